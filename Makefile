@@ -1,0 +1,41 @@
+# The two entry points of the README.  Both create .venv when it is missing.
+PYTHON ?= python3
+VENV := .venv
+BIN := $(VENV)/bin
+STAMP := $(VENV)/.installed
+
+.PHONY: demo test lint unit vcan suite perf clean
+
+$(STAMP): pyproject.toml
+	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install -q --upgrade pip
+	$(BIN)/python -m pip install -q -e '.[dev]'
+	touch $(STAMP)
+
+# The bench's main job: a paper scenario between two processes over CAN.
+demo: $(STAMP)
+	$(BIN)/bench run wen-5.1 --estimator tt-dq --out runs/demo
+
+# The whole test suite: lint, format, types, unit and process tests, and the
+# SocketCAN tests on vcan (natively, or inside User-Mode Linux).
+test: lint unit vcan
+
+lint: $(STAMP)
+	$(BIN)/ruff check .
+	$(BIN)/ruff format --check .
+	$(BIN)/mypy
+
+unit: $(STAMP)
+	$(BIN)/pytest -m "not socketcan"
+
+vcan: $(STAMP)
+	tools/vcan-tests
+
+suite: $(STAMP)
+	$(BIN)/bench suite paper --out docs/results
+
+perf: $(STAMP)
+	$(BIN)/bench perf --out docs/perf
+
+clean:
+	rm -rf $(VENV) runs .pytest_cache .mypy_cache .ruff_cache

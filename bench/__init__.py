@@ -1,0 +1,1 @@
+"""The bench: every side effect (CAN buses, processes, files, plots, CLI)."""

@@ -1,0 +1,432 @@
+"""Scenario files: a documented, validated TOML schema.
+
+A scenario fixes everything a run needs besides the transport: the motor
+preset, the PWM rate, the estimator, the duration, the speed-reference and
+load-torque profiles, the injected latency, the sensing noise and the seed.
+The ten scenarios of the papers ship in ``bench/scenarios/``; a user's own file
+path works wherever a name does.
+
+Schema (all keys optional unless marked *required*)::
+
+    name = "wen-5.1"                 # defaults to the file's stem
+    description = "..."
+    paper = "Wen et al. 2023, Sec. 5.1, Table 5"
+    preset = "wen2023"               # *required*: plant preset (plant_rt.PRESETS)
+    estimator = "tt-dq"              # default estimator for `bench run`
+    estimators = ["sfhf", "tt-ab", "tt-dq", "sensored"]   # the ones `bench suite` runs
+    f_sw = 10000.0                   # PWM (= control) frequency, Hz; default: the preset's
+    duration = 3.0                   # simulated seconds, *required*
+    seed = 1                         # seeds the sensor noise and the latency jitter
+    saturation = true                # d-axis saturation in the plant (needed by the polarity test)
+    theta_e0_deg = 0.0               # initial electrical rotor angle
+    known_initial_angle = true       # false: the controller runs its start-up (HF + polarity)
+    speed_rpm = [[0.0, 100.0]]       # (t s, rpm) breakpoints, linear between, held after the last;
+                                     # a step is two points at the same time
+    load_nm = [[0.0, 0.0]]           # (t s, N m) breakpoints, same rules
+    reference_rate_hz = 1000.0       # how often the bench re-sends a changing reference
+    score_from_s = 0.5               # metrics ignore the start-up transient before this time
+    thd_window_s = [3.0, 11.0]       # window for the THD of phase-A current (optional)
+
+    [estimator_options]              # passed to the estimator (e.g. v_h = 50.0)
+    [noise]
+    current_std_a = 0.0              # white noise on each phase current, A rms
+    adc_bits = 0                     # 0: no quantization
+    adc_full_scale_a = 0.0
+    [latency]
+    duty_delay_steps = 0             # lockstep: whole PWM periods per direction
+    sample_delay_steps = 0
+    duty_delay_us = 0.0              # real-time mode: microseconds per direction
+    sample_delay_us = 0.0
+    jitter_us = 0.0                  # real-time: standard deviation (normal) or half-width (uniform)
+    jitter_dist = "normal"           # "normal" | "uniform"
+    drop_prob = 0.0                  # per frame, each direction
+    [paper_result]                   # the paper's numbers, for reports only
+    theta_err_max_deg = 4.0
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, field, replace
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+from bench._errors import ScenarioError
+
+SHIPPED = (
+    "wen-5.1",
+    "wen-5.2",
+    "wen-5.3",
+    "wen-5.4",
+    "xue-fig13",
+    "xue-fig14",
+    "xue-fig15",
+    "xue-fig16",
+    "xue-fig17",
+    "xue-fig18",
+)
+
+
+@dataclass(frozen=True, slots=True)
+class Profile:
+    """Piecewise-linear function of time, held constant after the last breakpoint."""
+
+    points: tuple[tuple[float, float], ...]
+
+    def __call__(self, t: float) -> float:
+        pts = self.points
+        if t <= pts[0][0]:
+            return pts[0][1]
+        for (t0, v0), (t1, v1) in zip(pts, pts[1:], strict=False):
+            if t < t1:
+                if t1 == t0:
+                    return v1
+                return v0 + (v1 - v0) * (t - t0) / (t1 - t0)
+        return pts[-1][1]
+
+    def is_constant_between(self, t0: float, t1: float) -> bool:
+        """True when the profile does not change on [t0, t1]."""
+        return self(t0) == self(t1) and all(
+            v == self(t0) for (t, v) in self.points if t0 <= t <= t1
+        )
+
+
+@dataclass(frozen=True, slots=True)
+class Latency:
+    """Latency injected on the link, per direction."""
+
+    duty_delay_steps: int = 0
+    sample_delay_steps: int = 0
+    duty_delay_us: float = 0.0
+    sample_delay_us: float = 0.0
+    jitter_us: float = 0.0
+    jitter_dist: str = "normal"
+    drop_prob: float = 0.0
+
+    @property
+    def any(self) -> bool:
+        return bool(
+            self.duty_delay_steps
+            or self.sample_delay_steps
+            or self.duty_delay_us
+            or self.sample_delay_us
+            or self.jitter_us
+            or self.drop_prob
+        )
+
+
+@dataclass(frozen=True, slots=True)
+class Noise:
+    current_std_a: float = 0.0
+    adc_bits: int = 0
+    adc_full_scale_a: float = 0.0
+
+
+@dataclass(frozen=True, slots=True)
+class Scenario:
+    """One validated scenario. Build with :func:`load_scenario`."""
+
+    name: str
+    source: str
+    preset: str
+    duration: float
+    description: str = ""
+    paper: str = ""
+    estimator: str = "tt-dq"
+    estimators: tuple[str, ...] = ()
+    f_sw: float | None = None
+    seed: int = 1
+    saturation: bool = True
+    theta_e0_deg: float = 0.0
+    known_initial_angle: bool = True
+    speed_rpm: Profile = field(default_factory=lambda: Profile(((0.0, 0.0),)))
+    load_nm: Profile = field(default_factory=lambda: Profile(((0.0, 0.0),)))
+    reference_rate_hz: float = 1000.0
+    score_from_s: float = 0.5
+    thd_window_s: tuple[float, float] | None = None
+    estimator_options: dict[str, Any] = field(default_factory=dict)
+    noise: Noise = field(default_factory=Noise)
+    latency: Latency = field(default_factory=Latency)
+    paper_result: dict[str, Any] = field(default_factory=dict)
+
+    def with_overrides(self, **kw: Any) -> Scenario:
+        """A copy with some fields replaced (command-line options)."""
+        clean = {k: v for k, v in kw.items() if v is not None}
+        return replace(self, **clean)
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain representation for the run metadata."""
+        return {
+            "name": self.name,
+            "source": self.source,
+            "preset": self.preset,
+            "duration": self.duration,
+            "description": self.description,
+            "paper": self.paper,
+            "estimator": self.estimator,
+            "estimators": list(self.estimators),
+            "f_sw": self.f_sw,
+            "seed": self.seed,
+            "saturation": self.saturation,
+            "theta_e0_deg": self.theta_e0_deg,
+            "known_initial_angle": self.known_initial_angle,
+            "speed_rpm": [list(p) for p in self.speed_rpm.points],
+            "load_nm": [list(p) for p in self.load_nm.points],
+            "reference_rate_hz": self.reference_rate_hz,
+            "score_from_s": self.score_from_s,
+            "thd_window_s": list(self.thd_window_s) if self.thd_window_s else None,
+            "estimator_options": dict(self.estimator_options),
+            "noise": {
+                "current_std_a": self.noise.current_std_a,
+                "adc_bits": self.noise.adc_bits,
+                "adc_full_scale_a": self.noise.adc_full_scale_a,
+            },
+            "latency": {
+                "duty_delay_steps": self.latency.duty_delay_steps,
+                "sample_delay_steps": self.latency.sample_delay_steps,
+                "duty_delay_us": self.latency.duty_delay_us,
+                "sample_delay_us": self.latency.sample_delay_us,
+                "jitter_us": self.latency.jitter_us,
+                "jitter_dist": self.latency.jitter_dist,
+                "drop_prob": self.latency.drop_prob,
+            },
+            "paper_result": dict(self.paper_result),
+        }
+
+
+_TOP_KEYS = {
+    "name",
+    "description",
+    "paper",
+    "preset",
+    "estimator",
+    "estimators",
+    "f_sw",
+    "duration",
+    "seed",
+    "saturation",
+    "theta_e0_deg",
+    "known_initial_angle",
+    "speed_rpm",
+    "load_nm",
+    "reference_rate_hz",
+    "score_from_s",
+    "thd_window_s",
+    "estimator_options",
+    "noise",
+    "latency",
+    "paper_result",
+}
+
+
+def scenario_path(name_or_path: str) -> Path:
+    """Resolve a shipped scenario name or a user's file path."""
+    p = Path(name_or_path)
+    if p.suffix == ".toml" or p.exists():
+        if not p.is_file():
+            raise ScenarioError(f"{name_or_path}: no such scenario file")
+        return p
+    shipped = resources.files("bench.scenarios").joinpath(f"{name_or_path}.toml")
+    if not shipped.is_file():
+        raise ScenarioError(
+            f"{name_or_path}: unknown scenario (shipped: {', '.join(SHIPPED)}; "
+            "or give a path to a .toml file)"
+        )
+    return Path(str(shipped))
+
+
+class _Reader:
+    """Typed access to one TOML table with errors that name file and field."""
+
+    def __init__(self, src: str, table: dict[str, Any], prefix: str = "") -> None:
+        self.src = src
+        self.t = table
+        self.prefix = prefix
+
+    def fail(self, key: str, reason: str) -> ScenarioError:
+        return ScenarioError(f"{self.src}: field '{self.prefix}{key}': {reason}")
+
+    def num(
+        self, key: str, default: float | None = None, *, lo: float | None = None, hi: float | None = None
+    ) -> float:
+        if key not in self.t:
+            if default is None:
+                raise self.fail(key, "required")
+            return default
+        v = self.t[key]
+        if isinstance(v, bool) or not isinstance(v, int | float):
+            raise self.fail(key, f"expected a number, got {type(v).__name__} {v!r}")
+        v = float(v)
+        if not math.isfinite(v):
+            raise self.fail(key, "must be finite")
+        if lo is not None and v < lo:
+            raise self.fail(key, f"must be >= {lo}, got {v}")
+        if hi is not None and v > hi:
+            raise self.fail(key, f"must be <= {hi}, got {v}")
+        return v
+
+    def integer(self, key: str, default: int, *, lo: int | None = None) -> int:
+        v = self.t.get(key, default)
+        if isinstance(v, bool) or not isinstance(v, int):
+            raise self.fail(key, f"expected an integer, got {v!r}")
+        if lo is not None and v < lo:
+            raise self.fail(key, f"must be >= {lo}, got {v}")
+        return v
+
+    def string(self, key: str, default: str | None = None) -> str:
+        if key not in self.t:
+            if default is None:
+                raise self.fail(key, "required")
+            return default
+        v = self.t[key]
+        if not isinstance(v, str):
+            raise self.fail(key, f"expected a string, got {v!r}")
+        return v
+
+    def boolean(self, key: str, default: bool) -> bool:
+        v = self.t.get(key, default)
+        if not isinstance(v, bool):
+            raise self.fail(key, f"expected true or false, got {v!r}")
+        return v
+
+    def table(self, key: str, allowed: set[str] | None = None) -> _Reader:
+        v = self.t.get(key, {})
+        if not isinstance(v, dict):
+            raise self.fail(key, "expected a table")
+        if allowed is not None:
+            for k in v:
+                if k not in allowed:
+                    raise ScenarioError(
+                        f"{self.src}: field '{key}.{k}': unknown key (known: {', '.join(sorted(allowed))})"
+                    )
+        return _Reader(self.src, v, f"{self.prefix}{key}.")
+
+    def profile(self, key: str) -> Profile:
+        v = self.t.get(key, [[0.0, 0.0]])
+        if not isinstance(v, list) or not v:
+            raise self.fail(key, "expected a non-empty list of [time_s, value] pairs")
+        pts: list[tuple[float, float]] = []
+        for i, p in enumerate(v):
+            if (
+                not isinstance(p, list)
+                or len(p) != 2
+                or not all(isinstance(x, int | float) and not isinstance(x, bool) for x in p)
+            ):
+                raise self.fail(key, f"entry {i}: expected [time_s, value], got {p!r}")
+            t, val = float(p[0]), float(p[1])
+            if pts and t < pts[-1][0]:
+                raise self.fail(key, f"entry {i}: times must not decrease ({t} < {pts[-1][0]})")
+            if not (math.isfinite(t) and math.isfinite(val)) or t < 0:
+                raise self.fail(key, f"entry {i}: time must be >= 0 and values finite")
+            pts.append((t, val))
+        return Profile(tuple(pts))
+
+
+def parse_scenario(data: dict[str, Any], src: str) -> Scenario:
+    """Validate a scenario table (already parsed from TOML)."""
+    from controller import ESTIMATOR_NAMES
+    from plant_rt import PRESETS
+
+    for k in data:
+        if k not in _TOP_KEYS:
+            raise ScenarioError(f"{src}: field '{k}': unknown key (known: {', '.join(sorted(_TOP_KEYS))})")
+    r = _Reader(src, data)
+    preset = r.string("preset")
+    if preset not in PRESETS:
+        raise r.fail("preset", f"unknown preset {preset!r} (known: {', '.join(PRESETS)})")
+    estimator = r.string("estimator", "tt-dq")
+    if estimator not in ESTIMATOR_NAMES:
+        raise r.fail("estimator", f"unknown estimator {estimator!r} (known: {', '.join(ESTIMATOR_NAMES)})")
+    ests = data.get("estimators", [estimator])
+    if not isinstance(ests, list) or not all(isinstance(e, str) for e in ests):
+        raise r.fail("estimators", "expected a list of estimator names")
+    for e in ests:
+        if e not in ESTIMATOR_NAMES:
+            raise r.fail("estimators", f"unknown estimator {e!r} (known: {', '.join(ESTIMATOR_NAMES)})")
+    f_sw = r.num("f_sw", -1.0)
+    if f_sw != -1.0 and not 100.0 <= f_sw <= 100e3:
+        raise r.fail("f_sw", f"must be between 100 Hz and 100 kHz, got {f_sw}")
+    thd = data.get("thd_window_s")
+    thd_window: tuple[float, float] | None = None
+    if thd is not None:
+        if (
+            not isinstance(thd, list)
+            or len(thd) != 2
+            or not all(isinstance(x, int | float) for x in thd)
+            or not thd[0] < thd[1]
+        ):
+            raise r.fail("thd_window_s", "expected [start_s, end_s] with start < end")
+        thd_window = (float(thd[0]), float(thd[1]))
+    nz = r.table("noise", {"current_std_a", "adc_bits", "adc_full_scale_a"})
+    noise = Noise(
+        current_std_a=nz.num("current_std_a", 0.0, lo=0.0),
+        adc_bits=nz.integer("adc_bits", 0, lo=0),
+        adc_full_scale_a=nz.num("adc_full_scale_a", 0.0, lo=0.0),
+    )
+    if noise.adc_bits and noise.adc_full_scale_a <= 0:
+        raise nz.fail("adc_full_scale_a", "must be > 0 when adc_bits is set")
+    lt = r.table(
+        "latency",
+        {
+            "duty_delay_steps",
+            "sample_delay_steps",
+            "duty_delay_us",
+            "sample_delay_us",
+            "jitter_us",
+            "jitter_dist",
+            "drop_prob",
+        },
+    )
+    dist = lt.string("jitter_dist", "normal")
+    if dist not in ("normal", "uniform"):
+        raise lt.fail("jitter_dist", f"expected 'normal' or 'uniform', got {dist!r}")
+    latency = Latency(
+        duty_delay_steps=lt.integer("duty_delay_steps", 0, lo=0),
+        sample_delay_steps=lt.integer("sample_delay_steps", 0, lo=0),
+        duty_delay_us=lt.num("duty_delay_us", 0.0, lo=0.0),
+        sample_delay_us=lt.num("sample_delay_us", 0.0, lo=0.0),
+        jitter_us=lt.num("jitter_us", 0.0, lo=0.0),
+        jitter_dist=dist,
+        drop_prob=lt.num("drop_prob", 0.0, lo=0.0, hi=1.0),
+    )
+    opts = r.table("estimator_options").t
+    paper = r.table("paper_result").t
+    return Scenario(
+        name=r.string("name", Path(src).stem),
+        source=src,
+        preset=preset,
+        duration=r.num("duration", lo=1e-3),
+        description=r.string("description", ""),
+        paper=r.string("paper", ""),
+        estimator=estimator,
+        estimators=tuple(ests),
+        f_sw=None if f_sw == -1.0 else f_sw,
+        seed=r.integer("seed", 1, lo=0),
+        saturation=r.boolean("saturation", True),
+        theta_e0_deg=r.num("theta_e0_deg", 0.0),
+        known_initial_angle=r.boolean("known_initial_angle", True),
+        speed_rpm=r.profile("speed_rpm"),
+        load_nm=r.profile("load_nm"),
+        reference_rate_hz=r.num("reference_rate_hz", 1000.0, lo=1.0),
+        score_from_s=r.num("score_from_s", 0.5, lo=0.0),
+        thd_window_s=thd_window,
+        estimator_options=dict(opts),
+        noise=noise,
+        latency=latency,
+        paper_result=dict(paper),
+    )
+
+
+def load_scenario(name_or_path: str) -> Scenario:
+    """Load a shipped scenario by name, or a user's TOML file by path."""
+    path = scenario_path(name_or_path)
+    try:
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+    except tomllib.TOMLDecodeError as e:
+        raise ScenarioError(f"{path}: not valid TOML: {e}") from None
+    except OSError as e:
+        raise ScenarioError(f"{path}: cannot read: {e.strerror}") from None
+    src = name_or_path if not Path(name_or_path).exists() else str(path)
+    return parse_scenario(data, src)

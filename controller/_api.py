@@ -1,0 +1,161 @@
+"""The controller's seam: what it receives each PWM period and what it returns.
+
+Only plain values cross this seam, and every one of them is also carried by a
+frame of the DBC (``dbc/bench.dbc``), so a controller node on a CAN bus and an
+in-process loop see exactly the same numbers.
+
+Timing convention (see DESIGN.md, "Timing model"): step ``k`` is the PWM
+period that starts at ``t = k T_s``.  The plant samples the phase currents at
+that instant (carrier peak of symmetric PWM) and sends :class:`Measurement`
+``k``.  The controller answers with the duties that take effect in period
+``k + 1`` (one-period computation delay).  Every angle a controller reports
+(:attr:`ControlOutput.theta_hat`) is its estimate of the electrical rotor angle
+*at the sample instant* ``k T_s``, so the bench can score it against the
+plant's truth at the same instant.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Protocol
+
+
+@dataclass(frozen=True, slots=True)
+class Measurement:
+    """Samples of one PWM period, taken at ``t = k T_s``.
+
+    Parameters
+    ----------
+    k : int
+        Step counter (PWM periods since the start of the run).
+    i_a, i_b, i_c : float
+        Phase currents (A).
+    u_dc : float
+        DC-link voltage (V).
+    theta_e : float or None
+        True electrical rotor angle (rad). Only the ``sensored`` baseline may
+        receive it; every sensorless estimator gets ``None``.
+    w_e : float or None
+        True electrical speed (rad/s), same rule as ``theta_e``.
+    """
+
+    k: int
+    i_a: float
+    i_b: float
+    i_c: float
+    u_dc: float
+    theta_e: float | None = None
+    w_e: float | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class ControlOutput:
+    """What the controller returns for sample ``k``.
+
+    Parameters
+    ----------
+    k : int
+        The sample this answers; the duties apply in period ``k + 1``.
+    d_a, d_b, d_c : float
+        Phase duty cycles in [0, 1] for period ``k + 1``.
+    enable : bool
+        False keeps the inverter's switches open (PWM disabled).
+    theta_hat : float
+        Estimated electrical angle at ``t = k T_s`` (rad, wrapped to [0, 2 pi)).
+    w_hat : float
+        Estimated electrical speed (rad/s).
+    err : float
+        The estimator's normalised error signal (rad; about the angle error
+        for small errors once the observer is locked).
+    mode : int
+        Controller state, one of the ``MODE_*`` constants.
+    i_d, i_q : float
+        Fundamental currents in the estimated d-q frame (A), HF removed.
+    """
+
+    k: int
+    d_a: float
+    d_b: float
+    d_c: float
+    enable: bool
+    theta_hat: float
+    w_hat: float
+    err: float
+    mode: int
+    i_d: float = 0.0
+    i_q: float = 0.0
+
+
+MODE_DISABLED = 0
+MODE_ALIGN = 1  # standstill: HF estimator converging, speed loop held
+MODE_POLARITY = 2  # magnet polarity test (d-axis current pulses)
+MODE_RUN = 3  # speed loop released
+MODE_FAULT = 4
+
+
+@dataclass(frozen=True, slots=True)
+class EstimatorInput:
+    """What an estimator sees of sample ``k``.
+
+    Parameters
+    ----------
+    k : int
+        Step counter.
+    i_alpha, i_beta : float
+        Measured stator current in the stationary frame (A), HF included.
+    torque : float
+        Electromagnetic torque the controller believes it produces (N m),
+        from its own motor model and current reference; used for the
+        torque feed-forward of the Luenberger observer (Xue eq. 9).
+    theta_e : float or None
+        Truth, for the ``sensored`` estimator only.
+    w_e : float or None
+        Truth, for the ``sensored`` estimator only.
+    """
+
+    k: int
+    i_alpha: float
+    i_beta: float
+    torque: float
+    theta_e: float | None = None
+    w_e: float | None = None
+
+
+class Estimator(Protocol):
+    """A rotor-position estimator plugged into the field-oriented controller.
+
+    Call order in every period ``k``: :meth:`update` with sample ``k``, then
+    the controller reads the attributes below, computes the fundamental
+    voltage for period ``k + 1`` and adds :meth:`injection` to it (the HF
+    voltage is added after the current PI output, so the PI never sees it as
+    its own output).
+
+    Attributes
+    ----------
+    theta_hat : float
+        Estimated electrical angle at ``t = k T_s`` (rad).
+    w_hat : float
+        Estimated electrical speed (rad/s).
+    err : float
+        Normalised error signal fed to the observer (rad for small errors).
+    i_alpha_f, i_beta_f : float
+        Sample ``k`` with the HF response removed, for the current loop (A).
+    """
+
+    theta_hat: float
+    w_hat: float
+    err: float
+    i_alpha_f: float
+    i_beta_f: float
+
+    def update(self, x: EstimatorInput) -> None:
+        """Take sample ``k`` and advance the estimate."""
+        ...
+
+    def injection(self) -> tuple[float, float]:
+        """HF voltage (alpha, beta) (V) to add to the command for period ``k + 1``."""
+        ...
+
+    def reset(self, theta0: float) -> None:
+        """Restart from angle ``theta0`` (rad) at zero speed (e.g. after a polarity flip)."""
+        ...
