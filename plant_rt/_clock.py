@@ -1,0 +1,126 @@
+"""Real-time stepping on absolute deadlines.
+
+Deadline ``n`` is ``t_0 + n T_s`` with ``t_0`` taken from
+``time.perf_counter()`` at :meth:`RealTimeClock.start`; sleeps are never
+accumulated, so the schedule does not drift. Waiting is hybrid: sleep until
+``spin`` seconds before the deadline (the OS wakes threads late by tens to
+hundreds of microseconds), then busy-wait on ``perf_counter``.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True, slots=True)
+class JitterStats:
+    """Lateness of the wake-ups after their deadlines (s).
+
+    Parameters
+    ----------
+    n : int
+        Number of waits.
+    median, p99, max : float
+        Median, 99th percentile and maximum lateness (s).
+    overruns : int
+        Waits entered after their deadline had passed.
+    """
+
+    n: int
+    median: float
+    p99: float
+    max: float
+    overruns: int
+
+
+class RealTimeClock:
+    """Absolute-deadline clock with overrun counting and jitter statistics.
+
+    Parameters
+    ----------
+    T_s : float
+        Period (s).
+    spin : float, optional
+        Busy-wait margin before each deadline (s).
+    keep : int, optional
+        Number of most recent lateness values kept for the statistics.
+
+    Examples
+    --------
+    >>> clock = RealTimeClock(1e-3)
+    >>> clock.start()
+    >>> for _ in range(3):
+    ...     lateness = clock.wait()  # returns at deadline 1, 2, 3
+    """
+
+    def __init__(self, T_s: float, spin: float = 200e-6, keep: int = 100_000) -> None:
+        if not T_s > 0.0:
+            raise ValueError(f"T_s must be > 0, got {T_s}")
+        self.T_s = float(T_s)
+        self.spin = float(spin)
+        self.keep = int(keep)
+        self.overruns = 0
+        self.n = 0
+        self._t0: float | None = None
+        self._late: list[float] = []
+        self._late_max = 0.0
+
+    def start(self, t0: float | None = None) -> None:
+        """Start the schedule at ``t0`` (default: now); deadline ``n`` is ``t0 + n T_s``."""
+        self._t0 = time.perf_counter() if t0 is None else float(t0)
+        self.n = 0
+        self.overruns = 0
+        self._late = []
+        self._late_max = 0.0
+
+    @property
+    def next_deadline(self) -> float:
+        """The ``perf_counter`` time of the next deadline (s)."""
+        if self._t0 is None:
+            self.start()
+        assert self._t0 is not None
+        return self._t0 + (self.n + 1) * self.T_s
+
+    def wait(self) -> float:
+        """Wait until the next deadline and return how late the wake-up was (s).
+
+        If the deadline has already passed, return at once and count an
+        overrun; the schedule stays absolute, so later deadlines are not
+        shifted (the caller catches up).
+        """
+        deadline = self.next_deadline
+        now = time.perf_counter()
+        if now > deadline:
+            self.overruns += 1
+        else:
+            pause = deadline - now - self.spin
+            if pause > 0.0:
+                time.sleep(pause)
+            while time.perf_counter() < deadline:
+                pass
+            now = time.perf_counter()
+        late = now - deadline
+        self.n += 1
+        lst = self._late
+        lst.append(late)
+        if len(lst) > 2 * self.keep:
+            del lst[: len(lst) - self.keep]
+        if late > self._late_max:
+            self._late_max = late
+        return late
+
+    def periods_behind(self) -> int:
+        """Whole periods the schedule is behind the wall clock right now."""
+        behind = (time.perf_counter() - self.next_deadline) / self.T_s
+        return int(behind) + 1 if behind > 0.0 else 0
+
+    def stats(self) -> JitterStats:
+        """Lateness statistics over the kept waits (overruns included)."""
+        lst = sorted(self._late[-self.keep :])
+        if not lst:
+            return JitterStats(0, 0.0, 0.0, 0.0, self.overruns)
+        n = len(lst)
+        median = lst[n // 2] if n % 2 else 0.5 * (lst[n // 2 - 1] + lst[n // 2])
+        p99 = lst[min(n - 1, int(0.99 * (n - 1) + 0.5))]
+        return JitterStats(self.n, median, p99, self._late_max, self.overruns)
