@@ -10,6 +10,7 @@ two things: ``speed_err_max_rpm`` is the estimation error |w_hat - w_true|,
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Mapping
 
@@ -75,7 +76,7 @@ def overshoot_rpm(t: Array, w_ref: Array, w: Array, *, min_step_rpm: float = 1.0
         return math.nan
     bounds = [*jumps.tolist(), len(t)]
     worst = 0.0
-    for a, b in zip(bounds[:-1], bounds[1:], strict=True):
+    for a, b in itertools.pairwise(bounds):
         direction = math.copysign(1.0, float(w_ref[a] - w_ref[a - 1]))
         over = direction * (w[a:b] - w_ref[a:b])
         worst = max(worst, float(np.max(over)))
@@ -113,7 +114,7 @@ def compute_metrics(
         "theta_err_abs_max_rad": float(np.max(np.abs(err))),
         "speed_err_max_rpm": float(np.max(np.abs(table["w_hat_rpm"][sel] - w))),
         "speed_track_err_max_rpm": float(np.max(np.abs(table["w_ref_rpm"][sel] - w))),
-        "steps": int(len(t)),
+        "steps": len(t),
         "scored_steps": int(np.count_nonzero(sel)),
         "sim_s": float(len(t) * T_s),
     }

@@ -46,6 +46,7 @@ Schema (all keys optional unless marked *required*)::
 
 from __future__ import annotations
 
+import itertools
 import math
 import tomllib
 from dataclasses import dataclass, field, replace
@@ -79,7 +80,7 @@ class Profile:
         pts = self.points
         if t <= pts[0][0]:
             return pts[0][1]
-        for (t0, v0), (t1, v1) in zip(pts, pts[1:], strict=False):
+        for (t0, v0), (t1, v1) in itertools.pairwise(pts):
             if t < t1:
                 if t1 == t0:
                     return v1
@@ -249,7 +250,12 @@ class _Reader:
         return ScenarioError(f"{self.src}: field '{self.prefix}{key}': {reason}")
 
     def num(
-        self, key: str, default: float | None = None, *, lo: float | None = None, hi: float | None = None
+        self,
+        key: str,
+        default: float | None = None,
+        *,
+        lo: float | None = None,
+        hi: float | None = None,
     ) -> float:
         if key not in self.t:
             if default is None:
@@ -331,20 +337,26 @@ def parse_scenario(data: dict[str, Any], src: str) -> Scenario:
 
     for k in data:
         if k not in _TOP_KEYS:
-            raise ScenarioError(f"{src}: field '{k}': unknown key (known: {', '.join(sorted(_TOP_KEYS))})")
+            raise ScenarioError(
+                f"{src}: field '{k}': unknown key (known: {', '.join(sorted(_TOP_KEYS))})"
+            )
     r = _Reader(src, data)
     preset = r.string("preset")
     if preset not in PRESETS:
         raise r.fail("preset", f"unknown preset {preset!r} (known: {', '.join(PRESETS)})")
     estimator = r.string("estimator", "tt-dq")
     if estimator not in ESTIMATOR_NAMES:
-        raise r.fail("estimator", f"unknown estimator {estimator!r} (known: {', '.join(ESTIMATOR_NAMES)})")
+        raise r.fail(
+            "estimator", f"unknown estimator {estimator!r} (known: {', '.join(ESTIMATOR_NAMES)})"
+        )
     ests = data.get("estimators", [estimator])
     if not isinstance(ests, list) or not all(isinstance(e, str) for e in ests):
         raise r.fail("estimators", "expected a list of estimator names")
     for e in ests:
         if e not in ESTIMATOR_NAMES:
-            raise r.fail("estimators", f"unknown estimator {e!r} (known: {', '.join(ESTIMATOR_NAMES)})")
+            raise r.fail(
+                "estimators", f"unknown estimator {e!r} (known: {', '.join(ESTIMATOR_NAMES)})"
+            )
     f_sw = r.num("f_sw", -1.0)
     if f_sw != -1.0 and not 100.0 <= f_sw <= 100e3:
         raise r.fail("f_sw", f"must be between 100 Hz and 100 kHz, got {f_sw}")

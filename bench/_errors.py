@@ -1,0 +1,42 @@
+"""Typed errors of the bench, in the spirit of python-can's ``CanError`` tree.
+
+A :class:`BenchError` is a user's mistake or an unusable environment (bad
+scenario file, unknown interface, unreadable capture, broken DBC): the command
+line prints ``str(e)`` as one line and exits with status 2, without a
+traceback. Anything else is a bug and keeps its traceback.
+
+Each message names the file (or interface), the field and the reason, e.g.
+``scenario wen-5.1.toml: field 'duration': must be > 0, got -1``.
+"""
+
+from __future__ import annotations
+
+__all__ = [
+    "BenchError",
+    "CaptureError",
+    "DbcError",
+    "InterfaceError",
+    "ScenarioError",
+]
+
+
+class BenchError(Exception):
+    """Base of every error the bench reports as one line (exit status 2)."""
+
+    exit_code: int = 2
+
+
+class ScenarioError(BenchError):
+    """A scenario file or name is wrong (missing file, bad TOML, bad field)."""
+
+
+class InterfaceError(BenchError):
+    """A CAN interface cannot be opened (unknown name, missing channel, driver error)."""
+
+
+class CaptureError(BenchError):
+    """A CAN capture (log file) cannot be read or written."""
+
+
+class DbcError(BenchError):
+    """The DBC file is unusable, or a value cannot be encoded with it."""

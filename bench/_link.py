@@ -1,0 +1,259 @@
+"""The latency link: a gateway between two buses with delay, jitter and drop.
+
+Like ``cangw``, but it delays what it forwards.  Side A is the plant's bus,
+side B the controller's.  It forwards ``PhaseSamples`` and ``PlantTruth``
+from A to B, ``PwmDuty`` from B to A, and ``BenchCommand`` from A to B at
+once (the bench sends its commands on the plant's side; forwarding them both
+ways would echo them forever on a bus that delivers a node's own frames back
+to it, as udp_multicast does).
+
+Lockstep (deterministic): delays are whole PWM periods, counted in the
+plant's sample frames seen on A.  Sample ``j`` is released to B when A has
+carried sample ``j + N_s``; duty ``t`` (the answer to sample ``t - 1``, which
+B received when A carried sample ``t - 1 + N_s``) is released to A when A
+carries sample ``t - 1 + N_s + N_d``.  Release points follow from the
+frames' own step counters, never from arrival times, so the trace is the
+same however the processes are scheduled.  A dropped
+frame is recovered by the plant's retransmission: a repeated sample on A
+makes the link repeat what it has already released.
+
+Real time: each frame is released ``delay + jitter`` microseconds after it
+was received (absolute times, a heap ordered by release time; frames of one
+direction may overtake each other when the jitter exceeds their spacing,
+as on a real gateway with queues).
+"""
+
+from __future__ import annotations
+
+import heapq
+import random
+import select
+import time
+from collections import deque
+from collections.abc import Callable
+
+import can
+
+from bench._codec import Codec
+from bench._nodes import unwrap
+
+
+class LockstepLink:
+    """Period-counting link logic (no I/O): frames in, frames out per side."""
+
+    def __init__(
+        self,
+        codec: Codec,
+        *,
+        sample_delay: int,
+        duty_delay: int,
+        drop_prob: float = 0.0,
+        seed: int = 0,
+    ) -> None:
+        self.codec = codec
+        self.n_s = sample_delay
+        self.n_d = duty_delay
+        self.drop_prob = drop_prob
+        self.rng = random.Random(seed)
+        self.m = 1 << codec.step_bits("PhaseSamples")
+        self.id_samples = codec.frame_id("PhaseSamples")
+        self.id_truth = codec.frame_id("PlantTruth")
+        self.id_duty = codec.frame_id("PwmDuty")
+        self.id_cmd = codec.frame_id("BenchCommand")
+        self.latest_a = -1
+        self.held_b: deque[tuple[int, can.Message]] = deque()
+        self.held_a: deque[tuple[int, can.Message]] = deque()
+        self.released_b: dict[int, list[can.Message]] = {}
+        self.released_a: deque[can.Message] = deque(maxlen=4)
+        self.dropped = 0
+
+    def _drop(self) -> bool:
+        if self.drop_prob and self.rng.random() < self.drop_prob:
+            self.dropped += 1
+            return True
+        return False
+
+    def _release(self) -> tuple[list[can.Message], list[can.Message]]:
+        to_b: list[can.Message] = []
+        to_a: list[can.Message] = []
+        while self.held_b and self.held_b[0][0] <= self.latest_a - self.n_s:
+            j, m = self.held_b.popleft()
+            self.released_b.setdefault(j, []).append(m)
+            self.released_b.pop(j - 8, None)
+            if not self._drop():
+                to_b.append(m)
+        while self.held_a and self.held_a[0][0] <= self.latest_a:
+            _, m = self.held_a.popleft()
+            self.released_a.append(m)
+            if not self._drop():
+                to_a.append(m)
+        return to_b, to_a
+
+    def from_a(self, msg: can.Message) -> tuple[list[can.Message], list[can.Message]]:
+        """A frame seen on A: (frames for B, frames for A)."""
+        fid = msg.arbitration_id
+        if fid == self.id_cmd:
+            return [msg], []
+        if fid not in (self.id_samples, self.id_truth):
+            return [], []
+        d = self.codec.decode(msg)
+        if d is None or d.reason is not None:
+            return [], []
+        j = unwrap(int(d.signals["step"]) % self.m, max(self.latest_a, 0), self.m)
+        if fid == self.id_samples:
+            if j <= self.latest_a:
+                # the plant repeats itself: a frame was lost somewhere; repeat what was released
+                again_b = list(self.released_b.get(j, [])) if j <= self.latest_a - self.n_s else []
+                return again_b, list(self.released_a)
+            self.latest_a = j
+        elif any(j == s and m.arbitration_id == self.id_truth for s, m in self.held_b):
+            return [], []
+        self.held_b.append((j, msg))
+        return self._release()
+
+    def from_b(self, msg: can.Message) -> tuple[list[can.Message], list[can.Message]]:
+        """A frame seen on B: (frames for B, frames for A)."""
+        fid = msg.arbitration_id
+        if fid != self.id_duty:
+            return [], []
+        d = self.codec.decode(msg)
+        if d is None or d.reason is not None:
+            return [], []
+        t = unwrap(int(d.signals["step"]), max(self.latest_a, 0) + 1, self.m)
+        # duty t answers sample t - 1, which B saw when A carried sample t - 1 + N_s
+        self.held_a.append((t - 1 + self.n_s + self.n_d, msg))
+        if len(self.held_a) > 1 and self.held_a[-2][0] > self.held_a[-1][0]:
+            self.held_a = deque(sorted(self.held_a, key=lambda x: x[0]))
+        return self._release()
+
+
+class RealtimeLink:
+    """Time-based link logic: frames get a release time; :meth:`due` pops them."""
+
+    def __init__(
+        self,
+        codec: Codec,
+        *,
+        sample_delay_us: float,
+        duty_delay_us: float,
+        jitter_us: float = 0.0,
+        jitter_dist: str = "normal",
+        drop_prob: float = 0.0,
+        seed: int = 0,
+        clock: Callable[[], float] = time.perf_counter,
+    ) -> None:
+        self.codec = codec
+        self.d_s = sample_delay_us * 1e-6
+        self.d_d = duty_delay_us * 1e-6
+        self.jit = jitter_us * 1e-6
+        self.dist = jitter_dist
+        self.drop_prob = drop_prob
+        self.rng = random.Random(seed)
+        self.clock = clock
+        self.heap: list[tuple[float, int, str, can.Message]] = []
+        self.n = 0
+        self.dropped = 0
+        self.forward_a = {codec.frame_id("PhaseSamples"), codec.frame_id("PlantTruth")}
+        self.id_duty = codec.frame_id("PwmDuty")
+        self.id_cmd = codec.frame_id("BenchCommand")
+
+    def _jitter(self) -> float:
+        if not self.jit:
+            return 0.0
+        if self.dist == "uniform":
+            return self.rng.uniform(-self.jit, self.jit)
+        return self.rng.gauss(0.0, self.jit)
+
+    def _push(self, delay: float, side: str, msg: can.Message) -> None:
+        if self.drop_prob and self.rng.random() < self.drop_prob:
+            self.dropped += 1
+            return
+        t = self.clock() + max(0.0, delay + self._jitter())
+        self.n += 1
+        heapq.heappush(self.heap, (t, self.n, side, msg))
+
+    def from_a(self, msg: can.Message) -> None:
+        if msg.arbitration_id in self.forward_a:
+            self._push(self.d_s, "b", msg)
+        elif msg.arbitration_id == self.id_cmd:
+            self._push(0.0, "b", msg)
+
+    def from_b(self, msg: can.Message) -> None:
+        if msg.arbitration_id == self.id_duty:
+            self._push(self.d_d, "a", msg)
+
+    def next_time(self) -> float | None:
+        return self.heap[0][0] if self.heap else None
+
+    def due(self) -> list[tuple[str, can.Message]]:
+        now = self.clock()
+        out = []
+        while self.heap and self.heap[0][0] <= now:
+            _, _, side, msg = heapq.heappop(self.heap)
+            out.append((side, msg))
+        return out
+
+
+def link_loop(
+    bus_a: can.BusABC,
+    bus_b: can.BusABC,
+    logic: LockstepLink | RealtimeLink,
+    *,
+    on_ready: Callable[[], None] | None = None,
+    stop: Callable[[], bool] = lambda: False,
+    idle_s: float = 3600.0,
+) -> None:
+    """Run a link between two buses until ``stop()`` or ``idle_s`` without traffic."""
+    if on_ready:
+        on_ready()
+    fds: list[int] | None
+    try:
+        fds = [bus_a.fileno(), bus_b.fileno()]
+        if min(fds) < 0:
+            fds = None
+    except (NotImplementedError, AttributeError):
+        fds = None
+    last = time.monotonic()
+    while not stop():
+        got = False
+        for side, bus in (("a", bus_a), ("b", bus_b)):
+            while (msg := bus.recv(0.0)) is not None:
+                got = True
+                msg = _copy(msg)
+                if isinstance(logic, LockstepLink):
+                    to_b, to_a = logic.from_a(msg) if side == "a" else logic.from_b(msg)
+                    for m in to_b:
+                        bus_b.send(m)
+                    for m in to_a:
+                        bus_a.send(m)
+                elif side == "a":
+                    logic.from_a(msg)
+                else:
+                    logic.from_b(msg)
+        wait = 0.05
+        if isinstance(logic, RealtimeLink):
+            for side, m in logic.due():
+                (bus_a if side == "a" else bus_b).send(m)
+            nt = logic.next_time()
+            if nt is not None:
+                wait = max(0.0, min(wait, nt - logic.clock()))
+        if got:
+            last = time.monotonic()
+            continue
+        if time.monotonic() - last > idle_s:
+            return
+        if fds is not None:
+            select.select(fds, [], [], wait)
+        else:
+            time.sleep(min(wait, 0.0002))
+
+
+def _copy(msg: can.Message) -> can.Message:
+    return can.Message(
+        arbitration_id=msg.arbitration_id,
+        is_extended_id=msg.is_extended_id,
+        data=bytes(msg.data),
+        is_fd=msg.is_fd,
+        bitrate_switch=msg.bitrate_switch,
+        dlc=msg.dlc,
+    )

@@ -1,0 +1,240 @@
+"""The nodes' main loops on a python-can bus, and the in-process loop.
+
+``plant_loop`` and ``controller_loop`` drive a :class:`~bench._nodes.PlantNode`
+or :class:`~bench._nodes.ControllerNode` from a :class:`can.BusABC`; they are
+what ``bench plant`` and ``bench controller`` run as processes, and what the
+``virtual``-bus tests run as threads.  ``run_inprocess`` passes the same
+frames between the same nodes without any bus: the reference trace.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+
+import can
+
+from bench._codec import Codec
+from bench._errors import BenchError
+from bench._nodes import ControllerNode, PlantNode
+from bench._scenario import Scenario
+from bench._setup import (
+    build_controller,
+    build_plant,
+    command_schedule,
+    lockstep_delay,
+    n_steps,
+    sample_period,
+)
+from plant_rt import RealTimeClock
+
+STATE_IDLE, STATE_RUN, STATE_DONE = 0, 1, 2
+
+#: Lockstep: resend the recent frames when the expected duty has not come in this time.
+RETRANSMIT_S = 0.05
+#: Lockstep: give up when nothing arrives for this long.
+STALL_S = 20.0
+
+
+def make_plant_node(scn: Scenario, codec: Codec, *, truth_every: int = 1) -> PlantNode:
+    return PlantNode(
+        codec,
+        build_plant(scn),
+        n_steps=n_steps(scn),
+        lockstep_delay=lockstep_delay(scn),
+        truth_every=truth_every,
+    )
+
+
+def make_controller_node(scn: Scenario, estimator: str, codec: Codec) -> ControllerNode:
+    return ControllerNode(
+        codec, build_controller(scn, estimator), needs_truth=estimator == "sensored"
+    )
+
+
+def command_frames(scn: Scenario, codec: Codec) -> list[tuple[int, can.Message]]:
+    """The scenario's bench commands as frames, with their apply steps."""
+    m = 1 << codec.step_bits("BenchCommand")
+    out = []
+    for i, c in enumerate(command_schedule(scn)):
+        msg = codec.encode(
+            "BenchCommand",
+            {
+                "cmd": c.cmd,
+                "seq": i % 16,
+                "speed_ref": c.speed_ref_rpm,
+                "load_torque": c.load_nm,
+                "step": c.apply_step % m,
+            },
+        )
+        out.append((c.apply_step, msg))
+    return out
+
+
+def run_inprocess(scn: Scenario, estimator: str, codec: Codec) -> list[can.Message]:
+    """Run a scenario in lockstep in this process; return every frame in wire order.
+
+    The frames are the same objects the CAN nodes would send (same DBC
+    encoding, so the same quantization), passed by hand; injected lockstep
+    latency goes through the same :class:`~bench._link.LockstepLink` logic
+    the link process runs.
+    """
+    from bench._link import LockstepLink
+
+    pn = make_plant_node(scn, codec)
+    cn = make_controller_node(scn, estimator, codec)
+    lt = scn.latency
+    link = (
+        LockstepLink(codec, sample_delay=lt.sample_delay_steps, duty_delay=lt.duty_delay_steps)
+        if lt.sample_delay_steps or lt.duty_delay_steps
+        else None
+    )
+    frames: list[can.Message] = []
+    for _, m in command_frames(scn, codec):
+        frames.append(m)
+        pn.on_message(m)
+        cn.on_message(m)
+    pn.apply_commands()
+    out = pn.frames_now()
+    while True:
+        frames.extend(out)
+        to_plant: list[can.Message] = []
+        to_ctrl = out
+        if link is not None:
+            to_ctrl = []
+            for m in out:
+                to_b, to_a = link.from_a(m)
+                to_ctrl.extend(to_b)
+                to_plant.extend(to_a)
+        replies: list[can.Message] = []
+        for m in to_ctrl:
+            replies.extend(cn.on_message(m))
+        frames.extend(replies)
+        if link is None:
+            to_plant = replies
+        else:
+            for m in replies:
+                _, to_a = link.from_b(m)
+                to_plant.extend(to_a)
+        for m in to_plant:
+            pn.on_message(m)
+        if pn.done:
+            break
+        if not pn.ready():
+            raise RuntimeError(f"in-process loop stalled at step {pn.plant.k}")
+        out = pn.advance_lockstep()
+    return frames
+
+
+def _send_all(bus: can.BusABC, frames: list[can.Message], node_counters: object) -> None:
+    for f in frames:
+        for attempt in range(3):
+            try:
+                bus.send(f)
+                break
+            except can.CanOperationError:
+                if attempt == 2:
+                    raise
+                time.sleep(0.001)
+
+
+def plant_loop(
+    bus: can.BusABC,
+    node: PlantNode,
+    *,
+    realtime: bool,
+    on_ready: Callable[[], None] | None = None,
+    stop: Callable[[], bool] = lambda: False,
+    watchdog_s: float = STALL_S,
+) -> None:
+    """Serve the plant on ``bus`` until the scenario's end or a stop command."""
+    ids = {node.codec.frame_id(n) for n in ("PwmDuty", "BenchCommand")}
+    if on_ready:
+        on_ready()
+    # wait for the start command
+    t_idle = time.monotonic()
+    while not node.started:
+        if stop():
+            return
+        msg = bus.recv(0.05)
+        if msg is not None and msg.arbitration_id in ids:
+            node.on_message(msg)
+            node.apply_commands()
+        if time.monotonic() - t_idle > 3600.0:
+            raise BenchError("plant: no start command within an hour")
+    _send_all(bus, node.frames_now(), node.counters)
+    if realtime:
+        clock = RealTimeClock(node.plant.T_s)
+        clock.start()
+        while not node.done and not stop():
+            while (msg := bus.recv(0.0)) is not None:
+                if msg.arbitration_id in ids:
+                    node.on_message(msg)
+            _send_all(bus, node.advance_realtime(), node.counters)
+            clock.wait()
+        node.counters.overruns = clock.overruns
+        st = clock.stats()
+        node.jitter = {
+            "n": float(st.n),
+            "median": 1e6 * st.median,
+            "p99": 1e6 * st.p99,
+            "max": 1e6 * st.max,
+        }
+    else:
+        last_progress = time.monotonic()
+        while not node.done and not stop():
+            t_wait = time.monotonic()
+            while not node.ready():
+                msg = bus.recv(RETRANSMIT_S)
+                if msg is not None:
+                    if msg.arbitration_id in ids:
+                        node.on_message(msg)
+                    continue
+                now = time.monotonic()
+                if now - last_progress > watchdog_s:
+                    raise BenchError(
+                        f"plant: no duty frame for step {node.needed_duty()} in {watchdog_s:.0f} s "
+                        "(is a controller running on this bus?)"
+                    )
+                if now - t_wait >= RETRANSMIT_S:
+                    _send_all(bus, node.retransmit(), node.counters)
+                    t_wait = now
+            _send_all(bus, node.advance_lockstep(), node.counters)
+            last_progress = time.monotonic()
+    bus.send(node.status_frame(STATE_DONE))
+
+
+def controller_loop(
+    bus: can.BusABC,
+    node: ControllerNode,
+    *,
+    realtime: bool,
+    on_ready: Callable[[], None] | None = None,
+    stop: Callable[[], bool] = lambda: False,
+    idle_s: float = 3600.0,
+) -> None:
+    """Serve the controller on ``bus`` until a stop command (or ``idle_s`` of silence)."""
+    node.realtime = realtime
+    names = ["PhaseSamples", "BenchCommand"]
+    if node.needs_truth:
+        names.append("PlantTruth")
+    ids = {node.codec.frame_id(n) for n in names}
+    if on_ready:
+        on_ready()
+    last = time.monotonic()
+    while not node.stopped and not stop():
+        msg = bus.recv(0.05)
+        if msg is None:
+            if time.monotonic() - last > idle_s:
+                return
+            continue
+        if msg.arbitration_id not in ids:
+            continue
+        last = time.monotonic()
+        out = node.on_message(msg)
+        if out:
+            _send_all(bus, out, node.counters)
+
+
+def period_s(scn: Scenario) -> float:
+    return sample_period(scn)

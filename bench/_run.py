@@ -1,0 +1,493 @@
+"""``bench run``: plant and controller as two OS processes over CAN, recorded.
+
+The orchestrator starts ``bench plant`` and ``bench controller`` (and ``bench
+link`` when latency is injected) as separate processes on the chosen bus,
+records every frame of the bus(es) into a python-can log file, sends the
+scenario's bench commands ahead of the plant, waits for the end, and derives
+the per-step table, ``metrics.json``, the metadata and the plots from the
+capture, exactly as ``bench analyze`` would.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import platform
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import can
+
+from bench._analysis import analyze_frames, write_csv
+from bench._codec import Codec
+from bench._errors import BenchError
+from bench._loops import STATE_DONE, command_frames
+from bench._metrics import compute_metrics
+from bench._scenario import Scenario
+from bench._setup import get_preset, lockstep_delay, n_steps, sample_period
+
+LOG_SUFFIX = {"blf": ".blf", "asc": ".asc", "log": ".log"}
+
+
+@dataclass(frozen=True, slots=True)
+class BusSpec:
+    """Where a node's bus is: a python-can interface, channel and options."""
+
+    interface: str
+    channel: str
+    port: int | None = None
+
+    def args(self) -> list[str]:
+        a = ["--interface", self.interface, "--channel", self.channel]
+        if self.port is not None:
+            a += ["--port", str(self.port)]
+        return a
+
+    def open(self) -> can.BusABC:
+        from bench._bus import open_bus
+
+        kw: dict[str, Any] = {}
+        if self.port is not None:
+            kw["port"] = self.port
+        bus = open_bus(self.interface, self.channel, fd=True, **kw)
+        _grow_receive_buffer(bus)
+        return bus
+
+    def peer(self) -> BusSpec:
+        """The second bus of a latency link (controller side)."""
+        if self.interface == "udp_multicast":
+            return BusSpec(self.interface, self.channel, (self.port or 43113) + 1)
+        if self.interface == "socketcan" and self.channel[-1:].isdigit():
+            return BusSpec(self.interface, self.channel[:-1] + str(int(self.channel[-1]) + 1))
+        return BusSpec(self.interface, self.channel + "-b", self.port)
+
+    def describe(self) -> str:
+        s = f"{self.interface}:{self.channel}"
+        return s + (f" port {self.port}" if self.port is not None else "")
+
+
+#: Receive buffer asked for on socket-based buses (bytes): a recorder thread that
+#: is descheduled for a while must not lose frames (udp_multicast drops on overflow).
+RECEIVE_BUFFER = 8 << 20
+
+
+def _grow_receive_buffer(bus: can.BusABC) -> None:
+    sock = getattr(getattr(bus, "_multicast", None), "_socket", None) or getattr(
+        bus, "socket", None
+    )
+    if not isinstance(sock, socket.socket):
+        return
+    for opt in (getattr(socket, "SO_RCVBUFFORCE", None), socket.SO_RCVBUF):
+        if opt is None:
+            continue
+        try:
+            sock.setsockopt(socket.SOL_SOCKET, opt, RECEIVE_BUFFER)
+            return
+        except OSError:
+            continue
+
+
+class Recorder(can.Listener):
+    """Keeps every frame (with the index of the bus it came from) and writes the capture."""
+
+    def __init__(self, codec: Codec, writer: can.Listener, channel: int) -> None:
+        self.codec = codec
+        self.writer = writer
+        self.channel = channel
+        self.frames: list[can.Message] = []
+        self.samples_id = codec.frame_id("PhaseSamples")
+        self.status_id = codec.frame_id("PlantStatus")
+        self.last_raw_step = -1
+        self.done = threading.Event()
+        self.lock = threading.Lock()
+
+    def on_message_received(self, msg: can.Message) -> None:
+        msg.channel = self.channel
+        with self.lock:
+            self.frames.append(msg)
+            self.writer.on_message_received(msg)
+        if msg.arbitration_id == self.samples_id:
+            d = self.codec.decode(msg)
+            if d is not None and d.reason is None:
+                self.last_raw_step = int(d.signals["step"])
+        elif msg.arbitration_id == self.status_id:
+            d = self.codec.decode(msg)
+            if d is not None and d.reason is None and int(d.signals["state"]) == STATE_DONE:
+                self.done.set()
+
+
+@dataclass(slots=True)
+class RunResult:
+    out_dir: Path
+    metrics: dict[str, Any]
+    capture: Path
+    meta: dict[str, Any] = field(default_factory=dict)
+
+
+def _versions() -> dict[str, str]:
+    import cantools
+    import matplotlib
+    import numpy
+    import scipy
+
+    return {
+        "python": platform.python_version(),
+        "python-can": can.__version__,
+        "cantools": cantools.__version__,
+        "numpy": numpy.__version__,
+        "scipy": scipy.__version__,
+        "matplotlib": matplotlib.__version__,
+        "platform": platform.platform(),
+    }
+
+
+def _node_cmd(role: str, scn: Scenario, spec: BusSpec, extra: list[str]) -> list[str]:
+    return [sys.executable, "-m", "bench", role, scn.source, *spec.args(), *extra]
+
+
+def _scenario_args(scn: Scenario, mode: str) -> list[str]:
+    return [
+        "--mode",
+        mode,
+        "--duration",
+        repr(scn.duration),
+        "--delay-steps",
+        str(scn.latency.duty_delay_steps),
+        "--sample-delay-steps",
+        str(scn.latency.sample_delay_steps),
+    ]
+
+
+def _wait_ready(proc: subprocess.Popen[str], role: str, log: Path, timeout: float = 60.0) -> None:
+    assert proc.stdout is not None
+    t0 = time.monotonic()
+    while time.monotonic() - t0 < timeout:
+        line = proc.stdout.readline()
+        if line.strip() == "READY":
+            return
+        if line == "" and proc.poll() is not None:
+            tail = log.read_text(errors="replace").strip().splitlines()[-1:] if log.exists() else []
+            raise BenchError(f"{role} process exited before it was ready: {' '.join(tail)}")
+    raise BenchError(f"{role} process not ready after {timeout:.0f} s")
+
+
+def run_scenario(
+    scn: Scenario,
+    estimator: str,
+    *,
+    spec: BusSpec,
+    out_dir: Path,
+    mode: str = "lockstep",
+    log_format: str = "blf",
+    progress: bool = True,
+    codec: Codec | None = None,
+) -> RunResult:
+    """Run ``scn`` with ``estimator`` between two processes on ``spec``'s bus."""
+    codec = codec or Codec()
+    out_dir.mkdir(parents=True, exist_ok=True)
+    capture = out_dir / f"capture{LOG_SUFFIX[log_format]}"
+    T_s = sample_period(scn)
+    n = n_steps(scn)
+    link = scn.latency.any
+    spec_b = spec.peer() if link else spec
+    scn_args = _scenario_args(scn, mode)
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    procs: list[tuple[str, subprocess.Popen[str]]] = []
+    writer = can.Logger(str(capture))
+    bus_a = spec.open()
+    buses = [bus_a]
+    if link:
+        buses.append(spec_b.open())
+    recorders = [Recorder(codec, writer, i + 1) for i in range(len(buses))]
+    notifiers = [can.Notifier(b, [r], timeout=0.05) for b, r in zip(buses, recorders, strict=True)]
+    t_wall0 = time.perf_counter()
+    interrupted = False
+    prev_handlers = {}
+
+    def _on_signal(signum: int, frame: Any) -> None:
+        nonlocal interrupted
+        interrupted = True
+
+    for s in (signal.SIGINT, signal.SIGTERM):
+        try:
+            prev_handlers[s] = signal.signal(s, _on_signal)
+        except ValueError:
+            pass  # not in the main thread
+    try:
+        roles = [
+            ("controller", spec_b, ["--estimator", estimator, *scn_args]),
+            ("plant", spec, scn_args),
+        ]
+        if link:
+            lt = scn.latency
+            link_args = [
+                "--to", *_peer_args(spec_b), "--seed", str(scn.seed), "--mode", mode,
+                "--delay-steps", str(lt.duty_delay_steps),
+                "--sample-delay-steps", str(lt.sample_delay_steps),
+                "--duty-delay-us", repr(lt.duty_delay_us),
+                "--sample-delay-us", repr(lt.sample_delay_us),
+                "--jitter-us", repr(lt.jitter_us), "--jitter-dist", lt.jitter_dist,
+                "--drop-prob", repr(lt.drop_prob),
+            ]  # fmt: skip
+            roles.insert(0, ("link", spec, link_args))
+        for role, sp, extra in roles:
+            log = out_dir / f"{role}.log"
+            cmd = (
+                _node_cmd(role, scn, sp, [*extra, "--report", str(out_dir / f"{role}.json")])
+                if role != "link"
+                else [sys.executable, "-m", "bench", "link", *sp.args(), *extra]
+            )
+            p = subprocess.Popen(
+                cmd,
+                stdout=subprocess.PIPE,
+                stderr=log.open("w"),
+                text=True,
+                env=env,
+                start_new_session=True,
+            )
+            procs.append((role, p))
+            _wait_ready(p, role, log)
+        # commands: sent ahead of the plant by a lead, each twice
+        cmds = command_frames(scn, codec)
+        lead = max(500, int(0.2 / T_s))
+        m_step = 1 << codec.step_bits("PhaseSamples")
+        sent = 0
+        full_step = 0
+        last_raw = -1
+        plant = dict(procs)["plant"]
+        t_last_print = 0.0
+        while True:
+            raw = recorders[0].last_raw_step
+            if raw != last_raw and raw >= 0:
+                full_step += (raw - last_raw) % m_step if last_raw >= 0 else raw
+                last_raw = raw
+            while sent < len(cmds) and cmds[sent][0] <= full_step + lead:
+                bus_a.send(cmds[sent][1])
+                bus_a.send(cmds[sent][1])
+                sent += 1
+            if recorders[0].done.is_set() or plant.poll() is not None or interrupted:
+                break
+            now = time.perf_counter()
+            if progress and now - t_last_print > 0.5:
+                t_last_print = now
+                frac = min(1.0, full_step / max(1, n))
+                el = now - t_wall0
+                eta = el / frac - el if frac > 0.01 else float("nan")
+                print(
+                    f"\r  step {full_step}/{n} ({100 * frac:5.1f} %), {el:5.1f} s, ~{eta:4.0f} s left ",
+                    end="",
+                    file=sys.stderr,
+                    flush=True,
+                )
+            time.sleep(0.002)
+        if progress:
+            print(file=sys.stderr)
+        # stop everything: the stop command is in the schedule; repeat it to be sure.
+        # With latency the controller never sees the last sample, so the nodes
+        # that do not end by themselves get SIGTERM (they stop cleanly on it).
+        bus_a.send(cmds[-1][1])
+        try:
+            plant.wait(timeout=5.0)
+        except subprocess.TimeoutExpired:
+            plant.send_signal(signal.SIGTERM)
+        time.sleep(0.2)
+        for _, p in procs:
+            if p.poll() is None:
+                p.send_signal(signal.SIGTERM)
+        deadline = time.monotonic() + 2.0
+        for _, p in procs:
+            try:
+                p.wait(timeout=max(0.1, deadline - time.monotonic()))
+            except subprocess.TimeoutExpired:
+                p.kill()
+                p.wait()
+    finally:
+        for _, p in procs:
+            if p.poll() is None:
+                p.kill()
+                p.wait()
+        time.sleep(0.05)
+        for nt in notifiers:
+            nt.stop()
+        writer.stop()
+        for b in buses:
+            b.shutdown()
+        for s, h in prev_handlers.items():
+            signal.signal(s, h)
+    wall = time.perf_counter() - t_wall0
+    failures = {role: p.returncode for role, p in procs if p.returncode not in (0, None)}
+    frames = (
+        sorted((m for r in recorders for m in r.frames), key=lambda m: m.timestamp)
+        if link
+        else recorders[0].frames
+    )
+    reports = {}
+    for role in ("plant", "controller"):
+        f = out_dir / f"{role}.json"
+        if f.exists():
+            reports[role] = json.loads(f.read_text())
+    meta = run_metadata(scn, estimator, mode=mode, transport=spec.describe(), link=link)
+    meta["node_reports"] = reports
+    meta["exit_codes"] = {role: p.returncode for role, p in procs}
+    if interrupted:
+        meta["interrupted"] = True
+    result = finish_run(frames, codec, scn, out_dir, meta=meta, wall_s=wall, capture=capture)
+    if failures and not interrupted:
+        logs = "; ".join(
+            f"{r}: {(out_dir / (r + '.log')).read_text(errors='replace').strip().splitlines()[-1:]}"
+            for r in failures
+        )
+        raise BenchError(f"node process failed ({logs}); files in {out_dir}")
+    return result
+
+
+def _peer_args(spec: BusSpec) -> list[str]:
+    a = [f"{spec.interface}:{spec.channel}"]
+    if spec.port is not None:
+        a.append(f"--to-port={spec.port}")
+    return a
+
+
+def run_metadata(
+    scn: Scenario, estimator: str, *, mode: str, transport: str, link: bool
+) -> dict[str, Any]:
+    p = get_preset(scn)
+    from dataclasses import asdict
+
+    return {
+        "scenario": scn.to_dict(),
+        "estimator": estimator,
+        "mode": mode,
+        "transport": transport,
+        "latency_link": link,
+        "lockstep_delay_steps": lockstep_delay(scn),
+        "T_s": sample_period(scn),
+        "f_sw": 1.0 / sample_period(scn),
+        "preset": {
+            "name": p.name,
+            "motor": asdict(p.motor),
+            "inverter": asdict(p.inverter),
+            "f_sw": p.f_sw,
+            "doc": p.doc,
+        },
+        "seed": scn.seed,
+        "versions": _versions(),
+    }
+
+
+def finish_run(
+    frames: list[can.Message],
+    codec: Codec,
+    scn: Scenario,
+    out_dir: Path,
+    *,
+    meta: dict[str, Any],
+    wall_s: float,
+    capture: Path | None,
+    plots: bool = True,
+) -> RunResult:
+    """Table, metrics, metadata and plots from a run's frames."""
+    T_s = sample_period(scn)
+    n_p = get_preset(scn).motor.n_p
+    cap = analyze_frames(frames, codec, T_s=T_s, n_p=n_p)
+    write_csv(str(out_dir / "signals.csv"), cap.table)
+    m: dict[str, Any] = compute_metrics(
+        cap.table,
+        T_s=T_s,
+        n_p=n_p,
+        score_from_s=scn.score_from_s,
+        thd_window_s=scn.thd_window_s,
+        overshoot="speed_overshoot_rpm" in scn.paper_result,
+    )
+    reports = meta.get("node_reports", {})
+    plant_r = reports.get("plant", {})
+    ctrl_r = reports.get("controller", {})
+    m["wall_s"] = wall_s
+    m["realtime_factor"] = m["sim_s"] / wall_s if wall_s > 0 else float("nan")
+    m["deadline_misses"] = int(plant_r.get("overruns", 0))
+    m["late_duty_periods"] = int(plant_r.get("late_duties", 0))
+    m["frames_rejected"] = int(
+        cap.frames_rejected + plant_r.get("frames_rejected", 0) + ctrl_r.get("frames_rejected", 0)
+    )
+    reasons: dict[str, int] = dict(cap.rejected)
+    for r in (plant_r, ctrl_r):
+        for k, v in r.get("reject_reasons", {}).items():
+            reasons[k] = reasons.get(k, 0) + int(v)
+    m["frames_rejected_by_reason"] = reasons
+    m["frames_recorded"] = cap.frames
+    m["frames_unknown_id"] = cap.unknown_ids
+    m["incomplete_steps"] = cap.incomplete_steps
+    m["retransmits"] = int(plant_r.get("retransmits", 0))
+    m["late_commands"] = int(plant_r.get("late_commands", 0) + ctrl_r.get("late_commands", 0))
+    if any(getattr(f, "channel", None) == 2 for f in frames[:2000]):
+        from bench._analysis import measure_latency
+
+        m["latency_measured"] = measure_latency(frames, codec)
+        lt = scn.latency
+        m["latency_configured"] = {
+            "samples_steps": lt.sample_delay_steps,
+            "duties_steps": lt.duty_delay_steps,
+            "samples_us": lt.sample_delay_us,
+            "duties_us": lt.duty_delay_us,
+            "jitter_us": lt.jitter_us,
+            "drop_prob": lt.drop_prob,
+        }
+    if plant_r.get("jitter"):
+        m["jitter_us"] = plant_r["jitter"]
+    meta = dict(
+        meta,
+        scored_from_s=scn.score_from_s,
+        capture=capture.name if capture else None,
+        wall_s=wall_s,
+    )
+    (out_dir / "metrics.json").write_text(json.dumps(m, indent=2, sort_keys=True) + "\n")
+    (out_dir / "meta.json").write_text(
+        json.dumps(meta, indent=2, sort_keys=True, default=str) + "\n"
+    )
+    if plots:
+        from bench._plots import plot_run
+
+        plot_run(cap.table, out_dir, title=f"{scn.name} / {meta.get('estimator', '?')}")
+    return RunResult(out_dir=out_dir, metrics=m, capture=capture or out_dir, meta=meta)
+
+
+METRIC_ROWS = (
+    ("theta_err_max_deg", "deg"),
+    ("theta_err_min_deg", "deg"),
+    ("theta_err_mean_deg", "deg"),
+    ("theta_err_abs_mean_deg", "deg"),
+    ("theta_err_rms_deg", "deg"),
+    ("theta_err_abs_max_rad", "rad"),
+    ("speed_err_max_rpm", "rpm"),
+    ("speed_track_err_max_rpm", "rpm"),
+    ("speed_overshoot_rpm", "rpm"),
+    ("thd_phase_a_pct", "%"),
+    ("steps", ""),
+    ("sim_s", "s"),
+    ("wall_s", "s"),
+    ("realtime_factor", "x"),
+    ("deadline_misses", ""),
+    ("frames_rejected", ""),
+    ("retransmits", ""),
+)
+
+
+def format_metrics(m: dict[str, Any], paper: dict[str, Any] | None = None) -> str:
+    """The metrics as an aligned text table, with the paper's number where it has one."""
+    paper = paper or {}
+    lines = [f"{'metric':<26}{'bench':>12}  {'paper':>8}"]
+    for key, unit in METRIC_ROWS:
+        if key not in m:
+            continue
+        v = m[key]
+        vs = f"{v:12.3f}" if isinstance(v, float) else f"{v:>12}"
+        ps = f"{paper[key]:>8}" if key in paper else f"{'':>8}"
+        lines.append(f"{key:<26}{vs}  {ps} {unit}")
+    return "\n".join(lines)

@@ -1,0 +1,143 @@
+"""From a scenario to the objects of a run: plant, controller, command schedule.
+
+Every node (plant process, controller process, in-process loop) builds its
+objects here, so they agree on the motor, the rate and the references.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+from bench._errors import ScenarioError
+from bench._nodes import CMD_START, CMD_STOP, RPM_PER_RAD_S
+from bench._scenario import Scenario
+from controller import Controller, ControllerPars, MotorModel
+from controller._registry import ESTIMATOR_NAMES
+from plant_rt import ConstantLoad, Plant, Preset, SensorPars, preset
+
+
+@dataclass(frozen=True, slots=True)
+class PlannedCommand:
+    """A bench command and the step it applies at."""
+
+    apply_step: int
+    cmd: int
+    speed_ref_rpm: float
+    load_nm: float
+
+
+def get_preset(scn: Scenario) -> Preset:
+    try:
+        return preset(scn.preset)
+    except KeyError as e:
+        raise ScenarioError(f"{scn.source}: field 'preset': {e.args[0] if e.args else e}") from None
+
+
+def sample_period(scn: Scenario) -> float:
+    """PWM (= control) period of the scenario (s)."""
+    return 1.0 / (scn.f_sw or get_preset(scn).f_sw)
+
+
+def n_steps(scn: Scenario) -> int:
+    return int(round(scn.duration / sample_period(scn)))
+
+
+def lockstep_delay(scn: Scenario) -> int:
+    return scn.latency.duty_delay_steps + scn.latency.sample_delay_steps
+
+
+def build_plant(scn: Scenario) -> Plant:
+    p = get_preset(scn)
+    nz = scn.noise
+    sensors = SensorPars(
+        bits=nz.adc_bits or None,
+        i_fs=nz.adc_full_scale_a or 50.0,
+        noise_i=nz.current_std_a,
+        seed=scn.seed,
+    )
+    theta_m0 = math.radians(scn.theta_e0_deg) / p.motor.n_p
+    return Plant(
+        p.motor,
+        p.inverter,
+        sample_period(scn),
+        sensors=sensors,
+        load=ConstantLoad(scn.load_nm(0.0)),
+        saturation=scn.saturation,
+        theta_m0=theta_m0,
+    )
+
+
+def motor_model(p: Preset) -> MotorModel:
+    """The controller's copy of the motor parameters (here: the nominal ones)."""
+    m = p.motor
+    return MotorModel(
+        n_p=m.n_p,
+        R_s=m.R_s,
+        L_d=m.L_d,
+        L_q=m.L_q,
+        psi_f=m.psi_f,
+        J=m.J,
+        b=m.b,
+        i_max=m.i_max,
+        tau_max=1.5 * m.tau_rated,
+    )
+
+
+def build_controller(scn: Scenario, estimator: str) -> Controller:
+    if estimator not in ESTIMATOR_NAMES:
+        raise ScenarioError(
+            f"unknown estimator {estimator!r} (known: {', '.join(ESTIMATOR_NAMES)})"
+        )
+    p = get_preset(scn)
+    kw: dict[str, Any] = {}
+    if estimator == "sensored":
+        kw["startup"] = False
+    elif scn.known_initial_angle:
+        kw["startup"] = False
+        kw["theta0"] = math.radians(scn.theta_e0_deg)
+    try:
+        pars = ControllerPars(
+            motor=motor_model(p),
+            T_s=sample_period(scn),
+            estimator=estimator,
+            estimator_options=dict(scn.estimator_options),
+            **kw,
+        )
+        return Controller(pars)
+    except TypeError as e:
+        raise ScenarioError(f"{scn.source}: field 'estimator_options': {e}") from None
+
+
+def command_schedule(scn: Scenario) -> list[PlannedCommand]:
+    """The bench commands of a run, one per reference change.
+
+    References are evaluated every ``1 / reference_rate_hz`` (a ramp becomes
+    a staircase at that rate, as a drive receiving set-points at 1 kHz sees
+    it) and at every breakpoint of the profiles, so steps happen at the
+    exact period the scenario names.  The first command starts the run at
+    step 0; the last stops it after ``duration``.
+    """
+    T_s = sample_period(scn)
+    n = n_steps(scn)
+    every = max(1, int(round(1.0 / (scn.reference_rate_hz * T_s))))
+    ticks = set(range(0, n, every))
+    for t, _ in (*scn.speed_rpm.points, *scn.load_nm.points):
+        k = int(round(t / T_s))
+        if 0 <= k < n:
+            ticks.add(k)
+    out = [PlannedCommand(0, CMD_START, scn.speed_rpm(0.0), scn.load_nm(0.0))]
+    last = (out[0].speed_ref_rpm, out[0].load_nm)
+    for k in sorted(ticks - {0}):
+        t = k * T_s
+        val = (scn.speed_rpm(t), scn.load_nm(t))
+        if val != last:
+            out.append(PlannedCommand(k, 0, val[0], val[1]))
+            last = val
+    out.append(PlannedCommand(n, CMD_STOP, last[0], last[1]))
+    return out
+
+
+def rad_s(rpm: float) -> float:
+    return rpm / RPM_PER_RAD_S

@@ -1,0 +1,350 @@
+"""The ``bench`` command line.
+
+One function per subcommand, registered in :func:`build_parser`; a missing
+optional dependency breaks only its own subcommand.  A user's mistake (bad
+scenario, unknown estimator, unreadable capture, missing interface) is a
+:class:`~bench._errors.BenchError`: one line on stderr, exit code 2, no
+traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import random
+import signal
+import sys
+import threading
+from pathlib import Path
+from typing import Any
+
+from bench._errors import BenchError, InterfaceError
+
+MODES = ("lockstep", "realtime")
+
+
+def _add_bus(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group("bus")
+    g.add_argument(
+        "--interface",
+        "-i",
+        help="python-can interface (socketcan, udp_multicast, virtual, pcan, ...)",
+    )
+    g.add_argument(
+        "--channel", "-c", help="channel (vcan0, can0, PCAN_USBBUS1, a multicast group, ...)"
+    )
+    g.add_argument("--port", type=int, help="UDP port (udp_multicast only)")
+    g.add_argument("--bitrate", type=int, help="nominal bit rate (real adapters)")
+    g.add_argument("--data-bitrate", type=int, help="CAN FD data bit rate (real adapters)")
+
+
+def _add_scenario_overrides(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--mode", choices=MODES, default="lockstep")
+    p.add_argument("--duration", type=float, help="simulated seconds (overrides the scenario)")
+    p.add_argument(
+        "--delay-steps",
+        type=int,
+        help="injected latency on the duty direction, whole PWM periods (lockstep)",
+    )
+    p.add_argument(
+        "--sample-delay-steps", type=int, help="injected latency on the sample direction (lockstep)"
+    )
+    p.add_argument("--seed", type=int, help="seed of noise and jitter (overrides the scenario)")
+
+
+def _scenario(args: argparse.Namespace) -> Any:
+    from dataclasses import replace
+
+    from bench._scenario import load_scenario
+
+    scn = load_scenario(args.scenario)
+    lat = scn.latency
+    if getattr(args, "delay_steps", None) is not None:
+        lat = replace(lat, duty_delay_steps=max(0, args.delay_steps))
+    if getattr(args, "sample_delay_steps", None) is not None:
+        lat = replace(lat, sample_delay_steps=max(0, args.sample_delay_steps))
+    if getattr(args, "duration", None) is not None and args.duration <= 0:
+        raise BenchError(f"--duration must be > 0, got {args.duration}")
+    return scn.with_overrides(
+        duration=getattr(args, "duration", None), seed=getattr(args, "seed", None), latency=lat
+    )
+
+
+def _spec(args: argparse.Namespace, *, announce: bool) -> Any:
+    from bench._bus import default_transport
+    from bench._run import BusSpec
+
+    if args.interface is None:
+        if args.channel is not None:
+            raise InterfaceError("--channel given without --interface")
+        iface, chan, reason = default_transport()
+        if announce:
+            print(f"transport: {iface} {chan} ({reason})", file=sys.stderr)
+        port = args.port
+        if iface == "udp_multicast" and port is None:
+            # a port of its own per run: parallel runs must not hear each other
+            port = 44000 + 2 * random.Random(os.getpid()).randrange(5000)
+        return BusSpec(iface, chan, port)
+    from bench._bus import default_channel
+
+    channel: str | None = args.channel or default_channel(args.interface)
+    if channel is None:
+        raise InterfaceError(f"--interface {args.interface}: give --channel")
+    return BusSpec(args.interface, channel, args.port)
+
+
+_STOP = threading.Event()
+
+
+def _ready() -> None:
+    print("READY", flush=True)
+
+
+def _stop_on_signals() -> None:
+    """SIGTERM/SIGINT end a node's loop cleanly (report written, exit code 0)."""
+
+    def handler(signum: int, frame: Any) -> None:
+        _STOP.set()
+
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        signal.signal(sig, handler)
+
+
+def _write_report(path: str | None, data: dict[str, Any]) -> None:
+    if path:
+        Path(path).write_text(json.dumps(data, indent=2, default=str) + "\n")
+
+
+def cmd_run(args: argparse.Namespace) -> int:
+    from bench._run import format_metrics, run_scenario
+
+    scn = _scenario(args)
+    est = args.estimator or scn.estimator
+    from controller._registry import ESTIMATOR_NAMES
+
+    if est not in ESTIMATOR_NAMES:
+        raise BenchError(
+            f"--estimator: unknown estimator {est!r} (known: {', '.join(ESTIMATOR_NAMES)})"
+        )
+    spec = _spec(args, announce=True)
+    out = Path(args.out) if args.out else Path("runs") / f"{scn.name}-{est}"
+    print(f"run: {scn.name} with {est}, {args.mode}, {spec.describe()} -> {out}", file=sys.stderr)
+    res = run_scenario(
+        scn,
+        est,
+        spec=spec,
+        out_dir=out,
+        mode=args.mode,
+        log_format=args.log_format,
+        progress=not args.quiet,
+    )
+    print(format_metrics(res.metrics, scn.paper_result))
+    print(
+        f"files: {out}/ (capture{Path(res.capture).suffix}, signals.csv, metrics.json, meta.json, run.png)"
+    )
+    return 0
+
+
+def cmd_plant(args: argparse.Namespace) -> int:
+    from bench._codec import Codec
+    from bench._loops import make_plant_node, plant_loop
+
+    scn = _scenario(args)
+    spec = _spec(args, announce=False)
+    codec = Codec()
+    node = make_plant_node(scn, codec, truth_every=args.truth_every)
+    bus = spec.open()
+    _stop_on_signals()
+    try:
+        plant_loop(bus, node, realtime=args.mode == "realtime", on_ready=_ready, stop=_STOP.is_set)
+    finally:
+        bus.shutdown()
+        c = node.counters
+        _write_report(
+            args.report,
+            {
+                "steps": node.plant.k,
+                "overruns": c.overruns,
+                "late_duties": c.late_duties,
+                "frames_rejected": c.frames_rejected,
+                "reject_reasons": c.reject_reasons,
+                "retransmits": c.retransmits,
+                "duplicates": c.duplicates,
+                "late_commands": c.late_commands,
+                "jitter": getattr(node, "jitter", None),
+            },
+        )
+    return 0
+
+
+def cmd_controller(args: argparse.Namespace) -> int:
+    from bench._codec import Codec
+    from bench._loops import controller_loop, make_controller_node
+
+    scn = _scenario(args)
+    est = args.estimator or scn.estimator
+    spec = _spec(args, announce=False)
+    codec = Codec()
+    node = make_controller_node(scn, est, codec)
+    bus = spec.open()
+    _stop_on_signals()
+    try:
+        controller_loop(
+            bus, node, realtime=args.mode == "realtime", on_ready=_ready, stop=_STOP.is_set
+        )
+    finally:
+        bus.shutdown()
+        c = node.counters
+        _write_report(
+            args.report,
+            {
+                "steps": node.next_k,
+                "frames_rejected": c.frames_rejected,
+                "reject_reasons": c.reject_reasons,
+                "duplicates": c.duplicates,
+                "late_commands": c.late_commands,
+            },
+        )
+    return 0
+
+
+def cmd_link(args: argparse.Namespace) -> int:
+    from bench._codec import Codec
+    from bench._link import LockstepLink, RealtimeLink, link_loop
+    from bench._run import BusSpec
+
+    codec = Codec()
+    a = _spec(args, announce=False)
+    iface, _, chan = args.to.partition(":")
+    if not iface or not chan:
+        raise BenchError(f"--to: expected INTERFACE:CHANNEL, got {args.to!r}")
+    b = BusSpec(iface, chan, args.to_port)
+    logic: LockstepLink | RealtimeLink
+    if args.mode == "lockstep":
+        logic = LockstepLink(
+            codec,
+            sample_delay=args.sample_delay_steps or 0,
+            duty_delay=args.delay_steps or 0,
+            drop_prob=args.drop_prob,
+            seed=args.seed or 0,
+        )
+    else:
+        logic = RealtimeLink(
+            codec,
+            sample_delay_us=args.sample_delay_us,
+            duty_delay_us=args.duty_delay_us,
+            jitter_us=args.jitter_us,
+            jitter_dist=args.jitter_dist,
+            drop_prob=args.drop_prob,
+            seed=args.seed or 0,
+        )
+    bus_a, bus_b = a.open(), b.open()
+    _stop_on_signals()
+    try:
+        link_loop(bus_a, bus_b, logic, on_ready=_ready, idle_s=args.idle_s, stop=_STOP.is_set)
+    finally:
+        bus_a.shutdown()
+        bus_b.shutdown()
+    return 0
+
+
+def cmd_analyze(args: argparse.Namespace) -> int:
+    from bench._replay import analyze_capture
+
+    res = analyze_capture(
+        Path(args.log), out_dir=Path(args.out) if args.out else None, scenario=args.scenario
+    )
+    from bench._run import format_metrics
+
+    print(format_metrics(res.metrics))
+    print(f"files: {res.out_dir}/")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(
+        prog="bench",
+        description="CAN hardware-in-the-loop bench for sensorless IPMSM control",
+    )
+    sub = ap.add_subparsers(dest="command", required=True)
+
+    p = sub.add_parser("run", help="run a scenario: plant and controller as two processes over CAN")
+    p.add_argument(
+        "scenario", help="shipped scenario name (wen-5.1, xue-fig13, ...) or a .toml path"
+    )
+    p.add_argument(
+        "--estimator", "-e", help="sfhf, tt-ab, tt-dq, square-wave, square-wave-nocic, sensored"
+    )
+    _add_scenario_overrides(p)
+    _add_bus(p)
+    p.add_argument("--out", "-o", help="run folder (default runs/SCENARIO-ESTIMATOR)")
+    p.add_argument(
+        "--log-format", choices=("blf", "asc", "log"), default="blf", help="capture format"
+    )
+    p.add_argument("--quiet", "-q", action="store_true", help="no progress line")
+    p.set_defaults(func=cmd_run)
+
+    p = sub.add_parser("plant", help="serve the plant emulator on a bus (one node)")
+    p.add_argument("scenario")
+    _add_scenario_overrides(p)
+    _add_bus(p)
+    p.add_argument("--truth-every", type=int, default=1, help="send PlantTruth every N periods")
+    p.add_argument("--report", help="write the node's counters to this JSON file at exit")
+    p.set_defaults(func=cmd_plant)
+
+    p = sub.add_parser("controller", help="serve the drive controller on a bus (one node)")
+    p.add_argument("scenario")
+    p.add_argument("--estimator", "-e")
+    _add_scenario_overrides(p)
+    _add_bus(p)
+    p.add_argument("--report", help="write the node's counters to this JSON file at exit")
+    p.set_defaults(func=cmd_controller)
+
+    p = sub.add_parser("link", help="latency link between two buses (delay, jitter, drop)")
+    _add_bus(p)
+    p.add_argument(
+        "--to", required=True, help="the other bus, INTERFACE:CHANNEL (e.g. socketcan:vcan1)"
+    )
+    p.add_argument("--to-port", type=int, help="UDP port of the other bus (udp_multicast)")
+    p.add_argument("--mode", choices=MODES, default="lockstep")
+    p.add_argument("--delay-steps", type=int, default=0, help="lockstep: duty direction, periods")
+    p.add_argument(
+        "--sample-delay-steps", type=int, default=0, help="lockstep: sample direction, periods"
+    )
+    p.add_argument("--duty-delay-us", type=float, default=0.0, help="real time: duty direction")
+    p.add_argument("--sample-delay-us", type=float, default=0.0, help="real time: sample direction")
+    p.add_argument("--jitter-us", type=float, default=0.0)
+    p.add_argument("--jitter-dist", choices=("normal", "uniform"), default="normal")
+    p.add_argument("--drop-prob", type=float, default=0.0)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--duration", type=float, help="ignored (accepted for symmetry with the nodes)")
+    p.add_argument(
+        "--idle-s", type=float, default=30.0, help="exit after this long without traffic"
+    )
+    p.set_defaults(func=cmd_link)
+
+    p = sub.add_parser("analyze", help="decode a capture into signals.csv, metrics.json and plots")
+    p.add_argument("log", help="a capture python-can reads (.blf, .asc, .log, .trc, .csv, .mf4)")
+    p.add_argument("--out", "-o", help="output folder (default: beside the capture)")
+    p.add_argument("--scenario", help="scenario of the capture (default: from meta.json beside it)")
+    p.set_defaults(func=cmd_analyze)
+    return ap
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = build_parser()
+    args = ap.parse_args(argv)
+    try:
+        rc: int = args.func(args)
+        return rc
+    except BenchError as e:
+        print(f"bench: error: {e}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("bench: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,155 @@
+"""The DBC file: loadable, complete, and its scalings fit the physics they carry."""
+
+from __future__ import annotations
+
+import math
+import subprocess
+import sys
+
+import cantools
+import pytest
+
+from dbc import DBC_PATH
+
+EXPECTED = {
+    "PwmDuty": {"duty_a", "duty_b", "duty_c", "enable", "step", "crc"},
+    "PhaseSamples": {"i_a", "i_b", "u_dc", "step", "status", "crc"},
+    "PlantTruth": {"theta_e", "w_m", "tau_e", "tau_L", "step"},
+    "CtrlTelemetry": {"theta_hat", "w_hat", "err", "mode", "step"},
+    "BenchCommand": {"cmd", "speed_ref", "load_torque", "seq", "step", "crc"},
+    "PlantStatus": {"state", "fault_code", "overruns", "late_frames", "step", "crc"},
+}
+
+
+@pytest.fixture(scope="module")
+def db() -> cantools.database.can.Database:
+    database = cantools.database.load_file(str(DBC_PATH))
+    assert isinstance(database, cantools.database.can.Database)
+    return database
+
+
+def test_messages_and_signal_names(db):
+    got = {m.name: {s.name for s in m.signals} for m in db.messages}
+    assert got == EXPECTED
+    assert {n.name for n in db.nodes} == {"Plant", "Controller", "Bench"}
+
+
+def test_cantools_dump_is_clean():
+    res = subprocess.run(
+        [sys.executable, "-m", "cantools", "dump", str(DBC_PATH)],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert res.returncode == 0, res.stderr
+    assert "PwmDuty" in res.stdout and "CtrlTelemetry" in res.stdout
+    assert "warning" not in (res.stdout + res.stderr).lower()
+
+
+def test_priorities(db):
+    fid = {m.name: m.frame_id for m in db.messages}
+    per_period = max(fid["PwmDuty"], fid["PhaseSamples"])
+    assert per_period < fid["BenchCommand"]
+    assert fid["BenchCommand"] < min(fid["PlantStatus"], fid["PlantTruth"], fid["CtrlTelemetry"])
+    assert all(not m.is_extended_frame for m in db.messages)
+
+
+def test_frame_formats(db):
+    for m in db.messages:
+        if m.name in ("PlantTruth", "CtrlTelemetry"):
+            assert m.is_fd and 8 < m.length <= 64
+        else:
+            assert not m.is_fd and m.length == 8
+        # Every bit of each frame is used or the frame is FD-padded to a valid DLC.
+        used = sum(s.length for s in m.signals)
+        assert used <= 8 * m.length
+
+
+def test_every_signal_commented(db):
+    for m in db.messages:
+        assert m.comment, m.name
+        for s in m.signals:
+            assert s.comment, f"{m.name}.{s.name}"
+
+
+def test_crc_and_e2e_data_ids(db):
+    ids = []
+    for m in db.messages:
+        crc = [s for s in m.signals if s.name == "crc"]
+        if not crc:
+            continue
+        assert crc[0].length == 8 and crc[0].start == 0
+        ids.append(m.dbc.attributes["E2EDataId"].value)
+    assert len(ids) == 4 and len(set(ids)) == 4
+
+
+def test_value_tables(db):
+    cmd = db.get_message_by_name("BenchCommand").get_signal_by_name("cmd")
+    assert {k: str(v) for k, v in cmd.choices.items()} == {
+        0: "none",
+        1: "start",
+        2: "stop",
+        3: "reset",
+        4: "enable",
+        5: "disable",
+    }
+    fault = db.get_message_by_name("PlantStatus").get_signal_by_name("fault_code")
+    assert [str(fault.choices[i]) for i in range(5)] == [
+        "none",
+        "watchdog",
+        "over_current",
+        "over_voltage",
+        "over_speed",
+    ]
+    mode = db.get_message_by_name("CtrlTelemetry").get_signal_by_name("mode")
+    from controller._api import MODE_ALIGN, MODE_DISABLED, MODE_FAULT, MODE_POLARITY, MODE_RUN
+
+    assert str(mode.choices[MODE_DISABLED]) == "disabled"
+    assert str(mode.choices[MODE_ALIGN]) == "align"
+    assert str(mode.choices[MODE_POLARITY]) == "polarity"
+    assert str(mode.choices[MODE_RUN]) == "run"
+    assert str(mode.choices[MODE_FAULT]) == "fault"
+
+
+def test_step_counters_wide_enough(db):
+    for m in db.messages:
+        step = m.get_signal_by_name("step") if "step" in {s.name for s in m.signals} else None
+        if step is not None:
+            assert step.length >= 10 and not step.is_signed and step.scale == 1
+
+
+def _hf_currents(V_h: float, f_h: float, L_d: float, L_q: float) -> tuple[float, float]:
+    """Positive and negative-sequence HF current amplitudes at standstill (Wen (5), and (6)
+    with the sign derived from (2): V_h (L_q - L_d) / (2 w_h L_d L_q))."""
+    w_h = 2 * math.pi * f_h
+    return V_h * (L_d + L_q) / (2 * w_h * L_d * L_q), V_h * (L_q - L_d) / (2 * w_h * L_d * L_q)
+
+
+def test_current_scale_resolves_wen_hf_response_and_xue_range(db):
+    i_a = db.get_message_by_name("PhaseSamples").get_signal_by_name("i_a")
+    lsb = i_a.scale
+    I_p, I_n = _hf_currents(50.0, 500.0, 57e-3, 82e-3)
+    assert I_p == pytest.approx(0.237, abs=2e-3) and I_n == pytest.approx(0.0426, abs=1e-3)
+    assert I_n / lsb > 16  # the negative sequence spans many LSB
+    # Quantization noise (uniform, LSB/sqrt(12)) as angle noise on the 2-theta vector, per
+    # raw sample: far below the degree-level errors the bench scores.
+    angle_noise_deg = math.degrees(lsb / math.sqrt(12) / (2 * I_n))
+    assert angle_noise_deg < 0.5
+    # xue2022: about 30 A peak; the range leaves room for an over-current trip at 1.5 x.
+    assert i_a.minimum <= -45 and i_a.maximum >= 45
+
+
+def test_duty_resolution_does_not_limit_current_loop(db):
+    duty = db.get_message_by_name("PwmDuty").get_signal_by_name("duty_a")
+    i_lsb = db.get_message_by_name("PhaseSamples").get_signal_by_name("i_a").scale
+    v_lsb = duty.scale * 540.0
+    assert v_lsb < 0.02  # < 20 mV of phase voltage at 540 V
+    # Largest current change one duty LSB makes in a period: xue2022 (L_d 3.53 mH, 1 kHz).
+    di = v_lsb * 1e-3 / 3.53e-3
+    assert di < 3 * i_lsb
+    assert duty.minimum == 0 and duty.maximum > 0.9999
+
+
+def test_u_dc_range_and_resolution(db):
+    u_dc = db.get_message_by_name("PhaseSamples").get_signal_by_name("u_dc")
+    assert u_dc.maximum >= 540 * 1.5 and u_dc.scale / 540 < 1e-3
