@@ -1,0 +1,60 @@
+"""Pure drive controller: field-oriented control and sensorless estimators.
+
+Never imports :mod:`plant_rt`, never touches CAN.
+"""
+
+from controller._api import (
+    MODE_ALIGN,
+    MODE_DISABLED,
+    MODE_FAULT,
+    MODE_POLARITY,
+    MODE_RUN,
+    ControlOutput,
+    Estimator,
+    EstimatorInput,
+    Measurement,
+)
+from controller._controller import Controller, ControllerPars
+from controller._filters import BPF_WEN, HPF_WEN, LPF_WEN, discretize
+from controller._params import MotorModel
+from controller._pi import PIController
+from controller._pll import PositionObserver
+from controller._registry import ESTIMATOR_NAMES, UnknownEstimatorError, make_estimator
+from controller._rotating import RotatingInjectionPars, hf_amplitudes
+from controller._startup import PolarityTest
+from controller._svpwm import svpwm
+from controller._transforms import clarke, inv_clarke, inv_park, park, wrap_2pi, wrap_pi
+
+__all__ = [
+    "BPF_WEN",
+    "ESTIMATOR_NAMES",
+    "HPF_WEN",
+    "LPF_WEN",
+    "MODE_ALIGN",
+    "MODE_DISABLED",
+    "MODE_FAULT",
+    "MODE_POLARITY",
+    "MODE_RUN",
+    "ControlOutput",
+    "Controller",
+    "ControllerPars",
+    "Estimator",
+    "EstimatorInput",
+    "Measurement",
+    "MotorModel",
+    "PIController",
+    "PolarityTest",
+    "PositionObserver",
+    "RotatingInjectionPars",
+    "UnknownEstimatorError",
+    "clarke",
+    "discretize",
+    "hf_amplitudes",
+    "inv_clarke",
+    "inv_park",
+    "make_estimator",
+    "park",
+    "svpwm",
+    "wrap_2pi",
+    "wrap_pi",
+]

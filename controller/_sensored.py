@@ -1,0 +1,48 @@
+"""Sensored baseline: the same FOC with the true rotor angle and speed."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from controller._api import EstimatorInput
+from controller._params import MotorModel
+
+
+class SensoredEstimator:
+    """Passes the true angle and speed (``EstimatorInput.theta_e``/``w_e``) through.
+
+    No injection; the current loop gets the measured current unchanged.
+    Raises ``ValueError`` if the truth is missing.
+    """
+
+    def __init__(self, T_s: float) -> None:
+        self.T_s = T_s
+        self.theta_hat = 0.0
+        self.w_hat = 0.0
+        self.err = 0.0
+        self.i_alpha_f = 0.0
+        self.i_beta_f = 0.0
+
+    def update(self, x: EstimatorInput) -> None:
+        """Take sample ``k`` (angle and speed at ``k T_s``)."""
+        if x.theta_e is None or x.w_e is None:
+            raise ValueError("the sensored estimator needs Measurement.theta_e and w_e")
+        self.theta_hat = x.theta_e
+        self.w_hat = x.w_e
+        self.i_alpha_f = x.i_alpha
+        self.i_beta_f = x.i_beta
+
+    def injection(self) -> tuple[float, float]:
+        """No HF injection."""
+        return 0.0, 0.0
+
+    def reset(self, theta0: float) -> None:
+        """Nothing to restart: the angle comes from the sensor."""
+        self.theta_hat = theta0
+
+
+def create(motor: MotorModel, T_s: float, **options: Any) -> SensoredEstimator:
+    """Build the ``sensored`` estimator (takes no options)."""
+    if options:
+        raise TypeError(f"sensored estimator takes no options, got {sorted(options)}")
+    return SensoredEstimator(T_s)
