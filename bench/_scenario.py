@@ -406,7 +406,7 @@ def parse_scenario(data: dict[str, Any], src: str) -> Scenario:
     opts = r.table("estimator_options").t
     paper = r.table("paper_result").t
     return Scenario(
-        name=r.string("name", Path(src).stem),
+        name=r.string("name", src[:-5] if src.endswith(".toml") else src),
         source=src,
         preset=preset,
         duration=r.num("duration", lo=1e-3),

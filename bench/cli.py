@@ -10,6 +10,7 @@ traceback.
 from __future__ import annotations
 
 import argparse
+import importlib
 import json
 import os
 import random
@@ -22,6 +23,16 @@ from typing import Any
 from bench._errors import BenchError, InterfaceError
 
 MODES = ("lockstep", "realtime")
+
+#: Modules that add subcommands: each has ``register(subparsers)`` and keeps
+#: its heavy imports inside its command functions.
+SUBCOMMAND_MODULES = (
+    "bench._cli_suite",
+    "bench._cli_replay",
+    "bench._cli_firmware",
+    "bench._cli_perf",
+    "bench._cli_reliability",
+)
 
 
 def _add_bus(p: argparse.ArgumentParser) -> None:
@@ -329,6 +340,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", "-o", help="output folder (default: beside the capture)")
     p.add_argument("--scenario", help="scenario of the capture (default: from meta.json beside it)")
     p.set_defaults(func=cmd_analyze)
+
+    for mod in SUBCOMMAND_MODULES:
+        try:
+            module = importlib.import_module(mod)
+        except ModuleNotFoundError as e:
+            if e.name != mod:
+                raise
+            continue
+        module.register(sub)
     return ap
 
 
