@@ -49,6 +49,7 @@ COLUMNS: tuple[tuple[str, str], ...] = (
     ("enable", "PWM enabled by the controller, 0/1"),
     ("est_err", "estimator error signal, rad"),
     ("mode", "controller mode"),
+    ("duty_age", "age of the duty applied in the previous period, PWM periods (255: none)"),
 )
 
 
@@ -90,6 +91,55 @@ class _Unwrapper:
         return full, back
 
 
+#: Messages of the per-step table and the signals taken from each, in table order.
+_TABLE_MESSAGES: tuple[tuple[str, tuple[str, ...]], ...] = (
+    ("PhaseSamples", ("i_a", "i_b", "u_dc")),
+    ("PlantTruth", ("theta_e", "w_m", "tau_e", "tau_L", "duty_age")),
+    ("CtrlTelemetry", ("theta_hat", "w_hat", "err", "mode")),
+    ("PwmDuty", ("duty_a", "duty_b", "duty_c", "enable")),
+    ("BenchCommand", ("speed_ref", "load_torque")),
+)
+
+
+def _unwrap_sequential(raw: list[int], modulus: int) -> list[int]:
+    """Full steps of a counter when nothing anchors it: relative to the highest so far."""
+    out: list[int] = []
+    u = _Unwrapper(modulus)
+    for r in raw:
+        out.append(u(r)[0])
+    return out
+
+
+def _full_steps(
+    name: str,
+    raw: npt.NDArray[np.int64],
+    index: npt.NDArray[np.int64],
+    bits: int,
+    anchor: tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]] | None,
+) -> npt.NDArray[np.int64]:
+    """Full step numbers of a message's counter values.
+
+    A counter narrower than the widest one in the capture (``PhaseSamples``
+    and ``PwmDuty`` carry 10 bits, ``BenchCommand`` 16, ``PlantTruth`` and
+    ``CtrlTelemetry`` 32) is unwrapped to the step nearest that of the latest
+    wide-counter frame before it (the first one for frames before any), so
+    a capture that starts mid-run or has gaps longer than the narrow counter's
+    range still lines up all messages of a step.  Without wide counters the
+    narrow ones are unwrapped one after the other from the first value.
+    """
+    m = 1 << bits
+    if anchor is None or len(anchor[0]) == 0:
+        if len(raw) < 2 or np.all(np.abs(np.diff(raw)) < m // 2):
+            return raw.copy()  # no counter wrap: sequential unwrapping keeps every value
+        return np.array(_unwrap_sequential(raw.tolist(), m), dtype=np.int64)
+    a_idx, a_step = anchor
+    pos = np.searchsorted(a_idx, index, side="right") - 1
+    expected = a_step[np.maximum(pos, 0)]
+    half = m // 2
+    full: npt.NDArray[np.int64] = expected + (raw - expected + half) % m - half
+    return full
+
+
 def analyze_frames(
     frames: Iterable[can.Message],
     codec: Codec,
@@ -97,96 +147,119 @@ def analyze_frames(
     T_s: float,
     n_p: int,
 ) -> Capture:
-    """Decode frames into the per-step table (steps with samples, truth and telemetry)."""
-    samples: dict[int, tuple[float, float, float]] = {}
-    truth: dict[int, tuple[float, float, float, float]] = {}
-    tele: dict[int, tuple[float, float, float, float]] = {}
-    duty: dict[int, tuple[float, float, float, float]] = {}
-    cmds: dict[int, tuple[float, float]] = {}
-    unwrappers: dict[str, _Unwrapper] = {}
-    for name, _sig in (
-        ("PhaseSamples", "step"),
-        ("PlantTruth", "step"),
-        ("CtrlTelemetry", "step"),
-        ("PwmDuty", "step"),
-        ("BenchCommand", "step"),
-    ):
-        unwrappers[name] = _Unwrapper(1 << codec.step_bits(name))
-    cap = Capture(table={})
-    for msg in frames:
-        cap.frames += 1
-        if msg.is_error_frame or msg.is_remote_frame:
+    """Decode frames into the per-step table (steps with samples, truth and telemetry).
+
+    The whole capture is decoded at once (:func:`bench._batch_decode.decode_batch`,
+    the same values and rejections as :meth:`Codec.decode` frame by frame).
+    Per message, in capture order: the first frame of a step wins (later
+    copies count as duplicates) and a step below the highest seen so far
+    counts as out of order.  The table has one row per step that has samples,
+    truth and telemetry; when the capture has no telemetry at all (a drive
+    that does not send it), one row per step with samples and truth, the
+    estimate columns NaN.
+
+    Raises
+    ------
+    ValueError
+        No step has samples and truth (the message says what the capture holds).
+    """
+    from bench._batch_decode import decode_batch
+
+    seq = frames if isinstance(frames, list) else list(frames)
+    dec = decode_batch(seq, codec)
+    cap = Capture(
+        table={},
+        frames=dec.frames,
+        unknown_ids=dec.unknown_ids,
+        rejected=dict(dec.rejected),
+    )
+    bits = {name: codec.step_bits(name) for name, _ in _TABLE_MESSAGES}
+    wide = max(bits.values())
+    # anchor of the narrow counters: every valid frame with a wide counter
+    a_parts = [
+        (dec.messages[n].index, dec.messages[n].signals["step"])
+        for n, _ in _TABLE_MESSAGES
+        if bits[n] == wide and n in dec.messages
+    ]
+    anchor = None
+    if a_parts:
+        a_idx = np.concatenate([p[0] for p in a_parts])
+        a_step = np.concatenate([p[1] for p in a_parts]).astype(np.int64)
+        o = np.argsort(a_idx, kind="stable")
+        anchor = (a_idx[o], a_step[o])
+    stores: dict[str, tuple[npt.NDArray[np.int64], Array]] = {}
+    for name, sigs in _TABLE_MESSAGES:
+        b = dec.messages.get(name)
+        if b is None or len(b.index) == 0:
+            stores[name] = (np.zeros(0, dtype=np.int64), np.zeros((0, len(sigs))))
             continue
-        d = codec.decode(msg)
-        if d is None:
-            cap.unknown_ids += 1
-            continue
-        if d.reason is not None:
-            cap.rejected[d.reason] = cap.rejected.get(d.reason, 0) + 1
-            continue
-        s = d.signals
-        if d.name == "PhaseSamples":
-            k, back = unwrappers[d.name](int(s["step"]))
-            store: dict = samples
-            val: tuple = (float(s["i_a"]), float(s["i_b"]), float(s["u_dc"]))
-        elif d.name == "PlantTruth":
-            k, back = unwrappers[d.name](int(s["step"]))
-            store = truth
-            val = (float(s["theta_e"]), float(s["w_m"]), float(s["tau_e"]), float(s["tau_L"]))
-        elif d.name == "CtrlTelemetry":
-            k, back = unwrappers[d.name](int(s["step"]))
-            store = tele
-            val = (float(s["theta_hat"]), float(s["w_hat"]), float(s["err"]), float(s["mode"]))
-        elif d.name == "PwmDuty":
-            k, back = unwrappers[d.name](int(s["step"]))
-            k -= 1  # the duty tagged k+1 answers sample k
-            store = duty
-            val = (float(s["duty_a"]), float(s["duty_b"]), float(s["duty_c"]), float(s["enable"]))
-        elif d.name == "BenchCommand":
-            k, back = unwrappers[d.name](int(s["step"]))
-            store = cmds
-            val = (float(s["speed_ref"]), float(s["load_torque"]))
-        else:
-            continue
-        if k in store:
-            cap.duplicates += 1
-            continue
-        if back:
-            cap.out_of_order += 1
-        store[k] = val
-    steps_all = sorted(set(samples) & set(truth) & set(tele))
-    if not steps_all:
-        raise ValueError("no step has samples, truth and telemetry together")
-    cap.incomplete_steps = len(set(samples) | set(truth) | set(tele)) - len(steps_all)
-    k0 = steps_all[0]
-    cap.first_step = k0
-    steps = np.array(steps_all, dtype=np.int64)
+        raw = b.signals["step"].astype(np.int64)
+        full = _full_steps(name, raw, b.index, bits[name], anchor if bits[name] < wide else None)
+        if name == "PwmDuty":
+            full = full - 1  # the duty tagged k+1 answers sample k
+        steps_u, first = np.unique(full, return_index=True)
+        cap.duplicates += len(full) - len(steps_u)
+        if len(full) > 1:
+            prev_max = np.maximum.accumulate(full)[:-1]
+            back = np.zeros(len(full), dtype=bool)
+            back[1:] = full[1:] < prev_max
+            is_first = np.zeros(len(full), dtype=bool)
+            is_first[first] = True
+            cap.out_of_order += int(np.count_nonzero(back & is_first))
+        vals = np.column_stack([b.signals[s][first] for s in sigs])
+        stores[name] = (steps_u, vals)
+    s_steps = stores["PhaseSamples"][0]
+    t_steps = stores["PlantTruth"][0]
+    e_steps = stores["CtrlTelemetry"][0]
+    # (each store's steps are sorted and unique)
+    steps = np.intersect1d(
+        np.intersect1d(s_steps, t_steps, assume_unique=True), e_steps, assume_unique=True
+    )
+    if len(steps) == 0 and len(e_steps) == 0:
+        steps = np.intersect1d(s_steps, t_steps, assume_unique=True)
+    if len(steps) == 0:
+        held = ", ".join(f"{name} {len(stores[name][0])}" for name, _ in _TABLE_MESSAGES)
+        raise ValueError(
+            "no step has samples, truth and telemetry together "
+            f"(valid steps per message: {held}; {cap.unknown_ids} frames with other IDs, "
+            f"{cap.frames_rejected} rejected)"
+        )
+    every = np.sort(np.concatenate([s_steps, t_steps, e_steps]))
+    n_union = int(np.count_nonzero(np.diff(every))) + 1
+    cap.incomplete_steps = n_union - len(steps)
+    cap.first_step = int(steps[0])
     n = len(steps)
     cols = {name: np.full(n, math.nan) for name, _ in COLUMNS}
     cols["step"] = steps.astype(float)
     cols["t"] = steps * T_s
-    cols["i_a"], cols["i_b"], cols["u_dc"] = (
-        np.array([samples[k][j] for k in steps_all]) for j in range(3)
-    )
+
+    def take(store: tuple[npt.NDArray[np.int64], Array], j: int) -> Array:
+        st, va = store
+        pos = np.searchsorted(st, steps)
+        pos_c = np.minimum(pos, max(len(st) - 1, 0))
+        hit = (pos < len(st)) & (st[pos_c] == steps) if len(st) else np.zeros(n, dtype=bool)
+        col = np.full(n, math.nan)
+        col[hit] = va[pos_c[hit], j]
+        return col
+
+    cols["i_a"], cols["i_b"], cols["u_dc"] = (take(stores["PhaseSamples"], j) for j in range(3))
     cols["i_c"] = -cols["i_a"] - cols["i_b"]
-    cols["theta_e"], cols["w_m_rpm"], cols["tau_e"], cols["tau_L"] = (
-        np.array([truth[k][j] for k in steps_all]) for j in range(4)
+    cols["theta_e"], cols["w_m_rpm"], cols["tau_e"], cols["tau_L"], cols["duty_age"] = (
+        take(stores["PlantTruth"], j) for j in range(5)
     )
     cols["theta_hat"], cols["w_hat_rpm"], cols["est_err"], cols["mode"] = (
-        np.array([tele[k][j] for k in steps_all]) for j in range(4)
+        take(stores["CtrlTelemetry"], j) for j in range(4)
     )
     # wire units: w_m mechanical rad/s, w_hat electrical rad/s
     rpm = 60.0 / (2.0 * math.pi)
     cols["w_m_rpm"] = cols["w_m_rpm"] * rpm
     cols["w_hat_rpm"] = cols["w_hat_rpm"] * (rpm / n_p)
-    nan4 = (math.nan,) * 4
     cols["d_a"], cols["d_b"], cols["d_c"], cols["enable"] = (
-        np.array([duty.get(k, nan4)[j] for k in steps_all]) for j in range(4)
+        take(stores["PwmDuty"], j) for j in range(4)
     )
     # references in force: forward fill of the commands by apply step
-    if cmds:
-        c_steps = np.array(sorted(cmds), dtype=np.int64)
-        c_vals = np.array([cmds[k] for k in c_steps.tolist()])
+    c_steps, c_vals = stores["BenchCommand"]
+    if len(c_steps):
         idx = np.searchsorted(c_steps, steps, side="right") - 1
         ok = idx >= 0
         for j, name in enumerate(("w_ref_rpm", "load_ref_nm")):
@@ -221,66 +294,45 @@ def read_csv(path: str) -> dict[str, Array]:
 
 
 def measure_latency(frames: list[can.Message], codec: Codec) -> dict[str, dict[str, float]]:
-    """Latency seen across a link, per direction, from a two-bus capture.
+    """Wall-clock latency across a link, per direction, from a two-bus capture.
 
     ``frames`` must carry ``channel`` 1 (plant side, bus A) and 2 (controller
     side, bus B), as :class:`bench._run.Recorder` tags them, and receive
-    timestamps from one clock.  For each sample frame ``j`` first seen on B,
-    the delay in periods is the number of plant samples A had carried by
-    then minus ``j + 1``; for each duty frame, the number of plant samples A
-    carried between the duty's appearance on B and on A.  Microseconds are
-    the timestamp differences of the same frame on both sides.
+    timestamps from one clock.  For each sample frame, the time from its
+    appearance on A to its appearance on B; for each duty frame, from B to A
+    (microseconds, median and 99th percentile).
+
+    Latency in whole PWM periods is not counted here: in lockstep the plant
+    may legitimately run ahead of a delayed frame, so counting periods
+    between timestamps depends on scheduling.  The exact figure is the
+    plant's own ``duty_age`` (in ``PlantTruth``, scored as
+    ``loop_latency_steps``).
     """
     sid, did = codec.frame_id("PhaseSamples"), codec.frame_id("PwmDuty")
     m = 1 << codec.step_bits("PhaseSamples")
-    ordered = sorted(frames, key=lambda f: f.timestamp)
-    seen_a: dict[tuple[int, int], float] = {}
-    seen_b: dict[tuple[int, int], float] = {}
-    a_count = 0
-    a_count_at: dict[tuple[str, int, int], int] = {}
-    unw = {1: _Unwrapper(m), 2: _Unwrapper(m), 3: _Unwrapper(m), 4: _Unwrapper(m)}
-    for f in ordered:
+    first_seen: dict[tuple[int, int, int], float] = {}
+    unw: dict[tuple[int, int], _Unwrapper] = {}
+    for f in sorted(frames, key=lambda f: f.timestamp):
         if f.arbitration_id not in (sid, did) or f.channel not in (1, 2):
             continue
         d = codec.decode(f)
         if d is None or d.reason is not None:
             continue
-        ch = int(f.channel)
-        kind = 0 if f.arbitration_id == sid else 2
-        k, _ = unw[ch + kind](int(d.signals["step"]))
-        key = (f.arbitration_id, k)
-        store = seen_a if ch == 1 else seen_b
-        if key in store:
-            continue
-        store[key] = f.timestamp
-        if ch == 1 and f.arbitration_id == sid:
-            a_count = max(a_count, k + 1)
-        a_count_at[("A" if ch == 1 else "B", f.arbitration_id, k)] = a_count
+        key = (int(f.channel), f.arbitration_id)
+        k, _ = unw.setdefault(key, _Unwrapper(m))(int(d.signals["step"]))
+        first_seen.setdefault((*key, k), f.timestamp)
     out: dict[str, dict[str, float]] = {}
-    for name, fid, first, second in (
-        ("samples", sid, "A", "B"),
-        ("duties", did, "B", "A"),
-    ):
-        steps, us = [], []
-        for (f_id, k), t_b in (seen_b if second == "B" else seen_a).items():
-            if f_id != fid:
-                continue
-            src = seen_a if first == "A" else seen_b
-            if (f_id, k) not in src:
-                continue
-            if name == "samples":
-                steps.append(a_count_at[(second, f_id, k)] - (k + 1))
-            else:
-                steps.append(a_count_at[(second, f_id, k)] - a_count_at[(first, f_id, k)])
-            us.append(1e6 * (t_b - src[(f_id, k)]))
-        if steps:
-            arr, us_arr = np.array(steps, dtype=float), np.array(us)
+    for name, fid, src, dst in (("samples", sid, 1, 2), ("duties", did, 2, 1)):
+        us = [
+            1e6 * (t - first_seen[(src, fid, k)])
+            for (ch, f_id, k), t in first_seen.items()
+            if ch == dst and f_id == fid and (src, fid, k) in first_seen
+        ]
+        if us:
+            arr = np.array(us)
             out[name] = {
-                "steps_median": float(np.median(arr)),
-                "steps_min": float(arr.min()),
-                "steps_max": float(arr.max()),
-                "us_median": float(np.median(us_arr)),
-                "us_p99": float(np.percentile(us_arr, 99)),
+                "us_median": float(np.median(arr)),
+                "us_p99": float(np.percentile(arr, 99)),
                 "frames": float(len(arr)),
             }
     return out

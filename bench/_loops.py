@@ -9,6 +9,7 @@ frames between the same nodes without any bus: the reference trace.
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable
 
@@ -16,7 +17,7 @@ import can
 
 from bench._codec import Codec
 from bench._errors import BenchError
-from bench._nodes import ControllerNode, PlantNode
+from bench._nodes import STATE_IDLE, ControllerNode, NodeCounters, PlantNode
 from bench._scenario import Scenario
 from bench._setup import (
     build_controller,
@@ -26,23 +27,61 @@ from bench._setup import (
     n_steps,
     sample_period,
 )
-from plant_rt import RealTimeClock
+from plant_rt import ProtectionPars, RealTimeClock
 
-STATE_IDLE, STATE_RUN, STATE_DONE = 0, 1, 2
+#: ``PlantStatus.state`` of the plant's last frame: the run is over, the plant idle.
+STATE_DONE = STATE_IDLE
+STATE_RUN = 1
 
 #: Lockstep: resend the recent frames when the expected duty has not come in this time.
 RETRANSMIT_S = 0.05
 #: Lockstep: give up when nothing arrives for this long.
 STALL_S = 20.0
+#: Real-time plant watchdog: trip after this many PWM periods without a valid duty ...
+WATCHDOG_PERIODS = 10
+#: ... but never after less than this (a general-purpose OS deschedules a process for ms).
+WATCHDOG_MIN_S = 0.02
+#: Lockstep plant watchdog: trip after this many retransmission rounds without a duty (5 s).
+WATCHDOG_ROUNDS = 100
+#: Real-time controller: disable the PWM when no valid sample came for this long.
+SAMPLE_TIMEOUT_S = 0.05
+#: A frame the bus refuses (buffer full, bus-off) is tried this many times in all.
+SEND_ATTEMPTS = 5
 
 
-def make_plant_node(scn: Scenario, codec: Codec, *, truth_every: int = 1) -> PlantNode:
+def watchdog_periods(T_s: float, watchdog_s: float | None = None) -> int:
+    """Real-time watchdog in PWM periods: ``watchdog_s`` if given, else the defaults."""
+    if watchdog_s is not None:
+        return max(1, math.ceil(watchdog_s / T_s - 1e-9))
+    return max(WATCHDOG_PERIODS, math.ceil(WATCHDOG_MIN_S / T_s - 1e-9))
+
+
+def make_plant_node(
+    scn: Scenario,
+    codec: Codec,
+    *,
+    truth_every: int = 1,
+    protection: ProtectionPars | None = None,
+    watchdog_s: float | None = None,
+    watchdog_rounds: int = WATCHDOG_ROUNDS,
+) -> PlantNode:
+    """The plant node of a scenario, with protection and watchdogs.
+
+    ``protection`` defaults to :meth:`ProtectionPars.from_preset` of the
+    scenario's preset; ``watchdog_s`` to :func:`watchdog_periods`' default.
+    """
+    plant = build_plant(scn)
+    if protection is None:
+        protection = ProtectionPars.from_preset(plant.motor, plant.inverter)
     return PlantNode(
         codec,
-        build_plant(scn),
+        plant,
         n_steps=n_steps(scn),
         lockstep_delay=lockstep_delay(scn),
         truth_every=truth_every,
+        protection=protection,
+        watchdog_periods=watchdog_periods(plant.T_s, watchdog_s),
+        watchdog_rounds=watchdog_rounds,
     )
 
 
@@ -126,16 +165,24 @@ def run_inprocess(scn: Scenario, estimator: str, codec: Codec) -> list[can.Messa
     return frames
 
 
-def _send_all(bus: can.BusABC, frames: list[can.Message], node_counters: object) -> None:
+def _send_all(bus: can.BusABC, frames: list[can.Message], counters: NodeCounters) -> None:
+    """Send ``frames``; a refused send (buffer full, bus-off) is counted and retried.
+
+    After :data:`SEND_ATTEMPTS` refusals the frame is counted as lost and the
+    node goes on (lockstep recovers it by retransmission; real time by the
+    next period's frame); a send error is never fatal.
+    """
     for f in frames:
-        for attempt in range(3):
+        for attempt in range(SEND_ATTEMPTS):
             try:
                 bus.send(f)
                 break
-            except can.CanOperationError:
-                if attempt == 2:
-                    raise
-                time.sleep(0.001)
+            except (can.CanError, OSError):
+                counters.send_errors += 1
+                if attempt == SEND_ATTEMPTS - 1:
+                    counters.frames_lost_on_send += 1
+                else:
+                    time.sleep(0.0005 * (attempt + 1))
 
 
 def plant_loop(
@@ -149,6 +196,7 @@ def plant_loop(
 ) -> None:
     """Serve the plant on ``bus`` until the scenario's end or a stop command."""
     ids = {node.codec.frame_id(n) for n in ("PwmDuty", "BenchCommand")}
+    node.realtime = realtime
     if on_ready:
         on_ready()
     # wait for the start command
@@ -185,6 +233,8 @@ def plant_loop(
         while not node.done and not stop():
             t_wait = time.monotonic()
             while not node.ready():
+                if stop():
+                    break
                 msg = bus.recv(RETRANSMIT_S)
                 if msg is not None:
                     if msg.arbitration_id in ids:
@@ -197,11 +247,14 @@ def plant_loop(
                         "(is a controller running on this bus?)"
                     )
                 if now - t_wait >= RETRANSMIT_S:
+                    _send_all(bus, node.on_duty_timeout(), node.counters)
                     _send_all(bus, node.retransmit(), node.counters)
                     t_wait = now
+            if not node.ready():
+                break
             _send_all(bus, node.advance_lockstep(), node.counters)
             last_progress = time.monotonic()
-    bus.send(node.status_frame(STATE_DONE))
+    _send_all(bus, [node.status_frame(STATE_DONE, node.fault)], node.counters)
 
 
 def controller_loop(
@@ -212,8 +265,14 @@ def controller_loop(
     on_ready: Callable[[], None] | None = None,
     stop: Callable[[], bool] = lambda: False,
     idle_s: float = 3600.0,
+    sample_timeout_s: float = SAMPLE_TIMEOUT_S,
 ) -> None:
-    """Serve the controller on ``bus`` until a stop command (or ``idle_s`` of silence)."""
+    """Serve the controller on ``bus`` until a stop command (or ``idle_s`` of silence).
+
+    Real time: when no valid sample arrived for ``sample_timeout_s`` after the
+    first one, the controller disables its PWM (:meth:`ControllerNode.sample_timeout`)
+    until a reset or enable command.
+    """
     node.realtime = realtime
     names = ["PhaseSamples", "BenchCommand"]
     if node.needs_truth:
@@ -222,15 +281,25 @@ def controller_loop(
     if on_ready:
         on_ready()
     last = time.monotonic()
+    seen = node.samples_accepted
+    t_sample = last
+    poll = min(0.05, sample_timeout_s / 4) if realtime else 0.05
     while not node.stopped and not stop():
-        msg = bus.recv(0.05)
+        msg = bus.recv(poll)
+        now = time.monotonic()
+        if realtime:
+            if node.samples_accepted != seen:
+                seen = node.samples_accepted
+                t_sample = now
+            elif seen and now - t_sample > sample_timeout_s:
+                node.sample_timeout()
         if msg is None:
-            if time.monotonic() - last > idle_s:
+            if now - last > idle_s:
                 return
             continue
         if msg.arbitration_id not in ids:
             continue
-        last = time.monotonic()
+        last = now
         out = node.on_message(msg)
         if out:
             _send_all(bus, out, node.counters)

@@ -95,10 +95,14 @@ def compute_metrics(
     """The metrics of DESIGN.md from a per-step table.
 
     ``table`` needs the columns ``t``, ``theta_e``, ``theta_hat``,
-    ``w_m_rpm``, ``w_hat_rpm``, ``w_ref_rpm`` and ``i_a``.
+    ``w_m_rpm``, ``w_hat_rpm``, ``w_ref_rpm`` and ``i_a``; rows whose
+    optional ``mode`` column is 0 (controller disabled) are not scored.
     """
     t = table["t"]
     sel = t >= score_from_s
+    if "mode" in table:
+        # a disabled controller (mode 0, e.g. the stop step at the end) makes no estimate
+        sel &= table["mode"] != 0
     if not np.any(sel):
         raise ValueError(f"no samples after score_from_s = {score_from_s} s")
     err = wrap_pi(table["theta_e"][sel] - table["theta_hat"][sel])

@@ -21,6 +21,20 @@ Step bookkeeping (DESIGN.md, "Timing model"):
 
 Counters on the wire are ``step mod 2**bits``; receivers unwrap them against
 the step they expect.
+
+Fail-safe behaviour (docs/RELIABILITY.md): every frame a node receives ends in
+exactly one of its counters: accepted, rejected (with a reason: the codec's
+``bad_crc``, ``bad_length``, ``decode_error``, ``out_of_range``, or the node's
+``stale_counter``, ``future_counter``), repeated (``repeated_counter``: an
+exact repeat of an accepted counter, produced by the bench itself when it
+sends commands twice or retransmits in lockstep; answered as before, counted
+but not as a rejection), ignored (a DBC message the node does not consume)
+or unknown (not in the DBC). Only an accepted duty frame with every duty in
+[0, 1] is ever applied. The plant node trips to the safe state (all switches
+open) on a protection fault (:class:`plant_rt.Protection`) or when valid duty
+frames stop (watchdog), reports it with ``PlantStatus``, and stays there until
+a ``reset`` or ``enable`` bench command; the controller node disables its PWM
+when samples stop (real time).
 """
 
 from __future__ import annotations
@@ -31,11 +45,34 @@ from dataclasses import dataclass, field
 
 import can
 
-from bench._codec import Codec
+from bench._codec import REJECT_OUT_OF_RANGE, Codec
 from controller import Controller, ControlOutput, Measurement
-from plant_rt import ConstantLoad, Plant
+from plant_rt import (
+    FAULT_NAMES,
+    FAULT_NONE,
+    FAULT_WATCHDOG,
+    ConstantLoad,
+    Plant,
+    Protection,
+    ProtectionPars,
+)
 
 CMD_NONE, CMD_START, CMD_STOP, CMD_RESET, CMD_ENABLE, CMD_DISABLE = 0, 1, 2, 3, 4, 5
+#: Plant states (DBC value table of ``PlantStatus.state`` and ``PhaseSamples.status``).
+STATE_IDLE, STATE_RUNNING, STATE_FAULT = 0, 1, 2
+
+#: A counter that is older than the receiver accepts (replayed or very late frame).
+REJECT_STALE_COUNTER = "stale_counter"
+#: A counter ahead of anything the sender can have produced yet.
+REJECT_FUTURE_COUNTER = "future_counter"
+#: An exact repeat of an accepted counter: counted, not a rejection (see module doc).
+REPEATED_COUNTER = "repeated_counter"
+#: More pending bench commands than this are refused (a flood of forged frames).
+REJECT_QUEUE_FULL = "queue_full"
+MAX_PENDING_COMMANDS = 4096
+_FAR = 1 << 62
+#: Lockstep: a duty answered from the controller's cache may be this many periods old.
+DUTY_REPEAT_WINDOW = 16
 
 RPM_PER_RAD_S = 60.0 / (2.0 * math.pi)
 
@@ -69,40 +106,104 @@ class NodeCounters:
     overruns: int = 0
     late_duties: int = 0
     missing_duties: int = 0
+    frames_accepted: int = 0
+    frames_ignored: int = 0
+    frames_unknown: int = 0
+    send_errors: int = 0
+    frames_lost_on_send: int = 0
 
     def reject(self, reason: str) -> None:
-        self.frames_rejected += 1
+        """Count a frame that is not used, under ``reason``.
+
+        ``repeated_counter`` goes to ``duplicates`` (and the per-reason
+        counts); every other reason to ``frames_rejected``.
+        """
         self.reject_reasons[reason] = self.reject_reasons.get(reason, 0) + 1
+        if reason == REPEATED_COUNTER:
+            self.duplicates += 1
+        else:
+            self.frames_rejected += 1
+
+    @property
+    def frames_seen(self) -> int:
+        """Every frame given to the node, whatever became of it."""
+        return (
+            self.frames_accepted
+            + self.frames_rejected
+            + self.duplicates
+            + self.frames_ignored
+            + self.frames_unknown
+        )
+
+    def as_dict(self) -> dict[str, object]:
+        """The counters as a JSON-ready dict (the node reports)."""
+        return {
+            "frames_accepted": self.frames_accepted,
+            "frames_rejected": self.frames_rejected,
+            "reject_reasons": dict(self.reject_reasons),
+            "duplicates": self.duplicates,
+            "frames_ignored": self.frames_ignored,
+            "frames_unknown": self.frames_unknown,
+            "late_commands": self.late_commands,
+            "retransmits": self.retransmits,
+            "overruns": self.overruns,
+            "late_duties": self.late_duties,
+            "send_errors": self.send_errors,
+            "frames_lost_on_send": self.frames_lost_on_send,
+        }
 
 
 class _CommandQueue:
-    """Bench commands ordered by apply step, de-duplicated by apply step."""
+    """Bench commands ordered by apply step, de-duplicated by apply step and alive counter."""
 
     def __init__(self, modulus: int) -> None:
         self.modulus = modulus
         self.pending: dict[int, Command] = {}
         self.applied_upto = -1
+        self.recent: deque[tuple[int, int]] = deque(maxlen=64)
+        self.next_step = _FAR
 
     def add(self, sig: dict[str, float], now: int, counters: NodeCounters) -> None:
         s = unwrap(int(sig["step"]), now, self.modulus)
+        key = (s, int(sig["seq"]))
+        if key in self.recent:
+            counters.reject(REPEATED_COUNTER)
+            return
         if s <= self.applied_upto:
-            if s in self.pending or s < self.applied_upto - self.modulus // 4:
+            if s < self.applied_upto - self.modulus // 4:
+                counters.reject(REJECT_STALE_COUNTER)
+                return
+            if s in self.pending:
+                counters.reject(REPEATED_COUNTER)
                 return
             counters.late_commands += 1
             s = self.applied_upto + 1
         if s in self.pending:
-            counters.duplicates += 1
+            counters.reject(REPEATED_COUNTER)
             return
+        if len(self.pending) >= MAX_PENDING_COMMANDS:
+            counters.reject(REJECT_QUEUE_FULL)
+            return
+        counters.frames_accepted += 1
+        self.recent.append(key)
+        self.next_step = min(self.next_step, s)
         self.pending[s] = Command(
             s, int(sig["cmd"]), float(sig["speed_ref"]), float(sig["load_torque"])
         )
 
     def due(self, step: int) -> list[Command]:
+        if step > self.applied_upto:
+            self.applied_upto = step
+        if not self.pending or self.next_step > step:
+            return []
         out = [c for s, c in sorted(self.pending.items()) if s <= step]
         for c in out:
             del self.pending[c.apply_step]
-        self.applied_upto = max(self.applied_upto, step)
+        self.next_step = min(self.pending) if self.pending else _FAR
         return out
+
+
+_SAFE_DUTY = (0.5, 0.5, 0.5, False)
 
 
 class PlantNode:
@@ -119,6 +220,15 @@ class PlantNode:
     truth_every : int
         Send ``PlantTruth`` every this many periods (1 on virtual transports;
         more on a real bus, see the CAN budget).
+    protection : ProtectionPars, optional
+        Trip thresholds (over-current, DC-link over-voltage, over-speed);
+        None: no protection trips.
+    watchdog_periods : int
+        Real time: trip to the safe state when no valid duty frame has
+        arrived for this many PWM periods of the plant's clock (0: off).
+    watchdog_rounds : int
+        Lockstep: trip when this many retransmission rounds in a row brought
+        no valid duty frame (0: off).
     """
 
     def __init__(
@@ -129,6 +239,9 @@ class PlantNode:
         n_steps: int,
         lockstep_delay: int = 0,
         truth_every: int = 1,
+        protection: ProtectionPars | None = None,
+        watchdog_periods: int = 0,
+        watchdog_rounds: int = 0,
     ) -> None:
         self.codec = codec
         self.plant = plant
@@ -139,39 +252,147 @@ class PlantNode:
         self.m_cmd = 1 << codec.step_bits("BenchCommand")
         self.m_truth = 1 << codec.step_bits("PlantTruth")
         self.m_samples = 1 << codec.step_bits("PhaseSamples")
+        self.m_status = 1 << codec.step_bits("PlantStatus")
+        self.id_duty = codec.frame_id("PwmDuty")
+        self.id_cmd = codec.frame_id("BenchCommand")
         self.duties: dict[int, tuple[float, float, float, bool]] = {}
-        self.latest_duty: tuple[float, float, float, bool] = (0.5, 0.5, 0.5, False)
+        self.latest_duty: tuple[float, float, float, bool] = _SAFE_DUTY
         self.latest_duty_step = -1
         self.commands = _CommandQueue(self.m_cmd)
         self.counters = NodeCounters()
         self.started = False
         self.stopped = False
+        self.realtime = False
         self.jitter: dict[str, float] | None = None
+        #: age (PWM periods) of the duty applied in the last period; 255: none.
+        #: Sent in PlantTruth so the recorder measures the loop latency exactly.
+        self.duty_age = 255
         self.sent: deque[list[can.Message]] = deque(maxlen=lockstep_delay + 3)
+        self.protection = Protection(protection) if protection is not None else None
+        self.watchdog_periods = max(0, int(watchdog_periods))
+        self.watchdog_rounds = max(0, int(watchdog_rounds))
+        #: Latched fault code (``PlantStatus.fault_code``); FAULT_NONE while healthy.
+        self.fault = FAULT_NONE
+        #: Step at which the fault was latched (-1: none).
+        self.fault_step = -1
+        #: Trips by fault name, and operator resets that cleared a fault.
+        self.trips: dict[str, int] = {}
+        self.resets = 0
+        self.last_duty_k = 0
+        self.rounds_waiting = 0
+        self._outbox: list[can.Message] = []
 
     # -- receiving ---------------------------------------------------------
     def on_message(self, msg: can.Message) -> None:
+        """Take one received frame; never raises for any frame content."""
+        c = self.counters
         d = self.codec.decode(msg)
         if d is None:
+            c.frames_unknown += 1
             return
-        if d.reason is not None:
-            if d.name in ("PwmDuty", "BenchCommand"):
-                self.counters.reject(d.reason)
-            return
-        k = self.plant.k
         if d.name == "PwmDuty":
-            s = d.signals
-            t = unwrap(int(s["step"]), k - self.delay, self.m_step)
-            if t in self.duties or t <= self.latest_duty_step - 2 * self.m_step // 4:
-                self.counters.duplicates += 1
+            if d.reason is not None:
+                c.reject(d.reason)
                 return
-            duty = (float(s["duty_a"]), float(s["duty_b"]), float(s["duty_c"]), bool(s["enable"]))
-            self.duties[t] = duty
-            if t > self.latest_duty_step:
-                self.latest_duty_step = t
-                self.latest_duty = duty
+            self._on_duty(d.signals)
         elif d.name == "BenchCommand":
-            self.commands.add(d.signals, k, self.counters)
+            if d.reason is not None:
+                c.reject(d.reason)
+                return
+            self.commands.add(d.signals, self.plant.k, c)
+        else:
+            c.frames_ignored += 1
+
+    def _on_duty(self, s: dict[str, float]) -> None:
+        c = self.counters
+        k = self.plant.k
+        t = unwrap(int(s["step"]), k - self.delay, self.m_step)
+        if t > k + 1:
+            # the controller answers sample k with duty k + 1 at the latest
+            c.reject(REJECT_FUTURE_COUNTER)
+            return
+        if self.realtime:
+            if t == self.latest_duty_step:
+                c.reject(REPEATED_COUNTER)
+                return
+            if t < self.latest_duty_step:
+                c.reject(REJECT_STALE_COUNTER)
+                return
+        else:
+            needed = k - self.delay
+            if t < needed - DUTY_REPEAT_WINDOW:
+                c.reject(REJECT_STALE_COUNTER)
+                return
+            if t < needed or t in self.duties:
+                # already applied or already here: the answer to a retransmission
+                c.reject(REPEATED_COUNTER)
+                return
+        d_a, d_b, d_c = float(s["duty_a"]), float(s["duty_b"]), float(s["duty_c"])
+        if not (0.0 <= d_a <= 1.0 and 0.0 <= d_b <= 1.0 and 0.0 <= d_c <= 1.0):
+            c.reject(REJECT_OUT_OF_RANGE)  # unreachable with the shipped DBC; kept as a guard
+            return
+        c.frames_accepted += 1
+        duty = (d_a, d_b, d_c, bool(s["enable"]))
+        self.last_duty_k = k
+        if not self.realtime:
+            self.duties[t] = duty
+        if t > self.latest_duty_step:
+            self.latest_duty_step = t
+            self.latest_duty = duty
+
+    # -- faults ------------------------------------------------------------
+    def trip(self, code: int) -> None:
+        """Latch fault ``code`` (first fault wins): safe state until reset, status frame queued."""
+        if self.fault != FAULT_NONE:
+            return
+        self.fault = code
+        self.fault_step = self.plant.k
+        name = FAULT_NAMES.get(code, str(code))
+        self.trips[name] = self.trips.get(name, 0) + 1
+        self._outbox.append(self.status_frame(STATE_FAULT, code))
+
+    def reset_fault(self) -> bool:
+        """Operator reset: clear the latch and re-arm the watchdog; True if a fault was cleared."""
+        if self.protection is not None:
+            self.protection.reset()
+        self.last_duty_k = self.plant.k
+        self.rounds_waiting = 0
+        if self.fault == FAULT_NONE:
+            return False
+        self.fault = FAULT_NONE
+        self.fault_step = -1
+        self.resets += 1
+        self._outbox.append(self.status_frame(STATE_RUNNING, FAULT_NONE))
+        return True
+
+    def _check_protection(self) -> None:
+        prot = self.protection
+        if prot is not None and self.fault == FAULT_NONE:
+            code = prot.check(*self.plant.protection_inputs())
+            if code != FAULT_NONE:
+                prot.reset()
+                self.trip(code)
+
+    def _flush_outbox(self, frames: list[can.Message]) -> list[can.Message]:
+        if self._outbox:
+            frames = [*self._outbox, *frames]
+            self._outbox = []
+        return frames
+
+    def on_duty_timeout(self) -> list[can.Message]:
+        """Lockstep: one retransmission round passed without the needed duty.
+
+        Returns the frames to send (the fault status when the watchdog trips).
+        """
+        self.rounds_waiting += 1
+        if (
+            self.watchdog_rounds
+            and self.started
+            and self.fault == FAULT_NONE
+            and self.rounds_waiting >= self.watchdog_rounds
+        ):
+            self.trip(FAULT_WATCHDOG)
+        return self._flush_outbox([])
 
     # -- lockstep ----------------------------------------------------------
     def needed_duty(self) -> int:
@@ -184,10 +405,13 @@ class PlantNode:
         return t <= 0 or t in self.duties
 
     def frames_now(self) -> list[can.Message]:
-        """The frames describing the plant at the current instant ``k T``."""
+        """The frames describing the plant at the current instant ``k T_s``."""
         p = self.plant
         s = p.sample()
-        status = 1 if self.started and not self.stopped else 0
+        if self.fault != FAULT_NONE:
+            status = STATE_FAULT
+        else:
+            status = STATE_RUNNING if self.started and not self.stopped else STATE_IDLE
         frames = [
             self.codec.encode(
                 "PhaseSamples",
@@ -210,6 +434,7 @@ class PlantNode:
                         "w_m": tr.w_m,
                         "tau_e": tr.tau_e,
                         "tau_L": tr.tau_L,
+                        "duty_age": self.duty_age,
                         "step": s.k % self.m_truth,
                     },
                 )
@@ -221,22 +446,31 @@ class PlantNode:
         for c in self.commands.due(self.plant.k):
             if c.cmd == CMD_START:
                 self.started = True
+                self.last_duty_k = self.plant.k
             elif c.cmd == CMD_STOP:
                 self.stopped = True
+            elif c.cmd in (CMD_RESET, CMD_ENABLE):
+                self.reset_fault()
             self.plant.set_load(ConstantLoad(c.load_nm))
 
     def advance_lockstep(self) -> list[can.Message]:
         """Run the current period with its duty; return the next instant's frames."""
         t = self.needed_duty()
         if t <= 0:
-            d_a, d_b, d_c, en = 0.5, 0.5, 0.5, False
+            d_a, d_b, d_c, en = _SAFE_DUTY
+            self.duty_age = 255
         else:
+            self.duty_age = min(254, self.plant.k - t)
             d_a, d_b, d_c, en = self.duties.pop(t)
             for old in [s for s in self.duties if s < t]:
                 del self.duties[old]
+        if self.fault != FAULT_NONE:
+            en = False
+        self.rounds_waiting = 0
         self.plant.step(d_a, d_b, d_c, en)
+        self._check_protection()
         self.apply_commands()
-        return self.frames_now()
+        return self._flush_outbox(self.frames_now())
 
     def retransmit(self) -> list[can.Message]:
         """Frames to resend when the expected duty did not come (lossy transport)."""
@@ -245,18 +479,37 @@ class PlantNode:
 
     # -- real time ---------------------------------------------------------
     def advance_realtime(self) -> list[can.Message]:
-        """Run one period with the latest valid duty (real-time mode)."""
+        """Run one period with the latest valid duty (real-time mode).
+
+        The watchdog, armed by the first valid duty frame, trips when the last
+        one arrived ``watchdog_periods`` or more periods ago; this period then
+        already runs in the safe state.
+        """
         d_a, d_b, d_c, en = self.latest_duty
-        expected = self.plant.k - self.delay
+        k = self.plant.k
+        self.duty_age = (
+            255 if self.latest_duty_step < 0 else max(0, min(254, k - self.latest_duty_step))
+        )
+        expected = k - self.delay
         if self.latest_duty_step < expected:
             if self.latest_duty_step < 0:
                 en = False
             else:
                 self.counters.late_duties += 1
+        if (
+            self.watchdog_periods
+            and self.latest_duty_step >= 0  # armed by the first valid duty
+            and self.fault == FAULT_NONE
+            and k - self.last_duty_k >= self.watchdog_periods
+        ):
+            self.trip(FAULT_WATCHDOG)
+        if self.fault != FAULT_NONE:
+            en = False
         self.plant.step(d_a, d_b, d_c, en)
+        self._check_protection()
         self.duties.clear()
         self.apply_commands()
-        return self.frames_now()
+        return self._flush_outbox(self.frames_now())
 
     def status_frame(self, state: int, fault_code: int = 0) -> can.Message:
         c = self.counters
@@ -267,9 +520,22 @@ class PlantNode:
                 "fault_code": fault_code,
                 "overruns": min(c.overruns, 0xFFFF),
                 "late_frames": min(c.late_duties, 0xFFFF),
-                "step": self.plant.k % (1 << self.codec.step_bits("PlantStatus")),
+                "step": self.plant.k % self.m_status,
             },
         )
+
+    def report(self) -> dict[str, object]:
+        """Counters and fault history, for the node's JSON report."""
+        out = self.counters.as_dict()
+        out.update(
+            steps=self.plant.k,
+            jitter=self.jitter,
+            fault=FAULT_NAMES.get(self.fault, str(self.fault)),
+            fault_step=self.fault_step,
+            trips=dict(self.trips),
+            resets=self.resets,
+        )
+        return out
 
     @property
     def done(self) -> bool:
@@ -305,41 +571,76 @@ class ControllerNode:
         self.counters = NodeCounters()
         self.stopped = False
         self.realtime = False
+        #: Valid samples taken (the loop's watchdog watches it move).
+        self.samples_accepted = 0
+        #: Times the PWM was disabled because samples stopped (real time).
+        self.sample_timeouts = 0
+        #: True from a sample timeout until a reset/enable command.
+        self.faulted = False
 
     def on_message(self, msg: can.Message) -> list[can.Message]:
+        """Take one received frame; return the frames to send. Never raises for any content."""
+        c = self.counters
         d = self.codec.decode(msg)
         if d is None:
+            c.frames_unknown += 1
+            return []
+        name = d.name
+        if name not in ("PhaseSamples", "BenchCommand") and not (
+            name == "PlantTruth" and self.needs_truth
+        ):
+            c.frames_ignored += 1
             return []
         if d.reason is not None:
-            if d.name in ("PhaseSamples", "BenchCommand"):
-                self.counters.reject(d.reason)
+            c.reject(d.reason)
             return []
-        if d.name == "BenchCommand":
-            self.commands.add(d.signals, self.next_k, self.counters)
+        if name == "BenchCommand":
+            self.commands.add(d.signals, self.next_k, c)
             if self.realtime:
                 self._apply_commands(self.next_k + self.m_cmd)
             return []
-        if d.name == "PhaseSamples":
+        if name == "PhaseSamples":
             k = unwrap(int(d.signals["step"]), self.next_k, self.m_step)
             if k < self.next_k:
-                self.counters.duplicates += 1
-                return list(self.answers.get(k, []))
+                cached = self.answers.get(k)
+                if cached is None:
+                    c.reject(REJECT_STALE_COUNTER)
+                    return []
+                c.reject(REPEATED_COUNTER)
+                return list(cached)
+            if k in self.samples:
+                c.reject(REPEATED_COUNTER)
+                return []
+            c.frames_accepted += 1
+            self.samples_accepted += 1
             if self.realtime and k > self.next_k:
                 # real time: never wait for the past, skip to the newest sample
                 self.samples = {s: v for s, v in self.samples.items() if s >= k}
                 self.next_k = k
             self.samples[k] = d.signals
-        elif d.name == "PlantTruth" and self.needs_truth:
+        else:  # PlantTruth, sensored baseline
             k = unwrap(int(d.signals["step"]), self.next_k, self.m_truth)
-            if k >= self.next_k:
-                self.truth[k] = d.signals
-        else:
-            return []
+            if k < self.next_k or k in self.truth:
+                c.reject(REPEATED_COUNTER)
+                return []
+            if k > self.next_k + self.m_step:
+                c.reject(REJECT_FUTURE_COUNTER)
+                return []
+            c.frames_accepted += 1
+            self.truth[k] = d.signals
         return self._run_ready()
+
+    def sample_timeout(self) -> None:
+        """Samples stopped (real time): disable the PWM until a reset or enable command."""
+        if not self.faulted:
+            self.faulted = True
+            self.sample_timeouts += 1
+            self.ctrl.set_enable(False)
 
     def _apply_commands(self, step: int) -> None:
         for c in self.commands.due(step):
             if c.cmd in (CMD_START, CMD_ENABLE, CMD_RESET):
+                self.faulted = False
                 self.ctrl.set_enable(True)
             elif c.cmd in (CMD_STOP, CMD_DISABLE):
                 self.ctrl.set_enable(False)
@@ -366,6 +667,12 @@ class ControllerNode:
             self.answers.pop(k - 8, None)
             out.extend(frames)
             self.next_k = k + 1
+        return out
+
+    def report(self) -> dict[str, object]:
+        """Counters, for the node's JSON report."""
+        out = self.counters.as_dict()
+        out.update(steps=self.next_k, sample_timeouts=self.sample_timeouts)
         return out
 
     def encode_output(self, o: ControlOutput) -> list[can.Message]:

@@ -13,6 +13,7 @@ from __future__ import annotations
 import json
 import os
 import platform
+import select
 import signal
 import socket
 import subprocess
@@ -24,6 +25,7 @@ from pathlib import Path
 from typing import Any
 
 import can
+import numpy as np
 
 from bench._analysis import analyze_frames, write_csv
 from bench._codec import Codec
@@ -84,7 +86,9 @@ def _grow_receive_buffer(bus: can.BusABC) -> None:
     )
     if not isinstance(sock, socket.socket):
         return
-    for opt in (getattr(socket, "SO_RCVBUFFORCE", None), socket.SO_RCVBUF):
+    # SO_RCVBUFFORCE (root: above net.core.rmem_max) is 33 on Linux; Python does not name it
+    force = getattr(socket, "SO_RCVBUFFORCE", 33 if sys.platform.startswith("linux") else None)
+    for opt in (force, socket.SO_RCVBUF):
         if opt is None:
             continue
         try:
@@ -121,6 +125,23 @@ class Recorder(can.Listener):
             d = self.codec.decode(msg)
             if d is not None and d.reason is None and int(d.signals["state"]) == STATE_DONE:
                 self.done.set()
+
+
+def _drain(recorders: list[Recorder], quiet_s: float = 0.5, limit_s: float = 10.0) -> None:
+    """Wait until the recorders have read what is still queued in their sockets.
+
+    On a slow host (User-Mode Linux) the recorder thread lags the nodes by
+    thousands of frames; stopping it as soon as the nodes end would lose them.
+    Returns once no frame came in for ``quiet_s``, or after ``limit_s``.
+    """
+    t_end = time.monotonic() + limit_s
+    last = -1
+    while time.monotonic() < t_end:
+        n = sum(len(r.frames) for r in recorders)
+        if n == last:
+            return
+        last = n
+        time.sleep(quiet_s)
 
 
 @dataclass(slots=True)
@@ -165,10 +186,21 @@ def _scenario_args(scn: Scenario, mode: str) -> list[str]:
     ]
 
 
-def _wait_ready(proc: subprocess.Popen[str], role: str, log: Path, timeout: float = 60.0) -> None:
+def _wait_ready(
+    proc: subprocess.Popen[str],
+    role: str,
+    log: Path,
+    timeout: float = 60.0,
+    stop: Any = lambda: False,
+) -> None:
+    """Wait for the node's READY line; return early when ``stop()`` (a signal came)."""
     assert proc.stdout is not None
     t0 = time.monotonic()
     while time.monotonic() - t0 < timeout:
+        if stop():
+            return
+        if not select.select([proc.stdout], [], [], 0.1)[0] and proc.poll() is None:
+            continue
         line = proc.stdout.readline()
         if line.strip() == "READY":
             return
@@ -188,8 +220,12 @@ def run_scenario(
     log_format: str = "blf",
     progress: bool = True,
     codec: Codec | None = None,
+    node_args: dict[str, list[str]] | None = None,
 ) -> RunResult:
-    """Run ``scn`` with ``estimator`` between two processes on ``spec``'s bus."""
+    """Run ``scn`` with ``estimator`` between two processes on ``spec``'s bus.
+
+    ``node_args`` adds command-line options per role (``plant``, ``controller``).
+    """
     codec = codec or Codec()
     out_dir.mkdir(parents=True, exist_ok=True)
     capture = out_dir / f"capture{LOG_SUFFIX[log_format]}"
@@ -206,6 +242,8 @@ def run_scenario(
     if link:
         buses.append(spec_b.open())
     recorders = [Recorder(codec, writer, i + 1) for i in range(len(buses))]
+    for r in recorders[1:]:
+        r.lock = recorders[0].lock  # one writer: one lock, or the capture is corrupted
     notifiers = [can.Notifier(b, [r], timeout=0.05) for b, r in zip(buses, recorders, strict=True)]
     t_wall0 = time.perf_counter()
     interrupted = False
@@ -221,9 +259,14 @@ def run_scenario(
         except ValueError:
             pass  # not in the main thread
     try:
+        extra_args = node_args or {}
         roles = [
-            ("controller", spec_b, ["--estimator", estimator, *scn_args]),
-            ("plant", spec, scn_args),
+            (
+                "controller",
+                spec_b,
+                ["--estimator", estimator, *scn_args, *extra_args.get("controller", [])],
+            ),
+            ("plant", spec, [*scn_args, *extra_args.get("plant", [])]),
         ]
         if link:
             lt = scn.latency
@@ -238,6 +281,8 @@ def run_scenario(
             ]  # fmt: skip
             roles.insert(0, ("link", spec, link_args))
         for role, sp, extra in roles:
+            if interrupted:
+                break
             log = out_dir / f"{role}.log"
             cmd = (
                 _node_cmd(role, scn, sp, [*extra, "--report", str(out_dir / f"{role}.json")])
@@ -253,7 +298,7 @@ def run_scenario(
                 start_new_session=True,
             )
             procs.append((role, p))
-            _wait_ready(p, role, log)
+            _wait_ready(p, role, log, stop=lambda: interrupted)
         # commands: sent ahead of the plant by a lead, each twice
         cmds = command_frames(scn, codec)
         lead = max(500, int(0.2 / T_s))
@@ -261,9 +306,9 @@ def run_scenario(
         sent = 0
         full_step = 0
         last_raw = -1
-        plant = dict(procs)["plant"]
+        plant = dict(procs).get("plant")
         t_last_print = 0.0
-        while True:
+        while plant is not None and not interrupted:
             raw = recorders[0].last_raw_step
             if raw != last_raw and raw >= 0:
                 full_step += (raw - last_raw) % m_step if last_raw >= 0 else raw
@@ -292,12 +337,14 @@ def run_scenario(
         # stop everything: the stop command is in the schedule; repeat it to be sure.
         # With latency the controller never sees the last sample, so the nodes
         # that do not end by themselves get SIGTERM (they stop cleanly on it).
-        bus_a.send(cmds[-1][1])
-        try:
-            plant.wait(timeout=5.0)
-        except subprocess.TimeoutExpired:
-            plant.send_signal(signal.SIGTERM)
-        time.sleep(0.2)
+        # Interrupted (SIGINT/SIGTERM): no waiting, every node gets SIGTERM at once.
+        if plant is not None and not interrupted:
+            bus_a.send(cmds[-1][1])
+            try:
+                plant.wait(timeout=5.0)
+            except subprocess.TimeoutExpired:
+                plant.send_signal(signal.SIGTERM)
+            time.sleep(0.2)
         for _, p in procs:
             if p.poll() is None:
                 p.send_signal(signal.SIGTERM)
@@ -313,7 +360,7 @@ def run_scenario(
             if p.poll() is None:
                 p.kill()
                 p.wait()
-        time.sleep(0.05)
+        _drain(recorders)
         for nt in notifiers:
             nt.stop()
         writer.stop()
@@ -338,7 +385,34 @@ def run_scenario(
     meta["exit_codes"] = {role: p.returncode for role, p in procs}
     if interrupted:
         meta["interrupted"] = True
-    result = finish_run(frames, codec, scn, out_dir, meta=meta, wall_s=wall, capture=capture)
+    result: RunResult | None
+    try:
+        result = finish_run(frames, codec, scn, out_dir, meta=meta, wall_s=wall, capture=capture)
+    except ValueError:
+        if not (interrupted or failures):
+            raise
+        result = None
+    if result is None:
+        # interrupted (or a node died) before the scored part: score what there is
+        try:
+            result = finish_run(
+                frames,
+                codec,
+                scn.with_overrides(score_from_s=0.0),
+                out_dir,
+                meta=meta,
+                wall_s=wall,
+                capture=capture,
+            )
+        except ValueError:
+            result = None
+    if result is None:
+        # stopped before the first complete step: the capture is still valid
+        meta["capture"] = capture.name
+        metrics: dict[str, Any] = {"steps": 0, "frames_recorded": len(frames), "wall_s": wall}
+        (out_dir / "metrics.json").write_text(json.dumps(metrics, indent=2) + "\n")
+        (out_dir / "meta.json").write_text(json.dumps(meta, indent=2, default=str) + "\n")
+        result = RunResult(out_dir=out_dir, metrics=metrics, capture=capture, meta=meta)
     if failures and not interrupted:
         logs = "; ".join(
             f"{r}: {(out_dir / (r + '.log')).read_text(errors='replace').strip().splitlines()[-1:]}"
@@ -424,8 +498,18 @@ def finish_run(
     m["frames_recorded"] = cap.frames
     m["frames_unknown_id"] = cap.unknown_ids
     m["incomplete_steps"] = cap.incomplete_steps
+    m["frames_duplicate"] = cap.duplicates
+    m["frames_out_of_order"] = cap.out_of_order
     m["retransmits"] = int(plant_r.get("retransmits", 0))
     m["late_commands"] = int(plant_r.get("late_commands", 0) + ctrl_r.get("late_commands", 0))
+    age = cap.table["duty_age"]
+    age = age[age < 255]
+    if len(age):
+        m["loop_latency_steps"] = {
+            "median": float(np.median(age)),
+            "min": float(age.min()),
+            "max": float(age.max()),
+        }
     if any(getattr(f, "channel", None) == 2 for f in frames[:2000]):
         from bench._analysis import measure_latency
 

@@ -149,11 +149,17 @@ def cmd_run(args: argparse.Namespace) -> int:
         mode=args.mode,
         log_format=args.log_format,
         progress=not args.quiet,
+        node_args={"plant": ["--watchdog-ms", repr(args.watchdog_ms)]}
+        if args.watchdog_ms is not None
+        else None,
     )
     print(format_metrics(res.metrics, scn.paper_result))
     print(
         f"files: {out}/ (capture{Path(res.capture).suffix}, signals.csv, metrics.json, meta.json, run.png)"
     )
+    if res.meta.get("interrupted"):
+        print("bench: interrupted", file=sys.stderr)
+        return 130
     return 0
 
 
@@ -164,28 +170,20 @@ def cmd_plant(args: argparse.Namespace) -> int:
     scn = _scenario(args)
     spec = _spec(args, announce=False)
     codec = Codec()
-    node = make_plant_node(scn, codec, truth_every=args.truth_every)
+    node = make_plant_node(
+        scn,
+        codec,
+        truth_every=args.truth_every,
+        watchdog_s=None if args.watchdog_ms is None else args.watchdog_ms * 1e-3,
+        watchdog_rounds=args.watchdog_rounds,
+    )
     bus = spec.open()
     _stop_on_signals()
     try:
         plant_loop(bus, node, realtime=args.mode == "realtime", on_ready=_ready, stop=_STOP.is_set)
     finally:
         bus.shutdown()
-        c = node.counters
-        _write_report(
-            args.report,
-            {
-                "steps": node.plant.k,
-                "overruns": c.overruns,
-                "late_duties": c.late_duties,
-                "frames_rejected": c.frames_rejected,
-                "reject_reasons": c.reject_reasons,
-                "retransmits": c.retransmits,
-                "duplicates": c.duplicates,
-                "late_commands": c.late_commands,
-                "jitter": getattr(node, "jitter", None),
-            },
-        )
+        _write_report(args.report, node.report())
     return 0
 
 
@@ -202,21 +200,16 @@ def cmd_controller(args: argparse.Namespace) -> int:
     _stop_on_signals()
     try:
         controller_loop(
-            bus, node, realtime=args.mode == "realtime", on_ready=_ready, stop=_STOP.is_set
+            bus,
+            node,
+            realtime=args.mode == "realtime",
+            on_ready=_ready,
+            stop=_STOP.is_set,
+            sample_timeout_s=args.sample_timeout_ms * 1e-3,
         )
     finally:
         bus.shutdown()
-        c = node.counters
-        _write_report(
-            args.report,
-            {
-                "steps": node.next_k,
-                "frames_rejected": c.frames_rejected,
-                "reject_reasons": c.reject_reasons,
-                "duplicates": c.duplicates,
-                "late_commands": c.late_commands,
-            },
-        )
+        _write_report(args.report, node.report())
     return 0
 
 
@@ -273,6 +266,15 @@ def cmd_analyze(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_busload(args: argparse.Namespace) -> int:
+    from bench._busload import busload_table, format_busload
+    from bench._codec import Codec
+
+    rates = [float(r) * 1e3 for r in args.rates.split(",")]
+    print(format_busload(busload_table(Codec(), rates=rates)))
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(
         prog="bench",
@@ -294,6 +296,11 @@ def build_parser() -> argparse.ArgumentParser:
         "--log-format", choices=("blf", "asc", "log"), default="blf", help="capture format"
     )
     p.add_argument("--quiet", "-q", action="store_true", help="no progress line")
+    p.add_argument(
+        "--watchdog-ms",
+        type=float,
+        help="real time: the plant's safe state after this long without a valid duty",
+    )
     p.set_defaults(func=cmd_run)
 
     p = sub.add_parser("plant", help="serve the plant emulator on a bus (one node)")
@@ -301,6 +308,17 @@ def build_parser() -> argparse.ArgumentParser:
     _add_scenario_overrides(p)
     _add_bus(p)
     p.add_argument("--truth-every", type=int, default=1, help="send PlantTruth every N periods")
+    p.add_argument(
+        "--watchdog-ms",
+        type=float,
+        help="real time: safe state after this long without a valid duty (default 10 periods, >= 20 ms)",
+    )
+    p.add_argument(
+        "--watchdog-rounds",
+        type=int,
+        default=100,
+        help="lockstep: safe state after this many 50 ms retransmission rounds without a duty",
+    )
     p.add_argument("--report", help="write the node's counters to this JSON file at exit")
     p.set_defaults(func=cmd_plant)
 
@@ -310,6 +328,12 @@ def build_parser() -> argparse.ArgumentParser:
     _add_scenario_overrides(p)
     _add_bus(p)
     p.add_argument("--report", help="write the node's counters to this JSON file at exit")
+    p.add_argument(
+        "--sample-timeout-ms",
+        type=float,
+        default=50.0,
+        help="real time: disable the PWM after this long without a valid sample",
+    )
     p.set_defaults(func=cmd_controller)
 
     p = sub.add_parser("link", help="latency link between two buses (delay, jitter, drop)")
@@ -341,6 +365,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--scenario", help="scenario of the capture (default: from meta.json beside it)")
     p.set_defaults(func=cmd_analyze)
 
+    p = sub.add_parser(
+        "busload", help="CAN bus load of the DBC's frames per layout, bit rate and PWM rate"
+    )
+    p.add_argument("--rates", default="1,4,10", help="PWM rates in kHz, comma-separated")
+    p.set_defaults(func=cmd_busload)
+
     for mod in SUBCOMMAND_MODULES:
         try:
             module = importlib.import_module(mod)
@@ -364,6 +394,9 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("bench: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # output piped into head and the like
+        sys.stderr.close()
+        return 0
 
 
 if __name__ == "__main__":

@@ -16,9 +16,25 @@ from plant_rt._load import (
 from plant_rt._machine import MotorPars, SaturationPars, flux_d, magnetic_energy, torque
 from plant_rt._plant import EnergyMeter, Plant, Sample, Truth
 from plant_rt._presets import PRESETS, Preset, UnknownPresetError, preset
+from plant_rt._protection import (
+    FAULT_NAMES,
+    FAULT_NONE,
+    FAULT_OVER_CURRENT,
+    FAULT_OVER_SPEED,
+    FAULT_OVER_VOLTAGE,
+    FAULT_WATCHDOG,
+    Protection,
+    ProtectionPars,
+)
 from plant_rt._sensors import SensorPars
 
 __all__ = [
+    "FAULT_NAMES",
+    "FAULT_NONE",
+    "FAULT_OVER_CURRENT",
+    "FAULT_OVER_SPEED",
+    "FAULT_OVER_VOLTAGE",
+    "FAULT_WATCHDOG",
     "PRESETS",
     "ConstantLoad",
     "EnergyMeter",
@@ -29,6 +45,8 @@ __all__ = [
     "MotorPars",
     "Plant",
     "Preset",
+    "Protection",
+    "ProtectionPars",
     "RampLoad",
     "RealTimeClock",
     "Sample",

@@ -268,6 +268,19 @@ class Plant:
         self._sample = smp
         return smp
 
+    def protection_inputs(self) -> tuple[float, float, float, float, float]:
+        """What an inverter's protection sees at ``t = k T_s``.
+
+        Returns
+        -------
+        tuple of float
+            True phase currents ``i_a, i_b, i_c`` (A), DC-link voltage
+            ``u_dc`` (V) and mechanical speed ``w_m`` (rad/s), the inputs of
+            :meth:`plant_rt.Protection.check`.
+        """
+        i_a, i_b, i_c = self.currents_abc()
+        return i_a, i_b, i_c, self._u_dc, self._w_m
+
     def torque(self) -> float:
         """Electromagnetic torque at ``t = k T_s`` (N m)."""
         psi_d, _ = flux_d(self.motor, self._i_d, self.saturation)

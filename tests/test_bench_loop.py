@@ -118,21 +118,33 @@ def test_two_processes_over_udp_multicast_equal_inprocess(
         assert (tmp_path / "run" / f).is_file()
 
 
-def test_lockstep_latency_through_link_process(tmp_path: Path) -> None:
-    scn = short("wen-5.1", 0.08, duty_delay_steps=2, sample_delay_steps=1)
+@pytest.mark.parametrize(("duty", "sample"), [(2, 0), (0, 3), (2, 1)])
+def test_lockstep_latency_through_link_process(tmp_path: Path, duty: int, sample: int) -> None:
+    scn = short("wen-5.1", 0.06, duty_delay_steps=duty, sample_delay_steps=sample)
     ref = trace(run_inprocess(scn, "sensored", CODEC), scn)
     res = run_scenario(
         scn, "sensored", spec=udp_spec(tmp_path), out_dir=tmp_path / "lat", progress=False
     )
     frames = list(can.LogReader(str(res.capture)))
     assert_same_trace(ref, trace(frames, scn))
+    # the plant reports the age of every duty it applied: exactly the injected periods
+    loop = res.metrics["loop_latency_steps"]
+    assert loop["min"] == loop["max"] == duty + sample
+    # both buses were recorded and the wall-clock latency per direction is measured
     lat = res.metrics["latency_measured"]
-    assert lat["samples"]["steps_median"] == 1
-    assert lat["duties"]["steps_median"] == 2
+    assert lat["samples"]["us_median"] > 0 and lat["duties"]["us_median"] > 0
+    assert res.metrics["latency_configured"]["duties_steps"] == duty
     # and the delay is real: the same run without it differs
     ref0 = trace(run_inprocess(replace(scn, latency=Latency()), "sensored", CODEC), scn)
     n = min(len(ref0["i_a"]), len(ref["i_a"]))
     assert not np.allclose(ref0["i_a"][:n], ref["i_a"][:n])
+
+
+def test_loop_latency_is_zero_without_a_link(ref_sensored: tuple[Scenario, dict]) -> None:
+    _, ref = ref_sensored
+    age = ref["duty_age"]
+    assert age[0] == 255  # no duty yet in period 0
+    assert np.all(age[2:] == 0)
 
 
 def test_lockstep_recovers_lost_frames_without_changing_the_trace(tmp_path: Path) -> None:

@@ -24,7 +24,6 @@ from bench._codec import Codec
 from bench._errors import BenchError, InterfaceError
 
 REPO = Path(__file__).resolve().parent.parent
-HAS_VCAN0 = Path("/sys/class/net/vcan0").exists()
 
 
 @pytest.fixture(scope="module")
@@ -227,7 +226,7 @@ def test_errors_are_one_line(interface, channel, kwargs, match):
 
 
 @pytest.mark.socketcan
-@pytest.mark.skipif(not HAS_VCAN0, reason="needs vcan0 (run with -m socketcan where it exists)")
+@pytest.mark.usefixtures("vcan0")
 @pytest.mark.parametrize("name", ["PwmDuty", "PlantTruth"])  # classic and FD
 def test_socketcan_vcan0_send_receive(codec, name):
     a = open_bus("socketcan", "vcan0")
@@ -249,6 +248,6 @@ def test_socketcan_vcan0_send_receive(codec, name):
 
 
 @pytest.mark.socketcan
-@pytest.mark.skipif(not HAS_VCAN0, reason="needs vcan0 (run with -m socketcan where it exists)")
+@pytest.mark.usefixtures("vcan0")
 def test_socketcan_default_transport_is_vcan0():
     assert default_transport()[:2] == ("socketcan", "vcan0")

@@ -1,0 +1,37 @@
+"""Recorded bench runs shared by the capture tests (analyze, rerun, replay).
+
+Each run is recorded once per test session: two OS processes over
+udp_multicast in lockstep, 0.2 s of wen-5.1 (2001 PWM periods at 10 kHz,
+about 8000 frames), into pytest's temporary directory.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+
+from bench._run import BusSpec, run_scenario
+from bench._scenario import load_scenario
+
+_RUNS: dict[str, Path] = {}
+_PORTS = {"sensored": 0, "tt-dq": 2}
+
+
+def recorded_run(tmp_path_factory: pytest.TempPathFactory, estimator: str) -> Path:
+    """Folder of a recorded wen-5.1 run (0.2 s, scored from 0.1 s) with ``estimator``."""
+    if estimator not in _RUNS:
+        scn = load_scenario("wen-5.1").with_overrides(duration=0.2, score_from_s=0.1)
+        # a port of its own per test process and run: parallel runs must not hear each other
+        port = 47000 + 4 * (os.getpid() % 2000) + _PORTS[estimator]
+        out = tmp_path_factory.mktemp(f"run-{estimator}")
+        run_scenario(
+            scn,
+            estimator,
+            spec=BusSpec("udp_multicast", "239.74.163.2", port),
+            out_dir=out,
+            progress=False,
+        )
+        _RUNS[estimator] = out
+    return _RUNS[estimator]

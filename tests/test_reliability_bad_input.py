@@ -1,0 +1,82 @@
+"""A user's mistake gives one line naming the file, field and reason, and exit status 2."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from bench.cli import main
+
+ROOT = Path(__file__).resolve().parents[1]
+WEN = (ROOT / "bench" / "scenarios" / "wen-5.1.toml").read_text()
+
+
+def one_line_error(capsys: pytest.CaptureFixture[str], argv: list[str], *words: str) -> str:
+    rc = main(argv)
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2
+    last = err[-1]
+    assert last.startswith("bench: error: "), err
+    assert "Traceback" not in "\n".join(err)
+    for w in words:
+        assert w in last, (w, last)
+    return last
+
+
+def test_malformed_scenario(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    f = tmp_path / "bad.toml"
+    f.write_text(WEN.replace("duration = 4.0", "duration = -1.0"))
+    one_line_error(capsys, ["run", str(f), "--interface", "virtual", "--channel", "x"],
+                   "bad.toml", "duration")  # fmt: skip
+    f.write_text("duration = [")
+    one_line_error(capsys, ["run", str(f)], "bad.toml", "TOML")
+
+
+def test_unknown_preset(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    f = tmp_path / "preset.toml"
+    f.write_text(WEN.replace('preset = "wen2023"', 'preset = "nope"'))
+    one_line_error(capsys, ["run", str(f)], "preset.toml", "preset", "nope")
+
+
+def test_unknown_estimator(capsys: pytest.CaptureFixture[str]) -> None:
+    one_line_error(capsys, ["run", "wen-5.1", "-e", "nope"], "estimator", "nope")
+
+
+def test_unreadable_dbc(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    missing = tmp_path / "missing.dbc"
+    one_line_error(capsys, ["soak", "--dbc", str(missing), "--frames", "10"],
+                   "missing.dbc", "not found")  # fmt: skip
+    junk = tmp_path / "junk.dbc"
+    junk.write_text("BO_ this is not a DBC\n")
+    one_line_error(capsys, ["soak", "--dbc", str(junk), "--frames", "10"], "junk.dbc")
+
+
+def test_unreadable_capture(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    one_line_error(capsys, ["analyze", str(tmp_path / "none.blf")], "none.blf")
+    junk = tmp_path / "junk.blf"
+    junk.write_bytes(b"\x00garbage" * 10)
+    one_line_error(capsys, ["analyze", str(junk), "--scenario", "wen-5.1"], "junk.blf")
+
+
+def test_missing_interface_or_channel(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = str(tmp_path / "r")
+    one_line_error(capsys, ["run", "wen-5.1", "--interface", "nosuch", "--channel", "x", "-o", out],
+                   "nosuch")  # fmt: skip
+    one_line_error(capsys, ["run", "wen-5.1", "--channel", "vcan0", "-o", out], "--interface")
+
+
+def test_bad_input_through_a_real_process() -> None:
+    p = subprocess.run(
+        [sys.executable, "-m", "bench", "run", "no-such-scenario"],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert p.returncode == 2
+    lines = p.stderr.strip().splitlines()
+    assert len(lines) == 1 and "no-such-scenario" in lines[0], p.stderr
+    assert "Traceback" not in p.stderr

@@ -1,0 +1,187 @@
+"""``bench replay``: a capture back onto a bus with its recorded timing.
+
+Received on a second bus object: the same IDs, payloads and order, and the
+receive times follow the capture's time line within the error the replay
+reports (plus a generous allowance for the transport; no tight timing
+assertion on a shared machine).
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import can
+import numpy as np
+import pytest
+
+from bench._errors import BenchError
+from bench._replay import (
+    parse_id_map,
+    read_capture,
+    replay_frames,
+    schedule,
+    select_frames,
+)
+from bench._run import BusSpec
+from bench.cli import main
+from tests.replay_helpers import recorded_run
+
+
+@pytest.fixture(scope="module")
+def frames(tmp_path_factory: pytest.TempPathFactory) -> list[can.Message]:
+    fr, _ = read_capture(recorded_run(tmp_path_factory, "tt-dq") / "capture.blf")
+    return fr
+
+
+def drain(reader: can.BufferedReader) -> list[can.Message]:
+    out = []
+    while (m := reader.get_message(0.2)) is not None:
+        out.append(m)
+    return out
+
+
+@pytest.mark.parametrize("clock", ["deadline", "messagesync"])
+def test_replay_on_virtual_bus_keeps_frames_order_and_timing(
+    frames: list[can.Message], clock: str
+) -> None:
+    chosen = select_frames(frames[:3000])
+    chan = f"replay{os.getpid()}{clock}"
+    tx = can.Bus(interface="virtual", channel=chan)
+    rx = can.Bus(interface="virtual", channel=chan)
+    try:
+        res = replay_frames(tx, chosen, clock=clock)
+        got = []
+        while (m := rx.recv(0.1)) is not None:
+            got.append(m)
+    finally:
+        tx.shutdown()
+        rx.shutdown()
+    assert res.sent == len(chosen) == len(got)
+    assert [m.arbitration_id for m in got] == [m.arbitration_id for m in chosen]
+    assert [bytes(m.data) for m in got] == [bytes(m.data) for m in chosen]
+    assert [m.is_fd for m in got] == [m.is_fd for m in chosen]
+    # the virtual bus stamps each frame when it is sent: relative to the first one,
+    # the stamps follow the capture's time line within the reported worst error
+    want = np.array([m.timestamp for m in chosen]) - chosen[0].timestamp
+    rel = np.array([m.timestamp for m in got]) - got[0].timestamp
+    dev = np.abs(rel - want)
+    assert res.error_worst_us >= res.error_median_us >= -1.0
+    assert np.max(dev) <= 2e-6 * res.error_worst_us + 0.02
+    # and the replay took the capture's time, not less (frames were not just dumped)
+    assert res.wall_s >= 0.99 * want[-1]
+
+
+def test_replay_on_udp_multicast(frames: list[can.Message]) -> None:
+    chosen = select_frames(frames[:2000])
+    port = 53000 + 2 * (os.getpid() % 2000)
+    spec = BusSpec("udp_multicast", "239.74.163.3", port)
+    rx = spec.open()  # with a large receive buffer: a busy machine must not drop frames
+    tx = spec.open()
+    reader = can.BufferedReader()
+    notifier = can.Notifier(rx, [reader], timeout=0.05)
+    try:
+        res = replay_frames(tx, chosen, speed=1.0)
+        got = drain(reader)
+    finally:
+        notifier.stop()
+        tx.shutdown()
+        rx.shutdown()
+    assert len(got) == len(chosen)
+    assert [(m.arbitration_id, bytes(m.data)) for m in got] == [
+        (m.arbitration_id, bytes(m.data)) for m in chosen
+    ]
+    span = chosen[-1].timestamp - chosen[0].timestamp
+    assert res.wall_s >= 0.99 * span
+    rel = np.array([m.timestamp for m in got]) - got[0].timestamp
+    want = np.array([m.timestamp for m in chosen]) - chosen[0].timestamp
+    assert np.max(np.abs(rel - want)) <= 1e-6 * res.error_worst_us + 0.05
+
+
+TAGGED: list[tuple[int, int | str]] = [
+    (0x10, 1),
+    (0x11, 1),
+    (0x10, 2),
+    (0x20, "can2"),
+    (0x11, "can1"),
+]
+
+
+def test_filters_and_id_map() -> None:
+    ms = [
+        can.Message(
+            timestamp=0.001 * i,
+            arbitration_id=fid,
+            is_extended_id=False,
+            data=bytes([i]),
+            channel=ch,
+        )
+        for i, (fid, ch) in enumerate(TAGGED)
+    ]
+    out = select_frames(ms, channels=[1], id_map=parse_id_map(["0x10=0x210", "17=0x1FFFF"]))
+    assert [(m.arbitration_id, m.is_extended_id, m.data[0]) for m in out] == [
+        (0x210, False, 0),
+        (0x1FFFF, True, 1),
+        (0x1FFFF, True, 4),
+    ]
+    assert all(m.channel is None for m in out)
+    out = select_frames(ms, ids=[0x10, 0x20], exclude_ids=[0x20])
+    assert [m.data[0] for m in out] == [0, 2]
+    offs, cut = schedule(
+        [can.Message(timestamp=t) for t in (10.0, 10.5, 15.5, 15.6)], speed=2.0, max_gap_s=1.0
+    )
+    assert offs == pytest.approx([0.0, 0.25, 0.75, 0.8])
+    assert cut == pytest.approx(2.0)
+    with pytest.raises(BenchError):
+        parse_id_map(["0x10:0x210"])
+
+
+def test_loops_continue_on_one_time_line(frames: list[can.Message]) -> None:
+    chosen = select_frames(frames[:200])
+    chan = f"loop{os.getpid()}"
+    tx = can.Bus(interface="virtual", channel=chan)
+    rx = can.Bus(interface="virtual", channel=chan)
+    try:
+        res = replay_frames(tx, chosen, loops=3, speed=4.0)
+        n = 0
+        while rx.recv(0.1) is not None:
+            n += 1
+    finally:
+        tx.shutdown()
+        rx.shutdown()
+    assert n == res.sent == 600 and res.loops == 3
+    span = (chosen[-1].timestamp - chosen[0].timestamp) / 4.0
+    assert res.wall_s >= 2.9 * span
+
+
+def test_cli_replay(
+    tmp_path: Path, frames: list[can.Message], capsys: pytest.CaptureFixture
+) -> None:
+    path = tmp_path / "small.asc"
+    with can.Logger(str(path)) as w:
+        for m in frames[:300]:
+            w.on_message_received(m)
+    chan = f"cli{os.getpid()}"
+    rx = can.Bus(interface="virtual", channel=chan)
+    try:
+        argv = ["replay", str(path), "--interface", "virtual", "--channel", chan]
+        rc = main([*argv, "--speed", "4", "--map", "0x10=0x210", "--channel-filter", "1"])
+        got: list[can.Message] = []
+        while (r := rx.recv(0.1)) is not None:
+            got.append(r)
+    finally:
+        rx.shutdown()
+    out = capsys.readouterr().out
+    assert rc == 0
+    assert "timing error vs capture: median" in out and "worst" in out
+    assert len(got) == 300
+    assert 0x210 in {m.arbitration_id for m in got} and 0x10 not in {m.arbitration_id for m in got}
+    for argv in (
+        ["replay", str(tmp_path / "nope.blf"), "--interface", "virtual"],
+        ["replay", str(path), "--interface", "virtual", "--map", "0x10"],
+        ["replay", str(path), "--interface", "virtual", "--id", "0x555"],
+        ["replay", str(path), "--interface", "virtual", "--speed", "0"],
+    ):
+        assert main(argv) == 2, argv
+        err = capsys.readouterr().err.strip().splitlines()
+        assert err[-1].startswith("bench: error: "), err
