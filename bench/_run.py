@@ -45,11 +45,17 @@ class BusSpec:
     interface: str
     channel: str
     port: int | None = None
+    bitrate: int | None = None
+    data_bitrate: int | None = None
 
     def args(self) -> list[str]:
         a = ["--interface", self.interface, "--channel", self.channel]
         if self.port is not None:
             a += ["--port", str(self.port)]
+        if self.bitrate is not None:
+            a += ["--bitrate", str(self.bitrate)]
+        if self.data_bitrate is not None:
+            a += ["--data-bitrate", str(self.data_bitrate)]
         return a
 
     def open(self) -> can.BusABC:
@@ -58,7 +64,14 @@ class BusSpec:
         kw: dict[str, Any] = {}
         if self.port is not None:
             kw["port"] = self.port
-        bus = open_bus(self.interface, self.channel, fd=True, **kw)
+        bus = open_bus(
+            self.interface,
+            self.channel,
+            fd=True,
+            bitrate=self.bitrate,
+            data_bitrate=self.data_bitrate,
+            **kw,
+        )
         _grow_receive_buffer(bus)
         return bus
 

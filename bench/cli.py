@@ -96,13 +96,21 @@ def _spec(args: argparse.Namespace, *, announce: bool) -> Any:
         if iface == "udp_multicast" and port is None:
             # a port of its own per run: parallel runs must not hear each other
             port = 44000 + 2 * random.Random(os.getpid()).randrange(5000)
-        return BusSpec(iface, chan, port)
+        return BusSpec(
+            iface, chan, port, getattr(args, "bitrate", None), getattr(args, "data_bitrate", None)
+        )
     from bench._bus import default_channel
 
     channel: str | None = args.channel or default_channel(args.interface)
     if channel is None:
         raise InterfaceError(f"--interface {args.interface}: give --channel")
-    return BusSpec(args.interface, channel, args.port)
+    return BusSpec(
+        args.interface,
+        channel,
+        args.port,
+        getattr(args, "bitrate", None),
+        getattr(args, "data_bitrate", None),
+    )
 
 
 _STOP = threading.Event()

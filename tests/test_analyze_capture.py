@@ -175,7 +175,7 @@ def garbage_capture(frames: list[can.Message]) -> tuple[list[can.Message], list[
                     arbitration_id=0x100,
                     is_extended_id=False,
                     is_fd=True,
-                    data=bytes(16),
+                    data=bytes(20),
                 ),
                 "bad_length",
             )

@@ -101,7 +101,7 @@ _CHILD = textwrap.dedent(
             bus.send(codec.encode("PhaseSamples",
                      {"i_a": 1.5, "i_b": -0.25, "u_dc": 540.0, "status": 1, "step": 1234}))
             bus.send(codec.encode("PlantTruth",
-                     {"theta_e": 1.0, "w_m": 10.0, "tau_e": 2.0, "tau_L": -1.0, "step": 1234}))
+                     {"theta_e": 1.0, "w_m": 10.0, "tau_e": 2.0, "tau_L": -1.0, "step": 1234, "duty_age": 0}))
             until = time.monotonic() + 0.2
             while time.monotonic() < until:
                 msg = bus.recv(0.05)

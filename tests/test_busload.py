@@ -111,9 +111,11 @@ def test_loads_scale_with_rate(table):
 
 def test_recorder_frames_cost_and_fd_helps(table):
     classic = _row(table, "control+recorder", "classic 1M")
-    # Each 12-byte FD frame is two classic frames (8 + 4 bytes) on a classic bus.
-    per_fd_frame = classic_frame_bits(8)[1] + classic_frame_bits(4)[1]
-    assert classic["period_us_max"] == pytest.approx(270 + 2 * per_fd_frame)
+    # On a classic bus each FD frame is split into 8-byte frames plus the rest:
+    # PlantTruth (16 bytes) = 8 + 8, CtrlTelemetry (12 bytes) = 8 + 4.
+    truth = 2 * classic_frame_bits(8)[1]
+    tele = classic_frame_bits(8)[1] + classic_frame_bits(4)[1]
+    assert classic["period_us_max"] == pytest.approx(270 + truth + tele)
     fd = _row(table, "control+recorder", "FD 1M/5M")
     assert fd["period_us_max"] < classic["period_us_max"]
     # The DBC's classic frames stay classic on an FD bus: same control time as classic 1M.

@@ -42,7 +42,7 @@ def test_generated_files(built):
         (0x101, "CTRL_TELEMETRY"),
     ]:
         assert f"BENCH_DBC_{symbol}_FRAME_ID (0x{frame_id:02x}u)" in text
-    assert "BENCH_DBC_PLANT_TRUTH_LENGTH (12u)" in text
+    assert "BENCH_DBC_PLANT_TRUTH_LENGTH (16u)" in text
 
 
 def test_vectors_cover_every_message(built):

@@ -117,7 +117,14 @@ def test_counters_and_angles_wrap(codec):
         "PwmDuty", {"duty_a": 0.5, "duty_b": 0.5, "duty_c": 0.5, "enable": 1, "step": -1}
     )
     assert got["step"] == 1023
-    truth = {"theta_e": -0.1, "w_m": 0.0, "tau_e": 0.0, "tau_L": 0.0, "step": 2**32 + 7}
+    truth = {
+        "theta_e": -0.1,
+        "w_m": 0.0,
+        "tau_e": 0.0,
+        "tau_L": 0.0,
+        "step": 2**32 + 7,
+        "duty_age": 0,
+    }
     got = codec.quantize("PlantTruth", truth)
     assert got["theta_e"] == pytest.approx(2 * math.pi - 0.1, abs=math.pi / 65536)
     assert got["step"] == 7
@@ -146,8 +153,10 @@ def test_frame_flags_follow_dbc(codec):
     assert duty.arbitration_id == codec.frame_id("PwmDuty") == 0x010
     assert not duty.is_fd and not duty.bitrate_switch and not duty.is_extended_id
     assert duty.dlc == 8
-    truth = codec.encode("PlantTruth", {"theta_e": 1, "w_m": 2, "tau_e": 3, "tau_L": 4, "step": 5})
-    assert truth.is_fd and truth.bitrate_switch and truth.dlc == 12
+    truth = codec.encode(
+        "PlantTruth", {"theta_e": 1, "w_m": 2, "tau_e": 3, "tau_L": 4, "step": 5, "duty_age": 0}
+    )
+    assert truth.is_fd and truth.bitrate_switch and truth.dlc == 16
 
 
 def test_crc_filled_and_every_bit_flip_rejected(codec):

@@ -14,7 +14,7 @@ from dbc import DBC_PATH
 EXPECTED = {
     "PwmDuty": {"duty_a", "duty_b", "duty_c", "enable", "step", "crc"},
     "PhaseSamples": {"i_a", "i_b", "u_dc", "step", "status", "crc"},
-    "PlantTruth": {"theta_e", "w_m", "tau_e", "tau_L", "step"},
+    "PlantTruth": {"theta_e", "w_m", "tau_e", "tau_L", "step", "duty_age"},
     "CtrlTelemetry": {"theta_hat", "w_hat", "err", "mode", "step"},
     "BenchCommand": {"cmd", "speed_ref", "load_torque", "seq", "step", "crc"},
     "PlantStatus": {"state", "fault_code", "overruns", "late_frames", "step", "crc"},

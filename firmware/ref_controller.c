@@ -1,0 +1,469 @@
+/*
+ * Reference external drive controller for the CAN hardware-in-the-loop bench.
+ *
+ * A sensored FOC speed controller that talks to `bench plant` over SocketCAN
+ * using nothing but the DBC (dbc/bench.dbc): the frames are packed and
+ * unpacked by the C code `bench codegen` generates (bench_dbc.h/.c, cantools)
+ * and protected by the generated E2E helper (bench_e2e.h/.c).  It is meant as
+ * the starting point of a real controller's firmware: the control law is in
+ * foc.c (no I/O), this file only maps frames to foc_step() and back.  No
+ * dynamic allocation.
+ *
+ * Frames (DBC names; one of each per PWM period k unless noted):
+ *   in   PhaseSamples  0x011  i_a, i_b, u_dc sampled at k T_s; step = k mod 1024
+ *   in   PlantTruth    0x100  CAN FD: true electrical angle and mechanical speed
+ *                             at k T_s (the "sensor" of this sensored controller)
+ *   in   BenchCommand  0x020  start/stop/enable/disable, speed_ref; step = the
+ *                             period the command applies in (mod 65536), sent ahead
+ *   out  PwmDuty       0x010  duties for period k + 1; step = (k + 1) mod 1024, E2E CRC
+ *   out  CtrlTelemetry 0x101  CAN FD: theta_hat = the angle used (the true one),
+ *                             w_hat (electrical), mode; step = k
+ *
+ * Period k is computed when PhaseSamples(k) and a PlantTruth not older than
+ * the truth decimation (-e) are both in; the angle is extrapolated from the
+ * truth's step to k with its speed (exact when truth comes every period).
+ * A repeated PhaseSamples(k) (the lockstep plant re-sends when a duty is
+ * late) gets the same PwmDuty again.  Frames with a bad length, a bad E2E
+ * CRC or an out-of-range value are counted and dropped.
+ *
+ * Usage: ref_controller [-i IFACE] [-e TRUTH_EVERY] [-t IDLE_S]
+ *   -i  SocketCAN interface (default vcan0); CAN FD must be enabled on it
+ *   -e  the plant's --truth-every (default 1)
+ *   -t  exit after this many seconds without a frame (default 30)
+ * Prints READY when listening; exits 0 after the stop command, with a summary.
+ */
+#include <errno.h>
+#include <math.h>
+#include <net/if.h>
+#include <poll.h>
+#include <signal.h>
+#include <stdbool.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/ioctl.h>
+#include <sys/socket.h>
+#include <time.h>
+#include <unistd.h>
+
+#include <linux/can.h>
+#include <linux/can/raw.h>
+
+#include "bench_dbc.h"
+#include "bench_e2e.h"
+#include "foc.h"
+#include "motor_params.h"
+
+#define TWO_PI 6.28318530717958647692
+
+/* Widths of the step counters (DBC: PhaseSamples.step and PwmDuty.step are
+ * 10 bits, BenchCommand.step 16 bits, PlantTruth.step and CtrlTelemetry.step
+ * 32 bits).  Receivers unwrap them against the step they expect. */
+#define SAMPLE_STEP_BITS 10
+#define COMMAND_STEP_BITS 16
+#define TRUTH_STEP_BITS 32
+
+/* BenchCommand.cmd values (DBC VAL_ table). */
+enum { CMD_NONE = 0, CMD_START = 1, CMD_STOP = 2, CMD_RESET = 3, CMD_ENABLE = 4, CMD_DISABLE = 5 };
+
+/* CtrlTelemetry.mode values (DBC VAL_ table). */
+enum { MODE_DISABLED = 0, MODE_RUN = 3 };
+
+/* Commands received ahead of their apply step wait here (fixed size). */
+#define CMD_QUEUE_LEN 128
+
+typedef struct {
+    int64_t apply_step;
+    uint8_t cmd;
+    double speed_ref_rpm;
+} command_t;
+
+typedef struct {
+    /* sample and truth waiting to be used */
+    bool have_sample;
+    int64_t sample_k;
+    double i_a, i_b, u_dc;
+    bool have_truth;
+    int64_t truth_k;
+    double theta_e, w_m;
+    /* the next period to compute, and the last answer (for repeats) */
+    int64_t next_k;
+    struct canfd_frame last_duty;
+    bool have_last_duty;
+    /* bench commands */
+    command_t queue[CMD_QUEUE_LEN];
+    int n_queued;
+    int last_seq;
+    int64_t last_cmd_step;
+    bool stop;
+    /* counters */
+    long steps, rejected, repeats, cmd_dropped, send_errors;
+} node_t;
+
+static volatile sig_atomic_t interrupted;
+
+static void on_signal(int sig)
+{
+    (void)sig;
+    interrupted = 1;
+}
+
+/* The step nearest `expected` whose low `bits` bits are `raw`. */
+static int64_t unwrap(uint32_t raw, int64_t expected, unsigned bits)
+{
+    int64_t mod = (int64_t)1 << bits;
+    int64_t half = mod / 2;
+    int64_t d = ((int64_t)raw - expected + half) % mod;
+    if (d < 0) {
+        d += mod;
+    }
+    return expected + d - half;
+}
+
+/* A frame of `len` bytes with identifier `id` (CAN FD when it is longer than 8). */
+static void make_frame(struct canfd_frame *fr, uint32_t id, const uint8_t *data, size_t len)
+{
+    memset(fr, 0, sizeof *fr);
+    fr->can_id = id;
+    fr->len = (uint8_t)len;
+    if (len > CAN_MAX_DLEN) {
+        fr->flags = CANFD_BRS; /* DBC: CANFD_BRS = 1 */
+    }
+    memcpy(fr->data, data, len);
+}
+
+static void send_frame(int sock, const struct canfd_frame *fr, node_t *n)
+{
+    size_t size = fr->len > CAN_MAX_DLEN ? CANFD_MTU : CAN_MTU;
+    for (int attempt = 0; attempt < 50; attempt++) {
+        if (write(sock, fr, size) == (ssize_t)size) {
+            return;
+        }
+        if (errno != ENOBUFS && errno != EAGAIN && errno != EINTR) {
+            break;
+        }
+        struct timespec ts = {0, 200000}; /* transmit queue full: wait 0.2 ms */
+        nanosleep(&ts, NULL);
+    }
+    n->send_errors++;
+}
+
+/* Duty 0..1 to its raw value, clipped to the DBC range [0 | 1 - 2^-15]
+ * (an unclipped 1.0 would not fit the 15-bit signal). */
+static uint16_t duty_raw(double d)
+{
+    double lsb = bench_dbc_pwm_duty_duty_a_decode(1u);
+    return bench_dbc_pwm_duty_duty_a_encode(d < 0.0 ? 0.0 : (d > 1.0 - lsb ? 1.0 - lsb : d));
+}
+
+/* Angle [rad] to the raw value of a 16-bit SigModular angle, modulo 2 pi. */
+static uint16_t angle_raw(double theta)
+{
+    double lsb = bench_dbc_ctrl_telemetry_theta_hat_decode(1u);
+    double r = fmod(floor(theta / lsb + 0.5), 65536.0);
+    if (r < 0.0) {
+        r += 65536.0;
+    }
+    return (uint16_t)r;
+}
+
+static void send_outputs(int sock, node_t *n, int64_t k, const foc_output_t *o, double theta,
+                         double w_e, bool enabled)
+{
+    uint8_t buf[64];
+    struct canfd_frame fr;
+
+    struct bench_dbc_pwm_duty_t duty;
+    bench_dbc_pwm_duty_init(&duty);
+    duty.duty_a = duty_raw(o->d_a);
+    duty.duty_b = duty_raw(o->d_b);
+    duty.duty_c = duty_raw(o->d_c);
+    duty.enable = o->enable ? 1u : 0u;
+    duty.step = (uint16_t)((uint64_t)(k + 1) & ((1u << SAMPLE_STEP_BITS) - 1u));
+    int len = bench_dbc_pwm_duty_pack(buf, &duty, sizeof buf);
+    bench_e2e_protect(BENCH_E2E_PWM_DUTY_DATA_ID, buf, (size_t)len, BENCH_E2E_PWM_DUTY_CRC_INDEX);
+    make_frame(&fr, BENCH_DBC_PWM_DUTY_FRAME_ID, buf, (size_t)len);
+    send_frame(sock, &fr, n);
+    n->last_duty = fr;
+    n->have_last_duty = true;
+
+    struct bench_dbc_ctrl_telemetry_t tel;
+    bench_dbc_ctrl_telemetry_init(&tel);
+    tel.theta_hat = angle_raw(theta);
+    tel.w_hat = bench_dbc_ctrl_telemetry_w_hat_encode(w_e);
+    tel.err = 0;
+    tel.mode = enabled ? MODE_RUN : MODE_DISABLED;
+    tel.step = (uint32_t)k;
+    len = bench_dbc_ctrl_telemetry_pack(buf, &tel, sizeof buf);
+    make_frame(&fr, BENCH_DBC_CTRL_TELEMETRY_FRAME_ID, buf, (size_t)len);
+    send_frame(sock, &fr, n);
+}
+
+/* Apply the commands due at period k, in apply-step order. */
+static void apply_commands(node_t *n, foc_t *foc, int64_t k)
+{
+    for (;;) {
+        int best = -1;
+        for (int i = 0; i < n->n_queued; i++) {
+            if (n->queue[i].apply_step <= k &&
+                (best < 0 || n->queue[i].apply_step < n->queue[best].apply_step)) {
+                best = i;
+            }
+        }
+        if (best < 0) {
+            return;
+        }
+        command_t c = n->queue[best];
+        n->queue[best] = n->queue[--n->n_queued];
+        if (c.cmd == CMD_START || c.cmd == CMD_ENABLE || c.cmd == CMD_RESET) {
+            foc_enable(foc, true);
+        } else if (c.cmd == CMD_STOP || c.cmd == CMD_DISABLE) {
+            foc_enable(foc, false);
+            if (c.cmd == CMD_STOP) {
+                n->stop = true;
+            }
+        }
+        foc_set_speed_ref(foc, c.speed_ref_rpm * (TWO_PI / 60.0));
+    }
+}
+
+/* Compute period sample_k when its sample and a recent enough truth are in. */
+static void try_compute(int sock, node_t *n, foc_t *foc, int truth_every)
+{
+    if (!n->have_sample || !n->have_truth) {
+        return;
+    }
+    int64_t k = n->sample_k;
+    int64_t age = k - n->truth_k;
+    if (age < 0 || age >= truth_every) {
+        return; /* wait for the truth of this period */
+    }
+    apply_commands(n, foc, k);
+    /* the angle at the sample instant (extrapolated when truth is decimated) */
+    double w_e = MOTOR_N_P * n->w_m;
+    double theta = fmod(n->theta_e + w_e * (double)age / PWM_FREQ_HZ, TWO_PI);
+    foc_input_t in = {n->i_a, n->i_b, n->u_dc, theta, n->w_m};
+    foc_output_t out;
+    foc_step(foc, &in, &out);
+    send_outputs(sock, n, k, &out, theta, w_e, foc->enabled);
+    n->have_sample = false;
+    n->next_k = k + 1;
+    n->steps++;
+}
+
+static void on_frame(int sock, node_t *n, foc_t *foc, const struct canfd_frame *fr,
+                     int truth_every)
+{
+    if (fr->can_id & (CAN_EFF_FLAG | CAN_RTR_FLAG | CAN_ERR_FLAG)) {
+        return;
+    }
+    switch (fr->can_id & CAN_SFF_MASK) {
+    case BENCH_DBC_PHASE_SAMPLES_FRAME_ID: {
+        struct bench_dbc_phase_samples_t s;
+        if (fr->len != BENCH_DBC_PHASE_SAMPLES_LENGTH ||
+            !bench_e2e_check(BENCH_E2E_PHASE_SAMPLES_DATA_ID, fr->data, fr->len,
+                             BENCH_E2E_PHASE_SAMPLES_CRC_INDEX) ||
+            bench_dbc_phase_samples_unpack(&s, fr->data, fr->len) != 0 ||
+            !bench_dbc_phase_samples_status_is_in_range(s.status)) {
+            n->rejected++;
+            return;
+        }
+        int64_t k = unwrap(s.step, n->next_k, SAMPLE_STEP_BITS);
+        if (k < n->next_k) {
+            /* a repeat of a sample already answered: answer the newest again */
+            n->repeats++;
+            if (k == n->next_k - 1 && n->have_last_duty) {
+                send_frame(sock, &n->last_duty, n);
+            }
+            return;
+        }
+        n->have_sample = true;
+        n->sample_k = k;
+        n->i_a = bench_dbc_phase_samples_i_a_decode(s.i_a);
+        n->i_b = bench_dbc_phase_samples_i_b_decode(s.i_b);
+        n->u_dc = bench_dbc_phase_samples_u_dc_decode(s.u_dc);
+        break;
+    }
+    case BENCH_DBC_PLANT_TRUTH_FRAME_ID: {
+        struct bench_dbc_plant_truth_t t;
+        /* no CRC in the DBC: the truth is recorder data on a real bench */
+        if (fr->len != BENCH_DBC_PLANT_TRUTH_LENGTH ||
+            bench_dbc_plant_truth_unpack(&t, fr->data, fr->len) != 0) {
+            n->rejected++;
+            return;
+        }
+        int64_t k = unwrap(t.step, n->next_k, TRUTH_STEP_BITS);
+        if (n->have_truth && k <= n->truth_k) {
+            return; /* old or repeated */
+        }
+        n->have_truth = true;
+        n->truth_k = k;
+        n->theta_e = bench_dbc_plant_truth_theta_e_decode(t.theta_e);
+        n->w_m = bench_dbc_plant_truth_w_m_decode(t.w_m);
+        break;
+    }
+    case BENCH_DBC_BENCH_COMMAND_FRAME_ID: {
+        struct bench_dbc_bench_command_t c;
+        if (fr->len != BENCH_DBC_BENCH_COMMAND_LENGTH ||
+            !bench_e2e_check(BENCH_E2E_BENCH_COMMAND_DATA_ID, fr->data, fr->len,
+                             BENCH_E2E_BENCH_COMMAND_CRC_INDEX) ||
+            bench_dbc_bench_command_unpack(&c, fr->data, fr->len) != 0 ||
+            !bench_dbc_bench_command_cmd_is_in_range(c.cmd)) {
+            n->rejected++;
+            return;
+        }
+        int64_t step = unwrap(c.step, n->next_k, COMMAND_STEP_BITS);
+        if (c.seq == n->last_seq && step == n->last_cmd_step) {
+            return; /* the same transmission again (DBC: same seq = repeat) */
+        }
+        n->last_seq = c.seq;
+        n->last_cmd_step = step;
+        bool queued = false;
+        for (int i = 0; i < n->n_queued; i++) {
+            queued = queued || n->queue[i].apply_step == step; /* one command per step */
+        }
+        if (!queued && n->n_queued == CMD_QUEUE_LEN) {
+            n->cmd_dropped++;
+        } else if (!queued) {
+            command_t *q = &n->queue[n->n_queued++];
+            q->apply_step = step;
+            q->cmd = c.cmd;
+            q->speed_ref_rpm = bench_dbc_bench_command_speed_ref_decode(c.speed_ref);
+        }
+        if (step <= n->next_k) {
+            /* due before the next period is computed: apply now (a stop for the
+             * period after the plant's last one ends the program here) */
+            apply_commands(n, foc, n->next_k);
+        }
+        return;
+    }
+    default:
+        return;
+    }
+    try_compute(sock, n, foc, truth_every);
+}
+
+/* Raw CAN socket on `ifname` with CAN FD frames enabled and the three input IDs. */
+static int open_can(const char *ifname)
+{
+    int sock = socket(PF_CAN, SOCK_RAW, CAN_RAW);
+    if (sock < 0) {
+        perror("ref_controller: socket(PF_CAN)");
+        return -1;
+    }
+    int on = 1;
+    if (setsockopt(sock, SOL_CAN_RAW, CAN_RAW_FD_FRAMES, &on, sizeof on) != 0) {
+        perror("ref_controller: CAN_RAW_FD_FRAMES");
+        close(sock);
+        return -1;
+    }
+    struct can_filter filters[] = {
+        {BENCH_DBC_PHASE_SAMPLES_FRAME_ID, CAN_SFF_MASK | CAN_EFF_FLAG | CAN_RTR_FLAG},
+        {BENCH_DBC_PLANT_TRUTH_FRAME_ID, CAN_SFF_MASK | CAN_EFF_FLAG | CAN_RTR_FLAG},
+        {BENCH_DBC_BENCH_COMMAND_FRAME_ID, CAN_SFF_MASK | CAN_EFF_FLAG | CAN_RTR_FLAG},
+    };
+    if (setsockopt(sock, SOL_CAN_RAW, CAN_RAW_FILTER, filters, sizeof filters) != 0) {
+        perror("ref_controller: CAN_RAW_FILTER");
+        close(sock);
+        return -1;
+    }
+    struct ifreq ifr;
+    memset(&ifr, 0, sizeof ifr);
+    strncpy(ifr.ifr_name, ifname, IFNAMSIZ - 1);
+    if (ioctl(sock, SIOCGIFINDEX, &ifr) != 0) {
+        fprintf(stderr, "ref_controller: interface %s: %s\n", ifname, strerror(errno));
+        close(sock);
+        return -1;
+    }
+    struct sockaddr_can addr;
+    memset(&addr, 0, sizeof addr);
+    addr.can_family = AF_CAN;
+    addr.can_ifindex = ifr.ifr_ifindex;
+    if (bind(sock, (struct sockaddr *)&addr, sizeof addr) != 0) {
+        fprintf(stderr, "ref_controller: bind %s: %s\n", ifname, strerror(errno));
+        close(sock);
+        return -1;
+    }
+    return sock;
+}
+
+int main(int argc, char **argv)
+{
+    const char *ifname = "vcan0";
+    int truth_every = 1;
+    double idle_s = 30.0;
+    int opt;
+    while ((opt = getopt(argc, argv, "i:e:t:")) != -1) {
+        switch (opt) {
+        case 'i':
+            ifname = optarg;
+            break;
+        case 'e':
+            truth_every = atoi(optarg);
+            break;
+        case 't':
+            idle_s = atof(optarg);
+            break;
+        default:
+            fprintf(stderr, "usage: %s [-i IFACE] [-e TRUTH_EVERY] [-t IDLE_S]\n", argv[0]);
+            return 2;
+        }
+    }
+    if (truth_every < 1 || !(idle_s > 0.0)) {
+        fprintf(stderr, "ref_controller: -e must be >= 1 and -t > 0\n");
+        return 2;
+    }
+    int sock = open_can(ifname);
+    if (sock < 0) {
+        return 1;
+    }
+    signal(SIGINT, on_signal);
+    signal(SIGTERM, on_signal);
+
+    static node_t node; /* static: zero-initialised, off the stack */
+    static foc_t foc;
+    node.last_seq = -1;
+    node.last_cmd_step = -1;
+    foc_init(&foc, 1.0 / PWM_FREQ_HZ, MOTOR_N_P, MOTOR_R_S, MOTOR_L_D, MOTOR_L_Q, MOTOR_PSI_F,
+             MOTOR_J, MOTOR_I_MAX, MOTOR_TAU_MAX, ALPHA_C, ALPHA_S);
+
+    printf("READY\n");
+    fflush(stdout);
+    int rc = 0;
+    double idle = 0.0;
+    struct pollfd pfd = {sock, POLLIN, 0};
+    while (!node.stop && !interrupted) {
+        int ready = poll(&pfd, 1, 100);
+        if (ready < 0 && errno != EINTR) {
+            perror("ref_controller: poll");
+            rc = 1;
+            break;
+        }
+        if (ready <= 0) {
+            idle += 0.1;
+            if (idle >= idle_s) {
+                fprintf(stderr, "ref_controller: no frame for %.0f s, exiting\n", idle_s);
+                rc = 1;
+                break;
+            }
+            continue;
+        }
+        idle = 0.0;
+        struct canfd_frame fr;
+        ssize_t nbytes = read(sock, &fr, sizeof fr);
+        if (nbytes != CAN_MTU && nbytes != CANFD_MTU) {
+            if (nbytes < 0 && errno == EINTR) {
+                continue;
+            }
+            node.rejected++;
+            continue;
+        }
+        on_frame(sock, &node, &foc, &fr, truth_every);
+    }
+    close(sock);
+    printf("ref_controller: %ld steps, %ld rejected, %ld repeats, %ld commands dropped, "
+           "%ld send errors\n",
+           node.steps, node.rejected, node.repeats, node.cmd_dropped, node.send_errors);
+    return rc != 0 ? rc : (node.send_errors ? 1 : 0);
+}

@@ -1,0 +1,177 @@
+"""The reference C controller closes a sensored FOC loop against `bench plant` on vcan0.
+
+Three processes on one SocketCAN bus: ``python -m bench plant`` (lockstep),
+``firmware/ref_controller`` (C, raw AF_CAN sockets with CAN FD, built from the
+C code `bench codegen` generates) and this test as the bench: it records every
+frame, sends the scenario's bench commands ahead of the plant and analyses the
+capture as ``bench analyze`` would.
+"""
+
+from __future__ import annotations
+
+import json
+import select
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import can
+import numpy as np
+import pytest
+
+from bench._analysis import analyze_frames
+from bench._codec import Codec
+from bench._loops import command_frames
+from bench._run import BusSpec, Recorder, _drain
+from bench._scenario import load_scenario
+from bench._setup import get_preset, n_steps, sample_period
+from tests.conftest import require_vcan
+from tests.test_firmware import CC, MAKE, build_firmware
+
+pytestmark = [
+    pytest.mark.socketcan,
+    pytest.mark.skipif(CC is None or MAKE is None, reason="needs a C compiler and make"),
+]
+
+SCENARIO = Path(__file__).parent / "data" / "firmware-100rpm.toml"
+#: Upper bound of the whole closed-loop run [s]; UML closes about 1000 periods/s.
+RUN_TIMEOUT_S = 240.0
+READY_TIMEOUT_S = 120.0
+
+
+def _wait_ready(proc: subprocess.Popen[str], what: str) -> None:
+    assert proc.stdout is not None
+    deadline = time.monotonic() + READY_TIMEOUT_S
+    while time.monotonic() < deadline:
+        readable, _, _ = select.select([proc.stdout], [], [], 1.0)
+        if readable:
+            line = proc.stdout.readline()
+            if line.strip() == "READY":
+                return
+            if line == "" and proc.poll() is not None:
+                pytest.fail(f"{what} exited before it was ready (exit {proc.returncode})")
+    pytest.fail(f"{what} not ready within {READY_TIMEOUT_S} s")
+
+
+@pytest.fixture(scope="module")
+def firmware_run(tmp_path_factory: pytest.TempPathFactory) -> dict:
+    """One closed-loop run of the C controller; returns the capture's table and reports."""
+    require_vcan("vcan0")
+    out = tmp_path_factory.mktemp("fwrun")
+    exe = build_firmware(out / "build")
+    codec = Codec()
+    scn = load_scenario(str(SCENARIO))
+    n = n_steps(scn)
+    capture = out / "capture.blf"
+    writer = can.Logger(str(capture))
+    bus = BusSpec("socketcan", "vcan0").open()  # CAN FD, large receive buffer
+    rec = Recorder(codec, writer, 1)
+    notifier = can.Notifier(bus, [rec], timeout=0.05)
+    procs: list[subprocess.Popen[str]] = []
+    try:
+        ctrl = subprocess.Popen(
+            [str(exe), "-i", "vcan0", "-t", str(RUN_TIMEOUT_S)],
+            stdout=subprocess.PIPE,
+            stderr=(out / "ctrl.log").open("w"),
+            text=True,
+        )
+        procs.append(ctrl)
+        _wait_ready(ctrl, "ref_controller")
+        plant = subprocess.Popen(
+            [sys.executable, "-m", "bench", "plant", str(SCENARIO),
+             "--interface", "socketcan", "--channel", "vcan0", "--mode", "lockstep",
+             "--report", str(out / "plant.json")],
+            stdout=subprocess.PIPE,
+            stderr=(out / "plant.log").open("w"),
+            text=True,
+        )  # fmt: skip
+        procs.append(plant)
+        _wait_ready(plant, "bench plant")
+        # bench commands ahead of the plant (each carries its apply step)
+        cmds = command_frames(scn, codec)
+        m_step = 1 << codec.step_bits("PhaseSamples")
+        lead = 200
+        sent = full = 0
+        last = -1
+        t0 = time.monotonic()
+        while not rec.done.is_set() and plant.poll() is None:
+            raw = rec.last_raw_step
+            if raw >= 0 and raw != last:
+                full += (raw - last) % m_step if last >= 0 else raw
+                last = raw
+            while sent < len(cmds) and cmds[sent][0] <= full + lead:
+                bus.send(cmds[sent][1])
+                sent += 1
+            if time.monotonic() - t0 > RUN_TIMEOUT_S:
+                pytest.fail(f"run not finished in {RUN_TIMEOUT_S} s (at step {full} of {n})")
+            time.sleep(0.002)
+        bus.send(cmds[-1][1])  # the stop command once more
+        plant.wait(timeout=30)
+        ctrl_out, _ = ctrl.communicate(timeout=60)
+    finally:
+        for p in procs:
+            if p.poll() is None:
+                p.kill()
+                p.wait()
+        _drain([rec])  # the recorder may lag the nodes on a slow host
+        notifier.stop()
+        writer.stop()
+        bus.shutdown()
+    assert plant.returncode == 0, (out / "plant.log").read_text()[-2000:]
+    assert ctrl.returncode == 0, ctrl_out + (out / "ctrl.log").read_text()[-2000:]
+    cap = analyze_frames(rec.frames, codec, T_s=sample_period(scn), n_p=get_preset(scn).motor.n_p)
+    return {
+        "scn": scn,
+        "n": n,
+        "cap": cap,
+        "frames": rec.frames,
+        "plant": json.loads((out / "plant.json").read_text()),
+        "ctrl_summary": ctrl_out.strip().splitlines()[-1],
+    }
+
+
+def test_c_controller_reaches_the_commanded_speed(firmware_run: dict) -> None:
+    t = firmware_run["cap"].table
+    scn = firmware_run["scn"]
+    assert len(t["step"]) == firmware_run["n"] + 1  # steps 0..n, none missing
+    steady = t["t"] >= scn.score_from_s
+    w = t["w_m_rpm"][steady]
+    err = t["theta_err_deg"]
+    print(  # shown by pytest -rP: the measured numbers
+        f"C controller: speed {np.mean(w):.3f} rpm (min {np.min(w):.3f}, max {np.max(w):.3f}), "
+        f"position error max |{np.max(np.abs(err)):.4f}| deg, i_d mean {np.mean(t['i_d'][steady]):.4f} A"
+    )
+    assert np.mean(w) == pytest.approx(100.0, abs=2.0)
+    assert np.max(np.abs(w - 100.0)) < 5.0
+    # field orientation: no d current, q current only for friction and the ramp
+    assert abs(np.mean(t["i_d"][steady])) < 0.05
+    assert np.max(np.abs(t["i_q"][steady])) < 0.5
+    # the ramp needs torque: i_q positive while accelerating
+    accel = (t["t"] > 0.005) & (t["t"] < 0.05)
+    assert np.mean(t["i_q"][accel]) > 0.1
+    # enabled from the start command (step 0) until the stop command (step n)
+    assert np.all(t["enable"][:-1] == 1.0) and t["enable"][-1] == 0.0
+
+
+def test_c_controller_logs_the_sensored_angle(firmware_run: dict) -> None:
+    """theta_hat is the true angle of the same step: the recorder's error is zero."""
+    t = firmware_run["cap"].table
+    assert np.max(np.abs(t["theta_err_deg"])) < 0.01
+    assert np.all(t["mode"][:-1] == 3) and t["mode"][-1] == 0  # run, then stopped
+
+
+def test_plant_accepted_every_c_frame(firmware_run: dict) -> None:
+    """Every PwmDuty of the C controller passed the plant's CRC, length and range checks."""
+    r = firmware_run["plant"]
+    assert r["steps"] == firmware_run["n"]
+    assert r["frames_rejected"] == 0, r["reject_reasons"]
+    assert firmware_run["cap"].frames_rejected == 0
+    duties = [f for f in firmware_run["frames"] if f.arbitration_id == 0x010]
+    tele = [f for f in firmware_run["frames"] if f.arbitration_id == 0x101]
+    assert len(duties) >= firmware_run["n"] and not any(f.is_fd for f in duties)
+    assert len(tele) >= firmware_run["n"] and all(
+        f.is_fd and len(f.data) == Codec().length("CtrlTelemetry") for f in tele
+    )
+    assert firmware_run["ctrl_summary"].startswith(f"ref_controller: {firmware_run['n'] + 1} steps")
+    assert " 0 rejected" in firmware_run["ctrl_summary"]
