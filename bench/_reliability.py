@@ -27,10 +27,12 @@ from dataclasses import asdict, dataclass, field
 from typing import Any
 
 import can
+import cantools
 
 from bench._codec import Codec
 from bench._e2e import crc8_j1850
 from bench._nodes import CMD_DISABLE, CMD_RESET, ControllerNode, PlantNode, unwrap
+from dbc import DBC_PATH
 from plant_rt import FAULT_NONE, FAULT_OVER_CURRENT, FAULT_WATCHDOG
 
 __all__ = [
@@ -81,19 +83,17 @@ def e2e_ok(codec: Codec, msg: can.Message) -> bool:
 
 
 def raw_duty(data: bytes) -> tuple[float, float, float, bool]:
-    """Oracle: the duties of a ``PwmDuty`` payload, unpacked by hand from its layout.
+    """Oracle: the duties of a ``PwmDuty`` payload, decoded by cantools alone.
 
-    ``duty_a`` bits 8-22, ``duty_b`` 23-37, ``duty_c`` 38-52 (LSB 2^-15),
-    ``enable`` bit 53, little endian (``dbc/bench.dbc``).
+    Straight from the DBC's message definition (no CRC check, no range
+    check, none of :class:`~bench._codec.Codec`'s fast paths), so a defect in
+    the codec's decoding cannot hide itself from the fuzz test.
     """
-    v = int.from_bytes(data[:8], "little")
-    lsb = 2.0**-15
-    return (
-        ((v >> 8) & 0x7FFF) * lsb,
-        ((v >> 23) & 0x7FFF) * lsb,
-        ((v >> 38) & 0x7FFF) * lsb,
-        bool((v >> 53) & 1),
-    )
+    sig: Any = _PWM_DUTY.decode(data[:8], decode_choices=False, scaling=True)
+    return (float(sig["duty_a"]), float(sig["duty_b"]), float(sig["duty_c"]), bool(sig["enable"]))
+
+
+_PWM_DUTY = cantools.database.load_file(str(DBC_PATH)).get_message_by_name("PwmDuty")
 
 
 class StepGuard:
