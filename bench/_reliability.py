@@ -93,7 +93,9 @@ def raw_duty(data: bytes) -> tuple[float, float, float, bool]:
     return (float(sig["duty_a"]), float(sig["duty_b"]), float(sig["duty_c"]), bool(sig["enable"]))
 
 
-_PWM_DUTY = cantools.database.load_file(str(DBC_PATH)).get_message_by_name("PwmDuty")
+_DB = cantools.database.load_file(str(DBC_PATH))
+assert isinstance(_DB, cantools.database.can.Database)
+_PWM_DUTY = _DB.get_message_by_name("PwmDuty")
 
 
 class StepGuard:
