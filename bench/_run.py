@@ -314,7 +314,11 @@ def run_scenario(
             _wait_ready(p, role, log, stop=lambda: interrupted)
         # commands: sent ahead of the plant by a lead, each twice
         cmds = command_frames(scn, codec)
-        lead = max(500, int(0.2 / T_s))
+        # Nodes queue commands by their apply step, so sending far ahead costs
+        # nothing; the recorder's view of the plant's step lags on a slow host
+        # (User-Mode Linux: by thousands of frames), and a late command would
+        # change the trace.
+        lead = max(3000, int(0.5 / T_s))
         m_step = 1 << codec.step_bits("PhaseSamples")
         sent = 0
         full_step = 0
@@ -354,14 +358,21 @@ def run_scenario(
         if plant is not None and not interrupted:
             bus_a.send(cmds[-1][1])
             try:
-                plant.wait(timeout=5.0)
+                plant.wait(timeout=30.0)
             except subprocess.TimeoutExpired:
                 plant.send_signal(signal.SIGTERM)
+            ctrl = dict(procs).get("controller")
+            if ctrl is not None and not link:
+                # it stops by itself at the stop command's step
+                try:
+                    ctrl.wait(timeout=10.0)
+                except subprocess.TimeoutExpired:
+                    pass
             time.sleep(0.2)
         for _, p in procs:
             if p.poll() is None:
                 p.send_signal(signal.SIGTERM)
-        deadline = time.monotonic() + 2.0
+        deadline = time.monotonic() + (2.0 if interrupted else 10.0)
         for _, p in procs:
             try:
                 p.wait(timeout=max(0.1, deadline - time.monotonic()))

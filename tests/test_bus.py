@@ -234,7 +234,14 @@ def test_socketcan_vcan0_send_receive(codec, name):
     try:
         signals = {
             "PwmDuty": {"duty_a": 0.1, "duty_b": 0.2, "duty_c": 0.3, "enable": 1, "step": 5},
-            "PlantTruth": {"theta_e": 3.0, "w_m": -5.0, "tau_e": 1.0, "tau_L": 0.5, "step": 99},
+            "PlantTruth": {
+                "theta_e": 3.0,
+                "w_m": -5.0,
+                "tau_e": 1.0,
+                "tau_L": 0.5,
+                "step": 99,
+                "duty_age": 0,
+            },
         }[name]
         sent = codec.encode(name, signals)
         a.send(sent)

@@ -91,7 +91,7 @@ def firmware_run(tmp_path_factory: pytest.TempPathFactory) -> dict:
         # bench commands ahead of the plant (each carries its apply step)
         cmds = command_frames(scn, codec)
         m_step = 1 << codec.step_bits("PhaseSamples")
-        lead = 200
+        lead = 3000  # far ahead: the recorder's view of the step lags on a slow host
         sent = full = 0
         last = -1
         t0 = time.monotonic()
