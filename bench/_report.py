@@ -183,12 +183,11 @@ def evaluate_claims(summary: dict[str, Any]) -> list[dict[str, str]]:
             ("max |dtheta| (deg)", "theta_err_abs_max_deg", bound)
         ]
         checks.append(("mean |dtheta| (deg)", "theta_err_abs_mean_deg", pr["theta_err_mean_deg"]))
-        for key, label in (
-            ("speed_err_max_rpm", "speed error (rpm)"),
-            ("thd_phase_a_pct", "THD (%)"),
-        ):
-            if key in pr:
-                checks.append((label, key, pr[key]))
+        # THD is shown in the table but not checked: the plant's inverter is an
+        # average model without switching harmonics or dead time, so a low THD
+        # says nothing about the method (see "Limits of the comparison").
+        if "speed_err_max_rpm" in pr:
+            checks.append(("speed error (rpm)", "speed_err_max_rpm", pr["speed_err_max_rpm"]))
         text = f"tt-dq within the proposed method's numbers of {table}: " + ", ".join(
             f"{lab} <= {b:g}" for lab, _, b in checks
         )
@@ -489,6 +488,7 @@ def render_markdown(summary: dict[str, Any]) -> str:
         ]
         lines += _wen_section(summary)
     lines += _xue_section(summary)
+    lines += _limits_section(summary)
     lines += _sweep_section(summary)
     failed = [r for r in summary["runs"] if "error" in r]
     if failed:
@@ -496,6 +496,67 @@ def render_markdown(summary: dict[str, Any]) -> str:
         lines += [f"- {r['scenario']}/{r['estimator']}: {r['error']}" for r in failed]
         lines.append("")
     return "\n".join(lines)
+
+
+def _luenberger_peak(n_p: int, d_tau: float, J: float, a: float) -> float:
+    """Peak of Xue eq. (12) after a load step ``d_tau`` with the triple pole ``a``.
+
+    With ``K1 = a^3 J, K2 = 3 a^2 J, K3 = 3 a J`` eq. (12) is
+    ``e(s) = -n_p d_tau / (J (s + a)^3)`` for a step, i.e.
+    ``e(t) = -n_p d_tau t^2 exp(-a t) / (2 J)``, largest at ``t = 2 / a``:
+    ``2 exp(-2) n_p d_tau / (J a^2)`` (rad, electrical).
+    """
+    return 2.0 * math.exp(-2.0) * n_p * d_tau / (J * a * a)
+
+
+def _limits_section(summary: dict[str, Any]) -> list[str]:
+    """What limits the comparison, with closed forms where there is one."""
+    lines = ["## Limits of the comparison", ""]
+    xue_load = [
+        r
+        for r in summary.get("runs", [])
+        if r["scenario"] in ("xue-fig15", "xue-fig16")
+        and r["estimator"] == "square-wave"
+        and _ok(r)
+    ]
+    if xue_load:
+        from bench._setup import motor_model
+        from controller._square_wave import SquareWaveEstimator
+        from plant_rt import preset
+
+        p = preset("xue2022")
+        a = SquareWaveEstimator(motor_model(p), p.T_s).observer.a  # the default pole
+        peak = _luenberger_peak(p.motor.n_p, 3.0, p.motor.J, a)
+        a_need = math.sqrt(2.0 * math.exp(-2.0) * p.motor.n_p * 3.0 / (p.motor.J * 0.26))
+        measured = ", ".join(
+            f"{r['scenario']} {_f(r['metrics']['theta_err_abs_max_rad'], 3)} rad" for r in xue_load
+        )
+        lines += [
+            f"- **Xue Figs. 15-16 (sudden 3 N m):** the error after a load step is what Xue's "
+            f"eq. (12) predicts for the observer: with the triple pole a = {a:.1f} rad/s "
+            f"(0.1 / (3.5 T), chosen for phase margin against the 3.5-period loop delay) and "
+            f"J = {p.motor.J} kg m^2 (Xue gives no inertia), the closed-form peak "
+            f"2 e^-2 n_p dT_L / (J a^2) is {peak:.3f} rad; the bench measures {measured}. "
+            f"Staying under 0.26 rad would need a >= {a_need:.1f} rad/s or a larger inertia; "
+            "neither is given by the paper, and the bench does not tune them per scenario.",
+        ]
+    lines += [
+        "- **THD (Wen Table 8):** the plant's inverter is an average model over each PWM "
+        "period with no dead time and a sinusoidal back-EMF, so the phase current has almost "
+        "no low-order harmonics (THD 2nd-40th well below 1 %). Wen's 9.2 % comes from an "
+        "RT-LAB switching model whose inverter non-linearities the papers do not describe; "
+        "the THD is reported, not counted as reproduced.",
+        "- **Wen Tables 5-8:** tt-dq stays well inside the paper's errors because the bench "
+        "omits what limits a real drive (dead time, sensor offsets and quantization, "
+        "cross-saturation). The plant supports dead time, noise and ADC quantization; the "
+        "sweeps show how the methods degrade with noise.",
+        "- **CIC (Xue Figs. 11-12):** Xue's evidence for the CIC is the harmonic content of "
+        "the position quadrature signal, not the position error; with the bench's bookkeeping "
+        "of sample times, the zero-order hold and the CIC give the same error within a few "
+        "milliradians.",
+        "",
+    ]
+    return lines
 
 
 def rerender(out_dir: Path) -> dict[str, Any]:
