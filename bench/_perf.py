@@ -173,7 +173,9 @@ def realtime_run(f_sw: float, duration: float, out: Path) -> dict[str, float]:
         progress=False,
     )
     m = res.metrics
-    n = max(1, int(m["steps"]))
+    # periods the plant ran (the table may miss a few steps whose telemetry never came)
+    plant_steps = res.meta.get("node_reports", {}).get("plant", {}).get("steps")
+    n = max(1, int(plant_steps or m["steps"]))
     jit = m.get("jitter_us") or {}
     return {
         "f_sw": f_sw,

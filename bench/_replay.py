@@ -43,7 +43,7 @@ import numpy.typing as npt
 from bench._codec import Codec
 from bench._errors import BenchError, CaptureError, ScenarioError
 from bench._run import RunResult, finish_run
-from bench._scenario import Scenario, load_scenario, parse_scenario
+from bench._scenario import Scenario, load_scenario, scenario_from_dict
 
 __all__ = [
     "CAPTURE_SUFFIXES",
@@ -120,9 +120,7 @@ def read_capture(path: Path) -> tuple[list[can.Message], str | None]:
 
 def scenario_from_meta(meta: dict[str, Any]) -> Scenario:
     d = dict(meta["scenario"])
-    src = d.pop("source", "meta.json")
-    d = {k: v for k, v in d.items() if v is not None}
-    return parse_scenario(d, src)
+    return scenario_from_dict(d, str(d.get("source", "meta.json")))
 
 
 def capture_scenario(path: Path, scenario: str | None) -> tuple[Scenario, dict[str, Any]]:

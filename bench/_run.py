@@ -32,7 +32,7 @@ from bench._codec import Codec
 from bench._errors import BenchError
 from bench._loops import STATE_DONE, command_frames
 from bench._metrics import compute_metrics
-from bench._scenario import Scenario
+from bench._scenario import Scenario, write_effective
 from bench._setup import get_preset, lockstep_delay, n_steps, sample_period
 
 LOG_SUFFIX = {"blf": ".blf", "asc": ".asc", "log": ".log"}
@@ -182,8 +182,8 @@ def _versions() -> dict[str, str]:
     }
 
 
-def _node_cmd(role: str, scn: Scenario, spec: BusSpec, extra: list[str]) -> list[str]:
-    return [sys.executable, "-m", "bench", role, scn.source, *spec.args(), *extra]
+def _node_cmd(role: str, scenario_file: Path, spec: BusSpec, extra: list[str]) -> list[str]:
+    return [sys.executable, "-m", "bench", role, str(scenario_file), *spec.args(), *extra]
 
 
 def _scenario_args(scn: Scenario, mode: str) -> list[str]:
@@ -247,6 +247,8 @@ def run_scenario(
     link = scn.latency.any
     spec_b = spec.peer() if link else spec
     scn_args = _scenario_args(scn, mode)
+    # the nodes get the exact scenario of this run (every override included)
+    scn_file = write_effective(scn, out_dir / "scenario.json")
     env = dict(os.environ, PYTHONUNBUFFERED="1")
     procs: list[tuple[str, subprocess.Popen[str]]] = []
     writer = can.Logger(str(capture))
@@ -298,7 +300,7 @@ def run_scenario(
                 break
             log = out_dir / f"{role}.log"
             cmd = (
-                _node_cmd(role, scn, sp, [*extra, "--report", str(out_dir / f"{role}.json")])
+                _node_cmd(role, scn_file, sp, [*extra, "--report", str(out_dir / f"{role}.json")])
                 if role != "link"
                 else [sys.executable, "-m", "bench", "link", *sp.args(), *extra]
             )
@@ -318,7 +320,9 @@ def run_scenario(
         # nothing; the recorder's view of the plant's step lags on a slow host
         # (User-Mode Linux: by thousands of frames), and a late command would
         # change the trace.
-        lead = max(3000, int(0.5 / T_s))
+        # In real time the plant's clock runs regardless: a burst of commands
+        # at the start would make its first periods late, so only a short lead.
+        lead = max(3000, int(0.5 / T_s)) if mode == "lockstep" else max(20, int(0.02 / T_s))
         m_step = 1 << codec.step_bits("PhaseSamples")
         sent = 0
         full_step = 0

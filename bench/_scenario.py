@@ -47,6 +47,7 @@ Schema (all keys optional unless marked *required*)::
 from __future__ import annotations
 
 import itertools
+import json
 import math
 import tomllib
 from dataclasses import dataclass, field, replace
@@ -225,7 +226,7 @@ _TOP_KEYS = {
 def scenario_path(name_or_path: str) -> Path:
     """Resolve a shipped scenario name or a user's file path."""
     p = Path(name_or_path)
-    if p.suffix == ".toml" or p.exists():
+    if p.suffix in (".toml", ".json") or p.exists():
         if not p.is_file():
             raise ScenarioError(f"{name_or_path}: no such scenario file")
         return p
@@ -431,9 +432,34 @@ def parse_scenario(data: dict[str, Any], src: str) -> Scenario:
     )
 
 
+def scenario_from_dict(d: dict[str, Any], src: str) -> Scenario:
+    """A scenario from :meth:`Scenario.to_dict` (run metadata, effective scenarios)."""
+    data = {k: v for k, v in d.items() if v is not None and k != "source"}
+    return parse_scenario(data, src)
+
+
+def write_effective(scn: Scenario, path: Path) -> Path:
+    """Write the exact scenario of a run (overrides included) for its node processes."""
+    path.write_text(json.dumps(scn.to_dict(), indent=2) + "\n", encoding="utf-8")
+    return path
+
+
 def load_scenario(name_or_path: str) -> Scenario:
-    """Load a shipped scenario by name, or a user's TOML file by path."""
+    """Load a shipped scenario by name, or a user's TOML file by path.
+
+    A ``.json`` file written by :func:`write_effective` (the effective
+    scenario of a run, which ``bench run`` hands to its node processes) is
+    read too.
+    """
     path = scenario_path(name_or_path)
+    if path.suffix == ".json":
+        try:
+            d = json.loads(path.read_text(encoding="utf-8"))
+        except (OSError, ValueError) as e:
+            raise ScenarioError(f"{path}: not a scenario file: {e}") from None
+        if not isinstance(d, dict):
+            raise ScenarioError(f"{path}: not a scenario file")
+        return scenario_from_dict(d, str(d.get("source", path)))
     try:
         data = tomllib.loads(path.read_text(encoding="utf-8"))
     except tomllib.TOMLDecodeError as e:
