@@ -60,28 +60,29 @@ def inprocess_loop(estimator: str, n_steps: int) -> float:
     ctrl.set_speed_ref(100.0 * 2.0 * math.pi / 60.0)
     truth = estimator == "sensored"
     d = (0.5, 0.5, 0.5, False)
-    # settle past the start-up first (not timed)
-    for _ in range(2000):
-        s = plant.sample()
-        tr = plant.truth() if truth else None
-        o = ctrl.step(
-            Measurement(
-                s.k, s.i_a, s.i_b, s.i_c, s.u_dc, tr.theta_e if tr else None, tr.w_e if tr else None
+
+    def run(n: int) -> None:
+        nonlocal d
+        for _ in range(n):
+            s = plant.sample()
+            tr = plant.truth() if truth else None
+            o = ctrl.step(
+                Measurement(
+                    s.k,
+                    s.i_a,
+                    s.i_b,
+                    s.i_c,
+                    s.u_dc,
+                    tr.theta_e if tr else None,
+                    tr.w_e if tr else None,
+                )
             )
-        )
-        plant.step(*d)
-        d = (o.d_a, o.d_b, o.d_c, o.enable)
+            plant.step(*d)
+            d = (o.d_a, o.d_b, o.d_c, o.enable)
+
+    run(2000)  # settle past the start-up first (not timed)
     t0 = time.perf_counter()
-    for _ in range(n_steps):
-        s = plant.sample()
-        tr = plant.truth() if truth else None
-        o = ctrl.step(
-            Measurement(
-                s.k, s.i_a, s.i_b, s.i_c, s.u_dc, tr.theta_e if tr else None, tr.w_e if tr else None
-            )
-        )
-        plant.step(*d)
-        d = (o.d_a, o.d_b, o.d_c, o.enable)
+    run(n_steps)
     return (time.perf_counter() - t0) / n_steps
 
 

@@ -14,24 +14,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from controller import Controller, ControllerPars, Measurement, MotorModel
+from bench._setup import motor_model
+from controller import Controller, ControllerPars, Measurement
 from plant_rt import Plant, Preset
-
-
-def motor_model(p: Preset) -> MotorModel:
-    """The controller's model of a preset's motor: exact parameters, torque limit at ``i_max``."""
-    m = p.motor
-    return MotorModel(
-        n_p=m.n_p,
-        R_s=m.R_s,
-        L_d=m.L_d,
-        L_q=m.L_q,
-        psi_f=m.psi_f,
-        J=m.J,
-        b=m.b,
-        i_max=m.i_max,
-        tau_max=1.5 * m.n_p * m.psi_f * m.i_max,
-    )
 
 
 def wrap(x: np.ndarray) -> np.ndarray:
