@@ -210,16 +210,21 @@ def plant_loop(
             node.apply_commands()
         if time.monotonic() - t_idle > 3600.0:
             raise BenchError("plant: no start command within an hour")
-    _send_all(bus, node.frames_now(), node.counters)
+    frames = node.frames_now()
     if realtime:
+        # Each instant's frames leave at that instant (the deadline), so the
+        # controller has one period to answer, as in a drive; the plant then
+        # runs the period with the newest duty meant for it.
         clock = RealTimeClock(node.plant.T_s)
         clock.start()
         while not node.done and not stop():
+            _send_all(bus, frames, node.counters)
             while (msg := bus.recv(0.0)) is not None:
                 if msg.arbitration_id in ids:
                     node.on_message(msg)
-            _send_all(bus, node.advance_realtime(), node.counters)
+            frames = node.advance_realtime()
             clock.wait()
+        _send_all(bus, frames, node.counters)
         node.counters.overruns = clock.overruns
         st = clock.stats()
         node.jitter = {
@@ -229,6 +234,7 @@ def plant_loop(
             "max": 1e6 * st.max,
         }
     else:
+        _send_all(bus, frames, node.counters)
         last_progress = time.monotonic()
         while not node.done and not stop():
             t_wait = time.monotonic()

@@ -312,7 +312,7 @@ class PlantNode:
             c.reject(REJECT_FUTURE_COUNTER)
             return
         if self.realtime:
-            if t == self.latest_duty_step:
+            if t == self.latest_duty_step or t in self.duties:
                 c.reject(REPEATED_COUNTER)
                 return
             if t < self.latest_duty_step:
@@ -334,9 +334,11 @@ class PlantNode:
         c.frames_accepted += 1
         duty = (d_a, d_b, d_c, bool(s["enable"]))
         self.last_duty_k = k
-        if not self.realtime:
-            self.duties[t] = duty
-        if t > self.latest_duty_step:
+        # Both modes keep the duty until its period: in real time a fast
+        # controller answers sample k (duty k + 1) before period k has started,
+        # and applying it then would put it one period early.
+        self.duties[t] = duty
+        if not self.realtime and t > self.latest_duty_step:
             self.latest_duty_step = t
             self.latest_duty = duty
 
@@ -485,8 +487,15 @@ class PlantNode:
         one arrived ``watchdog_periods`` or more periods ago; this period then
         already runs in the safe state.
         """
-        d_a, d_b, d_c, en = self.latest_duty
         k = self.plant.k
+        due = [t for t in self.duties if t <= k]
+        if due:
+            t = max(due)
+            self.latest_duty_step = t
+            self.latest_duty = self.duties[t]
+            for t in due:
+                del self.duties[t]
+        d_a, d_b, d_c, en = self.latest_duty
         self.duty_age = (
             255 if self.latest_duty_step < 0 else max(0, min(254, k - self.latest_duty_step))
         )
@@ -507,7 +516,6 @@ class PlantNode:
             en = False
         self.plant.step(d_a, d_b, d_c, en)
         self._check_protection()
-        self.duties.clear()
         self.apply_commands()
         return self._flush_outbox(self.frames_now())
 
@@ -596,8 +604,9 @@ class ControllerNode:
             return []
         if name == "BenchCommand":
             self.commands.add(d.signals, self.next_k, c)
-            if self.realtime:
-                self._apply_commands(self.next_k + self.m_cmd)
+            if self.realtime and self.commands.pending:
+                # real time: a command takes effect when it arrives
+                self._apply_commands(max(self.commands.pending))
             return []
         if name == "PhaseSamples":
             k = unwrap(int(d.signals["step"]), self.next_k, self.m_step)

@@ -95,7 +95,10 @@ pytestmark = pytest.mark.skipif(sys.platform != "linux", reason="uses /proc")
 def test_killed_controller_puts_the_plant_in_safe_state(tmp_path: Path) -> None:
     out = tmp_path / "kill"
     proc = _bench_run(out, 0, 2.5, "--watchdog-ms", "500")
-    _wait_running(0, 500)
+    # kill during the standstill before the speed ramp (0.3 s): on a turning
+    # rotor the held duty would raise the current to the over-current trip
+    # within about 0.1 s, before this deliberately slow watchdog
+    _wait_running(0, 150)
     os.kill(_children(out)["controller"], signal.SIGKILL)
     _, err = proc.communicate(timeout=60)
     assert proc.returncode == 2, err  # the run reports the failed node, one line
@@ -121,7 +124,7 @@ def test_killed_controller_puts_the_plant_in_safe_state(tmp_path: Path) -> None:
     # the signal log is complete and readable up to the kill
     table = read_csv(str(out / "signals.csv"))
     steps = table["step"]
-    assert len(steps) >= 450 and (steps[1:] - steps[:-1] == 1).all()
+    assert len(steps) >= 140 and (steps[1:] - steps[:-1] == 1).all()
     json.loads((out / "metrics.json").read_text())
 
 
