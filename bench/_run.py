@@ -329,6 +329,7 @@ def run_scenario(
         last_raw = -1
         plant = dict(procs).get("plant")
         t_last_print = 0.0
+        tty = sys.stderr.isatty()
         while plant is not None and not interrupted:
             raw = recorders[0].last_raw_step
             if raw != last_raw and raw >= 0:
@@ -341,19 +342,22 @@ def run_scenario(
             if recorders[0].done.is_set() or plant.poll() is not None or interrupted:
                 break
             now = time.perf_counter()
-            if progress and now - t_last_print > 0.5:
+            if progress and now - t_last_print > (0.5 if tty else 5.0):
                 t_last_print = now
                 frac = min(1.0, full_step / max(1, n))
                 el = now - t_wall0
                 eta = el / frac - el if frac > 0.01 else float("nan")
+                # a terminal gets one line rewritten in place; a log gets a line every 5 s
+                lead_in = "\r" if tty else ""
                 print(
-                    f"\r  step {full_step}/{n} ({100 * frac:5.1f} %), {el:5.1f} s, ~{eta:4.0f} s left ",
-                    end="",
+                    f"{lead_in}  step {full_step}/{n} ({100 * frac:5.1f} %), "
+                    f"{el:5.1f} s, ~{eta:4.0f} s left ",
+                    end="" if tty else "\n",
                     file=sys.stderr,
                     flush=True,
                 )
             time.sleep(0.002)
-        if progress:
+        if progress and tty:
             print(file=sys.stderr)
         # stop everything: the stop command is in the schedule; repeat it to be sure.
         # With latency the controller never sees the last sample, so the nodes
