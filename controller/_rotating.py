@@ -152,6 +152,16 @@ class RotatingHFEstimator:
         """Take sample ``k`` and advance the estimate."""
         raise NotImplementedError
 
+    def _publish(self, th: float, f: float, err: float, i_af: float, i_bf: float) -> None:
+        """End of every demodulator's update: outputs of sample ``k``, then the observer step."""
+        self.i_alpha_f = i_af
+        self.i_beta_f = i_bf
+        self.theta_hat = th
+        self.f = f
+        self.err = err
+        self.pll.update(err)
+        self.w_hat = self.pll.w_hat
+
     def injection(self) -> tuple[float, float]:
         """HF voltage (V) for period ``k + 1``: eq. (3) at ``t = (k + 1.5) T_s``."""
         ph = (self._k + 1.5) * self.wT

@@ -57,8 +57,7 @@ class SFHFEstimator(RotatingHFEstimator):
     def update(self, x: EstimatorInput) -> None:
         """Demodulate sample ``k`` (Fig. 3, eq. 9) and advance the observer."""
         self._k = x.k
-        pll = self.pll
-        th = pll.theta_hat
+        th = self.pll.theta_hat
         ph = (x.k * self.wT) % (2.0 * math.pi)
         c_h = math.cos(ph)
         s_h = math.sin(ph)
@@ -78,13 +77,7 @@ class SFHFEstimator(RotatingHFEstimator):
         else:
             f = self._lpf.update(-(i_an * c_r + i_bn * s_r))
             err = f * self._inv_norm
-        self.i_alpha_f = i_a - i_ah
-        self.i_beta_f = i_b - i_bh
-        self.theta_hat = th
-        self.f = f
-        self.err = err
-        pll.update(err)
-        self.w_hat = pll.w_hat
+        self._publish(th, f, err, i_a - i_ah, i_b - i_bh)
 
 
 def create(motor: MotorModel, T_s: float, **options: Any) -> SFHFEstimator:

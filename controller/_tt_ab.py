@@ -49,8 +49,7 @@ class TTABEstimator(RotatingHFEstimator):
     def update(self, x: EstimatorInput) -> None:
         """Demodulate sample ``k`` (eqs. 25-28) and advance the observer."""
         self._k = x.k
-        pll = self.pll
-        th = pll.theta_hat
+        th = self.pll.theta_hat
         i_a = x.i_alpha
         i_b = x.i_beta
         i_ah, i_bh = self._bpf.update(i_a, i_b)
@@ -60,13 +59,7 @@ class TTABEstimator(RotatingHFEstimator):
             err = f / (2.0 * max(math.hypot(s_2, c_2), self._floor))
         else:
             err = f * self._inv_norm
-        self.i_alpha_f = i_a - i_ah
-        self.i_beta_f = i_b - i_bh
-        self.theta_hat = th
-        self.f = f
-        self.err = err
-        pll.update(err)
-        self.w_hat = pll.w_hat
+        self._publish(th, f, err, i_a - i_ah, i_b - i_bh)
 
 
 def create(motor: MotorModel, T_s: float, **options: Any) -> TTABEstimator:

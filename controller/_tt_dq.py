@@ -52,8 +52,7 @@ class TTDQEstimator(RotatingHFEstimator):
     def update(self, x: EstimatorInput) -> None:
         """Demodulate sample ``k`` (eqs. 31-34) and advance the observer."""
         self._k = x.k
-        pll = self.pll
-        th = pll.theta_hat
+        th = self.pll.theta_hat
         c = math.cos(th)
         s = math.sin(th)
         i_a = x.i_alpha
@@ -70,13 +69,7 @@ class TTDQEstimator(RotatingHFEstimator):
             err = f * self._inv_norm
         i_df = i_d - i_dh
         i_qf = i_q - i_qh
-        self.i_alpha_f = c * i_df - s * i_qf
-        self.i_beta_f = s * i_df + c * i_qf
-        self.theta_hat = th
-        self.f = f
-        self.err = err
-        pll.update(err)
-        self.w_hat = pll.w_hat
+        self._publish(th, f, err, c * i_df - s * i_qf, s * i_df + c * i_qf)
 
 
 def create(motor: MotorModel, T_s: float, **options: Any) -> TTDQEstimator:
