@@ -19,40 +19,16 @@ import can
 import numpy as np
 import pytest
 
-from bench._analysis import analyze_frames
-from bench._codec import Codec
 from bench._loops import run_inprocess
 from bench._run import BusSpec, RunResult, run_scenario
-from bench._scenario import Latency, Profile, Scenario, load_scenario
-from bench._setup import sample_period
+from bench._scenario import Latency, Scenario
 from bench.cli import main
 from tests.conftest import require_vcan
+from tests.trace_helpers import CODEC, assert_same_trace, short, trace
 
 pytestmark = pytest.mark.socketcan
 
-CODEC = Codec()
 VCAN0 = BusSpec("socketcan", "vcan0")
-
-
-def short(name: str, duration: float, **lat: object) -> Scenario:
-    """A shortened scenario whose speed reference ramps to 100 rpm in 50 ms."""
-    s = load_scenario(name).with_overrides(
-        duration=duration,
-        score_from_s=duration / 2,
-        speed_rpm=Profile(((0.0, 0.0), (0.05, 100.0))),
-    )
-    return replace(s, latency=replace(s.latency, **lat)) if lat else s
-
-
-def trace(frames: list[can.Message], scn: Scenario) -> dict[str, np.ndarray]:
-    return analyze_frames(frames, CODEC, T_s=sample_period(scn), n_p=4).table
-
-
-def assert_same_trace(a: dict[str, np.ndarray], b: dict[str, np.ndarray]) -> None:
-    assert len(a["step"]) == len(b["step"])
-    np.testing.assert_array_equal(a["step"], b["step"])
-    for col in ("theta_err_deg", "theta_hat", "w_m_rpm", "i_a", "d_a"):
-        np.testing.assert_allclose(a[col], b[col], rtol=0, atol=1e-9, equal_nan=True, err_msg=col)
 
 
 @pytest.fixture(scope="module")
