@@ -540,6 +540,8 @@ class PlantNode:
             jitter=self.jitter,
             fault=FAULT_NAMES.get(self.fault, str(self.fault)),
             fault_step=self.fault_step,
+            # period in which the last valid duty frame arrived (the watchdog's reference)
+            last_duty_arrival=self.last_duty_k,
             trips=dict(self.trips),
             resets=self.resets,
         )
