@@ -18,6 +18,7 @@ import can
 from bench._codec import Codec
 from bench._errors import BenchError
 from bench._nodes import STATE_IDLE, ControllerNode, NodeCounters, PlantNode
+from bench._rt import no_gc
 from bench._scenario import Scenario
 from bench._setup import (
     build_controller,
@@ -216,15 +217,16 @@ def plant_loop(
         # controller has one period to answer, as in a drive; the plant then
         # runs the period with the newest duty meant for it.
         clock = RealTimeClock(node.plant.T_s)
-        clock.start()
-        while not node.done and not stop():
+        with no_gc():
+            clock.start()
+            while not node.done and not stop():
+                _send_all(bus, frames, node.counters)
+                while (msg := bus.recv(0.0)) is not None:
+                    if msg.arbitration_id in ids:
+                        node.on_message(msg)
+                frames = node.advance_realtime()
+                clock.wait()
             _send_all(bus, frames, node.counters)
-            while (msg := bus.recv(0.0)) is not None:
-                if msg.arbitration_id in ids:
-                    node.on_message(msg)
-            frames = node.advance_realtime()
-            clock.wait()
-        _send_all(bus, frames, node.counters)
         node.counters.overruns = clock.overruns
         st = clock.stats()
         node.jitter = {
@@ -232,6 +234,9 @@ def plant_loop(
             "median": 1e6 * st.median,
             "p99": 1e6 * st.p99,
             "max": 1e6 * st.max,
+            "busy_median": 1e6 * st.busy_median,
+            "busy_p99": 1e6 * st.busy_p99,
+            "busy_max": 1e6 * st.busy_max,
         }
     else:
         _send_all(bus, frames, node.counters)
@@ -290,25 +295,26 @@ def controller_loop(
     seen = node.samples_accepted
     t_sample = last
     poll = min(0.05, sample_timeout_s / 4) if realtime else 0.05
-    while not node.stopped and not stop():
-        msg = bus.recv(poll)
-        now = time.monotonic()
-        if realtime:
-            if node.samples_accepted != seen:
-                seen = node.samples_accepted
-                t_sample = now
-            elif seen and now - t_sample > sample_timeout_s:
-                node.sample_timeout()
-        if msg is None:
-            if now - last > idle_s:
-                return
-            continue
-        if msg.arbitration_id not in ids:
-            continue
-        last = now
-        out = node.on_message(msg)
-        if out:
-            _send_all(bus, out, node.counters)
+    with no_gc(realtime):
+        while not node.stopped and not stop():
+            msg = bus.recv(poll)
+            now = time.monotonic()
+            if realtime:
+                if node.samples_accepted != seen:
+                    seen = node.samples_accepted
+                    t_sample = now
+                elif seen and now - t_sample > sample_timeout_s:
+                    node.sample_timeout()
+            if msg is None:
+                if now - last > idle_s:
+                    return
+                continue
+            if msg.arbitration_id not in ids:
+                continue
+            last = now
+            out = node.on_message(msg)
+            if out:
+                _send_all(bus, out, node.counters)
 
 
 def period_s(scn: Scenario) -> float:

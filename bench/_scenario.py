@@ -154,9 +154,17 @@ class Scenario:
     paper_result: dict[str, Any] = field(default_factory=dict)
 
     def with_overrides(self, **kw: Any) -> Scenario:
-        """A copy with some fields replaced (command-line options)."""
+        """A copy with some fields replaced (command-line options).
+
+        A ``duration`` shorter than the scoring start would leave nothing to
+        score: such a shortened run is scored over its second half
+        (``score_from_s = duration / 2``), which ``metrics.json`` states.
+        """
         clean = {k: v for k, v in kw.items() if v is not None}
-        return replace(self, **clean)
+        out = replace(self, **clean)
+        if "score_from_s" not in clean and out.score_from_s >= out.duration:
+            out = replace(out, score_from_s=out.duration / 2)
+        return out
 
     def to_dict(self) -> dict[str, Any]:
         """Plain representation for the run metadata."""
@@ -406,11 +414,20 @@ def parse_scenario(data: dict[str, Any], src: str) -> Scenario:
     )
     opts = r.table("estimator_options").t
     paper = r.table("paper_result").t
+    duration = r.num("duration", lo=1e-3)
+    # default: past the start-up transient (0.5 s), or the second half of a shorter run
+    score_from_s = r.num("score_from_s", min(0.5, duration / 2), lo=0.0)
+    if score_from_s >= duration:
+        raise r.fail(
+            "score_from_s",
+            f"{score_from_s} s is not before the end of the run (duration {duration} s): "
+            "nothing would be scored",
+        )
     return Scenario(
         name=r.string("name", src[:-5] if src.endswith(".toml") else src),
         source=src,
         preset=preset,
-        duration=r.num("duration", lo=1e-3),
+        duration=duration,
         description=r.string("description", ""),
         paper=r.string("paper", ""),
         estimator=estimator,
@@ -423,7 +440,7 @@ def parse_scenario(data: dict[str, Any], src: str) -> Scenario:
         speed_rpm=r.profile("speed_rpm"),
         load_nm=r.profile("load_nm"),
         reference_rate_hz=r.num("reference_rate_hz", 1000.0, lo=1.0),
-        score_from_s=r.num("score_from_s", 0.5, lo=0.0),
+        score_from_s=score_from_s,
         thd_window_s=thd_window,
         estimator_options=dict(opts),
         noise=noise,

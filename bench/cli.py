@@ -50,6 +50,38 @@ def _add_bus(p: argparse.ArgumentParser) -> None:
     g.add_argument("--data-bitrate", type=int, help="CAN FD data bit rate (real adapters)")
 
 
+def _rt_priority(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        v = 0
+    if not 1 <= v <= 99:
+        raise argparse.ArgumentTypeError(f"expected a SCHED_FIFO priority 1-99, got {text!r}")
+    return v
+
+
+def _add_rt(p: argparse.ArgumentParser, *, cpu: bool = True) -> None:
+    g = p.add_argument_group("real time (see bench/_rt.py)")
+    g.add_argument(
+        "--rt-priority",
+        type=_rt_priority,
+        metavar="N",
+        help="real time: run under SCHED_FIFO at priority N (1-99) with memory locked "
+        "(needs root or CAP_SYS_NICE; refused settings are reported, not fatal)",
+    )
+    if cpu:
+        g.add_argument("--cpu", type=int, metavar="N", help="real time: pin the node to CPU N")
+
+
+def _node_rt(args: argparse.Namespace, role: str) -> dict[str, object] | None:
+    """Apply the node's real-time settings (real-time mode only); what was granted."""
+    if args.mode != "realtime":
+        return None
+    from bench._rt import apply_rt
+
+    return apply_rt(args.rt_priority, args.cpu, role=role).as_dict()
+
+
 def _add_scenario_overrides(p: argparse.ArgumentParser) -> None:
     p.add_argument("--mode", choices=MODES, default="lockstep")
     p.add_argument("--duration", type=float, help="simulated seconds (overrides the scenario)")
@@ -135,6 +167,18 @@ def _write_report(path: str | None, data: dict[str, Any]) -> None:
         Path(path).write_text(json.dumps(data, indent=2, default=str) + "\n")
 
 
+def _run_node_args(args: argparse.Namespace) -> dict[str, list[str]]:
+    """Options ``bench run`` passes on to its plant and controller processes."""
+    out: dict[str, list[str]] = {"plant": [], "controller": []}
+    if args.watchdog_ms is not None:
+        out["plant"] += ["--watchdog-ms", repr(args.watchdog_ms)]
+    if args.rt_priority is not None:
+        # the plant keeps the clock: it goes first; the controller one below
+        out["plant"] += ["--rt-priority", str(args.rt_priority)]
+        out["controller"] += ["--rt-priority", str(max(1, args.rt_priority - 1))]
+    return out
+
+
 def cmd_run(args: argparse.Namespace) -> int:
     from bench._run import format_metrics, run_scenario
 
@@ -157,10 +201,11 @@ def cmd_run(args: argparse.Namespace) -> int:
         mode=args.mode,
         log_format=args.log_format,
         progress=not args.quiet,
-        node_args={"plant": ["--watchdog-ms", repr(args.watchdog_ms)]}
-        if args.watchdog_ms is not None
-        else None,
+        node_args=_run_node_args(args),
     )
+    for role, rep in res.meta.get("node_reports", {}).items():
+        for why in ((rep or {}).get("rt") or {}).get("refused", []):
+            print(f"{role}: real-time setting refused: {why}", file=sys.stderr)
     print(format_metrics(res.metrics, scn.paper_result))
     print(
         f"files: {out}/ (capture{Path(res.capture).suffix}, signals.csv, metrics.json, meta.json, run.png)"
@@ -187,11 +232,12 @@ def cmd_plant(args: argparse.Namespace) -> int:
     )
     bus = spec.open()
     _stop_on_signals()
+    rt = _node_rt(args, "plant")
     try:
         plant_loop(bus, node, realtime=args.mode == "realtime", on_ready=_ready, stop=_STOP.is_set)
     finally:
         bus.shutdown()
-        _write_report(args.report, node.report())
+        _write_report(args.report, {**node.report(), "rt": rt})
     return 0
 
 
@@ -206,6 +252,7 @@ def cmd_controller(args: argparse.Namespace) -> int:
     node = make_controller_node(scn, est, codec)
     bus = spec.open()
     _stop_on_signals()
+    rt = _node_rt(args, "controller")
     try:
         controller_loop(
             bus,
@@ -217,7 +264,7 @@ def cmd_controller(args: argparse.Namespace) -> int:
         )
     finally:
         bus.shutdown()
-        _write_report(args.report, node.report())
+        _write_report(args.report, {**node.report(), "rt": rt})
     return 0
 
 
@@ -309,6 +356,7 @@ def build_parser() -> argparse.ArgumentParser:
         type=float,
         help="real time: the plant's safe state after this long without a valid duty",
     )
+    _add_rt(p, cpu=False)
     p.set_defaults(func=cmd_run)
 
     p = sub.add_parser("plant", help="serve the plant emulator on a bus (one node)")
@@ -328,6 +376,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="lockstep: safe state after this many 50 ms retransmission rounds without a duty",
     )
     p.add_argument("--report", help="write the node's counters to this JSON file at exit")
+    _add_rt(p)
     p.set_defaults(func=cmd_plant)
 
     p = sub.add_parser("controller", help="serve the drive controller on a bus (one node)")
@@ -342,6 +391,7 @@ def build_parser() -> argparse.ArgumentParser:
         default=50.0,
         help="real time: disable the PWM after this long without a valid sample",
     )
+    _add_rt(p)
     p.set_defaults(func=cmd_controller)
 
     p = sub.add_parser("link", help="latency link between two buses (delay, jitter, drop)")

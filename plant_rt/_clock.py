@@ -25,6 +25,10 @@ class JitterStats:
         Median, 99th percentile and maximum lateness (s).
     overruns : int
         Waits entered after their deadline had passed.
+    busy_median, busy_p99, busy_max : float
+        The caller's work per period (s): from one wake-up to the next call
+        of :meth:`RealTimeClock.wait` (RT-LAB's "computation time").  Above
+        ``T_s`` the schedule cannot be kept whatever the scheduler does.
     """
 
     n: int
@@ -32,6 +36,9 @@ class JitterStats:
     p99: float
     max: float
     overruns: int
+    busy_median: float = 0.0
+    busy_p99: float = 0.0
+    busy_max: float = 0.0
 
 
 class RealTimeClock:
@@ -65,6 +72,8 @@ class RealTimeClock:
         self._t0: float | None = None
         self._late: list[float] = []
         self._late_max = 0.0
+        self._busy: list[float] = []
+        self._woke = 0.0
 
     def start(self, t0: float | None = None) -> None:
         """Start the schedule at ``t0`` (default: now); deadline ``n`` is ``t0 + n T_s``."""
@@ -73,6 +82,8 @@ class RealTimeClock:
         self.overruns = 0
         self._late = []
         self._late_max = 0.0
+        self._busy = []
+        self._woke = self._t0
 
     @property
     def next_deadline(self) -> float:
@@ -91,6 +102,10 @@ class RealTimeClock:
         """
         deadline = self.next_deadline
         now = time.perf_counter()
+        busy = self._busy
+        busy.append(now - self._woke)
+        if len(busy) > 2 * self.keep:
+            del busy[: len(busy) - self.keep]
         if now > deadline:
             self.overruns += 1
         else:
@@ -100,6 +115,7 @@ class RealTimeClock:
             while time.perf_counter() < deadline:
                 pass
             now = time.perf_counter()
+        self._woke = now
         late = now - deadline
         self.n += 1
         lst = self._late
@@ -120,7 +136,16 @@ class RealTimeClock:
         lst = sorted(self._late[-self.keep :])
         if not lst:
             return JitterStats(0, 0.0, 0.0, 0.0, self.overruns)
-        n = len(lst)
-        median = lst[n // 2] if n % 2 else 0.5 * (lst[n // 2 - 1] + lst[n // 2])
-        p99 = lst[min(n - 1, int(0.99 * (n - 1) + 0.5))]
-        return JitterStats(self.n, median, p99, self._late_max, self.overruns)
+        median, p99 = _median_p99(lst)
+        busy = sorted(self._busy[-self.keep :])
+        b_med, b_p99 = _median_p99(busy)
+        return JitterStats(
+            self.n, median, p99, self._late_max, self.overruns, b_med, b_p99, busy[-1]
+        )
+
+
+def _median_p99(lst: list[float]) -> tuple[float, float]:
+    """Median and 99th percentile of a sorted, non-empty list."""
+    n = len(lst)
+    median = lst[n // 2] if n % 2 else 0.5 * (lst[n // 2 - 1] + lst[n // 2])
+    return median, lst[min(n - 1, int(0.99 * (n - 1) + 0.5))]

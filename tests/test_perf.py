@@ -32,10 +32,19 @@ def test_perf_quick_writes_every_section(tmp_path: Path, capsys) -> None:
     assert len(res["busload"]) >= 4
     nums = [v for s in ("inprocess", "lockstep", "codec", "busload") for v in _numbers(res[s])]
     assert all(math.isfinite(v) and v > 0 for v in nums)
-    for name in ("1kHz", "4kHz", "10kHz"):
-        r = res["realtime"][name]
-        assert (
-            r["steps"] > 0 and r["overrun_pct"] >= 0 and r["jitter_us_max"] >= r["jitter_us_median"]
-        )
+    assert set(res["realtime_fifo"]) == {"1kHz", "4kHz", "10kHz"}
+    for sec in ("realtime", "realtime_fifo"):
+        for name in ("1kHz", "4kHz", "10kHz"):
+            r = res[sec][name]
+            assert (
+                r["steps"] > 0
+                and r["overrun_pct"] >= 0
+                and r["jitter_us_max"] >= r["jitter_us_median"]
+                and r["busy_us_p99"] >= r["busy_us_median"] > 0
+            )
+            assert r["policy"] in ("normal", "fifo")
+        assert all(r["policy"] == "normal" for r in res["realtime"].values())
+    for v in res["verdicts"].values():
+        assert v["config"]
     out = capsys.readouterr().out
     assert "targets:" in out and "perf.json" in out

@@ -58,6 +58,10 @@ def _write(tmp_path: Path, text: str) -> str:
         ),
         ('preset = "wen2023"\nduration = 1.0\ncolour = 1\n', "'colour': unknown key"),
         ("preset = \n", "not valid TOML"),
+        (
+            'preset = "wen2023"\nduration = 1.0\nscore_from_s = 1.0\n',
+            "'score_from_s': 1.0 s is not before the end of the run",
+        ),
     ],
 )
 def test_bad_scenarios_name_file_field_and_reason(tmp_path: Path, text: str, needle: str) -> None:
@@ -73,3 +77,20 @@ def test_bad_scenarios_name_file_field_and_reason(tmp_path: Path, text: str, nee
 def test_unknown_scenario_name_lists_the_shipped_ones() -> None:
     with pytest.raises(ScenarioError, match=r"wen-5\.1"):
         load_scenario("wen-9.9")
+
+
+def test_duration_shorter_than_the_scoring_start_scores_the_second_half() -> None:
+    s = load_scenario("xue-fig13")
+    assert s.score_from_s == 1.0
+    assert s.with_overrides(duration=0.3).score_from_s == pytest.approx(0.15)
+    assert s.with_overrides(duration=3.0).score_from_s == 1.0  # long enough: unchanged
+    assert s.with_overrides(duration=0.3, score_from_s=0.1).score_from_s == 0.1
+
+
+def test_a_short_file_scenario_without_scoring_start_scores_its_second_half(tmp_path: Path) -> None:
+    assert (
+        load_scenario(_write(tmp_path, 'preset = "wen2023"\nduration = 0.4\n')).score_from_s == 0.2
+    )
+    assert (
+        load_scenario(_write(tmp_path, 'preset = "wen2023"\nduration = 2.0\n')).score_from_s == 0.5
+    )

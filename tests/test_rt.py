@@ -1,0 +1,130 @@
+"""Real-time settings of the node processes (bench/_rt.py) and the clock's compute time."""
+
+from __future__ import annotations
+
+import gc
+import json
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from bench._rt import apply_rt, no_gc
+from bench.cli import main
+from plant_rt import RealTimeClock
+
+
+def _in_child(code: str) -> dict[str, object]:
+    """Run ``code`` (which prints JSON) in a fresh interpreter: scheduling is per process."""
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=60, check=True
+    )
+    return {"result": json.loads(out.stdout), "stderr": out.stderr}
+
+
+def _fifo_permitted() -> bool:
+    code = (
+        "import os\n"
+        "try:\n"
+        "    os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(1)); print('true')\n"
+        "except (OSError, AttributeError):\n"
+        "    print('false')\n"
+    )
+    return bool(_in_child(code)["result"])
+
+
+def test_nothing_asked_nothing_changed() -> None:
+    rt = apply_rt(None, None, role="plant")
+    assert rt.policy == "normal" and rt.refused == [] and not rt.memory_locked
+    assert rt.cpus == sorted(os.sched_getaffinity(0))
+
+
+def test_a_refused_setting_is_reported_not_raised() -> None:
+    r = _in_child(
+        "import json; from bench._rt import apply_rt\n"
+        "print(json.dumps(apply_rt(None, 4096, role='plant').as_dict()))"
+    )
+    res = r["result"]
+    assert isinstance(res, dict)
+    assert res["policy"] == "normal"
+    assert len(res["refused"]) == 1 and "cpu 4096" in res["refused"][0]
+    lines = str(r["stderr"]).strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("plant: real-time setting refused")
+
+
+def test_fifo_priority_and_cpu_granted_or_refused_with_a_reason() -> None:
+    r = _in_child(
+        "import json, os; from bench._rt import apply_rt\n"
+        "rt = apply_rt(42, 0, role='controller').as_dict()\n"
+        "rt['now'] = [os.sched_getscheduler(0), os.sched_getparam(0).sched_priority]\n"
+        "print(json.dumps(rt))"
+    )
+    res = r["result"]
+    assert isinstance(res, dict)
+    assert res["cpus"] == [0]
+    if _fifo_permitted():
+        assert res["policy"] == "fifo" and res["priority"] == 42
+        assert res["now"] == [os.SCHED_FIFO, 42]
+    else:
+        assert res["policy"] == "normal" and res["priority"] is None
+        assert any("SCHED_FIFO priority 42" in x for x in res["refused"])  # type: ignore[union-attr]
+
+
+def test_no_gc_switches_the_collector_off_and_restores_it() -> None:
+    assert gc.isenabled()
+    with no_gc():
+        assert not gc.isenabled()
+        assert gc.get_freeze_count() > 0
+    assert gc.isenabled() and gc.get_freeze_count() == 0
+    with pytest.raises(RuntimeError), no_gc():
+        raise RuntimeError("the loop failed")
+    assert gc.isenabled()
+    with no_gc(False):
+        assert gc.isenabled()
+
+
+def test_clock_reports_the_callers_compute_time() -> None:
+    T_s = 2e-3
+    clock = RealTimeClock(T_s)
+    clock.start()
+    for _ in range(20):
+        t = time.perf_counter()
+        while time.perf_counter() - t < 0.5e-3:  # 0.5 ms of work per period
+            pass
+        clock.wait()
+    st = clock.stats()
+    # at least the work done; less than a period unless the machine stalled
+    assert 0.5e-3 <= st.busy_median < T_s
+    assert st.busy_median <= st.busy_p99 <= st.busy_max
+
+
+def test_rt_priority_out_of_range_is_one_line(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as e:
+        main(["run", "wen-5.1", "--mode", "realtime", "--rt-priority", "0"])
+    assert e.value.code == 2
+    err = capsys.readouterr().err
+    assert "--rt-priority" in err and "1-99" in err and "Traceback" not in err
+
+
+def test_realtime_run_records_what_the_nodes_were_granted(tmp_path: Path) -> None:
+    port = 46000 + 2 * (os.getpid() % 2000)
+    out = tmp_path / "rt"
+    code = main(
+        [
+            "run", "xue-fig13", "-e", "sensored", "--mode", "realtime", "--duration", "0.3",
+            "--interface", "udp_multicast", "--channel", "239.74.163.2", "--port", str(port),
+            "--rt-priority", "30", "--out", str(out), "--quiet",
+        ]
+    )  # fmt: skip
+    assert code == 0
+    reps = json.loads((out / "meta.json").read_text())["node_reports"]
+    want = "fifo" if _fifo_permitted() else "normal"
+    assert reps["plant"]["rt"]["policy"] == want
+    assert reps["controller"]["rt"]["policy"] == want
+    if want == "fifo":
+        assert (reps["plant"]["rt"]["priority"], reps["controller"]["rt"]["priority"]) == (30, 29)
+    m = json.loads((out / "metrics.json").read_text())
+    assert m["jitter_us"]["busy_median"] > 0
