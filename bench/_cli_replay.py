@@ -59,13 +59,15 @@ def cmd_replay(args: argparse.Namespace) -> int:
         spec = BusSpec(spec.interface, spec.channel, None)  # python-can's default port
     if args.max_gap is not None and args.max_gap <= 0:
         raise BenchError(f"--max-gap must be > 0, got {args.max_gap}")
+    if not args.speed > 0:
+        raise BenchError(f"--speed must be > 0, got {args.speed}")
     span = chosen[-1].timestamp - chosen[0].timestamp
+    bus = spec.open()  # a missing interface is reported before anything else
     print(
         f"replay: {len(chosen)} of {len(frames)} frames, {span:.3f} s of capture "
         f"at x{args.speed:g} -> {spec.describe()}",
         file=sys.stderr,
     )
-    bus = spec.open()
     try:
         res = replay_frames(
             bus,

@@ -122,6 +122,10 @@ class Recorder(can.Listener):
         self.samples_id = codec.frame_id("PhaseSamples")
         self.status_id = codec.frame_id("PlantStatus")
         self.last_raw_step = -1
+        #: The plant's step from the sample counter, unwrapped here where every
+        #: frame is seen in order (a poller could miss a whole counter cycle).
+        self.step = -1
+        self._m_step = 1 << codec.step_bits("PhaseSamples")
         self.done = threading.Event()
         self.lock = threading.Lock()
 
@@ -133,7 +137,15 @@ class Recorder(can.Listener):
         if msg.arbitration_id == self.samples_id:
             d = self.codec.decode(msg)
             if d is not None and d.reason is None:
-                self.last_raw_step = int(d.signals["step"])
+                raw = int(d.signals["step"])
+                last = self.last_raw_step
+                if last < 0:
+                    self.step, self.last_raw_step = raw, raw
+                else:
+                    ahead = (raw - last) % self._m_step
+                    if ahead < self._m_step // 2:  # behind: a retransmitted old frame
+                        self.step += ahead
+                        self.last_raw_step = raw
         elif msg.arbitration_id == self.status_id:
             d = self.codec.decode(msg)
             if d is not None and d.reason is None and int(d.signals["state"]) == STATE_DONE:
@@ -323,18 +335,13 @@ def run_scenario(
         # In real time the plant's clock runs regardless: a burst of commands
         # at the start would make its first periods late, so only a short lead.
         lead = max(3000, int(0.5 / T_s)) if mode == "lockstep" else max(20, int(0.02 / T_s))
-        m_step = 1 << codec.step_bits("PhaseSamples")
         sent = 0
         full_step = 0
-        last_raw = -1
         plant = dict(procs).get("plant")
         t_last_print = 0.0
         tty = sys.stderr.isatty()
         while plant is not None and not interrupted:
-            raw = recorders[0].last_raw_step
-            if raw != last_raw and raw >= 0:
-                full_step += (raw - last_raw) % m_step if last_raw >= 0 else raw
-                last_raw = raw
+            full_step = max(0, recorders[0].step)
             while sent < len(cmds) and cmds[sent][0] <= full_step + lead:
                 bus_a.send(cmds[sent][1])
                 bus_a.send(cmds[sent][1])

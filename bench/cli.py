@@ -18,7 +18,7 @@ import signal
 import sys
 import threading
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 from bench._errors import BenchError, InterfaceError
 
@@ -192,7 +192,8 @@ def cmd_run(args: argparse.Namespace) -> int:
         )
     spec = _spec(args, announce=True)
     out = Path(args.out) if args.out else Path("runs") / f"{scn.name}-{est}"
-    print(f"run: {scn.name} with {est}, {args.mode}, {spec.describe()} -> {out}", file=sys.stderr)
+    # the heading of the report on stdout: stderr carries progress and errors only
+    print(f"run: {scn.name} with {est}, {args.mode}, {spec.describe()} -> {out}", flush=True)
     res = run_scenario(
         scn,
         est,
@@ -330,8 +331,15 @@ def cmd_busload(args: argparse.Namespace) -> int:
     return 0
 
 
+class _Parser(argparse.ArgumentParser):
+    """Command-line mistakes as one line (with where to look), exit code 2."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(
+    ap = _Parser(
         prog="bench",
         description="CAN hardware-in-the-loop bench for sensorless IPMSM control",
     )
@@ -442,7 +450,10 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     ap = build_parser()
-    args = ap.parse_args(argv)
+    try:
+        args = ap.parse_args(argv)
+    except SystemExit as e:  # --help, or a mistake already reported on one line
+        return e.code if isinstance(e.code, int) else 2
     try:
         rc: int = args.func(args)
         return rc

@@ -7,24 +7,22 @@ about 8000 frames), into pytest's temporary directory.
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import pytest
 
 from bench._run import BusSpec, run_scenario
 from bench._scenario import load_scenario
+from tests.ports import free_port
 
 _RUNS: dict[str, Path] = {}
-_PORTS = {"sensored": 0, "tt-dq": 2}
 
 
 def recorded_run(tmp_path_factory: pytest.TempPathFactory, estimator: str) -> Path:
     """Folder of a recorded wen-5.1 run (0.2 s, scored from 0.1 s) with ``estimator``."""
     if estimator not in _RUNS:
         scn = load_scenario("wen-5.1").with_overrides(duration=0.2, score_from_s=0.1)
-        # a port of its own per test process and run: parallel runs must not hear each other
-        port = 47000 + 4 * (os.getpid() % 2000) + _PORTS[estimator]
+        port = free_port()  # parallel runs on this host must not hear each other
         out = tmp_path_factory.mktemp(f"run-{estimator}")
         run_scenario(
             scn,

@@ -342,7 +342,8 @@ def test_cli_missing_and_unreadable_captures(tmp_path: Path, capsys: pytest.Capt
         assert path.name in err[0]
     rc = main(["analyze", str(tmp_path)])  # a folder without a capture
     assert rc == 2
-    assert capsys.readouterr().err.startswith("bench: error: ")
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("bench: error: "), err
 
 
 def test_cli_analyze_of_a_run_folder(

@@ -28,13 +28,13 @@ from bench._loops import (
 )
 from bench._run import BusSpec, run_scenario
 from bench._scenario import Latency, Scenario
+from tests.ports import free_port
 from tests.trace_helpers import CODEC, assert_same_trace, short, trace
 
 
 def udp_spec(tmp_path: Path) -> BusSpec:
-    # a port of its own per test run: parallel runs must not hear each other
-    port = 45000 + 2 * (os.getpid() % 2000)
-    return BusSpec("udp_multicast", "239.74.163.2", port)
+    # a port of its own per run: parallel runs on this host must not hear each other
+    return BusSpec("udp_multicast", "239.74.163.2", free_port())
 
 
 @pytest.fixture(scope="module")
@@ -167,8 +167,12 @@ def test_realtime_run_at_1khz_reports_deadlines(tmp_path: Path) -> None:
         progress=False,
     )
     m = res.metrics
-    assert m["steps"] > 0.9 * 500
-    assert "deadline_misses" in m
+    plant = res.meta["node_reports"]["plant"]
+    assert plant["steps"] == 500  # the plant ran every period of the scenario
+    # the table has a row per step whose frames the recorder got (all of them
+    # unless the machine stalled the recorder longer than its buffer)
+    assert 0.5 * 500 < m["steps"] <= 500
+    assert m["deadline_misses"] == plant["overruns"]
     assert m["jitter_us"]["max"] >= m["jitter_us"]["median"] >= 0.0
     # real time: wall time follows simulated time
     assert m["wall_s"] >= 0.9 * m["sim_s"]

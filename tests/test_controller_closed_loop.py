@@ -23,8 +23,11 @@ def test_wen_5_1_tt_dq_holds_100_rpm() -> None:
     tr = run(plant, ctrl, 15000, 100 * RPM)
     sel = tr.t >= 0.5
     e = np.degrees(np.abs(tr.err[sel]))
-    assert e.mean() <= 2.0
-    assert e.max() <= 4.0
+    # the paper's bounds (2.0 / 4.0 deg) would pass without the delay
+    # compensation (0.36 deg at 100 rpm); the bench's own figure is checked
+    # (0.37 deg mean, 0.71 deg max when written)
+    assert e.mean() <= 0.6
+    assert e.max() <= 1.0
     assert np.abs(tr.w_m[sel] / RPM - 100.0).max() < 2.0
     assert (tr.mode[sel] == MODE_RUN).all()
 

@@ -90,16 +90,11 @@ def firmware_run(tmp_path_factory: pytest.TempPathFactory) -> dict:
         _wait_ready(plant, "bench plant")
         # bench commands ahead of the plant (each carries its apply step)
         cmds = command_frames(scn, codec)
-        m_step = 1 << codec.step_bits("PhaseSamples")
         lead = 3000  # far ahead: the recorder's view of the step lags on a slow host
         sent = full = 0
-        last = -1
         t0 = time.monotonic()
         while not rec.done.is_set() and plant.poll() is None:
-            raw = rec.last_raw_step
-            if raw >= 0 and raw != last:
-                full += (raw - last) % m_step if last >= 0 else raw
-                last = raw
+            full = max(0, rec.step)
             while sent < len(cmds) and cmds[sent][0] <= full + lead:
                 bus.send(cmds[sent][1])
                 sent += 1

@@ -6,8 +6,6 @@ by-hand unpacking of the ``PwmDuty`` layout (``bench._reliability``).
 
 from __future__ import annotations
 
-import os
-
 import can
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
@@ -17,6 +15,7 @@ from bench._loops import make_controller_node, make_plant_node
 from bench._reliability import FrameFuzzer, FuzzResult, StepGuard, e2e_ok, fuzz_node, raw_duty
 from bench._run import BusSpec
 from bench._scenario import load_scenario
+from tests.ports import free_port
 
 CODEC = Codec()
 FRAMES = 12_000
@@ -148,8 +147,7 @@ def test_hypothesis_frames_never_escape_the_plant_node(
 
 
 def test_fuzz_through_a_real_udp_bus() -> None:
-    port = 46000 + 2 * (os.getpid() % 2000)
-    spec = BusSpec("udp_multicast", "239.74.163.2", port)
+    spec = BusSpec("udp_multicast", "239.74.163.2", free_port())
     tx, rx = spec.open(), spec.open()
     node = make_plant_node(scn(4), CODEC)
     node.started = True

@@ -18,6 +18,7 @@ def one_line_error(capsys: pytest.CaptureFixture[str], argv: list[str], *words: 
     rc = main(argv)
     err = capsys.readouterr().err.strip().splitlines()
     assert rc == 2
+    assert len(err) == 1, err
     last = err[-1]
     assert last.startswith("bench: error: "), err
     assert "Traceback" not in "\n".join(err)

@@ -15,6 +15,7 @@ import pytest
 from bench._rt import apply_rt, no_gc
 from bench.cli import main
 from plant_rt import RealTimeClock
+from tests.ports import free_port
 
 
 def _in_child(code: str) -> dict[str, object]:
@@ -56,15 +57,16 @@ def test_a_refused_setting_is_reported_not_raised() -> None:
 
 
 def test_fifo_priority_and_cpu_granted_or_refused_with_a_reason() -> None:
+    cpu = min(os.sched_getaffinity(0))  # CPU 0 may not be ours (cpuset, taskset)
     r = _in_child(
         "import json, os; from bench._rt import apply_rt\n"
-        "rt = apply_rt(42, 0, role='controller').as_dict()\n"
+        f"rt = apply_rt(42, {cpu}, role='controller').as_dict()\n"
         "rt['now'] = [os.sched_getscheduler(0), os.sched_getparam(0).sched_priority]\n"
         "print(json.dumps(rt))"
     )
     res = r["result"]
     assert isinstance(res, dict)
-    assert res["cpus"] == [0]
+    assert res["cpus"] == [cpu]
     if _fifo_permitted():
         assert res["policy"] == "fifo" and res["priority"] == 42
         assert res["now"] == [os.SCHED_FIFO, 42]
@@ -90,27 +92,31 @@ def test_clock_reports_the_callers_compute_time() -> None:
     T_s = 2e-3
     clock = RealTimeClock(T_s)
     clock.start()
-    for _ in range(20):
-        t = time.perf_counter()
-        while time.perf_counter() - t < 0.5e-3:  # 0.5 ms of work per period
+    woke = time.perf_counter()
+    mine = []
+    for _ in range(21):
+        while time.perf_counter() - woke < 0.5e-3:  # 0.5 ms of work per period
             pass
+        mine.append(time.perf_counter() - woke)
         clock.wait()
+        woke = time.perf_counter()
     st = clock.stats()
-    # at least the work done; less than a period unless the machine stalled
-    assert 0.5e-3 <= st.busy_median < T_s
+    # the clock's figure is the caller's own wake-up-to-wait time (what a
+    # preempted caller measures too), whatever the machine's load
+    assert st.busy_median >= 0.5e-3
+    assert abs(st.busy_median - sorted(mine)[10]) < 0.2e-3
     assert st.busy_median <= st.busy_p99 <= st.busy_max
 
 
 def test_rt_priority_out_of_range_is_one_line(capsys: pytest.CaptureFixture[str]) -> None:
-    with pytest.raises(SystemExit) as e:
-        main(["run", "wen-5.1", "--mode", "realtime", "--rt-priority", "0"])
-    assert e.value.code == 2
-    err = capsys.readouterr().err
-    assert "--rt-priority" in err and "1-99" in err and "Traceback" not in err
+    assert main(["run", "wen-5.1", "--mode", "realtime", "--rt-priority", "0"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("bench run: error: "), err
+    assert "--rt-priority" in err[0] and "1-99" in err[0]
 
 
 def test_realtime_run_records_what_the_nodes_were_granted(tmp_path: Path) -> None:
-    port = 46000 + 2 * (os.getpid() % 2000)
+    port = free_port()
     out = tmp_path / "rt"
     code = main(
         [
