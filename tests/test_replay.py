@@ -42,6 +42,20 @@ def drain(reader: can.BufferedReader) -> list[can.Message]:
     return out
 
 
+def _keeps_the_time_line(rel: np.ndarray, want: np.ndarray, tol_s: float) -> None:
+    """Most frames arrive on the capture's time line (up to one common offset).
+
+    A stall of the machine makes a few frames late (the schedule is absolute,
+    so the replay catches up); frames dumped at once, or paced wrongly, put
+    most of them off the line by a sizeable part of the span.
+    """
+    dev = rel - want
+    spread = np.abs(dev - np.median(dev))
+    assert np.median(spread) <= tol_s, np.median(spread)
+    assert np.mean(spread <= tol_s) >= 0.9
+    assert want[-1] > 20 * tol_s  # the capture is long enough for this to mean something
+
+
 @pytest.mark.parametrize("clock", ["deadline", "messagesync"])
 def test_replay_on_virtual_bus_keeps_frames_order_and_timing(
     frames: list[can.Message], clock: str
@@ -66,9 +80,8 @@ def test_replay_on_virtual_bus_keeps_frames_order_and_timing(
     # the stamps follow the capture's time line within the reported worst error
     want = np.array([m.timestamp for m in chosen]) - chosen[0].timestamp
     rel = np.array([m.timestamp for m in got]) - got[0].timestamp
-    dev = np.abs(rel - want)
     assert res.error_worst_us >= res.error_median_us >= -1.0
-    assert np.max(dev) <= 2e-6 * res.error_worst_us + 0.02
+    _keeps_the_time_line(rel, want, 2e-3)
     # and the replay took the capture's time, not less (frames were not just dumped)
     assert res.wall_s >= 0.99 * want[-1]
 
@@ -95,7 +108,7 @@ def test_replay_on_udp_multicast(frames: list[can.Message]) -> None:
     assert res.wall_s >= 0.99 * span
     rel = np.array([m.timestamp for m in got]) - got[0].timestamp
     want = np.array([m.timestamp for m in chosen]) - chosen[0].timestamp
-    assert np.max(np.abs(rel - want)) <= 1e-6 * res.error_worst_us + 0.05
+    _keeps_the_time_line(rel, want, 5e-3)
 
 
 TAGGED: list[tuple[int, int | str]] = [
