@@ -17,7 +17,10 @@ Sequence (estimator frozen, no injection; ``u`` along the estimated d axis)::
 ``N = ceil(L_d i_pulse / (U T_s))`` (at least 2), so the peak is about
 ``i_pulse`` in the linear model also at a low switching frequency. The
 peaks ``dI_+ = max(i_d - i_d0)`` over the first half and
-``dI_- = max(i_d0 - i_d)`` over the second decide: ``dI_+ < dI_-`` means the
+``dI_- = max(i_d1 - i_d)`` over the second, each from its own half's start
+current (``i_d1``: what the resistance left of the first half's pulse pair,
+which would otherwise bias ``dI_-`` by about ``i_pulse R N T_s / L_d``),
+decide: ``dI_+ < dI_-`` means the
 estimated d axis points south and the angle is flipped by pi. Volt-second
 balanced pulses return the flux (and the current) to its start value, so
 the rotor gets no net torque.
@@ -53,6 +56,7 @@ class PolarityTest:
         "T_s",
         "U",
         "_i0",
+        "_i1",
         "_n",
         "d_i_neg",
         "d_i_pos",
@@ -71,6 +75,7 @@ class PolarityTest:
         self.N = 1
         self._n = 0
         self._i0 = 0.0
+        self._i1 = 0.0
         self.d_i_pos = 0.0
         self.d_i_neg = 0.0
         self.done = False
@@ -83,6 +88,7 @@ class PolarityTest:
         self.N = max(2, math.ceil(flux / (self.U * self.T_s) - 1e-9))
         self._n = 0
         self._i0 = i_d0
+        self._i1 = i_d0
         self.d_i_pos = 0.0
         self.d_i_neg = 0.0
         self.done = False
@@ -102,7 +108,9 @@ class PolarityTest:
             if d > self.d_i_pos:
                 self.d_i_pos = d
         else:
-            d = self._i0 - i_d
+            if n == 3 * N:  # start of the second half: its own reference
+                self._i1 = i_d
+            d = self._i1 - i_d
             if d > self.d_i_neg:
                 self.d_i_neg = d
         self._n = n + 1

@@ -65,7 +65,9 @@ def dead_time_error(i_x: float, u_dc: float, t_dead: float, T_s: float) -> float
     the machine (``i_x > 0``), the upper one otherwise. Of the two edges of
     a period only the one that turns on the switch opposite to the
     conducting diode is delayed, so the mean pole voltage loses
-    ``t_dead / T_s * u_dc`` against the current's direction.
+    ``t_dead / T_s * u_dc`` against the current's direction. A leg held at
+    a rail (duty 0 or 1) does not switch and has no such error: the plant
+    applies this only to switching legs.
 
     Parameters
     ----------

@@ -344,10 +344,15 @@ class Plant:
             v_c = clamp_duty(d_c) * u_dc
             t_dead = self.inverter.t_dead
             if t_dead > 0.0:
+                # only a switching leg has dead time: one held at a rail
+                # (duty 0 or 1) keeps its switch on the whole period
                 i_a, i_b, i_c = self.currents_abc()
-                v_a += dead_time_error(i_a, u_dc, t_dead, self.T_s)
-                v_b += dead_time_error(i_b, u_dc, t_dead, self.T_s)
-                v_c += dead_time_error(i_c, u_dc, t_dead, self.T_s)
+                if 0.0 < v_a < u_dc:
+                    v_a += dead_time_error(i_a, u_dc, t_dead, self.T_s)
+                if 0.0 < v_b < u_dc:
+                    v_b += dead_time_error(i_b, u_dc, t_dead, self.T_s)
+                if 0.0 < v_c < u_dc:
+                    v_c += dead_time_error(i_c, u_dc, t_dead, self.T_s)
             u_al = (2.0 * v_a - v_b - v_c) / 3.0
             u_be = (v_b - v_c) * INV_SQRT3
             for j in range(self.substeps):
