@@ -20,6 +20,8 @@ when it names an interface, else :func:`default_transport` decides.
 from __future__ import annotations
 
 import functools
+import gc
+import logging
 import socket
 from pathlib import Path
 from typing import Any
@@ -195,9 +197,7 @@ def open_bus(
             interface, transport_channel, _ = default_transport()
             channel = channel if channel is not None else transport_channel
 
-    if interface not in _valid_interfaces():
-        known = ", ".join(sorted(_valid_interfaces()))
-        raise InterfaceError(f"interface {interface!r}: unknown; python-can knows: {known}")
+    check_interface(interface)
 
     args: dict[str, Any] = dict(kwargs)
     if channel is None:
@@ -220,10 +220,43 @@ def open_bus(
             args["bitrate"] = int(bitrate)
         if data_bitrate is not None:
             args["data_bitrate"] = int(data_bitrate)
+    # A bus whose constructor failed is freed with the exception; python-can
+    # then logs "... was not properly shut down", a second line after ours.
+    log = logging.getLogger("can.bus")
+    level = log.level
     try:
         return can.Bus(interface=interface, channel=channel, **args)
     except Exception as e:  # drivers raise anything from CanError to OSError or ImportError
-        raise InterfaceError(f"interface {interface} channel {channel}: {_one_line(e)}") from None
+        why = _one_line(e)
+        log.setLevel(logging.ERROR)
+    try:
+        gc.collect()
+    finally:
+        log.setLevel(level)
+    raise InterfaceError(f"interface {interface} channel {channel}: {why}")
+
+
+def check_interface(interface: str) -> None:
+    """Raise :class:`InterfaceError` (one line) when ``interface`` cannot work here."""
+    if interface not in _valid_interfaces():
+        known = ", ".join(sorted(_valid_interfaces()))
+        raise InterfaceError(f"interface {interface!r}: unknown; python-can knows: {known}")
+    if interface == "socketcan" and not _af_can_works():
+        raise InterfaceError(
+            "interface socketcan: this kernel has no SocketCAN (no AF_CAN sockets); "
+            "use udp_multicast (the default here), or tools/vcan-tests for vcan "
+            "inside User-Mode Linux"
+        )
+
+
+def python_can_config() -> dict[str, Any] | None:
+    """python-can's own configuration when it names an interface, else None."""
+    if not _python_can_config_names_interface():
+        return None
+    try:
+        return dict(can.util.load_config())
+    except Exception as e:
+        raise InterfaceError(f"python-can configuration: {_one_line(e)}") from None
 
 
 def _python_can_config_names_interface() -> bool:

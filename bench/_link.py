@@ -202,8 +202,15 @@ def link_loop(
     on_ready: Callable[[], None] | None = None,
     stop: Callable[[], bool] = lambda: False,
     idle_s: float = 3600.0,
+    sent: dict[str, int] | None = None,
 ) -> None:
-    """Run a link between two buses until ``stop()`` or ``idle_s`` without traffic."""
+    """Run a link between two buses until ``stop()`` or ``idle_s`` without traffic.
+
+    ``sent``, when given, counts the frames forwarded (keys ``a_to_b``, ``b_to_a``).
+    """
+    count = sent if sent is not None else {}
+    count.setdefault("a_to_b", 0)
+    count.setdefault("b_to_a", 0)
     if on_ready:
         on_ready()
     fds: list[int] | None
@@ -226,6 +233,8 @@ def link_loop(
                         bus_b.send(m)
                     for m in to_a:
                         bus_a.send(m)
+                    count["a_to_b"] += len(to_b)
+                    count["b_to_a"] += len(to_a)
                 elif side == "a":
                     logic.from_a(msg)
                 else:
@@ -234,6 +243,7 @@ def link_loop(
         if isinstance(logic, RealtimeLink):
             for side, m in logic.due():
                 (bus_a if side == "a" else bus_b).send(m)
+                count["b_to_a" if side == "a" else "a_to_b"] += 1
             nt = logic.next_time()
             if nt is not None:
                 wait = max(0.0, min(wait, nt - logic.clock()))

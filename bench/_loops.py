@@ -212,6 +212,25 @@ def plant_loop(
         if time.monotonic() - t_idle > 3600.0:
             raise BenchError("plant: no start command within an hour")
     frames = node.frames_now()
+    t_loop = time.perf_counter()
+    try:
+        _serve_plant(bus, node, ids, frames, realtime=realtime, stop=stop, watchdog_s=watchdog_s)
+    finally:
+        node.loop_s = time.perf_counter() - t_loop
+    _send_all(bus, [node.status_frame(STATE_DONE, node.fault)], node.counters)
+
+
+def _serve_plant(
+    bus: can.BusABC,
+    node: PlantNode,
+    ids: set[int],
+    frames: list[can.Message],
+    *,
+    realtime: bool,
+    stop: Callable[[], bool],
+    watchdog_s: float,
+) -> None:
+    """The plant's stepping loop, from the start command to the end of the run."""
     if realtime:
         # Each instant's frames leave at that instant (the deadline), so the
         # controller has one period to answer, as in a drive; the plant then
@@ -265,7 +284,6 @@ def plant_loop(
                 break
             _send_all(bus, node.advance_lockstep(), node.counters)
             last_progress = time.monotonic()
-    _send_all(bus, [node.status_frame(STATE_DONE, node.fault)], node.counters)
 
 
 def controller_loop(

@@ -264,6 +264,8 @@ class PlantNode:
         self.stopped = False
         self.realtime = False
         self.jitter: dict[str, float] | None = None
+        #: Wall seconds of the stepping loop (start command to the last period).
+        self.loop_s: float | None = None
         #: age (PWM periods) of the duty applied in the last period; 255: none.
         #: Sent in PlantTruth so the recorder measures the loop latency exactly.
         self.duty_age = 255
@@ -538,6 +540,7 @@ class PlantNode:
         out.update(
             steps=self.plant.k,
             jitter=self.jitter,
+            loop_s=self.loop_s,
             fault=FAULT_NAMES.get(self.fault, str(self.fault)),
             fault_step=self.fault_step,
             # period in which the last valid duty frame arrived (the watchdog's reference)

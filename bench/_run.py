@@ -32,6 +32,7 @@ from bench._codec import Codec
 from bench._errors import BenchError
 from bench._loops import STATE_DONE, command_frames
 from bench._metrics import compute_metrics
+from bench._nodes import REPEATED_COUNTER
 from bench._scenario import Scenario, write_effective
 from bench._setup import get_preset, lockstep_delay, n_steps, sample_period
 
@@ -263,11 +264,15 @@ def run_scenario(
     scn_file = write_effective(scn, out_dir / "scenario.json")
     env = dict(os.environ, PYTHONUNBUFFERED="1")
     procs: list[tuple[str, subprocess.Popen[str]]] = []
-    writer = can.Logger(str(capture))
-    bus_a = spec.open()
+    bus_a = spec.open()  # a bus that cannot be opened leaves no empty capture behind
     buses = [bus_a]
     if link:
-        buses.append(spec_b.open())
+        try:
+            buses.append(spec_b.open())
+        except BaseException:
+            bus_a.shutdown()
+            raise
+    writer = can.Logger(str(capture))
     recorders = [Recorder(codec, writer, i + 1) for i in range(len(buses))]
     for r in recorders[1:]:
         r.lock = recorders[0].lock  # one writer: one lock, or the capture is corrupted
@@ -353,12 +358,12 @@ def run_scenario(
                 t_last_print = now
                 frac = min(1.0, full_step / max(1, n))
                 el = now - t_wall0
-                eta = el / frac - el if frac > 0.01 else float("nan")
+                left = f"~{el / frac - el:4.0f} s left" if frac > 0.01 else "starting"
                 # a terminal gets one line rewritten in place; a log gets a line every 5 s
                 lead_in = "\r" if tty else ""
                 print(
-                    f"{lead_in}  step {full_step}/{n} ({100 * frac:5.1f} %), "
-                    f"{el:5.1f} s, ~{eta:4.0f} s left ",
+                    f"{lead_in}  step {min(full_step, n)}/{n} ({100 * frac:5.1f} %), "
+                    f"{el:5.1f} s, {left} ",
                     end="" if tty else "\n",
                     file=sys.stderr,
                     flush=True,
@@ -523,17 +528,27 @@ def finish_run(
     plant_r = reports.get("plant", {})
     ctrl_r = reports.get("controller", {})
     m["wall_s"] = wall_s
-    m["realtime_factor"] = m["sim_s"] / wall_s if wall_s > 0 else float("nan")
+    # simulated time per wall second of the plant's stepping loop (process
+    # start-up excluded); the whole run's wall time when no plant report
+    loop_s = plant_r.get("loop_s") or wall_s
+    m["realtime_factor"] = m["sim_s"] / loop_s if loop_s > 0 else float("nan")
     m["deadline_misses"] = int(plant_r.get("overruns", 0))
     m["late_duty_periods"] = int(plant_r.get("late_duties", 0))
     m["frames_rejected"] = int(
         cap.frames_rejected + plant_r.get("frames_rejected", 0) + ctrl_r.get("frames_rejected", 0)
     )
     reasons: dict[str, int] = dict(cap.rejected)
+    repeated = 0
     for r in (plant_r, ctrl_r):
         for k, v in r.get("reject_reasons", {}).items():
-            reasons[k] = reasons.get(k, 0) + int(v)
+            if k == REPEATED_COUNTER:
+                # expected, not a fault: every command is sent twice, and a
+                # retransmitted frame answers a lost one; counted on its own
+                repeated += int(v)
+            else:
+                reasons[k] = reasons.get(k, 0) + int(v)
     m["frames_rejected_by_reason"] = reasons
+    m["frames_repeated_ignored"] = repeated
     m["frames_recorded"] = cap.frames
     m["frames_unknown_id"] = cap.unknown_ids
     m["incomplete_steps"] = cap.incomplete_steps
@@ -581,6 +596,25 @@ def finish_run(
     return RunResult(out_dir=out_dir, metrics=m, capture=capture or out_dir, meta=meta)
 
 
+#: Real-time runs with more late periods than this get a warning (fraction).
+REALTIME_LATE_WARN = 0.01
+
+
+def realtime_warning(m: dict[str, Any]) -> str | None:
+    """One line when a real-time run did not keep time well enough to read as a drive's."""
+    steps = max(1, int(m.get("steps", 0)))
+    late = m.get("late_duty_periods", 0) / steps
+    over = m.get("deadline_misses", 0) / steps
+    if max(late, over) <= REALTIME_LATE_WARN:
+        return None
+    worst = (m.get("jitter_us") or {}).get("max", float("nan")) * 1e-3
+    return (
+        f"warning: real time not kept: {100 * late:.1f} % of periods ran with a late duty, "
+        f"{100 * over:.1f} % started late (worst wake-up {worst:.1f} ms); the figures include "
+        "this machine's scheduling, not only the controller (see README, --rt-priority)"
+    )
+
+
 METRIC_ROWS = (
     ("theta_err_max_deg", "deg"),
     ("theta_err_min_deg", "deg"),
@@ -602,10 +636,17 @@ METRIC_ROWS = (
 )
 
 
-def format_metrics(m: dict[str, Any], paper: dict[str, Any] | None = None) -> str:
-    """The metrics as an aligned text table, with the paper's number where it has one."""
+def format_metrics(
+    m: dict[str, Any], paper: dict[str, Any] | None = None, paper_method: str | None = None
+) -> str:
+    """The metrics as an aligned text table, with the paper's number where it has one.
+
+    ``paper_method``: the method the paper's numbers belong to (the
+    scenario's own estimator), named in the column's heading.
+    """
     paper = paper or {}
-    lines = [f"{'metric':<26}{'bench':>12}  {'paper':>8}"]
+    head = f"paper ({paper_method})" if paper and paper_method else "paper"
+    lines = [f"{'metric':<26}{'bench':>12}  {head}"]
     for key, unit in METRIC_ROWS:
         if key not in m:
             continue

@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import json
+import math
 import os
 import random
 import signal
@@ -58,6 +59,21 @@ def _rt_priority(text: str) -> int:
     if not 1 <= v <= 99:
         raise argparse.ArgumentTypeError(f"expected a SCHED_FIFO priority 1-99, got {text!r}")
     return v
+
+
+def _rates_khz(text: str) -> list[float]:
+    out = []
+    for part in text.split(","):
+        try:
+            v = float(part)
+        except ValueError:
+            v = math.nan
+        if not (math.isfinite(v) and v > 0.0):
+            raise argparse.ArgumentTypeError(
+                f"expected positive PWM rates in kHz separated by commas, got {text!r}"
+            )
+        out.append(v)
+    return out
 
 
 def _add_rt(p: argparse.ArgumentParser, *, cpu: bool = True) -> None:
@@ -114,10 +130,36 @@ def _scenario(args: argparse.Namespace) -> Any:
     )
 
 
-def _spec(args: argparse.Namespace, *, announce: bool) -> Any:
-    from bench._bus import default_transport
+def _spec(args: argparse.Namespace, *, announce: bool, one_process: bool = False) -> Any:
+    """The bus of the command's options (or python-can's configuration, or the default).
+
+    ``one_process``: the command's bus may be python-can's in-process
+    ``virtual`` bus (replay); the bench's nodes are separate processes and
+    cannot meet on it.
+    """
+    from bench._bus import check_interface, default_transport, python_can_config
     from bench._run import BusSpec
 
+    if args.interface is None and (cfg := python_can_config()) is not None:
+        # python-can's own configuration (~/.canrc, CAN_INTERFACE, ...) names the bus
+        args.interface = str(cfg.get("interface"))
+        args.channel = args.channel or cfg.get("channel")
+        for key in ("bitrate", "data_bitrate"):
+            if getattr(args, key, None) is None and cfg.get(key) is not None:
+                setattr(args, key, int(cfg[key]))
+        if announce:
+            print(
+                f"transport: {args.interface} {args.channel} (python-can configuration)",
+                file=sys.stderr,
+            )
+    if args.interface is not None:
+        check_interface(args.interface)
+        if args.interface == "virtual" and not one_process:
+            raise InterfaceError(
+                "--interface virtual: python-can's virtual bus lives inside one process "
+                "and the bench's nodes are separate processes; use udp_multicast (the "
+                "default without vcan) or socketcan"
+            )
     if args.interface is None:
         if args.channel is not None:
             raise InterfaceError("--channel given without --interface")
@@ -135,7 +177,7 @@ def _spec(args: argparse.Namespace, *, announce: bool) -> Any:
 
     channel: str | None = args.channel or default_channel(args.interface)
     if channel is None:
-        raise InterfaceError(f"--interface {args.interface}: give --channel")
+        raise InterfaceError(f"--interface {args.interface}: this adapter needs --channel")
     return BusSpec(
         args.interface,
         channel,
@@ -179,8 +221,21 @@ def _run_node_args(args: argparse.Namespace) -> dict[str, list[str]]:
     return out
 
 
+def _check_estimator_fits(scn: Any, est: str) -> None:
+    """Build the controller once here, so a misfit is one line before any process starts."""
+    from bench._setup import build_controller
+
+    try:
+        build_controller(scn, est)
+    except (ValueError, TypeError) as e:
+        raise BenchError(
+            f"--estimator {est}: cannot run scenario {scn.name} ({e}); "
+            f"the scenario's estimators: {', '.join(scn.estimators)}"
+        ) from None
+
+
 def cmd_run(args: argparse.Namespace) -> int:
-    from bench._run import format_metrics, run_scenario
+    from bench._run import format_metrics, realtime_warning, run_scenario
 
     scn = _scenario(args)
     est = args.estimator or scn.estimator
@@ -190,6 +245,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         raise BenchError(
             f"--estimator: unknown estimator {est!r} (known: {', '.join(ESTIMATOR_NAMES)})"
         )
+    _check_estimator_fits(scn, est)
     spec = _spec(args, announce=True)
     out = Path(args.out) if args.out else Path("runs") / f"{scn.name}-{est}"
     # the heading of the report on stdout: stderr carries progress and errors only
@@ -207,10 +263,12 @@ def cmd_run(args: argparse.Namespace) -> int:
     for role, rep in res.meta.get("node_reports", {}).items():
         for why in ((rep or {}).get("rt") or {}).get("refused", []):
             print(f"{role}: real-time setting refused: {why}", file=sys.stderr)
-    print(format_metrics(res.metrics, scn.paper_result))
-    print(
-        f"files: {out}/ (capture{Path(res.capture).suffix}, signals.csv, metrics.json, meta.json, run.png)"
-    )
+    print(format_metrics(res.metrics, scn.paper_result, scn.estimator))
+    if args.mode == "realtime" and (warn := realtime_warning(res.metrics)):
+        print(warn, file=sys.stderr)
+    names = [f"capture{Path(res.capture).suffix}", "signals.csv", "metrics.json", "meta.json"]
+    written = [n for n in [*names, "run.png"] if (out / n).is_file()]
+    print(f"files: {out}/ ({', '.join(written)})")
     if res.meta.get("interrupted"):
         print("bench: interrupted", file=sys.stderr)
         return 130
@@ -280,6 +338,23 @@ def cmd_link(args: argparse.Namespace) -> int:
     if not iface or not chan:
         raise BenchError(f"--to: expected INTERFACE:CHANNEL, got {args.to!r}")
     b = BusSpec(iface, chan, args.to_port)
+    if not 0.0 <= args.drop_prob <= 1.0:
+        raise BenchError(f"--drop-prob: a probability in [0, 1], got {args.drop_prob}")
+    for opt in (
+        "delay_steps",
+        "sample_delay_steps",
+        "duty_delay_us",
+        "sample_delay_us",
+        "jitter_us",
+    ):
+        v = getattr(args, opt)
+        if v is not None and v < 0:
+            raise BenchError(f"--{opt.replace('_', '-')}: must be >= 0, got {v}")
+    if _same_bus(a, b):
+        raise BenchError(
+            f"--to {b.describe()}: the same bus as the link's input ({a.describe()}); "
+            "a link forwards between two buses"
+        )
     logic: LockstepLink | RealtimeLink
     if args.mode == "lockstep":
         logic = LockstepLink(
@@ -299,14 +374,36 @@ def cmd_link(args: argparse.Namespace) -> int:
             drop_prob=args.drop_prob,
             seed=args.seed or 0,
         )
-    bus_a, bus_b = a.open(), b.open()
-    _stop_on_signals()
+    bus_a = a.open()
     try:
-        link_loop(bus_a, bus_b, logic, on_ready=_ready, idle_s=args.idle_s, stop=_STOP.is_set)
+        bus_b = b.open()
+    except BaseException:
+        bus_a.shutdown()
+        raise
+    _stop_on_signals()
+    sent: dict[str, int] = {}
+    try:
+        link_loop(
+            bus_a, bus_b, logic, on_ready=_ready, idle_s=args.idle_s, stop=_STOP.is_set, sent=sent
+        )
     finally:
         bus_a.shutdown()
         bus_b.shutdown()
+        print(
+            f"link: forwarded {sent.get('a_to_b', 0)} frames {a.describe()} -> {b.describe()}, "
+            f"{sent.get('b_to_a', 0)} back; dropped {logic.dropped} on purpose",
+            file=sys.stderr,
+        )
     return 0
+
+
+def _same_bus(a: Any, b: Any) -> bool:
+    """Whether two bus specs name one bus (udp_multicast: one port is one bus, any group)."""
+    if a.interface != b.interface:
+        return False
+    if a.interface == "udp_multicast":
+        return (a.port or 43113) == (b.port or 43113)
+    return bool(a.channel == b.channel)
 
 
 def cmd_analyze(args: argparse.Namespace) -> int:
@@ -326,8 +423,7 @@ def cmd_busload(args: argparse.Namespace) -> int:
     from bench._busload import busload_table, format_busload
     from bench._codec import Codec
 
-    rates = [float(r) * 1e3 for r in args.rates.split(",")]
-    print(format_busload(busload_table(Codec(), rates=rates)))
+    print(format_busload(busload_table(Codec(), rates=[r * 1e3 for r in args.rates])))
     return 0
 
 
@@ -434,7 +530,12 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser(
         "busload", help="CAN bus load of the DBC's frames per layout, bit rate and PWM rate"
     )
-    p.add_argument("--rates", default="1,4,10", help="PWM rates in kHz, comma-separated")
+    p.add_argument(
+        "--rates",
+        type=_rates_khz,
+        default=[1.0, 4.0, 10.0],
+        help="PWM rates in kHz, comma-separated (default 1,4,10)",
+    )
     p.set_defaults(func=cmd_busload)
 
     for mod in SUBCOMMAND_MODULES:

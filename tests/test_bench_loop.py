@@ -86,6 +86,11 @@ def test_two_processes_over_udp_multicast_equal_inprocess(
         assert key in m
     assert m["steps"] == len(ref["step"])
     assert m["frames_rejected"] == 0
+    # the per-reason counts add up to the total; the second copy of every
+    # command (each is sent twice) is counted apart, not as a rejection
+    assert sum(m["frames_rejected_by_reason"].values()) == m["frames_rejected"]
+    n_cmd = len(command_frames(scn, CODEC))
+    assert m["frames_repeated_ignored"] >= n_cmd  # at least one node saw every repeat
     for f in ("signals.csv", "meta.json", "run.png"):
         assert (tmp_path / "run" / f).is_file()
 

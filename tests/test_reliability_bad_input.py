@@ -81,3 +81,55 @@ def test_bad_input_through_a_real_process() -> None:
     lines = p.stderr.strip().splitlines()
     assert len(lines) == 1 and "no-such-scenario" in lines[0], p.stderr
     assert "Traceback" not in p.stderr
+
+
+def test_virtual_bus_is_refused_for_processes(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # python-can's virtual bus does not leave its process: a run on it would wait forever
+    line = one_line_error(
+        capsys, ["run", "wen-5.1", "-i", "virtual", "-o", str(tmp_path / "r")], "virtual"
+    )
+    assert "separate processes" in line
+    assert not (tmp_path / "r").exists()
+
+
+def test_an_estimator_that_cannot_run_the_scenario_is_refused_before_any_process(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "r"
+    line = one_line_error(capsys, ["run", "xue-fig13", "-e", "tt-dq", "-o", str(out)], "tt-dq")
+    assert "xue-fig13" in line and "Nyquist" in line and "square-wave" in line
+    assert not out.exists()
+
+
+def test_python_can_configuration_names_the_bus(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # CAN_INTERFACE is read (here a name python-can does not know, so nothing starts)
+    monkeypatch.setenv("CAN_INTERFACE", "nosuchbus")
+    monkeypatch.setenv("CAN_CHANNEL", "x")
+    one_line_error(capsys, ["run", "wen-5.1", "-o", str(tmp_path / "r")], "nosuchbus")
+
+
+@pytest.mark.parametrize("rates", ["abc", ",", "-1,0", "1,nan"])
+def test_busload_rates_are_checked(rates: str, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["busload", f"--rates={rates}"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--rates" in err[0] and "positive" in err[0], err
+
+
+@pytest.mark.parametrize(
+    ("extra", "word"),
+    [
+        (["--to-port", "47100"], "the same bus"),
+        (["--to-port", "47101", "--drop-prob", "2"], "--drop-prob"),
+        (["--to-port", "47101", "--jitter-us", "-5"], "--jitter-us"),
+        (["--to-port", "47101", "--delay-steps", "-1"], "--delay-steps"),
+    ],
+)
+def test_link_settings_are_checked(
+    extra: list[str], word: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    argv = ["link", "-i", "udp_multicast", "--port", "47100", "--to", "udp_multicast:239.74.163.2"]
+    one_line_error(capsys, [*argv, *extra], word)

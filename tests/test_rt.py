@@ -134,3 +134,24 @@ def test_realtime_run_records_what_the_nodes_were_granted(tmp_path: Path) -> Non
         assert (reps["plant"]["rt"]["priority"], reps["controller"]["rt"]["priority"]) == (30, 29)
     m = json.loads((out / "metrics.json").read_text())
     assert m["jitter_us"]["busy_median"] > 0
+
+
+def test_a_realtime_run_that_did_not_keep_time_gets_a_warning() -> None:
+    from bench._run import realtime_warning
+
+    clean = {"steps": 3000, "late_duty_periods": 20, "deadline_misses": 3, "jitter_us": {}}
+    assert realtime_warning(clean) is None  # 0.7 %: within what the README states
+    bad = {"steps": 3000, "late_duty_periods": 243, "deadline_misses": 203,
+           "jitter_us": {"max": 114000.0}}  # fmt: skip
+    line = realtime_warning(bad)
+    assert line is not None and "\n" not in line
+    assert "8.1 % of periods ran with a late duty" in line and "114.0 ms" in line
+
+
+def test_the_paper_column_names_the_method_its_numbers_belong_to() -> None:
+    from bench._run import format_metrics
+
+    text = format_metrics({"theta_err_max_deg": 1.0}, {"theta_err_max_deg": 4.0}, "tt-dq")
+    head, row = text.splitlines()
+    assert "paper (tt-dq)" in head and row.split()[1:3] == ["1.000", "4.0"]
+    assert "paper" in format_metrics({"theta_err_max_deg": 1.0}).splitlines()[0]
