@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 from pathlib import Path
 
@@ -21,6 +22,10 @@ def cmd_soak(args: argparse.Namespace) -> int:
         raise BenchError(f"--frames must be >= 1, got {args.frames}")
     if args.loop_periods < 1 or args.fault_every < 1:
         raise BenchError("--loop-periods and --fault-every must be >= 1")
+    if args.out:  # before the soak, not after it has run for hours
+        parent = Path(args.out).resolve().parent
+        if not parent.is_dir() or not os.access(parent, os.W_OK):
+            raise BenchError(f"--out {args.out}: cannot write there (no such writable folder)")
     rep = run_soak(
         args.frames,
         seed=args.seed,

@@ -61,6 +61,28 @@ def _rt_priority(text: str) -> int:
     return v
 
 
+def _number(kind: type, lo: float, strict: bool) -> Any:
+    """An argparse type: a ``kind`` number above ``lo`` (``strict``) or at least ``lo``."""
+    what = f"{'a whole' if kind is int else 'a'} number {'>' if strict else '>='} {lo:g}"
+
+    def parse(text: str) -> Any:
+        try:
+            v = kind(text)
+        except ValueError:
+            v = None
+        if v is None or not math.isfinite(v) or (v <= lo if strict else v < lo):
+            raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}")
+        return v
+
+    return parse
+
+
+_POS_INT = _number(int, 0, True)
+_NONNEG_INT = _number(int, 0, False)
+_POS_FLOAT = _number(float, 0.0, True)
+_NONNEG_FLOAT = _number(float, 0.0, False)
+
+
 def _rates_khz(text: str) -> list[float]:
     out = []
     for part in text.split(","):
@@ -100,14 +122,16 @@ def _node_rt(args: argparse.Namespace, role: str) -> dict[str, object] | None:
 
 def _add_scenario_overrides(p: argparse.ArgumentParser) -> None:
     p.add_argument("--mode", choices=MODES, default="lockstep")
-    p.add_argument("--duration", type=float, help="simulated seconds (overrides the scenario)")
+    p.add_argument("--duration", type=_POS_FLOAT, help="simulated seconds (overrides the scenario)")
     p.add_argument(
         "--delay-steps",
-        type=int,
+        type=_NONNEG_INT,
         help="injected latency on the duty direction, whole PWM periods (lockstep)",
     )
     p.add_argument(
-        "--sample-delay-steps", type=int, help="injected latency on the sample direction (lockstep)"
+        "--sample-delay-steps",
+        type=_NONNEG_INT,
+        help="injected latency on the sample direction (lockstep)",
     )
     p.add_argument("--seed", type=int, help="seed of noise and jitter (overrides the scenario)")
 
@@ -457,7 +481,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quiet", "-q", action="store_true", help="no progress line")
     p.add_argument(
         "--watchdog-ms",
-        type=float,
+        type=_POS_FLOAT,
         help="real time: the plant's safe state after this long without a valid duty",
     )
     _add_rt(p, cpu=False)
@@ -467,15 +491,17 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("scenario")
     _add_scenario_overrides(p)
     _add_bus(p)
-    p.add_argument("--truth-every", type=int, default=1, help="send PlantTruth every N periods")
+    p.add_argument(
+        "--truth-every", type=_POS_INT, default=1, help="send PlantTruth every N periods"
+    )
     p.add_argument(
         "--watchdog-ms",
-        type=float,
+        type=_POS_FLOAT,
         help="real time: safe state after this long without a valid duty (default 10 periods, >= 20 ms)",
     )
     p.add_argument(
         "--watchdog-rounds",
-        type=int,
+        type=_POS_INT,
         default=100,
         help="lockstep: safe state after this many 50 ms retransmission rounds without a duty",
     )
@@ -491,7 +517,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--report", help="write the node's counters to this JSON file at exit")
     p.add_argument(
         "--sample-timeout-ms",
-        type=float,
+        type=_POS_FLOAT,
         default=50.0,
         help="real time: disable the PWM after this long without a valid sample",
     )
@@ -505,13 +531,22 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--to-port", type=int, help="UDP port of the other bus (udp_multicast)")
     p.add_argument("--mode", choices=MODES, default="lockstep")
-    p.add_argument("--delay-steps", type=int, default=0, help="lockstep: duty direction, periods")
     p.add_argument(
-        "--sample-delay-steps", type=int, default=0, help="lockstep: sample direction, periods"
+        "--delay-steps", type=_NONNEG_INT, default=0, help="lockstep: duty direction, periods"
     )
-    p.add_argument("--duty-delay-us", type=float, default=0.0, help="real time: duty direction")
-    p.add_argument("--sample-delay-us", type=float, default=0.0, help="real time: sample direction")
-    p.add_argument("--jitter-us", type=float, default=0.0)
+    p.add_argument(
+        "--sample-delay-steps",
+        type=_NONNEG_INT,
+        default=0,
+        help="lockstep: sample direction, periods",
+    )
+    p.add_argument(
+        "--duty-delay-us", type=_NONNEG_FLOAT, default=0.0, help="real time: duty direction"
+    )
+    p.add_argument(
+        "--sample-delay-us", type=_NONNEG_FLOAT, default=0.0, help="real time: sample direction"
+    )
+    p.add_argument("--jitter-us", type=_NONNEG_FLOAT, default=0.0)
     p.add_argument("--jitter-dist", choices=("normal", "uniform"), default="normal")
     p.add_argument("--drop-prob", type=float, default=0.0)
     p.add_argument("--seed", type=int, default=0)
