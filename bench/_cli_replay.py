@@ -8,6 +8,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 from pathlib import Path
 from typing import Any
@@ -15,10 +16,10 @@ from typing import Any
 _LOG_HELP = "a capture python-can reads (.blf, .asc, .log, .trc, .csv, .mf4) or a run folder"
 
 
-def _ids(text: str) -> list[int]:
+def _ids(text: str, option: str) -> list[int]:
     from bench._replay import parse_id
 
-    return [parse_id(t) for t in text.split(",") if t.strip()]
+    return [parse_id(t, option) for t in text.split(",") if t.strip()]
 
 
 def _channels(text: str) -> list[int]:
@@ -34,35 +35,47 @@ def _channels(text: str) -> list[int]:
 
 def cmd_replay(args: argparse.Namespace) -> int:
     from bench._errors import BenchError
-    from bench._replay import parse_id_map, read_capture, replay_frames, select_frames
+    from bench._replay import (
+        CLOCKS,
+        incomplete_warning,
+        parse_id_map,
+        read_capture,
+        replay_frames,
+        select_frames,
+    )
     from bench._run import BusSpec
     from bench.cli import _spec
 
-    frames, problem = read_capture(Path(args.log))
-    if problem:
-        print(
-            f"replay: reading stopped early ({problem}); replaying what was read", file=sys.stderr
-        )
-    chosen = select_frames(
-        frames,
-        ids=None if args.id is None else [i for s in args.id for i in _ids(s)],
-        exclude_ids=[i for s in args.exclude_id or [] for i in _ids(s)],
-        channels=None
+    # every option first: a mistake is reported before the capture is read or a bus opened
+    if not (args.speed > 0 and math.isfinite(args.speed)):
+        raise BenchError(f"--speed must be > 0, got {args.speed:g}")
+    if args.loop < 0:
+        raise BenchError(f"--loop must be >= 0 (0 = until interrupted), got {args.loop}")
+    if args.max_gap is not None and not args.max_gap > 0:
+        raise BenchError(f"--max-gap must be > 0, got {args.max_gap:g}")
+    if args.clock not in CLOCKS:
+        raise BenchError(f"--clock: unknown {args.clock!r} (known: {', '.join(CLOCKS)})")
+    ids = None if args.id is None else [i for s in args.id for i in _ids(s, "--id")]
+    exclude = [i for s in args.exclude_id or [] for i in _ids(s, "--exclude-id")]
+    channels = (
+        None
         if args.channel_filter is None
-        else [c for s in args.channel_filter for c in _channels(s)],
-        id_map=parse_id_map(args.map or []),
+        else [c for s in args.channel_filter for c in _channels(s)]
     )
-    if not chosen:
-        raise BenchError(f"{args.log}: no frame passed the filters ({len(frames)} in the capture)")
-    spec = _spec(args, announce=True)
+    id_map = parse_id_map(args.map or [])
+    spec = _spec(args, announce=True, one_process=True)
     if args.interface is None and args.port is None and spec.interface == "udp_multicast":
         spec = BusSpec(spec.interface, spec.channel, None)  # python-can's default port
-    if args.max_gap is not None and args.max_gap <= 0:
-        raise BenchError(f"--max-gap must be > 0, got {args.max_gap}")
-    if not args.speed > 0:
-        raise BenchError(f"--speed must be > 0, got {args.speed}")
+
+    path = Path(args.log)
+    frames, problem = read_capture(path)
+    if problem:
+        print(incomplete_warning(path, problem, len(frames)), file=sys.stderr)
+    chosen = select_frames(frames, ids=ids, exclude_ids=exclude, channels=channels, id_map=id_map)
+    if not chosen:
+        raise BenchError(f"{args.log}: no frame passed the filters ({len(frames)} in the capture)")
     span = chosen[-1].timestamp - chosen[0].timestamp
-    bus = spec.open()  # a missing interface is reported before anything else
+    bus = spec.open()  # a missing interface is reported before anything is sent
     print(
         f"replay: {len(chosen)} of {len(frames)} frames, {span:.3f} s of capture "
         f"at x{args.speed:g} -> {spec.describe()}",
@@ -80,6 +93,32 @@ def cmd_replay(args: argparse.Namespace) -> int:
     finally:
         bus.shutdown()
     print(res.summary())
+    lag = res.lag_warning()
+    if lag:
+        print(lag, file=sys.stderr)
+    return 0
+
+
+def _files_line(out_dir: Path, names: list[str]) -> str:
+    return f"files: {out_dir}/ ({', '.join(names)})"
+
+
+def cmd_analyze(args: argparse.Namespace) -> int:
+    """``bench analyze``: the metrics table with the paper's column, and the files written."""
+    from bench._replay import analyze_capture
+    from bench._run import format_metrics
+
+    plots = not getattr(args, "no_plots", False)
+    res = analyze_capture(
+        Path(args.log),
+        out_dir=Path(args.out) if args.out else None,
+        scenario=args.scenario,
+        plots=plots,
+    )
+    scn = res.meta.get("scenario", {})
+    print(format_metrics(res.metrics, scn.get("paper_result"), scn.get("estimator")))
+    names = ["signals.csv", "metrics.json", "meta.json"] + (["run.png"] if plots else [])
+    print(_files_line(res.out_dir, names))
     return 0
 
 
@@ -97,7 +136,7 @@ def cmd_rerun(args: argparse.Namespace) -> int:
 
     r: dict[str, Any] = res.report
     est = r["estimate"]
-    print(format_metrics(res.metrics))
+    print(format_metrics(res.metrics, res.paper_result))
     if r["recorded_metrics"] is not None:
         rm = r["recorded_metrics"]
         print(
@@ -109,7 +148,7 @@ def cmd_rerun(args: argparse.Namespace) -> int:
         + (" (bit for bit)" if est["reproduces_recorded_bit_for_bit"] else "")
     )
     print(f"note: {r['comparison']}")
-    print(f"files: {res.out_dir}/ (signals.csv, metrics.json, rerun.json, run.png)")
+    print(_files_line(res.out_dir, res.files))
     return 0
 
 

@@ -17,7 +17,9 @@ and spins the rest (sub-10-microsecond error, at the cost of a busy core
 near each frame), and ``messagesync``, python-can's :class:`can.MessageSync`,
 which only sleeps (its error is the sleep overshoot of the OS, typically
 50-100 us).  The achieved error (send instant minus deadline) is measured
-for every frame and reported as median and worst.
+for every frame and reported as median and worst; a median or p99 lateness
+above ``max(1 ms, 10 % of the mean frame gap)`` is reported as a replay that
+could not keep up (:meth:`ReplayResult.lag_warning`).
 
 Bench captures tag each frame with the bus it was recorded on: channel 1 is
 the plant-side bus, 2 the controller-side bus (only with a latency link).
@@ -27,6 +29,7 @@ are understood.
 
 from __future__ import annotations
 
+import io
 import json
 import math
 import sys
@@ -52,9 +55,11 @@ __all__ = [
     "analyze_capture",
     "capture_scenario",
     "channel_tag",
+    "incomplete_warning",
     "parse_id_map",
     "read_capture",
     "replay_frames",
+    "scoring_scenario",
     "select_frames",
 ]
 
@@ -73,23 +78,121 @@ def _find_in_folder(path: Path) -> Path:
     raise CaptureError(f"{path}: a folder without capture.* ({', '.join(CAPTURE_SUFFIXES)})")
 
 
-def read_capture(path: Path) -> tuple[list[can.Message], str | None]:
-    """All frames python-can can read from ``path``, and why reading stopped early (or None).
+#: Text formats python-can reads line by line (a cut last line is dropped, not parsed).
+_TEXT_READERS: dict[str, type[can.io.generic.TextIOMessageReader]] = {
+    ".asc": can.ASCReader,
+    ".log": can.CanutilsLogReader,
+    ".trc": can.TRCReader,
+    ".csv": can.CSVReader,
+}
 
-    ``path`` may also be a run folder (its ``capture.*`` is read).
+
+def _blf_header(path: Path) -> tuple[int, int]:
+    """File size and object count a BLF header declares (both 0 for an unfinished file).
 
     Raises
     ------
     CaptureError
-        Missing file, a format python-can does not read, a missing optional
-        reader, or no frame at all.
+        The file is too short for a BLF header or lacks its ``LOGG`` signature.
+    """
+    from can.io.blf import FILE_HEADER_STRUCT
+
+    with path.open("rb") as f:
+        data = f.read(FILE_HEADER_STRUCT.size)
+    if len(data) < FILE_HEADER_STRUCT.size:
+        raise CaptureError(
+            f"{path}: not a readable BLF capture ({len(data)} bytes, "
+            f"shorter than the {FILE_HEADER_STRUCT.size}-byte BLF file header)"
+        )
+    header = FILE_HEADER_STRUCT.unpack(data)
+    if header[0] != b"LOGG":
+        raise CaptureError(f"{path}: not a readable BLF capture (no 'LOGG' signature at its start)")
+    return int(header[10]), int(header[12])
+
+
+def _blf_problem(path: Path, declared: tuple[int, int], n_read: int) -> str | None:
+    """Why a BLF looks incomplete: its size or object count against its header."""
+    from can.io.blf import FILE_HEADER_SIZE
+
+    size_decl, count = declared
+    size = path.stat().st_size
+    if count == 0 and size_decl <= FILE_HEADER_SIZE and size > FILE_HEADER_SIZE:
+        return (
+            "the BLF header was never completed (its writer did not close the file), "
+            "so the capture may end early"
+        )
+    if size < size_decl:
+        return (
+            f"truncated BLF: {size} of the {size_decl} bytes its header declares "
+            f"({n_read} of its {count} frames read)"
+        )
+    if n_read < count:
+        return (
+            f"{n_read} of the {count} objects the BLF header counts were read "
+            "(a damaged file, or object types python-can does not read)"
+        )
+    return None
+
+
+def _text_tail(path: Path) -> tuple[int | None, bool]:
+    """Where the last complete line of a text capture ends (None: the file ends with
+    one), and whether an ASC file's ``End TriggerBlock`` footer is missing."""
+    size = path.stat().st_size
+    with path.open("rb") as f:
+        f.seek(max(0, size - 4096))
+        tail = f.read()
+    no_footer = path.suffix.lower() == ".asc" and b"end triggerblock" not in tail.lower()
+    if not tail or tail.endswith((b"\n", b"\r")):
+        return None, no_footer
+    nl = max(tail.rfind(b"\n"), tail.rfind(b"\r"))
+    if nl < 0 and size > len(tail):  # a last line longer than 4 kB: find its start
+        data = path.read_bytes()
+        nl = max(data.rfind(b"\n"), data.rfind(b"\r"))
+        return nl + 1, no_footer
+    return size - len(tail) + nl + 1, no_footer
+
+
+def _open_reader(path: Path, cut_at: int | None) -> Iterable[can.Message]:
+    """python-can's reader of ``path``; only its first ``cut_at`` bytes when given."""
+    if cut_at is None:
+        return can.LogReader(str(path))
+    data = path.read_bytes()[:cut_at]
+    text = io.TextIOWrapper(io.BytesIO(data), encoding="utf-8", errors="replace")
+    return _TEXT_READERS[path.suffix.lower()](text)
+
+
+def read_capture(path: Path) -> tuple[list[can.Message], str | None]:
+    """All frames python-can can read from ``path``, and why the capture is incomplete (or None).
+
+    ``path`` may also be a run folder (its ``capture.*`` is read).  A reader
+    that stops on a corrupt object keeps what it read; python-can's readers
+    stop silently at a truncated end, so the capture is also checked against
+    what its format promises: a BLF's size and object count against its
+    header, a text capture's last line (a line cut short is dropped, never
+    parsed into a frame with missing bytes) and an ASC's ``End TriggerBlock``.
+
+    Raises
+    ------
+    CaptureError
+        Missing file, a format python-can does not read (or a file that is
+        not what its suffix says), a missing optional reader, or no frame.
     """
     if path.is_dir():
         path = _find_in_folder(path)
     if not path.is_file():
         raise CaptureError(f"{path}: no such capture file")
+    suffix = path.suffix.lower()
+    problems: list[str] = []
+    blf = _blf_header(path) if suffix == ".blf" else None
+    cut_at: int | None = None
+    if suffix in _TEXT_READERS:
+        cut_at, no_footer = _text_tail(path)
+        if cut_at is not None:
+            problems.append("its last line is cut short (no line end); that line was dropped")
+        if no_footer:
+            problems.append("no 'End TriggerBlock' line at its end (the file was cut short)")
     try:
-        reader = can.LogReader(str(path))
+        reader = _open_reader(path, cut_at)
     except ValueError as e:
         raise CaptureError(f"{path}: not a capture python-can can read ({e})") from None
     except ImportError as e:
@@ -100,21 +203,28 @@ def read_capture(path: Path) -> tuple[list[can.Message], str | None]:
     except Exception as e:  # a reader that fails on the header
         raise CaptureError(f"{path}: unreadable capture: {type(e).__name__}: {e}") from None
     frames: list[can.Message] = []
-    problem: str | None = None
+    read_error: str | None = None
     try:
         for msg in reader:
             frames.append(msg)
     except Exception as e:  # truncated or corrupt tail: keep what was read
-        problem = f"{type(e).__name__}: {e}"
+        read_error = f"{type(e).__name__}: {e}"
+        problems.insert(0, f"reading stopped at a corrupt record ({read_error})")
     finally:
         try:
-            reader.stop()
+            reader.stop()  # type: ignore[attr-defined]
         except Exception:
             pass
+    if blf is not None:
+        why = _blf_problem(path, blf, len(frames))
+        if why:
+            problems.append(why)
     if not frames:
+        kind = "not a readable BLF capture: " if blf is not None else ""
         raise CaptureError(
-            f"{path}: no frames could be read" + (f" ({problem})" if problem else "")
+            f"{path}: {kind}no frames could be read" + (f" ({read_error})" if read_error else "")
         )
+    problem = "; ".join(problems) if problems else None
     return frames, problem
 
 
@@ -140,6 +250,11 @@ def capture_scenario(path: Path, scenario: str | None) -> tuple[Scenario, dict[s
     if scenario is not None:
         return load_scenario(scenario), meta
     if meta:
+        if not isinstance(meta.get("scenario"), dict):
+            raise CaptureError(
+                f"{meta_path}: no scenario in this metadata; "
+                "give --scenario NAME_OR_FILE for the capture's PWM rate and motor"
+            )
         try:
             return scenario_from_meta(meta), meta
         except (KeyError, TypeError) as e:
@@ -149,14 +264,16 @@ def capture_scenario(path: Path, scenario: str | None) -> tuple[Scenario, dict[s
     )
 
 
-def capture_summary(frames: Sequence[can.Message], codec: Codec, problem: str | None) -> str:
-    """One line on what a capture holds besides the run: other IDs, rejections, order."""
+def _summarize(
+    frames: Sequence[can.Message], codec: Codec, problem: str | None
+) -> tuple[str, tuple[int, int] | None]:
+    """One line on the capture's counters, and its first and last step (None: no step)."""
     from bench._analysis import analyze_frames
 
     try:
         cap = analyze_frames(frames, codec, T_s=1.0, n_p=1)
     except ValueError:
-        return f"capture: {len(frames)} frames, no complete step"
+        return f"capture: {len(frames)} frames, no complete step", None
     rej = ", ".join(f"{k} {v}" for k, v in sorted(cap.rejected.items()))
     s = (
         f"capture: {cap.frames} frames, {cap.unknown_ids} with IDs not in the DBC, "
@@ -165,8 +282,42 @@ def capture_summary(frames: Sequence[can.Message], codec: Codec, problem: str | 
         f"{cap.incomplete_steps} incomplete steps, first step {cap.first_step}"
     )
     if problem:
-        s += f"; reading stopped early: {problem}"
-    return s
+        s += "; incomplete capture (see the warning)"
+    steps = cap.table["step"]
+    span = (int(steps[0]), int(steps[-1])) if len(steps) else None
+    return s, span
+
+
+def capture_summary(frames: Sequence[can.Message], codec: Codec, problem: str | None) -> str:
+    """One line on what a capture holds besides the run: other IDs, rejections, order."""
+    return _summarize(frames, codec, problem)[0]
+
+
+def incomplete_warning(path: Path, problem: str, n_frames: int) -> str:
+    """The one-line warning about an incomplete capture (what was kept)."""
+    return f"warning: {path}: incomplete capture: {problem}; using the {n_frames} frames read"
+
+
+def scoring_scenario(scn: Scenario, t_first: float, t_end: float) -> tuple[Scenario, str | None]:
+    """The scenario to score a capture spanning ``t_first`` .. ``t_end`` (s) with, and what changed.
+
+    A live run shorter than its scenario's scoring start is scored over its
+    second half (:meth:`Scenario.with_overrides` with its ``duration``).  A
+    capture whose span ends at or before ``score_from_s`` is scored the same
+    way, from the middle of its span, with the scenario's duration set to the
+    span's end, so that a capture of a shortened run scores as the live run
+    did and the ``meta.json`` written with it scores the same again.
+    """
+    if scn.score_from_s < t_end:
+        return scn, None
+    t_end = round(t_end, 9)
+    start = round(t_first + (t_end - t_first) / 2, 9)
+    out = scn.with_overrides(duration=max(t_end, 1e-3), score_from_s=start)
+    return out, (
+        f"capture ends at {t_end:g} s, not after the scenario's scoring start "
+        f"({scn.score_from_s:g} s): scoring its second half, from {start:g} s "
+        "(as a run of that duration is scored)"
+    )
 
 
 def analyze_capture(
@@ -189,47 +340,51 @@ def analyze_capture(
     scenario : str, optional
         Scenario name or file; default from ``meta.json`` beside the capture.
     echo : callable, optional
-        Receives a one-line summary of the capture's counters (default: stderr).
+        Receives the one-line summary of the capture's counters and any
+        warning line (default: stderr).
     plots : bool
         Draw ``run.png``.
+
+    The ``meta.json`` written carries the scenario used (as a live run's
+    does), so a later ``bench analyze`` or ``bench rerun`` of the same folder
+    needs no ``--scenario``.  An incomplete capture (see
+    :func:`read_capture`) is analysed as far as it was read, with a warning
+    and ``capture_truncated``/``capture_read_error`` in ``metrics.json``.
     """
+    from bench._setup import sample_period
+
     codec = codec or Codec()
     frames, problem = read_capture(path)
     capture = path if path.is_file() else _find_in_folder(path)
     scn, meta = capture_scenario(path, scenario)
     say = echo or (lambda s: print(s, file=sys.stderr))
-    say(capture_summary(frames, codec, problem))
+    line, span = _summarize(frames, codec, problem)
+    say(line)
+    if problem:
+        say(incomplete_warning(capture, problem, len(frames)))
+    if span is not None:
+        T_s = sample_period(scn)
+        scn, moved = scoring_scenario(scn, span[0] * T_s, span[1] * T_s)
+        if moved:
+            say(moved)
     out = out_dir or capture.parent
     out.mkdir(parents=True, exist_ok=True)
-    meta = dict(meta, analyzed_from=str(capture))
+    meta = dict(meta, analyzed_from=str(capture), scenario=scn.to_dict())
+    meta.pop("capture_read_error", None)
     if problem:
         meta["capture_read_error"] = problem
     wall_s = float(meta.get("wall_s", 0.0))
     try:
-        return finish_run(
+        res = finish_run(
             frames, codec, scn, out, meta=meta, wall_s=wall_s, capture=capture, plots=plots
         )
     except ValueError as e:
-        if "score_from_s" not in str(e):
-            raise CaptureError(f"{capture}: {e}") from None
-    # a capture that ends before the scenario's scoring window: score all of it, say so
-    say(
-        f"capture ends before {scn.score_from_s} s (the scenario's scoring start): scoring all steps"
-    )
-    meta["scoring_window_moved"] = f"capture ends before score_from_s = {scn.score_from_s} s"
-    try:
-        return finish_run(
-            frames,
-            codec,
-            scn.with_overrides(score_from_s=0.0),
-            out,
-            meta=meta,
-            wall_s=wall_s,
-            capture=capture,
-            plots=plots,
-        )
-    except ValueError as e:
         raise CaptureError(f"{capture}: {e}") from None
+    if problem:
+        res.metrics["capture_truncated"] = True
+        res.metrics["capture_read_error"] = problem
+        (out / "metrics.json").write_text(json.dumps(res.metrics, indent=2, sort_keys=True) + "\n")
+    return res
 
 
 # -- replay ----------------------------------------------------------------------------
@@ -249,8 +404,9 @@ def channel_tag(channel: object) -> int | None:
     return None
 
 
-def parse_id(text: str) -> int:
-    """A CAN identifier from ``0x210``, ``210h`` or decimal ``528``."""
+def parse_id(text: str, option: str | None = None) -> int:
+    """A CAN identifier from ``0x210``, ``210h`` or decimal ``528`` (``option`` names it in errors)."""
+    where = f"{option}: " if option else ""
     t = text.strip().lower()
     try:
         if t.startswith("0x"):
@@ -260,20 +416,20 @@ def parse_id(text: str) -> int:
         else:
             v = int(t, 10)
     except ValueError:
-        raise BenchError(f"not a CAN identifier: {text!r} (use 0x210 or 528)") from None
+        raise BenchError(f"{where}not a CAN identifier: {text!r} (use 0x210 or 528)") from None
     if not 0 <= v < (1 << 29):
-        raise BenchError(f"CAN identifier out of range: {text!r}")
+        raise BenchError(f"{where}CAN identifier out of range: {text!r}")
     return v
 
 
 def parse_id_map(items: Iterable[str]) -> dict[int, int]:
-    """``["0x10=0x210", ...]`` to ``{0x10: 0x210, ...}``."""
+    """``["0x10=0x210", ...]`` to ``{0x10: 0x210, ...}``; errors name ``--map`` and the item."""
     out: dict[int, int] = {}
     for item in items:
         old, sep, new = item.partition("=")
         if not sep:
             raise BenchError(f"--map: expected OLD=NEW (e.g. 0x10=0x210), got {item!r}")
-        out[parse_id(old)] = parse_id(new)
+        out[parse_id(old, f"--map {item}")] = parse_id(new, f"--map {item}")
     return out
 
 
@@ -343,6 +499,7 @@ class ReplayResult:
     send_failures: int = 0
     skipped_gap_s: float = 0.0
     sent_at: list[float] = field(default_factory=list)
+    mean_gap_s: float = 0.0
 
     @property
     def error_median_us(self) -> float:
@@ -356,6 +513,46 @@ class ReplayResult:
     def error_p99_us(self) -> float:
         return (
             float(1e6 * np.percentile(np.abs(self.error_s), 99)) if len(self.error_s) else math.nan
+        )
+
+    def lag_limit_s(self) -> float:
+        """Lateness above which the replay did not keep up: ``max(1 ms, 10 % of the mean gap)``.
+
+        1 ms is well above what a working replay shows (the OS sleep
+        overshoot of ``messagesync`` is 50-100 us, the spinning ``deadline``
+        clock a few us, a classic CAN frame at 500 kbit/s takes about
+        0.25 ms), so it flags a replay that falls behind, not scheduler
+        noise; 10 % of the mean frame gap (after ``speed``) takes over for
+        sparse captures, where a frame that late is already out of step with
+        its neighbours.
+        """
+        return max(1e-3, 0.1 * self.mean_gap_s)
+
+    def lag_warning(self) -> str | None:
+        """One line when the median or p99 lateness exceeds :meth:`lag_limit_s`, else None."""
+        if not len(self.error_s):
+            return None
+        med = float(np.median(self.error_s))
+        p99 = float(np.percentile(self.error_s, 99))
+        limit = self.lag_limit_s()
+        if med <= limit and p99 <= limit:
+            return None
+        figures = (
+            f"frames late by median {1e3 * med:.3f} ms, p99 {1e3 * p99:.3f} ms "
+            f"(limit {1e3 * limit:.3f} ms)"
+        )
+        if med > limit:
+            want = 1.0 / self.mean_gap_s if self.mean_gap_s > 0 else math.inf
+            got = self.sent / self.wall_s if self.wall_s > 0 else math.inf
+            return (
+                f"warning: the replay could not keep up with the capture's timing at "
+                f"x{self.speed:g}: {figures}; sent {got:.0f} frames/s where the capture "
+                f"needs {want:.0f} frames/s; lower --speed or use a faster interface"
+            )
+        return (
+            f"warning: the replay could not keep the capture's timing for its latest 1 % of "
+            f"frames: {figures}; it caught up (absolute deadlines): the machine stalled it "
+            "at times" + ("; --clock deadline keeps closer" if self.clock == "messagesync" else "")
         )
 
     def summary(self) -> str:
@@ -501,4 +698,5 @@ def replay_frames(
         send_failures=failures,
         skipped_gap_s=cut,
         sent_at=sent_at,
+        mean_gap_s=offs[-1] / (n - 1) if n > 1 else 0.0,
     )

@@ -575,12 +575,16 @@ def rerender(out_dir: Path) -> dict[str, Any]:
     from bench._suite import refresh_extras
 
     path = out_dir / "summary.json"
+    if not path.is_file():
+        raise BenchError(
+            f"{out_dir}: not a suite folder (no summary.json; 'bench suite paper' writes one)"
+        )
     try:
         summary: dict[str, Any] = json.loads(path.read_text())
         refresh_extras(summary)
         summary["claims"] = evaluate_claims(summary)
     except (OSError, ValueError, KeyError, TypeError) as e:
-        raise BenchError(f"{path}: not a suite summary ({type(e).__name__}: {e})") from None
+        raise BenchError(f"{path}: not a suite summary ({e})") from None
     write_report(summary, out_dir)
     return summary
 

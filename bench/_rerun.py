@@ -47,7 +47,13 @@ from bench._analysis import analyze_frames, write_csv
 from bench._batch_decode import decode_batch
 from bench._codec import Codec
 from bench._errors import BenchError, CaptureError
-from bench._replay import capture_scenario, channel_tag, read_capture
+from bench._replay import (
+    capture_scenario,
+    channel_tag,
+    incomplete_warning,
+    read_capture,
+    scoring_scenario,
+)
 
 __all__ = ["RerunResult", "injection_note", "rerun_capture"]
 
@@ -59,6 +65,8 @@ class RerunResult:
     out_dir: Path
     metrics: dict[str, Any]
     report: dict[str, Any] = field(default_factory=dict)
+    files: list[str] = field(default_factory=list)
+    paper_result: dict[str, Any] = field(default_factory=dict)
 
 
 def injection_note(estimator: str, recorded: str | None) -> str:
@@ -155,6 +163,8 @@ def rerun_capture(
     say = echo or (lambda s: print(s, file=sys.stderr))
     frames, problem = read_capture(path)
     scn, meta = capture_scenario(path, scenario)
+    if problem:
+        say(incomplete_warning(path, problem, len(frames)))
     recorded = meta.get("estimator") if isinstance(meta.get("estimator"), str) else None
     if recorded is not None and recorded not in ESTIMATOR_NAMES:
         recorded = None
@@ -286,10 +296,11 @@ def rerun_capture(
             )
         )
 
-    score_from = scn.score_from_s
-    if not np.any(new.table["t"] >= score_from):
-        say(f"capture ends before {score_from} s (the scenario's scoring start): scoring all steps")
-        score_from = 0.0
+    t = new.table["t"]
+    scored, moved = scoring_scenario(scn, float(t[0]), float(t[-1]))
+    if moved:
+        say(moved)
+    score_from = scored.score_from_s
     try:
         m_new = score(new.table, score_from)
     except ValueError as e:
@@ -307,6 +318,9 @@ def rerun_capture(
     m_new["frames_unknown_id"] = new.unknown_ids
     m_new["frames_duplicate"] = new.duplicates
     m_new["frames_out_of_order"] = new.out_of_order
+    if problem:
+        m_new["capture_truncated"] = True
+        m_new["capture_read_error"] = problem
     reproduced = bool(common) and not differ and len(common) == len(rec_tele)
     th_diff = math.nan
     if common:
@@ -328,6 +342,7 @@ def rerun_capture(
         "comparison": injection_note(estimator, recorded),
         "first_step": k_first,
         "scored_from_s": score_from,
+        "scoring_window_moved": moved,
         "started_without_command": started_without_command,
         "sample_gap_steps": gap_steps,
         "estimate": {
@@ -360,4 +375,11 @@ def rerun_capture(
             else "no recorded estimate to compare"
         )
     )
-    return RerunResult(out_dir=dest, metrics=m_new, report=report)
+    files = ["signals.csv", "metrics.json", "rerun.json"] + (["run.png"] if plots else [])
+    return RerunResult(
+        out_dir=dest,
+        metrics=m_new,
+        report=report,
+        files=files,
+        paper_result=dict(scn.paper_result),
+    )

@@ -431,16 +431,9 @@ def _same_bus(a: Any, b: Any) -> bool:
 
 
 def cmd_analyze(args: argparse.Namespace) -> int:
-    from bench._replay import analyze_capture
+    from bench._cli_replay import cmd_analyze as analyze
 
-    res = analyze_capture(
-        Path(args.log), out_dir=Path(args.out) if args.out else None, scenario=args.scenario
-    )
-    from bench._run import format_metrics
-
-    print(format_metrics(res.metrics))
-    print(f"files: {res.out_dir}/")
-    return 0
+    return analyze(args)
 
 
 def cmd_busload(args: argparse.Namespace) -> int:
@@ -560,6 +553,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("log", help="a capture python-can reads (.blf, .asc, .log, .trc, .csv, .mf4)")
     p.add_argument("--out", "-o", help="output folder (default: beside the capture)")
     p.add_argument("--scenario", help="scenario of the capture (default: from meta.json beside it)")
+    p.add_argument("--no-plots", action="store_true", help="skip run.png")
     p.set_defaults(func=cmd_analyze)
 
     p = sub.add_parser(
