@@ -6,6 +6,8 @@ import copy
 import re
 from typing import Any
 
+import pytest
+
 from bench._report import (
     NOT_REPRODUCED,
     NOT_RUN,
@@ -201,3 +203,19 @@ def test_report_tables_are_filled_and_mark_paper_only_rows() -> None:
     tt = next(r for r in rows if r[0] == "tt-dq" and r[1] == "bench")
     assert tt[4] == "0.40 / 0.40"
     assert len(widths) >= 2  # several tables of different width, each row split correctly
+
+
+def test_speed_error_closed_form_is_the_derivative_of_eq_12() -> None:
+    import math
+
+    import numpy as np
+
+    from bench._report import _luenberger_peak, _luenberger_speed_peak_rpm
+
+    n_p, d_tau, J, a = 4, 3.0, 0.01, 28.6
+    t = np.linspace(0.0, 0.5, 200001)
+    e = n_p * d_tau * t**2 * np.exp(-a * t) / (2.0 * J)  # eq. (12) after a step (rad, el.)
+    assert np.max(e) == pytest.approx(_luenberger_peak(n_p, d_tau, J, a), rel=1e-6)
+    w_el = np.gradient(e, t)
+    want_rpm = np.max(np.abs(w_el)) / n_p * 60.0 / (2.0 * math.pi)
+    assert _luenberger_speed_peak_rpm(n_p, d_tau, J, a) == pytest.approx(want_rpm, rel=1e-4)
