@@ -302,16 +302,25 @@ def measure_latency(frames: list[can.Message], codec: Codec) -> dict[str, dict[s
     appearance on A to its appearance on B; for each duty frame, from B to A
     (microseconds, median and 99th percentile).
 
-    Latency in whole PWM periods is not counted here: in lockstep the plant
-    may legitimately run ahead of a delayed frame, so counting periods
-    between timestamps depends on scheduling.  The exact figure is the
-    plant's own ``duty_age`` (in ``PlantTruth``, scored as
-    ``loop_latency_steps``).
+    In whole PWM periods, counted on the plant's own clock (the highest
+    sample step seen on A so far): a sample ``j`` that appears on B while A
+    has carried up to sample ``s`` was held ``s - j`` periods; a duty ``t``
+    (the answer to sample ``t - 1``) that appears on A while A has carried
+    up to ``s`` closed a loop of ``s - (t - 1)`` periods.  A frame is never
+    released before the sample on A that triggers it, but the recorder may
+    see the plant's next sample first (two sockets, one clock), which can
+    only add a period; so the delay is the least count over all frames
+    (``samples.steps``, and ``duties.steps`` = least loop minus
+    ``samples.steps``), with the median beside it.  The plant's own
+    ``duty_age`` (scored as ``loop_latency_steps``) is the exact round trip.
     """
     sid, did = codec.frame_id("PhaseSamples"), codec.frame_id("PwmDuty")
     m = 1 << codec.step_bits("PhaseSamples")
     first_seen: dict[tuple[int, int, int], float] = {}
     unw: dict[tuple[int, int], _Unwrapper] = {}
+    a_max = -1  # the highest sample step carried on A so far
+    held_s: list[int] = []  # per sample on B: periods it was held
+    loop_d: list[int] = []  # per duty on A: periods since its sample left A
     for f in sorted(frames, key=lambda f: f.timestamp):
         if f.arbitration_id not in (sid, did) or f.channel not in (1, 2):
             continue
@@ -320,7 +329,14 @@ def measure_latency(frames: list[can.Message], codec: Codec) -> dict[str, dict[s
             continue
         key = (int(f.channel), f.arbitration_id)
         k, _ = unw.setdefault(key, _Unwrapper(m))(int(d.signals["step"]))
+        new = (*key, k) not in first_seen
         first_seen.setdefault((*key, k), f.timestamp)
+        if key == (1, sid):
+            a_max = max(a_max, k)
+        elif new and a_max >= 0 and key == (2, sid):
+            held_s.append(a_max - k)
+        elif new and a_max >= 0 and key == (1, did):
+            loop_d.append(a_max - (k - 1))
     out: dict[str, dict[str, float]] = {}
     for name, fid, src, dst in (("samples", sid, 1, 2), ("duties", did, 2, 1)):
         us = [
@@ -335,4 +351,12 @@ def measure_latency(frames: list[can.Message], codec: Codec) -> dict[str, dict[s
                 "us_p99": float(np.percentile(arr, 99)),
                 "frames": float(len(arr)),
             }
+    if held_s and "samples" in out:
+        n_s = min(held_s)
+        out["samples"].update(steps=float(n_s), steps_median=float(np.median(held_s)))
+        if loop_d and "duties" in out:
+            out["duties"].update(
+                steps=float(min(loop_d) - n_s),
+                steps_median=float(np.median(loop_d) - np.median(held_s)),
+            )
     return out

@@ -462,8 +462,10 @@ def run_soak(
     base = load_scenario(scenario)
     rep = SoakReport(seed=seed)
     # 1. each node alone, both modes
+    # the plant's share is split between its two modes (the real-time half
+    # gets the odd frame), so each node gets exactly ``frames``
     for who, k, rt in (("plant", 0, True), ("plant", 1, False), ("controller", 2, True)):
-        n = frames // 2 if who == "plant" else frames
+        n = frames if who == "controller" else (frames + 1) // 2 if rt else frames // 2
         scn = base.with_overrides(duration=1e4, seed=seed + k)
         node: PlantNode | ControllerNode
         if who == "plant":

@@ -40,6 +40,12 @@ Schema (all keys optional unless marked *required*)::
     jitter_us = 0.0                  # real-time: standard deviation (normal) or half-width (uniform)
     jitter_dist = "normal"           # "normal" | "uniform"
     drop_prob = 0.0                  # per frame, each direction
+    [controller_model]               # the controller's parameter errors: factors on the
+    R_s = 1.0                        # plant's values (1.0 exact, 1.2 = believes 20 % more);
+    L_d = 1.0                        # the plant keeps the preset's values
+    L_q = 1.0
+    psi_f = 1.0
+    J = 1.0
     [paper_result]                   # the paper's numbers, for reports only
     theta_err_max_deg = 4.0
 """
@@ -127,6 +133,29 @@ class Noise:
 
 
 @dataclass(frozen=True, slots=True)
+class ModelErrors:
+    """Relative errors of the controller's motor model against the plant's parameters.
+
+    Each field is a factor on the plant's value (1.0 = exact, 1.2 = the
+    controller believes 20 % more); the plant always keeps the preset's
+    values. Used for robustness studies: the current-loop gains and the
+    decoupling use ``R_s``, ``L_d``, ``L_q`` and ``psi_f``; the torque
+    constant ``1.5 n_p psi_f``; the speed-loop gains ``J``; the HF
+    estimators their normalisation by the model's ``L_d``, ``L_q``.
+    """
+
+    R_s: float = 1.0
+    L_d: float = 1.0
+    L_q: float = 1.0
+    psi_f: float = 1.0
+    J: float = 1.0
+
+
+#: Keys of the ``[controller_model]`` table, in schema order.
+MODEL_ERROR_KEYS = ("R_s", "L_d", "L_q", "psi_f", "J")
+
+
+@dataclass(frozen=True, slots=True)
 class Scenario:
     """One validated scenario. Build with :func:`load_scenario`."""
 
@@ -151,6 +180,7 @@ class Scenario:
     estimator_options: dict[str, Any] = field(default_factory=dict)
     noise: Noise = field(default_factory=Noise)
     latency: Latency = field(default_factory=Latency)
+    controller_model: ModelErrors = field(default_factory=ModelErrors)
     paper_result: dict[str, Any] = field(default_factory=dict)
 
     def with_overrides(self, **kw: Any) -> Scenario:
@@ -202,6 +232,7 @@ class Scenario:
                 "jitter_dist": self.latency.jitter_dist,
                 "drop_prob": self.latency.drop_prob,
             },
+            "controller_model": {k: getattr(self.controller_model, k) for k in MODEL_ERROR_KEYS},
             "paper_result": dict(self.paper_result),
         }
 
@@ -227,6 +258,7 @@ _TOP_KEYS = {
     "estimator_options",
     "noise",
     "latency",
+    "controller_model",
     "paper_result",
 }
 
@@ -412,6 +444,14 @@ def parse_scenario(data: dict[str, Any], src: str) -> Scenario:
         jitter_dist=dist,
         drop_prob=lt.num("drop_prob", 0.0, lo=0.0, hi=1.0),
     )
+    cm = r.table("controller_model", set(MODEL_ERROR_KEYS))
+    factors: dict[str, float] = {}
+    for k in MODEL_ERROR_KEYS:
+        v = cm.num(k, 1.0)
+        if not v > 0.0:
+            raise cm.fail(k, f"must be a positive factor (1.0 = exact), got {v}")
+        factors[k] = v
+    controller_model = ModelErrors(**factors)
     opts = r.table("estimator_options").t
     paper = r.table("paper_result").t
     duration = r.num("duration", lo=1e-3)
@@ -445,6 +485,7 @@ def parse_scenario(data: dict[str, Any], src: str) -> Scenario:
         estimator_options=dict(opts),
         noise=noise,
         latency=latency,
+        controller_model=controller_model,
         paper_result=dict(paper),
     )
 

@@ -12,9 +12,9 @@ from typing import Any
 
 from bench._errors import ScenarioError
 from bench._nodes import CMD_START, CMD_STOP, RPM_PER_RAD_S
-from bench._scenario import Scenario
+from bench._scenario import ModelErrors, Scenario
 from controller import Controller, ControllerPars, MotorModel
-from controller._registry import ESTIMATOR_NAMES
+from controller._registry import ESTIMATOR_NAMES, injection_family
 from plant_rt import ConstantLoad, Plant, Preset, SensorPars, preset
 
 
@@ -69,16 +69,26 @@ def build_plant(scn: Scenario) -> Plant:
     )
 
 
-def motor_model(p: Preset) -> MotorModel:
-    """The controller's copy of the motor parameters (here: the nominal ones)."""
+def motor_model(p: Preset, errors: ModelErrors | None = None) -> MotorModel:
+    """The controller's copy of the motor parameters.
+
+    Parameters
+    ----------
+    p : Preset
+        The plant's preset; its parameters are read, never changed.
+    errors : ModelErrors, optional
+        Factors on ``R_s``, ``L_d``, ``L_q``, ``psi_f`` and ``J`` (the
+        scenario's ``[controller_model]`` table); ``None``: the nominal values.
+    """
     m = p.motor
+    e = errors or ModelErrors()
     return MotorModel(
         n_p=m.n_p,
-        R_s=m.R_s,
-        L_d=m.L_d,
-        L_q=m.L_q,
-        psi_f=m.psi_f,
-        J=m.J,
+        R_s=m.R_s * e.R_s,
+        L_d=m.L_d * e.L_d,
+        L_q=m.L_q * e.L_q,
+        psi_f=m.psi_f * e.psi_f,
+        J=m.J * e.J,
         b=m.b,
         i_max=m.i_max,
         tau_max=1.5 * m.tau_rated,
@@ -97,9 +107,16 @@ def build_controller(scn: Scenario, estimator: str) -> Controller:
     elif scn.known_initial_angle:
         kw["startup"] = False
         kw["theta0"] = math.radians(scn.theta_e0_deg)
+    model = motor_model(p, scn.controller_model)
+    if injection_family(estimator) != "none" and not model.L_q > model.L_d:
+        raise ScenarioError(
+            f"{scn.source}: field 'controller_model': the factors L_d = {scn.controller_model.L_d} "
+            f"and L_q = {scn.controller_model.L_q} leave the controller's model without "
+            f"saliency (L_q {model.L_q:.4g} H <= L_d {model.L_d:.4g} H), which {estimator} needs"
+        )
     try:
         pars = ControllerPars(
-            motor=motor_model(p),
+            motor=model,
             T_s=sample_period(scn),
             estimator=estimator,
             estimator_options=dict(scn.estimator_options),

@@ -15,6 +15,22 @@ from bench._run import BusSpec, run_scenario
 from bench._scenario import load_scenario
 from tests.ports import free_port
 
+#: The metrics that a capture's analysis must reproduce exactly.
+POSITION_SPEED = (
+    "theta_err_max_deg",
+    "theta_err_min_deg",
+    "theta_err_mean_deg",
+    "theta_err_abs_mean_deg",
+    "theta_err_rms_deg",
+    "theta_err_abs_max_deg",
+    "theta_err_abs_max_rad",
+    "speed_err_max_rpm",
+    "speed_track_err_max_rpm",
+    "steps",
+    "scored_steps",
+    "sim_s",
+)
+
 _RUNS: dict[str, Path] = {}
 
 

@@ -24,23 +24,9 @@ from bench._batch_decode import decode_batch
 from bench._codec import Codec
 from bench._replay import analyze_capture, read_capture
 from bench.cli import main
-from tests.replay_helpers import recorded_run
+from tests.replay_helpers import POSITION_SPEED, recorded_run
 
 CODEC = Codec()
-POSITION_SPEED = (
-    "theta_err_max_deg",
-    "theta_err_min_deg",
-    "theta_err_mean_deg",
-    "theta_err_abs_mean_deg",
-    "theta_err_rms_deg",
-    "theta_err_abs_max_deg",
-    "theta_err_abs_max_rad",
-    "speed_err_max_rpm",
-    "speed_track_err_max_rpm",
-    "steps",
-    "scored_steps",
-    "sim_s",
-)
 
 
 def metrics(folder: Path) -> dict:

@@ -110,6 +110,9 @@ def test_lockstep_latency_through_link_process(tmp_path: Path, duty: int, sample
     # both buses were recorded and the wall-clock latency per direction is measured
     lat = res.metrics["latency_measured"]
     assert lat["samples"]["us_median"] > 0 and lat["duties"]["us_median"] > 0
+    # ... and in periods on the plant's clock, each direction exactly as injected
+    assert lat["samples"]["steps"] == sample
+    assert lat["duties"]["steps"] == duty
     assert res.metrics["latency_configured"]["duties_steps"] == duty
     # and the delay is real: the same run without it differs
     ref0 = trace(run_inprocess(replace(scn, latency=Latency()), "sensored", CODEC), scn)
