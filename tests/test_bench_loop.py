@@ -156,8 +156,8 @@ def test_virtual_bus_threads_equal_inprocess(ref_sensored: tuple[Scenario, dict]
     tc.join(10)
     # the recording bus object queued every frame the others sent; drain it
     frames = [*(m for _, m in command_frames(scn, CODEC))]
-    while (m := bus_r.recv(0.2)) is not None:
-        frames.append(m)
+    while (got := bus_r.recv(0.2)) is not None:
+        frames.append(got)
     for b in (bus_p, bus_c, bus_r):
         b.shutdown()
     assert not tc.is_alive()

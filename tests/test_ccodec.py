@@ -16,6 +16,7 @@ pytestmark = pytest.mark.skipif(CC is None, reason="no C compiler")
 
 @pytest.fixture(scope="module")
 def built(tmp_path_factory):
+    assert CC is not None
     out = tmp_path_factory.mktemp("ccodec")
     codec = Codec()
     header, source = generate_c(out, codec)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import can
 import pytest
@@ -27,10 +28,16 @@ def codec() -> Codec:
     return Codec()
 
 
+def _range(s: Any) -> tuple[float, float]:
+    """A signal's [minimum, maximum]: every signal of the bench's DBC declares both."""
+    assert s.minimum is not None and s.maximum is not None, s.name
+    return float(s.minimum), float(s.maximum)
+
+
 def _mid(codec: Codec, name: str) -> dict[str, float]:
     m = codec.message(name)
     return {
-        s.name: round(0.5 * (s.minimum + s.maximum) / s.scale) * s.scale
+        s.name: round(0.5 * sum(_range(s)) / s.scale) * s.scale
         for s in m.signals
         if s.name != "crc"
     }
@@ -41,10 +48,11 @@ def _cases(codec: Codec):
         for s in codec.message(name).signals:
             if s.name == "crc":
                 continue
-            points = {"min": s.minimum, "max": s.maximum, "one_lsb": s.scale}
-            if s.minimum <= 0 <= s.maximum:
+            lo, hi = _range(s)
+            points = {"min": lo, "max": hi, "one_lsb": s.scale}
+            if lo <= 0 <= hi:
                 points["zero"] = 0.0
-            if s.minimum < 0:
+            if lo < 0:
                 points["minus_one_lsb"] = -s.scale
             for label, v in points.items():
                 yield name, s.name, label, float(v), float(s.scale)
@@ -79,11 +87,7 @@ def test_quantization_within_half_lsb(data):
     codec = default_codec()
     name = data.draw(st.sampled_from(codec.names))
     m = codec.message(name)
-    values = {
-        s.name: data.draw(st.floats(float(s.minimum), float(s.maximum)))
-        for s in m.signals
-        if s.name != "crc"
-    }
+    values = {s.name: data.draw(st.floats(*_range(s))) for s in m.signals if s.name != "crc"}
     got = codec.quantize(name, values)
     for s in m.signals:
         if s.name == "crc":

@@ -60,7 +60,9 @@ def test_codegen_writes_dbc_code_and_e2e_helper(tmp_path: Path, capsys) -> None:
     header = (out / "bench_e2e.h").read_text()
     codec = Codec()
     for name, ident in [("PwmDuty", "PWM_DUTY"), ("PhaseSamples", "PHASE_SAMPLES")]:
-        data_id = int(codec.message(name).dbc.attributes["E2EDataId"].value)
+        dbc = codec.message(name).dbc
+        assert dbc is not None
+        data_id = int(dbc.attributes["E2EDataId"].value)
         assert f"#define BENCH_E2E_{ident}_DATA_ID ({data_id}u)" in header
         assert f"#define BENCH_E2E_{ident}_CRC_INDEX (0u)" in header
     # recorder frames carry no CRC, so no E2E macros for them
@@ -122,6 +124,7 @@ def test_c_e2e_helper_agrees_with_python(tmp_path: Path) -> None:
     rng = random.Random(5)
     for index, _, data, _ in iter_vectors(codec):
         message = codec.message(codec.names[index])
+        assert message.dbc is not None
         attr = message.dbc.attributes.get("E2EDataId")
         if attr is None:
             continue

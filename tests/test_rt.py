@@ -72,7 +72,7 @@ def test_fifo_priority_and_cpu_granted_or_refused_with_a_reason() -> None:
         assert res["now"] == [os.SCHED_FIFO, 42]
     else:
         assert res["policy"] == "normal" and res["priority"] is None
-        assert any("SCHED_FIFO priority 42" in x for x in res["refused"])  # type: ignore[union-attr]
+        assert any("SCHED_FIFO priority 42" in x for x in res["refused"])
 
 
 def test_no_gc_switches_the_collector_off_and_restores_it() -> None:

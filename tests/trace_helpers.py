@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import replace
+from typing import Any
 
 import can
 import numpy as np
@@ -15,7 +16,7 @@ from bench._setup import sample_period
 CODEC = Codec()
 
 
-def short(name: str, duration: float, **lat: object) -> Scenario:
+def short(name: str, duration: float, **lat: Any) -> Scenario:
     """A shortened scenario whose speed reference ramps to 100 rpm in 50 ms."""
     s = load_scenario(name).with_overrides(
         duration=duration,
