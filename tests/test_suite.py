@@ -127,3 +127,47 @@ def test_cli_rejects_unknown_names_with_one_line(capsys: pytest.CaptureFixture[s
     assert cli.main(["suite", "sweep", "--sweeps", "temperature"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "temperature" in err[0]
+
+
+def test_suite_runs_over_the_can_transport_equal_in_process(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The suite's real path: each run two processes in lockstep over udp_multicast.
+
+    Lockstep is exact, so the metrics equal the in-process suite's for the same
+    quick scenario; the progress display prints a line per finished run.
+    """
+    common = dict(scenarios=("xue-fig13",), estimators=("sensored", "square-wave"), quick=True)
+    over_can = run_suite(
+        SuiteOptions(
+            out_dir=tmp_path / "can",
+            runs_dir=tmp_path / "can-runs",
+            interface="udp_multicast",
+            workers=2,
+            progress=True,
+            **common,  # type: ignore[arg-type]
+        )
+    )
+    err = capsys.readouterr().err
+    inproc = run_suite(
+        SuiteOptions(
+            out_dir=tmp_path / "inproc",
+            runs_dir=tmp_path / "inproc-runs",
+            inprocess=True,
+            progress=False,
+            **common,  # type: ignore[arg-type]
+        )
+    )
+    assert over_can["suite"]["transport"].startswith("udp_multicast")
+    assert over_can["suite"]["mode"] == "lockstep"
+    by = {(r["scenario"], r["estimator"]): r for r in inproc["runs"]}
+    assert len(over_can["runs"]) == len(by) == 2
+    for r in over_can["runs"]:
+        ref = by[(r["scenario"], r["estimator"])]
+        for key in ("theta_err_max_deg", "theta_err_rms_deg", "speed_err_max_rpm", "steps"):
+            assert r["metrics"][key] == ref["metrics"][key], (r["estimator"], key)
+        run_dir = tmp_path / "can-runs" / r["scenario"] / r["estimator"]
+        assert (run_dir / "capture.blf").is_file() and (run_dir / "plant.json").is_file()
+    # the progress display: one line per finished run (stderr is not a terminal here)
+    done = [ln for ln in err.splitlines() if re.match(r"\[\d/2\] xue-fig13", ln)]
+    assert len(done) == 2 and all(" done " in ln for ln in done), err
