@@ -38,10 +38,12 @@ def cmd_replay(args: argparse.Namespace) -> int:
     from bench._replay import (
         CLOCKS,
         incomplete_warning,
+        open_buses,
+        parse_channel_map,
         parse_id_map,
+        plan_replay,
         read_capture,
         replay_frames,
-        select_frames,
     )
     from bench._run import BusSpec
     from bench.cli import _spec
@@ -63,35 +65,52 @@ def cmd_replay(args: argparse.Namespace) -> int:
         else [c for s in args.channel_filter for c in _channels(s)]
     )
     id_map = parse_id_map(args.map or [])
-    spec = _spec(args, announce=True, one_process=True)
-    if args.interface is None and args.port is None and spec.interface == "udp_multicast":
-        spec = BusSpec(spec.interface, spec.channel, None)  # python-can's default port
+    channel_map = parse_channel_map(
+        args.channel_map or [], bitrate=args.bitrate, data_bitrate=args.data_bitrate
+    )
+    _spec(argparse.Namespace(**vars(args)), announce=False, one_process=True)  # check only
+
+    def default_bus() -> BusSpec:
+        """The --interface/--channel bus (or the default), for frames of unmapped channels."""
+        spec: BusSpec = _spec(args, announce=True, one_process=True)
+        if args.interface is None and args.port is None and spec.interface == "udp_multicast":
+            spec = BusSpec(spec.interface, spec.channel, None)  # python-can's default port
+        return spec
 
     path = Path(args.log)
     frames, problem = read_capture(path)
     if problem:
         print(incomplete_warning(path, problem, len(frames)), file=sys.stderr)
-    chosen = select_frames(frames, ids=ids, exclude_ids=exclude, channels=channels, id_map=id_map)
+    plan = plan_replay(
+        frames,
+        default=default_bus,
+        channel_map=channel_map,
+        ids=ids,
+        exclude_ids=exclude,
+        channels=channels,
+        id_map=id_map,
+    )
+    chosen = plan.frames
     if not chosen:
         raise BenchError(f"{args.log}: no frame passed the filters ({len(frames)} in the capture)")
     span = chosen[-1].timestamp - chosen[0].timestamp
-    bus = spec.open()  # a missing interface is reported before anything is sent
-    print(
-        f"replay: {len(chosen)} of {len(frames)} frames, {span:.3f} s of capture "
-        f"at x{args.speed:g} -> {spec.describe()}",
-        file=sys.stderr,
-    )
-    try:
+    # a missing interface is reported before anything is sent; every bus is shut down after
+    with open_buses(plan.buses) as buses:
+        print(
+            f"replay: {len(chosen)} of {len(frames)} frames, {span:.3f} s of capture "
+            f"at x{args.speed:g} -> {plan.describe()}",
+            file=sys.stderr,
+        )
         res = replay_frames(
-            bus,
+            buses,
             chosen,
             speed=args.speed,
             loops=args.loop,
             clock=args.clock,
             max_gap_s=args.max_gap,
+            route=plan.route,
+            bus_names=[b.describe() for b in plan.buses],
         )
-    finally:
-        bus.shutdown()
     print(res.summary())
     lag = res.lag_warning()
     if lag:
@@ -173,6 +192,17 @@ def register(sub: Any) -> None:
     )
     p.add_argument(
         "--map", action="append", metavar="OLD=NEW", help="rename an ID (0x10=0x210; repeatable)"
+    )
+    p.add_argument(
+        "--channel-map",
+        action="append",
+        metavar="CH=INTERFACE:CHANNEL",
+        help=(
+            "send the frames of capture channel CH (as python-can reads it: 1, 2, can1) on "
+            "this bus instead (repeatable; 2=socketcan:can1, 1=virtual:a); for udp_multicast "
+            "CHANNEL is GROUP, GROUP:PORT, :PORT or [IPv6-GROUP]:PORT; frames of channels not "
+            "mapped go to the --interface/--channel bus (or the default transport)"
+        ),
     )
     p.add_argument(
         "--clock",

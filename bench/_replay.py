@@ -24,17 +24,22 @@ could not keep up (:meth:`ReplayResult.lag_warning`).
 Bench captures tag each frame with the bus it was recorded on: channel 1 is
 the plant-side bus, 2 the controller-side bus (only with a latency link).
 python-can's ``.log`` writer turns these into ``can1``/``can2``; both forms
-are understood.
+are understood.  ``--channel-map CH=INTERFACE:CHANNEL`` sends each capture
+channel onto a bus of its own (:func:`plan_replay`): every bus is opened
+once, all follow the one absolute time line, and the frames of channels not
+mapped go to the default bus.
 """
 
 from __future__ import annotations
 
+import contextlib
 import io
+import ipaddress
 import json
 import math
 import sys
 import time
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -45,20 +50,26 @@ import numpy.typing as npt
 
 from bench._codec import Codec
 from bench._errors import BenchError, CaptureError, ScenarioError
-from bench._run import RunResult, finish_run
+from bench._run import BusSpec, RunResult, finish_run
 from bench._scenario import Scenario, load_scenario, scenario_from_dict
 
 __all__ = [
     "CAPTURE_SUFFIXES",
     "CLOCKS",
+    "ChannelMap",
+    "ReplayPlan",
     "ReplayResult",
     "analyze_capture",
     "capture_scenario",
     "channel_tag",
     "incomplete_warning",
+    "open_buses",
+    "parse_channel_map",
     "parse_id_map",
+    "plan_replay",
     "read_capture",
     "replay_frames",
+    "resolve_channel_map",
     "scoring_scenario",
     "select_frames",
 ]
@@ -433,6 +444,48 @@ def parse_id_map(items: Iterable[str]) -> dict[int, int]:
     return out
 
 
+def _selected(
+    frames: Iterable[can.Message],
+    *,
+    ids: Iterable[int] | None,
+    exclude_ids: Iterable[int] | None,
+    channels: Iterable[int] | None,
+    id_map: dict[int, int] | None,
+) -> list[tuple[can.Message, can.Message]]:
+    """Pairs (recorded frame, fresh frame to send) of :func:`select_frames`, in timestamp order."""
+    keep = None if ids is None else frozenset(ids)
+    drop = frozenset(exclude_ids or ())
+    chans = None if channels is None else frozenset(channels)
+    remap = id_map or {}
+    out: list[tuple[can.Message, can.Message]] = []
+    for m in frames:
+        if m.is_error_frame:
+            continue
+        fid = m.arbitration_id
+        if keep is not None and fid not in keep:
+            continue
+        if fid in drop:
+            continue
+        if chans is not None and channel_tag(m.channel) not in chans:
+            continue
+        new_id = remap.get(fid, fid)
+        fresh = can.Message(
+            timestamp=m.timestamp,
+            arbitration_id=new_id,
+            is_extended_id=m.is_extended_id or new_id > 0x7FF,
+            is_remote_frame=m.is_remote_frame,
+            is_fd=m.is_fd,
+            bitrate_switch=m.bitrate_switch,
+            error_state_indicator=m.error_state_indicator,
+            dlc=m.dlc,
+            data=m.data,
+            check=False,
+        )
+        out.append((m, fresh))
+    out.sort(key=lambda pair: pair[1].timestamp)  # stable: equal stamps keep their order
+    return out
+
+
 def select_frames(
     frames: Iterable[can.Message],
     *,
@@ -447,38 +500,255 @@ def select_frames(
     identifier, ``channels`` on the bench's bus tag (:func:`channel_tag`),
     and ``id_map`` renames identifiers (a new ID above 0x7FF is sent extended).
     """
-    keep = None if ids is None else frozenset(ids)
-    drop = frozenset(exclude_ids or ())
-    chans = None if channels is None else frozenset(channels)
-    remap = id_map or {}
-    out: list[can.Message] = []
-    for m in frames:
-        if m.is_error_frame:
-            continue
-        fid = m.arbitration_id
-        if keep is not None and fid not in keep:
-            continue
-        if fid in drop:
-            continue
-        if chans is not None and channel_tag(m.channel) not in chans:
-            continue
-        new_id = remap.get(fid, fid)
-        out.append(
-            can.Message(
-                timestamp=m.timestamp,
-                arbitration_id=new_id,
-                is_extended_id=m.is_extended_id or new_id > 0x7FF,
-                is_remote_frame=m.is_remote_frame,
-                is_fd=m.is_fd,
-                bitrate_switch=m.bitrate_switch,
-                error_state_indicator=m.error_state_indicator,
-                dlc=m.dlc,
-                data=m.data,
-                check=False,
+    pairs = _selected(frames, ids=ids, exclude_ids=exclude_ids, channels=channels, id_map=id_map)
+    return [fresh for _, fresh in pairs]
+
+
+# -- channel remapping -----------------------------------------------------------------
+
+
+@dataclass(frozen=True, slots=True)
+class ChannelMap:
+    """One ``--channel-map CH=INTERFACE:CHANNEL``: frames of capture channel ``channel`` go to ``bus``.
+
+    ``item`` is the text as given (for messages).
+    """
+
+    item: str
+    channel: str
+    bus: BusSpec
+
+
+_CHANNEL_MAP_FORM = "CH=INTERFACE:CHANNEL (e.g. 2=socketcan:can1, 1=udp_multicast:239.0.0.1:43001)"
+
+
+def _udp_target(rest: str, where: str) -> tuple[str | None, int | None]:
+    """Group and port of ``GROUP``, ``GROUP:PORT``, ``[GROUP]:PORT`` or ``:PORT`` (udp_multicast)."""
+    group: str = rest
+    port_text: str | None = None
+    if rest.startswith("["):
+        close = rest.find("]")
+        after = rest[close + 1 :] if close >= 0 else ""
+        if close < 0 or (after and not after.startswith(":")):
+            raise BenchError(f"{where}: expected udp_multicast:[GROUP]:PORT for an IPv6 group")
+        group, port_text = rest[1:close], (after[1:] if after else None)
+    elif rest.count(":") == 1:  # IPv4 group (or none) and a port; bare IPv6 has several colons
+        group, port_text = rest.split(":")
+    port: int | None = None
+    if port_text is not None:
+        try:
+            port = int(port_text)
+        except ValueError:
+            port = -1
+        if not 0 < port < 65536:
+            raise BenchError(f"{where}: not a UDP port: {port_text!r} (1-65535)")
+    if not group:
+        return None, port
+    try:
+        is_multicast = ipaddress.ip_address(group).is_multicast
+    except ValueError:
+        raise BenchError(
+            f"{where}: not an IP address: {group!r} (a multicast group such as 239.0.0.1; "
+            "an IPv6 group with a port goes in brackets: [ff15::1]:43001)"
+        ) from None
+    if not is_multicast:
+        raise BenchError(f"{where}: {group} is not a multicast group")
+    return group, port
+
+
+def parse_channel_map(
+    items: Iterable[str], *, bitrate: int | None = None, data_bitrate: int | None = None
+) -> list[ChannelMap]:
+    """``["2=socketcan:can1", ...]`` to :class:`ChannelMap` items; errors name ``--channel-map``.
+
+    ``INTERFACE`` is any python-can interface; ``CHANNEL`` is its channel and
+    may be left out (``2=virtual``, ``2=socketcan:``) for the interface's
+    default (``vcan0``, the udp_multicast group, ``bench``).  For
+    ``udp_multicast`` the channel is ``GROUP``, ``GROUP:PORT``, ``:PORT``
+    (the default group) or ``[GROUP]:PORT`` for an IPv6 group; without a port,
+    python-can's default port.  ``bitrate``/``data_bitrate`` apply to every
+    bus (real adapters).  Only the text is checked here; whether ``CH`` is
+    in a capture is :func:`resolve_channel_map`'s part.
+    """
+    from bench._bus import check_interface, default_channel
+
+    out: list[ChannelMap] = []
+    for item in items:
+        where = f"--channel-map {item}"
+        ch, sep, target = item.partition("=")
+        ch, target = ch.strip(), target.strip()
+        if not sep or not ch or not target:
+            raise BenchError(f"--channel-map: expected {_CHANNEL_MAP_FORM}, got {item!r}")
+        interface, _, rest = target.partition(":")
+        interface, rest = interface.strip(), rest.strip()
+        try:
+            check_interface(interface)
+        except BenchError as e:
+            raise BenchError(f"{where}: {e}") from None
+        port: int | None = None
+        channel: str | None
+        if interface == "udp_multicast":
+            channel, port = _udp_target(rest, where)
+        else:
+            channel = rest or None
+        channel = channel or default_channel(interface)
+        if channel is None:
+            raise BenchError(
+                f"{where}: interface {interface} needs a channel ({ch}={interface}:CHANNEL)"
             )
-        )
-    out.sort(key=lambda m: m.timestamp)  # stable: equal stamps keep their order
+        out.append(ChannelMap(item, ch, BusSpec(interface, channel, port, bitrate, data_bitrate)))
     return out
+
+
+def _channel_key(channel: object) -> str | None:
+    return None if channel is None else str(channel)
+
+
+def resolve_channel_map(
+    maps: Sequence[ChannelMap], frames: Iterable[can.Message]
+) -> dict[str, int]:
+    """Which map item each channel of the capture follows: ``{str(channel): index in maps}``.
+
+    ``CH`` names a channel as python-can reads it (``1``, ``can1``); when no
+    channel is spelled that way, the bench's bus tag matches (``1`` finds
+    ``can1`` and ``can1`` finds ``1``, as with ``--channel-filter``).
+
+    Raises
+    ------
+    BenchError
+        ``CH`` is not in the capture, or names more than one of its channels,
+        or a channel is mapped twice; one line naming ``--channel-map`` and the item.
+    """
+    present: dict[str, None] = {}
+    for m in frames:
+        key = _channel_key(m.channel)
+        if key is not None:
+            present[key] = None
+    names = ", ".join(present) or "none: its frames carry no channel"
+    out: dict[str, int] = {}
+    for j, cm in enumerate(maps):
+        hits = [c for c in present if c == cm.channel]
+        tag = channel_tag(cm.channel)
+        if not hits and tag is not None:
+            hits = [c for c in present if channel_tag(c) == tag]
+        where = f"--channel-map {cm.item}"
+        if not hits:
+            raise BenchError(
+                f"{where}: channel {cm.channel} is not in the capture (its channels: {names})"
+            )
+        if len(hits) > 1:
+            raise BenchError(
+                f"{where}: channel {cm.channel} matches several of the capture's channels "
+                f"({', '.join(hits)}); name one exactly"
+            )
+        if hits[0] in out:
+            raise BenchError(
+                f"{where}: capture channel {hits[0]} is already mapped by "
+                f"--channel-map {maps[out[hits[0]]].item}"
+            )
+        out[hits[0]] = j
+    return out
+
+
+@dataclass(slots=True)
+class ReplayPlan:
+    """What a replay sends where.
+
+    ``buses`` are distinct (each opened once); ``route[i]`` is the index in
+    ``buses`` of frame ``i``; ``channels[b]`` lists the capture channels sent
+    on bus ``b`` (``"*"``: every channel no ``--channel-map`` names).
+    """
+
+    frames: list[can.Message]
+    route: list[int]
+    buses: list[BusSpec]
+    channels: list[list[str]]
+
+    def describe(self) -> str:
+        """``virtual:a (channel 1), udp_multicast:... (other channels)``; one bus: its name only."""
+        if len(self.buses) == 1 and self.channels[0] == ["*"]:
+            return self.buses[0].describe()
+        parts = []
+        for spec, chans in zip(self.buses, self.channels, strict=True):
+            named = [c for c in chans if c != "*"]
+            what = []
+            if named:
+                what.append(f"channel{'s' if len(named) > 1 else ''} {', '.join(named)}")
+            if "*" in chans:
+                what.append("unmapped channels")
+            parts.append(f"{spec.describe()} ({' and '.join(what)})")
+        return ", ".join(parts)
+
+
+def plan_replay(
+    frames: Iterable[can.Message],
+    *,
+    default: Callable[[], BusSpec],
+    channel_map: Sequence[ChannelMap] = (),
+    ids: Iterable[int] | None = None,
+    exclude_ids: Iterable[int] | None = None,
+    channels: Iterable[int] | None = None,
+    id_map: dict[int, int] | None = None,
+) -> ReplayPlan:
+    """Select the frames (:func:`select_frames`) and choose the bus of each.
+
+    Frames of a channel named in ``channel_map`` go to its bus; all others
+    to ``default()``, which is called only when such a frame is left after
+    the filters.  Every mapped bus is in the plan (even when the filters
+    leave it no frame); a bus named twice, or equal to the default, is one bus.
+
+    Raises
+    ------
+    BenchError
+        A ``channel_map`` item that does not fit the capture (:func:`resolve_channel_map`).
+    """
+    frames = list(frames)
+    by_channel = resolve_channel_map(channel_map, frames)
+    pairs = _selected(frames, ids=ids, exclude_ids=exclude_ids, channels=channels, id_map=id_map)
+    buses: list[BusSpec] = []
+    chans: list[list[str]] = []
+    index: dict[tuple[str, str, int | None], int] = {}
+
+    def bus_of(spec: BusSpec) -> int:
+        key = (spec.interface, spec.channel, spec.port)
+        if key not in index:
+            index[key] = len(buses)
+            buses.append(spec)
+            chans.append([])
+        return index[key]
+
+    of_map = [bus_of(cm.bus) for cm in channel_map]
+    for ch, j in by_channel.items():
+        chans[of_map[j]].append(ch)
+    default_bus: int | None = None
+    route: list[int] = []
+    for rec, _ in pairs:
+        key = _channel_key(rec.channel)
+        j_map = by_channel.get(key, -1) if key is not None else -1
+        if j_map >= 0:
+            route.append(of_map[j_map])
+            continue
+        if default_bus is None:
+            default_bus = bus_of(default())
+            chans[default_bus].append("*")
+        route.append(default_bus)
+    return ReplayPlan([fresh for _, fresh in pairs], route, buses, chans)
+
+
+@contextlib.contextmanager
+def open_buses(specs: Sequence[BusSpec]) -> Iterator[list[can.BusABC]]:
+    """Open every bus of ``specs`` in order; all are shut down on exit or on any error.
+
+    A bus that fails to open shuts down those opened before it, so an error
+    leaves nothing open (and python-can logs no "not properly shut down").
+    """
+    with contextlib.ExitStack() as stack:
+        buses: list[can.BusABC] = []
+        for spec in specs:
+            bus = spec.open()
+            stack.callback(bus.shutdown)
+            buses.append(bus)
+        yield buses
 
 
 @dataclass(slots=True)
@@ -500,6 +770,8 @@ class ReplayResult:
     skipped_gap_s: float = 0.0
     sent_at: list[float] = field(default_factory=list)
     mean_gap_s: float = 0.0
+    bus_names: list[str] = field(default_factory=list)
+    sent_per_bus: list[int] = field(default_factory=list)
 
     @property
     def error_median_us(self) -> float:
@@ -562,6 +834,14 @@ class ReplayResult:
             f"timing error vs capture: median {self.error_median_us:.1f} us, "
             f"p99 {self.error_p99_us:.1f} us, worst {self.error_worst_us:.1f} us"
             + (f"; {self.send_failures} send failures" if self.send_failures else "")
+            + self._per_bus()
+        )
+
+    def _per_bus(self) -> str:
+        if not self.bus_names:
+            return ""
+        return "; frames per bus: " + ", ".join(
+            f"{name} {n}" for name, n in zip(self.bus_names, self.sent_per_bus, strict=True)
         )
 
 
@@ -600,7 +880,7 @@ def _send(bus: can.BusABC, msg: can.Message) -> bool:
 
 
 def replay_frames(
-    bus: can.BusABC,
+    bus: can.BusABC | Sequence[can.BusABC],
     frames: Sequence[can.Message],
     *,
     speed: float = 1.0,
@@ -609,11 +889,16 @@ def replay_frames(
     max_gap_s: float | None = None,
     spin_s: float = 0.0002,
     stop: Callable[[], bool] = lambda: False,
+    route: Sequence[int] | None = None,
+    bus_names: Sequence[str] | None = None,
 ) -> ReplayResult:
     """Send ``frames`` on ``bus`` at their recorded times (absolute deadlines).
 
     Parameters
     ----------
+    bus : can.BusABC or sequence of can.BusABC
+        One bus, or several: frame ``i`` goes to ``bus[route[i]]``.  All
+        share one absolute time line (the schedule does not depend on the bus).
     speed : float
         Time compression: 2 replays twice as fast.
     loops : int
@@ -625,7 +910,20 @@ def replay_frames(
         ``"messagesync"`` (:class:`can.MessageSync`, sleep only).
     max_gap_s : float, optional
         Shorten silences longer than this (capture seconds).
+    route : sequence of int, optional
+        Index into ``bus`` of each frame (default: all on the first).
+    bus_names : sequence of str, optional
+        Names of the buses, for :meth:`ReplayResult.summary` (frames per bus).
     """
+    buses = [bus] if isinstance(bus, can.BusABC) else list(bus)
+    if not buses:
+        raise ValueError("replay_frames: no bus")
+    route = [0] * len(frames) if route is None else list(route)
+    if len(route) != len(frames) or any(not 0 <= r < len(buses) for r in route):
+        raise ValueError("replay_frames: route must give a bus index for every frame")
+    if bus_names is not None and len(bus_names) != len(buses):
+        raise ValueError("replay_frames: bus_names must name every bus")
+    target_bus = [buses[r] for r in route]  # one lookup per frame in the send loop
     if clock not in CLOCKS:
         raise BenchError(f"--clock: unknown {clock!r} (known: {', '.join(CLOCKS)})")
     if loops < 0:
@@ -658,7 +956,7 @@ def replay_frames(
                         sleep(rem - spin_s)
                 errors.append(now - target)
                 sent_at.append(now)
-                if not _send(bus, frames[i]):
+                if not _send(target_bus[i], frames[i]):
                     failures += 1
             j += 1
             done_loops = j
@@ -681,12 +979,19 @@ def replay_frames(
             target = t_start + (stamp.timestamp - frames[0].timestamp)
             errors.append(now - target)
             sent_at.append(now)
-            if not _send(bus, frames[i % n]):
+            if not _send(target_bus[i % n], frames[i % n]):
                 failures += 1
             i += 1
         t0 = t_start
         done_loops = i // n
     wall = perf() - t0
+    per_loop = [0] * len(buses)
+    for r in route:
+        per_loop[r] += 1
+    full, rest = divmod(len(errors), n)
+    per_bus = [full * c for c in per_loop]
+    for r in route[:rest]:
+        per_bus[r] += 1
     return ReplayResult(
         sent=len(errors),
         loops=done_loops,
@@ -699,4 +1004,6 @@ def replay_frames(
         skipped_gap_s=cut,
         sent_at=sent_at,
         mean_gap_s=offs[-1] / (n - 1) if n > 1 else 0.0,
+        bus_names=list(bus_names or []),
+        sent_per_bus=per_bus,
     )
