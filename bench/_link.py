@@ -18,9 +18,18 @@ frame is recovered by the plant's retransmission: a repeated sample on A
 makes the link repeat what it has already released.
 
 Real time: each frame is released ``delay + jitter`` microseconds after it
-was received (absolute times, a heap ordered by release time; frames of one
-direction may overtake each other when the jitter exceeds their spacing,
-as on a real gateway with queues).
+was received, never before (a negative draw is clipped to no delay; absolute
+times, a heap ordered by release time; frames of one direction may overtake
+each other when the jitter exceeds their spacing, as on a real gateway with
+queues).  ``BenchCommand`` frames pass at once, never jittered nor dropped,
+in both modes.
+
+Per direction: the sample direction (``PhaseSamples`` and ``PlantTruth``,
+A to B) and the duty direction (``PwmDuty``, B to A) each have their own
+delay, jitter and drop probability.  One seed serves the link; each direction
+draws its drops and its jitter from random streams of its own derived from
+the seed (:func:`direction_rng`), so the settings or the traffic of one
+direction never change the draws of the other.
 """
 
 from __future__ import annotations
@@ -38,8 +47,38 @@ from bench._codec import Codec
 from bench._nodes import unwrap
 
 
+def direction_rng(seed: int, direction: str, kind: str) -> random.Random:
+    """The random stream of one direction (``"samples"``, ``"duties"``) and use
+    (``"drop"``, ``"jitter"``) of a link seeded with ``seed``.
+
+    Seeded from a string (hashed with SHA-512 by :class:`random.Random`), so
+    the streams of one seed are unrelated to each other and do not depend on
+    ``PYTHONHASHSEED``.
+    """
+    return random.Random(f"bench-link/{direction}/{kind}/{seed}")
+
+
+def _resolve(shared: float, own: float | None) -> float:
+    return shared if own is None else own
+
+
 class LockstepLink:
-    """Period-counting link logic (no I/O): frames in, frames out per side."""
+    """Period-counting link logic (no I/O): frames in, frames out per side.
+
+    Parameters
+    ----------
+    codec : Codec
+        The DBC codec (frame IDs, step counters).
+    sample_delay, duty_delay : int
+        Fixed delay of the sample (A to B) and duty (B to A) directions,
+        whole PWM periods.
+    drop_prob : float
+        Drop probability per frame, both directions.
+    seed : int
+        Seed of the drop streams (one per direction, :func:`direction_rng`).
+    sample_drop_prob, duty_drop_prob : float or None
+        Drop probability of one direction; ``None``: ``drop_prob``.
+    """
 
     def __init__(
         self,
@@ -49,12 +88,16 @@ class LockstepLink:
         duty_delay: int,
         drop_prob: float = 0.0,
         seed: int = 0,
+        sample_drop_prob: float | None = None,
+        duty_drop_prob: float | None = None,
     ) -> None:
         self.codec = codec
         self.n_s = sample_delay
         self.n_d = duty_delay
-        self.drop_prob = drop_prob
-        self.rng = random.Random(seed)
+        self.p_s = _resolve(drop_prob, sample_drop_prob)
+        self.p_d = _resolve(drop_prob, duty_drop_prob)
+        self.rng_s = direction_rng(seed, "samples", "drop")
+        self.rng_d = direction_rng(seed, "duties", "drop")
         self.m = 1 << codec.step_bits("PhaseSamples")
         self.id_samples = codec.frame_id("PhaseSamples")
         self.id_truth = codec.frame_id("PlantTruth")
@@ -65,13 +108,13 @@ class LockstepLink:
         self.held_a: deque[tuple[int, can.Message]] = deque()
         self.released_b: dict[int, list[can.Message]] = {}
         self.released_a: deque[can.Message] = deque(maxlen=4)
-        self.dropped = 0
+        self.dropped_samples = 0
+        self.dropped_duties = 0
 
-    def _drop(self) -> bool:
-        if self.drop_prob and self.rng.random() < self.drop_prob:
-            self.dropped += 1
-            return True
-        return False
+    @property
+    def dropped(self) -> int:
+        """Frames dropped on purpose, both directions."""
+        return self.dropped_samples + self.dropped_duties
 
     def _release(self) -> tuple[list[can.Message], list[can.Message]]:
         to_b: list[can.Message] = []
@@ -80,12 +123,16 @@ class LockstepLink:
             j, m = self.held_b.popleft()
             self.released_b.setdefault(j, []).append(m)
             self.released_b.pop(j - 8, None)
-            if not self._drop():
+            if self.p_s and self.rng_s.random() < self.p_s:
+                self.dropped_samples += 1
+            else:
                 to_b.append(m)
         while self.held_a and self.held_a[0][0] <= self.latest_a:
             _, m = self.held_a.popleft()
             self.released_a.append(m)
-            if not self._drop():
+            if self.p_d and self.rng_d.random() < self.p_d:
+                self.dropped_duties += 1
+            else:
                 to_a.append(m)
         return to_b, to_a
 
@@ -127,8 +174,68 @@ class LockstepLink:
         return self._release()
 
 
+class _Way:
+    """One direction of a :class:`RealtimeLink` (delays in seconds)."""
+
+    __slots__ = ("delay", "dist", "drop_prob", "dropped", "jit", "rng_drop", "rng_jit", "side")
+
+    def __init__(
+        self,
+        side: str,
+        delay: float,
+        jit: float,
+        dist: str,
+        drop_prob: float,
+        rng_drop: random.Random,
+        rng_jit: random.Random,
+    ) -> None:
+        self.side = side
+        self.delay = delay
+        self.jit = jit
+        self.dist = dist
+        self.drop_prob = drop_prob
+        self.rng_drop = rng_drop
+        self.rng_jit = rng_jit
+        self.dropped = 0
+
+    def hold(self) -> float | None:
+        """How long to hold a frame, s (>= 0); ``None``: drop it."""
+        if self.drop_prob and self.rng_drop.random() < self.drop_prob:
+            self.dropped += 1
+            return None
+        if not self.jit:
+            return self.delay
+        if self.dist == "uniform":
+            j = self.rng_jit.uniform(-self.jit, self.jit)
+        else:
+            j = self.rng_jit.gauss(0.0, self.jit)
+        d = self.delay + j
+        return d if d > 0.0 else 0.0
+
+
 class RealtimeLink:
-    """Time-based link logic: frames get a release time; :meth:`due` pops them."""
+    """Time-based link logic: frames get a release time; :meth:`due` pops them.
+
+    Parameters
+    ----------
+    codec : Codec
+        The DBC codec (frame IDs).
+    sample_delay_us, duty_delay_us : float
+        Fixed delay of the sample (A to B) and duty (B to A) directions, us.
+    jitter_us : float
+        Jitter, both directions, us: standard deviation (``"normal"``) or
+        half-width (``"uniform"``).  The delay is ``max(0, delay + jitter)``.
+    jitter_dist : str
+        ``"normal"`` or ``"uniform"``.
+    drop_prob : float
+        Drop probability per frame, both directions.
+    seed : int
+        Seed of the random streams (two per direction, :func:`direction_rng`).
+    clock : callable
+        Time in seconds (monotonic).
+    sample_jitter_us, duty_jitter_us, sample_drop_prob, duty_drop_prob : float or None
+        One direction's jitter or drop probability; ``None``: the shared one.
+    """
 
     def __init__(
         self,
@@ -141,46 +248,71 @@ class RealtimeLink:
         drop_prob: float = 0.0,
         seed: int = 0,
         clock: Callable[[], float] = time.perf_counter,
+        sample_jitter_us: float | None = None,
+        duty_jitter_us: float | None = None,
+        sample_drop_prob: float | None = None,
+        duty_drop_prob: float | None = None,
     ) -> None:
         self.codec = codec
-        self.d_s = sample_delay_us * 1e-6
-        self.d_d = duty_delay_us * 1e-6
-        self.jit = jitter_us * 1e-6
-        self.dist = jitter_dist
-        self.drop_prob = drop_prob
-        self.rng = random.Random(seed)
+        self.samples = _Way(
+            "b",
+            sample_delay_us * 1e-6,
+            _resolve(jitter_us, sample_jitter_us) * 1e-6,
+            jitter_dist,
+            _resolve(drop_prob, sample_drop_prob),
+            direction_rng(seed, "samples", "drop"),
+            direction_rng(seed, "samples", "jitter"),
+        )
+        self.duties = _Way(
+            "a",
+            duty_delay_us * 1e-6,
+            _resolve(jitter_us, duty_jitter_us) * 1e-6,
+            jitter_dist,
+            _resolve(drop_prob, duty_drop_prob),
+            direction_rng(seed, "duties", "drop"),
+            direction_rng(seed, "duties", "jitter"),
+        )
         self.clock = clock
         self.heap: list[tuple[float, int, str, can.Message]] = []
         self.n = 0
-        self.dropped = 0
         self.forward_a = {codec.frame_id("PhaseSamples"), codec.frame_id("PlantTruth")}
         self.id_duty = codec.frame_id("PwmDuty")
         self.id_cmd = codec.frame_id("BenchCommand")
 
-    def _jitter(self) -> float:
-        if not self.jit:
-            return 0.0
-        if self.dist == "uniform":
-            return self.rng.uniform(-self.jit, self.jit)
-        return self.rng.gauss(0.0, self.jit)
+    @property
+    def dropped_samples(self) -> int:
+        """Sample-direction frames (A to B) dropped on purpose."""
+        return self.samples.dropped
 
-    def _push(self, delay: float, side: str, msg: can.Message) -> None:
-        if self.drop_prob and self.rng.random() < self.drop_prob:
-            self.dropped += 1
-            return
-        t = self.clock() + max(0.0, delay + self._jitter())
+    @property
+    def dropped_duties(self) -> int:
+        """Duty-direction frames (B to A) dropped on purpose."""
+        return self.duties.dropped
+
+    @property
+    def dropped(self) -> int:
+        """Frames dropped on purpose, both directions."""
+        return self.samples.dropped + self.duties.dropped
+
+    def _push(self, hold: float, side: str, msg: can.Message) -> None:
         self.n += 1
-        heapq.heappush(self.heap, (t, self.n, side, msg))
+        heapq.heappush(self.heap, (self.clock() + hold, self.n, side, msg))
 
     def from_a(self, msg: can.Message) -> None:
+        """A frame seen on A (the plant's bus)."""
         if msg.arbitration_id in self.forward_a:
-            self._push(self.d_s, "b", msg)
+            hold = self.samples.hold()
+            if hold is not None:
+                self._push(hold, "b", msg)
         elif msg.arbitration_id == self.id_cmd:
             self._push(0.0, "b", msg)
 
     def from_b(self, msg: can.Message) -> None:
+        """A frame seen on B (the controller's bus)."""
         if msg.arbitration_id == self.id_duty:
-            self._push(self.d_d, "a", msg)
+            hold = self.duties.hold()
+            if hold is not None:
+                self._push(hold, "a", msg)
 
     def next_time(self) -> float | None:
         return self.heap[0][0] if self.heap else None

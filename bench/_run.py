@@ -308,8 +308,11 @@ def run_scenario(
                 "--sample-delay-steps", str(lt.sample_delay_steps),
                 "--duty-delay-us", repr(lt.duty_delay_us),
                 "--sample-delay-us", repr(lt.sample_delay_us),
-                "--jitter-us", repr(lt.jitter_us), "--jitter-dist", lt.jitter_dist,
-                "--drop-prob", repr(lt.drop_prob),
+                "--duty-jitter-us", repr(lt.duty.jitter_us),
+                "--sample-jitter-us", repr(lt.sample.jitter_us),
+                "--jitter-dist", lt.jitter_dist,
+                "--duty-drop-prob", repr(lt.duty.drop_prob),
+                "--sample-drop-prob", repr(lt.sample.drop_prob),
             ]  # fmt: skip
             roles.insert(0, ("link", spec, link_args))
         for role, sp, extra in roles:
@@ -574,8 +577,11 @@ def finish_run(
             "duties_steps": lt.duty_delay_steps,
             "samples_us": lt.sample_delay_us,
             "duties_us": lt.duty_delay_us,
-            "jitter_us": lt.jitter_us,
-            "drop_prob": lt.drop_prob,
+            "samples_jitter_us": lt.sample.jitter_us,
+            "duties_jitter_us": lt.duty.jitter_us,
+            "jitter_dist": lt.jitter_dist,
+            "samples_drop_prob": lt.sample.drop_prob,
+            "duties_drop_prob": lt.duty.drop_prob,
         }
     if plant_r.get("jitter"):
         m["jitter_us"] = plant_r["jitter"]

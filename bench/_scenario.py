@@ -37,9 +37,18 @@ Schema (all keys optional unless marked *required*)::
     sample_delay_steps = 0
     duty_delay_us = 0.0              # real-time mode: microseconds per direction
     sample_delay_us = 0.0
-    jitter_us = 0.0                  # real-time: standard deviation (normal) or half-width (uniform)
-    jitter_dist = "normal"           # "normal" | "uniform"
-    drop_prob = 0.0                  # per frame, each direction
+    jitter_us = 0.0                  # real-time: standard deviation (normal) or half-width
+                                     # (uniform), both directions
+    duty_jitter_us = 0.0             # per direction; default jitter_us, wins over it when both given
+    sample_jitter_us = 0.0
+    jitter_dist = "normal"           # "normal" | "uniform", both directions
+    drop_prob = 0.0                  # per frame, both directions
+    duty_drop_prob = 0.0             # per direction; default drop_prob, wins over it when both given
+    sample_drop_prob = 0.0           # (the seed gives each direction a random stream of its own:
+                                     # one direction's settings never change the other's draws)
+    [motor]                          # explicit motor parameters (SI) replacing the preset's,
+    R_s = 2.8                        # for plant and controller alike; any of n_p, R_s, L_d,
+    L_q = 0.082                      # L_q, psi_f, J, b, i_rated, i_max, tau_rated, w_m_rated
     [controller_model]               # the controller's parameter errors: factors on the
     R_s = 1.0                        # plant's values (1.0 exact, 1.2 = believes 20 % more);
     L_d = 1.0                        # the plant keeps the preset's values
@@ -102,8 +111,41 @@ class Profile:
 
 
 @dataclass(frozen=True, slots=True)
+class Direction:
+    """The latency of one direction of the link, shared values resolved.
+
+    Attributes
+    ----------
+    delay_steps : int
+        Lockstep: fixed delay, whole PWM periods.
+    delay_us : float
+        Real time: fixed delay, us.
+    jitter_us : float
+        Real time: standard deviation (normal) or half-width (uniform) of the
+        jitter added to ``delay_us``, us.
+    drop_prob : float
+        Probability that a frame of this direction is dropped.
+    """
+
+    delay_steps: int
+    delay_us: float
+    jitter_us: float
+    drop_prob: float
+
+
+@dataclass(frozen=True, slots=True)
 class Latency:
-    """Latency injected on the link, per direction."""
+    """Latency injected on the link, per direction.
+
+    The duty direction carries ``PwmDuty`` to the plant, the sample direction
+    ``PhaseSamples`` and ``PlantTruth`` to the controller.  ``jitter_us`` and
+    ``drop_prob`` apply to both directions; ``duty_jitter_us``,
+    ``sample_jitter_us``, ``duty_drop_prob`` and ``sample_drop_prob`` (``None``:
+    not given) override them for one direction, and win when a file gives
+    both.  Use :attr:`duty` and :attr:`sample` for the values in force.  One
+    ``jitter_dist`` and the scenario's one ``seed`` serve both directions;
+    the link derives a separate random stream per direction from the seed.
+    """
 
     duty_delay_steps: int = 0
     sample_delay_steps: int = 0
@@ -112,17 +154,70 @@ class Latency:
     jitter_us: float = 0.0
     jitter_dist: str = "normal"
     drop_prob: float = 0.0
+    duty_jitter_us: float | None = None
+    sample_jitter_us: float | None = None
+    duty_drop_prob: float | None = None
+    sample_drop_prob: float | None = None
+
+    @property
+    def duty(self) -> Direction:
+        """Duties to the plant (B to A), shared values resolved."""
+        return Direction(
+            delay_steps=self.duty_delay_steps,
+            delay_us=self.duty_delay_us,
+            jitter_us=self.jitter_us if self.duty_jitter_us is None else self.duty_jitter_us,
+            drop_prob=self.drop_prob if self.duty_drop_prob is None else self.duty_drop_prob,
+        )
+
+    @property
+    def sample(self) -> Direction:
+        """Samples (and truth) to the controller (A to B), shared values resolved."""
+        return Direction(
+            delay_steps=self.sample_delay_steps,
+            delay_us=self.sample_delay_us,
+            jitter_us=self.jitter_us if self.sample_jitter_us is None else self.sample_jitter_us,
+            drop_prob=self.drop_prob if self.sample_drop_prob is None else self.sample_drop_prob,
+        )
 
     @property
     def any(self) -> bool:
+        d, s = self.duty, self.sample
         return bool(
-            self.duty_delay_steps
-            or self.sample_delay_steps
-            or self.duty_delay_us
-            or self.sample_delay_us
-            or self.jitter_us
-            or self.drop_prob
+            d.delay_steps
+            or s.delay_steps
+            or d.delay_us
+            or s.delay_us
+            or d.jitter_us
+            or s.jitter_us
+            or d.drop_prob
+            or s.drop_prob
         )
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain representation; per-direction keys only when given (exact round trip)."""
+        out: dict[str, Any] = {
+            "duty_delay_steps": self.duty_delay_steps,
+            "sample_delay_steps": self.sample_delay_steps,
+            "duty_delay_us": self.duty_delay_us,
+            "sample_delay_us": self.sample_delay_us,
+            "jitter_us": self.jitter_us,
+            "jitter_dist": self.jitter_dist,
+            "drop_prob": self.drop_prob,
+        }
+        for k in _LATENCY_DIRECTION_KEYS:
+            v = getattr(self, k)
+            if v is not None:
+                out[k] = v
+        return out
+
+
+#: Per-direction keys of ``[latency]`` that override a shared one when given.
+_LATENCY_DIRECTION_KEYS = (
+    "duty_jitter_us",
+    "sample_jitter_us",
+    "duty_drop_prob",
+    "sample_drop_prob",
+)
 
 
 @dataclass(frozen=True, slots=True)
@@ -182,6 +277,8 @@ class Scenario:
     latency: Latency = field(default_factory=Latency)
     controller_model: ModelErrors = field(default_factory=ModelErrors)
     paper_result: dict[str, Any] = field(default_factory=dict)
+    #: Explicit motor parameters (SI units) replacing the preset's (``[motor]``).
+    motor: dict[str, float] = field(default_factory=dict)
 
     def with_overrides(self, **kw: Any) -> Scenario:
         """A copy with some fields replaced (command-line options).
@@ -223,16 +320,9 @@ class Scenario:
                 "adc_bits": self.noise.adc_bits,
                 "adc_full_scale_a": self.noise.adc_full_scale_a,
             },
-            "latency": {
-                "duty_delay_steps": self.latency.duty_delay_steps,
-                "sample_delay_steps": self.latency.sample_delay_steps,
-                "duty_delay_us": self.latency.duty_delay_us,
-                "sample_delay_us": self.latency.sample_delay_us,
-                "jitter_us": self.latency.jitter_us,
-                "jitter_dist": self.latency.jitter_dist,
-                "drop_prob": self.latency.drop_prob,
-            },
+            "latency": self.latency.to_dict(),
             "controller_model": {k: getattr(self.controller_model, k) for k in MODEL_ERROR_KEYS},
+            "motor": dict(self.motor),
             "paper_result": dict(self.paper_result),
         }
 
@@ -259,8 +349,14 @@ _TOP_KEYS = {
     "noise",
     "latency",
     "controller_model",
+    "motor",
     "paper_result",
 }
+
+#: Keys of the ``[motor]`` table: the fields of :class:`plant_rt.MotorPars`.
+MOTOR_KEYS = (
+    "n_p", "R_s", "L_d", "L_q", "psi_f", "J", "b", "i_rated", "i_max", "tau_rated", "w_m_rated",
+)  # fmt: skip
 
 
 def scenario_path(name_or_path: str) -> Path:
@@ -371,6 +467,43 @@ class _Reader:
         return Profile(tuple(pts))
 
 
+def _parse_latency(r: _Reader) -> Latency:
+    """The ``[latency]`` table; a per-direction key wins over the shared one."""
+    lt = r.table(
+        "latency",
+        {
+            "duty_delay_steps",
+            "sample_delay_steps",
+            "duty_delay_us",
+            "sample_delay_us",
+            "jitter_us",
+            "jitter_dist",
+            "drop_prob",
+            *_LATENCY_DIRECTION_KEYS,
+        },
+    )
+    dist = lt.string("jitter_dist", "normal")
+    if dist not in ("normal", "uniform"):
+        raise lt.fail("jitter_dist", f"expected 'normal' or 'uniform', got {dist!r}")
+
+    def opt(key: str, hi: float | None) -> float | None:
+        return lt.num(key, 0.0, lo=0.0, hi=hi) if key in lt.t else None
+
+    return Latency(
+        duty_delay_steps=lt.integer("duty_delay_steps", 0, lo=0),
+        sample_delay_steps=lt.integer("sample_delay_steps", 0, lo=0),
+        duty_delay_us=lt.num("duty_delay_us", 0.0, lo=0.0),
+        sample_delay_us=lt.num("sample_delay_us", 0.0, lo=0.0),
+        jitter_us=lt.num("jitter_us", 0.0, lo=0.0),
+        jitter_dist=dist,
+        drop_prob=lt.num("drop_prob", 0.0, lo=0.0, hi=1.0),
+        duty_jitter_us=opt("duty_jitter_us", None),
+        sample_jitter_us=opt("sample_jitter_us", None),
+        duty_drop_prob=opt("duty_drop_prob", 1.0),
+        sample_drop_prob=opt("sample_drop_prob", 1.0),
+    )
+
+
 def parse_scenario(data: dict[str, Any], src: str) -> Scenario:
     """Validate a scenario table (already parsed from TOML)."""
     from controller import ESTIMATOR_NAMES
@@ -420,30 +553,7 @@ def parse_scenario(data: dict[str, Any], src: str) -> Scenario:
     )
     if noise.adc_bits and noise.adc_full_scale_a <= 0:
         raise nz.fail("adc_full_scale_a", "must be > 0 when adc_bits is set")
-    lt = r.table(
-        "latency",
-        {
-            "duty_delay_steps",
-            "sample_delay_steps",
-            "duty_delay_us",
-            "sample_delay_us",
-            "jitter_us",
-            "jitter_dist",
-            "drop_prob",
-        },
-    )
-    dist = lt.string("jitter_dist", "normal")
-    if dist not in ("normal", "uniform"):
-        raise lt.fail("jitter_dist", f"expected 'normal' or 'uniform', got {dist!r}")
-    latency = Latency(
-        duty_delay_steps=lt.integer("duty_delay_steps", 0, lo=0),
-        sample_delay_steps=lt.integer("sample_delay_steps", 0, lo=0),
-        duty_delay_us=lt.num("duty_delay_us", 0.0, lo=0.0),
-        sample_delay_us=lt.num("sample_delay_us", 0.0, lo=0.0),
-        jitter_us=lt.num("jitter_us", 0.0, lo=0.0),
-        jitter_dist=dist,
-        drop_prob=lt.num("drop_prob", 0.0, lo=0.0, hi=1.0),
-    )
+    latency = _parse_latency(r)
     cm = r.table("controller_model", set(MODEL_ERROR_KEYS))
     factors: dict[str, float] = {}
     for k in MODEL_ERROR_KEYS:
@@ -452,6 +562,19 @@ def parse_scenario(data: dict[str, Any], src: str) -> Scenario:
             raise cm.fail(k, f"must be a positive factor (1.0 = exact), got {v}")
         factors[k] = v
     controller_model = ModelErrors(**factors)
+    mt = r.table("motor", set(MOTOR_KEYS))
+    motor: dict[str, float] = {}
+    for k in MOTOR_KEYS:
+        if k in mt.t:
+            if k == "n_p":
+                motor[k] = mt.integer(k, 0, lo=1)
+            elif k in ("psi_f", "b"):
+                motor[k] = mt.num(k, lo=0.0)
+            else:
+                v = mt.num(k)
+                if not v > 0.0:
+                    raise mt.fail(k, f"must be > 0, got {v}")
+                motor[k] = v
     opts = r.table("estimator_options").t
     paper = r.table("paper_result").t
     duration = r.num("duration", lo=1e-3)
@@ -487,6 +610,7 @@ def parse_scenario(data: dict[str, Any], src: str) -> Scenario:
         latency=latency,
         controller_model=controller_model,
         paper_result=dict(paper),
+        motor=motor,
     )
 
 

@@ -7,7 +7,7 @@ objects here, so they agree on the motor, the rate and the references.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 from bench._errors import ScenarioError
@@ -29,10 +29,22 @@ class PlannedCommand:
 
 
 def get_preset(scn: Scenario) -> Preset:
+    """The scenario's preset, with its ``[motor]`` parameters in place of the preset's."""
     try:
-        return preset(scn.preset)
+        p = preset(scn.preset)
     except KeyError as e:
         raise ScenarioError(f"{scn.source}: field 'preset': {e.args[0] if e.args else e}") from None
+    if not scn.motor:
+        return p
+    over: dict[str, Any] = dict(scn.motor)  # n_p an int, the rest floats (checked on load)
+    try:
+        motor = replace(p.motor, **over)
+    except (ValueError, TypeError) as e:
+        raise ScenarioError(f"{scn.source}: field 'motor': {e}") from None
+    given = ", ".join(f"{k} = {v:g}" for k, v in scn.motor.items())
+    return replace(
+        p, motor=motor, doc=f"{p.doc}\n\nReplaced by the scenario's [motor] table: {given}."
+    )
 
 
 def sample_period(scn: Scenario) -> float:

@@ -362,14 +362,18 @@ def cmd_link(args: argparse.Namespace) -> int:
     if not iface or not chan:
         raise BenchError(f"--to: expected INTERFACE:CHANNEL, got {args.to!r}")
     b = BusSpec(iface, chan, args.to_port)
-    if not 0.0 <= args.drop_prob <= 1.0:
-        raise BenchError(f"--drop-prob: a probability in [0, 1], got {args.drop_prob}")
+    for opt in ("drop_prob", "duty_drop_prob", "sample_drop_prob"):
+        v = getattr(args, opt)
+        if v is not None and not 0.0 <= v <= 1.0:
+            raise BenchError(f"--{opt.replace('_', '-')}: a probability in [0, 1], got {v}")
     for opt in (
         "delay_steps",
         "sample_delay_steps",
         "duty_delay_us",
         "sample_delay_us",
         "jitter_us",
+        "duty_jitter_us",
+        "sample_jitter_us",
     ):
         v = getattr(args, opt)
         if v is not None and v < 0:
@@ -387,6 +391,8 @@ def cmd_link(args: argparse.Namespace) -> int:
             duty_delay=args.delay_steps or 0,
             drop_prob=args.drop_prob,
             seed=args.seed or 0,
+            sample_drop_prob=args.sample_drop_prob,
+            duty_drop_prob=args.duty_drop_prob,
         )
     else:
         logic = RealtimeLink(
@@ -397,6 +403,10 @@ def cmd_link(args: argparse.Namespace) -> int:
             jitter_dist=args.jitter_dist,
             drop_prob=args.drop_prob,
             seed=args.seed or 0,
+            sample_jitter_us=args.sample_jitter_us,
+            duty_jitter_us=args.duty_jitter_us,
+            sample_drop_prob=args.sample_drop_prob,
+            duty_drop_prob=args.duty_drop_prob,
         )
     bus_a = a.open()
     try:
@@ -415,7 +425,8 @@ def cmd_link(args: argparse.Namespace) -> int:
         bus_b.shutdown()
         print(
             f"link: forwarded {sent.get('a_to_b', 0)} frames {a.describe()} -> {b.describe()}, "
-            f"{sent.get('b_to_a', 0)} back; dropped {logic.dropped} on purpose",
+            f"{sent.get('b_to_a', 0)} back; dropped {logic.dropped_samples} samples/truth and "
+            f"{logic.dropped_duties} duties on purpose",
             file=sys.stderr,
         )
     return 0
@@ -539,10 +550,31 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--sample-delay-us", type=_NONNEG_FLOAT, default=0.0, help="real time: sample direction"
     )
-    p.add_argument("--jitter-us", type=_NONNEG_FLOAT, default=0.0)
+    p.add_argument(
+        "--jitter-us",
+        type=_NONNEG_FLOAT,
+        default=0.0,
+        help="real time, both directions: standard deviation (normal) or half-width (uniform)",
+    )
+    for way in ("duty", "sample"):
+        p.add_argument(
+            f"--{way}-jitter-us",
+            type=_NONNEG_FLOAT,
+            help=f"real time: jitter of the {way} direction (default: --jitter-us)",
+        )
     p.add_argument("--jitter-dist", choices=("normal", "uniform"), default="normal")
-    p.add_argument("--drop-prob", type=float, default=0.0)
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument(
+        "--drop-prob", type=float, default=0.0, help="per frame, both directions, in [0, 1]"
+    )
+    for way in ("duty", "sample"):
+        p.add_argument(
+            f"--{way}-drop-prob",
+            type=float,
+            help=f"drop probability of the {way} direction (default: --drop-prob)",
+        )
+    p.add_argument(
+        "--seed", type=int, default=0, help="seed of the drops and jitter (a stream per direction)"
+    )
     p.add_argument("--duration", type=float, help="ignored (accepted for symmetry with the nodes)")
     p.add_argument(
         "--idle-s", type=float, default=30.0, help="exit after this long without traffic"
