@@ -155,11 +155,13 @@ def test_killed_controller_puts_the_plant_in_safe_state(tmp_path: Path) -> None:
     json.loads((out / "metrics.json").read_text())
 
 
-def test_sigint_stops_every_process_and_flushes_the_files(tmp_path: Path) -> None:
-    sig = signal.SIGINT
-    out = tmp_path / "sigint"
-    proc = _bench_run(out, 1, 60.0)
-    _wait_running(1)
+@pytest.mark.parametrize(("sig", "k"), [(signal.SIGINT, 1), (signal.SIGTERM, 2)])
+def test_a_signal_mid_run_stops_every_process_and_flushes_the_files(
+    tmp_path: Path, sig: signal.Signals, k: int
+) -> None:
+    out = tmp_path / "sig"
+    proc = _bench_run(out, k, 60.0)
+    _wait_running(k)
     kids = _children(out)
     assert len(kids) == 2
     proc.send_signal(sig)
