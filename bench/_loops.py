@@ -17,10 +17,11 @@ import can
 
 from bench._codec import Codec
 from bench._errors import BenchError
-from bench._nodes import STATE_IDLE, ControllerNode, NodeCounters, PlantNode
+from bench._nodes import CMD_NONE, STATE_IDLE, ControllerNode, NodeCounters, PlantNode
 from bench._rt import no_gc
 from bench._scenario import Scenario
 from bench._setup import (
+    PlannedCommand,
     build_controller,
     build_plant,
     command_schedule,
@@ -92,11 +93,31 @@ def make_controller_node(scn: Scenario, estimator: str, codec: Codec) -> Control
     )
 
 
-def command_frames(scn: Scenario, codec: Codec) -> list[tuple[int, can.Message]]:
-    """The scenario's bench commands as frames, with their apply steps."""
+def command_frames(
+    scn: Scenario, codec: Codec, pace_every: int = 0
+) -> list[tuple[int, can.Message]]:
+    """The scenario's bench commands as frames, with their apply steps.
+
+    ``pace_every > 0`` adds a keep-alive (``cmd`` 0, the references already
+    in force, so nothing changes) at every multiple of ``pace_every`` that
+    has no command of its own: the pace tokens of a paced lockstep plant
+    (:attr:`bench._nodes.PlantNode.pace_every`).
+    """
     m = 1 << codec.step_bits("BenchCommand")
+    plan = command_schedule(scn)
+    if pace_every > 0:
+        have = {c.apply_step for c in plan}
+        extra = []
+        j = 0
+        for k in range(pace_every, plan[-1].apply_step, pace_every):
+            while j + 1 < len(plan) and plan[j + 1].apply_step < k:
+                j += 1
+            if k not in have:
+                c = plan[j]
+                extra.append(PlannedCommand(k, CMD_NONE, c.speed_ref_rpm, c.load_nm))
+        plan = sorted([*plan, *extra], key=lambda c: c.apply_step)
     out = []
-    for i, c in enumerate(command_schedule(scn)):
+    for i, c in enumerate(plan):
         msg = codec.encode(
             "BenchCommand",
             {
@@ -281,6 +302,21 @@ def _serve_plant(
                     _send_all(bus, node.retransmit(), node.counters)
                     t_wait = now
             if not node.ready():
+                break
+            # paced by bench run: not ahead of the commands (and so of its recorder)
+            while not node.paced():
+                if stop():
+                    break
+                msg = bus.recv(RETRANSMIT_S)
+                if msg is not None:
+                    if msg.arbitration_id in ids:
+                        node.on_message(msg)
+                elif time.monotonic() - last_progress > watchdog_s:
+                    raise BenchError(
+                        f"plant: no bench command for step {node.plant.k} in {watchdog_s:.0f} s "
+                        "(paced by bench run: has its recorder stopped?)"
+                    )
+            if not node.paced():
                 break
             _send_all(bus, node.advance_lockstep(), node.counters)
             last_progress = time.monotonic()

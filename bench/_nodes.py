@@ -163,33 +163,35 @@ class _CommandQueue:
         self.recent: deque[tuple[int, int]] = deque(maxlen=64)
         self.next_step = _FAR
 
-    def add(self, sig: dict[str, float], now: int, counters: NodeCounters) -> None:
+    def add(self, sig: dict[str, float], now: int, counters: NodeCounters) -> int | None:
+        """Queue a command; its unwrapped apply step if it is known now (new or a repeat)."""
         s = unwrap(int(sig["step"]), now, self.modulus)
         key = (s, int(sig["seq"]))
         if key in self.recent:
             counters.reject(REPEATED_COUNTER)
-            return
+            return s
         if s <= self.applied_upto:
             if s < self.applied_upto - self.modulus // 4:
                 counters.reject(REJECT_STALE_COUNTER)
-                return
+                return None
             if s in self.pending:
                 counters.reject(REPEATED_COUNTER)
-                return
+                return s
             counters.late_commands += 1
             s = self.applied_upto + 1
         if s in self.pending:
             counters.reject(REPEATED_COUNTER)
-            return
+            return s
         if len(self.pending) >= MAX_PENDING_COMMANDS:
             counters.reject(REJECT_QUEUE_FULL)
-            return
+            return None
         counters.frames_accepted += 1
         self.recent.append(key)
         self.next_step = min(self.next_step, s)
         self.pending[s] = Command(
             s, int(sig["cmd"]), float(sig["speed_ref"]), float(sig["load_torque"])
         )
+        return s
 
     def due(self, step: int) -> list[Command]:
         if step > self.applied_upto:
@@ -259,6 +261,13 @@ class PlantNode:
         self.latest_duty: tuple[float, float, float, bool] = _SAFE_DUTY
         self.latest_duty_step = -1
         self.commands = _CommandQueue(self.m_cmd)
+        #: Lockstep pacing (0: off): run period k only once a bench command
+        #: for step k or later has arrived. ``bench run`` sends one at least
+        #: every this many periods, as far ahead as its recorder has seen, so
+        #: the plant never outruns the recording (whose socket would overflow
+        #: on a loaded machine) and no command is ever late.
+        self.pace_every = 0
+        self.cmd_horizon = -1
         self.counters = NodeCounters()
         self.started = False
         self.stopped = False
@@ -301,7 +310,9 @@ class PlantNode:
             if d.reason is not None:
                 c.reject(d.reason)
                 return
-            self.commands.add(d.signals, self.plant.k, c)
+            known = self.commands.add(d.signals, self.plant.k, c)
+            if known is not None and known > self.cmd_horizon:
+                self.cmd_horizon = known
         else:
             c.frames_ignored += 1
 
@@ -407,6 +418,10 @@ class PlantNode:
         """Lockstep: whether the duty for the current period has arrived."""
         t = self.needed_duty()
         return t <= 0 or t in self.duties
+
+    def paced(self) -> bool:
+        """Lockstep: whether pacing lets the current period run (always when off)."""
+        return self.pace_every <= 0 or self.plant.k <= self.cmd_horizon
 
     def frames_now(self) -> list[can.Message]:
         """The frames describing the plant at the current instant ``k T_s``."""

@@ -90,8 +90,13 @@ class BusSpec:
 
 
 #: Receive buffer asked for on socket-based buses (bytes): a recorder thread that
-#: is descheduled for a while must not lose frames (udp_multicast drops on overflow).
-RECEIVE_BUFFER = 8 << 20
+#: is descheduled for a while must not lose frames (udp_multicast drops on
+#: overflow). A lockstep plant is paced to at most the command lead (3000
+#: periods, about 15,000 frames of about 1 kB in the kernel) ahead of it.
+RECEIVE_BUFFER = 64 << 20
+#: Lockstep pacing: a bench command (a keep-alive when nothing changes) at
+#: least every this many periods; see :attr:`bench._nodes.PlantNode.pace_every`.
+PACE_EVERY = 100
 
 
 def _grow_receive_buffer(bus: can.BusABC) -> None:
@@ -290,6 +295,11 @@ def run_scenario(
             prev_handlers[s] = signal.signal(s, _on_signal)
         except ValueError:
             pass  # not in the main thread
+    # Lockstep: the plant runs no further than the commands this process has
+    # sent, which follow what the recorder has seen: the recording never
+    # falls so far behind that its socket overflows on a loaded machine.
+    pace = PACE_EVERY if mode == "lockstep" else 0
+    pace_args = ["--pace-every", str(pace)] if pace else []
     try:
         extra_args = node_args or {}
         roles = [
@@ -298,7 +308,11 @@ def run_scenario(
                 spec_b,
                 ["--estimator", estimator, *scn_args, *extra_args.get("controller", [])],
             ),
-            ("plant", spec, [*scn_args, *extra_args.get("plant", [])]),
+            (
+                "plant",
+                spec,
+                [*scn_args, *pace_args, *extra_args.get("plant", [])],
+            ),
         ]
         if link:
             lt = scn.latency
@@ -335,7 +349,7 @@ def run_scenario(
             procs.append((role, p))
             _wait_ready(p, role, log, stop=lambda: interrupted)
         # commands: sent ahead of the plant by a lead, each twice
-        cmds = command_frames(scn, codec)
+        cmds = command_frames(scn, codec, pace_every=pace)
         # Nodes queue commands by their apply step, so sending far ahead costs
         # nothing; the recorder's view of the plant's step lags on a slow host
         # (User-Mode Linux: by thousands of frames), and a late command would
@@ -348,12 +362,21 @@ def run_scenario(
         plant = dict(procs).get("plant")
         t_last_print = 0.0
         tty = sys.stderr.isatty()
+        t_moved, seen_step = time.monotonic(), -1
         while plant is not None and not interrupted:
             full_step = max(0, recorders[0].step)
             while sent < len(cmds) and cmds[sent][0] <= full_step + lead:
                 bus_a.send(cmds[sent][1])
                 bus_a.send(cmds[sent][1])
                 sent += 1
+            if full_step != seen_step:
+                t_moved, seen_step = time.monotonic(), full_step
+            elif pace and sent and time.monotonic() - t_moved > 1.0:
+                # a paced plant that stopped moving may have lost the newest
+                # commands (a lossy transport): the last few once more
+                for _, m in cmds[max(0, sent - 8) : sent]:
+                    bus_a.send(m)
+                t_moved = time.monotonic()
             if recorders[0].done.is_set() or plant.poll() is not None or interrupted:
                 break
             now = time.perf_counter()

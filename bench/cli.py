@@ -313,6 +313,8 @@ def cmd_plant(args: argparse.Namespace) -> int:
         watchdog_s=None if args.watchdog_ms is None else args.watchdog_ms * 1e-3,
         watchdog_rounds=args.watchdog_rounds,
     )
+    if args.mode == "lockstep":
+        node.pace_every = args.pace_every
     bus = spec.open()
     _stop_on_signals()
     rt = _node_rt(args, "plant")
@@ -510,6 +512,14 @@ def build_parser() -> argparse.ArgumentParser:
         help="lockstep: safe state after this many 50 ms retransmission rounds without a duty",
     )
     p.add_argument("--report", help="write the node's counters to this JSON file at exit")
+    p.add_argument(
+        "--pace-every",
+        type=_NONNEG_INT,
+        default=0,
+        metavar="N",
+        help="lockstep: run period k only once a bench command for step k or later has come "
+        "(the sender keeps one at least every N periods); 0: off (bench run sets it)",
+    )
     _add_rt(p)
     p.set_defaults(func=cmd_plant)
 
