@@ -281,45 +281,61 @@ def _serve_plant(
     else:
         _send_all(bus, frames, node.counters)
         last_progress = time.monotonic()
+        t_wait = last_progress
+
+        def no_duty() -> None:
+            nonlocal t_wait
+            now = time.monotonic()
+            if now - last_progress > watchdog_s:
+                raise BenchError(
+                    f"plant: no duty frame for step {node.needed_duty()} in {watchdog_s:.0f} s "
+                    "(is a controller running on this bus?)"
+                )
+            if now - t_wait >= RETRANSMIT_S:
+                _send_all(bus, node.on_duty_timeout(), node.counters)
+                _send_all(bus, node.retransmit(), node.counters)
+                t_wait = now
+
+        def no_command() -> None:
+            if time.monotonic() - last_progress > watchdog_s:
+                raise BenchError(
+                    f"plant: no bench command for step {node.plant.k} in {watchdog_s:.0f} s "
+                    "(paced by bench run: has its recorder stopped?)"
+                )
+
         while not node.done and not stop():
             t_wait = time.monotonic()
-            while not node.ready():
-                if stop():
-                    break
-                msg = bus.recv(RETRANSMIT_S)
-                if msg is not None:
-                    if msg.arbitration_id in ids:
-                        node.on_message(msg)
-                    continue
-                now = time.monotonic()
-                if now - last_progress > watchdog_s:
-                    raise BenchError(
-                        f"plant: no duty frame for step {node.needed_duty()} in {watchdog_s:.0f} s "
-                        "(is a controller running on this bus?)"
-                    )
-                if now - t_wait >= RETRANSMIT_S:
-                    _send_all(bus, node.on_duty_timeout(), node.counters)
-                    _send_all(bus, node.retransmit(), node.counters)
-                    t_wait = now
-            if not node.ready():
+            if not _receive_until(bus, node, ids, node.ready, stop, no_duty):
                 break
             # paced by bench run: not ahead of the commands (and so of its recorder)
-            while not node.paced():
-                if stop():
-                    break
-                msg = bus.recv(RETRANSMIT_S)
-                if msg is not None:
-                    if msg.arbitration_id in ids:
-                        node.on_message(msg)
-                elif time.monotonic() - last_progress > watchdog_s:
-                    raise BenchError(
-                        f"plant: no bench command for step {node.plant.k} in {watchdog_s:.0f} s "
-                        "(paced by bench run: has its recorder stopped?)"
-                    )
-            if not node.paced():
+            if not _receive_until(bus, node, ids, node.paced, stop, no_command):
                 break
             _send_all(bus, node.advance_lockstep(), node.counters)
             last_progress = time.monotonic()
+
+
+def _receive_until(
+    bus: can.BusABC,
+    node: PlantNode,
+    ids: set[int],
+    done: Callable[[], bool],
+    stop: Callable[[], bool],
+    quiet: Callable[[], None],
+) -> bool:
+    """Feed the node its frames until ``done()`` (True) or ``stop()`` (False).
+
+    ``quiet()`` runs after each ``RETRANSMIT_S`` without a frame (it may raise).
+    """
+    while not done():
+        if stop():
+            return False
+        msg = bus.recv(RETRANSMIT_S)
+        if msg is not None:
+            if msg.arbitration_id in ids:
+                node.on_message(msg)
+            continue
+        quiet()
+    return True
 
 
 def controller_loop(
