@@ -578,6 +578,11 @@ def finish_run(
     m["frames_recorded"] = cap.frames
     m["frames_unknown_id"] = cap.unknown_ids
     m["incomplete_steps"] = cap.incomplete_steps
+    # periods 0 .. n - 1 of the scenario without a row: frames the recording lost
+    # (or a run stopped early); the metrics above cover only the rows present
+    n_run = n_steps(scn)
+    present = np.unique(cap.table["step"][cap.table["step"] < n_run]).size
+    m["steps_missing"] = int(n_run - present)
     m["frames_duplicate"] = cap.duplicates
     m["frames_out_of_order"] = cap.out_of_order
     m["retransmits"] = int(plant_r.get("retransmits", 0))

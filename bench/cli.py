@@ -290,6 +290,13 @@ def cmd_run(args: argparse.Namespace) -> int:
     print(format_metrics(res.metrics, scn.paper_result, scn.estimator))
     if args.mode == "realtime" and (warn := realtime_warning(res.metrics)):
         print(warn, file=sys.stderr)
+    missing = int(res.metrics.get("steps_missing", 0))
+    if missing and not res.meta.get("interrupted"):
+        print(
+            f"warning: {missing} periods of the run have no row in signals.csv (frames the "
+            "recording lost); the metrics cover the rows present",
+            file=sys.stderr,
+        )
     names = [f"capture{Path(res.capture).suffix}", "signals.csv", "metrics.json", "meta.json"]
     written = [n for n in [*names, "run.png"] if (out / n).is_file()]
     print(f"files: {out}/ ({', '.join(written)})")

@@ -126,6 +126,10 @@ def test_capture_starting_mid_run_lines_up_all_messages(run: Path, tmp_path: Pat
     res = analyze_capture(tmp_path / "cut.blf", out_dir=tmp_path / "out", echo=quiet, plots=False)
     assert res.metrics["steps"] == len(got["step"])
     assert math.isfinite(res.metrics["theta_err_rms_deg"])
+    # the periods before the cut have no rows, and the metrics say how many
+    n_run = 2000  # 0.2 s at 10 kHz
+    assert res.metrics["steps_missing"] == n_run - int(np.sum(got["step"] < n_run))
+    assert res.metrics["steps_missing"] >= cap.first_step
 
 
 def garbage_capture(frames: list[can.Message]) -> tuple[list[can.Message], list[str]]:

@@ -85,6 +85,7 @@ def test_two_processes_over_udp_multicast_equal_inprocess(
     ):
         assert key in m
     assert m["steps"] == len(ref["step"])
+    assert m["steps_missing"] == 0  # every period of the scenario has its row
     assert m["frames_rejected"] == 0
     # the per-reason counts add up to the total; the second copy of every
     # command (each is sent twice) is counted apart, not as a rejection
