@@ -338,11 +338,17 @@ def link_loop(
 ) -> None:
     """Run a link between two buses until ``stop()`` or ``idle_s`` without traffic.
 
-    ``sent``, when given, counts the frames forwarded (keys ``a_to_b``, ``b_to_a``).
+    ``sent``, when given, counts the frames forwarded (keys ``a_to_b``, ``b_to_a``)
+    and the sends a bus refused (``send_errors``, ``frames_lost_on_send``).
     """
     count = sent if sent is not None else {}
     count.setdefault("a_to_b", 0)
     count.setdefault("b_to_a", 0)
+    # a send the bus refuses (queue full, bus-off) is retried and counted, never fatal
+    from bench._loops import _send_all
+    from bench._nodes import NodeCounters
+
+    counters = NodeCounters()
     if on_ready:
         on_ready()
     fds: list[int] | None
@@ -361,10 +367,8 @@ def link_loop(
                 msg = _copy(msg)
                 if isinstance(logic, LockstepLink):
                     to_b, to_a = logic.from_a(msg) if side == "a" else logic.from_b(msg)
-                    for m in to_b:
-                        bus_b.send(m)
-                    for m in to_a:
-                        bus_a.send(m)
+                    _send_all(bus_b, to_b, counters)
+                    _send_all(bus_a, to_a, counters)
                     count["a_to_b"] += len(to_b)
                     count["b_to_a"] += len(to_a)
                 elif side == "a":
@@ -374,11 +378,14 @@ def link_loop(
         wait = 0.05
         if isinstance(logic, RealtimeLink):
             for side, m in logic.due():
-                (bus_a if side == "a" else bus_b).send(m)
+                _send_all(bus_a if side == "a" else bus_b, [m], counters)
                 count["b_to_a" if side == "a" else "a_to_b"] += 1
             nt = logic.next_time()
             if nt is not None:
                 wait = max(0.0, min(wait, nt - logic.clock()))
+        if counters.send_errors:
+            count["send_errors"] = counters.send_errors
+            count["frames_lost_on_send"] = counters.frames_lost_on_send
         if got:
             last = time.monotonic()
             continue

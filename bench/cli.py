@@ -435,7 +435,13 @@ def cmd_link(args: argparse.Namespace) -> int:
         print(
             f"link: forwarded {sent.get('a_to_b', 0)} frames {a.describe()} -> {b.describe()}, "
             f"{sent.get('b_to_a', 0)} back; dropped {logic.dropped_samples} samples/truth and "
-            f"{logic.dropped_duties} duties on purpose",
+            f"{logic.dropped_duties} duties on purpose"
+            + (
+                f"; {sent['send_errors']} sends refused by a bus, "
+                f"{sent.get('frames_lost_on_send', 0)} frames lost after retries"
+                if sent.get("send_errors")
+                else ""
+            ),
             file=sys.stderr,
         )
     return 0
