@@ -375,18 +375,6 @@ def cmd_link(args: argparse.Namespace) -> int:
         v = getattr(args, opt)
         if v is not None and not 0.0 <= v <= 1.0:
             raise BenchError(f"--{opt.replace('_', '-')}: a probability in [0, 1], got {v}")
-    for opt in (
-        "delay_steps",
-        "sample_delay_steps",
-        "duty_delay_us",
-        "sample_delay_us",
-        "jitter_us",
-        "duty_jitter_us",
-        "sample_jitter_us",
-    ):
-        v = getattr(args, opt)
-        if v is not None and v < 0:
-            raise BenchError(f"--{opt.replace('_', '-')}: must be >= 0, got {v}")
     if _same_bus(a, b):
         raise BenchError(
             f"--to {b.describe()}: the same bus as the link's input ({a.describe()}); "
