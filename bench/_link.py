@@ -335,8 +335,13 @@ def link_loop(
     stop: Callable[[], bool] = lambda: False,
     idle_s: float = 3600.0,
     sent: dict[str, int] | None = None,
-) -> None:
+) -> str:
     """Run a link between two buses until ``stop()`` or ``idle_s`` without traffic.
+
+    The idle time counts from the last frame received, and only once traffic
+    has begun: a link started ahead of its nodes waits for them however long
+    they take to start (on a slow host, tens of seconds per Python process).
+    Returns why it ended: ``"stopped"`` or ``"idle"``.
 
     ``sent``, when given, counts the frames forwarded (keys ``a_to_b``, ``b_to_a``)
     and the sends a bus refused (``send_errors``, ``frames_lost_on_send``).
@@ -358,7 +363,7 @@ def link_loop(
             fds = None
     except (NotImplementedError, AttributeError):
         fds = None
-    last = time.monotonic()
+    last: float | None = None  # no traffic yet
     while not stop():
         got = False
         for side, bus in (("a", bus_a), ("b", bus_b)):
@@ -389,12 +394,13 @@ def link_loop(
         if got:
             last = time.monotonic()
             continue
-        if time.monotonic() - last > idle_s:
-            return
+        if last is not None and time.monotonic() - last > idle_s:
+            return "idle"
         if fds is not None:
             select.select(fds, [], [], wait)
         else:
             time.sleep(min(wait, 0.0002))
+    return "stopped"
 
 
 def _copy(msg: can.Message) -> can.Message:

@@ -363,6 +363,7 @@ def run_scenario(
         t_last_print = 0.0
         tty = sys.stderr.isatty()
         t_moved, seen_step = time.monotonic(), -1
+        ended: str | None = None
         while plant is not None and not interrupted:
             full_step = max(0, recorders[0].step)
             while sent < len(cmds) and cmds[sent][0] <= full_step + lead:
@@ -378,6 +379,9 @@ def run_scenario(
                     bus_a.send(m)
                 t_moved = time.monotonic()
             if recorders[0].done.is_set() or plant.poll() is not None or interrupted:
+                break
+            ended = _ended_early(procs)
+            if ended:
                 break
             now = time.perf_counter()
             if progress and now - t_last_print > (0.5 if tty else 5.0):
@@ -401,7 +405,7 @@ def run_scenario(
         # With latency the controller never sees the last sample, so the nodes
         # that do not end by themselves get SIGTERM (they stop cleanly on it).
         # Interrupted (SIGINT/SIGTERM): no waiting, every node gets SIGTERM at once.
-        if plant is not None and not interrupted:
+        if plant is not None and not interrupted and not ended:
             bus_a.send(cmds[-1][1])
             try:
                 plant.wait(timeout=30.0)
@@ -483,13 +487,36 @@ def run_scenario(
         (out_dir / "metrics.json").write_text(json.dumps(metrics, indent=2) + "\n")
         (out_dir / "meta.json").write_text(json.dumps(meta, indent=2, default=str) + "\n")
         result = RunResult(out_dir=out_dir, metrics=metrics, capture=capture, meta=meta)
-    if failures and not interrupted:
-        logs = "; ".join(
-            f"{r}: {(out_dir / (r + '.log')).read_text(errors='replace').strip().splitlines()[-1:]}"
-            for r in failures
+    if ended and not interrupted:
+        raise BenchError(
+            f"{ended} process ended before the run did ({_last_line(out_dir, ended)}); "
+            f"files in {out_dir}"
         )
+    if failures and not interrupted:
+        logs = "; ".join(f"{r}: {_last_line(out_dir, r)}" for r in failures)
         raise BenchError(f"node process failed ({logs}); files in {out_dir}")
     return result
+
+
+def _ended_early(procs: list[tuple[str, subprocess.Popen[str]]]) -> str | None:
+    """``"link"`` when the latency link ended while the plant still runs, else ``None``.
+
+    The link is the bench's own infrastructure and never ends by itself during
+    a run; without it the plant would only wait for its watchdog.  A node that
+    dies (the controller) is left to the plant, as a drive would be: the
+    plant's watchdog and safe state are what such a run tests.
+    """
+    for role, p in procs:
+        if role == "link" and p.poll() is not None:
+            return role
+    return None
+
+
+def _last_line(out_dir: Path, role: str) -> str:
+    """The last line a node process wrote to its log (empty if none)."""
+    f = out_dir / f"{role}.log"
+    lines = f.read_text(errors="replace").strip().splitlines() if f.exists() else []
+    return lines[-1] if lines else "no output"
 
 
 def _peer_args(spec: BusSpec) -> list[str]:

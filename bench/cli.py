@@ -413,13 +413,16 @@ def cmd_link(args: argparse.Namespace) -> int:
         raise
     _stop_on_signals()
     sent: dict[str, int] = {}
+    why = "stopped"
     try:
-        link_loop(
+        why = link_loop(
             bus_a, bus_b, logic, on_ready=_ready, idle_s=args.idle_s, stop=_STOP.is_set, sent=sent
         )
     finally:
         bus_a.shutdown()
         bus_b.shutdown()
+        if why == "idle":
+            print(f"link: no traffic for {args.idle_s:g} s: stopping", file=sys.stderr)
         print(
             f"link: forwarded {sent.get('a_to_b', 0)} frames {a.describe()} -> {b.describe()}, "
             f"{sent.get('b_to_a', 0)} back; dropped {logic.dropped_samples} samples/truth and "
@@ -588,7 +591,10 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--duration", type=float, help="ignored (accepted for symmetry with the nodes)")
     p.add_argument(
-        "--idle-s", type=float, default=30.0, help="exit after this long without traffic"
+        "--idle-s",
+        type=float,
+        default=30.0,
+        help="exit after this long without traffic, once traffic has begun (s)",
     )
     p.set_defaults(func=cmd_link)
 
