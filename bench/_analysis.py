@@ -311,7 +311,8 @@ def measure_latency(frames: list[can.Message], codec: Codec) -> dict[str, dict[s
     see the plant's next sample first (two sockets, one clock), which can
     only add a period; so the delay is the least count over all frames
     (``samples.steps``, and ``duties.steps`` = least loop minus
-    ``samples.steps``), with the median beside it.  The plant's own
+    ``samples.steps``).  No median is given: it would count the recorder's
+    ordering (often one period more), not the link.  The plant's own
     ``duty_age`` (scored as ``loop_latency_steps``) is the exact round trip.
     """
     sid, did = codec.frame_id("PhaseSamples"), codec.frame_id("PwmDuty")
@@ -353,10 +354,7 @@ def measure_latency(frames: list[can.Message], codec: Codec) -> dict[str, dict[s
             }
     if held_s and "samples" in out:
         n_s = min(held_s)
-        out["samples"].update(steps=float(n_s), steps_median=float(np.median(held_s)))
+        out["samples"]["steps"] = float(n_s)
         if loop_d and "duties" in out:
-            out["duties"].update(
-                steps=float(min(loop_d) - n_s),
-                steps_median=float(np.median(loop_d) - np.median(held_s)),
-            )
+            out["duties"]["steps"] = float(min(loop_d) - n_s)
     return out

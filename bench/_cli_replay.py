@@ -155,7 +155,7 @@ def cmd_rerun(args: argparse.Namespace) -> int:
 
     r: dict[str, Any] = res.report
     est = r["estimate"]
-    print(format_metrics(res.metrics, res.paper_result))
+    print(format_metrics(res.metrics, res.paper_result, res.paper_method))
     if r["recorded_metrics"] is not None:
         rm = r["recorded_metrics"]
         print(

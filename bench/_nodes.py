@@ -623,10 +623,11 @@ class ControllerNode:
             c.reject(d.reason)
             return []
         if name == "BenchCommand":
+            # In both modes a command takes effect at its step (the sample of
+            # that step), as in the plant: the bench sends commands ahead of
+            # time, and applied on arrival a stop would end the controller
+            # (and a set-point change reach it) that much early.
             self.commands.add(d.signals, self.next_k, c)
-            if self.realtime and self.commands.pending:
-                # real time: a command takes effect when it arrives
-                self._apply_commands(max(self.commands.pending))
             return []
         if name == "PhaseSamples":
             k = unwrap(int(d.signals["step"]), self.next_k, self.m_step)

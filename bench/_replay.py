@@ -82,6 +82,20 @@ CLOCKS = ("deadline", "messagesync")
 
 
 def _find_in_folder(path: Path) -> Path:
+    """The capture of a run folder: the one its ``meta.json`` names, else the first ``capture.*``.
+
+    A folder reused by runs in different formats may hold an older
+    ``capture.*`` beside the latest run's; ``meta.json`` (rewritten by every
+    run) names the latest one in ``capture``.
+    """
+    try:
+        named = json.loads((path / "meta.json").read_text()).get("capture")
+    except (OSError, ValueError, AttributeError):
+        named = None
+    if isinstance(named, str) and named:
+        cand = path / Path(named).name
+        if cand.is_file():
+            return cand
     for suffix in CAPTURE_SUFFIXES:
         cand = path / f"capture{suffix}"
         if cand.is_file():

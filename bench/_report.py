@@ -19,7 +19,7 @@ import math
 from pathlib import Path
 from typing import Any
 
-from bench._sweep import FLAT_DEG, METHODS
+from bench._sweep import FLAT_DEG, METHODS, SWEEPS
 
 REPRODUCED = "reproduced"
 NOT_REPRODUCED = "not reproduced"
@@ -396,8 +396,18 @@ def _xue_section(summary: dict[str, Any]) -> list[str]:
     return [*lines, ""]
 
 
+def _in_order(d: dict[str, Any], order: tuple[str, ...]) -> list[tuple[str, Any]]:
+    """The items of ``d`` with the keys of ``order`` first, in that order, then the rest.
+
+    ``summary.json`` is written with sorted keys: the report must not depend
+    on whether its summary was just built or read back.
+    """
+    rank = {k: i for i, k in enumerate(order)}
+    return sorted(d.items(), key=lambda kv: rank.get(kv[0], len(order)))
+
+
 def _sweep_section(summary: dict[str, Any]) -> list[str]:
-    sw = summary.get("sweeps") or {}
+    sw = dict(_in_order(summary.get("sweeps") or {}, tuple(SWEEPS)))
     if not sw:
         return []
     any_sw = next(iter(sw.values()))
@@ -424,7 +434,7 @@ def _sweep_section(summary: dict[str, Any]) -> list[str]:
         if s["fit"]:
             head += [f"slope ({s['slope_unit']})", "change (deg)", "flat"]
         rows = []
-        for est, m in s["methods"].items():
+        for est, m in _in_order(s["methods"], METHODS):
             cells = []
             for x in s["values"]:
                 i = m["x"].index(x) if x in m["x"] else -1
@@ -440,7 +450,9 @@ def _sweep_section(summary: dict[str, Any]) -> list[str]:
         lines += ["Cells: mean dtheta / max |dtheta| (deg).", ""]
         lines += _table(head, rows)
         errs = [
-            f"{est} at {x}: {e}" for est, m in s["methods"].items() for x, e in m["errors"].items()
+            f"{est} at {x}: {e}"
+            for est, m in _in_order(s["methods"], METHODS)
+            for x, e in m["errors"].items()
         ]
         if errs:
             lines += ["", "Failed points: " + "; ".join(errs)]

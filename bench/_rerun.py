@@ -67,6 +67,8 @@ class RerunResult:
     report: dict[str, Any] = field(default_factory=dict)
     files: list[str] = field(default_factory=list)
     paper_result: dict[str, Any] = field(default_factory=dict)
+    #: The method ``paper_result`` belongs to (the scenario's own estimator).
+    paper_method: str | None = None
 
 
 def injection_note(estimator: str, recorded: str | None) -> str:
@@ -153,6 +155,7 @@ def rerun_capture(
     from bench._loops import make_controller_node
     from bench._metrics import compute_metrics
     from bench._setup import get_preset, sample_period
+    from bench.cli import _check_estimator_fits
     from controller._registry import ESTIMATOR_NAMES
 
     if estimator not in ESTIMATOR_NAMES:
@@ -163,6 +166,7 @@ def rerun_capture(
     say = echo or (lambda s: print(s, file=sys.stderr))
     frames, problem = read_capture(path)
     scn, meta = capture_scenario(path, scenario)
+    _check_estimator_fits(scn, estimator)  # a misfit is one line, as for ``bench run``
     if problem:
         say(incomplete_warning(path, problem, len(frames)))
     recorded = meta.get("estimator") if isinstance(meta.get("estimator"), str) else None
@@ -382,4 +386,5 @@ def rerun_capture(
         report=report,
         files=files,
         paper_result=dict(scn.paper_result),
+        paper_method=scn.estimator,
     )

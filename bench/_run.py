@@ -32,7 +32,7 @@ from bench._codec import Codec
 from bench._errors import BenchError
 from bench._loops import STATE_DONE, command_frames
 from bench._metrics import compute_metrics
-from bench._nodes import REPEATED_COUNTER
+from bench._nodes import REPEATED_COUNTER, unwrap
 from bench._scenario import Scenario, write_effective
 from bench._setup import get_preset, lockstep_delay, n_steps, sample_period
 
@@ -277,6 +277,11 @@ def run_scenario(
         except BaseException:
             bus_a.shutdown()
             raise
+    # a folder used again: an older run's capture in another format would be
+    # taken for this run's by replay and rerun
+    for old in out_dir.glob("capture.*"):
+        if old != capture and old.suffix in set(LOG_SUFFIX.values()):
+            old.unlink()
     writer = can.Logger(str(capture))
     recorders = [Recorder(codec, writer, i + 1) for i in range(len(buses))]
     for r in recorders[1:]:
@@ -640,6 +645,11 @@ def finish_run(
         }
     if plant_r.get("jitter"):
         m["jitter_us"] = plant_r["jitter"]
+    fault, fault_step = plant_fault(frames, codec)
+    if plant_r.get("fault") not in (None, "none"):
+        fault, fault_step = str(plant_r["fault"]), int(plant_r.get("fault_step", fault_step))
+    m["plant_fault"] = fault
+    m["plant_fault_step"] = fault_step
     meta = dict(
         meta,
         scored_from_s=scn.score_from_s,
@@ -655,6 +665,44 @@ def finish_run(
 
         plot_run(cap.table, out_dir, title=f"{scn.name} / {meta.get('estimator', '?')}")
     return RunResult(out_dir=out_dir, metrics=m, capture=capture or out_dir, meta=meta)
+
+
+def plant_fault(frames: list[can.Message], codec: Codec) -> tuple[str, int]:
+    """The plant's first protection trip in a capture: (fault name, period), or ("none", -1).
+
+    From the ``PlantStatus`` frames the plant sends when it trips; the
+    16-bit step is unwrapped against the number of ``PhaseSamples`` frames
+    before it (retransmissions add a few, far less than the counter's range).
+    """
+    from plant_rt import FAULT_NAMES
+
+    id_status, id_samples = codec.frame_id("PlantStatus"), codec.frame_id("PhaseSamples")
+    m = 1 << codec.step_bits("PlantStatus")
+    seen = 0
+    for f in frames:
+        if f.arbitration_id == id_samples:
+            seen += 1
+        elif f.arbitration_id == id_status:
+            d = codec.decode(f)
+            if d is None or d.reason is not None or int(d.signals["fault_code"]) == 0:
+                continue
+            code = int(d.signals["fault_code"])
+            step = unwrap(int(d.signals["step"]), seen, m)
+            return FAULT_NAMES.get(code, str(code)), step
+    return "none", -1
+
+
+def fault_warning(m: dict[str, Any], T_s: float) -> str | None:
+    """One line when the plant tripped a protection during the run."""
+    fault = m.get("plant_fault", "none")
+    if fault in (None, "none"):
+        return None
+    k = int(m.get("plant_fault_step", -1))
+    return (
+        f"warning: the plant tripped its {fault} protection in period {k} "
+        f"(t = {k * T_s:.4f} s) and ran in the safe state from there (inverter off); "
+        "the metrics include that part"
+    )
 
 
 #: Real-time runs with more late periods than this get a warning (fraction).

@@ -21,20 +21,27 @@ Schema (all keys optional unless marked *required*)::
     theta_e0_deg = 0.0               # initial electrical rotor angle
     known_initial_angle = true       # false: the controller runs its start-up (HF + polarity)
     speed_rpm = [[0.0, 100.0]]       # (t s, rpm) breakpoints, linear between, held after the last;
-                                     # a step is two points at the same time
-    load_nm = [[0.0, 0.0]]           # (t s, N m) breakpoints, same rules
+                                     # a step is two points at the same time; values within the
+                                     # range of BenchCommand.speed_ref (dbc/bench.dbc)
+    load_nm = [[0.0, 0.0]]           # (t s, N m) breakpoints, same rules (BenchCommand.load_torque)
     reference_rate_hz = 1000.0       # how often the bench re-sends a changing reference
     score_from_s = 0.5               # metrics ignore the start-up transient before this time
     thd_window_s = [3.0, 11.0]       # window for the THD of phase-A current (optional)
 
-    [estimator_options]              # passed to the estimator (e.g. v_h = 50.0)
+    [estimator_options]              # passed to the estimator, checked on load by key name
+    V_h = 50.0                       # rotating (sfhf, tt-ab, tt-dq): injection amplitude, V,
+    f_h = 500.0                      # frequency, Hz; also w_o, normalise, bpf, hpf, lpf
+    U_h = 20.0                       # square-wave: injection amplitude, V; also a, M, delay_comp
+                                     # (amplitudes <= u_dc/sqrt(3) of the preset, f_h below
+                                     # Nyquist; the keys of both families are accepted, since
+                                     # the estimator may be chosen on the command line)
     [noise]
     current_std_a = 0.0              # white noise on each phase current, A rms
     adc_bits = 0                     # 0: no quantization
     adc_full_scale_a = 0.0
     [latency]
-    duty_delay_steps = 0             # lockstep: whole PWM periods per direction
-    sample_delay_steps = 0
+    duty_delay_steps = 0             # lockstep: whole PWM periods per direction; together at
+    sample_delay_steps = 0           # most a quarter of the step counters' range (256 periods)
     duty_delay_us = 0.0              # real-time mode: microseconds per direction
     sample_delay_us = 0.0
     jitter_us = 0.0                  # real-time: standard deviation (normal) or half-width
@@ -61,6 +68,9 @@ Schema (all keys optional unless marked *required*)::
 
 from __future__ import annotations
 
+import dataclasses
+import functools
+import inspect
 import itertools
 import json
 import math
@@ -289,6 +299,8 @@ class Scenario:
         """
         clean = {k: v for k, v in kw.items() if v is not None}
         out = replace(self, **clean)
+        if "latency" in clean:  # e.g. --delay-steps
+            _check_delay_steps(out.source, out.latency)
         if "score_from_s" not in clean and out.score_from_s >= out.duration:
             out = replace(out, score_from_s=out.duration / 2)
         return out
@@ -357,6 +369,110 @@ _TOP_KEYS = {
 MOTOR_KEYS = (
     "n_p", "R_s", "L_d", "L_q", "psi_f", "J", "b", "i_rated", "i_max", "tau_rated", "w_m_rated",
 )  # fmt: skip
+
+
+#: ``[estimator_options]`` keys checked by kind.  The estimator, and so the family
+#: the options are for, may be chosen only on the command line: the keys of
+#: every family are accepted (:func:`estimator_option_keys`), each value is
+#: checked by its key's name.
+_OPTION_AMPLITUDES = ("V_h", "U_h")  # injection amplitude (V): (0, u_dc / sqrt(3)]
+_OPTION_FREQUENCIES = ("f_h",)  # injection frequency (Hz): (0, Nyquist)
+_OPTION_NONNEGATIVE = ("w_o", "delay_comp")  # PLL bandwidth (0 freezes it), periods (0: off)
+_OPTION_INTEGERS = ("M",)  # CIC differential delay (PWM periods), >= 1
+_OPTION_FILTERS = ("bpf", "hpf", "lpf")  # continuous prototypes [[b...], [a...]]
+_OPTION_CHOICES = {"normalise": ("model", "measured")}
+# any other key (``a``, the square-wave observer pole, rad/s): a number > 0
+#: Parameters of the square-wave estimator that are not options: the
+#: controller's (``motor``, ``T_s``) and the estimator name's (``cic``:
+#: ``square-wave`` or ``square-wave-nocic``).
+_SQUARE_WAVE_FIXED = ("self", "motor", "T_s", "cic")
+
+
+@functools.cache
+def estimator_option_keys() -> dict[str, Any]:
+    """Every ``[estimator_options]`` key with its default, over all estimator families.
+
+    Rotating injection (``sfhf``, ``tt-ab``, ``tt-dq``): the fields of
+    :class:`controller._rotating.RotatingInjectionPars`; square-wave: the
+    keyword parameters of :class:`controller._square_wave.SquareWaveEstimator`.
+    ``sensored`` takes none.
+    """
+    from controller._rotating import RotatingInjectionPars
+    from controller._square_wave import SquareWaveEstimator
+
+    keys: dict[str, Any] = {f.name: f.default for f in dataclasses.fields(RotatingInjectionPars)}
+    for k, p in inspect.signature(SquareWaveEstimator.__init__).parameters.items():
+        if k not in _SQUARE_WAVE_FIXED:
+            keys[k] = p.default
+    return keys
+
+
+def _signal_range(message: Any, signal: str) -> tuple[float, float]:
+    """``[min|max]`` of a DBC signal (its raw range when the DBC gives none), as encoded."""
+    s = message.get_signal_by_name(signal)
+    raw_lo = -(1 << (s.length - 1)) if s.is_signed else 0
+    raw_hi = (1 << (s.length - 1)) - 1 if s.is_signed else (1 << s.length) - 1
+    lo = raw_lo * s.scale + s.offset if s.minimum is None else s.minimum
+    hi = raw_hi * s.scale + s.offset if s.maximum is None else s.maximum
+    return float(lo), float(hi)
+
+
+@dataclass(frozen=True, slots=True)
+class _WireLimits:
+    """What the DBC (``dbc/bench.dbc``) lets a scenario ask for."""
+
+    speed_rpm: tuple[float, float]  # BenchCommand.speed_ref
+    load_nm: tuple[float, float]  # BenchCommand.load_torque
+    step_bits: int  # width of the narrowest step counter
+    step_messages: tuple[str, ...]  # the messages that carry it
+
+    @property
+    def max_delay_steps(self) -> int:
+        """Largest injected lockstep delay, periods, both directions together.
+
+        Receivers unwrap a step counter of modulus ``2**bits`` within half of
+        it; a quarter leaves the other quarter to the retransmission window.
+        """
+        return (1 << self.step_bits) // 4
+
+
+@functools.cache
+def _wire_limits() -> _WireLimits:
+    from bench._codec import default_codec
+
+    codec = default_codec()
+    cmd = codec.message("BenchCommand")
+    widths = {n: codec.step_bits(n) for n in codec.names if codec.step_bits(n)}
+    bits = min(widths.values())
+    return _WireLimits(
+        speed_rpm=_signal_range(cmd, "speed_ref"),
+        load_nm=_signal_range(cmd, "load_torque"),
+        step_bits=bits,
+        step_messages=tuple(n for n, b in widths.items() if b == bits),
+    )
+
+
+def _check_delay_steps(src: str, lat: Latency) -> None:
+    """Injected lockstep delays the step counters of the wire can carry."""
+    w = _wire_limits()
+    bound = w.max_delay_steps
+    why = (
+        f"a quarter of the {1 << w.step_bits} periods after which the {w.step_bits}-bit "
+        f"step counters of {'/'.join(w.step_messages)} wrap (receivers place a frame "
+        "only within half of that; the rest is the retransmission margin)"
+    )
+    for key in ("duty_delay_steps", "sample_delay_steps"):
+        v = getattr(lat, key)
+        if v > bound:
+            raise ScenarioError(
+                f"{src}: field 'latency.{key}': {v} periods is more than {bound}, {why}"
+            )
+    total = lat.duty_delay_steps + lat.sample_delay_steps
+    if total > bound:
+        raise ScenarioError(
+            f"{src}: field 'latency': duty_delay_steps + sample_delay_steps = {total} periods "
+            f"is more than {bound}, {why}"
+        )
 
 
 def scenario_path(name_or_path: str) -> Path:
@@ -446,7 +562,11 @@ class _Reader:
                     )
         return _Reader(self.src, v, f"{self.prefix}{key}.")
 
-    def profile(self, key: str) -> Profile:
+    def profile(
+        self, key: str, carried: tuple[float, float] | None = None, unit: str = ""
+    ) -> Profile:
+        """Breakpoints ``[[t, value], ...]``; values within ``carried`` (the
+        BenchCommand signal's range) when given."""
         v = self.t.get(key, [[0.0, 0.0]])
         if not isinstance(v, list) or not v:
             raise self.fail(key, "expected a non-empty list of [time_s, value] pairs")
@@ -463,6 +583,12 @@ class _Reader:
                 raise self.fail(key, f"entry {i}: times must not decrease ({t} < {pts[-1][0]})")
             if not (math.isfinite(t) and math.isfinite(val)) or t < 0:
                 raise self.fail(key, f"entry {i}: time must be >= 0 and values finite")
+            if carried is not None and not carried[0] <= val <= carried[1]:
+                raise self.fail(
+                    key,
+                    f"entry {i}: {val:.10g} {unit} outside the range the BenchCommand frame "
+                    f"carries ({carried[0]:g} to {carried[1]:g} {unit})",
+                )
             pts.append((t, val))
         return Profile(tuple(pts))
 
@@ -489,7 +615,7 @@ def _parse_latency(r: _Reader) -> Latency:
     def opt(key: str, hi: float | None) -> float | None:
         return lt.num(key, 0.0, lo=0.0, hi=hi) if key in lt.t else None
 
-    return Latency(
+    out = Latency(
         duty_delay_steps=lt.integer("duty_delay_steps", 0, lo=0),
         sample_delay_steps=lt.integer("sample_delay_steps", 0, lo=0),
         duty_delay_us=lt.num("duty_delay_us", 0.0, lo=0.0),
@@ -502,11 +628,88 @@ def _parse_latency(r: _Reader) -> Latency:
         duty_drop_prob=opt("duty_drop_prob", 1.0),
         sample_drop_prob=opt("sample_drop_prob", 1.0),
     )
+    _check_delay_steps(r.src, out)
+    return out
+
+
+def _parse_filter(r: _Reader, key: str) -> tuple[tuple[float, ...], ...]:
+    """A continuous filter prototype ``[[b_0, ...], [a_0, ...]]`` (an estimator option)."""
+    v = r.t[key]
+    if not (
+        isinstance(v, list)
+        and len(v) == 2
+        and all(
+            isinstance(c, list)
+            and c
+            and all(
+                isinstance(x, int | float) and not isinstance(x, bool) and math.isfinite(x)
+                for x in c
+            )
+            for c in v
+        )
+        and v[1][0] != 0
+    ):
+        raise r.fail(
+            key,
+            "expected [[b_0, b_1, ...], [a_0, a_1, ...]], the numerator and denominator "
+            f"of a continuous prototype (finite numbers, a_0 != 0), got {v!r}",
+        )
+    return tuple(tuple(float(x) for x in c) for c in v)
+
+
+def _parse_estimator_options(r: _Reader, preset: str, f_s: float) -> dict[str, Any]:
+    """The ``[estimator_options]`` table, each value checked by its key's name.
+
+    Amplitudes must be > 0 and within the inverter's linear range
+    ``u_dc / sqrt(3)`` (space-vector modulation) of the preset; frequencies
+    > 0 and below the Nyquist frequency of the sample rate ``f_s``.
+    """
+    from plant_rt import PRESETS
+
+    keys = estimator_option_keys()
+    eo = r.table("estimator_options", set(keys))
+    u_dc = PRESETS[preset].inverter.u_dc
+    u_lin = u_dc / math.sqrt(3.0)
+    out: dict[str, Any] = {}
+    for k in eo.t:
+        if k in _OPTION_CHOICES:
+            choices = _OPTION_CHOICES[k]
+            s = eo.string(k)
+            if s not in choices:
+                raise eo.fail(k, f"expected {' or '.join(map(repr, choices))}, got {s!r}")
+            out[k] = s
+        elif k in _OPTION_FILTERS:
+            out[k] = _parse_filter(eo, k)
+        elif k in _OPTION_INTEGERS:
+            out[k] = eo.integer(k, 0, lo=1)
+        elif isinstance(keys[k], bool):
+            out[k] = eo.boolean(k, keys[k])
+        elif k in _OPTION_NONNEGATIVE:
+            out[k] = eo.num(k, lo=0.0)
+        else:
+            v = eo.num(k)
+            if not v > 0.0:
+                raise eo.fail(k, f"must be > 0, got {v}")
+            if k in _OPTION_AMPLITUDES and v > u_lin:
+                raise eo.fail(
+                    k,
+                    f"injection amplitude {v:g} V is above the inverter's linear limit "
+                    f"u_dc/sqrt(3) = {u_lin:.4g} V (preset {preset}, u_dc = {u_dc:g} V)",
+                )
+            if k in _OPTION_FREQUENCIES and v >= f_s / 2.0:
+                raise eo.fail(
+                    k,
+                    f"injection frequency {v:g} Hz is not below the Nyquist frequency "
+                    f"{f_s / 2.0:g} Hz of the {f_s:g} Hz sample rate",
+                )
+            out[k] = v
+    return out
 
 
 def parse_scenario(data: dict[str, Any], src: str) -> Scenario:
     """Validate a scenario table (already parsed from TOML)."""
     from controller import ESTIMATOR_NAMES
+    from controller._registry import injection_family
     from plant_rt import PRESETS
 
     for k in data:
@@ -575,7 +778,17 @@ def parse_scenario(data: dict[str, Any], src: str) -> Scenario:
                 if not v > 0.0:
                     raise mt.fail(k, f"must be > 0, got {v}")
                 motor[k] = v
-    opts = r.table("estimator_options").t
+    base = PRESETS[preset].motor
+    L_d, L_q = motor.get("L_d", base.L_d), motor.get("L_q", base.L_q)
+    hf = [e for e in dict.fromkeys((*ests, estimator)) if injection_family(e) != "none"]
+    if hf and not L_q > L_d:
+        raise mt.fail(
+            "L_q" if "L_q" in motor else "L_d",
+            f"the motor is not salient (L_q {L_q:.4g} H <= L_d {L_d:.4g} H), and the "
+            f"HF-injection estimators of the scenario ({', '.join(hf)}) need L_q > L_d; "
+            "only 'sensored' runs without saliency",
+        )
+    opts = _parse_estimator_options(r, preset, PRESETS[preset].f_sw if f_sw == -1.0 else f_sw)
     paper = r.table("paper_result").t
     duration = r.num("duration", lo=1e-3)
     # default: past the start-up transient (0.5 s), or the second half of a shorter run
@@ -600,8 +813,8 @@ def parse_scenario(data: dict[str, Any], src: str) -> Scenario:
         saturation=r.boolean("saturation", True),
         theta_e0_deg=r.num("theta_e0_deg", 0.0),
         known_initial_angle=r.boolean("known_initial_angle", True),
-        speed_rpm=r.profile("speed_rpm"),
-        load_nm=r.profile("load_nm"),
+        speed_rpm=r.profile("speed_rpm", _wire_limits().speed_rpm, "rpm"),
+        load_nm=r.profile("load_nm", _wire_limits().load_nm, "N m"),
         reference_rate_hz=r.num("reference_rate_hz", 1000.0, lo=1.0),
         score_from_s=score_from_s,
         thd_window_s=thd_window,

@@ -40,6 +40,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Protocol
 
+from bench._errors import BenchError
 from bench._scenario import SHIPPED, Scenario, load_scenario
 
 #: Simulated seconds of a run in ``--quick`` mode (smoke test, not comparable with the papers).
@@ -308,6 +309,16 @@ def paper_jobs(
     return jobs
 
 
+def unmatched_estimators(scenarios: Sequence[str], estimators: Sequence[str]) -> str | None:
+    """Which of ``estimators`` none of ``scenarios`` lists, and what they list (None: all listed)."""
+    listed = {name: load_scenario(name).estimators for name in scenarios}
+    missing = [e for e in estimators if not any(e in ests for ests in listed.values())]
+    if not missing:
+        return None
+    what = "; ".join(f"{name} lists {', '.join(ests)}" for name, ests in listed.items())
+    return f"--estimators {', '.join(missing)}: not an estimator of the scenarios chosen ({what})"
+
+
 def downscale_png(src: Path, dst: Path, width: int = PNG_WIDTH) -> None:
     """Copy a PNG, scaled to ``width`` pixels and reduced to a 64-colour palette."""
     from PIL import Image
@@ -471,7 +482,6 @@ def run_suite(opt: SuiteOptions) -> dict[str, Any]:
     from bench._sweep import collect, plot_sweeps, sweep_jobs
 
     t0 = time.perf_counter()
-    opt.out_dir.mkdir(parents=True, exist_ok=True)
     transport = None if opt.inprocess else suite_transport(opt.interface, opt.channel)
     workers = opt.workers
     note = ""
@@ -487,6 +497,14 @@ def run_suite(opt: SuiteOptions) -> dict[str, Any]:
         transport=transport,
     )
     sweeps = sweep_jobs(opt.sweeps, quick=opt.sweep_quick) if opt.sweeps else []
+    why = None if opt.estimators is None else unmatched_estimators(opt.scenarios, opt.estimators)
+    if not (runs or sweeps):
+        raise BenchError(
+            f"{why or 'no scenario with an estimator and no sweep'}; nothing left to run"
+        )
+    if why:
+        print(f"suite: {why}; skipped", file=sys.stderr)
+    opt.out_dir.mkdir(parents=True, exist_ok=True)
     if opt.progress:
         where = "in-process" if transport is None else f"{transport[0]} {transport[1]}"
         print(

@@ -24,6 +24,8 @@ from typing import Any, NoReturn
 from bench._errors import BenchError, InterfaceError
 
 MODES = ("lockstep", "realtime")
+#: Exit status of ``bench run`` when the plant tripped a protection (files written).
+EXIT_PLANT_TRIPPED = 3
 
 #: Modules that add subcommands: each has ``register(subparsers)`` and keeps
 #: its heavy imports inside its command functions.
@@ -133,7 +135,9 @@ def _add_scenario_overrides(p: argparse.ArgumentParser) -> None:
         type=_NONNEG_INT,
         help="injected latency on the sample direction (lockstep)",
     )
-    p.add_argument("--seed", type=int, help="seed of noise and jitter (overrides the scenario)")
+    p.add_argument(
+        "--seed", type=_NONNEG_INT, help="seed of noise and jitter (overrides the scenario)"
+    )
 
 
 def _scenario(args: argparse.Namespace) -> Any:
@@ -259,7 +263,8 @@ def _check_estimator_fits(scn: Any, est: str) -> None:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    from bench._run import format_metrics, realtime_warning, run_scenario
+    from bench._run import fault_warning, format_metrics, realtime_warning, run_scenario
+    from bench._setup import sample_period
 
     scn = _scenario(args)
     est = args.estimator or scn.estimator
@@ -290,6 +295,9 @@ def cmd_run(args: argparse.Namespace) -> int:
     print(format_metrics(res.metrics, scn.paper_result, scn.estimator))
     if args.mode == "realtime" and (warn := realtime_warning(res.metrics)):
         print(warn, file=sys.stderr)
+    tripped = fault_warning(res.metrics, sample_period(scn))
+    if tripped:
+        print(tripped, file=sys.stderr)
     missing = int(res.metrics.get("steps_missing", 0))
     if missing and not res.meta.get("interrupted"):
         print(
@@ -303,7 +311,8 @@ def cmd_run(args: argparse.Namespace) -> int:
     if res.meta.get("interrupted"):
         print("bench: interrupted", file=sys.stderr)
         return 130
-    return 0
+    # every file is written; the status says the run is not a scenario result
+    return EXIT_PLANT_TRIPPED if tripped else 0
 
 
 def cmd_plant(args: argparse.Namespace) -> int:
@@ -587,7 +596,10 @@ def build_parser() -> argparse.ArgumentParser:
             help=f"drop probability of the {way} direction (default: --drop-prob)",
         )
     p.add_argument(
-        "--seed", type=int, default=0, help="seed of the drops and jitter (a stream per direction)"
+        "--seed",
+        type=_NONNEG_INT,
+        default=0,
+        help="seed of the drops and jitter (a stream per direction)",
     )
     p.add_argument("--duration", type=float, help="ignored (accepted for symmetry with the nodes)")
     p.add_argument(

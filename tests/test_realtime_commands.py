@@ -1,0 +1,70 @@
+"""Real time: the controller applies a bench command at its step, not on arrival.
+
+``bench run`` sends commands ahead of the plant (20 periods in real time);
+applied on arrival, the stop command ended the controller 20 periods before
+the plant's last period (every real-time run then counted 20 late duties and
+20 missing rows) and a set-point change reached the controller early.
+"""
+
+from __future__ import annotations
+
+from bench._codec import Codec
+from bench._loops import command_frames, make_controller_node, make_plant_node
+from bench._nodes import CMD_STOP, ControllerNode, PlantNode
+from bench._scenario import Profile, load_scenario
+
+CODEC = Codec()
+
+
+def _answer_steps(node: ControllerNode, pn: PlantNode, n: int) -> list[int]:
+    """Feed ``n`` periods of samples to ``node``; the steps of the duties it answered."""
+    steps = []
+    for _ in range(n):
+        for m in pn.frames_now():
+            for o in node.on_message(m):
+                d = CODEC.decode(o)
+                if d is not None and d.name == "PwmDuty":
+                    steps.append(int(d.signals["step"]))
+                    pn.on_message(o)
+        pn.advance_lockstep()
+    return steps
+
+
+def test_stop_sent_early_takes_effect_at_its_step() -> None:
+    scn = load_scenario("xue-fig13").with_overrides(duration=0.05)  # 50 periods at 1 kHz
+    node = make_controller_node(scn, "sensored", CODEC)
+    node.realtime = True
+    pn = make_plant_node(scn, CODEC)
+    cmds = command_frames(scn, CODEC)
+    stop_step, stop_msg = cmds[-1]
+    assert CODEC.decode(stop_msg).signals["cmd"] == CMD_STOP  # type: ignore[union-attr]
+    # every command, the stop included, arrives before the first sample
+    for _, m in cmds:
+        pn.on_message(m)
+        assert node.on_message(m) == []
+    pn.apply_commands()
+    assert not node.stopped
+    steps = _answer_steps(node, pn, stop_step)
+    # answered every period up to the stop's step, then stopped
+    assert steps == list(range(1, stop_step + 1))
+    assert not node.stopped
+    _answer_steps(node, pn, 1)
+    assert node.stopped
+
+
+def test_speed_step_sent_early_reaches_the_controller_at_its_step() -> None:
+    scn = load_scenario("xue-fig13").with_overrides(duration=0.05)
+    scn = scn.with_overrides(speed_rpm=Profile(((0.0, 0.0), (0.02, 0.0), (0.0201, 300.0))))
+    node = make_controller_node(scn, "sensored", CODEC)
+    node.realtime = True
+    pn = make_plant_node(scn, CODEC)
+    cmds = command_frames(scn, CODEC)
+    for _, m in cmds:
+        pn.on_message(m)
+        node.on_message(m)
+    pn.apply_commands()
+    change = next(s for s, m in cmds if CODEC.decode(m).signals["speed_ref"] > 0)  # type: ignore[union-attr]
+    _answer_steps(node, pn, change)  # samples 0 .. change - 1
+    assert node.ctrl.w_m_ref == 0.0
+    _answer_steps(node, pn, 1)  # sample ``change``
+    assert node.ctrl.w_m_ref > 0.0
