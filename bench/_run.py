@@ -486,8 +486,11 @@ def run_scenario(
         except ValueError:
             result = None
     if result is None:
-        # stopped before the first complete step: the capture is still valid
-        meta["capture"] = capture.name
+        # stopped before the first complete step: the capture is still valid;
+        # one without a single frame is not kept (no reader takes an empty log)
+        meta["capture"] = capture.name if frames else None
+        if not frames:
+            capture.unlink(missing_ok=True)
         metrics: dict[str, Any] = {"steps": 0, "frames_recorded": len(frames), "wall_s": wall}
         (out_dir / "metrics.json").write_text(json.dumps(metrics, indent=2) + "\n")
         (out_dir / "meta.json").write_text(json.dumps(meta, indent=2, default=str) + "\n")
