@@ -17,7 +17,8 @@ Step bookkeeping (DESIGN.md, "Timing model"):
   ``t`` during period ``t + N``; periods with no duty yet run with the
   inverter disabled.
 - ``BenchCommand.step = s``: both nodes apply the command just before
-  they handle step ``s`` (lockstep), or on receipt (real time).
+  they handle step ``s``, in both modes; a command that arrives after its
+  step takes effect in the next period (counted in ``late_commands``).
 
 Counters on the wire are ``step mod 2**bits``; receivers unwrap them against
 the step they expect.
@@ -178,7 +179,11 @@ class _CommandQueue:
                 counters.reject(REPEATED_COUNTER)
                 return s
             counters.late_commands += 1
+            # late: in the next period, after any other late command already
+            # waiting there (arrival order, so a newer set-point wins)
             s = self.applied_upto + 1
+            while s in self.pending:
+                s += 1
         if s in self.pending:
             counters.reject(REPEATED_COUNTER)
             return s
@@ -661,7 +666,16 @@ class ControllerNode:
         return self._run_ready()
 
     def sample_timeout(self) -> None:
-        """Samples stopped (real time): disable the PWM until a reset or enable command."""
+        """Samples stopped (real time): disable the PWM until a reset or enable command.
+
+        When the stop command is due with the very sample that did not come
+        (the plant's last one, lost on the way), the run is over: stop.
+        """
+        if any(
+            c.cmd == CMD_STOP and c.apply_step <= self.next_k
+            for c in self.commands.pending.values()
+        ):
+            self.stopped = True
         if not self.faulted:
             self.faulted = True
             self.sample_timeouts += 1

@@ -449,10 +449,12 @@ def _sweep_section(summary: dict[str, Any]) -> list[str]:
             rows.append([est, *cells])
         lines += ["Cells: mean dtheta / max |dtheta| (deg).", ""]
         lines += _table(head, rows)
+        # in the sweep's order (summary.json stores the keys sorted as text)
         errs = [
-            f"{est} at {x}: {e}"
+            f"{est} at {x:g}: {m['errors'][f'{x:g}']}"
             for est, m in _in_order(s["methods"], METHODS)
-            for x, e in m["errors"].items()
+            for x in s["values"]
+            if f"{x:g}" in m["errors"]
         ]
         if errs:
             lines += ["", "Failed points: " + "; ".join(errs)]

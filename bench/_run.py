@@ -277,11 +277,6 @@ def run_scenario(
         except BaseException:
             bus_a.shutdown()
             raise
-    # a folder used again: an older run's capture in another format would be
-    # taken for this run's by replay and rerun
-    for old in out_dir.glob("capture.*"):
-        if old != capture and old.suffix in set(LOG_SUFFIX.values()):
-            old.unlink()
     writer = can.Logger(str(capture))
     recorders = [Recorder(codec, writer, i + 1) for i in range(len(buses))]
     for r in recorders[1:]:
@@ -648,9 +643,11 @@ def finish_run(
         }
     if plant_r.get("jitter"):
         m["jitter_us"] = plant_r["jitter"]
+    # the first trip, from the capture; the plant's report (its latched, so
+    # last, fault) only when the capture lost the status frame
     fault, fault_step = plant_fault(frames, codec)
-    if plant_r.get("fault") not in (None, "none"):
-        fault, fault_step = str(plant_r["fault"]), int(plant_r.get("fault_step", fault_step))
+    if fault == "none" and plant_r.get("fault") not in (None, "none"):
+        fault, fault_step = str(plant_r["fault"]), int(plant_r.get("fault_step", -1))
     m["plant_fault"] = fault
     m["plant_fault_step"] = fault_step
     meta = dict(
@@ -673,25 +670,27 @@ def finish_run(
 def plant_fault(frames: list[can.Message], codec: Codec) -> tuple[str, int]:
     """The plant's first protection trip in a capture: (fault name, period), or ("none", -1).
 
-    From the ``PlantStatus`` frames the plant sends when it trips; the
-    16-bit step is unwrapped against the number of ``PhaseSamples`` frames
-    before it (retransmissions add a few, far less than the counter's range).
+    From the ``PlantStatus`` frames the plant sends when it trips; their
+    16-bit step is unwrapped against the 32-bit step of the last
+    ``PlantTruth`` frame before it (the plant's own period count, whatever
+    the capture's length, start, retransmissions or number of buses).
     """
     from plant_rt import FAULT_NAMES
 
-    id_status, id_samples = codec.frame_id("PlantStatus"), codec.frame_id("PhaseSamples")
+    id_status, id_truth = codec.frame_id("PlantStatus"), codec.frame_id("PlantTruth")
     m = 1 << codec.step_bits("PlantStatus")
-    seen = 0
+    last_truth: can.Message | None = None
     for f in frames:
-        if f.arbitration_id == id_samples:
-            seen += 1
+        if f.arbitration_id == id_truth:
+            last_truth = f
         elif f.arbitration_id == id_status:
             d = codec.decode(f)
             if d is None or d.reason is not None or int(d.signals["fault_code"]) == 0:
                 continue
+            t = codec.decode(last_truth) if last_truth is not None else None
+            ref = int(t.signals["step"]) if t is not None and t.reason is None else 0
             code = int(d.signals["fault_code"])
-            step = unwrap(int(d.signals["step"]), seen, m)
-            return FAULT_NAMES.get(code, str(code)), step
+            return FAULT_NAMES.get(code, str(code)), unwrap(int(d.signals["step"]), ref, m)
     return "none", -1
 
 
@@ -703,7 +702,7 @@ def fault_warning(m: dict[str, Any], T_s: float) -> str | None:
     k = int(m.get("plant_fault_step", -1))
     return (
         f"warning: the plant tripped its {fault} protection in period {k} "
-        f"(t = {k * T_s:.4f} s) and ran in the safe state from there (inverter off); "
+        f"(t = {k * T_s:.4f} s) and switched the inverter off (safe state, until a reset); "
         "the metrics include that part"
     )
 

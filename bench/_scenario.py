@@ -786,7 +786,8 @@ def parse_scenario(data: dict[str, Any], src: str) -> Scenario:
             "L_q" if "L_q" in motor else "L_d",
             f"the motor is not salient (L_q {L_q:.4g} H <= L_d {L_d:.4g} H), and the "
             f"HF-injection estimators of the scenario ({', '.join(hf)}) need L_q > L_d; "
-            "only 'sensored' runs without saliency",
+            "only 'sensored' runs without saliency "
+            '(estimator = "sensored", estimators = ["sensored"])',
         )
     opts = _parse_estimator_options(r, preset, PRESETS[preset].f_sw if f_sw == -1.0 else f_sw)
     paper = r.table("paper_result").t

@@ -10,12 +10,19 @@ as if nothing happened; ``bench analyze`` finds the same trip in the capture.
 from __future__ import annotations
 
 import json
+import shutil
 from pathlib import Path
 
+import can
 import pytest
 
+from bench._codec import Codec
+from bench._run import plant_fault
 from bench.cli import EXIT_PLANT_TRIPPED, main
+from plant_rt import FAULT_OVER_VOLTAGE
 from tests.ports import free_port
+
+CODEC = Codec()
 
 
 def test_trip_is_a_warning_a_metric_and_an_exit_status(
@@ -35,9 +42,14 @@ def test_trip_is_a_warning_a_metric_and_an_exit_status(
     assert f"tripped its over_speed protection in period {k} " in err
     m = json.loads((out / "metrics.json").read_text())
     assert (m["plant_fault"], m["plant_fault_step"]) == ("over_speed", k)
-    # the same trip, found offline in the capture's PlantStatus frames
+    # the same trip, found offline in the capture's PlantStatus frames alone
+    # (a copy without meta.json, so without the plant's report)
+    lone = tmp_path / "lone"
+    lone.mkdir()
+    shutil.copy(out / "capture.blf", lone / "capture.blf")
     again = tmp_path / "again"
-    assert main(["analyze", str(out / "capture.blf"), "--out", str(again)]) == 0
+    argv = ["analyze", str(lone / "capture.blf"), "--scenario", str(scn), "--out", str(again)]
+    assert main(argv) == 0
     m2 = json.loads((again / "metrics.json").read_text())
     assert (m2["plant_fault"], m2["plant_fault_step"]) == ("over_speed", k)
 
@@ -48,3 +60,31 @@ def test_a_run_without_trip_says_none(tmp_path: Path) -> None:
     assert main([*argv, "--port", str(free_port())]) == 0
     m = json.loads((out / "metrics.json").read_text())
     assert (m["plant_fault"], m["plant_fault_step"]) == ("none", -1)
+
+
+def _truth(k: int, channel: int) -> can.Message:
+    sig = {"theta_e": 0.0, "w_m": 0.0, "tau_e": 0.0, "tau_L": 0.0, "duty_age": 1, "step": k}
+    m = CODEC.encode("PlantTruth", sig)
+    m.channel = channel
+    return m
+
+
+def _status(k: int, code: int) -> can.Message:
+    sig = {"state": 2, "fault_code": code, "overruns": 0, "late_frames": 0, "step": k % 65536}
+    return CODEC.encode("PlantStatus", sig)
+
+
+def test_trip_period_past_the_status_counters_wrap_on_two_buses() -> None:
+    """The 16-bit status step is placed by the plant's 32-bit truth step, not by counting frames.
+
+    A two-bus capture (a link run) carries every truth frame twice, and a
+    trip after period 65,536 needs the wrap resolved.
+    """
+    k_trip = 70_000
+    frames = [_truth(k, ch) for k in range(k_trip - 5, k_trip) for ch in (1, 2)]
+    frames += [_status(k_trip, FAULT_OVER_VOLTAGE), _status(k_trip + 3, FAULT_OVER_VOLTAGE)]
+    assert plant_fault(frames, CODEC) == ("over_voltage", k_trip)
+    # a capture that starts mid-run: the same
+    assert plant_fault(frames[6:], CODEC) == ("over_voltage", k_trip)
+    # status frames without a fault (state reports) are not trips
+    assert plant_fault([*frames[:4], _status(k_trip, 0)], CODEC) == ("none", -1)

@@ -8,6 +8,9 @@ the plant's last period (every real-time run then counted 20 late duties and
 
 from __future__ import annotations
 
+import can
+import pytest
+
 from bench._codec import Codec
 from bench._loops import command_frames, make_controller_node, make_plant_node
 from bench._nodes import CMD_STOP, ControllerNode, PlantNode
@@ -68,3 +71,48 @@ def test_speed_step_sent_early_reaches_the_controller_at_its_step() -> None:
     assert node.ctrl.w_m_ref == 0.0
     _answer_steps(node, pn, 1)  # sample ``change``
     assert node.ctrl.w_m_ref > 0.0
+
+
+def test_lost_last_sample_still_stops_the_controller_on_its_timeout() -> None:
+    """The plant's last sample (the stop's step) lost: the sample timeout ends the run."""
+    scn = load_scenario("xue-fig13").with_overrides(duration=0.05)
+    cmds = command_frames(scn, CODEC)
+    stop_step = cmds[-1][0]
+    for lost_from, stops in ((stop_step, True), (stop_step - 10, False)):
+        node = make_controller_node(scn, "sensored", CODEC)
+        node.realtime = True
+        pn = make_plant_node(scn, CODEC)
+        for _, m in cmds:
+            pn.on_message(m)
+            node.on_message(m)
+        pn.apply_commands()
+        _answer_steps(node, pn, lost_from)  # samples 0 .. lost_from - 1 arrive
+        node.sample_timeout()
+        # only a stop due with the missing sample ends it; earlier, samples just stopped
+        assert node.stopped is stops and node.faulted
+
+
+def test_late_commands_keep_their_order_and_the_newest_set_point() -> None:
+    """Two different commands arriving after their steps: both applied, the newer last."""
+    scn = load_scenario("xue-fig13").with_overrides(duration=0.05)
+    node = make_controller_node(scn, "sensored", CODEC)
+    node.realtime = True
+    pn = make_plant_node(scn, CODEC)
+    cmds = command_frames(scn, CODEC)
+    for _, m in cmds[:1]:  # the start
+        pn.on_message(m)
+        node.on_message(m)
+    pn.apply_commands()
+    _answer_steps(node, pn, 10)
+
+    def command(step: int, rpm: float, seq: int) -> can.Message:
+        sig = {"cmd": 0, "seq": seq, "step": step, "speed_ref": rpm, "load_torque": 0.0}
+        return CODEC.encode("BenchCommand", sig)
+
+    for m in (command(5, 50.0, 7), command(8, 100.0, 8)):  # both late, newest last
+        node.on_message(m)
+        node.on_message(m)  # the second copy of each is a repeat, not a new command
+    assert node.counters.late_commands == 2
+    assert node.counters.reject_reasons == {"repeated_counter": 2}
+    _answer_steps(node, pn, 3)
+    assert node.ctrl.w_m_ref * 60.0 / (2.0 * 3.141592653589793) == pytest.approx(100.0, rel=1e-3)

@@ -207,6 +207,26 @@ def test_report_orders_sweeps_and_methods_as_the_suite_does() -> None:
     assert rows[: len(METHODS)] == list(METHODS)
 
 
+def test_failed_points_are_listed_in_the_sweeps_order() -> None:
+    """Error keys are text ("100" sorts before "25" in summary.json): listed by value."""
+    summary = json.loads((RESULTS / "summary.json").read_text())
+    # a sweep whose values sort differently as text (speed: "400" < "50")
+    kind, sw = next(
+        (k, v)
+        for k, v in summary["sweeps"].items()
+        if f"{v['values'][-1]:g}" < f"{v['values'][1]:g}"
+    )
+    est = next(iter(sw["methods"]))
+    lo, hi = sw["values"][1], sw["values"][-1]
+    errs = {f"{hi:g}": "late", f"{lo:g}": "early"}
+    sw["methods"][est]["errors"] = dict(sorted(errs.items()))  # as read back from JSON
+    text = render_markdown(summary)
+    line = next(ln for ln in text.splitlines() if ln.startswith("Failed points: "))
+    assert line == f"Failed points: {est} at {lo:g}: early; {est} at {hi:g}: late", kind
+    sw["methods"][est]["errors"] = errs  # as built by the suite: the same report
+    assert render_markdown(summary) == text
+
+
 # ---------------------------------------------------------------- 5: the paper's column of rerun
 
 
