@@ -299,8 +299,11 @@ class Scenario:
         """
         clean = {k: v for k, v in kw.items() if v is not None}
         out = replace(self, **clean)
-        if "latency" in clean:  # e.g. --delay-steps
+        if "latency" in clean or "f_sw" in clean:  # e.g. --delay-steps, --duty-delay-us
+            from plant_rt import PRESETS
+
             _check_delay_steps(out.source, out.latency)
+            _check_delay_us(out.source, out.latency, out.f_sw or PRESETS[out.preset].f_sw)
         if "score_from_s" not in clean and out.score_from_s >= out.duration:
             out = replace(out, score_from_s=out.duration / 2)
         return out
@@ -473,6 +476,23 @@ def _check_delay_steps(src: str, lat: Latency) -> None:
             f"{src}: field 'latency': duty_delay_steps + sample_delay_steps = {total} periods "
             f"is more than {bound}, {why}"
         )
+
+
+def _check_delay_us(src: str, lat: Latency, f_sw: float) -> None:
+    """Injected real-time delays the step counters can carry, at the PWM rate ``f_sw``.
+
+    A frame held longer than the lockstep bound (in periods of ``f_sw``)
+    would reach a receiver that can no longer place its step counter.
+    """
+    bound = _wire_limits().max_delay_steps
+    for key in ("duty_delay_us", "sample_delay_us"):
+        v = getattr(lat, key)
+        if v * 1e-6 * f_sw > bound:
+            raise ScenarioError(
+                f"{src}: field 'latency.{key}': {v:g} us is more than {bound} PWM periods at "
+                f"{f_sw:g} Hz ({bound / f_sw * 1e6:g} us), the most the step counters carry "
+                "(see latency.duty_delay_steps)"
+            )
 
 
 def scenario_path(name_or_path: str) -> Path:
@@ -789,7 +809,9 @@ def parse_scenario(data: dict[str, Any], src: str) -> Scenario:
             "only 'sensored' runs without saliency "
             '(estimator = "sensored", estimators = ["sensored"])',
         )
-    opts = _parse_estimator_options(r, preset, PRESETS[preset].f_sw if f_sw == -1.0 else f_sw)
+    f_eff = PRESETS[preset].f_sw if f_sw == -1.0 else f_sw
+    _check_delay_us(r.src, latency, f_eff)
+    opts = _parse_estimator_options(r, preset, f_eff)
     paper = r.table("paper_result").t
     duration = r.num("duration", lo=1e-3)
     # default: past the start-up transient (0.5 s), or the second half of a shorter run

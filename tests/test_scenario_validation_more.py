@@ -271,3 +271,15 @@ def test_non_salient_motor_with_an_injection_estimator_on_the_command_line(
     line = _cli_error(capsys, ["run", path, "--estimator", "tt-dq"])
     assert f"{path}: field 'motor.L_q': the motor is not salient (L_q 0.05 H <= L_d 0.1 H)" in line
     assert "controller_model" not in line
+
+
+def test_realtime_delays_beyond_the_step_counters_are_one_line(tmp_path: Path) -> None:
+    """256 periods at wen2023's 10 kHz: 25.6 ms; at a scenario's own f_sw, that rate's periods."""
+    assert load_scenario(_write(tmp_path, "[latency]\nduty_delay_us = 25600.0\n")).latency
+    msg = _error(_write(tmp_path, "[latency]\nsample_delay_us = 25700.0\n"))
+    assert "field 'latency.sample_delay_us': 25700 us is more than 256 PWM periods" in msg
+    assert "(25600 us)" in msg
+    # the bound follows the scenario's PWM rate
+    slow = WEN.replace('preset = "wen2023"', 'preset = "wen2023"\nf_sw = 1000.0')
+    assert slow != WEN
+    assert load_scenario(_write(tmp_path, "[latency]\nduty_delay_us = 200000.0\n", slow))
