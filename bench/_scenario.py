@@ -495,6 +495,32 @@ def _check_delay_us(src: str, lat: Latency, f_sw: float) -> None:
             )
 
 
+def saliency_error(
+    src: str, preset: str, motor: dict[str, float], estimators: tuple[str, ...] | list[str]
+) -> ScenarioError | None:
+    """The error of a motor without saliency asked to run HF-injection estimators, if any.
+
+    ``motor``: the scenario's ``[motor]`` overrides of the preset.  Checked on
+    load for the scenario's estimators and again when an estimator chosen on
+    the command line is built.
+    """
+    from controller._registry import injection_family
+    from plant_rt import PRESETS
+
+    base = PRESETS[preset].motor
+    L_d, L_q = motor.get("L_d", base.L_d), motor.get("L_q", base.L_q)
+    hf = [e for e in dict.fromkeys(estimators) if injection_family(e) != "none"]
+    if not hf or L_q > L_d:
+        return None
+    key = "L_q" if "L_q" in motor or "L_d" not in motor else "L_d"
+    return ScenarioError(
+        f"{src}: field 'motor.{key}': the motor is not salient (L_q {L_q:.4g} H <= L_d "
+        f"{L_d:.4g} H), and the HF-injection estimators asked for ({', '.join(hf)}) need "
+        "L_q > L_d; only 'sensored' runs without saliency "
+        '(estimator = "sensored", estimators = ["sensored"])'
+    )
+
+
 def scenario_path(name_or_path: str) -> Path:
     """Resolve a shipped scenario name or a user's file path."""
     p = Path(name_or_path)
@@ -729,7 +755,6 @@ def _parse_estimator_options(r: _Reader, preset: str, f_s: float) -> dict[str, A
 def parse_scenario(data: dict[str, Any], src: str) -> Scenario:
     """Validate a scenario table (already parsed from TOML)."""
     from controller import ESTIMATOR_NAMES
-    from controller._registry import injection_family
     from plant_rt import PRESETS
 
     for k in data:
@@ -798,17 +823,8 @@ def parse_scenario(data: dict[str, Any], src: str) -> Scenario:
                 if not v > 0.0:
                     raise mt.fail(k, f"must be > 0, got {v}")
                 motor[k] = v
-    base = PRESETS[preset].motor
-    L_d, L_q = motor.get("L_d", base.L_d), motor.get("L_q", base.L_q)
-    hf = [e for e in dict.fromkeys((*ests, estimator)) if injection_family(e) != "none"]
-    if hf and not L_q > L_d:
-        raise mt.fail(
-            "L_q" if "L_q" in motor else "L_d",
-            f"the motor is not salient (L_q {L_q:.4g} H <= L_d {L_d:.4g} H), and the "
-            f"HF-injection estimators of the scenario ({', '.join(hf)}) need L_q > L_d; "
-            "only 'sensored' runs without saliency "
-            '(estimator = "sensored", estimators = ["sensored"])',
-        )
+    if err := saliency_error(r.src, preset, motor, (*ests, estimator)):
+        raise err
     f_eff = PRESETS[preset].f_sw if f_sw == -1.0 else f_sw
     _check_delay_us(r.src, latency, f_eff)
     opts = _parse_estimator_options(r, preset, f_eff)

@@ -12,7 +12,7 @@ from typing import Any
 
 from bench._errors import ScenarioError
 from bench._nodes import CMD_START, CMD_STOP, RPM_PER_RAD_S
-from bench._scenario import ModelErrors, Scenario
+from bench._scenario import ModelErrors, Scenario, saliency_error
 from controller import Controller, ControllerPars, MotorModel
 from controller._registry import ESTIMATOR_NAMES, injection_family
 from plant_rt import ConstantLoad, Plant, Preset, SensorPars, preset
@@ -120,11 +120,8 @@ def build_controller(scn: Scenario, estimator: str) -> Controller:
         kw["startup"] = False
         kw["theta0"] = math.radians(scn.theta_e0_deg)
     model = motor_model(p, scn.controller_model)
-    if injection_family(estimator) != "none" and not p.motor.L_q > p.motor.L_d:
-        raise ScenarioError(
-            f"{scn.source}: field 'motor.L_q': the motor is not salient (L_q "
-            f"{p.motor.L_q:.4g} H <= L_d {p.motor.L_d:.4g} H), which {estimator} needs"
-        )
+    if err := saliency_error(scn.source, scn.preset, scn.motor, [estimator]):
+        raise err
     if injection_family(estimator) != "none" and not model.L_q > model.L_d:
         raise ScenarioError(
             f"{scn.source}: field 'controller_model': the factors L_d = {scn.controller_model.L_d} "
