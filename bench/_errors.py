@@ -12,6 +12,9 @@ Each message names the file (or interface), the field and the reason, e.g.
 from __future__ import annotations
 
 __all__ = [
+    "EXIT_INTERRUPTED",
+    "EXIT_PLANT_TRIPPED",
+    "EXIT_USER_ERROR",
     "BenchError",
     "CaptureError",
     "DbcError",
@@ -19,11 +22,19 @@ __all__ = [
     "ScenarioError",
 ]
 
+#: Exit status of a user's mistake or a failure (one line on stderr).
+EXIT_USER_ERROR = 2
+#: Exit status of ``bench run`` / ``bench analyze`` when the plant tripped a
+#: protection (every file written; the metrics are not a scenario result).
+EXIT_PLANT_TRIPPED = 3
+#: Exit status of an interrupted command (Ctrl-C), with the files of the part that ran.
+EXIT_INTERRUPTED = 130
+
 
 class BenchError(Exception):
     """Base of every error the bench reports as one line (exit status 2)."""
 
-    exit_code: int = 2
+    exit_code: int = EXIT_USER_ERROR
 
 
 class ScenarioError(BenchError):

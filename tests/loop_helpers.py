@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from bench._setup import motor_model
+from bench.scenarios._setup import motor_model
 from controller import Controller, ControllerPars, Measurement
 from plant_rt import Plant, Preset
 

@@ -11,8 +11,9 @@ from pathlib import Path
 
 import pytest
 
-from bench._run import BusSpec, run_scenario
-from bench._scenario import load_scenario
+from bench.runs._run import run_scenario
+from bench.scenarios._schema import load_scenario
+from bench.wire._bus import BusSpec
 from tests.ports import free_port
 
 #: The metrics that a capture's analysis must reproduce exactly.

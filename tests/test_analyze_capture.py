@@ -19,11 +19,11 @@ import can
 import numpy as np
 import pytest
 
-from bench._analysis import analyze_frames, read_csv
-from bench._batch_decode import decode_batch
-from bench._codec import Codec
-from bench._replay import analyze_capture, read_capture
+from bench.captures._replay import analyze_capture, read_capture
 from bench.cli import main
+from bench.runs._analysis import analyze_frames, read_csv
+from bench.wire._batch_decode import decode_batch
+from bench.wire._codec import Codec
 from tests.replay_helpers import POSITION_SPEED, recorded_run
 
 CODEC = Codec()

@@ -18,7 +18,7 @@ import can
 import numpy as np
 import pytest
 
-from bench._loops import (
+from bench.nodes._loops import (
     command_frames,
     controller_loop,
     make_controller_node,
@@ -26,8 +26,9 @@ from bench._loops import (
     plant_loop,
     run_inprocess,
 )
-from bench._run import BusSpec, run_scenario
-from bench._scenario import Latency, Scenario
+from bench.runs._run import run_scenario
+from bench.scenarios._schema import Latency, Scenario
+from bench.wire._bus import BusSpec
 from tests.ports import free_port
 from tests.trace_helpers import CODEC, assert_same_trace, short, trace
 

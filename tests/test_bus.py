@@ -12,16 +12,16 @@ from pathlib import Path
 import can
 import pytest
 
-import bench._bus as busmod
-from bench._bus import (
+import bench.wire._bus as busmod
+from bench._errors import BenchError, InterfaceError
+from bench.wire._bus import (
     UDP_GROUP_IPV4,
     default_channel,
     default_transport,
     open_bus,
     udp_multicast_group,
 )
-from bench._codec import Codec
-from bench._errors import BenchError, InterfaceError
+from bench.wire._codec import Codec
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -88,8 +88,8 @@ def test_virtual_receive_own_messages(codec):
 _CHILD = textwrap.dedent(
     """
     import sys, time
-    from bench._bus import open_bus
-    from bench._codec import Codec
+    from bench.wire._bus import open_bus
+    from bench.wire._codec import Codec
 
     group, port = sys.argv[1], int(sys.argv[2])
     codec = Codec()

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from bench._busload import (
+from bench.wire._busload import (
     BUSES,
     PRACTICAL_LOAD,
     Bus,
@@ -14,7 +14,7 @@ from bench._busload import (
     format_busload,
     frame_time_us,
 )
-from bench._codec import Codec
+from bench.wire._codec import Codec
 
 
 @pytest.fixture(scope="module")

@@ -28,10 +28,10 @@ import can
 import numpy as np
 import pytest
 
-from bench._analysis import read_csv
 from bench._errors import CaptureError
-from bench._replay import analyze_capture, read_capture
+from bench.captures._replay import analyze_capture, read_capture
 from bench.cli import main
+from bench.runs._analysis import read_csv
 from tests.replay_helpers import POSITION_SPEED, recorded_run
 
 STEPS = 2001  # 0.2 s at 10 kHz, steps 0 .. 2000

@@ -18,10 +18,10 @@ import can
 import numpy as np
 import pytest
 
-from bench._codec import Codec
-from bench._replay import ReplayResult, analyze_capture, read_capture, replay_frames
-from bench._rerun import rerun_capture
+from bench.captures._replay import ReplayResult, analyze_capture, read_capture, replay_frames
+from bench.captures._rerun import rerun_capture
 from bench.cli import main
+from bench.wire._codec import Codec
 from tests.replay_helpers import recorded_run
 
 CODEC = Codec()

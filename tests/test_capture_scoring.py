@@ -17,10 +17,11 @@ from pathlib import Path
 
 import pytest
 
-from bench._cli_replay import cmd_analyze, cmd_rerun
-from bench._replay import analyze_capture, scoring_scenario
-from bench._rerun import rerun_capture
-from bench._scenario import load_scenario
+from bench.captures._replay import analyze_capture, scoring_scenario
+from bench.captures._rerun import rerun_capture
+from bench.cli.analyze import cmd_analyze
+from bench.cli.rerun import cmd_rerun
+from bench.scenarios._schema import load_scenario
 from tests.replay_helpers import recorded_run
 
 SCORED = (

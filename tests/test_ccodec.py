@@ -7,8 +7,8 @@ import subprocess
 
 import pytest
 
-from bench._ccodec import generate_c, generate_harness, iter_vectors, write_vectors
-from bench._codec import Codec
+from bench.wire._ccodec import generate_c, generate_harness, iter_vectors, write_vectors
+from bench.wire._codec import Codec
 
 CC = shutil.which("cc") or shutil.which("gcc") or shutil.which("clang")
 pytestmark = pytest.mark.skipif(CC is None, reason="no C compiler")

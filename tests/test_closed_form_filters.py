@@ -27,7 +27,7 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from bench._setup import motor_model
+from bench.scenarios._setup import motor_model
 from controller import BPF_WEN, HPF_WEN, LPF_WEN, EstimatorInput, make_estimator
 from controller._filters import Biquad2, FirstOrder, FirstOrder2, lpf_first_order
 from controller._rotating import RotatingInjectionPars

@@ -10,7 +10,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from bench._codec import (
+from bench._errors import BenchError, DbcError
+from bench.wire._codec import (
     REJECT_BAD_CRC,
     REJECT_BAD_LENGTH,
     REJECT_DECODE_ERROR,
@@ -19,7 +20,6 @@ from bench._codec import (
     default_codec,
     unwrap_step,
 )
-from bench._errors import BenchError, DbcError
 from dbc import DBC_PATH
 
 

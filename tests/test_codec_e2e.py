@@ -6,7 +6,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from bench._e2e import CRC8_J1850_TABLE, crc8_j1850, e2e_crc, e2e_start
+from bench.wire._e2e import CRC8_J1850_TABLE, crc8_j1850, e2e_crc, e2e_start
 
 # AUTOSAR SWS CRC Library, CRC8 (SAE J1850) check values; and the catalogue check value.
 PUBLISHED = [

@@ -16,10 +16,10 @@ from pathlib import Path
 
 import pytest
 
-from bench._ccodec import iter_vectors
-from bench._codec import Codec
-from bench._e2e import crc8_j1850, e2e_crc, e2e_start
 from bench.cli import main
+from bench.wire._ccodec import iter_vectors
+from bench.wire._codec import Codec
+from bench.wire._e2e import crc8_j1850, e2e_crc, e2e_start
 from controller._svpwm import svpwm
 from plant_rt import preset
 

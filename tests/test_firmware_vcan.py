@@ -20,12 +20,13 @@ import can
 import numpy as np
 import pytest
 
-from bench._analysis import analyze_frames
-from bench._codec import Codec
-from bench._loops import command_frames
-from bench._run import BusSpec, Recorder, _drain
-from bench._scenario import load_scenario
-from bench._setup import get_preset, n_steps, sample_period
+from bench.nodes._loops import command_frames
+from bench.runs._analysis import analyze_frames
+from bench.runs._recorder import Recorder, drain
+from bench.scenarios._schema import load_scenario
+from bench.scenarios._setup import get_preset, n_steps, sample_period
+from bench.wire._bus import BusSpec
+from bench.wire._codec import Codec
 from tests.conftest import require_vcan
 from tests.test_firmware import CC, MAKE, build_firmware
 
@@ -109,7 +110,7 @@ def firmware_run(tmp_path_factory: pytest.TempPathFactory) -> dict:
             if p.poll() is None:
                 p.kill()
                 p.wait()
-        _drain([rec])  # the recorder may lag the nodes on a slow host
+        drain([rec])  # the recorder may lag the nodes on a slow host
         notifier.stop()
         writer.stop()
         bus.shutdown()

@@ -1,7 +1,7 @@
 """Fuzzing the nodes: random frames never crash a node, are all counted, never reach the inverter.
 
-The oracle is independent of the codec: the raw CRC-8 of ``bench._e2e`` and a
-by-hand unpacking of the ``PwmDuty`` layout (``bench._reliability``).
+The oracle is independent of the codec: the raw CRC-8 of ``bench.wire._e2e`` and a
+by-hand unpacking of the ``PwmDuty`` layout (``bench.studies._soak``).
 """
 
 from __future__ import annotations
@@ -10,11 +10,11 @@ import can
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from bench._codec import Codec
-from bench._loops import make_controller_node, make_plant_node
-from bench._reliability import FrameFuzzer, FuzzResult, StepGuard, e2e_ok, fuzz_node, raw_duty
-from bench._run import BusSpec
-from bench._scenario import load_scenario
+from bench.nodes._loops import make_controller_node, make_plant_node
+from bench.scenarios._schema import load_scenario
+from bench.studies._soak import FrameFuzzer, FuzzResult, StepGuard, e2e_ok, fuzz_node, raw_duty
+from bench.wire._bus import BusSpec
+from bench.wire._codec import Codec
 from tests.ports import free_port
 
 CODEC = Codec()

@@ -19,19 +19,20 @@ from typing import Any
 import can
 import pytest
 
-from bench._codec import Codec
 from bench._errors import ScenarioError
-from bench._link import LockstepLink, RealtimeLink
-from bench._loops import run_inprocess
-from bench._run import BusSpec, run_scenario
-from bench._scenario import (
+from bench.cli import main
+from bench.nodes._link import LockstepLink, RealtimeLink
+from bench.nodes._loops import run_inprocess
+from bench.runs._run import run_scenario
+from bench.scenarios._schema import (
     Direction,
     Latency,
     load_scenario,
     scenario_from_dict,
     write_effective,
 )
-from bench.cli import main
+from bench.wire._bus import BusSpec
+from bench.wire._codec import Codec
 from tests.ports import free_port
 from tests.trace_helpers import assert_same_trace, short, trace
 
@@ -192,8 +193,8 @@ def test_link_per_direction_options_are_checked(
 def test_link_options_reach_the_link(
     mode: str, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    import bench._link
-    import bench.cli
+    import bench.cli.link
+    import bench.nodes._link
 
     got: list[LockstepLink | RealtimeLink] = []
     opened: list[can.BusABC] = []
@@ -203,8 +204,8 @@ def test_link_options_reach_the_link(
         return opened[-1]
 
     monkeypatch.setattr(BusSpec, "open", fake_open)
-    monkeypatch.setattr(bench.cli, "_stop_on_signals", lambda: None)
-    monkeypatch.setattr(bench._link, "link_loop", lambda a, b, logic, **kw: got.append(logic))
+    monkeypatch.setattr(bench.cli.link, "stop_on_signals", lambda: None)
+    monkeypatch.setattr(bench.nodes._link, "link_loop", lambda a, b, logic, **kw: got.append(logic))
     argv = [*LINK_ARGV, "--to-port", "47101", "--mode", mode, "--seed", "3"]
     extra = ["--drop-prob", "0.2", "--duty-drop-prob", "0.6", "--jitter-us", "9"]
     assert main([*argv, *extra, "--sample-jitter-us", "4"]) == 0

@@ -18,9 +18,9 @@ import uuid
 
 import can
 
-from bench._codec import Codec
-from bench._link import LockstepLink, link_loop
-from bench._run import _ended_early
+from bench.nodes._link import LockstepLink, link_loop
+from bench.runs._processes import ended_early
+from bench.wire._codec import Codec
 
 CODEC = Codec()
 
@@ -89,12 +89,12 @@ def test_a_link_that_ends_during_the_run_is_named() -> None:
     try:
         for p in (done_ok, failed):
             p.wait(10.0)
-        assert _ended_early([("link", running), ("plant", running)]) is None
+        assert ended_early([("link", running), ("plant", running)]) is None
         # the link never ends by itself during a run, whatever its exit code
-        assert _ended_early([("link", done_ok), ("plant", running)]) == "link"
-        assert _ended_early([("link", failed), ("plant", running)]) == "link"
+        assert ended_early([("link", done_ok), ("plant", running)]) == "link"
+        assert ended_early([("link", failed), ("plant", running)]) == "link"
         # a dead controller is the plant's to handle (watchdog, safe state)
-        assert _ended_early([("controller", failed), ("plant", running)]) is None
+        assert ended_early([("controller", failed), ("plant", running)]) is None
     finally:
         running.kill()
         running.wait()

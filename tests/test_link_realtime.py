@@ -22,8 +22,8 @@ from typing import Any
 import can
 import pytest
 
-from bench._codec import Codec
-from bench._link import RealtimeLink
+from bench.nodes._link import RealtimeLink
+from bench.wire._codec import Codec
 
 CODEC = Codec()
 ID_SAMPLES = CODEC.frame_id("PhaseSamples")

@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from bench._metrics import compute_metrics, overshoot_rpm, thd_pct, wrap_pi
+from bench.runs._metrics import compute_metrics, overshoot_rpm, thd_pct, wrap_pi
 
 
 @pytest.mark.parametrize("f1", [6.6667, 13.3, 26.67])

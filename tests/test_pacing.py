@@ -14,7 +14,7 @@ import time
 
 import can
 
-from bench._loops import (
+from bench.nodes._loops import (
     command_frames,
     controller_loop,
     make_controller_node,

@@ -22,8 +22,8 @@ import numpy as np
 import pytest
 
 from bench._errors import ScenarioError
-from bench._loops import run_inprocess
-from bench._scenario import (
+from bench.nodes._loops import run_inprocess
+from bench.scenarios._schema import (
     MODEL_ERROR_KEYS,
     ModelErrors,
     Scenario,
@@ -32,7 +32,7 @@ from bench._scenario import (
     scenario_from_dict,
     write_effective,
 )
-from bench._setup import build_controller, build_plant, get_preset
+from bench.scenarios._setup import build_controller, build_plant, get_preset
 from plant_rt import preset
 from tests.trace_helpers import CODEC, trace
 

@@ -16,9 +16,10 @@ from pathlib import Path
 import can
 import pytest
 
-from bench._codec import Codec
-from bench._run import plant_fault
-from bench.cli import EXIT_PLANT_TRIPPED, main
+from bench._errors import EXIT_PLANT_TRIPPED
+from bench.cli import main
+from bench.runs._results import plant_fault
+from bench.wire._codec import Codec
 from plant_rt import FAULT_OVER_VOLTAGE
 from tests.ports import free_port
 

@@ -6,10 +6,10 @@ import math
 
 import pytest
 
-from bench._codec import Codec
-from bench._loops import make_plant_node
-from bench._nodes import CMD_RESET, STATE_FAULT
-from bench._scenario import load_scenario
+from bench.nodes._loops import make_plant_node
+from bench.scenarios._schema import load_scenario
+from bench.wire._codec import Codec
+from bench.wire._protocol import CMD_RESET, STATE_FAULT
 from plant_rt import (
     FAULT_NONE,
     FAULT_OVER_CURRENT,

@@ -11,10 +11,11 @@ from __future__ import annotations
 import can
 import pytest
 
-from bench._codec import Codec
-from bench._loops import command_frames, make_controller_node, make_plant_node
-from bench._nodes import CMD_STOP, ControllerNode, PlantNode
-from bench._scenario import Profile, load_scenario
+from bench.nodes._loops import command_frames, make_controller_node, make_plant_node
+from bench.nodes._nodes import ControllerNode, PlantNode
+from bench.scenarios._schema import Profile, load_scenario
+from bench.wire._codec import Codec
+from bench.wire._protocol import CMD_STOP
 
 CODEC = Codec()
 

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import can
 
-from bench._codec import Codec
-from bench._run import Recorder
+from bench.runs._recorder import Recorder
+from bench.wire._codec import Codec
 
 CODEC = Codec()
 

@@ -7,8 +7,7 @@ import threading
 
 import can
 
-from bench._codec import Codec
-from bench._loops import (
+from bench.nodes._loops import (
     command_frames,
     controller_loop,
     make_controller_node,
@@ -16,8 +15,9 @@ from bench._loops import (
     plant_loop,
     watchdog_periods,
 )
-from bench._nodes import CMD_RESET, STATE_FAULT
-from bench._scenario import load_scenario
+from bench.scenarios._schema import load_scenario
+from bench.wire._codec import Codec
+from bench.wire._protocol import CMD_RESET, STATE_FAULT
 from plant_rt import FAULT_NONE, FAULT_WATCHDOG
 
 CODEC = Codec()

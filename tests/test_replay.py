@@ -16,15 +16,15 @@ import numpy as np
 import pytest
 
 from bench._errors import BenchError
-from bench._replay import (
+from bench.captures._replay import (
     parse_id_map,
     read_capture,
     replay_frames,
     schedule,
     select_frames,
 )
-from bench._run import BusSpec
 from bench.cli import main
+from bench.wire._bus import BusSpec
 from tests.ports import free_port
 from tests.replay_helpers import recorded_run
 

@@ -19,17 +19,16 @@ import can
 import pytest
 from can.interfaces import virtual
 
-from bench._bus import udp_multicast_group
 from bench._errors import BenchError, InterfaceError
-from bench._replay import (
+from bench.captures._replay import (
     parse_channel_map,
     plan_replay,
     read_capture,
     replay_frames,
     resolve_channel_map,
 )
-from bench._run import BusSpec
 from bench.cli import main
+from bench.wire._bus import BusSpec, udp_multicast_group
 from tests.ports import free_port
 
 #: Capture channel of each frame: interleaved, so that a replay that sends a
@@ -61,7 +60,7 @@ def _expect(channels: set[int]) -> list[tuple[int, bytes]]:
     return [(m.arbitration_id, bytes(m.data)) for m in _frames() if m.channel in channels]
 
 
-def _drain(bus: can.BusABC, timeout: float = 0.05) -> list[tuple[int, bytes]]:
+def drain(bus: can.BusABC, timeout: float = 0.05) -> list[tuple[int, bytes]]:
     out = []
     while (m := bus.recv(timeout)) is not None:
         out.append((m.arbitration_id, bytes(m.data)))
@@ -131,7 +130,7 @@ def test_each_channel_goes_to_its_bus(
     )
     out, err = capsys.readouterr()
     assert rc == 0, err
-    got = {k: _drain(b) for k, b in receivers.items()}
+    got = {k: drain(b) for k, b in receivers.items()}
     assert got["a"] == _expect({1})
     assert got["b"] == _expect({2})
     assert got["d"] == _expect({3})
@@ -182,7 +181,7 @@ def test_same_bus_named_twice_is_opened_once(
     assert rc == 0, err
     assert [(s.interface, s.channel) for s in opened] == [("virtual", a)]
     # one bus, so every frame once and in capture order
-    assert _drain(receivers["a"]) == _expect({1, 2, 3})
+    assert drain(receivers["a"]) == _expect({1, 2, 3})
     assert f"frames per bus: virtual:{a} {len(CHANNELS)}" in out
     assert _open_count(receivers["a"]) == 1
 
@@ -197,9 +196,9 @@ def test_unmapped_channel_goes_to_default_bus_only_when_left(
     argv += ["--channel-map", f"1=virtual:{a}", "--channel-map", f"2=virtual:{b}"]
     assert main([*argv, "-i", "virtual", "-c", d]) == 0
     out = capsys.readouterr().out
-    assert _drain(receivers["a"]) == _expect({1})
-    assert _drain(receivers["b"]) == _expect({2})
-    assert _drain(receivers["d"]) == []
+    assert drain(receivers["a"]) == _expect({1})
+    assert drain(receivers["b"]) == _expect({2})
+    assert drain(receivers["d"]) == []
     assert f"virtual:{d}" not in out
     # the planner never asks for the default bus when every frame has one
     frames, _ = read_capture(path)
@@ -225,7 +224,7 @@ def test_replay_frames_routes_on_one_time_line(clock: str) -> None:
         res = replay_frames(
             tx, frames, route=route, loops=2, speed=5.0, clock=clock, bus_names=names
         )
-        got = [_drain(b) for b in rx]
+        got = [drain(b) for b in rx]
     finally:
         for bus in tx + rx:
             bus.shutdown()
@@ -250,7 +249,7 @@ def test_udp_multicast_buses_by_port(tmp_path: Path, capsys: pytest.CaptureFixtu
         argv += ["--channel-map", f"can2=udp_multicast:{group}:{p2}"]
         rc = main([*argv, "-i", "udp_multicast", "-c", group, "--port", str(p3)])
         out, err = capsys.readouterr()
-        got = [_drain(b, 0.3) for b in rx]
+        got = [drain(b, 0.3) for b in rx]
     finally:
         for b in rx:
             b.shutdown()
@@ -326,7 +325,7 @@ def test_bad_mapping_is_one_line_before_anything_is_sent(
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1, err
     assert err[0].startswith("bench: error: --channel-map") and value in err[0] and why in err[0]
-    assert _drain(receivers["a"]) == [] and _drain(receivers["b"]) == []
+    assert drain(receivers["a"]) == [] and drain(receivers["b"]) == []
 
 
 def test_bus_that_fails_to_open_closes_the_others(

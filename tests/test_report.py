@@ -8,7 +8,7 @@ from typing import Any
 
 import pytest
 
-from bench._report import (
+from bench.studies._report import (
     NOT_REPRODUCED,
     NOT_RUN,
     PARTLY,
@@ -210,7 +210,7 @@ def test_speed_error_closed_form_is_the_derivative_of_eq_12() -> None:
 
     import numpy as np
 
-    from bench._report import _luenberger_peak, _luenberger_speed_peak_rpm
+    from bench.studies._report import _luenberger_peak, _luenberger_speed_peak_rpm
 
     n_p, d_tau, J, a = 4, 3.0, 0.01, 28.6
     t = np.linspace(0.0, 0.5, 200001)

@@ -16,11 +16,11 @@ import can
 import numpy as np
 import pytest
 
-from bench._analysis import read_csv
-from bench._codec import Codec
-from bench._replay import read_capture
-from bench._rerun import rerun_capture
+from bench.captures._replay import read_capture
+from bench.captures._rerun import rerun_capture
 from bench.cli import main
+from bench.runs._analysis import read_csv
+from bench.wire._codec import Codec
 from tests.replay_helpers import recorded_run
 
 CODEC = Codec()

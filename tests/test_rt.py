@@ -1,4 +1,4 @@
-"""Real-time settings of the node processes (bench/_rt.py) and the clock's compute time."""
+"""Real-time settings of the node processes (bench/nodes/_rt.py) and the clock's compute time."""
 
 from __future__ import annotations
 
@@ -12,8 +12,8 @@ from pathlib import Path
 
 import pytest
 
-from bench._rt import apply_rt, no_gc
 from bench.cli import main
+from bench.nodes._rt import apply_rt, no_gc
 from plant_rt import RealTimeClock
 from tests.ports import free_port
 
@@ -45,7 +45,7 @@ def test_nothing_asked_nothing_changed() -> None:
 
 def test_a_refused_setting_is_reported_not_raised() -> None:
     r = _in_child(
-        "import json; from bench._rt import apply_rt\n"
+        "import json; from bench.nodes._rt import apply_rt\n"
         "print(json.dumps(apply_rt(None, 4096, role='plant').as_dict()))"
     )
     res = r["result"]
@@ -59,7 +59,7 @@ def test_a_refused_setting_is_reported_not_raised() -> None:
 def test_fifo_priority_and_cpu_granted_or_refused_with_a_reason() -> None:
     cpu = min(os.sched_getaffinity(0))  # CPU 0 may not be ours (cpuset, taskset)
     r = _in_child(
-        "import json, os; from bench._rt import apply_rt\n"
+        "import json, os; from bench.nodes._rt import apply_rt\n"
         f"rt = apply_rt(42, {cpu}, role='controller').as_dict()\n"
         "rt['now'] = [os.sched_getscheduler(0), os.sched_getparam(0).sched_priority]\n"
         "print(json.dumps(rt))"
@@ -137,7 +137,7 @@ def test_realtime_run_records_what_the_nodes_were_granted(tmp_path: Path) -> Non
 
 
 def test_a_realtime_run_that_did_not_keep_time_gets_a_warning() -> None:
-    from bench._run import realtime_warning
+    from bench.runs._results import realtime_warning
 
     clean = {"steps": 3000, "late_duty_periods": 20, "deadline_misses": 3, "jitter_us": {}}
     assert realtime_warning(clean) is None  # 0.7 %: within what the README states
@@ -149,7 +149,7 @@ def test_a_realtime_run_that_did_not_keep_time_gets_a_warning() -> None:
 
 
 def test_the_paper_column_names_the_method_its_numbers_belong_to() -> None:
-    from bench._run import format_metrics
+    from bench.runs._results import format_metrics
 
     text = format_metrics({"theta_err_max_deg": 1.0}, {"theta_err_max_deg": 4.0}, "tt-dq")
     head, row = text.splitlines()

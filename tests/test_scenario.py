@@ -5,7 +5,7 @@ from pathlib import Path
 import pytest
 
 from bench._errors import ScenarioError
-from bench._scenario import SHIPPED, Profile, load_scenario
+from bench.scenarios._schema import SHIPPED, Profile, load_scenario
 
 
 @pytest.mark.parametrize("name", SHIPPED)

@@ -8,8 +8,8 @@ from pathlib import Path
 import pytest
 
 from bench._errors import ScenarioError
-from bench._scenario import load_scenario, write_effective
-from bench._setup import build_controller, build_plant, get_preset
+from bench.scenarios._schema import load_scenario, write_effective
+from bench.scenarios._setup import build_controller, build_plant, get_preset
 from plant_rt import preset
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -15,15 +15,15 @@ from pathlib import Path
 import pytest
 
 from bench._errors import ScenarioError
-from bench._scenario import (
+from bench.cli import main
+from bench.scenarios._schema import (
     estimator_option_keys,
     load_scenario,
     parse_scenario,
     scenario_from_dict,
     write_effective,
 )
-from bench._setup import build_controller
-from bench.cli import main
+from bench.scenarios._setup import build_controller
 from controller._rotating import RotatingInjectionPars
 from plant_rt import PRESETS
 

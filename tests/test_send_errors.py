@@ -1,6 +1,6 @@
 """A bus that refuses frames (buffer full, bus-off): counted, retried, never fatal.
 
-``bench._loops._send_all`` tries each frame up to ``SEND_ATTEMPTS`` times;
+``bench.nodes._send.send_all`` tries each frame up to ``SEND_ATTEMPTS`` times;
 every refusal (``can.CanOperationError`` or ``OSError``, e.g. ``ENOBUFS``
 of a full SocketCAN queue) adds one to ``send_errors``, and a frame still
 refused at the last attempt adds one to ``frames_lost_on_send``.  In lockstep
@@ -19,9 +19,7 @@ from typing import Any
 import can
 import pytest
 
-from bench._loops import (
-    SEND_ATTEMPTS,
-    _send_all,
+from bench.nodes._loops import (
     command_frames,
     controller_loop,
     make_controller_node,
@@ -29,7 +27,8 @@ from bench._loops import (
     plant_loop,
     run_inprocess,
 )
-from bench._nodes import NodeCounters
+from bench.nodes._nodes import NodeCounters
+from bench.nodes._send import SEND_ATTEMPTS, send_all
 from tests.trace_helpers import CODEC, assert_same_trace, short, trace
 
 
@@ -96,7 +95,7 @@ def test_refusals_below_the_attempts_deliver_the_frame_once(
     bus = RefusingBus(lambda n: n < n_refused, error)
     c = NodeCounters()
     (f,) = frames(1)
-    _send_all(bus, [f], c)
+    send_all(bus, [f], c)
     bus.shutdown()
     assert bus.sent == [f]  # once, not once per attempt
     assert bus.calls == n_refused + 1
@@ -116,7 +115,7 @@ def test_refusals_beyond_the_attempts_lose_the_frame_and_go_on(
     bus = RefusingBus(lambda n: n < n_refused, error)
     c = NodeCounters()
     fs = frames(3)
-    _send_all(bus, fs, c)  # must not raise
+    send_all(bus, fs, c)  # must not raise
     bus.shutdown()
     assert bus.sent == fs[1:]
     assert bus.calls == n_refused + 2
@@ -128,7 +127,7 @@ def test_refusals_beyond_the_attempts_lose_the_frame_and_go_on(
 def test_a_bus_that_always_refuses_loses_every_frame() -> None:
     bus = RefusingBus(lambda n: True)
     c = NodeCounters()
-    _send_all(bus, frames(3), c)
+    send_all(bus, frames(3), c)
     bus.shutdown()
     assert bus.sent == []
     assert c.send_errors == 3 * SEND_ATTEMPTS

@@ -17,8 +17,8 @@ from pathlib import Path
 import can
 import pytest
 
-from bench._analysis import read_csv
-from bench._codec import Codec
+from bench.runs._analysis import read_csv
+from bench.wire._codec import Codec
 from plant_rt import FAULT_WATCHDOG
 from tests.ports import free_port
 
@@ -74,7 +74,7 @@ def _wait_for(pred, timeout: float) -> None:
 
 def _wait_running(k: int, periods: int = 300) -> None:
     """Listen on the run's bus until the plant has sent ``periods`` sample frames."""
-    from bench._run import BusSpec
+    from bench.wire._bus import BusSpec
 
     bus = BusSpec("udp_multicast", "239.74.163.2", int(_port(k))).open()
     try:

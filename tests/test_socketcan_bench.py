@@ -19,10 +19,12 @@ import can
 import numpy as np
 import pytest
 
-from bench._loops import run_inprocess
-from bench._run import BusSpec, RunResult, run_scenario
-from bench._scenario import Latency, Scenario
 from bench.cli import main
+from bench.nodes._loops import run_inprocess
+from bench.runs._results import RunResult
+from bench.runs._run import run_scenario
+from bench.scenarios._schema import Latency, Scenario
+from bench.wire._bus import BusSpec
 from tests.conftest import require_vcan
 from tests.trace_helpers import CODEC, assert_same_trace, short, trace
 

@@ -17,9 +17,9 @@ from pathlib import Path
 import pytest
 
 from bench import cli
-from bench._report import NOT_RUN, REPRODUCED
-from bench._scenario import load_scenario
-from bench._suite import SuiteOptions, quick_scenario, run_suite
+from bench.scenarios._schema import load_scenario
+from bench.studies._report import NOT_RUN, REPRODUCED
+from bench.studies._suite import SuiteOptions, quick_scenario, run_suite
 
 
 @pytest.fixture(scope="module")

@@ -8,9 +8,9 @@ from typing import Any
 import numpy as np
 import pytest
 
-from bench._scenario import load_scenario
-from bench._setup import build_controller
-from bench._sweep import (
+from bench.scenarios._schema import load_scenario
+from bench.scenarios._setup import build_controller
+from bench.studies._sweep import (
     FLAT_DEG,
     SWEEPS,
     SweepJob,

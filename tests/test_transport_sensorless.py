@@ -17,8 +17,9 @@ import can
 import numpy as np
 import pytest
 
-from bench._loops import run_inprocess
-from bench._run import BusSpec, run_scenario
+from bench.nodes._loops import run_inprocess
+from bench.runs._run import run_scenario
+from bench.wire._bus import BusSpec
 from controller import MODE_ALIGN, MODE_POLARITY, MODE_RUN
 from tests.ports import free_port
 from tests.trace_helpers import CODEC, assert_same_trace, short, trace

@@ -17,13 +17,14 @@ from pathlib import Path
 import can
 import pytest
 
-from bench._replay import _find_in_folder, read_capture
-from bench._report import render_markdown
-from bench._rerun import rerun_capture
-from bench._run import BusSpec, run_scenario
-from bench._scenario import load_scenario
-from bench._suite import unmatched_estimators
+from bench.captures._replay import _find_in_folder, read_capture
+from bench.captures._rerun import rerun_capture
 from bench.cli import main
+from bench.runs._run import run_scenario
+from bench.scenarios._schema import load_scenario
+from bench.studies._report import render_markdown
+from bench.studies._suite import unmatched_estimators
+from bench.wire._bus import BusSpec
 from tests.ports import free_port
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -190,7 +191,7 @@ def test_suite_report_reproduces_the_committed_report(
 
 
 def test_report_orders_sweeps_and_methods_as_the_suite_does() -> None:
-    from bench._sweep import METHODS, SWEEPS
+    from bench.studies._sweep import METHODS, SWEEPS
 
     summary = json.loads((RESULTS / "summary.json").read_text())
     want = render_markdown(summary)
@@ -233,7 +234,7 @@ def test_failed_points_are_listed_in_the_sweeps_order() -> None:
 def test_rerun_names_the_method_of_the_papers_column(
     xue_run: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    from bench._run import format_metrics
+    from bench.runs._results import format_metrics
 
     scn = load_scenario("xue-fig13")
     assert main(["rerun", str(xue_run), "-e", "sensored", "--no-plots", "-o", str(tmp_path)]) == 0

@@ -8,10 +8,10 @@ from typing import Any
 import can
 import numpy as np
 
-from bench._analysis import analyze_frames
-from bench._codec import Codec
-from bench._scenario import Profile, Scenario, load_scenario
-from bench._setup import sample_period
+from bench.runs._analysis import analyze_frames
+from bench.scenarios._schema import Profile, Scenario, load_scenario
+from bench.scenarios._setup import sample_period
+from bench.wire._codec import Codec
 
 CODEC = Codec()
 

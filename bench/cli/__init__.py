@@ -1,0 +1,87 @@
+"""The ``bench`` command line: one small module per subcommand, registered here.
+
+Each module in :data:`SUBCOMMANDS` has ``register(subparsers)``, which adds
+its subcommand and sets ``func``, and keeps its heavy imports inside its
+command function, so ``bench --help`` and a node's start-up stay fast and a
+missing optional dependency breaks only its own subcommand.  What the
+modules share (bus, real-time and scenario options; signals) is in
+:mod:`bench.cli._common`.
+
+A user's mistake (bad scenario, unknown estimator, unreadable capture,
+missing interface) is a :class:`~bench._errors.BenchError`: one line on
+stderr, exit code 2, no traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+from typing import NoReturn
+
+from bench._errors import BenchError
+
+#: The subcommand modules, in the order ``bench --help`` lists them.
+SUBCOMMANDS = (
+    "run",
+    "plant",
+    "controller",
+    "link",
+    "analyze",
+    "busload",
+    "suite",
+    "replay",
+    "rerun",
+    "codegen",
+    "perf",
+    "soak",
+)
+
+
+class _Parser(argparse.ArgumentParser):
+    """Command-line mistakes as one line (with where to look), exit code 2."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    ap = _Parser(
+        prog="bench",
+        description="CAN hardware-in-the-loop bench for sensorless IPMSM control",
+    )
+    sub = ap.add_subparsers(dest="command", required=True)
+    for name in SUBCOMMANDS:
+        mod = f"bench.cli.{name}"
+        try:
+            module = importlib.import_module(mod)
+        except ModuleNotFoundError as e:
+            if e.name != mod:
+                raise
+            continue
+        module.register(sub)
+    return ap
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = build_parser()
+    try:
+        args = ap.parse_args(argv)
+    except SystemExit as e:  # --help, or a mistake already reported on one line
+        return e.code if isinstance(e.code, int) else 2
+    try:
+        rc: int = args.func(args)
+        return rc
+    except BenchError as e:
+        print(f"bench: error: {e}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("bench: interrupted", file=sys.stderr)
+        return 130
+    except BrokenPipeError:  # output piped into head and the like
+        sys.stderr.close()
+        return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

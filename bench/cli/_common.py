@@ -1,0 +1,236 @@
+"""What the subcommands share: bus and real-time options, scenario overrides, signals.
+
+Every subcommand module (:mod:`bench.cli.run`, :mod:`bench.cli.plant`, ...)
+builds its options from these helpers, so the same option means the same
+thing everywhere.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import random
+import signal
+import sys
+import threading
+from pathlib import Path
+from typing import Any
+
+from bench._errors import BenchError, InterfaceError
+
+MODES = ("lockstep", "realtime")
+#: Help of the LOG argument of the capture commands.
+LOG_HELP = "a capture python-can reads (.blf, .asc, .log, .trc, .csv, .mf4) or a run folder"
+
+
+def add_bus(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group("bus")
+    g.add_argument(
+        "--interface",
+        "-i",
+        help="python-can interface (socketcan, udp_multicast, virtual, pcan, ...)",
+    )
+    g.add_argument(
+        "--channel", "-c", help="channel (vcan0, can0, PCAN_USBBUS1, a multicast group, ...)"
+    )
+    g.add_argument("--port", type=int, help="UDP port (udp_multicast only)")
+    g.add_argument("--bitrate", type=int, help="nominal bit rate (real adapters)")
+    g.add_argument("--data-bitrate", type=int, help="CAN FD data bit rate (real adapters)")
+
+
+def rt_priority(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        v = 0
+    if not 1 <= v <= 99:
+        raise argparse.ArgumentTypeError(f"expected a SCHED_FIFO priority 1-99, got {text!r}")
+    return v
+
+
+def number(kind: type, lo: float, strict: bool) -> Any:
+    """An argparse type: a ``kind`` number above ``lo`` (``strict``) or at least ``lo``."""
+    what = f"{'a whole' if kind is int else 'a'} number {'>' if strict else '>='} {lo:g}"
+
+    def parse(text: str) -> Any:
+        try:
+            v = kind(text)
+        except ValueError:
+            v = None
+        if v is None or not math.isfinite(v) or (v <= lo if strict else v < lo):
+            raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}")
+        return v
+
+    return parse
+
+
+POS_INT = number(int, 0, True)
+NONNEG_INT = number(int, 0, False)
+POS_FLOAT = number(float, 0.0, True)
+NONNEG_FLOAT = number(float, 0.0, False)
+
+
+def rates_khz(text: str) -> list[float]:
+    out = []
+    for part in text.split(","):
+        try:
+            v = float(part)
+        except ValueError:
+            v = math.nan
+        if not (math.isfinite(v) and v > 0.0):
+            raise argparse.ArgumentTypeError(
+                f"expected positive PWM rates in kHz separated by commas, got {text!r}"
+            )
+        out.append(v)
+    return out
+
+
+def add_rt(p: argparse.ArgumentParser, *, cpu: bool = True) -> None:
+    g = p.add_argument_group("real time (see bench/nodes/_rt.py)")
+    g.add_argument(
+        "--rt-priority",
+        type=rt_priority,
+        metavar="N",
+        help="real time: run under SCHED_FIFO at priority N (1-99) with memory locked "
+        "(needs root or CAP_SYS_NICE; refused settings are reported, not fatal)",
+    )
+    if cpu:
+        g.add_argument("--cpu", type=int, metavar="N", help="real time: pin the node to CPU N")
+
+
+def node_rt(args: argparse.Namespace, role: str) -> dict[str, object] | None:
+    """Apply the node's real-time settings (real-time mode only); what was granted."""
+    if args.mode != "realtime":
+        return None
+    from bench.nodes._rt import apply_rt
+
+    return apply_rt(args.rt_priority, args.cpu, role=role).as_dict()
+
+
+def add_scenario_overrides(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--mode", choices=MODES, default="lockstep")
+    p.add_argument("--duration", type=POS_FLOAT, help="simulated seconds (overrides the scenario)")
+    p.add_argument(
+        "--delay-steps",
+        type=NONNEG_INT,
+        help="injected latency on the duty direction, whole PWM periods (lockstep)",
+    )
+    p.add_argument(
+        "--sample-delay-steps",
+        type=NONNEG_INT,
+        help="injected latency on the sample direction (lockstep)",
+    )
+    p.add_argument(
+        "--seed", type=NONNEG_INT, help="seed of noise and jitter (overrides the scenario)"
+    )
+
+
+def scenario_from_args(args: argparse.Namespace) -> Any:
+    from dataclasses import replace
+
+    from bench.scenarios._schema import load_scenario
+
+    scn = load_scenario(args.scenario)
+    lat = scn.latency
+    if getattr(args, "delay_steps", None) is not None:
+        lat = replace(lat, duty_delay_steps=max(0, args.delay_steps))
+    if getattr(args, "sample_delay_steps", None) is not None:
+        lat = replace(lat, sample_delay_steps=max(0, args.sample_delay_steps))
+    if getattr(args, "duration", None) is not None and args.duration <= 0:
+        raise BenchError(f"--duration must be > 0, got {args.duration}")
+    return scn.with_overrides(
+        duration=getattr(args, "duration", None), seed=getattr(args, "seed", None), latency=lat
+    )
+
+
+def bus_spec(args: argparse.Namespace, *, announce: bool, one_process: bool = False) -> Any:
+    """The bus of the command's options (or python-can's configuration, or the default).
+
+    ``one_process``: the command's bus may be python-can's in-process
+    ``virtual`` bus (replay); the bench's nodes are separate processes and
+    cannot meet on it.
+    """
+    from bench.wire._bus import BusSpec, check_interface, default_transport, python_can_config
+
+    if args.interface is None and (cfg := python_can_config()) is not None:
+        # python-can's own configuration (~/.canrc, CAN_INTERFACE, ...) names the bus
+        args.interface = str(cfg.get("interface"))
+        args.channel = args.channel or cfg.get("channel")
+        for key in ("bitrate", "data_bitrate"):
+            if getattr(args, key, None) is None and cfg.get(key) is not None:
+                setattr(args, key, int(cfg[key]))
+        if announce:
+            print(
+                f"transport: {args.interface} {args.channel} (python-can configuration)",
+                file=sys.stderr,
+            )
+    if args.interface is not None:
+        check_interface(args.interface)
+        if args.interface == "virtual" and not one_process:
+            raise InterfaceError(
+                "--interface virtual: python-can's virtual bus lives inside one process "
+                "and the bench's nodes are separate processes; use udp_multicast (the "
+                "default without vcan) or socketcan"
+            )
+    if args.interface is None:
+        if args.channel is not None:
+            raise InterfaceError("--channel given without --interface")
+        iface, chan, reason = default_transport()
+        if announce:
+            print(f"transport: {iface} {chan} ({reason})", file=sys.stderr)
+        port = args.port
+        if iface == "udp_multicast" and port is None:
+            # a port of its own per run: parallel runs must not hear each other
+            port = 44000 + 2 * random.Random(os.getpid()).randrange(5000)
+        return BusSpec(
+            iface, chan, port, getattr(args, "bitrate", None), getattr(args, "data_bitrate", None)
+        )
+    from bench.wire._bus import default_channel
+
+    channel: str | None = args.channel or default_channel(args.interface)
+    if channel is None:
+        raise InterfaceError(f"--interface {args.interface}: this adapter needs --channel")
+    return BusSpec(
+        args.interface,
+        channel,
+        args.port,
+        getattr(args, "bitrate", None),
+        getattr(args, "data_bitrate", None),
+    )
+
+
+STOP = threading.Event()
+
+
+def ready() -> None:
+    print("READY", flush=True)
+
+
+def stop_on_signals() -> None:
+    """SIGTERM/SIGINT end a node's loop cleanly (report written, exit code 0)."""
+
+    def handler(signum: int, frame: Any) -> None:
+        STOP.set()
+
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        signal.signal(sig, handler)
+
+
+def write_report(path: str | None, data: dict[str, Any]) -> None:
+    if path:
+        Path(path).write_text(json.dumps(data, indent=2, default=str) + "\n")
+
+
+def same_bus(a: Any, b: Any) -> bool:
+    """Whether two bus specs name one bus (udp_multicast: one port is one bus, any group)."""
+    if a.interface != b.interface:
+        return False
+    if a.interface == "udp_multicast":
+        return (a.port or 43113) == (b.port or 43113)
+    return bool(a.channel == b.channel)
+
+
+def files_line(out_dir: Path, names: list[str]) -> str:
+    return f"files: {out_dir}/ ({', '.join(names)})"

@@ -1,0 +1,64 @@
+"""``bench controller``: the project's drive controller as one node on a bus."""
+
+from __future__ import annotations
+
+import argparse
+from typing import Any
+
+from bench.cli._common import (
+    POS_FLOAT,
+    STOP,
+    add_bus,
+    add_rt,
+    add_scenario_overrides,
+    bus_spec,
+    node_rt,
+    ready,
+    scenario_from_args,
+    stop_on_signals,
+    write_report,
+)
+
+
+def cmd_controller(args: argparse.Namespace) -> int:
+    from bench.nodes._loops import controller_loop, make_controller_node
+    from bench.wire._codec import Codec
+
+    scn = scenario_from_args(args)
+    est = args.estimator or scn.estimator
+    spec = bus_spec(args, announce=False)
+    codec = Codec()
+    node = make_controller_node(scn, est, codec)
+    bus = spec.open()
+    stop_on_signals()
+    rt = node_rt(args, "controller")
+    try:
+        controller_loop(
+            bus,
+            node,
+            realtime=args.mode == "realtime",
+            on_ready=ready,
+            stop=STOP.is_set,
+            sample_timeout_s=args.sample_timeout_ms * 1e-3,
+        )
+    finally:
+        bus.shutdown()
+        write_report(args.report, {**node.report(), "rt": rt})
+    return 0
+
+
+def register(sub: Any) -> None:
+    p = sub.add_parser("controller", help="serve the drive controller on a bus (one node)")
+    p.add_argument("scenario")
+    p.add_argument("--estimator", "-e")
+    add_scenario_overrides(p)
+    add_bus(p)
+    p.add_argument("--report", help="write the node's counters to this JSON file at exit")
+    p.add_argument(
+        "--sample-timeout-ms",
+        type=POS_FLOAT,
+        default=50.0,
+        help="real time: disable the PWM after this long without a valid sample",
+    )
+    add_rt(p)
+    p.set_defaults(func=cmd_controller)

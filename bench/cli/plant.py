@@ -1,0 +1,79 @@
+"""``bench plant``: the plant emulator as one node on a bus."""
+
+from __future__ import annotations
+
+import argparse
+from typing import Any
+
+from bench.cli._common import (
+    NONNEG_INT,
+    POS_FLOAT,
+    POS_INT,
+    STOP,
+    add_bus,
+    add_rt,
+    add_scenario_overrides,
+    bus_spec,
+    node_rt,
+    ready,
+    scenario_from_args,
+    stop_on_signals,
+    write_report,
+)
+
+
+def cmd_plant(args: argparse.Namespace) -> int:
+    from bench.nodes._loops import make_plant_node, plant_loop
+    from bench.wire._codec import Codec
+
+    scn = scenario_from_args(args)
+    spec = bus_spec(args, announce=False)
+    codec = Codec()
+    node = make_plant_node(
+        scn,
+        codec,
+        truth_every=args.truth_every,
+        watchdog_s=None if args.watchdog_ms is None else args.watchdog_ms * 1e-3,
+        watchdog_rounds=args.watchdog_rounds,
+    )
+    if args.mode == "lockstep":
+        node.pace_every = args.pace_every
+    bus = spec.open()
+    stop_on_signals()
+    rt = node_rt(args, "plant")
+    try:
+        plant_loop(bus, node, realtime=args.mode == "realtime", on_ready=ready, stop=STOP.is_set)
+    finally:
+        bus.shutdown()
+        write_report(args.report, {**node.report(), "rt": rt})
+    return 0
+
+
+def register(sub: Any) -> None:
+    p = sub.add_parser("plant", help="serve the plant emulator on a bus (one node)")
+    p.add_argument("scenario")
+    add_scenario_overrides(p)
+    add_bus(p)
+    p.add_argument("--truth-every", type=POS_INT, default=1, help="send PlantTruth every N periods")
+    p.add_argument(
+        "--watchdog-ms",
+        type=POS_FLOAT,
+        help="real time: safe state after this long without a valid duty (default 10 periods, >= 20 ms)",
+    )
+    p.add_argument(
+        "--watchdog-rounds",
+        type=POS_INT,
+        default=100,
+        help="lockstep: safe state after this many 50 ms retransmission rounds without a duty",
+    )
+    p.add_argument("--report", help="write the node's counters to this JSON file at exit")
+    p.add_argument(
+        "--pace-every",
+        type=NONNEG_INT,
+        default=0,
+        metavar="N",
+        help="lockstep: run period k only once a bench command for step k or later has come "
+        "(the sender keeps one at least every N periods); 0: off (bench run sets it)",
+    )
+    add_rt(p)
+    p.set_defaults(func=cmd_plant)

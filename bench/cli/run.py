@@ -1,0 +1,109 @@
+"""``bench run``: a scenario between two processes over CAN, recorded and scored."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+from typing import Any
+
+from bench._errors import EXIT_PLANT_TRIPPED, BenchError
+from bench.cli._common import (
+    POS_FLOAT,
+    add_bus,
+    add_rt,
+    add_scenario_overrides,
+    bus_spec,
+    scenario_from_args,
+)
+from bench.scenarios._setup import check_estimator_fits
+
+
+def run_node_args(args: argparse.Namespace) -> dict[str, list[str]]:
+    """Options ``bench run`` passes on to its plant and controller processes."""
+    out: dict[str, list[str]] = {"plant": [], "controller": []}
+    if args.watchdog_ms is not None:
+        out["plant"] += ["--watchdog-ms", repr(args.watchdog_ms)]
+    if args.rt_priority is not None:
+        # the plant keeps the clock: it goes first; the controller one below
+        out["plant"] += ["--rt-priority", str(args.rt_priority)]
+        out["controller"] += ["--rt-priority", str(max(1, args.rt_priority - 1))]
+    return out
+
+
+def cmd_run(args: argparse.Namespace) -> int:
+    from bench.runs._results import fault_warning, format_metrics, realtime_warning
+    from bench.runs._run import run_scenario
+    from bench.scenarios._setup import sample_period
+
+    scn = scenario_from_args(args)
+    est = args.estimator or scn.estimator
+    from controller._registry import ESTIMATOR_NAMES
+
+    if est not in ESTIMATOR_NAMES:
+        raise BenchError(
+            f"--estimator: unknown estimator {est!r} (known: {', '.join(ESTIMATOR_NAMES)})"
+        )
+    check_estimator_fits(scn, est)
+    spec = bus_spec(args, announce=True)
+    out = Path(args.out) if args.out else Path("runs") / f"{scn.name}-{est}"
+    # the heading of the report on stdout: stderr carries progress and errors only
+    print(f"run: {scn.name} with {est}, {args.mode}, {spec.describe()} -> {out}", flush=True)
+    res = run_scenario(
+        scn,
+        est,
+        spec=spec,
+        out_dir=out,
+        mode=args.mode,
+        log_format=args.log_format,
+        progress=not args.quiet,
+        node_args=run_node_args(args),
+    )
+    for role, rep in res.meta.get("node_reports", {}).items():
+        for why in ((rep or {}).get("rt") or {}).get("refused", []):
+            print(f"{role}: real-time setting refused: {why}", file=sys.stderr)
+    print(format_metrics(res.metrics, scn.paper_result, scn.estimator))
+    if args.mode == "realtime" and (warn := realtime_warning(res.metrics)):
+        print(warn, file=sys.stderr)
+    tripped = fault_warning(res.metrics, sample_period(scn))
+    if tripped:
+        print(tripped, file=sys.stderr)
+    missing = int(res.metrics.get("steps_missing", 0))
+    if missing and not res.meta.get("interrupted"):
+        print(
+            f"warning: {missing} periods of the run have no row in signals.csv (frames the "
+            "recording lost); the metrics cover the rows present",
+            file=sys.stderr,
+        )
+    names = [f"capture{Path(res.capture).suffix}", "signals.csv", "metrics.json", "meta.json"]
+    written = [n for n in [*names, "run.png"] if (out / n).is_file()]
+    print(f"files: {out}/ ({', '.join(written)})")
+    if res.meta.get("interrupted"):
+        print("bench: interrupted", file=sys.stderr)
+        return 130
+    # every file is written; the status says the run is not a scenario result
+    return EXIT_PLANT_TRIPPED if tripped else 0
+
+
+def register(sub: Any) -> None:
+    p = sub.add_parser("run", help="run a scenario: plant and controller as two processes over CAN")
+    p.add_argument(
+        "scenario", help="shipped scenario name (wen-5.1, xue-fig13, ...) or a .toml path"
+    )
+    p.add_argument(
+        "--estimator", "-e", help="sfhf, tt-ab, tt-dq, square-wave, square-wave-nocic, sensored"
+    )
+    add_scenario_overrides(p)
+    add_bus(p)
+    p.add_argument("--out", "-o", help="run folder (default runs/SCENARIO-ESTIMATOR)")
+    p.add_argument(
+        "--log-format", choices=("blf", "asc", "log"), default="blf", help="capture format"
+    )
+    p.add_argument("--quiet", "-q", action="store_true", help="no progress line")
+    p.add_argument(
+        "--watchdog-ms",
+        type=POS_FLOAT,
+        help="real time: the plant's safe state after this long without a valid duty",
+    )
+    add_rt(p, cpu=False)
+    p.set_defaults(func=cmd_run)

@@ -1,0 +1,371 @@
+"""The nodes' main loops on a python-can bus, and the in-process loop.
+
+``plant_loop`` and ``controller_loop`` drive a :class:`~bench.nodes._nodes.PlantNode`
+or :class:`~bench.nodes._nodes.ControllerNode` from a :class:`can.BusABC`; they are
+what ``bench plant`` and ``bench controller`` run as processes, and what the
+``virtual``-bus tests run as threads.  ``run_inprocess`` passes the same
+frames between the same nodes without any bus: the reference trace.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+
+import can
+
+from bench._errors import BenchError
+from bench.nodes._nodes import ControllerNode, PlantNode
+from bench.nodes._rt import no_gc
+from bench.nodes._send import send_all
+from bench.scenarios._schema import Scenario
+from bench.scenarios._setup import (
+    PlannedCommand,
+    build_controller,
+    build_plant,
+    command_schedule,
+    lockstep_delay,
+    n_steps,
+    sample_period,
+)
+from bench.wire._codec import Codec
+from bench.wire._protocol import CMD_NONE, STATE_IDLE
+from plant_rt import ProtectionPars, RealTimeClock
+
+#: ``PlantStatus.state`` of the plant's last frame: the run is over, the plant idle.
+STATE_DONE = STATE_IDLE
+STATE_RUN = 1
+
+#: Lockstep: resend the recent frames when the expected duty has not come in this time.
+RETRANSMIT_S = 0.05
+#: Lockstep: give up when nothing arrives for this long.
+STALL_S = 20.0
+#: Real-time plant watchdog: trip after this many PWM periods without a valid duty ...
+WATCHDOG_PERIODS = 10
+#: ... but never after less than this (a general-purpose OS deschedules a process for ms).
+WATCHDOG_MIN_S = 0.02
+#: Lockstep plant watchdog: trip after this many retransmission rounds without a duty (5 s).
+WATCHDOG_ROUNDS = 100
+#: Real-time controller: disable the PWM when no valid sample came for this long.
+SAMPLE_TIMEOUT_S = 0.05
+
+
+def watchdog_periods(T_s: float, watchdog_s: float | None = None) -> int:
+    """Real-time watchdog in PWM periods: ``watchdog_s`` if given, else the defaults."""
+    if watchdog_s is not None:
+        return max(1, math.ceil(watchdog_s / T_s - 1e-9))
+    return max(WATCHDOG_PERIODS, math.ceil(WATCHDOG_MIN_S / T_s - 1e-9))
+
+
+def make_plant_node(
+    scn: Scenario,
+    codec: Codec,
+    *,
+    truth_every: int = 1,
+    protection: ProtectionPars | None = None,
+    watchdog_s: float | None = None,
+    watchdog_rounds: int = WATCHDOG_ROUNDS,
+) -> PlantNode:
+    """The plant node of a scenario, with protection and watchdogs.
+
+    ``protection`` defaults to :meth:`ProtectionPars.from_preset` of the
+    scenario's preset; ``watchdog_s`` to :func:`watchdog_periods`' default.
+    """
+    plant = build_plant(scn)
+    if protection is None:
+        protection = ProtectionPars.from_preset(plant.motor, plant.inverter)
+    return PlantNode(
+        codec,
+        plant,
+        n_steps=n_steps(scn),
+        lockstep_delay=lockstep_delay(scn),
+        truth_every=truth_every,
+        protection=protection,
+        watchdog_periods=watchdog_periods(plant.T_s, watchdog_s),
+        watchdog_rounds=watchdog_rounds,
+    )
+
+
+def make_controller_node(scn: Scenario, estimator: str, codec: Codec) -> ControllerNode:
+    return ControllerNode(
+        codec, build_controller(scn, estimator), needs_truth=estimator == "sensored"
+    )
+
+
+def command_frames(
+    scn: Scenario, codec: Codec, pace_every: int = 0
+) -> list[tuple[int, can.Message]]:
+    """The scenario's bench commands as frames, with their apply steps.
+
+    ``pace_every > 0`` adds a keep-alive (``cmd`` 0, the references already
+    in force, so nothing changes) at every multiple of ``pace_every`` that
+    has no command of its own: the pace tokens of a paced lockstep plant
+    (:attr:`bench.nodes._nodes.PlantNode.pace_every`).
+    """
+    m = 1 << codec.step_bits("BenchCommand")
+    plan = command_schedule(scn)
+    if pace_every > 0:
+        have = {c.apply_step for c in plan}
+        extra = []
+        j = 0
+        for k in range(pace_every, plan[-1].apply_step, pace_every):
+            while j + 1 < len(plan) and plan[j + 1].apply_step < k:
+                j += 1
+            if k not in have:
+                c = plan[j]
+                extra.append(PlannedCommand(k, CMD_NONE, c.speed_ref_rpm, c.load_nm))
+        plan = sorted([*plan, *extra], key=lambda c: c.apply_step)
+    out = []
+    for i, c in enumerate(plan):
+        msg = codec.encode(
+            "BenchCommand",
+            {
+                "cmd": c.cmd,
+                "seq": i % 16,
+                "speed_ref": c.speed_ref_rpm,
+                "load_torque": c.load_nm,
+                "step": c.apply_step % m,
+            },
+        )
+        out.append((c.apply_step, msg))
+    return out
+
+
+def run_inprocess(scn: Scenario, estimator: str, codec: Codec) -> list[can.Message]:
+    """Run a scenario in lockstep in this process; return every frame in wire order.
+
+    The frames are the same objects the CAN nodes would send (same DBC
+    encoding, so the same quantization), passed by hand; injected lockstep
+    latency goes through the same :class:`~bench.nodes._link.LockstepLink` logic
+    the link process runs.
+    """
+    from bench.nodes._link import LockstepLink
+
+    pn = make_plant_node(scn, codec)
+    cn = make_controller_node(scn, estimator, codec)
+    lt = scn.latency
+    link = (
+        LockstepLink(codec, sample_delay=lt.sample_delay_steps, duty_delay=lt.duty_delay_steps)
+        if lt.sample_delay_steps or lt.duty_delay_steps
+        else None
+    )
+    frames: list[can.Message] = []
+    for _, m in command_frames(scn, codec):
+        frames.append(m)
+        pn.on_message(m)
+        cn.on_message(m)
+    pn.apply_commands()
+    out = pn.frames_now()
+    while True:
+        frames.extend(out)
+        to_plant: list[can.Message] = []
+        to_ctrl = out
+        if link is not None:
+            to_ctrl = []
+            for m in out:
+                to_b, to_a = link.from_a(m)
+                to_ctrl.extend(to_b)
+                to_plant.extend(to_a)
+        replies: list[can.Message] = []
+        for m in to_ctrl:
+            replies.extend(cn.on_message(m))
+        frames.extend(replies)
+        if link is None:
+            to_plant = replies
+        else:
+            for m in replies:
+                _, to_a = link.from_b(m)
+                to_plant.extend(to_a)
+        for m in to_plant:
+            pn.on_message(m)
+        if pn.done:
+            break
+        if not pn.ready():
+            raise RuntimeError(f"in-process loop stalled at step {pn.plant.k}")
+        out = pn.advance_lockstep()
+    return frames
+
+
+def plant_loop(
+    bus: can.BusABC,
+    node: PlantNode,
+    *,
+    realtime: bool,
+    on_ready: Callable[[], None] | None = None,
+    stop: Callable[[], bool] = lambda: False,
+    watchdog_s: float = STALL_S,
+) -> None:
+    """Serve the plant on ``bus`` until the scenario's end or a stop command."""
+    ids = {node.codec.frame_id(n) for n in ("PwmDuty", "BenchCommand")}
+    node.realtime = realtime
+    if on_ready:
+        on_ready()
+    # wait for the start command
+    t_idle = time.monotonic()
+    while not node.started:
+        if stop():
+            return
+        msg = bus.recv(0.05)
+        if msg is not None and msg.arbitration_id in ids:
+            node.on_message(msg)
+            node.apply_commands()
+        if time.monotonic() - t_idle > 3600.0:
+            raise BenchError("plant: no start command within an hour")
+    frames = node.frames_now()
+    t_loop = time.perf_counter()
+    try:
+        _serve_plant(bus, node, ids, frames, realtime=realtime, stop=stop, watchdog_s=watchdog_s)
+    finally:
+        node.loop_s = time.perf_counter() - t_loop
+    send_all(bus, [node.status_frame(STATE_DONE, node.fault)], node.counters)
+
+
+def _serve_plant(
+    bus: can.BusABC,
+    node: PlantNode,
+    ids: set[int],
+    frames: list[can.Message],
+    *,
+    realtime: bool,
+    stop: Callable[[], bool],
+    watchdog_s: float,
+) -> None:
+    """The plant's stepping loop, from the start command to the end of the run."""
+    if realtime:
+        # Each instant's frames leave at that instant (the deadline), so the
+        # controller has one period to answer, as in a drive; the plant then
+        # runs the period with the newest duty meant for it.
+        clock = RealTimeClock(node.plant.T_s)
+        with no_gc():
+            clock.start()
+            while not node.done and not stop():
+                send_all(bus, frames, node.counters)
+                while (msg := bus.recv(0.0)) is not None:
+                    if msg.arbitration_id in ids:
+                        node.on_message(msg)
+                frames = node.advance_realtime()
+                clock.wait()
+            send_all(bus, frames, node.counters)
+        node.counters.overruns = clock.overruns
+        st = clock.stats()
+        node.jitter = {
+            "n": float(st.n),
+            "median": 1e6 * st.median,
+            "p99": 1e6 * st.p99,
+            "max": 1e6 * st.max,
+            "busy_median": 1e6 * st.busy_median,
+            "busy_p99": 1e6 * st.busy_p99,
+            "busy_max": 1e6 * st.busy_max,
+        }
+    else:
+        send_all(bus, frames, node.counters)
+        last_progress = time.monotonic()
+        t_wait = last_progress
+
+        def no_duty() -> None:
+            nonlocal t_wait
+            now = time.monotonic()
+            if now - last_progress > watchdog_s:
+                raise BenchError(
+                    f"plant: no duty frame for step {node.needed_duty()} in {watchdog_s:.0f} s "
+                    "(is a controller running on this bus?)"
+                )
+            if now - t_wait >= RETRANSMIT_S:
+                send_all(bus, node.on_duty_timeout(), node.counters)
+                send_all(bus, node.retransmit(), node.counters)
+                t_wait = now
+
+        def no_command() -> None:
+            if time.monotonic() - last_progress > watchdog_s:
+                raise BenchError(
+                    f"plant: no bench command for step {node.plant.k} in {watchdog_s:.0f} s "
+                    "(paced by bench run: has its recorder stopped?)"
+                )
+
+        while not node.done and not stop():
+            t_wait = time.monotonic()
+            if not _receive_until(bus, node, ids, node.ready, stop, no_duty):
+                break
+            # paced by bench run: not ahead of the commands (and so of its recorder)
+            if not _receive_until(bus, node, ids, node.paced, stop, no_command):
+                break
+            send_all(bus, node.advance_lockstep(), node.counters)
+            last_progress = time.monotonic()
+
+
+def _receive_until(
+    bus: can.BusABC,
+    node: PlantNode,
+    ids: set[int],
+    done: Callable[[], bool],
+    stop: Callable[[], bool],
+    quiet: Callable[[], None],
+) -> bool:
+    """Feed the node its frames until ``done()`` (True) or ``stop()`` (False).
+
+    ``quiet()`` runs after each ``RETRANSMIT_S`` without a frame (it may raise).
+    """
+    while not done():
+        if stop():
+            return False
+        msg = bus.recv(RETRANSMIT_S)
+        if msg is not None:
+            if msg.arbitration_id in ids:
+                node.on_message(msg)
+            continue
+        quiet()
+    return True
+
+
+def controller_loop(
+    bus: can.BusABC,
+    node: ControllerNode,
+    *,
+    realtime: bool,
+    on_ready: Callable[[], None] | None = None,
+    stop: Callable[[], bool] = lambda: False,
+    idle_s: float = 3600.0,
+    sample_timeout_s: float = SAMPLE_TIMEOUT_S,
+) -> None:
+    """Serve the controller on ``bus`` until a stop command (or ``idle_s`` of silence).
+
+    Real time: when no valid sample arrived for ``sample_timeout_s`` after the
+    first one, the controller disables its PWM (:meth:`ControllerNode.sample_timeout`)
+    until a reset or enable command.
+    """
+    node.realtime = realtime
+    names = ["PhaseSamples", "BenchCommand"]
+    if node.needs_truth:
+        names.append("PlantTruth")
+    ids = {node.codec.frame_id(n) for n in names}
+    if on_ready:
+        on_ready()
+    last = time.monotonic()
+    seen = node.samples_accepted
+    t_sample = last
+    poll = min(0.05, sample_timeout_s / 4) if realtime else 0.05
+    with no_gc(realtime):
+        while not node.stopped and not stop():
+            msg = bus.recv(poll)
+            now = time.monotonic()
+            if realtime:
+                if node.samples_accepted != seen:
+                    seen = node.samples_accepted
+                    t_sample = now
+                elif seen and now - t_sample > sample_timeout_s:
+                    node.sample_timeout()
+            if msg is None:
+                if now - last > idle_s:
+                    return
+                continue
+            if msg.arbitration_id not in ids:
+                continue
+            last = now
+            out = node.on_message(msg)
+            if out:
+                send_all(bus, out, node.counters)
+
+
+def period_s(scn: Scenario) -> float:
+    return sample_period(scn)

@@ -1,0 +1,742 @@
+"""Plant and controller nodes: the DBC on one side, the pure libraries on the other.
+
+The nodes are written as message-in / messages-out state machines with no I/O
+of their own, so exactly the same code runs
+
+- in-process (``bench._inprocess``: frames passed through a list, for fast
+  tests and as the reference trace), and
+- as OS processes on a python-can bus (``bench._proc``), in lockstep or in
+  real time.
+
+Step bookkeeping (DESIGN.md, "Timing model"):
+
+- ``PhaseSamples.step = k``: the currents sampled at ``t = k T``.
+- ``PwmDuty.step = k + 1``: the duty computed from sample ``k``; without
+  injected latency it is applied during period ``k + 1``.  With a lockstep
+  latency of ``N`` periods (sum of both directions) the plant applies duty
+  ``t`` during period ``t + N``; periods with no duty yet run with the
+  inverter disabled.
+- ``BenchCommand.step = s``: both nodes apply the command just before
+  they handle step ``s``, in both modes; a command that arrives after its
+  step takes effect in the next period (counted in ``late_commands``).
+
+Counters on the wire are ``step mod 2**bits``; receivers unwrap them against
+the step they expect.
+
+Fail-safe behaviour (docs/RELIABILITY.md): every frame a node receives ends in
+exactly one of its counters: accepted, rejected (with a reason: the codec's
+``bad_crc``, ``bad_length``, ``decode_error``, ``out_of_range``, or the node's
+``stale_counter``, ``future_counter``), repeated (``repeated_counter``: an
+exact repeat of an accepted counter, produced by the bench itself when it
+sends commands twice or retransmits in lockstep; answered as before, counted
+but not as a rejection), ignored (a DBC message the node does not consume)
+or unknown (not in the DBC). Only an accepted duty frame with every duty in
+[0, 1] is ever applied. The plant node trips to the safe state (all switches
+open) on a protection fault (:class:`plant_rt.Protection`) or when valid duty
+frames stop (watchdog), reports it with ``PlantStatus``, and stays there until
+a ``reset`` or ``enable`` bench command; the controller node disables its PWM
+when samples stop (real time).
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass, field
+
+import can
+
+from bench.wire._codec import REJECT_OUT_OF_RANGE, Codec
+from bench.wire._protocol import (
+    CMD_DISABLE,
+    CMD_ENABLE,
+    CMD_RESET,
+    CMD_START,
+    CMD_STOP,
+    RPM_PER_RAD_S,
+    STATE_FAULT,
+    STATE_IDLE,
+    STATE_RUNNING,
+    unwrap,
+)
+from controller import Controller, ControlOutput, Measurement
+from plant_rt import (
+    FAULT_NAMES,
+    FAULT_NONE,
+    FAULT_WATCHDOG,
+    ConstantLoad,
+    Plant,
+    Protection,
+    ProtectionPars,
+)
+
+#: A counter that is older than the receiver accepts (replayed or very late frame).
+REJECT_STALE_COUNTER = "stale_counter"
+#: A counter ahead of anything the sender can have produced yet.
+REJECT_FUTURE_COUNTER = "future_counter"
+#: An exact repeat of an accepted counter: counted, not a rejection (see module doc).
+REPEATED_COUNTER = "repeated_counter"
+#: More pending bench commands than this are refused (a flood of forged frames).
+REJECT_QUEUE_FULL = "queue_full"
+MAX_PENDING_COMMANDS = 4096
+_FAR = 1 << 62
+#: Lockstep: a duty answered from the controller's cache may be this many periods old.
+DUTY_REPEAT_WINDOW = 16
+
+
+@dataclass(slots=True)
+class Command:
+    """A decoded bench command, with its full (unwrapped) step."""
+
+    apply_step: int
+    cmd: int
+    speed_ref_rpm: float
+    load_nm: float
+
+
+@dataclass(slots=True)
+class NodeCounters:
+    """What a node counts; reported in the run's metrics."""
+
+    frames_rejected: int = 0
+    reject_reasons: dict[str, int] = field(default_factory=dict)
+    duplicates: int = 0
+    late_commands: int = 0
+    retransmits: int = 0
+    overruns: int = 0
+    late_duties: int = 0
+    missing_duties: int = 0
+    frames_accepted: int = 0
+    frames_ignored: int = 0
+    frames_unknown: int = 0
+    send_errors: int = 0
+    frames_lost_on_send: int = 0
+
+    def reject(self, reason: str) -> None:
+        """Count a frame that is not used, under ``reason``.
+
+        ``repeated_counter`` goes to ``duplicates`` (and the per-reason
+        counts); every other reason to ``frames_rejected``.
+        """
+        self.reject_reasons[reason] = self.reject_reasons.get(reason, 0) + 1
+        if reason == REPEATED_COUNTER:
+            self.duplicates += 1
+        else:
+            self.frames_rejected += 1
+
+    @property
+    def frames_seen(self) -> int:
+        """Every frame given to the node, whatever became of it."""
+        return (
+            self.frames_accepted
+            + self.frames_rejected
+            + self.duplicates
+            + self.frames_ignored
+            + self.frames_unknown
+        )
+
+    def as_dict(self) -> dict[str, object]:
+        """The counters as a JSON-ready dict (the node reports)."""
+        return {
+            "frames_accepted": self.frames_accepted,
+            "frames_rejected": self.frames_rejected,
+            "reject_reasons": dict(self.reject_reasons),
+            "duplicates": self.duplicates,
+            "frames_ignored": self.frames_ignored,
+            "frames_unknown": self.frames_unknown,
+            "late_commands": self.late_commands,
+            "retransmits": self.retransmits,
+            "overruns": self.overruns,
+            "late_duties": self.late_duties,
+            "send_errors": self.send_errors,
+            "frames_lost_on_send": self.frames_lost_on_send,
+        }
+
+
+class _CommandQueue:
+    """Bench commands ordered by apply step, de-duplicated by apply step and alive counter."""
+
+    def __init__(self, modulus: int) -> None:
+        self.modulus = modulus
+        self.pending: dict[int, Command] = {}
+        self.applied_upto = -1
+        self.recent: deque[tuple[int, int]] = deque(maxlen=64)
+        self.next_step = _FAR
+
+    def add(self, sig: dict[str, float], now: int, counters: NodeCounters) -> int | None:
+        """Queue a command; its unwrapped apply step if it is known now (new or a repeat)."""
+        s = unwrap(int(sig["step"]), now, self.modulus)
+        key = (s, int(sig["seq"]))
+        if key in self.recent:
+            counters.reject(REPEATED_COUNTER)
+            return s
+        if s <= self.applied_upto:
+            if s < self.applied_upto - self.modulus // 4:
+                counters.reject(REJECT_STALE_COUNTER)
+                return None
+            if s in self.pending:
+                counters.reject(REPEATED_COUNTER)
+                return s
+            counters.late_commands += 1
+            # late: in the next period, after any other late command already
+            # waiting there (arrival order, so a newer set-point wins)
+            s = self.applied_upto + 1
+            while s in self.pending:
+                s += 1
+        if s in self.pending:
+            counters.reject(REPEATED_COUNTER)
+            return s
+        if len(self.pending) >= MAX_PENDING_COMMANDS:
+            counters.reject(REJECT_QUEUE_FULL)
+            return None
+        counters.frames_accepted += 1
+        self.recent.append(key)
+        self.next_step = min(self.next_step, s)
+        self.pending[s] = Command(
+            s, int(sig["cmd"]), float(sig["speed_ref"]), float(sig["load_torque"])
+        )
+        return s
+
+    def due(self, step: int) -> list[Command]:
+        if step > self.applied_upto:
+            self.applied_upto = step
+        if not self.pending or self.next_step > step:
+            return []
+        out = [c for s, c in sorted(self.pending.items()) if s <= step]
+        for c in out:
+            del self.pending[c.apply_step]
+        self.next_step = min(self.pending) if self.pending else _FAR
+        return out
+
+
+_SAFE_DUTY = (0.5, 0.5, 0.5, False)
+
+
+class PlantNode:
+    """The plant behind the DBC.
+
+    Parameters
+    ----------
+    codec : Codec
+    plant : Plant
+    n_steps : int
+        Periods to run before reporting completion (0: until stopped).
+    lockstep_delay : int
+        Total injected latency in whole periods (lockstep only).
+    truth_every : int
+        Send ``PlantTruth`` every this many periods (1 on virtual transports;
+        more on a real bus, see the CAN budget).
+    protection : ProtectionPars, optional
+        Trip thresholds (over-current, DC-link over-voltage, over-speed);
+        None: no protection trips.
+    watchdog_periods : int
+        Real time: trip to the safe state when no valid duty frame has
+        arrived for this many PWM periods of the plant's clock (0: off).
+    watchdog_rounds : int
+        Lockstep: trip when this many retransmission rounds in a row brought
+        no valid duty frame (0: off).
+    """
+
+    def __init__(
+        self,
+        codec: Codec,
+        plant: Plant,
+        *,
+        n_steps: int,
+        lockstep_delay: int = 0,
+        truth_every: int = 1,
+        protection: ProtectionPars | None = None,
+        watchdog_periods: int = 0,
+        watchdog_rounds: int = 0,
+    ) -> None:
+        self.codec = codec
+        self.plant = plant
+        self.n_steps = n_steps
+        self.delay = lockstep_delay
+        self.truth_every = max(1, truth_every)
+        self.m_step = 1 << codec.step_bits("PwmDuty")
+        self.m_cmd = 1 << codec.step_bits("BenchCommand")
+        self.m_truth = 1 << codec.step_bits("PlantTruth")
+        self.m_samples = 1 << codec.step_bits("PhaseSamples")
+        self.m_status = 1 << codec.step_bits("PlantStatus")
+        self.id_duty = codec.frame_id("PwmDuty")
+        self.id_cmd = codec.frame_id("BenchCommand")
+        self.duties: dict[int, tuple[float, float, float, bool]] = {}
+        self.latest_duty: tuple[float, float, float, bool] = _SAFE_DUTY
+        self.latest_duty_step = -1
+        self.commands = _CommandQueue(self.m_cmd)
+        #: Lockstep pacing (0: off): run period k only once a bench command
+        #: for step k or later has arrived. ``bench run`` sends one at least
+        #: every this many periods, as far ahead as its recorder has seen, so
+        #: the plant never outruns the recording (whose socket would overflow
+        #: on a loaded machine) and no command is ever late.
+        self.pace_every = 0
+        self.cmd_horizon = -1
+        self.counters = NodeCounters()
+        self.started = False
+        self.stopped = False
+        self.realtime = False
+        self.jitter: dict[str, float] | None = None
+        #: Wall seconds of the stepping loop (start command to the last period).
+        self.loop_s: float | None = None
+        #: age (PWM periods) of the duty applied in the last period; 255: none.
+        #: Sent in PlantTruth so the recorder measures the loop latency exactly.
+        self.duty_age = 255
+        self.sent: deque[list[can.Message]] = deque(maxlen=lockstep_delay + 3)
+        self.protection = Protection(protection) if protection is not None else None
+        self.watchdog_periods = max(0, int(watchdog_periods))
+        self.watchdog_rounds = max(0, int(watchdog_rounds))
+        #: Latched fault code (``PlantStatus.fault_code``); FAULT_NONE while healthy.
+        self.fault = FAULT_NONE
+        #: Step at which the fault was latched (-1: none).
+        self.fault_step = -1
+        #: Trips by fault name, and operator resets that cleared a fault.
+        self.trips: dict[str, int] = {}
+        self.resets = 0
+        self.last_duty_k = 0
+        self.rounds_waiting = 0
+        self._outbox: list[can.Message] = []
+
+    # -- receiving ---------------------------------------------------------
+    def on_message(self, msg: can.Message) -> None:
+        """Take one received frame; never raises for any frame content."""
+        c = self.counters
+        d = self.codec.decode(msg)
+        if d is None:
+            c.frames_unknown += 1
+            return
+        if d.name == "PwmDuty":
+            if d.reason is not None:
+                c.reject(d.reason)
+                return
+            self._on_duty(d.signals)
+        elif d.name == "BenchCommand":
+            if d.reason is not None:
+                c.reject(d.reason)
+                return
+            known = self.commands.add(d.signals, self.plant.k, c)
+            if known is not None and known > self.cmd_horizon:
+                self.cmd_horizon = known
+        else:
+            c.frames_ignored += 1
+
+    def _on_duty(self, s: dict[str, float]) -> None:
+        c = self.counters
+        k = self.plant.k
+        t = unwrap(int(s["step"]), k - self.delay, self.m_step)
+        if t > k + 1:
+            # the controller answers sample k with duty k + 1 at the latest
+            c.reject(REJECT_FUTURE_COUNTER)
+            return
+        if self.realtime:
+            if t == self.latest_duty_step or t in self.duties:
+                c.reject(REPEATED_COUNTER)
+                return
+            if t < self.latest_duty_step:
+                c.reject(REJECT_STALE_COUNTER)
+                return
+        else:
+            needed = k - self.delay
+            if t < needed - DUTY_REPEAT_WINDOW:
+                c.reject(REJECT_STALE_COUNTER)
+                return
+            if t < needed or t in self.duties:
+                # already applied or already here: the answer to a retransmission
+                c.reject(REPEATED_COUNTER)
+                return
+        d_a, d_b, d_c = float(s["duty_a"]), float(s["duty_b"]), float(s["duty_c"])
+        if not (0.0 <= d_a <= 1.0 and 0.0 <= d_b <= 1.0 and 0.0 <= d_c <= 1.0):
+            c.reject(REJECT_OUT_OF_RANGE)  # unreachable with the shipped DBC; kept as a guard
+            return
+        c.frames_accepted += 1
+        duty = (d_a, d_b, d_c, bool(s["enable"]))
+        self.last_duty_k = k
+        # Both modes keep the duty until its period: in real time a fast
+        # controller answers sample k (duty k + 1) before period k has started,
+        # and applying it then would put it one period early.
+        self.duties[t] = duty
+        if not self.realtime and t > self.latest_duty_step:
+            self.latest_duty_step = t
+            self.latest_duty = duty
+
+    # -- faults ------------------------------------------------------------
+    def trip(self, code: int) -> None:
+        """Latch fault ``code`` (first fault wins): safe state until reset, status frame queued."""
+        if self.fault != FAULT_NONE:
+            return
+        self.fault = code
+        self.fault_step = self.plant.k
+        name = FAULT_NAMES.get(code, str(code))
+        self.trips[name] = self.trips.get(name, 0) + 1
+        self._outbox.append(self.status_frame(STATE_FAULT, code))
+
+    def reset_fault(self) -> bool:
+        """Operator reset: clear the latch and re-arm the watchdog; True if a fault was cleared."""
+        if self.protection is not None:
+            self.protection.reset()
+        self.last_duty_k = self.plant.k
+        self.rounds_waiting = 0
+        if self.fault == FAULT_NONE:
+            return False
+        self.fault = FAULT_NONE
+        self.fault_step = -1
+        self.resets += 1
+        self._outbox.append(self.status_frame(STATE_RUNNING, FAULT_NONE))
+        return True
+
+    def _check_protection(self) -> None:
+        prot = self.protection
+        if prot is not None and self.fault == FAULT_NONE:
+            code = prot.check(*self.plant.protection_inputs())
+            if code != FAULT_NONE:
+                prot.reset()
+                self.trip(code)
+
+    def _flush_outbox(self, frames: list[can.Message]) -> list[can.Message]:
+        if self._outbox:
+            frames = [*self._outbox, *frames]
+            self._outbox = []
+        return frames
+
+    def on_duty_timeout(self) -> list[can.Message]:
+        """Lockstep: one retransmission round passed without the needed duty.
+
+        Returns the frames to send (the fault status when the watchdog trips).
+        """
+        self.rounds_waiting += 1
+        if (
+            self.watchdog_rounds
+            and self.started
+            and self.fault == FAULT_NONE
+            and self.rounds_waiting >= self.watchdog_rounds
+        ):
+            self.trip(FAULT_WATCHDOG)
+        return self._flush_outbox([])
+
+    # -- lockstep ----------------------------------------------------------
+    def needed_duty(self) -> int:
+        """Tag of the duty applied in the current period (lockstep)."""
+        return self.plant.k - self.delay
+
+    def ready(self) -> bool:
+        """Lockstep: whether the duty for the current period has arrived."""
+        t = self.needed_duty()
+        return t <= 0 or t in self.duties
+
+    def paced(self) -> bool:
+        """Lockstep: whether pacing lets the current period run (always when off)."""
+        return self.pace_every <= 0 or self.plant.k <= self.cmd_horizon
+
+    def frames_now(self) -> list[can.Message]:
+        """The frames describing the plant at the current instant ``k T_s``."""
+        p = self.plant
+        s = p.sample()
+        if self.fault != FAULT_NONE:
+            status = STATE_FAULT
+        else:
+            status = STATE_RUNNING if self.started and not self.stopped else STATE_IDLE
+        frames = [
+            self.codec.encode(
+                "PhaseSamples",
+                {
+                    "i_a": s.i_a,
+                    "i_b": s.i_b,
+                    "u_dc": s.u_dc,
+                    "step": s.k % self.m_samples,
+                    "status": status,
+                },
+            )
+        ]
+        if s.k % self.truth_every == 0:
+            tr = p.truth()
+            frames.append(
+                self.codec.encode(
+                    "PlantTruth",
+                    {
+                        "theta_e": tr.theta_e,
+                        "w_m": tr.w_m,
+                        "tau_e": tr.tau_e,
+                        "tau_L": tr.tau_L,
+                        "duty_age": self.duty_age,
+                        "step": s.k % self.m_truth,
+                    },
+                )
+            )
+        self.sent.append(frames)
+        return frames
+
+    def apply_commands(self) -> None:
+        for c in self.commands.due(self.plant.k):
+            if c.cmd == CMD_START:
+                self.started = True
+                self.last_duty_k = self.plant.k
+            elif c.cmd == CMD_STOP:
+                self.stopped = True
+            elif c.cmd in (CMD_RESET, CMD_ENABLE):
+                self.reset_fault()
+            self.plant.set_load(ConstantLoad(c.load_nm))
+
+    def advance_lockstep(self) -> list[can.Message]:
+        """Run the current period with its duty; return the next instant's frames."""
+        t = self.needed_duty()
+        if t <= 0:
+            d_a, d_b, d_c, en = _SAFE_DUTY
+            self.duty_age = 255
+        else:
+            self.duty_age = min(254, self.plant.k - t)
+            d_a, d_b, d_c, en = self.duties.pop(t)
+            for old in [s for s in self.duties if s < t]:
+                del self.duties[old]
+        if self.fault != FAULT_NONE:
+            en = False
+        self.rounds_waiting = 0
+        self.plant.step(d_a, d_b, d_c, en)
+        self._check_protection()
+        self.apply_commands()
+        return self._flush_outbox(self.frames_now())
+
+    def retransmit(self) -> list[can.Message]:
+        """Frames to resend when the expected duty did not come (lossy transport)."""
+        self.counters.retransmits += 1
+        return [m for frames in self.sent for m in frames]
+
+    # -- real time ---------------------------------------------------------
+    def advance_realtime(self) -> list[can.Message]:
+        """Run one period with the latest valid duty (real-time mode).
+
+        The watchdog, armed by the first valid duty frame, trips when the last
+        one arrived ``watchdog_periods`` or more periods ago; this period then
+        already runs in the safe state.
+        """
+        k = self.plant.k
+        due = [t for t in self.duties if t <= k]
+        if due:
+            t = max(due)
+            self.latest_duty_step = t
+            self.latest_duty = self.duties[t]
+            for t in due:
+                del self.duties[t]
+        d_a, d_b, d_c, en = self.latest_duty
+        self.duty_age = (
+            255 if self.latest_duty_step < 0 else max(0, min(254, k - self.latest_duty_step))
+        )
+        expected = k - self.delay
+        if self.latest_duty_step < expected:
+            if self.latest_duty_step < 0:
+                en = False
+            else:
+                self.counters.late_duties += 1
+        if (
+            self.watchdog_periods
+            and self.latest_duty_step >= 0  # armed by the first valid duty
+            and self.fault == FAULT_NONE
+            and k - self.last_duty_k >= self.watchdog_periods
+        ):
+            self.trip(FAULT_WATCHDOG)
+        if self.fault != FAULT_NONE:
+            en = False
+        self.plant.step(d_a, d_b, d_c, en)
+        self._check_protection()
+        self.apply_commands()
+        return self._flush_outbox(self.frames_now())
+
+    def status_frame(self, state: int, fault_code: int = 0) -> can.Message:
+        c = self.counters
+        return self.codec.encode(
+            "PlantStatus",
+            {
+                "state": state,
+                "fault_code": fault_code,
+                "overruns": min(c.overruns, 0xFFFF),
+                "late_frames": min(c.late_duties, 0xFFFF),
+                "step": self.plant.k % self.m_status,
+            },
+        )
+
+    def report(self) -> dict[str, object]:
+        """Counters and fault history, for the node's JSON report."""
+        out = self.counters.as_dict()
+        out.update(
+            steps=self.plant.k,
+            jitter=self.jitter,
+            loop_s=self.loop_s,
+            fault=FAULT_NAMES.get(self.fault, str(self.fault)),
+            fault_step=self.fault_step,
+            # period in which the last valid duty frame arrived (the watchdog's reference)
+            last_duty_arrival=self.last_duty_k,
+            trips=dict(self.trips),
+            resets=self.resets,
+        )
+        return out
+
+    @property
+    def done(self) -> bool:
+        return self.stopped or (self.n_steps > 0 and self.plant.k >= self.n_steps)
+
+
+class ControllerNode:
+    """The controller behind the DBC: one sample in, one duty (+ telemetry) out.
+
+    Samples are processed strictly in step order; a sample that arrives
+    twice gets the cached answer again (the plant retransmits when a frame
+    was lost), a sample from the future waits for the missing ones.
+
+    Parameters
+    ----------
+    needs_truth : bool
+        The sensored baseline waits for ``PlantTruth`` of the same step.
+    """
+
+    def __init__(self, codec: Codec, controller: Controller, *, needs_truth: bool = False) -> None:
+        self.codec = codec
+        self.ctrl = controller
+        self.needs_truth = needs_truth
+        self.m_step = 1 << codec.step_bits("PhaseSamples")
+        self.m_cmd = 1 << codec.step_bits("BenchCommand")
+        self.m_tel = 1 << codec.step_bits("CtrlTelemetry")
+        self.m_truth = 1 << codec.step_bits("PlantTruth")
+        self.next_k = 0
+        self.samples: dict[int, dict[str, float]] = {}
+        self.truth: dict[int, dict[str, float]] = {}
+        self.answers: dict[int, list[can.Message]] = {}
+        self.commands = _CommandQueue(self.m_cmd)
+        self.counters = NodeCounters()
+        self.stopped = False
+        self.realtime = False
+        #: Valid samples taken (the loop's watchdog watches it move).
+        self.samples_accepted = 0
+        #: Times the PWM was disabled because samples stopped (real time).
+        self.sample_timeouts = 0
+        #: True from a sample timeout until a reset/enable command.
+        self.faulted = False
+
+    def on_message(self, msg: can.Message) -> list[can.Message]:
+        """Take one received frame; return the frames to send. Never raises for any content."""
+        c = self.counters
+        d = self.codec.decode(msg)
+        if d is None:
+            c.frames_unknown += 1
+            return []
+        name = d.name
+        if name not in ("PhaseSamples", "BenchCommand") and not (
+            name == "PlantTruth" and self.needs_truth
+        ):
+            c.frames_ignored += 1
+            return []
+        if d.reason is not None:
+            c.reject(d.reason)
+            return []
+        if name == "BenchCommand":
+            # In both modes a command takes effect at its step (the sample of
+            # that step), as in the plant: the bench sends commands ahead of
+            # time, and applied on arrival a stop would end the controller
+            # (and a set-point change reach it) that much early.
+            self.commands.add(d.signals, self.next_k, c)
+            return []
+        if name == "PhaseSamples":
+            k = unwrap(int(d.signals["step"]), self.next_k, self.m_step)
+            if k < self.next_k:
+                cached = self.answers.get(k)
+                if cached is None:
+                    c.reject(REJECT_STALE_COUNTER)
+                    return []
+                c.reject(REPEATED_COUNTER)
+                return list(cached)
+            if k in self.samples:
+                c.reject(REPEATED_COUNTER)
+                return []
+            c.frames_accepted += 1
+            self.samples_accepted += 1
+            if self.realtime and k > self.next_k:
+                # real time: never wait for the past, skip to the newest sample
+                self.samples = {s: v for s, v in self.samples.items() if s >= k}
+                self.next_k = k
+            self.samples[k] = d.signals
+        else:  # PlantTruth, sensored baseline
+            k = unwrap(int(d.signals["step"]), self.next_k, self.m_truth)
+            if k < self.next_k or k in self.truth:
+                c.reject(REPEATED_COUNTER)
+                return []
+            if k > self.next_k + self.m_step:
+                c.reject(REJECT_FUTURE_COUNTER)
+                return []
+            c.frames_accepted += 1
+            self.truth[k] = d.signals
+        return self._run_ready()
+
+    def sample_timeout(self) -> None:
+        """Samples stopped (real time): disable the PWM until a reset or enable command.
+
+        When the stop command is due with the very sample that did not come
+        (the plant's last one, lost on the way), the run is over: stop.
+        """
+        if any(
+            c.cmd == CMD_STOP and c.apply_step <= self.next_k
+            for c in self.commands.pending.values()
+        ):
+            self.stopped = True
+        if not self.faulted:
+            self.faulted = True
+            self.sample_timeouts += 1
+            self.ctrl.set_enable(False)
+
+    def _apply_commands(self, step: int) -> None:
+        for c in self.commands.due(step):
+            if c.cmd in (CMD_START, CMD_ENABLE, CMD_RESET):
+                self.faulted = False
+                self.ctrl.set_enable(True)
+            elif c.cmd in (CMD_STOP, CMD_DISABLE):
+                self.ctrl.set_enable(False)
+                if c.cmd == CMD_STOP:
+                    self.stopped = True
+            self.ctrl.set_speed_ref(c.speed_ref_rpm / RPM_PER_RAD_S)
+
+    def _run_ready(self) -> list[can.Message]:
+        out: list[can.Message] = []
+        while self.next_k in self.samples and (not self.needs_truth or self.next_k in self.truth):
+            k = self.next_k
+            s = self.samples.pop(k)
+            tr = self.truth.pop(k, None)
+            self._apply_commands(k)
+            theta = w_e = None
+            if tr is not None:
+                theta = float(tr["theta_e"])
+                w_e = float(tr["w_m"]) * self.ctrl.pars.motor.n_p
+            i_a, i_b = float(s["i_a"]), float(s["i_b"])
+            m = Measurement(k, i_a, i_b, -i_a - i_b, float(s["u_dc"]), theta, w_e)
+            o = self.ctrl.step(m)
+            frames = self.encode_output(o)
+            self.answers[k] = frames
+            self.answers.pop(k - 8, None)
+            out.extend(frames)
+            self.next_k = k + 1
+        return out
+
+    def report(self) -> dict[str, object]:
+        """Counters, for the node's JSON report."""
+        out = self.counters.as_dict()
+        out.update(steps=self.next_k, sample_timeouts=self.sample_timeouts)
+        return out
+
+    def encode_output(self, o: ControlOutput) -> list[can.Message]:
+        return [
+            self.codec.encode(
+                "PwmDuty",
+                {
+                    "duty_a": o.d_a,
+                    "duty_b": o.d_b,
+                    "duty_c": o.d_c,
+                    "enable": 1 if o.enable else 0,
+                    "step": (o.k + 1) % self.m_step,
+                },
+            ),
+            self.codec.encode(
+                "CtrlTelemetry",
+                {
+                    "theta_hat": o.theta_hat,
+                    "w_hat": o.w_hat,
+                    "err": o.err,
+                    "mode": o.mode,
+                    "step": o.k % self.m_tel,
+                },
+            ),
+        ]

@@ -1,0 +1,360 @@
+"""From a CAN capture to the per-step signal table.
+
+Live runs and ``bench analyze`` share this code: a run records the raw frames
+first and derives its table, metrics and plots from the capture, so a
+capture analysed later gives exactly what the live run wrote.
+
+Tolerated: captures that start mid-run (steps are counted from the first one
+seen), gaps, other traffic (IDs not in the DBC are counted and skipped),
+frames that fail their CRC or length (counted per reason), duplicated frames
+(first copy wins) and out-of-order counters (counted).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+
+import can
+import numpy as np
+import numpy.typing as npt
+
+from bench.wire._codec import Codec
+
+Array = npt.NDArray[np.float64]
+
+#: Columns of the per-step table, in CSV order, with units.
+COLUMNS: tuple[tuple[str, str], ...] = (
+    ("step", "PWM period index k (sample instant t = k T_s)"),
+    ("t", "s"),
+    ("theta_e", "true electrical angle, rad"),
+    ("theta_hat", "estimated electrical angle, rad"),
+    ("theta_err_deg", "wrap(theta_e - theta_hat), electrical degrees"),
+    ("w_m_rpm", "true mechanical speed, rpm"),
+    ("w_hat_rpm", "estimated mechanical speed, rpm"),
+    ("w_ref_rpm", "speed reference in force, rpm"),
+    ("load_ref_nm", "load torque commanded, N m"),
+    ("tau_e", "electromagnetic torque, N m"),
+    ("tau_L", "load torque, N m"),
+    ("i_a", "phase-A current sample, A"),
+    ("i_b", "phase-B current sample, A"),
+    ("i_c", "phase-C current (-i_a - i_b), A"),
+    ("i_d", "d current in the true rotor frame, A"),
+    ("i_q", "q current in the true rotor frame, A"),
+    ("u_dc", "DC-link voltage sample, V"),
+    ("d_a", "duty computed from this sample (applies from period k+1), 0..1"),
+    ("d_b", "duty, 0..1"),
+    ("d_c", "duty, 0..1"),
+    ("enable", "PWM enabled by the controller, 0/1"),
+    ("est_err", "estimator error signal, rad"),
+    ("mode", "controller mode"),
+    ("duty_age", "age of the duty applied in the previous period, PWM periods (255: none)"),
+)
+
+
+@dataclass(slots=True)
+class Capture:
+    """Decoded content of a capture."""
+
+    table: dict[str, Array]
+    frames: int = 0
+    unknown_ids: int = 0
+    rejected: dict[str, int] = field(default_factory=dict)
+    duplicates: int = 0
+    out_of_order: int = 0
+    incomplete_steps: int = 0
+    first_step: int = 0
+
+    @property
+    def frames_rejected(self) -> int:
+        return sum(self.rejected.values())
+
+
+class _Unwrapper:
+    def __init__(self, modulus: int) -> None:
+        self.m = modulus
+        self.last: int | None = None
+        self.base = 0
+
+    def __call__(self, raw: int) -> tuple[int, bool]:
+        """Full step for ``raw``, and whether it went backwards."""
+        if self.last is None:
+            self.last = raw
+            return raw, False
+        half = self.m // 2
+        d = (raw - self.last + half) % self.m - half
+        full = self.last + d
+        back = d < 0
+        if not back:
+            self.last = full
+        return full, back
+
+
+#: Messages of the per-step table and the signals taken from each, in table order.
+_TABLE_MESSAGES: tuple[tuple[str, tuple[str, ...]], ...] = (
+    ("PhaseSamples", ("i_a", "i_b", "u_dc")),
+    ("PlantTruth", ("theta_e", "w_m", "tau_e", "tau_L", "duty_age")),
+    ("CtrlTelemetry", ("theta_hat", "w_hat", "err", "mode")),
+    ("PwmDuty", ("duty_a", "duty_b", "duty_c", "enable")),
+    ("BenchCommand", ("speed_ref", "load_torque")),
+)
+
+
+def _unwrap_sequential(raw: list[int], modulus: int) -> list[int]:
+    """Full steps of a counter when nothing anchors it: relative to the highest so far."""
+    out: list[int] = []
+    u = _Unwrapper(modulus)
+    for r in raw:
+        out.append(u(r)[0])
+    return out
+
+
+def _full_steps(
+    name: str,
+    raw: npt.NDArray[np.int64],
+    index: npt.NDArray[np.int64],
+    bits: int,
+    anchor: tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]] | None,
+) -> npt.NDArray[np.int64]:
+    """Full step numbers of a message's counter values.
+
+    A counter narrower than the widest one in the capture (``PhaseSamples``
+    and ``PwmDuty`` carry 10 bits, ``BenchCommand`` 16, ``PlantTruth`` and
+    ``CtrlTelemetry`` 32) is unwrapped to the step nearest that of the latest
+    wide-counter frame before it (the first one for frames before any), so
+    a capture that starts mid-run or has gaps longer than the narrow counter's
+    range still lines up all messages of a step.  Without wide counters the
+    narrow ones are unwrapped one after the other from the first value.
+    """
+    m = 1 << bits
+    if anchor is None or len(anchor[0]) == 0:
+        if len(raw) < 2 or np.all(np.abs(np.diff(raw)) < m // 2):
+            return raw.copy()  # no counter wrap: sequential unwrapping keeps every value
+        return np.array(_unwrap_sequential(raw.tolist(), m), dtype=np.int64)
+    a_idx, a_step = anchor
+    pos = np.searchsorted(a_idx, index, side="right") - 1
+    expected = a_step[np.maximum(pos, 0)]
+    half = m // 2
+    full: npt.NDArray[np.int64] = expected + (raw - expected + half) % m - half
+    return full
+
+
+def analyze_frames(
+    frames: Iterable[can.Message],
+    codec: Codec,
+    *,
+    T_s: float,
+    n_p: int,
+) -> Capture:
+    """Decode frames into the per-step table (steps with samples, truth and telemetry).
+
+    The whole capture is decoded at once (:func:`bench.wire._batch_decode.decode_batch`,
+    the same values and rejections as :meth:`Codec.decode` frame by frame).
+    Per message, in capture order: the first frame of a step wins (later
+    copies count as duplicates) and a step below the highest seen so far
+    counts as out of order.  The table has one row per step that has samples,
+    truth and telemetry; when the capture has no telemetry at all (a drive
+    that does not send it), one row per step with samples and truth, the
+    estimate columns NaN.
+
+    Raises
+    ------
+    ValueError
+        No step has samples and truth (the message says what the capture holds).
+    """
+    from bench.wire._batch_decode import decode_batch
+
+    seq = frames if isinstance(frames, list) else list(frames)
+    dec = decode_batch(seq, codec)
+    cap = Capture(
+        table={},
+        frames=dec.frames,
+        unknown_ids=dec.unknown_ids,
+        rejected=dict(dec.rejected),
+    )
+    bits = {name: codec.step_bits(name) for name, _ in _TABLE_MESSAGES}
+    wide = max(bits.values())
+    # anchor of the narrow counters: every valid frame with a wide counter
+    a_parts = [
+        (dec.messages[n].index, dec.messages[n].signals["step"])
+        for n, _ in _TABLE_MESSAGES
+        if bits[n] == wide and n in dec.messages
+    ]
+    anchor = None
+    if a_parts:
+        a_idx = np.concatenate([p[0] for p in a_parts])
+        a_step = np.concatenate([p[1] for p in a_parts]).astype(np.int64)
+        o = np.argsort(a_idx, kind="stable")
+        anchor = (a_idx[o], a_step[o])
+    stores: dict[str, tuple[npt.NDArray[np.int64], Array]] = {}
+    for name, sigs in _TABLE_MESSAGES:
+        b = dec.messages.get(name)
+        if b is None or len(b.index) == 0:
+            stores[name] = (np.zeros(0, dtype=np.int64), np.zeros((0, len(sigs))))
+            continue
+        raw = b.signals["step"].astype(np.int64)
+        full = _full_steps(name, raw, b.index, bits[name], anchor if bits[name] < wide else None)
+        if name == "PwmDuty":
+            full = full - 1  # the duty tagged k+1 answers sample k
+        steps_u, first = np.unique(full, return_index=True)
+        cap.duplicates += len(full) - len(steps_u)
+        if len(full) > 1:
+            prev_max = np.maximum.accumulate(full)[:-1]
+            back = np.zeros(len(full), dtype=bool)
+            back[1:] = full[1:] < prev_max
+            is_first = np.zeros(len(full), dtype=bool)
+            is_first[first] = True
+            cap.out_of_order += int(np.count_nonzero(back & is_first))
+        vals = np.column_stack([b.signals[s][first] for s in sigs])
+        stores[name] = (steps_u, vals)
+    s_steps = stores["PhaseSamples"][0]
+    t_steps = stores["PlantTruth"][0]
+    e_steps = stores["CtrlTelemetry"][0]
+    # (each store's steps are sorted and unique)
+    steps = np.intersect1d(
+        np.intersect1d(s_steps, t_steps, assume_unique=True), e_steps, assume_unique=True
+    )
+    if len(steps) == 0 and len(e_steps) == 0:
+        steps = np.intersect1d(s_steps, t_steps, assume_unique=True)
+    if len(steps) == 0:
+        held = ", ".join(f"{name} {len(stores[name][0])}" for name, _ in _TABLE_MESSAGES)
+        raise ValueError(
+            "no step has samples, truth and telemetry together "
+            f"(valid steps per message: {held}; {cap.unknown_ids} frames with other IDs, "
+            f"{cap.frames_rejected} rejected)"
+        )
+    every = np.sort(np.concatenate([s_steps, t_steps, e_steps]))
+    n_union = int(np.count_nonzero(np.diff(every))) + 1
+    cap.incomplete_steps = n_union - len(steps)
+    cap.first_step = int(steps[0])
+    n = len(steps)
+    cols = {name: np.full(n, math.nan) for name, _ in COLUMNS}
+    cols["step"] = steps.astype(float)
+    cols["t"] = steps * T_s
+
+    def take(store: tuple[npt.NDArray[np.int64], Array], j: int) -> Array:
+        st, va = store
+        pos = np.searchsorted(st, steps)
+        pos_c = np.minimum(pos, max(len(st) - 1, 0))
+        hit = (pos < len(st)) & (st[pos_c] == steps) if len(st) else np.zeros(n, dtype=bool)
+        col = np.full(n, math.nan)
+        col[hit] = va[pos_c[hit], j]
+        return col
+
+    cols["i_a"], cols["i_b"], cols["u_dc"] = (take(stores["PhaseSamples"], j) for j in range(3))
+    cols["i_c"] = -cols["i_a"] - cols["i_b"]
+    cols["theta_e"], cols["w_m_rpm"], cols["tau_e"], cols["tau_L"], cols["duty_age"] = (
+        take(stores["PlantTruth"], j) for j in range(5)
+    )
+    cols["theta_hat"], cols["w_hat_rpm"], cols["est_err"], cols["mode"] = (
+        take(stores["CtrlTelemetry"], j) for j in range(4)
+    )
+    # wire units: w_m mechanical rad/s, w_hat electrical rad/s
+    rpm = 60.0 / (2.0 * math.pi)
+    cols["w_m_rpm"] = cols["w_m_rpm"] * rpm
+    cols["w_hat_rpm"] = cols["w_hat_rpm"] * (rpm / n_p)
+    cols["d_a"], cols["d_b"], cols["d_c"], cols["enable"] = (
+        take(stores["PwmDuty"], j) for j in range(4)
+    )
+    # references in force: forward fill of the commands by apply step
+    c_steps, c_vals = stores["BenchCommand"]
+    if len(c_steps):
+        idx = np.searchsorted(c_steps, steps, side="right") - 1
+        ok = idx >= 0
+        for j, name in enumerate(("w_ref_rpm", "load_ref_nm")):
+            col = np.full(n, math.nan)
+            col[ok] = c_vals[idx[ok], j]
+            cols[name] = col
+    th = cols["theta_e"]
+    err = (th - cols["theta_hat"] + np.pi) % (2 * np.pi) - np.pi
+    cols["theta_err_deg"] = np.degrees(err)
+    # Park transform of the sampled currents with the true angle (amplitude-invariant)
+    i_al = cols["i_a"]
+    i_be = (cols["i_a"] + 2.0 * cols["i_b"]) / math.sqrt(3.0)
+    c, s_ = np.cos(th), np.sin(th)
+    cols["i_d"] = c * i_al + s_ * i_be
+    cols["i_q"] = -s_ * i_al + c * i_be
+    cap.table = cols
+    return cap
+
+
+def write_csv(path: str, table: dict[str, Array]) -> None:
+    """Write the per-step table as CSV with a header row (readable by numpy alone)."""
+    names = [n for n, _ in COLUMNS]
+    data = np.column_stack([table[n] for n in names])
+    fmt = ["%d", "%.6f"] + ["%.9g"] * (len(names) - 2)
+    np.savetxt(path, data, delimiter=",", header=",".join(names), comments="", fmt=fmt)
+
+
+def read_csv(path: str) -> dict[str, Array]:
+    """Read a table written by :func:`write_csv`."""
+    arr = np.genfromtxt(path, delimiter=",", names=True)
+    return {n: np.asarray(arr[n], dtype=float) for n in arr.dtype.names or ()}
+
+
+def measure_latency(frames: list[can.Message], codec: Codec) -> dict[str, dict[str, float]]:
+    """Wall-clock latency across a link, per direction, from a two-bus capture.
+
+    ``frames`` must carry ``channel`` 1 (plant side, bus A) and 2 (controller
+    side, bus B), as :class:`bench.runs._recorder.Recorder` tags them, and receive
+    timestamps from one clock.  For each sample frame, the time from its
+    appearance on A to its appearance on B; for each duty frame, from B to A
+    (microseconds, median and 99th percentile).
+
+    In whole PWM periods, counted on the plant's own clock (the highest
+    sample step seen on A so far): a sample ``j`` that appears on B while A
+    has carried up to sample ``s`` was held ``s - j`` periods; a duty ``t``
+    (the answer to sample ``t - 1``) that appears on A while A has carried
+    up to ``s`` closed a loop of ``s - (t - 1)`` periods.  A frame is never
+    released before the sample on A that triggers it, but the recorder may
+    see the plant's next sample first (two sockets, one clock), which can
+    only add a period; so the delay is the least count over all frames
+    (``samples.steps``, and ``duties.steps`` = least loop minus
+    ``samples.steps``).  No median is given: it would count the recorder's
+    ordering (often one period more), not the link.  The plant's own
+    ``duty_age`` (scored as ``loop_latency_steps``) is the exact round trip.
+    """
+    sid, did = codec.frame_id("PhaseSamples"), codec.frame_id("PwmDuty")
+    m = 1 << codec.step_bits("PhaseSamples")
+    first_seen: dict[tuple[int, int, int], float] = {}
+    unw: dict[tuple[int, int], _Unwrapper] = {}
+    a_max = -1  # the highest sample step carried on A so far
+    held_s: list[int] = []  # per sample on B: periods it was held
+    loop_d: list[int] = []  # per duty on A: periods since its sample left A
+    for f in sorted(frames, key=lambda f: f.timestamp):
+        if f.arbitration_id not in (sid, did) or f.channel not in (1, 2):
+            continue
+        d = codec.decode(f)
+        if d is None or d.reason is not None:
+            continue
+        key = (int(f.channel), f.arbitration_id)
+        k, _ = unw.setdefault(key, _Unwrapper(m))(int(d.signals["step"]))
+        new = (*key, k) not in first_seen
+        first_seen.setdefault((*key, k), f.timestamp)
+        if key == (1, sid):
+            a_max = max(a_max, k)
+        elif new and a_max >= 0 and key == (2, sid):
+            held_s.append(a_max - k)
+        elif new and a_max >= 0 and key == (1, did):
+            loop_d.append(a_max - (k - 1))
+    out: dict[str, dict[str, float]] = {}
+    for name, fid, src, dst in (("samples", sid, 1, 2), ("duties", did, 2, 1)):
+        us = [
+            1e6 * (t - first_seen[(src, fid, k)])
+            for (ch, f_id, k), t in first_seen.items()
+            if ch == dst and f_id == fid and (src, fid, k) in first_seen
+        ]
+        if us:
+            arr = np.array(us)
+            out[name] = {
+                "us_median": float(np.median(arr)),
+                "us_p99": float(np.percentile(arr, 99)),
+                "frames": float(len(arr)),
+            }
+    if held_s and "samples" in out:
+        n_s = min(held_s)
+        out["samples"]["steps"] = float(n_s)
+        if loop_d and "duties" in out:
+            out["duties"]["steps"] = float(min(loop_d) - n_s)
+    return out

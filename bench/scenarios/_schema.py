@@ -1,0 +1,904 @@
+"""Scenario files: a documented, validated TOML schema.
+
+A scenario fixes everything a run needs besides the transport: the motor
+preset, the PWM rate, the estimator, the duration, the speed-reference and
+load-torque profiles, the injected latency, the sensing noise and the seed.
+The ten scenarios of the papers ship in ``bench/scenarios/``; a user's own file
+path works wherever a name does.
+
+Schema (all keys optional unless marked *required*)::
+
+    name = "wen-5.1"                 # defaults to the file's stem
+    description = "..."
+    paper = "Wen et al. 2023, Sec. 5.1, Table 5"
+    preset = "wen2023"               # *required*: plant preset (plant_rt.PRESETS)
+    estimator = "tt-dq"              # default estimator for `bench run`
+    estimators = ["sfhf", "tt-ab", "tt-dq", "sensored"]   # the ones `bench suite` runs
+    f_sw = 10000.0                   # PWM (= control) frequency, Hz; default: the preset's
+    duration = 3.0                   # simulated seconds, *required*
+    seed = 1                         # seeds the sensor noise and the latency jitter
+    saturation = true                # d-axis saturation in the plant (needed by the polarity test)
+    theta_e0_deg = 0.0               # initial electrical rotor angle
+    known_initial_angle = true       # false: the controller runs its start-up (HF + polarity)
+    speed_rpm = [[0.0, 100.0]]       # (t s, rpm) breakpoints, linear between, held after the last;
+                                     # a step is two points at the same time; values within the
+                                     # range of BenchCommand.speed_ref (dbc/bench.dbc)
+    load_nm = [[0.0, 0.0]]           # (t s, N m) breakpoints, same rules (BenchCommand.load_torque)
+    reference_rate_hz = 1000.0       # how often the bench re-sends a changing reference
+    score_from_s = 0.5               # metrics ignore the start-up transient before this time
+    thd_window_s = [3.0, 11.0]       # window for the THD of phase-A current (optional)
+
+    [estimator_options]              # passed to the estimator, checked on load by key name
+    V_h = 50.0                       # rotating (sfhf, tt-ab, tt-dq): injection amplitude, V,
+    f_h = 500.0                      # frequency, Hz; also w_o, normalise, bpf, hpf, lpf
+    U_h = 20.0                       # square-wave: injection amplitude, V; also a, M, delay_comp
+                                     # (amplitudes <= u_dc/sqrt(3) of the preset, f_h below
+                                     # Nyquist; the keys of both families are accepted, since
+                                     # the estimator may be chosen on the command line)
+    [noise]
+    current_std_a = 0.0              # white noise on each phase current, A rms
+    adc_bits = 0                     # 0: no quantization
+    adc_full_scale_a = 0.0
+    [latency]
+    duty_delay_steps = 0             # lockstep: whole PWM periods per direction; together at
+    sample_delay_steps = 0           # most a quarter of the step counters' range (256 periods)
+    duty_delay_us = 0.0              # real-time mode: microseconds per direction
+    sample_delay_us = 0.0
+    jitter_us = 0.0                  # real-time: standard deviation (normal) or half-width
+                                     # (uniform), both directions
+    duty_jitter_us = 0.0             # per direction; default jitter_us, wins over it when both given
+    sample_jitter_us = 0.0
+    jitter_dist = "normal"           # "normal" | "uniform", both directions
+    drop_prob = 0.0                  # per frame, both directions
+    duty_drop_prob = 0.0             # per direction; default drop_prob, wins over it when both given
+    sample_drop_prob = 0.0           # (the seed gives each direction a random stream of its own:
+                                     # one direction's settings never change the other's draws)
+    [motor]                          # explicit motor parameters (SI) replacing the preset's,
+    R_s = 2.8                        # for plant and controller alike; any of n_p, R_s, L_d,
+    L_q = 0.082                      # L_q, psi_f, J, b, i_rated, i_max, tau_rated, w_m_rated
+    [controller_model]               # the controller's parameter errors: factors on the
+    R_s = 1.0                        # plant's values (1.0 exact, 1.2 = believes 20 % more);
+    L_d = 1.0                        # the plant keeps the preset's values
+    L_q = 1.0
+    psi_f = 1.0
+    J = 1.0
+    [paper_result]                   # the paper's numbers, for reports only
+    theta_err_max_deg = 4.0
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import inspect
+import itertools
+import json
+import math
+import tomllib
+from dataclasses import dataclass, field, replace
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+from bench._errors import ScenarioError
+
+SHIPPED = (
+    "wen-5.1",
+    "wen-5.2",
+    "wen-5.3",
+    "wen-5.4",
+    "xue-fig13",
+    "xue-fig14",
+    "xue-fig15",
+    "xue-fig16",
+    "xue-fig17",
+    "xue-fig18",
+)
+
+
+@dataclass(frozen=True, slots=True)
+class Profile:
+    """Piecewise-linear function of time, held constant after the last breakpoint."""
+
+    points: tuple[tuple[float, float], ...]
+
+    def __call__(self, t: float) -> float:
+        pts = self.points
+        if t <= pts[0][0]:
+            return pts[0][1]
+        for (t0, v0), (t1, v1) in itertools.pairwise(pts):
+            if t < t1:
+                if t1 == t0:
+                    return v1
+                return v0 + (v1 - v0) * (t - t0) / (t1 - t0)
+        return pts[-1][1]
+
+    def is_constant_between(self, t0: float, t1: float) -> bool:
+        """True when the profile does not change on [t0, t1]."""
+        return self(t0) == self(t1) and all(
+            v == self(t0) for (t, v) in self.points if t0 <= t <= t1
+        )
+
+
+@dataclass(frozen=True, slots=True)
+class Direction:
+    """The latency of one direction of the link, shared values resolved.
+
+    Attributes
+    ----------
+    delay_steps : int
+        Lockstep: fixed delay, whole PWM periods.
+    delay_us : float
+        Real time: fixed delay, us.
+    jitter_us : float
+        Real time: standard deviation (normal) or half-width (uniform) of the
+        jitter added to ``delay_us``, us.
+    drop_prob : float
+        Probability that a frame of this direction is dropped.
+    """
+
+    delay_steps: int
+    delay_us: float
+    jitter_us: float
+    drop_prob: float
+
+
+@dataclass(frozen=True, slots=True)
+class Latency:
+    """Latency injected on the link, per direction.
+
+    The duty direction carries ``PwmDuty`` to the plant, the sample direction
+    ``PhaseSamples`` and ``PlantTruth`` to the controller.  ``jitter_us`` and
+    ``drop_prob`` apply to both directions; ``duty_jitter_us``,
+    ``sample_jitter_us``, ``duty_drop_prob`` and ``sample_drop_prob`` (``None``:
+    not given) override them for one direction, and win when a file gives
+    both.  Use :attr:`duty` and :attr:`sample` for the values in force.  One
+    ``jitter_dist`` and the scenario's one ``seed`` serve both directions;
+    the link derives a separate random stream per direction from the seed.
+    """
+
+    duty_delay_steps: int = 0
+    sample_delay_steps: int = 0
+    duty_delay_us: float = 0.0
+    sample_delay_us: float = 0.0
+    jitter_us: float = 0.0
+    jitter_dist: str = "normal"
+    drop_prob: float = 0.0
+    duty_jitter_us: float | None = None
+    sample_jitter_us: float | None = None
+    duty_drop_prob: float | None = None
+    sample_drop_prob: float | None = None
+
+    @property
+    def duty(self) -> Direction:
+        """Duties to the plant (B to A), shared values resolved."""
+        return Direction(
+            delay_steps=self.duty_delay_steps,
+            delay_us=self.duty_delay_us,
+            jitter_us=self.jitter_us if self.duty_jitter_us is None else self.duty_jitter_us,
+            drop_prob=self.drop_prob if self.duty_drop_prob is None else self.duty_drop_prob,
+        )
+
+    @property
+    def sample(self) -> Direction:
+        """Samples (and truth) to the controller (A to B), shared values resolved."""
+        return Direction(
+            delay_steps=self.sample_delay_steps,
+            delay_us=self.sample_delay_us,
+            jitter_us=self.jitter_us if self.sample_jitter_us is None else self.sample_jitter_us,
+            drop_prob=self.drop_prob if self.sample_drop_prob is None else self.sample_drop_prob,
+        )
+
+    @property
+    def any(self) -> bool:
+        d, s = self.duty, self.sample
+        return bool(
+            d.delay_steps
+            or s.delay_steps
+            or d.delay_us
+            or s.delay_us
+            or d.jitter_us
+            or s.jitter_us
+            or d.drop_prob
+            or s.drop_prob
+        )
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain representation; per-direction keys only when given (exact round trip)."""
+        out: dict[str, Any] = {
+            "duty_delay_steps": self.duty_delay_steps,
+            "sample_delay_steps": self.sample_delay_steps,
+            "duty_delay_us": self.duty_delay_us,
+            "sample_delay_us": self.sample_delay_us,
+            "jitter_us": self.jitter_us,
+            "jitter_dist": self.jitter_dist,
+            "drop_prob": self.drop_prob,
+        }
+        for k in _LATENCY_DIRECTION_KEYS:
+            v = getattr(self, k)
+            if v is not None:
+                out[k] = v
+        return out
+
+
+#: Per-direction keys of ``[latency]`` that override a shared one when given.
+_LATENCY_DIRECTION_KEYS = (
+    "duty_jitter_us",
+    "sample_jitter_us",
+    "duty_drop_prob",
+    "sample_drop_prob",
+)
+
+
+@dataclass(frozen=True, slots=True)
+class Noise:
+    current_std_a: float = 0.0
+    adc_bits: int = 0
+    adc_full_scale_a: float = 0.0
+
+
+@dataclass(frozen=True, slots=True)
+class ModelErrors:
+    """Relative errors of the controller's motor model against the plant's parameters.
+
+    Each field is a factor on the plant's value (1.0 = exact, 1.2 = the
+    controller believes 20 % more); the plant always keeps the preset's
+    values. Used for robustness studies: the current-loop gains and the
+    decoupling use ``R_s``, ``L_d``, ``L_q`` and ``psi_f``; the torque
+    constant ``1.5 n_p psi_f``; the speed-loop gains ``J``; the HF
+    estimators their normalisation by the model's ``L_d``, ``L_q``.
+    """
+
+    R_s: float = 1.0
+    L_d: float = 1.0
+    L_q: float = 1.0
+    psi_f: float = 1.0
+    J: float = 1.0
+
+
+#: Keys of the ``[controller_model]`` table, in schema order.
+MODEL_ERROR_KEYS = ("R_s", "L_d", "L_q", "psi_f", "J")
+
+
+@dataclass(frozen=True, slots=True)
+class Scenario:
+    """One validated scenario. Build with :func:`load_scenario`."""
+
+    name: str
+    source: str
+    preset: str
+    duration: float
+    description: str = ""
+    paper: str = ""
+    estimator: str = "tt-dq"
+    estimators: tuple[str, ...] = ()
+    f_sw: float | None = None
+    seed: int = 1
+    saturation: bool = True
+    theta_e0_deg: float = 0.0
+    known_initial_angle: bool = True
+    speed_rpm: Profile = field(default_factory=lambda: Profile(((0.0, 0.0),)))
+    load_nm: Profile = field(default_factory=lambda: Profile(((0.0, 0.0),)))
+    reference_rate_hz: float = 1000.0
+    score_from_s: float = 0.5
+    thd_window_s: tuple[float, float] | None = None
+    estimator_options: dict[str, Any] = field(default_factory=dict)
+    noise: Noise = field(default_factory=Noise)
+    latency: Latency = field(default_factory=Latency)
+    controller_model: ModelErrors = field(default_factory=ModelErrors)
+    paper_result: dict[str, Any] = field(default_factory=dict)
+    #: Explicit motor parameters (SI units) replacing the preset's (``[motor]``).
+    motor: dict[str, float] = field(default_factory=dict)
+
+    def with_overrides(self, **kw: Any) -> Scenario:
+        """A copy with some fields replaced (command-line options).
+
+        A ``duration`` shorter than the scoring start would leave nothing to
+        score: such a shortened run is scored over its second half
+        (``score_from_s = duration / 2``), which ``metrics.json`` states.
+        """
+        clean = {k: v for k, v in kw.items() if v is not None}
+        out = replace(self, **clean)
+        if "latency" in clean or "f_sw" in clean:  # e.g. --delay-steps, --duty-delay-us
+            from plant_rt import PRESETS
+
+            _check_delay_steps(out.source, out.latency)
+            _check_delay_us(out.source, out.latency, out.f_sw or PRESETS[out.preset].f_sw)
+        if "score_from_s" not in clean and out.score_from_s >= out.duration:
+            out = replace(out, score_from_s=out.duration / 2)
+        return out
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain representation for the run metadata."""
+        return {
+            "name": self.name,
+            "source": self.source,
+            "preset": self.preset,
+            "duration": self.duration,
+            "description": self.description,
+            "paper": self.paper,
+            "estimator": self.estimator,
+            "estimators": list(self.estimators),
+            "f_sw": self.f_sw,
+            "seed": self.seed,
+            "saturation": self.saturation,
+            "theta_e0_deg": self.theta_e0_deg,
+            "known_initial_angle": self.known_initial_angle,
+            "speed_rpm": [list(p) for p in self.speed_rpm.points],
+            "load_nm": [list(p) for p in self.load_nm.points],
+            "reference_rate_hz": self.reference_rate_hz,
+            "score_from_s": self.score_from_s,
+            "thd_window_s": list(self.thd_window_s) if self.thd_window_s else None,
+            "estimator_options": dict(self.estimator_options),
+            "noise": {
+                "current_std_a": self.noise.current_std_a,
+                "adc_bits": self.noise.adc_bits,
+                "adc_full_scale_a": self.noise.adc_full_scale_a,
+            },
+            "latency": self.latency.to_dict(),
+            "controller_model": {k: getattr(self.controller_model, k) for k in MODEL_ERROR_KEYS},
+            "motor": dict(self.motor),
+            "paper_result": dict(self.paper_result),
+        }
+
+
+_TOP_KEYS = {
+    "name",
+    "description",
+    "paper",
+    "preset",
+    "estimator",
+    "estimators",
+    "f_sw",
+    "duration",
+    "seed",
+    "saturation",
+    "theta_e0_deg",
+    "known_initial_angle",
+    "speed_rpm",
+    "load_nm",
+    "reference_rate_hz",
+    "score_from_s",
+    "thd_window_s",
+    "estimator_options",
+    "noise",
+    "latency",
+    "controller_model",
+    "motor",
+    "paper_result",
+}
+
+#: Keys of the ``[motor]`` table: the fields of :class:`plant_rt.MotorPars`.
+MOTOR_KEYS = (
+    "n_p", "R_s", "L_d", "L_q", "psi_f", "J", "b", "i_rated", "i_max", "tau_rated", "w_m_rated",
+)  # fmt: skip
+
+
+#: ``[estimator_options]`` keys checked by kind.  The estimator, and so the family
+#: the options are for, may be chosen only on the command line: the keys of
+#: every family are accepted (:func:`estimator_option_keys`), each value is
+#: checked by its key's name.
+_OPTION_AMPLITUDES = ("V_h", "U_h")  # injection amplitude (V): (0, u_dc / sqrt(3)]
+_OPTION_FREQUENCIES = ("f_h",)  # injection frequency (Hz): (0, Nyquist)
+_OPTION_NONNEGATIVE = ("w_o", "delay_comp")  # PLL bandwidth (0 freezes it), periods (0: off)
+_OPTION_INTEGERS = ("M",)  # CIC differential delay (PWM periods), >= 1
+_OPTION_FILTERS = ("bpf", "hpf", "lpf")  # continuous prototypes [[b...], [a...]]
+_OPTION_CHOICES = {"normalise": ("model", "measured")}
+# any other key (``a``, the square-wave observer pole, rad/s): a number > 0
+#: Parameters of the square-wave estimator that are not options: the
+#: controller's (``motor``, ``T_s``) and the estimator name's (``cic``:
+#: ``square-wave`` or ``square-wave-nocic``).
+_SQUARE_WAVE_FIXED = ("self", "motor", "T_s", "cic")
+
+
+@functools.cache
+def estimator_option_keys() -> dict[str, Any]:
+    """Every ``[estimator_options]`` key with its default, over all estimator families.
+
+    Rotating injection (``sfhf``, ``tt-ab``, ``tt-dq``): the fields of
+    :class:`controller._rotating.RotatingInjectionPars`; square-wave: the
+    keyword parameters of :class:`controller._square_wave.SquareWaveEstimator`.
+    ``sensored`` takes none.
+    """
+    from controller._rotating import RotatingInjectionPars
+    from controller._square_wave import SquareWaveEstimator
+
+    keys: dict[str, Any] = {f.name: f.default for f in dataclasses.fields(RotatingInjectionPars)}
+    for k, p in inspect.signature(SquareWaveEstimator.__init__).parameters.items():
+        if k not in _SQUARE_WAVE_FIXED:
+            keys[k] = p.default
+    return keys
+
+
+def _signal_range(message: Any, signal: str) -> tuple[float, float]:
+    """``[min|max]`` of a DBC signal (its raw range when the DBC gives none), as encoded."""
+    s = message.get_signal_by_name(signal)
+    raw_lo = -(1 << (s.length - 1)) if s.is_signed else 0
+    raw_hi = (1 << (s.length - 1)) - 1 if s.is_signed else (1 << s.length) - 1
+    lo = raw_lo * s.scale + s.offset if s.minimum is None else s.minimum
+    hi = raw_hi * s.scale + s.offset if s.maximum is None else s.maximum
+    return float(lo), float(hi)
+
+
+@dataclass(frozen=True, slots=True)
+class _WireLimits:
+    """What the DBC (``dbc/bench.dbc``) lets a scenario ask for."""
+
+    speed_rpm: tuple[float, float]  # BenchCommand.speed_ref
+    load_nm: tuple[float, float]  # BenchCommand.load_torque
+    step_bits: int  # width of the narrowest step counter
+    step_messages: tuple[str, ...]  # the messages that carry it
+
+    @property
+    def max_delay_steps(self) -> int:
+        """Largest injected lockstep delay, periods, both directions together.
+
+        Receivers unwrap a step counter of modulus ``2**bits`` within half of
+        it; a quarter leaves the other quarter to the retransmission window.
+        """
+        return (1 << self.step_bits) // 4
+
+
+@functools.cache
+def _wire_limits() -> _WireLimits:
+    from bench.wire._codec import default_codec
+
+    codec = default_codec()
+    cmd = codec.message("BenchCommand")
+    widths = {n: codec.step_bits(n) for n in codec.names if codec.step_bits(n)}
+    bits = min(widths.values())
+    return _WireLimits(
+        speed_rpm=_signal_range(cmd, "speed_ref"),
+        load_nm=_signal_range(cmd, "load_torque"),
+        step_bits=bits,
+        step_messages=tuple(n for n, b in widths.items() if b == bits),
+    )
+
+
+def _check_delay_steps(src: str, lat: Latency) -> None:
+    """Injected lockstep delays the step counters of the wire can carry."""
+    w = _wire_limits()
+    bound = w.max_delay_steps
+    why = (
+        f"a quarter of the {1 << w.step_bits} periods after which the {w.step_bits}-bit "
+        f"step counters of {'/'.join(w.step_messages)} wrap (receivers place a frame "
+        "only within half of that; the rest is the retransmission margin)"
+    )
+    for key in ("duty_delay_steps", "sample_delay_steps"):
+        v = getattr(lat, key)
+        if v > bound:
+            raise ScenarioError(
+                f"{src}: field 'latency.{key}': {v} periods is more than {bound}, {why}"
+            )
+    total = lat.duty_delay_steps + lat.sample_delay_steps
+    if total > bound:
+        raise ScenarioError(
+            f"{src}: field 'latency': duty_delay_steps + sample_delay_steps = {total} periods "
+            f"is more than {bound}, {why}"
+        )
+
+
+def _check_delay_us(src: str, lat: Latency, f_sw: float) -> None:
+    """Injected real-time delays the step counters can carry, at the PWM rate ``f_sw``.
+
+    A frame held longer than the lockstep bound (in periods of ``f_sw``)
+    would reach a receiver that can no longer place its step counter.
+    """
+    bound = _wire_limits().max_delay_steps
+    for key in ("duty_delay_us", "sample_delay_us"):
+        v = getattr(lat, key)
+        if v * 1e-6 * f_sw > bound:
+            raise ScenarioError(
+                f"{src}: field 'latency.{key}': {v:g} us is more than {bound} PWM periods at "
+                f"{f_sw:g} Hz ({bound / f_sw * 1e6:g} us), the most the step counters carry "
+                "(see latency.duty_delay_steps)"
+            )
+
+
+def saliency_error(
+    src: str, preset: str, motor: dict[str, float], estimators: tuple[str, ...] | list[str]
+) -> ScenarioError | None:
+    """The error of a motor without saliency asked to run HF-injection estimators, if any.
+
+    ``motor``: the scenario's ``[motor]`` overrides of the preset.  Checked on
+    load for the scenario's estimators and again when an estimator chosen on
+    the command line is built.
+    """
+    from controller._registry import injection_family
+    from plant_rt import PRESETS
+
+    base = PRESETS[preset].motor
+    L_d, L_q = motor.get("L_d", base.L_d), motor.get("L_q", base.L_q)
+    hf = [e for e in dict.fromkeys(estimators) if injection_family(e) != "none"]
+    if not hf or L_q > L_d:
+        return None
+    key = "L_q" if "L_q" in motor or "L_d" not in motor else "L_d"
+    return ScenarioError(
+        f"{src}: field 'motor.{key}': the motor is not salient (L_q {L_q:.4g} H <= L_d "
+        f"{L_d:.4g} H), and the HF-injection estimators asked for ({', '.join(hf)}) need "
+        "L_q > L_d; only 'sensored' runs without saliency "
+        '(estimator = "sensored", estimators = ["sensored"])'
+    )
+
+
+def scenario_path(name_or_path: str) -> Path:
+    """Resolve a shipped scenario name or a user's file path."""
+    p = Path(name_or_path)
+    if p.suffix in (".toml", ".json") or p.exists():
+        if not p.is_file():
+            raise ScenarioError(f"{name_or_path}: no such scenario file")
+        return p
+    shipped = resources.files("bench.scenarios").joinpath(f"{name_or_path}.toml")
+    if not shipped.is_file():
+        raise ScenarioError(
+            f"{name_or_path}: unknown scenario (shipped: {', '.join(SHIPPED)}; "
+            "or give a path to a .toml file)"
+        )
+    return Path(str(shipped))
+
+
+class _Reader:
+    """Typed access to one TOML table with errors that name file and field."""
+
+    def __init__(self, src: str, table: dict[str, Any], prefix: str = "") -> None:
+        self.src = src
+        self.t = table
+        self.prefix = prefix
+
+    def fail(self, key: str, reason: str) -> ScenarioError:
+        return ScenarioError(f"{self.src}: field '{self.prefix}{key}': {reason}")
+
+    def num(
+        self,
+        key: str,
+        default: float | None = None,
+        *,
+        lo: float | None = None,
+        hi: float | None = None,
+    ) -> float:
+        if key not in self.t:
+            if default is None:
+                raise self.fail(key, "required")
+            return default
+        v = self.t[key]
+        if isinstance(v, bool) or not isinstance(v, int | float):
+            raise self.fail(key, f"expected a number, got {type(v).__name__} {v!r}")
+        v = float(v)
+        if not math.isfinite(v):
+            raise self.fail(key, "must be finite")
+        if lo is not None and v < lo:
+            raise self.fail(key, f"must be >= {lo}, got {v}")
+        if hi is not None and v > hi:
+            raise self.fail(key, f"must be <= {hi}, got {v}")
+        return v
+
+    def integer(self, key: str, default: int, *, lo: int | None = None) -> int:
+        v = self.t.get(key, default)
+        if isinstance(v, bool) or not isinstance(v, int):
+            raise self.fail(key, f"expected an integer, got {v!r}")
+        if lo is not None and v < lo:
+            raise self.fail(key, f"must be >= {lo}, got {v}")
+        return v
+
+    def string(self, key: str, default: str | None = None) -> str:
+        if key not in self.t:
+            if default is None:
+                raise self.fail(key, "required")
+            return default
+        v = self.t[key]
+        if not isinstance(v, str):
+            raise self.fail(key, f"expected a string, got {v!r}")
+        return v
+
+    def boolean(self, key: str, default: bool) -> bool:
+        v = self.t.get(key, default)
+        if not isinstance(v, bool):
+            raise self.fail(key, f"expected true or false, got {v!r}")
+        return v
+
+    def table(self, key: str, allowed: set[str] | None = None) -> _Reader:
+        v = self.t.get(key, {})
+        if not isinstance(v, dict):
+            raise self.fail(key, "expected a table")
+        if allowed is not None:
+            for k in v:
+                if k not in allowed:
+                    raise ScenarioError(
+                        f"{self.src}: field '{key}.{k}': unknown key (known: {', '.join(sorted(allowed))})"
+                    )
+        return _Reader(self.src, v, f"{self.prefix}{key}.")
+
+    def profile(
+        self, key: str, carried: tuple[float, float] | None = None, unit: str = ""
+    ) -> Profile:
+        """Breakpoints ``[[t, value], ...]``; values within ``carried`` (the
+        BenchCommand signal's range) when given."""
+        v = self.t.get(key, [[0.0, 0.0]])
+        if not isinstance(v, list) or not v:
+            raise self.fail(key, "expected a non-empty list of [time_s, value] pairs")
+        pts: list[tuple[float, float]] = []
+        for i, p in enumerate(v):
+            if (
+                not isinstance(p, list)
+                or len(p) != 2
+                or not all(isinstance(x, int | float) and not isinstance(x, bool) for x in p)
+            ):
+                raise self.fail(key, f"entry {i}: expected [time_s, value], got {p!r}")
+            t, val = float(p[0]), float(p[1])
+            if pts and t < pts[-1][0]:
+                raise self.fail(key, f"entry {i}: times must not decrease ({t} < {pts[-1][0]})")
+            if not (math.isfinite(t) and math.isfinite(val)) or t < 0:
+                raise self.fail(key, f"entry {i}: time must be >= 0 and values finite")
+            if carried is not None and not carried[0] <= val <= carried[1]:
+                raise self.fail(
+                    key,
+                    f"entry {i}: {val:.10g} {unit} outside the range the BenchCommand frame "
+                    f"carries ({carried[0]:g} to {carried[1]:g} {unit})",
+                )
+            pts.append((t, val))
+        return Profile(tuple(pts))
+
+
+def _parse_latency(r: _Reader) -> Latency:
+    """The ``[latency]`` table; a per-direction key wins over the shared one."""
+    lt = r.table(
+        "latency",
+        {
+            "duty_delay_steps",
+            "sample_delay_steps",
+            "duty_delay_us",
+            "sample_delay_us",
+            "jitter_us",
+            "jitter_dist",
+            "drop_prob",
+            *_LATENCY_DIRECTION_KEYS,
+        },
+    )
+    dist = lt.string("jitter_dist", "normal")
+    if dist not in ("normal", "uniform"):
+        raise lt.fail("jitter_dist", f"expected 'normal' or 'uniform', got {dist!r}")
+
+    def opt(key: str, hi: float | None) -> float | None:
+        return lt.num(key, 0.0, lo=0.0, hi=hi) if key in lt.t else None
+
+    out = Latency(
+        duty_delay_steps=lt.integer("duty_delay_steps", 0, lo=0),
+        sample_delay_steps=lt.integer("sample_delay_steps", 0, lo=0),
+        duty_delay_us=lt.num("duty_delay_us", 0.0, lo=0.0),
+        sample_delay_us=lt.num("sample_delay_us", 0.0, lo=0.0),
+        jitter_us=lt.num("jitter_us", 0.0, lo=0.0),
+        jitter_dist=dist,
+        drop_prob=lt.num("drop_prob", 0.0, lo=0.0, hi=1.0),
+        duty_jitter_us=opt("duty_jitter_us", None),
+        sample_jitter_us=opt("sample_jitter_us", None),
+        duty_drop_prob=opt("duty_drop_prob", 1.0),
+        sample_drop_prob=opt("sample_drop_prob", 1.0),
+    )
+    _check_delay_steps(r.src, out)
+    return out
+
+
+def _parse_filter(r: _Reader, key: str) -> tuple[tuple[float, ...], ...]:
+    """A continuous filter prototype ``[[b_0, ...], [a_0, ...]]`` (an estimator option)."""
+    v = r.t[key]
+    if not (
+        isinstance(v, list)
+        and len(v) == 2
+        and all(
+            isinstance(c, list)
+            and c
+            and all(
+                isinstance(x, int | float) and not isinstance(x, bool) and math.isfinite(x)
+                for x in c
+            )
+            for c in v
+        )
+        and v[1][0] != 0
+    ):
+        raise r.fail(
+            key,
+            "expected [[b_0, b_1, ...], [a_0, a_1, ...]], the numerator and denominator "
+            f"of a continuous prototype (finite numbers, a_0 != 0), got {v!r}",
+        )
+    return tuple(tuple(float(x) for x in c) for c in v)
+
+
+def _parse_estimator_options(r: _Reader, preset: str, f_s: float) -> dict[str, Any]:
+    """The ``[estimator_options]`` table, each value checked by its key's name.
+
+    Amplitudes must be > 0 and within the inverter's linear range
+    ``u_dc / sqrt(3)`` (space-vector modulation) of the preset; frequencies
+    > 0 and below the Nyquist frequency of the sample rate ``f_s``.
+    """
+    from plant_rt import PRESETS
+
+    keys = estimator_option_keys()
+    eo = r.table("estimator_options", set(keys))
+    u_dc = PRESETS[preset].inverter.u_dc
+    u_lin = u_dc / math.sqrt(3.0)
+    out: dict[str, Any] = {}
+    for k in eo.t:
+        if k in _OPTION_CHOICES:
+            choices = _OPTION_CHOICES[k]
+            s = eo.string(k)
+            if s not in choices:
+                raise eo.fail(k, f"expected {' or '.join(map(repr, choices))}, got {s!r}")
+            out[k] = s
+        elif k in _OPTION_FILTERS:
+            out[k] = _parse_filter(eo, k)
+        elif k in _OPTION_INTEGERS:
+            out[k] = eo.integer(k, 0, lo=1)
+        elif isinstance(keys[k], bool):
+            out[k] = eo.boolean(k, keys[k])
+        elif k in _OPTION_NONNEGATIVE:
+            out[k] = eo.num(k, lo=0.0)
+        else:
+            v = eo.num(k)
+            if not v > 0.0:
+                raise eo.fail(k, f"must be > 0, got {v}")
+            if k in _OPTION_AMPLITUDES and v > u_lin:
+                raise eo.fail(
+                    k,
+                    f"injection amplitude {v:g} V is above the inverter's linear limit "
+                    f"u_dc/sqrt(3) = {u_lin:.4g} V (preset {preset}, u_dc = {u_dc:g} V)",
+                )
+            if k in _OPTION_FREQUENCIES and v >= f_s / 2.0:
+                raise eo.fail(
+                    k,
+                    f"injection frequency {v:g} Hz is not below the Nyquist frequency "
+                    f"{f_s / 2.0:g} Hz of the {f_s:g} Hz sample rate",
+                )
+            out[k] = v
+    return out
+
+
+def parse_scenario(data: dict[str, Any], src: str) -> Scenario:
+    """Validate a scenario table (already parsed from TOML)."""
+    from controller import ESTIMATOR_NAMES
+    from plant_rt import PRESETS
+
+    for k in data:
+        if k not in _TOP_KEYS:
+            raise ScenarioError(
+                f"{src}: field '{k}': unknown key (known: {', '.join(sorted(_TOP_KEYS))})"
+            )
+    r = _Reader(src, data)
+    preset = r.string("preset")
+    if preset not in PRESETS:
+        raise r.fail("preset", f"unknown preset {preset!r} (known: {', '.join(PRESETS)})")
+    estimator = r.string("estimator", "tt-dq")
+    if estimator not in ESTIMATOR_NAMES:
+        raise r.fail(
+            "estimator", f"unknown estimator {estimator!r} (known: {', '.join(ESTIMATOR_NAMES)})"
+        )
+    ests = data.get("estimators", [estimator])
+    if not isinstance(ests, list) or not all(isinstance(e, str) for e in ests):
+        raise r.fail("estimators", "expected a list of estimator names")
+    for e in ests:
+        if e not in ESTIMATOR_NAMES:
+            raise r.fail(
+                "estimators", f"unknown estimator {e!r} (known: {', '.join(ESTIMATOR_NAMES)})"
+            )
+    f_sw = r.num("f_sw", -1.0)
+    if f_sw != -1.0 and not 100.0 <= f_sw <= 100e3:
+        raise r.fail("f_sw", f"must be between 100 Hz and 100 kHz, got {f_sw}")
+    thd = data.get("thd_window_s")
+    thd_window: tuple[float, float] | None = None
+    if thd is not None:
+        if (
+            not isinstance(thd, list)
+            or len(thd) != 2
+            or not all(isinstance(x, int | float) for x in thd)
+            or not thd[0] < thd[1]
+        ):
+            raise r.fail("thd_window_s", "expected [start_s, end_s] with start < end")
+        thd_window = (float(thd[0]), float(thd[1]))
+    nz = r.table("noise", {"current_std_a", "adc_bits", "adc_full_scale_a"})
+    noise = Noise(
+        current_std_a=nz.num("current_std_a", 0.0, lo=0.0),
+        adc_bits=nz.integer("adc_bits", 0, lo=0),
+        adc_full_scale_a=nz.num("adc_full_scale_a", 0.0, lo=0.0),
+    )
+    if noise.adc_bits and noise.adc_full_scale_a <= 0:
+        raise nz.fail("adc_full_scale_a", "must be > 0 when adc_bits is set")
+    latency = _parse_latency(r)
+    cm = r.table("controller_model", set(MODEL_ERROR_KEYS))
+    factors: dict[str, float] = {}
+    for k in MODEL_ERROR_KEYS:
+        v = cm.num(k, 1.0)
+        if not v > 0.0:
+            raise cm.fail(k, f"must be a positive factor (1.0 = exact), got {v}")
+        factors[k] = v
+    controller_model = ModelErrors(**factors)
+    mt = r.table("motor", set(MOTOR_KEYS))
+    motor: dict[str, float] = {}
+    for k in MOTOR_KEYS:
+        if k in mt.t:
+            if k == "n_p":
+                motor[k] = mt.integer(k, 0, lo=1)
+            elif k in ("psi_f", "b"):
+                motor[k] = mt.num(k, lo=0.0)
+            else:
+                v = mt.num(k)
+                if not v > 0.0:
+                    raise mt.fail(k, f"must be > 0, got {v}")
+                motor[k] = v
+    if err := saliency_error(r.src, preset, motor, (*ests, estimator)):
+        raise err
+    f_eff = PRESETS[preset].f_sw if f_sw == -1.0 else f_sw
+    _check_delay_us(r.src, latency, f_eff)
+    opts = _parse_estimator_options(r, preset, f_eff)
+    paper = r.table("paper_result").t
+    duration = r.num("duration", lo=1e-3)
+    # default: past the start-up transient (0.5 s), or the second half of a shorter run
+    score_from_s = r.num("score_from_s", min(0.5, duration / 2), lo=0.0)
+    if score_from_s >= duration:
+        raise r.fail(
+            "score_from_s",
+            f"{score_from_s} s is not before the end of the run (duration {duration} s): "
+            "nothing would be scored",
+        )
+    return Scenario(
+        name=r.string("name", src[:-5] if src.endswith(".toml") else src),
+        source=src,
+        preset=preset,
+        duration=duration,
+        description=r.string("description", ""),
+        paper=r.string("paper", ""),
+        estimator=estimator,
+        estimators=tuple(ests),
+        f_sw=None if f_sw == -1.0 else f_sw,
+        seed=r.integer("seed", 1, lo=0),
+        saturation=r.boolean("saturation", True),
+        theta_e0_deg=r.num("theta_e0_deg", 0.0),
+        known_initial_angle=r.boolean("known_initial_angle", True),
+        speed_rpm=r.profile("speed_rpm", _wire_limits().speed_rpm, "rpm"),
+        load_nm=r.profile("load_nm", _wire_limits().load_nm, "N m"),
+        reference_rate_hz=r.num("reference_rate_hz", 1000.0, lo=1.0),
+        score_from_s=score_from_s,
+        thd_window_s=thd_window,
+        estimator_options=dict(opts),
+        noise=noise,
+        latency=latency,
+        controller_model=controller_model,
+        paper_result=dict(paper),
+        motor=motor,
+    )
+
+
+def scenario_from_dict(d: dict[str, Any], src: str) -> Scenario:
+    """A scenario from :meth:`Scenario.to_dict` (run metadata, effective scenarios)."""
+    data = {k: v for k, v in d.items() if v is not None and k != "source"}
+    return parse_scenario(data, src)
+
+
+def write_effective(scn: Scenario, path: Path) -> Path:
+    """Write the exact scenario of a run (overrides included) for its node processes."""
+    path.write_text(json.dumps(scn.to_dict(), indent=2) + "\n", encoding="utf-8")
+    return path
+
+
+def load_scenario(name_or_path: str) -> Scenario:
+    """Load a shipped scenario by name, or a user's TOML file by path.
+
+    A ``.json`` file written by :func:`write_effective` (the effective
+    scenario of a run, which ``bench run`` hands to its node processes) is
+    read too.
+    """
+    path = scenario_path(name_or_path)
+    if path.suffix == ".json":
+        try:
+            d = json.loads(path.read_text(encoding="utf-8"))
+        except (OSError, ValueError) as e:
+            raise ScenarioError(f"{path}: not a scenario file: {e}") from None
+        if not isinstance(d, dict):
+            raise ScenarioError(f"{path}: not a scenario file")
+        return scenario_from_dict(d, str(d.get("source", path)))
+    try:
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+    except tomllib.TOMLDecodeError as e:
+        raise ScenarioError(f"{path}: not valid TOML: {e}") from None
+    except OSError as e:
+        raise ScenarioError(f"{path}: cannot read: {e.strerror}") from None
+    src = name_or_path if not Path(name_or_path).exists() else str(path)
+    return parse_scenario(data, src)

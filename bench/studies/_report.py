@@ -1,0 +1,652 @@
+"""The suite's report: the papers' numbers beside the bench's, and a verdict per claim.
+
+``summary.json`` holds every number of ``report.md``: per run the paper's
+result (from the scenario's ``[paper_result]``) and the bench's metrics, the
+sweeps with their fitted slopes, and the claims with their verdicts
+(``reproduced``, ``not reproduced``, ``not run``).
+
+Wen's tables give an "average" position error without saying whether it is
+the mean of the signed error or of its magnitude; the bench reports both
+(``mean / mean |.|``) and compares the paper's number with the mean
+magnitude, which is what an average of a range such as "6 to -6, average
+3.0" (Table 8) can only be.  Wen's comparison methods [27] and [25] are not
+implemented; their rows are the paper's numbers, shown for context only.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+from bench.studies._sweep import FLAT_DEG, METHODS, SWEEPS
+
+REPRODUCED = "reproduced"
+NOT_REPRODUCED = "not reproduced"
+NOT_RUN = "not run"
+#: A claim about every scenario that holds in those run, when some were not.
+PARTLY = "reproduced where run"
+
+#: Wen et al. 2023, Tables 5-8: the rows of the comparison methods [27] and
+#: [25], as printed (max, range, average, speed error, THD); paper only.
+WEN_PAPER_ONLY: dict[str, tuple[str, list[tuple[str, str, str, str, str, str]]]] = {
+    "wen-5.1": (
+        "Table 5",
+        [("[27]", "4.5", "4.5 ~ 0.5", "2.5", "", ""), ("[25]", "4.2", "4.2 ~ 0", "2.1", "", "")],
+    ),
+    "wen-5.2": (
+        "Table 6",
+        [
+            ("[27]", "19.0", "19.0 ~ -0.5", "8.5", "", ""),
+            ("[25]", "8.0", "8.0 ~ -4.0", "4.0", "", ""),
+        ],
+    ),
+    "wen-5.3": (
+        "Table 7",
+        [
+            ("[27]", "6.0", "6.2 ~ -8.5", "4.2", "", ""),
+            ("[25]", "6.0", "6.0 ~ 6.0 (as printed)", "3.0", "", ""),
+        ],
+    ),
+    "wen-5.4": (
+        "Table 8",
+        [
+            ("[27]", "10.0", "10.0 ~ -7.0", "5.0", "24", "12.4"),
+            ("[25]", "8.0", "8.0 ~ -8.0", "4.0", "22", "10.5"),
+        ],
+    ),
+}
+
+#: Xue's bounds: paper_result key -> (bench metric, label, unit).
+XUE_BOUNDS = (
+    ("theta_err_abs_max_rad", "max |dtheta|", "rad"),
+    ("speed_err_max_rpm", "max speed error", "rpm"),
+    ("speed_overshoot_rpm", "speed overshoot", "rpm"),
+)
+
+
+def _f(x: Any, nd: int = 2) -> str:
+    if isinstance(x, int | float) and math.isfinite(float(x)):
+        return f"{float(x):.{nd}f}"
+    return "n/a"
+
+
+def _run(summary: dict[str, Any], scn: str, est: str) -> dict[str, Any] | None:
+    for r in summary.get("runs", []):
+        if r["scenario"] == scn and r["estimator"] == est:
+            return r
+    return None
+
+
+def _ok(r: dict[str, Any] | None) -> bool:
+    return r is not None and "error" not in r and bool(r.get("metrics"))
+
+
+def build_summary(
+    runs: list[dict[str, Any]], sweeps: dict[str, Any], info: dict[str, Any]
+) -> dict[str, Any]:
+    """The whole summary: runs, sweeps, suite information and the claims' verdicts."""
+    s: dict[str, Any] = {"suite": info, "runs": runs, "sweeps": sweeps}
+    s["claims"] = evaluate_claims(s)
+    return s
+
+
+# ---------------------------------------------------------------- claims
+
+
+def _claim(cid: str, text: str, source: str, verdict: str, detail: str) -> dict[str, str]:
+    return {"id": cid, "claim": text, "source": source, "verdict": verdict, "detail": detail}
+
+
+def _sweep_claim(summary: dict[str, Any], kinds: tuple[str, ...], what: str) -> dict[str, str]:
+    cid = f"wen-flat-{what}"
+    text = (
+        f"The position error of tt-dq does not depend on the {what}; "
+        f"that of sfhf and tt-ab does (fitted change over the swept range below / at least "
+        f"{FLAT_DEG:g} deg)"
+    )
+    src = "Wen Table 3, Secs. 3.1, 4.3"
+    sw = summary.get("sweeps", {})
+    present = [k for k in kinds if k in sw]
+    if not present:
+        return _claim(cid, text, src, NOT_RUN, "sweep not run")
+    parts = []
+    ok = True
+    for k in present:
+        meths = sw[k]["methods"]
+        unit = sw[k]["slope_unit"]
+        for est in METHODS:
+            m = meths.get(est)
+            if m is None or not math.isfinite(m.get("span_deg", math.nan)):
+                return _claim(cid, text, src, NOT_RUN, f"{k}: no fit for {est}")
+            want_flat = est == "tt-dq"
+            good = bool(m["flat"]) == want_flat
+            ok &= good
+            parts.append(
+                f"{k} {est}: {m['slope']:+.2f} {unit}, change {m['span_deg']:+.2f} deg "
+                f"({'flat' if m['flat'] else 'depends'}{'' if good else ', against the claim'})"
+            )
+    return _claim(cid, text, src, REPRODUCED if ok else NOT_REPRODUCED, "; ".join(parts))
+
+
+def _where(r: dict[str, Any]) -> str:
+    w = r.get("where_max")
+    if not w:
+        return ""
+    return (
+        f" (largest |dtheta| {w['theta_err_deg']:+.2f} deg at t = {w['t_s']:.2f} s, {w['context']})"
+    )
+
+
+def evaluate_claims(summary: dict[str, Any]) -> list[dict[str, str]]:
+    """A verdict per claim of the papers, from the numbers of ``summary``."""
+    claims = [
+        _sweep_claim(summary, ("speed",), "speed"),
+        _sweep_claim(summary, ("duty_delay", "sample_delay"), "delay"),
+    ]
+    wen = sorted(
+        {r["scenario"] for r in summary.get("runs", []) if r["scenario"] in WEN_PAPER_ONLY}
+    )
+    # ranking: tt-dq has the smallest mean |dtheta| of the three demodulators
+    text = "tt-dq has the smallest mean |dtheta| of sfhf, tt-ab and tt-dq in every Wen scenario"
+    src = "Wen Table 3, Tables 5-8"
+    parts, ok, missing = [], True, False
+    for scn in wen:
+        vals = {}
+        for est in METHODS:
+            r = _run(summary, scn, est)
+            if not _ok(r):
+                missing = True
+                continue
+            assert r is not None
+            vals[est] = r["metrics"]["theta_err_abs_mean_deg"]
+        if len(vals) < len(METHODS):
+            continue
+        best = min(vals, key=lambda e: vals[e])
+        ok &= best == "tt-dq"
+        parts.append(f"{scn}: " + ", ".join(f"{e} {v:.2f}" for e, v in vals.items()))
+    if not parts:
+        claims.append(_claim("wen-ranking", text, src, NOT_RUN, "no Wen scenario with all three"))
+    else:
+        complete = len(parts) == len(WEN_PAPER_ONLY) and not missing
+        detail = "; ".join(parts) + (
+            "" if complete else f" ({len(parts)} of {len(WEN_PAPER_ONLY)} Wen scenarios run)"
+        )
+        verdict = NOT_REPRODUCED if not ok else (REPRODUCED if complete else PARTLY)
+        claims.append(_claim("wen-ranking", text, src, verdict, detail))
+    # the proposed method's numbers, as bounds
+    for scn in wen:
+        r = _run(summary, scn, "tt-dq")
+        table = WEN_PAPER_ONLY[scn][0]
+        cid = f"{scn}-numbers"
+        if r is None:
+            continue
+        pr = r["paper_result"]
+        bound = max(abs(pr.get("theta_err_max_deg", math.nan)), abs(pr.get("theta_err_min_deg", 0)))
+        checks: list[tuple[str, str, float]] = [
+            ("max |dtheta| (deg)", "theta_err_abs_max_deg", bound)
+        ]
+        checks.append(("mean |dtheta| (deg)", "theta_err_abs_mean_deg", pr["theta_err_mean_deg"]))
+        # THD is shown in the table but not checked: the plant's inverter is an
+        # average model without switching harmonics or dead time, so a low THD
+        # says nothing about the method (see "Limits of the comparison").
+        if "speed_err_max_rpm" in pr:
+            checks.append(("speed error (rpm)", "speed_err_max_rpm", pr["speed_err_max_rpm"]))
+        text = f"tt-dq within the proposed method's numbers of {table}: " + ", ".join(
+            f"{lab} <= {b:g}" for lab, _, b in checks
+        )
+        if not _ok(r):
+            claims.append(_claim(cid, text, f"Wen {table}", NOT_RUN, r.get("error", "no metrics")))
+            continue
+        m = r["metrics"]
+        fails = [lab for lab, k, b in checks if not m.get(k, math.inf) <= b]
+        detail = ", ".join(f"{lab} {_f(m.get(k))}" for lab, k, _ in checks)
+        if fails:
+            detail += "; over: " + ", ".join(fails) + _where(r)
+        claims.append(
+            _claim(cid, text, f"Wen {table}", NOT_REPRODUCED if fails else REPRODUCED, detail)
+        )
+    # Xue's bounds
+    xue = sorted(
+        {r["scenario"] for r in summary.get("runs", []) if r["scenario"].startswith("xue")}
+    )
+    for scn in xue:
+        r = _run(summary, scn, "square-wave")
+        if r is None:
+            continue
+        pr = r["paper_result"]
+        xchecks = [(lab, k, pr[k], u) for k, lab, u in XUE_BOUNDS if k in pr]
+        text = "square-wave within Xue's bounds: " + ", ".join(
+            f"{lab} <= {b:g} {u}" for lab, _, b, u in xchecks
+        )
+        src = f"Xue {r['paper'].split(',')[-1].strip() if r['paper'] else 'Sec. 4'}"
+        if not _ok(r):
+            claims.append(_claim(f"{scn}-bounds", text, src, NOT_RUN, r.get("error", "")))
+            continue
+        m = r["metrics"]
+        fails = [lab for lab, k, b, _ in xchecks if not m.get(k, math.inf) <= b]
+        detail = ", ".join(f"{lab} {_f(m.get(k), 3)} {u}" for lab, k, _, u in xchecks)
+        if fails:
+            detail += "; over: " + ", ".join(fails) + _where(r)
+        claims.append(
+            _claim(f"{scn}-bounds", text, src, NOT_REPRODUCED if fails else REPRODUCED, detail)
+        )
+    # CIC interpolation reduces the error
+    text = "CIC interpolation lowers the max |dtheta| (square-wave <= square-wave-nocic) in every Xue scenario"
+    parts, ok = [], True
+    for scn in xue:
+        a, b = _run(summary, scn, "square-wave"), _run(summary, scn, "square-wave-nocic")
+        if not (_ok(a) and _ok(b)):
+            continue
+        assert a is not None and b is not None
+        va = a["metrics"]["theta_err_abs_max_rad"]
+        vb = b["metrics"]["theta_err_abs_max_rad"]
+        ok &= va <= vb
+        parts.append(f"{scn}: {va:.3f} vs {vb:.3f} rad")
+    claims.append(
+        _claim(
+            "xue-cic",
+            text,
+            "Xue Sec. 4, Figs. 11-12",
+            NOT_RUN if not parts else (REPRODUCED if ok else NOT_REPRODUCED),
+            "; ".join(parts) or "no Xue scenario with both",
+        )
+    )
+    return claims
+
+
+# ---------------------------------------------------------------- markdown
+
+
+def _cell(c: str) -> str:
+    """A table cell: never empty, pipes escaped."""
+    return (c or "n/a").replace("|", "\\|")
+
+
+def _table(head: list[str], rows: list[list[str]]) -> list[str]:
+    out = [
+        "| " + " | ".join(_cell(h) for h in head) + " |",
+        "|" + "|".join("---" for _ in head) + "|",
+    ]
+    out += ["| " + " | ".join(_cell(c) for c in row) + " |" for row in rows]
+    return out
+
+
+def _wen_section(summary: dict[str, Any]) -> list[str]:
+    lines: list[str] = []
+    names = sorted({r["scenario"] for r in summary["runs"] if r["scenario"] in WEN_PAPER_ONLY})
+    for scn in names:
+        table, paper_rows = WEN_PAPER_ONLY[scn]
+        runs = [r for r in summary["runs"] if r["scenario"] == scn]
+        full = scn == "wen-5.4"
+        head = [
+            "method",
+            "source",
+            "dtheta max",
+            "range of dtheta",
+            "dtheta avg (bench: mean / mean abs)",
+        ]
+        if full:
+            head += ["speed error (rpm)", "THD (%) (bench: to 40th / to 1.5 kHz)"]
+        rows = []
+        for name, mx, rng, avg, spd, thd in paper_rows:
+            row = [f"{name}", "paper only (not implemented)", mx, rng, avg]
+            rows.append(row + ([spd, thd] if full else []))
+        pr = runs[0]["paper_result"]
+        row = [
+            "proposed (tt-dq)",
+            "paper",
+            _f(pr.get("theta_err_max_deg"), 1),
+            f"{_f(pr.get('theta_err_max_deg'), 1)} ~ {_f(pr.get('theta_err_min_deg'), 1)}",
+            _f(pr.get("theta_err_mean_deg"), 1),
+        ]
+        rows.append(
+            row
+            + (
+                [_f(pr.get("speed_err_max_rpm"), 0), _f(pr.get("thd_phase_a_pct"), 1)]
+                if full
+                else []
+            )
+        )
+        for r in runs:
+            m = r["metrics"]
+            src = "bench" + (", zero line" if r["estimator"] == "sensored" else "")
+            if not _ok(r):
+                rows.append(
+                    [r["estimator"], src, "failed", "failed", "failed"]
+                    + (["failed", "failed"] if full else [])
+                )
+                continue
+            row = [
+                r["estimator"],
+                src,
+                _f(m["theta_err_max_deg"]),
+                f"{_f(m['theta_err_max_deg'])} ~ {_f(m['theta_err_min_deg'])}",
+                f"{_f(m['theta_err_mean_deg'])} / {_f(m['theta_err_abs_mean_deg'])}",
+            ]
+            if full:
+                thd = _f(m.get("thd_phase_a_pct"), 2)
+                if "thd_phase_a_hf_pct" in r:
+                    thd += f" / {_f(r['thd_phase_a_hf_pct'], 2)}"
+                row += [_f(m.get("speed_err_max_rpm"), 1), thd]
+            rows.append(row)
+        lines += [f"### {scn}: Wen {table} ({runs[0]['description']})", ""]
+        lines += _table(head, rows)
+        lines += ["", _where_max(runs), ""]
+    return lines
+
+
+def _where_max(runs: list[dict[str, Any]]) -> str:
+    bits = []
+    for r in runs:
+        w = r.get("where_max")
+        if _ok(r) and w:
+            bits.append(f"{r['estimator']} at t = {w['t_s']:.2f} s ({w['context']})")
+    return ("Largest |dtheta|: " + "; ".join(bits) + ".") if bits else ""
+
+
+def _xue_section(summary: dict[str, Any]) -> list[str]:
+    runs = [r for r in summary["runs"] if r["scenario"].startswith("xue")]
+    if not runs:
+        return []
+    rows = []
+    for r in runs:
+        pr = r["paper_result"]
+        for key, label, unit in XUE_BOUNDS:
+            if key not in pr:
+                continue
+            if not _ok(r):
+                rows.append(
+                    [
+                        r["scenario"],
+                        r["estimator"],
+                        f"{label} ({unit})",
+                        f"<= {pr[key]:g}",
+                        "failed",
+                        "failed",
+                    ]
+                )
+                continue
+            v = r["metrics"].get(key, math.nan)
+            verdict = "within" if v <= pr[key] else "exceeds"
+            if r["estimator"] != "square-wave":
+                verdict += " (bound is for square-wave)"
+            rows.append(
+                [
+                    r["scenario"],
+                    r["estimator"],
+                    f"{label} ({unit})",
+                    f"<= {pr[key]:g}",
+                    _f(v, 3),
+                    verdict,
+                ]
+            )
+    lines = ["## Xue et al. 2022: the paper's bounds and the bench", ""]
+    lines += _table(["scenario", "method", "quantity", "paper", "bench", "verdict"], rows)
+    lines += [
+        "",
+        "Speed error is the estimation error max |w_hat - w| (metrics also hold the tracking "
+        "error max |w_ref - w| as `speed_track_err_max_rpm`).",
+        "",
+    ]
+    for scn in sorted({r["scenario"] for r in runs}):
+        s = _where_max([r for r in runs if r["scenario"] == scn])
+        if s:
+            lines.append(f"- {scn}: {s}")
+    return [*lines, ""]
+
+
+def _in_order(d: dict[str, Any], order: tuple[str, ...]) -> list[tuple[str, Any]]:
+    """The items of ``d`` with the keys of ``order`` first, in that order, then the rest.
+
+    ``summary.json`` is written with sorted keys: the report must not depend
+    on whether its summary was just built or read back.
+    """
+    rank = {k: i for i, k in enumerate(order)}
+    return sorted(d.items(), key=lambda kv: rank.get(kv[0], len(order)))
+
+
+def _sweep_section(summary: dict[str, Any]) -> list[str]:
+    sw = dict(_in_order(summary.get("sweeps") or {}, tuple(SWEEPS)))
+    if not sw:
+        return []
+    any_sw = next(iter(sw.values()))
+    lines = [
+        "## Sweeps of the claims",
+        "",
+        f"Each point is the shipped `{any_sw['base_scenario']}` scenario (start-up, ramp, hold, "
+        f"no load) with one quantity changed, {any_sw['duration_s']:g} s simulated, scored from "
+        f"{any_sw['score_from_s']:g} s, run **in-process** (the same DBC frames between the same "
+        "nodes as over CAN; the two are tested equal in tests/test_bench_loop.py)"
+        + (", quick mode (fewer points, shorter)" if any_sw["quick"] else "")
+        + f". Slope: least-squares line through the mean dtheta; 'flat' means the fitted line "
+        f"changes by less than {FLAT_DEG:g} deg over the swept range.",
+        "",
+    ]
+    for kind, s in sw.items():
+        lines += [
+            f"### position error vs {s['label']}",
+            "",
+            f"![{kind}](sweeps/sweep-{kind}.png)",
+            "",
+        ]
+        head = ["method", *[f"{x:g}" for x in s["values"]]]
+        if s["fit"]:
+            head += [f"slope ({s['slope_unit']})", "change (deg)", "flat"]
+        rows = []
+        for est, m in _in_order(s["methods"], METHODS):
+            cells = []
+            for x in s["values"]:
+                i = m["x"].index(x) if x in m["x"] else -1
+                if i < 0 or not math.isfinite(m["theta_err_mean_deg"][i]):
+                    cells.append("failed")
+                else:
+                    cells.append(
+                        f"{m['theta_err_mean_deg'][i]:.2f} / {m['theta_err_abs_max_deg'][i]:.1f}"
+                    )
+            if s["fit"]:
+                cells += [_f(m["slope"]), _f(m["span_deg"]), "yes" if m["flat"] else "no"]
+            rows.append([est, *cells])
+        lines += ["Cells: mean dtheta / max |dtheta| (deg).", ""]
+        lines += _table(head, rows)
+        # in the sweep's order (summary.json stores the keys sorted as text)
+        errs = [
+            f"{est} at {x:g}: {m['errors'][f'{x:g}']}"
+            for est, m in _in_order(s["methods"], METHODS)
+            for x in s["values"]
+            if f"{x:g}" in m["errors"]
+        ]
+        if errs:
+            lines += ["", "Failed points: " + "; ".join(errs)]
+        lines.append("")
+    return lines
+
+
+def render_markdown(summary: dict[str, Any]) -> str:
+    """``report.md`` from a summary."""
+    info = summary["suite"]
+    lines = [
+        "# Paper reproduction: bench versus papers",
+        "",
+        f"Transport: {info['transport']}, {info['mode']}; {info['workers']} worker(s); "
+        f"{info['wall_s'] / 60:.1f} min wall time."
+        + (
+            " **Quick mode: durations cut, numbers not comparable with the papers.**"
+            if info["quick"]
+            else ""
+        ),
+        "",
+        "Angles are electrical degrees, dtheta = theta_e - theta_hat. The scenarios follow the "
+        "papers; what the papers leave open is chosen once in the presets and is the same for "
+        "every method. Per run: `runs/SCENARIO/ESTIMATOR/` (metrics.json, meta.json, run.png); "
+        f"the captures and signal tables stay in the runs folder (`{info['runs_dir']}`).",
+        "",
+        "## Claims",
+        "",
+    ]
+    rows = [
+        [c["id"], c["claim"], c["source"], f"**{c['verdict']}**", c["detail"]]
+        for c in summary["claims"]
+    ]
+    lines += _table(["id", "claim", "source", "verdict", "measured"], rows)
+    lines += [""]
+    if any(r["scenario"] in WEN_PAPER_ONLY for r in summary["runs"]):
+        lines += [
+            "## Wen et al. 2023: Tables 5-8 and the bench",
+            "",
+            "Rows [27] and [25] are the paper's comparison methods, which the bench does not "
+            "implement: paper numbers only. 'dtheta avg' of the paper is compared with the "
+            "bench's mean |dtheta| (the paper's averages of symmetric ranges, e.g. Table 8, can "
+            "only be a mean magnitude); the signed mean is shown first. Speed error: max "
+            "|w_hat - w| (rpm). THD of phase-A current over the full-load window: the metric "
+            "`thd_phase_a_pct` (harmonics 2 to 40, which compares with the paper's number) and, "
+            "after the slash, every harmonic up to 1.5 kHz, which includes the current of the "
+            "500 Hz injection.",
+            "",
+        ]
+        lines += _wen_section(summary)
+    lines += _xue_section(summary)
+    lines += _limits_section(summary)
+    lines += _sweep_section(summary)
+    failed = [r for r in summary["runs"] if "error" in r]
+    if failed:
+        lines += ["## Failed runs", ""]
+        lines += [f"- {r['scenario']}/{r['estimator']}: {r['error']}" for r in failed]
+        lines.append("")
+    return "\n".join(lines)
+
+
+def _luenberger_peak(n_p: int, d_tau: float, J: float, a: float) -> float:
+    """Peak of Xue eq. (12) after a load step ``d_tau`` with the triple pole ``a``.
+
+    With ``K1 = a^3 J, K2 = 3 a^2 J, K3 = 3 a J`` eq. (12) is
+    ``e(s) = -n_p d_tau / (J (s + a)^3)`` for a step, i.e.
+    ``e(t) = -n_p d_tau t^2 exp(-a t) / (2 J)``, largest at ``t = 2 / a``:
+    ``2 exp(-2) n_p d_tau / (J a^2)`` (rad, electrical).
+    """
+    return 2.0 * math.exp(-2.0) * n_p * d_tau / (J * a * a)
+
+
+def _luenberger_speed_peak_rpm(n_p: int, d_tau: float, J: float, a: float) -> float:
+    """Peak speed-estimation error after a load step, from the same eq. (12).
+
+    The speed error is the derivative of ``e(t)`` above:
+    ``n_p d_tau (t - a t^2 / 2) exp(-a t) / J``, largest at ``a t = 2 - sqrt(2)``,
+    where ``(x - x^2 / 2) exp(-x)`` is 0.2306; converted to mechanical rpm.
+    """
+    x = 2.0 - math.sqrt(2.0)
+    g = (x - 0.5 * x * x) * math.exp(-x)
+    return g * n_p * d_tau / (J * a) / n_p * 60.0 / (2.0 * math.pi)
+
+
+def _limits_section(summary: dict[str, Any]) -> list[str]:
+    """What limits the comparison, with closed forms where there is one."""
+    lines = ["## Limits of the comparison", ""]
+    xue_load = [
+        r
+        for r in summary.get("runs", [])
+        if r["scenario"] in ("xue-fig15", "xue-fig16")
+        and r["estimator"] == "square-wave"
+        and _ok(r)
+    ]
+    if xue_load:
+        from bench.scenarios._setup import motor_model
+        from controller._square_wave import SquareWaveEstimator
+        from plant_rt import preset
+
+        p = preset("xue2022")
+        a = SquareWaveEstimator(motor_model(p), p.T_s).observer.a  # the default pole
+        peak = _luenberger_peak(p.motor.n_p, 3.0, p.motor.J, a)
+        a_need = math.sqrt(2.0 * math.exp(-2.0) * p.motor.n_p * 3.0 / (p.motor.J * 0.26))
+        measured = ", ".join(
+            f"{r['scenario']} {_f(r['metrics']['theta_err_abs_max_rad'], 3)} rad" for r in xue_load
+        )
+        lines += [
+            f"- **Xue Figs. 15-16 (sudden 3 N m):** the error after a load step is what Xue's "
+            f"eq. (12) predicts for the observer: with the triple pole a = {a:.1f} rad/s "
+            f"(0.1 / (3.5 T), chosen for phase margin against the 3.5-period loop delay) and "
+            f"J = {p.motor.J} kg m^2 (Xue gives no inertia), the closed-form peak "
+            f"2 e^-2 n_p dT_L / (J a^2) is {peak:.3f} rad; the bench measures {measured}. "
+            f"Staying under 0.26 rad would need a >= {a_need:.1f} rad/s or a larger inertia; "
+            "neither is given by the paper, and the bench does not tune them per scenario.",
+        ]
+    fig18 = _run(summary, "xue-fig18", "square-wave")
+    if _ok(fig18):
+        from bench.scenarios._setup import motor_model
+        from controller._square_wave import SquareWaveEstimator
+        from plant_rt import preset
+
+        assert fig18 is not None
+        p = preset("xue2022")
+        a = SquareWaveEstimator(motor_model(p), p.T_s).observer.a
+        load_only = _luenberger_speed_peak_rpm(p.motor.n_p, 3.0, p.motor.J, a)
+        sens = _run(summary, "xue-fig18", "sensored")
+        sens_txt = (
+            f"; the sensored baseline's filtered speed, with no observer at all, is off by up "
+            f"to {_f(sens['metrics'].get('speed_err_max_rpm'), 1)} rpm during the speed steps"
+            if sens is not None and _ok(sens)
+            else ""
+        )
+        lines += [
+            f"- **Xue Fig. 18 (speed error):** the bench's largest speed-estimation error, "
+            f"{_f(fig18['metrics'].get('speed_err_max_rpm'), 1)} rpm against Xue's 63, comes "
+            "within 0.1 s of the release from standstill, where the 3 N m load and the "
+            "acceleration to 150 rpm start together right after the start-up. The observer's "
+            f"closed form for the load step alone (eq. (12), differentiated) is {load_only:.1f} "
+            "rpm with the same pole and inertia; the rest comes from the acceleration at the "
+            "current limit while the position error (largest at the same moment) distorts the "
+            f"torque the observer is fed{sens_txt}. Xue gives neither the inertia nor the step "
+            "times, so the bench's 1 s spacing and J are its own choices.",
+        ]
+    lines += [
+        "- **THD (Wen Table 8):** the plant's inverter is an average model over each PWM "
+        "period with no dead time and a sinusoidal back-EMF, so the phase current has almost "
+        "no low-order harmonics (THD 2nd-40th well below 1 %). Wen's 9.2 % comes from an "
+        "RT-LAB switching model whose inverter non-linearities the papers do not describe; "
+        "the THD is reported, not counted as reproduced.",
+        "- **Wen Tables 5-8:** tt-dq stays well inside the paper's errors because the bench "
+        "omits what limits a real drive (dead time, sensor offsets and quantization, "
+        "cross-saturation). The plant supports dead time, noise and ADC quantization; the "
+        "sweeps show how the methods degrade with noise.",
+        "- **CIC (Xue Figs. 11-12):** Xue's evidence for the CIC is the harmonic content of "
+        "the position quadrature signal, not the position error; with the bench's bookkeeping "
+        "of sample times, the zero-order hold and the CIC give the same error within a few "
+        "milliradians.",
+        "",
+    ]
+    return lines
+
+
+def rerender(out_dir: Path) -> dict[str, Any]:
+    """Re-evaluate the claims of ``out_dir/summary.json`` and rewrite its report.
+
+    The per-run extras (where the largest error happens, THD with the HF
+    current) are recomputed from the run folders when they are still there.
+    """
+    import json
+
+    from bench._errors import BenchError
+    from bench.studies._extras import refresh_extras
+
+    path = out_dir / "summary.json"
+    if not path.is_file():
+        raise BenchError(
+            f"{out_dir}: not a suite folder (no summary.json; 'bench suite paper' writes one)"
+        )
+    try:
+        summary: dict[str, Any] = json.loads(path.read_text())
+        refresh_extras(summary)
+        summary["claims"] = evaluate_claims(summary)
+    except (OSError, ValueError, KeyError, TypeError) as e:
+        raise BenchError(f"{path}: not a suite summary ({e})") from None
+    write_report(summary, out_dir)
+    return summary
+
+
+def write_report(summary: dict[str, Any], out_dir: Path) -> None:
+    """Write ``summary.json`` and ``report.md`` into ``out_dir``."""
+    from bench.studies._extras import write_json
+
+    out_dir.mkdir(parents=True, exist_ok=True)
+    write_json(out_dir / "summary.json", summary)
+    (out_dir / "report.md").write_text(render_markdown(summary) + "\n")

@@ -1,0 +1,452 @@
+"""``bench suite``: every paper scenario with every estimator that applies, and the sweeps.
+
+Each shipped scenario lists the estimators it is run with (``estimators`` in
+its TOML: the three rotating-injection demodulators and the sensored zero
+line for Wen, the square-wave estimator with and without CIC and the
+sensored zero line for Xue).  Each (scenario, estimator) pair is a lockstep
+run between two processes over the CAN transport of
+:func:`bench.wire._bus.default_transport` (:func:`bench.runs._run.run_scenario`), each
+run on a UDP port of its own so parallel runs do not hear each other.  The
+sweeps of :mod:`bench.studies._sweep` run in-process.
+
+Parallelism.  Each run is already three busy processes (recorder, plant,
+controller), so two runs at a time on a 2-core machine gain little: on the
+development machine four 1.5 s ``wen-5.1`` runs took 48.0 s one at a time and
+44.2 s two at a time (``concurrent.futures`` with 2 spawned workers), so two
+workers is the default; ``--jobs 1`` runs one at a time.  The in-process
+sweep points are single-threaded and gain about twice from two workers.
+On SocketCAN (one shared ``vcan0``) runs are not isolated from each other,
+so the suite runs them one at a time there.
+
+Files.  The full run folders (capture, ``signals.csv``, node logs) go to
+``runs_dir``; the suite's output folder receives only ``report.md``,
+``summary.json``, the sweep plots and per run ``metrics.json``, ``meta.json``
+and a downscaled ``run.png``, so it can be committed.
+"""
+
+from __future__ import annotations
+
+import math
+import multiprocessing as mp
+import os
+import random
+import shutil
+import sys
+import time
+from collections.abc import Callable, Sequence
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any, Protocol
+
+from bench._errors import BenchError
+from bench.scenarios._schema import SHIPPED, Scenario, load_scenario
+from bench.studies._extras import run_extras
+
+#: Simulated seconds of a run in ``--quick`` mode (smoke test, not comparable with the papers).
+QUICK_DURATION_S = 1.6
+#: Relative cost of a step over a bus versus in-process (for the time-left estimate only).
+BUS_STEP_COST = 6.0
+#: Fixed cost of a run (process start, analysis, plots), in in-process steps.
+RUN_OVERHEAD_STEPS = 15000.0
+#: Width of the per-run plot copied into the suite's output folder (pixels).
+PNG_WIDTH = 760
+
+#: Metrics of a run kept in ``summary.json``.
+SUMMARY_METRICS = (
+    "theta_err_max_deg",
+    "theta_err_min_deg",
+    "theta_err_mean_deg",
+    "theta_err_abs_mean_deg",
+    "theta_err_abs_max_deg",
+    "theta_err_abs_max_rad",
+    "theta_err_rms_deg",
+    "speed_err_max_rpm",
+    "speed_track_err_max_rpm",
+    "speed_overshoot_rpm",
+    "thd_phase_a_pct",
+    "steps",
+    "sim_s",
+    "wall_s",
+    "deadline_misses",
+    "frames_rejected",
+)
+
+
+class Job(Protocol):
+    @property
+    def label(self) -> str: ...
+
+    @property
+    def cost(self) -> float: ...
+
+    def __call__(self) -> dict[str, Any]: ...
+
+
+def quick_scenario(scn: Scenario, duration: float = QUICK_DURATION_S) -> Scenario:
+    """``scn`` cut to ``duration`` s; a THD window past the end moves to the scored part."""
+    d = min(scn.duration, duration)
+    thd = scn.thd_window_s
+    if thd is not None and thd[1] > d:
+        thd = (min(scn.score_from_s, d - 0.2), d)
+    return replace(scn, duration=d, thd_window_s=thd, score_from_s=min(scn.score_from_s, d - 0.2))
+
+
+@dataclass(frozen=True, slots=True)
+class RunJob:
+    """One (scenario, estimator) run, over a bus or in-process (picklable).
+
+    ``transport`` is ``(interface, channel, port)`` for a two-process run
+    over CAN, or None for an in-process run (the reference trace, used by
+    the quick test of the suite).
+    """
+
+    scenario: Scenario
+    estimator: str
+    run_dir: Path
+    transport: tuple[str, str, int | None] | None
+
+    @property
+    def label(self) -> str:
+        return f"{self.scenario.name}/{self.estimator}"
+
+    @property
+    def cost(self) -> float:
+        from bench.scenarios._setup import n_steps
+
+        k = BUS_STEP_COST if self.transport is not None else 1.0
+        return k * n_steps(self.scenario) + RUN_OVERHEAD_STEPS
+
+    def __call__(self) -> dict[str, Any]:
+        t0 = time.perf_counter()
+        try:
+            metrics = self._run()
+        except Exception as e:  # one failing run must not end the suite
+            return {"error": f"{type(e).__name__}: {e}", "wall_s": time.perf_counter() - t0}
+        return {"metrics": metrics, "wall_s": time.perf_counter() - t0}
+
+    def _run(self) -> dict[str, Any]:
+        from bench.runs._results import finish_run, run_metadata
+        from bench.runs._run import run_scenario
+        from bench.wire._bus import BusSpec
+        from bench.wire._codec import Codec
+
+        codec = Codec()
+        if self.transport is None:
+            from bench.nodes._loops import run_inprocess
+
+            self.run_dir.mkdir(parents=True, exist_ok=True)
+            t0 = time.perf_counter()
+            frames = run_inprocess(self.scenario, self.estimator, codec)
+            meta = run_metadata(
+                self.scenario, self.estimator, mode="lockstep", transport="in-process", link=False
+            )
+            res = finish_run(
+                frames,
+                codec,
+                self.scenario,
+                self.run_dir,
+                meta=meta,
+                wall_s=time.perf_counter() - t0,
+                capture=None,
+            )
+            return res.metrics
+        iface, chan, port = self.transport
+        res = run_scenario(
+            self.scenario,
+            self.estimator,
+            spec=BusSpec(iface, chan, port),
+            out_dir=self.run_dir,
+            progress=False,
+            codec=codec,
+        )
+        return res.metrics
+
+
+def _call(job: Job) -> dict[str, Any]:
+    return job()
+
+
+class Progress:
+    """One status line on stderr: runs done, the current runs, elapsed and time left.
+
+    The time left scales the elapsed time by the remaining share of the
+    jobs' costs (simulated steps, a bus step counted ``BUS_STEP_COST``
+    times), so it adapts to the machine as runs finish.
+    """
+
+    def __init__(self, total_cost: float, n: int, *, stream: Any = None, enabled: bool = True):
+        self.total = total_cost
+        self.n = n
+        self.done_cost = 0.0
+        self.done = 0
+        self.t0 = time.perf_counter()
+        self.stream = stream or sys.stderr
+        self.enabled = enabled
+        self.tty = bool(getattr(self.stream, "isatty", lambda: False)())
+        self.last = 0.0
+
+    def finished(self, job: Job, ok: bool) -> None:
+        self.done += 1
+        self.done_cost += job.cost
+        if self.enabled and not self.tty:
+            print(
+                f"[{self.done}/{self.n}] {job.label} {'done' if ok else 'FAILED'}  {self._times()}",
+                file=self.stream,
+                flush=True,
+            )
+
+    def _times(self) -> str:
+        el = time.perf_counter() - self.t0
+        if self.done_cost > 0:
+            left = el * (self.total - self.done_cost) / self.done_cost
+            return f"{_mmss(el)} elapsed, ~{_mmss(left)} left"
+        return f"{_mmss(el)} elapsed"
+
+    def show(self, running: Sequence[str]) -> None:
+        now = time.perf_counter()
+        if not (self.enabled and self.tty) or now - self.last < 0.5:
+            return
+        self.last = now
+        cur = ", ".join(running) or "-"
+        line = f"[{self.done}/{self.n}] running: {cur} | {self._times()}"
+        print(f"\r{line[:150]:<150}", end="", file=self.stream, flush=True)
+
+    def close(self) -> None:
+        if self.enabled and self.tty:
+            print(file=self.stream, flush=True)
+
+
+def _mmss(s: float) -> str:
+    if not math.isfinite(s):
+        return "?"
+    s = max(0.0, s)
+    return f"{int(s // 60)}:{int(s % 60):02d}"
+
+
+def run_jobs(
+    jobs: Sequence[Job],
+    *,
+    workers: int = 2,
+    progress: bool = True,
+    on_done: Callable[[Job, dict[str, Any]], None] | None = None,
+) -> list[dict[str, Any]]:
+    """Run ``jobs`` (longest first) on ``workers`` processes; results in ``jobs`` order."""
+    order = sorted(range(len(jobs)), key=lambda i: -jobs[i].cost)
+    results: list[dict[str, Any] | None] = [None] * len(jobs)
+    prog = Progress(sum(j.cost for j in jobs), len(jobs), enabled=progress)
+
+    def _record(i: int, res: dict[str, Any]) -> None:
+        results[i] = res
+        prog.finished(jobs[i], "error" not in res)
+        if on_done is not None:
+            on_done(jobs[i], res)
+
+    try:
+        if workers <= 1:
+            for i in order:
+                prog.show([jobs[i].label])
+                _record(i, jobs[i]())
+        else:
+            with ProcessPoolExecutor(workers, mp_context=mp.get_context("spawn")) as ex:
+                pending: dict[Future[dict[str, Any]], int] = {}
+                queue = list(order)
+                while queue or pending:
+                    while queue and len(pending) < workers:
+                        i = queue.pop(0)
+                        pending[ex.submit(_call, jobs[i])] = i
+                    prog.show([jobs[i].label for i in pending.values()])
+                    done, _ = wait(pending, timeout=0.5, return_when=FIRST_COMPLETED)
+                    for f in done:
+                        i = pending.pop(f)
+                        try:
+                            res = f.result()
+                        except Exception as e:  # a worker that died
+                            res = {"error": f"{type(e).__name__}: {e}", "wall_s": math.nan}
+                        _record(i, res)
+    finally:
+        prog.close()
+    return [r if r is not None else {"error": "not run"} for r in results]
+
+
+def suite_transport(interface: str | None = None, channel: str | None = None) -> tuple[str, str]:
+    """The transport of the suite's runs: the given one or the default."""
+    if interface is None:
+        from bench.wire._bus import default_transport
+
+        iface, chan, _ = default_transport()
+        return iface, chan
+    from bench._errors import InterfaceError
+    from bench.wire._bus import default_channel
+
+    chan2 = channel or default_channel(interface)
+    if chan2 is None:
+        raise InterfaceError(f"--interface {interface}: give --channel")
+    return interface, chan2
+
+
+def paper_jobs(
+    runs_dir: Path,
+    *,
+    scenarios: Sequence[str] = SHIPPED,
+    estimators: Sequence[str] | None = None,
+    quick: bool = False,
+    transport: tuple[str, str] | None = None,
+) -> list[RunJob]:
+    """One job per shipped scenario and estimator it lists (``estimators`` filters)."""
+    base_port = 40000 + 4 * random.Random(os.getpid()).randrange(3000)
+    jobs: list[RunJob] = []
+    for name in scenarios:
+        scn = load_scenario(name)
+        if quick:
+            scn = quick_scenario(scn)
+        for est in scn.estimators:
+            if estimators is not None and est not in estimators:
+                continue
+            tr: tuple[str, str, int | None] | None = None
+            if transport is not None:
+                port = base_port + 4 * len(jobs) if transport[0] == "udp_multicast" else None
+                tr = (transport[0], transport[1], port)
+            jobs.append(RunJob(scn, est, runs_dir / scn.name / est, tr))
+    return jobs
+
+
+def unmatched_estimators(scenarios: Sequence[str], estimators: Sequence[str]) -> str | None:
+    """Which of ``estimators`` none of ``scenarios`` lists, and what they list (None: all listed)."""
+    listed = {name: load_scenario(name).estimators for name in scenarios}
+    missing = [e for e in estimators if not any(e in ests for ests in listed.values())]
+    if not missing:
+        return None
+    what = "; ".join(f"{name} lists {', '.join(ests)}" for name, ests in listed.items())
+    return f"--estimators {', '.join(missing)}: not an estimator of the scenarios chosen ({what})"
+
+
+def downscale_png(src: Path, dst: Path, width: int = PNG_WIDTH) -> None:
+    """Copy a PNG, scaled to ``width`` pixels and reduced to a 64-colour palette."""
+    from PIL import Image
+
+    with Image.open(src) as im:
+        w, h = im.size
+        im2 = im.convert("RGB")
+        if w > width:
+            im2 = im2.resize((width, max(1, round(h * width / w))), Image.Resampling.LANCZOS)
+        im2 = im2.quantize(colors=64)
+        im2.save(dst, optimize=True)
+
+
+def export_run(job: RunJob, out_dir: Path) -> Path:
+    """Copy a run's small files (metrics, metadata, downscaled plot) under ``out_dir``."""
+    dst = out_dir / "runs" / job.scenario.name / job.estimator
+    dst.mkdir(parents=True, exist_ok=True)
+    for name in ("metrics.json", "meta.json"):
+        if (job.run_dir / name).exists():
+            shutil.copyfile(job.run_dir / name, dst / name)
+    if (job.run_dir / "run.png").exists():
+        downscale_png(job.run_dir / "run.png", dst / "run.png")
+    return dst
+
+
+def run_record(job: RunJob, res: dict[str, Any], out_dir: Path) -> dict[str, Any]:
+    """The entry of ``summary.json`` for one run."""
+    scn = job.scenario
+    rec: dict[str, Any] = {
+        "scenario": scn.name,
+        "estimator": job.estimator,
+        "paper": scn.paper,
+        "description": scn.description,
+        "duration_s": scn.duration,
+        "score_from_s": scn.score_from_s,
+        "paper_result": dict(scn.paper_result),
+        "transport": "in-process" if job.transport is None else f"{job.transport[0]} lockstep",
+        "wall_s": res.get("wall_s", math.nan),
+        "files": f"runs/{scn.name}/{job.estimator}",
+    }
+    if "error" in res:
+        rec["error"] = res["error"]
+        rec["metrics"] = {}
+    else:
+        m = res["metrics"]
+        rec["metrics"] = {k: m[k] for k in SUMMARY_METRICS if k in m}
+        rec.update(run_extras(job.run_dir / "signals.csv", scn))
+    return rec
+
+
+@dataclass(frozen=True, slots=True)
+class SuiteOptions:
+    """What ``bench suite paper`` runs and where it writes."""
+
+    out_dir: Path
+    runs_dir: Path
+    scenarios: tuple[str, ...] = SHIPPED
+    estimators: tuple[str, ...] | None = None
+    quick: bool = False
+    sweeps: tuple[str, ...] = ()
+    sweep_quick: bool = False
+    inprocess: bool = False
+    workers: int = 2
+    interface: str | None = None
+    channel: str | None = None
+    progress: bool = True
+
+
+def run_suite(opt: SuiteOptions) -> dict[str, Any]:
+    """Run the suite, write ``report.md``, ``summary.json`` and plots; return the summary."""
+    from bench.studies._report import build_summary, write_report
+    from bench.studies._sweep import collect, plot_sweeps, sweep_jobs
+
+    t0 = time.perf_counter()
+    transport = None if opt.inprocess else suite_transport(opt.interface, opt.channel)
+    workers = opt.workers
+    note = ""
+    if transport is not None and transport[0] != "udp_multicast" and workers > 1:
+        workers = 1
+        note = f"{transport[0]} {transport[1]} is shared by every run: runs one at a time"
+        print(f"suite: {note}", file=sys.stderr)
+    runs = paper_jobs(
+        opt.runs_dir,
+        scenarios=opt.scenarios,
+        estimators=opt.estimators,
+        quick=opt.quick,
+        transport=transport,
+    )
+    sweeps = sweep_jobs(opt.sweeps, quick=opt.sweep_quick) if opt.sweeps else []
+    why = None if opt.estimators is None else unmatched_estimators(opt.scenarios, opt.estimators)
+    if not (runs or sweeps):
+        raise BenchError(
+            f"{why or 'no scenario with an estimator and no sweep'}; nothing left to run"
+        )
+    if why:
+        print(f"suite: {why}; skipped", file=sys.stderr)
+    opt.out_dir.mkdir(parents=True, exist_ok=True)
+    if opt.progress:
+        where = "in-process" if transport is None else f"{transport[0]} {transport[1]}"
+        print(
+            f"suite: {len(runs)} runs ({where}, lockstep), {len(sweeps)} sweep points "
+            f"(in-process), {workers} worker(s); full runs in {opt.runs_dir}",
+            file=sys.stderr,
+        )
+    jobs: list[Job] = [*runs, *sweeps]
+    results = run_jobs(jobs, workers=workers, progress=opt.progress)
+    records = []
+    for job, res in zip(runs, results[: len(runs)], strict=True):
+        if "error" not in res:
+            export_run(job, opt.out_dir)
+        records.append(run_record(job, res, opt.out_dir))
+    sweep_summary: dict[str, Any] = {}
+    if sweeps:
+        sweep_summary = collect(sweeps, results[len(runs) :], quick=opt.sweep_quick)
+        plot_sweeps(sweep_summary, opt.out_dir / "sweeps")
+    info = {
+        "command": " ".join(["bench", *sys.argv[1:]]) if sys.argv[0].endswith("bench") else "",
+        "transport": "in-process" if transport is None else f"{transport[0]} {transport[1]}",
+        "mode": "lockstep",
+        "quick": opt.quick,
+        "sweep_quick": opt.sweep_quick,
+        "workers": workers,
+        "wall_s": time.perf_counter() - t0,
+        "note": note,
+        "runs_dir": str(opt.runs_dir),
+    }
+    summary = build_summary(records, sweep_summary, info)
+    write_report(summary, opt.out_dir)
+    return summary

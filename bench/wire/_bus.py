@@ -1,0 +1,352 @@
+"""One factory for every CAN bus the bench talks to.
+
+The bench depends on :class:`can.BusABC` only; which bus it gets is
+configuration, never code:
+
+- ``socketcan``: a Linux SocketCAN device, ``vcan0`` in tests or a real
+  ``can0`` (its bit rates are set with ``ip link``, not here);
+- ``udp_multicast``: python-can's CAN-over-UDP-multicast bus, the default
+  between processes on a host without vcan (no bit rate: a simulated bench can
+  run faster than any real bus, see :mod:`bench.wire._busload`);
+- ``virtual``: python-can's in-process bus, for tests;
+- any other python-can interface by name (``pcan``, ``kvaser``, ``vector``,
+  ``slcan``, ``gs_usb``, ...), with its channel and bit rates.
+
+With ``interface=None``, python-can's own configuration (``~/.canrc``,
+``/etc/can.conf``, ``CAN_INTERFACE``/``CAN_CHANNEL``/``CAN_BITRATE``) is used
+when it names an interface, else :func:`default_transport` decides.
+"""
+
+from __future__ import annotations
+
+import functools
+import gc
+import logging
+import socket
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import can
+from can.interfaces.udp_multicast import UdpMulticastBus
+
+from bench._errors import InterfaceError
+
+__all__ = [
+    "UDP_GROUP_IPV4",
+    "UDP_GROUP_IPV6",
+    "default_channel",
+    "default_transport",
+    "open_bus",
+    "udp_multicast_group",
+]
+
+UDP_GROUP_IPV6: str = UdpMulticastBus.DEFAULT_GROUP_IPv6
+"""python-can's default IPv6 multicast group (link scope of one hop)."""
+UDP_GROUP_IPV4: str = UdpMulticastBus.DEFAULT_GROUP_IPv4
+"""python-can's fallback IPv4 multicast group."""
+
+VIRTUAL_CHANNEL = "bench"
+"""Default channel of the in-process ``virtual`` bus."""
+
+_SYS_NET = Path("/sys/class/net")
+_IFF_UP = 0x1
+
+
+def _af_can_works() -> bool:
+    """True when the kernel opens a raw CAN socket (``AF_CAN``)."""
+    af_can = getattr(socket, "AF_CAN", None)
+    if af_can is None:
+        return False
+    try:
+        sock = socket.socket(af_can, socket.SOCK_RAW, socket.CAN_RAW)
+    except OSError:
+        return False
+    sock.close()
+    return True
+
+
+def _link_up(name: str, sys_net: Path = _SYS_NET) -> bool | None:
+    """None when the network device does not exist, else whether it is up."""
+    flags = sys_net / name / "flags"
+    if not (sys_net / name).exists():
+        return None
+    try:
+        return bool(int(flags.read_text().strip(), 0) & _IFF_UP)
+    except (OSError, ValueError):
+        return True  # present but unreadable: let the open report any problem
+
+
+@functools.cache
+def udp_multicast_group() -> str:
+    """The multicast group that this host can join: IPv6 when possible, else IPv4."""
+    try:
+        info = socket.getaddrinfo(UDP_GROUP_IPV6, None, socket.AF_INET6, socket.SOCK_DGRAM)
+        group_bin = socket.inet_pton(socket.AF_INET6, str(info[0][4][0]))
+        with socket.socket(socket.AF_INET6, socket.SOCK_DGRAM) as sock:
+            sock.setsockopt(
+                socket.IPPROTO_IPV6, socket.IPV6_JOIN_GROUP, group_bin + (0).to_bytes(4, "little")
+            )
+        return UDP_GROUP_IPV6
+    except OSError:
+        return UDP_GROUP_IPV4
+
+
+def default_transport(sys_net: Path = _SYS_NET) -> tuple[str, str, str]:
+    """Transport to use when the user names none.
+
+    ``socketcan`` on ``vcan0`` when that device exists, is up and the kernel
+    has ``AF_CAN``; ``udp_multicast`` otherwise.
+
+    Returns
+    -------
+    interface, channel, reason : str
+        The python-can interface and channel, and a short phrase saying why
+        (no newline), for the command line to print next to them.
+    """
+    up = _link_up("vcan0", sys_net)
+    if up is None:
+        why = "no vcan0"
+    elif not _af_can_works():
+        why = "vcan0 exists but this kernel has no AF_CAN sockets"
+    elif not up:
+        why = "vcan0 is down (ip link set up vcan0)"
+    else:
+        return "socketcan", "vcan0", "vcan0 is up and the kernel has AF_CAN"
+    return (
+        "udp_multicast",
+        udp_multicast_group(),
+        f"{why}; udp_multicast has no bit rate, so no real bus timing",
+    )
+
+
+def default_channel(interface: str) -> str | None:
+    """The channel :func:`open_bus` uses for ``interface`` when none is given.
+
+    ``vcan0`` for socketcan, :func:`udp_multicast_group` for udp_multicast,
+    ``"bench"`` for virtual; None for adapters, which need an explicit one.
+    """
+    if interface == "socketcan":
+        return "vcan0"
+    if interface == "udp_multicast":
+        return udp_multicast_group()
+    if interface == "virtual":
+        return VIRTUAL_CHANNEL
+    return None
+
+
+def _valid_interfaces() -> frozenset[str]:
+    return frozenset(can.interfaces.VALID_INTERFACES)
+
+
+def open_bus(
+    interface: str | None,
+    channel: str | None,
+    *,
+    fd: bool = True,
+    bitrate: int | None = None,
+    data_bitrate: int | None = None,
+    receive_own_messages: bool = False,
+    **kwargs: Any,
+) -> can.BusABC:
+    """Open a python-can bus.
+
+    Parameters
+    ----------
+    interface : str or None
+        python-can interface name (``socketcan``, ``udp_multicast``,
+        ``virtual``, ``pcan``, ...). None: python-can's configuration when it
+        names an interface, else :func:`default_transport`.
+    channel : str or None
+        Channel; defaults: ``vcan0`` (socketcan), :func:`udp_multicast_group`
+        (udp_multicast), ``"bench"`` (virtual). Other interfaces need one
+        unless python-can's configuration gives it.
+    fd : bool
+        Open the bus for CAN FD frames (the recorder frames are FD).
+    bitrate, data_bitrate : int or None
+        Arbitration and data bit rates (bit/s) for adapters that set them;
+        ignored by socketcan (set with ``ip link``), udp_multicast and
+        virtual. Adapters that need full bit timing take ``timing=`` (a
+        :class:`can.BitTiming` or :class:`can.BitTimingFd`) in ``kwargs``.
+    receive_own_messages : bool
+        Also receive the frames this bus sends (not supported by
+        udp_multicast).
+    **kwargs
+        Passed to :class:`can.Bus` (e.g. ``port`` for udp_multicast).
+
+    Raises
+    ------
+    InterfaceError
+        Unknown interface, missing channel, or any error of python-can or the
+        driver while opening, as one line.
+    """
+    if interface is None:
+        config: dict[str, Any] = {}
+        if _python_can_config_names_interface():
+            try:
+                config = dict(can.util.load_config())
+            except Exception as e:
+                raise InterfaceError(f"python-can configuration: {_one_line(e)}") from None
+        if config.get("interface"):
+            interface = str(config["interface"])
+            if channel is None and config.get("channel") is not None:
+                channel = str(config["channel"])
+            for key in ("bitrate", "data_bitrate"):
+                if key in config and key not in kwargs:
+                    kwargs[key] = config[key]
+        else:
+            interface, transport_channel, _ = default_transport()
+            channel = channel if channel is not None else transport_channel
+
+    check_interface(interface)
+
+    args: dict[str, Any] = dict(kwargs)
+    if channel is None:
+        channel = default_channel(interface)
+    if interface == "socketcan":
+        args.update(fd=fd, receive_own_messages=receive_own_messages)
+    elif interface == "udp_multicast":
+        if receive_own_messages:
+            raise InterfaceError(
+                f"interface udp_multicast channel {channel}: receive_own_messages unsupported"
+            )
+        args.update(fd=fd)
+    elif interface == "virtual":
+        args.update(receive_own_messages=receive_own_messages)
+    else:
+        if channel is None:
+            raise InterfaceError(f"interface {interface}: needs a channel (--channel)")
+        args.update(fd=fd, receive_own_messages=receive_own_messages)
+        if bitrate is not None:
+            args["bitrate"] = int(bitrate)
+        if data_bitrate is not None:
+            args["data_bitrate"] = int(data_bitrate)
+    # A bus whose constructor failed is freed with the exception; python-can
+    # then logs "... was not properly shut down", a second line after ours.
+    log = logging.getLogger("can.bus")
+    level = log.level
+    try:
+        return can.Bus(interface=interface, channel=channel, **args)
+    except Exception as e:  # drivers raise anything from CanError to OSError or ImportError
+        why = _one_line(e)
+        log.setLevel(logging.ERROR)
+    try:
+        gc.collect()
+    finally:
+        log.setLevel(level)
+    raise InterfaceError(f"interface {interface} channel {channel}: {why}")
+
+
+def check_interface(interface: str) -> None:
+    """Raise :class:`InterfaceError` (one line) when ``interface`` cannot work here."""
+    if interface not in _valid_interfaces():
+        known = ", ".join(sorted(_valid_interfaces()))
+        raise InterfaceError(f"interface {interface!r}: unknown; python-can knows: {known}")
+    if interface == "socketcan" and not _af_can_works():
+        raise InterfaceError(
+            "interface socketcan: this kernel has no SocketCAN (no AF_CAN sockets); "
+            "use udp_multicast (the default here), or tools/vcan-tests for vcan "
+            "inside User-Mode Linux"
+        )
+
+
+def python_can_config() -> dict[str, Any] | None:
+    """python-can's own configuration when it names an interface, else None."""
+    if not _python_can_config_names_interface():
+        return None
+    try:
+        return dict(can.util.load_config())
+    except Exception as e:
+        raise InterfaceError(f"python-can configuration: {_one_line(e)}") from None
+
+
+def _python_can_config_names_interface() -> bool:
+    """True when can.rc, the environment or a config file names an interface."""
+    sources: list[dict[str, Any]] = [dict(can.rc)]
+    try:
+        sources.append(dict(can.util.load_environment_config()))
+        sources.append(dict(can.util.load_file_config()))
+    except Exception as e:
+        raise InterfaceError(f"python-can configuration: {_one_line(e)}") from None
+    return any(src.get("interface") or src.get("bustype") for src in sources)
+
+
+def _one_line(e: BaseException) -> str:
+    text = str(e).strip()
+    first = text.splitlines()[0] if text else ""
+    return f"{type(e).__name__}: {first}" if first else type(e).__name__
+
+
+@dataclass(frozen=True, slots=True)
+class BusSpec:
+    """Where a node's bus is: a python-can interface, channel and options."""
+
+    interface: str
+    channel: str
+    port: int | None = None
+    bitrate: int | None = None
+    data_bitrate: int | None = None
+
+    def args(self) -> list[str]:
+        a = ["--interface", self.interface, "--channel", self.channel]
+        if self.port is not None:
+            a += ["--port", str(self.port)]
+        if self.bitrate is not None:
+            a += ["--bitrate", str(self.bitrate)]
+        if self.data_bitrate is not None:
+            a += ["--data-bitrate", str(self.data_bitrate)]
+        return a
+
+    def open(self) -> can.BusABC:
+        kw: dict[str, Any] = {}
+        if self.port is not None:
+            kw["port"] = self.port
+        bus = open_bus(
+            self.interface,
+            self.channel,
+            fd=True,
+            bitrate=self.bitrate,
+            data_bitrate=self.data_bitrate,
+            **kw,
+        )
+        grow_receive_buffer(bus)
+        return bus
+
+    def peer(self) -> BusSpec:
+        """The second bus of a latency link (controller side)."""
+        if self.interface == "udp_multicast":
+            return BusSpec(self.interface, self.channel, (self.port or 43113) + 1)
+        if self.interface == "socketcan" and self.channel[-1:].isdigit():
+            return BusSpec(self.interface, self.channel[:-1] + str(int(self.channel[-1]) + 1))
+        return BusSpec(self.interface, self.channel + "-b", self.port)
+
+    def describe(self) -> str:
+        s = f"{self.interface}:{self.channel}"
+        return s + (f" port {self.port}" if self.port is not None else "")
+
+
+#: Receive buffer asked for on socket-based buses (bytes): a recorder thread that
+#: is descheduled for a while must not lose frames (udp_multicast drops on
+#: overflow). A lockstep plant is paced to at most the command lead (3000
+#: periods, about 15,000 frames of about 1 kB in the kernel) ahead of it.
+RECEIVE_BUFFER = 64 << 20
+
+
+def grow_receive_buffer(bus: can.BusABC) -> None:
+    """Ask for a :data:`RECEIVE_BUFFER` receive buffer on a socket-based bus (best effort)."""
+    sock = getattr(getattr(bus, "_multicast", None), "_socket", None) or getattr(
+        bus, "socket", None
+    )
+    if not isinstance(sock, socket.socket):
+        return
+    # SO_RCVBUFFORCE (root: above net.core.rmem_max) is 33 on Linux; Python does not name it
+    force = getattr(socket, "SO_RCVBUFFORCE", 33 if sys.platform.startswith("linux") else None)
+    for opt in (force, socket.SO_RCVBUF):
+        if opt is None:
+            continue
+        try:
+            sock.setsockopt(socket.SOL_SOCKET, opt, RECEIVE_BUFFER)
+            return
+        except OSError:
+            continue
