@@ -19,7 +19,10 @@ import can
 import numpy as np
 import pytest
 
-from bench.captures._replay import analyze_capture, read_capture
+from bench.captures._read import (
+    analyze_capture,
+    read_capture,
+)
 from bench.cli import main
 from bench.runs._analysis import analyze_frames, read_csv
 from bench.wire._batch_decode import decode_batch

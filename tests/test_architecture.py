@@ -175,3 +175,17 @@ def test_plant_and_controller_stay_pure() -> None:
                 assert f"from {forbidden} " not in text and f"from {forbidden}." not in text, (
                     f"{name} imports {forbidden}"
                 )
+
+
+def test_every_subcommand_module_is_registered_and_registers_itself() -> None:
+    import importlib
+
+    from bench.cli import SUBCOMMANDS, build_parser
+
+    on_disk = sorted(p.stem for p in (ROOT / "bench" / "cli").glob("*.py") if p.stem[0] != "_")
+    assert sorted(SUBCOMMANDS) == on_disk
+    for name in SUBCOMMANDS:
+        assert callable(importlib.import_module(f"bench.cli.{name}").register)
+    parser = build_parser()
+    sub = next(a for a in parser._actions if a.dest == "command")
+    assert set(SUBCOMMANDS) <= set(sub.choices)  # type: ignore[arg-type]

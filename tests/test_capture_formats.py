@@ -29,7 +29,10 @@ import numpy as np
 import pytest
 
 from bench._errors import CaptureError
-from bench.captures._replay import analyze_capture, read_capture
+from bench.captures._read import (
+    analyze_capture,
+    read_capture,
+)
 from bench.cli import main
 from bench.runs._analysis import read_csv
 from tests.replay_helpers import POSITION_SPEED, recorded_run

@@ -18,7 +18,14 @@ import can
 import numpy as np
 import pytest
 
-from bench.captures._replay import ReplayResult, analyze_capture, read_capture, replay_frames
+from bench.captures._read import (
+    analyze_capture,
+    read_capture,
+)
+from bench.captures._replay import (
+    ReplayResult,
+    replay_frames,
+)
 from bench.captures._rerun import rerun_capture
 from bench.cli import main
 from bench.wire._codec import Codec

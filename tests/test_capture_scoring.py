@@ -17,7 +17,10 @@ from pathlib import Path
 
 import pytest
 
-from bench.captures._replay import analyze_capture, scoring_scenario
+from bench.captures._read import (
+    analyze_capture,
+    scoring_scenario,
+)
 from bench.captures._rerun import rerun_capture
 from bench.cli.analyze import cmd_analyze
 from bench.cli.rerun import cmd_rerun

@@ -11,8 +11,9 @@ from __future__ import annotations
 import can
 import pytest
 
+from bench.nodes._controller_node import ControllerNode
 from bench.nodes._loops import command_frames, make_controller_node, make_plant_node
-from bench.nodes._nodes import ControllerNode, PlantNode
+from bench.nodes._plant_node import PlantNode
 from bench.scenarios._schema import Profile, load_scenario
 from bench.wire._codec import Codec
 from bench.wire._protocol import CMD_STOP

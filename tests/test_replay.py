@@ -16,9 +16,11 @@ import numpy as np
 import pytest
 
 from bench._errors import BenchError
+from bench.captures._read import (
+    read_capture,
+)
 from bench.captures._replay import (
     parse_id_map,
-    read_capture,
     replay_frames,
     schedule,
     select_frames,

@@ -20,10 +20,12 @@ import pytest
 from can.interfaces import virtual
 
 from bench._errors import BenchError, InterfaceError
+from bench.captures._read import (
+    read_capture,
+)
 from bench.captures._replay import (
     parse_channel_map,
     plan_replay,
-    read_capture,
     replay_frames,
     resolve_channel_map,
 )

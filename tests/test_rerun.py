@@ -16,7 +16,9 @@ import can
 import numpy as np
 import pytest
 
-from bench.captures._replay import read_capture
+from bench.captures._read import (
+    read_capture,
+)
 from bench.captures._rerun import rerun_capture
 from bench.cli import main
 from bench.runs._analysis import read_csv

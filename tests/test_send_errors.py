@@ -19,6 +19,7 @@ from typing import Any
 import can
 import pytest
 
+from bench.nodes._counters import NodeCounters
 from bench.nodes._loops import (
     command_frames,
     controller_loop,
@@ -27,7 +28,6 @@ from bench.nodes._loops import (
     plant_loop,
     run_inprocess,
 )
-from bench.nodes._nodes import NodeCounters
 from bench.nodes._send import SEND_ATTEMPTS, send_all
 from tests.trace_helpers import CODEC, assert_same_trace, short, trace
 

@@ -17,7 +17,10 @@ from pathlib import Path
 import can
 import pytest
 
-from bench.captures._replay import _find_in_folder, read_capture
+from bench.captures._read import (
+    _find_in_folder,
+    read_capture,
+)
 from bench.captures._rerun import rerun_capture
 from bench.cli import main
 from bench.runs._run import run_scenario

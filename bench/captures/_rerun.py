@@ -1,7 +1,7 @@
 """``bench rerun``: a recorded capture through an estimator, offline.
 
 The sample frames of a capture (``PhaseSamples``) are fed, in capture order,
-into a :class:`~bench.nodes._nodes.ControllerNode` built for the chosen estimator,
+into a :class:`~bench.nodes._controller_node.ControllerNode` built for the chosen estimator,
 together with the recorded bench commands (applied at their steps exactly as
 the live controller applied them) and, for the sensored baseline, the
 recorded ``PlantTruth``.  The node's ``CtrlTelemetry`` is then scored against
@@ -44,12 +44,14 @@ import can
 import numpy as np
 
 from bench._errors import BenchError, CaptureError
-from bench.captures._replay import (
+from bench.captures._read import (
     capture_scenario,
-    channel_tag,
     incomplete_warning,
     read_capture,
     scoring_scenario,
+)
+from bench.captures._replay import (
+    channel_tag,
 )
 from bench.runs._analysis import analyze_frames, write_csv
 from bench.wire._batch_decode import decode_batch

@@ -11,7 +11,9 @@ from bench.cli._common import files_line
 
 def cmd_analyze(args: argparse.Namespace) -> int:
     """``bench analyze``: the metrics table with the paper's column, and the files written."""
-    from bench.captures._replay import analyze_capture
+    from bench.captures._read import (
+        analyze_capture,
+    )
     from bench.runs._results import format_metrics
 
     plots = not getattr(args, "no_plots", False)

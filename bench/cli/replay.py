@@ -12,7 +12,9 @@ from bench.cli._common import LOG_HELP, add_bus, bus_spec
 
 
 def _ids(text: str, option: str) -> list[int]:
-    from bench.captures._replay import parse_id
+    from bench.captures._replay import (
+        parse_id,
+    )
 
     return [parse_id(t, option) for t in text.split(",") if t.strip()]
 
@@ -30,14 +32,16 @@ def _channels(text: str) -> list[int]:
 
 def cmd_replay(args: argparse.Namespace) -> int:
     from bench._errors import BenchError
+    from bench.captures._read import (
+        incomplete_warning,
+        read_capture,
+    )
     from bench.captures._replay import (
         CLOCKS,
-        incomplete_warning,
         open_buses,
         parse_channel_map,
         parse_id_map,
         plan_replay,
-        read_capture,
         replay_frames,
     )
     from bench.wire._bus import BusSpec

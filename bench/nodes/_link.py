@@ -351,7 +351,7 @@ def link_loop(
     count.setdefault("a_to_b", 0)
     count.setdefault("b_to_a", 0)
     # a send the bus refuses (queue full, bus-off) is retried and counted, never fatal
-    from bench.nodes._nodes import NodeCounters
+    from bench.nodes._counters import NodeCounters
 
     counters = NodeCounters()
     if on_ready:

@@ -1,7 +1,7 @@
 """The nodes' main loops on a python-can bus, and the in-process loop.
 
-``plant_loop`` and ``controller_loop`` drive a :class:`~bench.nodes._nodes.PlantNode`
-or :class:`~bench.nodes._nodes.ControllerNode` from a :class:`can.BusABC`; they are
+``plant_loop`` and ``controller_loop`` drive a :class:`~bench.nodes._plant_node.PlantNode`
+or :class:`~bench.nodes._controller_node.ControllerNode` from a :class:`can.BusABC`; they are
 what ``bench plant`` and ``bench controller`` run as processes, and what the
 ``virtual``-bus tests run as threads.  ``run_inprocess`` passes the same
 frames between the same nodes without any bus: the reference trace.
@@ -16,7 +16,8 @@ from collections.abc import Callable
 import can
 
 from bench._errors import BenchError
-from bench.nodes._nodes import ControllerNode, PlantNode
+from bench.nodes._controller_node import ControllerNode
+from bench.nodes._plant_node import PlantNode
 from bench.nodes._rt import no_gc
 from bench.nodes._send import send_all
 from bench.scenarios._schema import Scenario
@@ -101,7 +102,7 @@ def command_frames(
     ``pace_every > 0`` adds a keep-alive (``cmd`` 0, the references already
     in force, so nothing changes) at every multiple of ``pace_every`` that
     has no command of its own: the pace tokens of a paced lockstep plant
-    (:attr:`bench.nodes._nodes.PlantNode.pace_every`).
+    (:attr:`bench.nodes._plant_node.PlantNode.pace_every`).
     """
     m = 1 << codec.step_bits("BenchCommand")
     plan = command_schedule(scn)
@@ -201,97 +202,124 @@ def plant_loop(
     node.realtime = realtime
     if on_ready:
         on_ready()
-    # wait for the start command
+    if not _wait_for_start(bus, node, ids, stop):
+        return
+    frames = node.frames_now()
+    t_loop = time.perf_counter()
+    try:
+        if realtime:
+            _serve_realtime(bus, node, ids, frames, stop=stop)
+        else:
+            _serve_lockstep(bus, node, ids, frames, stop=stop, watchdog_s=watchdog_s)
+    finally:
+        node.loop_s = time.perf_counter() - t_loop
+    send_all(bus, [node.status_frame(STATE_DONE, node.fault)], node.counters)
+
+
+def _wait_for_start(
+    bus: can.BusABC, node: PlantNode, ids: set[int], stop: Callable[[], bool]
+) -> bool:
+    """Feed the node its frames until the start command has been applied (False: stopped)."""
     t_idle = time.monotonic()
     while not node.started:
         if stop():
-            return
+            return False
         msg = bus.recv(0.05)
         if msg is not None and msg.arbitration_id in ids:
             node.on_message(msg)
             node.apply_commands()
         if time.monotonic() - t_idle > 3600.0:
             raise BenchError("plant: no start command within an hour")
-    frames = node.frames_now()
-    t_loop = time.perf_counter()
-    try:
-        _serve_plant(bus, node, ids, frames, realtime=realtime, stop=stop, watchdog_s=watchdog_s)
-    finally:
-        node.loop_s = time.perf_counter() - t_loop
-    send_all(bus, [node.status_frame(STATE_DONE, node.fault)], node.counters)
+    return True
 
 
-def _serve_plant(
+def _serve_realtime(
     bus: can.BusABC,
     node: PlantNode,
     ids: set[int],
     frames: list[can.Message],
     *,
-    realtime: bool,
+    stop: Callable[[], bool],
+) -> None:
+    """Real time: one period per tick of the plant's own clock, with the newest duty.
+
+    Each instant's frames leave at that instant (the deadline), so the
+    controller has one period to answer, as in a drive; the plant then runs
+    the period with the newest duty meant for it.  The clock's overruns and
+    jitter statistics go to the node's report.
+    """
+    clock = RealTimeClock(node.plant.T_s)
+    with no_gc():
+        clock.start()
+        while not node.done and not stop():
+            send_all(bus, frames, node.counters)
+            while (msg := bus.recv(0.0)) is not None:
+                if msg.arbitration_id in ids:
+                    node.on_message(msg)
+            frames = node.advance_realtime()
+            clock.wait()
+        send_all(bus, frames, node.counters)
+    node.counters.overruns = clock.overruns
+    st = clock.stats()
+    node.jitter = {
+        "n": float(st.n),
+        "median": 1e6 * st.median,
+        "p99": 1e6 * st.p99,
+        "max": 1e6 * st.max,
+        "busy_median": 1e6 * st.busy_median,
+        "busy_p99": 1e6 * st.busy_p99,
+        "busy_max": 1e6 * st.busy_max,
+    }
+
+
+def _serve_lockstep(
+    bus: can.BusABC,
+    node: PlantNode,
+    ids: set[int],
+    frames: list[can.Message],
+    *,
     stop: Callable[[], bool],
     watchdog_s: float,
 ) -> None:
-    """The plant's stepping loop, from the start command to the end of the run."""
-    if realtime:
-        # Each instant's frames leave at that instant (the deadline), so the
-        # controller has one period to answer, as in a drive; the plant then
-        # runs the period with the newest duty meant for it.
-        clock = RealTimeClock(node.plant.T_s)
-        with no_gc():
-            clock.start()
-            while not node.done and not stop():
-                send_all(bus, frames, node.counters)
-                while (msg := bus.recv(0.0)) is not None:
-                    if msg.arbitration_id in ids:
-                        node.on_message(msg)
-                frames = node.advance_realtime()
-                clock.wait()
-            send_all(bus, frames, node.counters)
-        node.counters.overruns = clock.overruns
-        st = clock.stats()
-        node.jitter = {
-            "n": float(st.n),
-            "median": 1e6 * st.median,
-            "p99": 1e6 * st.p99,
-            "max": 1e6 * st.max,
-            "busy_median": 1e6 * st.busy_median,
-            "busy_p99": 1e6 * st.busy_p99,
-            "busy_max": 1e6 * st.busy_max,
-        }
-    else:
-        send_all(bus, frames, node.counters)
+    """Lockstep: a period runs once its duty (and, when paced, its bench command) has come.
+
+    While it waits, the recent frames are resent every :data:`RETRANSMIT_S`
+    (a lost frame on a lossy transport); after ``watchdog_s`` without
+    progress the plant gives up with a message naming what it waited for.
+    """
+    send_all(bus, frames, node.counters)
+    last_progress = time.monotonic()
+    t_wait = last_progress
+
+    def no_duty() -> None:
+        nonlocal t_wait
+        now = time.monotonic()
+        if now - last_progress > watchdog_s:
+            raise BenchError(
+                f"plant: no duty frame for step {node.needed_duty()} in {watchdog_s:.0f} s "
+                "(is a controller running on this bus?)"
+            )
+        if now - t_wait >= RETRANSMIT_S:
+            send_all(bus, node.on_duty_timeout(), node.counters)
+            send_all(bus, node.retransmit(), node.counters)
+            t_wait = now
+
+    def no_command() -> None:
+        if time.monotonic() - last_progress > watchdog_s:
+            raise BenchError(
+                f"plant: no bench command for step {node.plant.k} in {watchdog_s:.0f} s "
+                "(paced by bench run: has its recorder stopped?)"
+            )
+
+    while not node.done and not stop():
+        t_wait = time.monotonic()
+        if not _receive_until(bus, node, ids, node.ready, stop, no_duty):
+            break
+        # paced by bench run: not ahead of the commands (and so of its recorder)
+        if not _receive_until(bus, node, ids, node.paced, stop, no_command):
+            break
+        send_all(bus, node.advance_lockstep(), node.counters)
         last_progress = time.monotonic()
-        t_wait = last_progress
-
-        def no_duty() -> None:
-            nonlocal t_wait
-            now = time.monotonic()
-            if now - last_progress > watchdog_s:
-                raise BenchError(
-                    f"plant: no duty frame for step {node.needed_duty()} in {watchdog_s:.0f} s "
-                    "(is a controller running on this bus?)"
-                )
-            if now - t_wait >= RETRANSMIT_S:
-                send_all(bus, node.on_duty_timeout(), node.counters)
-                send_all(bus, node.retransmit(), node.counters)
-                t_wait = now
-
-        def no_command() -> None:
-            if time.monotonic() - last_progress > watchdog_s:
-                raise BenchError(
-                    f"plant: no bench command for step {node.plant.k} in {watchdog_s:.0f} s "
-                    "(paced by bench run: has its recorder stopped?)"
-                )
-
-        while not node.done and not stop():
-            t_wait = time.monotonic()
-            if not _receive_until(bus, node, ids, node.ready, stop, no_duty):
-                break
-            # paced by bench run: not ahead of the commands (and so of its recorder)
-            if not _receive_until(bus, node, ids, node.paced, stop, no_command):
-                break
-            send_all(bus, node.advance_lockstep(), node.counters)
-            last_progress = time.monotonic()
 
 
 def _receive_until(

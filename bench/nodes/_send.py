@@ -6,7 +6,7 @@ import time
 
 import can
 
-from bench.nodes._nodes import NodeCounters
+from bench.nodes._counters import NodeCounters
 
 #: A frame the bus refuses (buffer full, bus-off) is tried this many times in all.
 SEND_ATTEMPTS = 5

@@ -41,7 +41,7 @@ from bench.wire._codec import Codec
 LOG_SUFFIX = {"blf": ".blf", "asc": ".asc", "log": ".log"}
 
 #: Lockstep pacing: a bench command (a keep-alive when nothing changes) at
-#: least every this many periods; see :attr:`bench.nodes._nodes.PlantNode.pace_every`.
+#: least every this many periods; see :attr:`bench.nodes._plant_node.PlantNode.pace_every`.
 PACE_EVERY = 100
 
 

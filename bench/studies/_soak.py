@@ -4,7 +4,7 @@
 values (including the bench's own identifiers), corrupted copies, wrong
 lengths, unknown identifiers, random payloads, duplicates, replays of old
 frames and reordered bursts. :func:`fuzz_node` feeds them to a
-:class:`~bench.nodes._nodes.PlantNode` or :class:`~bench.nodes._nodes.ControllerNode`
+:class:`~bench.nodes._plant_node.PlantNode` or :class:`~bench.nodes._controller_node.ControllerNode`
 directly (``on_message``), advancing the node as it would run, with the
 plant's ``step`` wrapped by :class:`StepGuard`, which checks every applied
 duty against an oracle that is independent of the codec: the raw E2E check
@@ -29,7 +29,8 @@ from typing import Any
 import can
 import cantools
 
-from bench.nodes._nodes import ControllerNode, PlantNode
+from bench.nodes._controller_node import ControllerNode
+from bench.nodes._plant_node import PlantNode
 from bench.wire._codec import Codec
 from bench.wire._e2e import crc8_j1850
 from bench.wire._protocol import CMD_DISABLE, CMD_RESET, unwrap

@@ -1,11 +1,13 @@
-"""Plant and controller nodes: the DBC on one side, the pure libraries on the other.
+"""The plant node: the DBC on one side, :class:`plant_rt.Plant` on the other.
+
+The controller node (:mod:`bench.nodes._controller_node`) follows the same rules.
 
 The nodes are written as message-in / messages-out state machines with no I/O
 of their own, so exactly the same code runs
 
-- in-process (``bench._inprocess``: frames passed through a list, for fast
+- in-process (``bench.nodes._loops.run_inprocess``: frames passed through a list, for fast
   tests and as the reference trace), and
-- as OS processes on a python-can bus (``bench._proc``), in lockstep or in
+- as OS processes on a python-can bus (``bench.nodes._loops``), in lockstep or in
   real time.
 
 Step bookkeeping (DESIGN.md, "Timing model"):
@@ -41,24 +43,28 @@ when samples stop (real time).
 from __future__ import annotations
 
 from collections import deque
-from dataclasses import dataclass, field
 
 import can
 
+from bench.nodes._counters import (
+    DUTY_REPEAT_WINDOW,
+    REJECT_FUTURE_COUNTER,
+    REJECT_STALE_COUNTER,
+    REPEATED_COUNTER,
+    CommandQueue,
+    NodeCounters,
+)
 from bench.wire._codec import REJECT_OUT_OF_RANGE, Codec
 from bench.wire._protocol import (
-    CMD_DISABLE,
     CMD_ENABLE,
     CMD_RESET,
     CMD_START,
     CMD_STOP,
-    RPM_PER_RAD_S,
     STATE_FAULT,
     STATE_IDLE,
     STATE_RUNNING,
     unwrap,
 )
-from controller import Controller, ControlOutput, Measurement
 from plant_rt import (
     FAULT_NAMES,
     FAULT_NONE,
@@ -68,145 +74,6 @@ from plant_rt import (
     Protection,
     ProtectionPars,
 )
-
-#: A counter that is older than the receiver accepts (replayed or very late frame).
-REJECT_STALE_COUNTER = "stale_counter"
-#: A counter ahead of anything the sender can have produced yet.
-REJECT_FUTURE_COUNTER = "future_counter"
-#: An exact repeat of an accepted counter: counted, not a rejection (see module doc).
-REPEATED_COUNTER = "repeated_counter"
-#: More pending bench commands than this are refused (a flood of forged frames).
-REJECT_QUEUE_FULL = "queue_full"
-MAX_PENDING_COMMANDS = 4096
-_FAR = 1 << 62
-#: Lockstep: a duty answered from the controller's cache may be this many periods old.
-DUTY_REPEAT_WINDOW = 16
-
-
-@dataclass(slots=True)
-class Command:
-    """A decoded bench command, with its full (unwrapped) step."""
-
-    apply_step: int
-    cmd: int
-    speed_ref_rpm: float
-    load_nm: float
-
-
-@dataclass(slots=True)
-class NodeCounters:
-    """What a node counts; reported in the run's metrics."""
-
-    frames_rejected: int = 0
-    reject_reasons: dict[str, int] = field(default_factory=dict)
-    duplicates: int = 0
-    late_commands: int = 0
-    retransmits: int = 0
-    overruns: int = 0
-    late_duties: int = 0
-    missing_duties: int = 0
-    frames_accepted: int = 0
-    frames_ignored: int = 0
-    frames_unknown: int = 0
-    send_errors: int = 0
-    frames_lost_on_send: int = 0
-
-    def reject(self, reason: str) -> None:
-        """Count a frame that is not used, under ``reason``.
-
-        ``repeated_counter`` goes to ``duplicates`` (and the per-reason
-        counts); every other reason to ``frames_rejected``.
-        """
-        self.reject_reasons[reason] = self.reject_reasons.get(reason, 0) + 1
-        if reason == REPEATED_COUNTER:
-            self.duplicates += 1
-        else:
-            self.frames_rejected += 1
-
-    @property
-    def frames_seen(self) -> int:
-        """Every frame given to the node, whatever became of it."""
-        return (
-            self.frames_accepted
-            + self.frames_rejected
-            + self.duplicates
-            + self.frames_ignored
-            + self.frames_unknown
-        )
-
-    def as_dict(self) -> dict[str, object]:
-        """The counters as a JSON-ready dict (the node reports)."""
-        return {
-            "frames_accepted": self.frames_accepted,
-            "frames_rejected": self.frames_rejected,
-            "reject_reasons": dict(self.reject_reasons),
-            "duplicates": self.duplicates,
-            "frames_ignored": self.frames_ignored,
-            "frames_unknown": self.frames_unknown,
-            "late_commands": self.late_commands,
-            "retransmits": self.retransmits,
-            "overruns": self.overruns,
-            "late_duties": self.late_duties,
-            "send_errors": self.send_errors,
-            "frames_lost_on_send": self.frames_lost_on_send,
-        }
-
-
-class _CommandQueue:
-    """Bench commands ordered by apply step, de-duplicated by apply step and alive counter."""
-
-    def __init__(self, modulus: int) -> None:
-        self.modulus = modulus
-        self.pending: dict[int, Command] = {}
-        self.applied_upto = -1
-        self.recent: deque[tuple[int, int]] = deque(maxlen=64)
-        self.next_step = _FAR
-
-    def add(self, sig: dict[str, float], now: int, counters: NodeCounters) -> int | None:
-        """Queue a command; its unwrapped apply step if it is known now (new or a repeat)."""
-        s = unwrap(int(sig["step"]), now, self.modulus)
-        key = (s, int(sig["seq"]))
-        if key in self.recent:
-            counters.reject(REPEATED_COUNTER)
-            return s
-        if s <= self.applied_upto:
-            if s < self.applied_upto - self.modulus // 4:
-                counters.reject(REJECT_STALE_COUNTER)
-                return None
-            if s in self.pending:
-                counters.reject(REPEATED_COUNTER)
-                return s
-            counters.late_commands += 1
-            # late: in the next period, after any other late command already
-            # waiting there (arrival order, so a newer set-point wins)
-            s = self.applied_upto + 1
-            while s in self.pending:
-                s += 1
-        if s in self.pending:
-            counters.reject(REPEATED_COUNTER)
-            return s
-        if len(self.pending) >= MAX_PENDING_COMMANDS:
-            counters.reject(REJECT_QUEUE_FULL)
-            return None
-        counters.frames_accepted += 1
-        self.recent.append(key)
-        self.next_step = min(self.next_step, s)
-        self.pending[s] = Command(
-            s, int(sig["cmd"]), float(sig["speed_ref"]), float(sig["load_torque"])
-        )
-        return s
-
-    def due(self, step: int) -> list[Command]:
-        if step > self.applied_upto:
-            self.applied_upto = step
-        if not self.pending or self.next_step > step:
-            return []
-        out = [c for s, c in sorted(self.pending.items()) if s <= step]
-        for c in out:
-            del self.pending[c.apply_step]
-        self.next_step = min(self.pending) if self.pending else _FAR
-        return out
-
 
 _SAFE_DUTY = (0.5, 0.5, 0.5, False)
 
@@ -263,7 +130,7 @@ class PlantNode:
         self.duties: dict[int, tuple[float, float, float, bool]] = {}
         self.latest_duty: tuple[float, float, float, bool] = _SAFE_DUTY
         self.latest_duty_step = -1
-        self.commands = _CommandQueue(self.m_cmd)
+        self.commands = CommandQueue(self.m_cmd)
         #: Lockstep pacing (0: off): run period k only once a bench command
         #: for step k or later has arrived. ``bench run`` sends one at least
         #: every this many periods, as far ahead as its recorder has seen, so
@@ -571,172 +438,3 @@ class PlantNode:
     @property
     def done(self) -> bool:
         return self.stopped or (self.n_steps > 0 and self.plant.k >= self.n_steps)
-
-
-class ControllerNode:
-    """The controller behind the DBC: one sample in, one duty (+ telemetry) out.
-
-    Samples are processed strictly in step order; a sample that arrives
-    twice gets the cached answer again (the plant retransmits when a frame
-    was lost), a sample from the future waits for the missing ones.
-
-    Parameters
-    ----------
-    needs_truth : bool
-        The sensored baseline waits for ``PlantTruth`` of the same step.
-    """
-
-    def __init__(self, codec: Codec, controller: Controller, *, needs_truth: bool = False) -> None:
-        self.codec = codec
-        self.ctrl = controller
-        self.needs_truth = needs_truth
-        self.m_step = 1 << codec.step_bits("PhaseSamples")
-        self.m_cmd = 1 << codec.step_bits("BenchCommand")
-        self.m_tel = 1 << codec.step_bits("CtrlTelemetry")
-        self.m_truth = 1 << codec.step_bits("PlantTruth")
-        self.next_k = 0
-        self.samples: dict[int, dict[str, float]] = {}
-        self.truth: dict[int, dict[str, float]] = {}
-        self.answers: dict[int, list[can.Message]] = {}
-        self.commands = _CommandQueue(self.m_cmd)
-        self.counters = NodeCounters()
-        self.stopped = False
-        self.realtime = False
-        #: Valid samples taken (the loop's watchdog watches it move).
-        self.samples_accepted = 0
-        #: Times the PWM was disabled because samples stopped (real time).
-        self.sample_timeouts = 0
-        #: True from a sample timeout until a reset/enable command.
-        self.faulted = False
-
-    def on_message(self, msg: can.Message) -> list[can.Message]:
-        """Take one received frame; return the frames to send. Never raises for any content."""
-        c = self.counters
-        d = self.codec.decode(msg)
-        if d is None:
-            c.frames_unknown += 1
-            return []
-        name = d.name
-        if name not in ("PhaseSamples", "BenchCommand") and not (
-            name == "PlantTruth" and self.needs_truth
-        ):
-            c.frames_ignored += 1
-            return []
-        if d.reason is not None:
-            c.reject(d.reason)
-            return []
-        if name == "BenchCommand":
-            # In both modes a command takes effect at its step (the sample of
-            # that step), as in the plant: the bench sends commands ahead of
-            # time, and applied on arrival a stop would end the controller
-            # (and a set-point change reach it) that much early.
-            self.commands.add(d.signals, self.next_k, c)
-            return []
-        if name == "PhaseSamples":
-            k = unwrap(int(d.signals["step"]), self.next_k, self.m_step)
-            if k < self.next_k:
-                cached = self.answers.get(k)
-                if cached is None:
-                    c.reject(REJECT_STALE_COUNTER)
-                    return []
-                c.reject(REPEATED_COUNTER)
-                return list(cached)
-            if k in self.samples:
-                c.reject(REPEATED_COUNTER)
-                return []
-            c.frames_accepted += 1
-            self.samples_accepted += 1
-            if self.realtime and k > self.next_k:
-                # real time: never wait for the past, skip to the newest sample
-                self.samples = {s: v for s, v in self.samples.items() if s >= k}
-                self.next_k = k
-            self.samples[k] = d.signals
-        else:  # PlantTruth, sensored baseline
-            k = unwrap(int(d.signals["step"]), self.next_k, self.m_truth)
-            if k < self.next_k or k in self.truth:
-                c.reject(REPEATED_COUNTER)
-                return []
-            if k > self.next_k + self.m_step:
-                c.reject(REJECT_FUTURE_COUNTER)
-                return []
-            c.frames_accepted += 1
-            self.truth[k] = d.signals
-        return self._run_ready()
-
-    def sample_timeout(self) -> None:
-        """Samples stopped (real time): disable the PWM until a reset or enable command.
-
-        When the stop command is due with the very sample that did not come
-        (the plant's last one, lost on the way), the run is over: stop.
-        """
-        if any(
-            c.cmd == CMD_STOP and c.apply_step <= self.next_k
-            for c in self.commands.pending.values()
-        ):
-            self.stopped = True
-        if not self.faulted:
-            self.faulted = True
-            self.sample_timeouts += 1
-            self.ctrl.set_enable(False)
-
-    def _apply_commands(self, step: int) -> None:
-        for c in self.commands.due(step):
-            if c.cmd in (CMD_START, CMD_ENABLE, CMD_RESET):
-                self.faulted = False
-                self.ctrl.set_enable(True)
-            elif c.cmd in (CMD_STOP, CMD_DISABLE):
-                self.ctrl.set_enable(False)
-                if c.cmd == CMD_STOP:
-                    self.stopped = True
-            self.ctrl.set_speed_ref(c.speed_ref_rpm / RPM_PER_RAD_S)
-
-    def _run_ready(self) -> list[can.Message]:
-        out: list[can.Message] = []
-        while self.next_k in self.samples and (not self.needs_truth or self.next_k in self.truth):
-            k = self.next_k
-            s = self.samples.pop(k)
-            tr = self.truth.pop(k, None)
-            self._apply_commands(k)
-            theta = w_e = None
-            if tr is not None:
-                theta = float(tr["theta_e"])
-                w_e = float(tr["w_m"]) * self.ctrl.pars.motor.n_p
-            i_a, i_b = float(s["i_a"]), float(s["i_b"])
-            m = Measurement(k, i_a, i_b, -i_a - i_b, float(s["u_dc"]), theta, w_e)
-            o = self.ctrl.step(m)
-            frames = self.encode_output(o)
-            self.answers[k] = frames
-            self.answers.pop(k - 8, None)
-            out.extend(frames)
-            self.next_k = k + 1
-        return out
-
-    def report(self) -> dict[str, object]:
-        """Counters, for the node's JSON report."""
-        out = self.counters.as_dict()
-        out.update(steps=self.next_k, sample_timeouts=self.sample_timeouts)
-        return out
-
-    def encode_output(self, o: ControlOutput) -> list[can.Message]:
-        return [
-            self.codec.encode(
-                "PwmDuty",
-                {
-                    "duty_a": o.d_a,
-                    "duty_b": o.d_b,
-                    "duty_c": o.d_c,
-                    "enable": 1 if o.enable else 0,
-                    "step": (o.k + 1) % self.m_step,
-                },
-            ),
-            self.codec.encode(
-                "CtrlTelemetry",
-                {
-                    "theta_hat": o.theta_hat,
-                    "w_hat": o.w_hat,
-                    "err": o.err,
-                    "mode": o.mode,
-                    "step": o.k % self.m_tel,
-                },
-            ),
-        ]

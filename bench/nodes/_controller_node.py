@@ -1,0 +1,198 @@
+"""The controller node: the DBC on one side, :class:`controller.Controller` on the other.
+
+One sample in, one duty (and telemetry) out, strictly in step order; the
+step bookkeeping and the counters follow the plant node's rules
+(:mod:`bench.nodes._plant_node`).
+"""
+
+from __future__ import annotations
+
+import can
+
+from bench.nodes._counters import (
+    REJECT_FUTURE_COUNTER,
+    REJECT_STALE_COUNTER,
+    REPEATED_COUNTER,
+    CommandQueue,
+    NodeCounters,
+)
+from bench.wire._codec import Codec
+from bench.wire._protocol import (
+    CMD_DISABLE,
+    CMD_ENABLE,
+    CMD_RESET,
+    CMD_START,
+    CMD_STOP,
+    RPM_PER_RAD_S,
+    unwrap,
+)
+from controller import Controller, ControlOutput, Measurement
+
+
+class ControllerNode:
+    """The controller behind the DBC: one sample in, one duty (+ telemetry) out.
+
+    Samples are processed strictly in step order; a sample that arrives
+    twice gets the cached answer again (the plant retransmits when a frame
+    was lost), a sample from the future waits for the missing ones.
+
+    Parameters
+    ----------
+    needs_truth : bool
+        The sensored baseline waits for ``PlantTruth`` of the same step.
+    """
+
+    def __init__(self, codec: Codec, controller: Controller, *, needs_truth: bool = False) -> None:
+        self.codec = codec
+        self.ctrl = controller
+        self.needs_truth = needs_truth
+        self.m_step = 1 << codec.step_bits("PhaseSamples")
+        self.m_cmd = 1 << codec.step_bits("BenchCommand")
+        self.m_tel = 1 << codec.step_bits("CtrlTelemetry")
+        self.m_truth = 1 << codec.step_bits("PlantTruth")
+        self.next_k = 0
+        self.samples: dict[int, dict[str, float]] = {}
+        self.truth: dict[int, dict[str, float]] = {}
+        self.answers: dict[int, list[can.Message]] = {}
+        self.commands = CommandQueue(self.m_cmd)
+        self.counters = NodeCounters()
+        self.stopped = False
+        self.realtime = False
+        #: Valid samples taken (the loop's watchdog watches it move).
+        self.samples_accepted = 0
+        #: Times the PWM was disabled because samples stopped (real time).
+        self.sample_timeouts = 0
+        #: True from a sample timeout until a reset/enable command.
+        self.faulted = False
+
+    def on_message(self, msg: can.Message) -> list[can.Message]:
+        """Take one received frame; return the frames to send. Never raises for any content."""
+        c = self.counters
+        d = self.codec.decode(msg)
+        if d is None:
+            c.frames_unknown += 1
+            return []
+        name = d.name
+        if name not in ("PhaseSamples", "BenchCommand") and not (
+            name == "PlantTruth" and self.needs_truth
+        ):
+            c.frames_ignored += 1
+            return []
+        if d.reason is not None:
+            c.reject(d.reason)
+            return []
+        if name == "BenchCommand":
+            # In both modes a command takes effect at its step (the sample of
+            # that step), as in the plant: the bench sends commands ahead of
+            # time, and applied on arrival a stop would end the controller
+            # (and a set-point change reach it) that much early.
+            self.commands.add(d.signals, self.next_k, c)
+            return []
+        if name == "PhaseSamples":
+            k = unwrap(int(d.signals["step"]), self.next_k, self.m_step)
+            if k < self.next_k:
+                cached = self.answers.get(k)
+                if cached is None:
+                    c.reject(REJECT_STALE_COUNTER)
+                    return []
+                c.reject(REPEATED_COUNTER)
+                return list(cached)
+            if k in self.samples:
+                c.reject(REPEATED_COUNTER)
+                return []
+            c.frames_accepted += 1
+            self.samples_accepted += 1
+            if self.realtime and k > self.next_k:
+                # real time: never wait for the past, skip to the newest sample
+                self.samples = {s: v for s, v in self.samples.items() if s >= k}
+                self.next_k = k
+            self.samples[k] = d.signals
+        else:  # PlantTruth, sensored baseline
+            k = unwrap(int(d.signals["step"]), self.next_k, self.m_truth)
+            if k < self.next_k or k in self.truth:
+                c.reject(REPEATED_COUNTER)
+                return []
+            if k > self.next_k + self.m_step:
+                c.reject(REJECT_FUTURE_COUNTER)
+                return []
+            c.frames_accepted += 1
+            self.truth[k] = d.signals
+        return self._run_ready()
+
+    def sample_timeout(self) -> None:
+        """Samples stopped (real time): disable the PWM until a reset or enable command.
+
+        When the stop command is due with the very sample that did not come
+        (the plant's last one, lost on the way), the run is over: stop.
+        """
+        if any(
+            c.cmd == CMD_STOP and c.apply_step <= self.next_k
+            for c in self.commands.pending.values()
+        ):
+            self.stopped = True
+        if not self.faulted:
+            self.faulted = True
+            self.sample_timeouts += 1
+            self.ctrl.set_enable(False)
+
+    def _apply_commands(self, step: int) -> None:
+        for c in self.commands.due(step):
+            if c.cmd in (CMD_START, CMD_ENABLE, CMD_RESET):
+                self.faulted = False
+                self.ctrl.set_enable(True)
+            elif c.cmd in (CMD_STOP, CMD_DISABLE):
+                self.ctrl.set_enable(False)
+                if c.cmd == CMD_STOP:
+                    self.stopped = True
+            self.ctrl.set_speed_ref(c.speed_ref_rpm / RPM_PER_RAD_S)
+
+    def _run_ready(self) -> list[can.Message]:
+        out: list[can.Message] = []
+        while self.next_k in self.samples and (not self.needs_truth or self.next_k in self.truth):
+            k = self.next_k
+            s = self.samples.pop(k)
+            tr = self.truth.pop(k, None)
+            self._apply_commands(k)
+            theta = w_e = None
+            if tr is not None:
+                theta = float(tr["theta_e"])
+                w_e = float(tr["w_m"]) * self.ctrl.pars.motor.n_p
+            i_a, i_b = float(s["i_a"]), float(s["i_b"])
+            m = Measurement(k, i_a, i_b, -i_a - i_b, float(s["u_dc"]), theta, w_e)
+            o = self.ctrl.step(m)
+            frames = self.encode_output(o)
+            self.answers[k] = frames
+            self.answers.pop(k - 8, None)
+            out.extend(frames)
+            self.next_k = k + 1
+        return out
+
+    def report(self) -> dict[str, object]:
+        """Counters, for the node's JSON report."""
+        out = self.counters.as_dict()
+        out.update(steps=self.next_k, sample_timeouts=self.sample_timeouts)
+        return out
+
+    def encode_output(self, o: ControlOutput) -> list[can.Message]:
+        return [
+            self.codec.encode(
+                "PwmDuty",
+                {
+                    "duty_a": o.d_a,
+                    "duty_b": o.d_b,
+                    "duty_c": o.d_c,
+                    "enable": 1 if o.enable else 0,
+                    "step": (o.k + 1) % self.m_step,
+                },
+            ),
+            self.codec.encode(
+                "CtrlTelemetry",
+                {
+                    "theta_hat": o.theta_hat,
+                    "w_hat": o.w_hat,
+                    "err": o.err,
+                    "mode": o.mode,
+                    "step": o.k % self.m_tel,
+                },
+            ),
+        ]

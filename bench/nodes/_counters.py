@@ -1,0 +1,152 @@
+"""What every node counts, and the bench-command queue both nodes share.
+
+Every frame a node receives ends in exactly one of its counters (see
+:mod:`bench.nodes._plant_node`): accepted, rejected with a reason, repeated,
+ignored or unknown.  Bench commands are queued by the step they apply at
+(:class:`CommandQueue`), so they may arrive early and in any order.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass, field
+
+from bench.wire._protocol import unwrap
+
+#: A counter that is older than the receiver accepts (replayed or very late frame).
+REJECT_STALE_COUNTER = "stale_counter"
+#: A counter ahead of anything the sender can have produced yet.
+REJECT_FUTURE_COUNTER = "future_counter"
+#: An exact repeat of an accepted counter: counted, not a rejection (see module doc).
+REPEATED_COUNTER = "repeated_counter"
+#: More pending bench commands than this are refused (a flood of forged frames).
+REJECT_QUEUE_FULL = "queue_full"
+MAX_PENDING_COMMANDS = 4096
+_FAR = 1 << 62
+#: Lockstep: a duty answered from the controller's cache may be this many periods old.
+DUTY_REPEAT_WINDOW = 16
+
+
+@dataclass(slots=True)
+class Command:
+    """A decoded bench command, with its full (unwrapped) step."""
+
+    apply_step: int
+    cmd: int
+    speed_ref_rpm: float
+    load_nm: float
+
+
+@dataclass(slots=True)
+class NodeCounters:
+    """What a node counts; reported in the run's metrics."""
+
+    frames_rejected: int = 0
+    reject_reasons: dict[str, int] = field(default_factory=dict)
+    duplicates: int = 0
+    late_commands: int = 0
+    retransmits: int = 0
+    overruns: int = 0
+    late_duties: int = 0
+    missing_duties: int = 0
+    frames_accepted: int = 0
+    frames_ignored: int = 0
+    frames_unknown: int = 0
+    send_errors: int = 0
+    frames_lost_on_send: int = 0
+
+    def reject(self, reason: str) -> None:
+        """Count a frame that is not used, under ``reason``.
+
+        ``repeated_counter`` goes to ``duplicates`` (and the per-reason
+        counts); every other reason to ``frames_rejected``.
+        """
+        self.reject_reasons[reason] = self.reject_reasons.get(reason, 0) + 1
+        if reason == REPEATED_COUNTER:
+            self.duplicates += 1
+        else:
+            self.frames_rejected += 1
+
+    @property
+    def frames_seen(self) -> int:
+        """Every frame given to the node, whatever became of it."""
+        return (
+            self.frames_accepted
+            + self.frames_rejected
+            + self.duplicates
+            + self.frames_ignored
+            + self.frames_unknown
+        )
+
+    def as_dict(self) -> dict[str, object]:
+        """The counters as a JSON-ready dict (the node reports)."""
+        return {
+            "frames_accepted": self.frames_accepted,
+            "frames_rejected": self.frames_rejected,
+            "reject_reasons": dict(self.reject_reasons),
+            "duplicates": self.duplicates,
+            "frames_ignored": self.frames_ignored,
+            "frames_unknown": self.frames_unknown,
+            "late_commands": self.late_commands,
+            "retransmits": self.retransmits,
+            "overruns": self.overruns,
+            "late_duties": self.late_duties,
+            "send_errors": self.send_errors,
+            "frames_lost_on_send": self.frames_lost_on_send,
+        }
+
+
+class CommandQueue:
+    """Bench commands ordered by apply step, de-duplicated by apply step and alive counter."""
+
+    def __init__(self, modulus: int) -> None:
+        self.modulus = modulus
+        self.pending: dict[int, Command] = {}
+        self.applied_upto = -1
+        self.recent: deque[tuple[int, int]] = deque(maxlen=64)
+        self.next_step = _FAR
+
+    def add(self, sig: dict[str, float], now: int, counters: NodeCounters) -> int | None:
+        """Queue a command; its unwrapped apply step if it is known now (new or a repeat)."""
+        s = unwrap(int(sig["step"]), now, self.modulus)
+        key = (s, int(sig["seq"]))
+        if key in self.recent:
+            counters.reject(REPEATED_COUNTER)
+            return s
+        if s <= self.applied_upto:
+            if s < self.applied_upto - self.modulus // 4:
+                counters.reject(REJECT_STALE_COUNTER)
+                return None
+            if s in self.pending:
+                counters.reject(REPEATED_COUNTER)
+                return s
+            counters.late_commands += 1
+            # late: in the next period, after any other late command already
+            # waiting there (arrival order, so a newer set-point wins)
+            s = self.applied_upto + 1
+            while s in self.pending:
+                s += 1
+        if s in self.pending:
+            counters.reject(REPEATED_COUNTER)
+            return s
+        if len(self.pending) >= MAX_PENDING_COMMANDS:
+            counters.reject(REJECT_QUEUE_FULL)
+            return None
+        counters.frames_accepted += 1
+        self.recent.append(key)
+        self.next_step = min(self.next_step, s)
+        self.pending[s] = Command(
+            s, int(sig["cmd"]), float(sig["speed_ref"]), float(sig["load_torque"])
+        )
+        return s
+
+    def due(self, step: int) -> list[Command]:
+        if step > self.applied_upto:
+            self.applied_upto = step
+        if not self.pending or self.next_step > step:
+            return []
+        out = [c for s, c in sorted(self.pending.items()) if s <= step]
+        for c in out:
+            del self.pending[c.apply_step]
+        self.next_step = min(self.pending) if self.pending else _FAR
+        return out
