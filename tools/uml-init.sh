@@ -38,6 +38,13 @@ mount -t tmpfs -o mode=1777 shm /dev/shm || fail "mount tmpfs on /dev/shm"
 mount -t devpts -o gid=5,mode=620,ptmxmode=666 devpts /dev/pts || fail "mount -t devpts"
 mount -t tmpfs -o mode=1777 tmp "$WORK/tmp" || fail "mount tmpfs on $WORK/tmp"
 export TMPDIR=$WORK/tmp
+# No AVX-512 in the tests' processes: on a host with AVX-512 or AMX, UML switches
+# only the x87/SSE/AVX state between the threads of one process (see
+# tools/uml-xstate-shim.c), so glibc's string functions, numpy's kernels and
+# OpenBLAS are kept to AVX2, whose state UML does switch.
+export GLIBC_TUNABLES=glibc.cpu.hwcaps=-AVX512F,-AVX512VL,-AVX512BW,-AVX512CD,-AVX512DQ
+export NPY_DISABLE_CPU_FEATURES="X86_V4 AVX512_ICL AVX512_SPR"
+export OPENBLAS_CORETYPE=Haswell
 
 # SocketCAN: the CAN core, raw and broadcast-manager sockets, then can-dev and vcan.
 M=/usr/lib/uml/modules/$(uname -r)/kernel
