@@ -5,12 +5,39 @@ Deadline ``n`` is ``t_0 + n T_s`` with ``t_0`` taken from
 accumulated, so the schedule does not drift. Waiting is hybrid: sleep until
 ``spin`` seconds before the deadline (the OS wakes threads late by tens to
 hundreds of microseconds), then busy-wait on ``perf_counter``.
+
+Late periods and host stalls (the policy).  A caller that finds its deadline
+passed by at most ``stall_s`` catches up: the schedule stays absolute and the
+next periods run back to back (each counted as an overrun, late).  A caller
+late by more than ``stall_s`` met a stall of the host (a descheduled virtual
+machine, a page-in): catching up would run a burst of hundreds of
+back-to-back periods, each late, for as long again as the stall lasted, and
+send the controller under test that burst.  The clock resynchronises instead:
+the deadlines that passed during the stall are skipped (no period is
+computed for them; they are counted as ``skipped``, not hidden), the
+schedule moves forward by whole periods, and the stall is counted apart
+(number, total and longest), so that the late-period figure measures the
+bench and the stall figures the host.  The default ``stall_s`` is
+:data:`STALL_MIN_S` or :data:`STALL_PERIODS` periods, whichever is longer:
+above the worst wake-up latency of a general-purpose kernel under load
+(``bench rtcheck`` measures it; docs/REALTIME.md), so that ordinary
+lateness is caught up and only a stall resynchronises.
 """
 
 from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+
+#: A wake-up later than this (s) is a stall of the host, at least (see the module doc).
+STALL_MIN_S = 2e-3
+#: ... and never less than this many periods.
+STALL_PERIODS = 4
+
+
+def default_stall_s(T_s: float) -> float:
+    """The lateness (s) above which a wake-up counts as a host stall at period ``T_s``."""
+    return max(STALL_MIN_S, STALL_PERIODS * T_s)
 
 
 @dataclass(frozen=True, slots=True)
@@ -29,6 +56,14 @@ class JitterStats:
         The caller's work per period (s): from one wake-up to the next call
         of :meth:`RealTimeClock.wait` (RT-LAB's "computation time").  Above
         ``T_s`` the schedule cannot be kept whatever the scheduler does.
+    stalls : int
+        Wake-ups later than the stall threshold (host stalls); each
+        resynchronised the schedule.
+    stall_total, stall_max : float
+        Total and longest stall (s): how late those wake-ups were.
+    skipped : int
+        Periods skipped by the resynchronisations (deadlines that passed
+        during a stall; missed periods, not computed).
     """
 
     n: int
@@ -39,6 +74,10 @@ class JitterStats:
     busy_median: float = 0.0
     busy_p99: float = 0.0
     busy_max: float = 0.0
+    stalls: int = 0
+    stall_total: float = 0.0
+    stall_max: float = 0.0
+    skipped: int = 0
 
 
 class RealTimeClock:
@@ -52,6 +91,10 @@ class RealTimeClock:
         Busy-wait margin before each deadline (s).
     keep : int, optional
         Number of most recent lateness values kept for the statistics.
+    stall_s : float, optional
+        A wake-up later than this is a host stall and resynchronises the
+        schedule (default :func:`default_stall_s`); ``math.inf``: always
+        catch up.
 
     Examples
     --------
@@ -61,10 +104,15 @@ class RealTimeClock:
     ...     lateness = clock.wait()  # returns at deadline 1, 2, 3
     """
 
-    def __init__(self, T_s: float, spin: float = 200e-6, keep: int = 100_000) -> None:
+    def __init__(
+        self, T_s: float, spin: float = 200e-6, keep: int = 100_000, stall_s: float | None = None
+    ) -> None:
         if not T_s > 0.0:
             raise ValueError(f"T_s must be > 0, got {T_s}")
         self.T_s = float(T_s)
+        self.stall_s = default_stall_s(self.T_s) if stall_s is None else float(stall_s)
+        if not self.stall_s > 0.0:
+            raise ValueError(f"stall_s must be > 0, got {stall_s}")
         self.spin = float(spin)
         self.keep = int(keep)
         self.overruns = 0
@@ -74,6 +122,10 @@ class RealTimeClock:
         self._late_max = 0.0
         self._busy: list[float] = []
         self._woke = 0.0
+        self.stalls = 0
+        self.stall_total = 0.0
+        self.stall_max = 0.0
+        self.skipped = 0
 
     def start(self, t0: float | None = None) -> None:
         """Start the schedule at ``t0`` (default: now); deadline ``n`` is ``t0 + n T_s``."""
@@ -84,6 +136,10 @@ class RealTimeClock:
         self._late_max = 0.0
         self._busy = []
         self._woke = self._t0
+        self.stalls = 0
+        self.stall_total = 0.0
+        self.stall_max = 0.0
+        self.skipped = 0
 
     @property
     def next_deadline(self) -> float:
@@ -96,9 +152,12 @@ class RealTimeClock:
     def wait(self) -> float:
         """Wait until the next deadline and return how late the wake-up was (s).
 
-        If the deadline has already passed, return at once and count an
-        overrun; the schedule stays absolute, so later deadlines are not
-        shifted (the caller catches up).
+        If the deadline has passed by at most ``stall_s``, return at once and
+        count an overrun; the schedule stays absolute, so later deadlines are
+        not shifted (the caller catches up).  If it has passed by more, the
+        host stalled: count the stall, skip the whole periods that passed
+        and move the schedule forward by them (the module doc gives the
+        reasons); the lateness returned and kept is that of the stall.
         """
         deadline = self.next_deadline
         now = time.perf_counter()
@@ -108,6 +167,16 @@ class RealTimeClock:
             del busy[: len(busy) - self.keep]
         if now > deadline:
             self.overruns += 1
+            behind = now - deadline
+            if behind > self.stall_s:
+                skip = int(behind / self.T_s)
+                assert self._t0 is not None
+                self._t0 += skip * self.T_s
+                self.skipped += skip
+                self.stalls += 1
+                self.stall_total += behind
+                if behind > self.stall_max:
+                    self.stall_max = behind
         else:
             pause = deadline - now - self.spin
             if pause > 0.0:
@@ -140,7 +209,18 @@ class RealTimeClock:
         busy = sorted(self._busy[-self.keep :])
         b_med, b_p99 = _median_p99(busy)
         return JitterStats(
-            self.n, median, p99, self._late_max, self.overruns, b_med, b_p99, busy[-1]
+            self.n,
+            median,
+            p99,
+            self._late_max,
+            self.overruns,
+            b_med,
+            b_p99,
+            busy[-1],
+            self.stalls,
+            self.stall_total,
+            self.stall_max,
+            self.skipped,
         )
 
 

@@ -2,14 +2,18 @@
 
 from __future__ import annotations
 
+import math
 import time
 
+import pytest
+
 from plant_rt import RealTimeClock
+from plant_rt._clock import STALL_MIN_S, STALL_PERIODS, default_stall_s
 
 
 def test_clock_counts_overruns_when_caller_is_late() -> None:
     T_s = 1e-3
-    clock = RealTimeClock(T_s)
+    clock = RealTimeClock(T_s, stall_s=math.inf)  # always catch up
     t0 = time.perf_counter()
     clock.start(t0)
     for _ in range(5):
@@ -39,3 +43,45 @@ def test_clock_restart_resets() -> None:
     clock.wait()
     clock.start()
     assert (clock.n, clock.overruns, clock.stats().n) == (0, 0, 0)
+
+
+def test_a_stall_resynchronises_the_schedule_and_is_counted_apart() -> None:
+    T_s = 1e-3
+    clock = RealTimeClock(T_s, stall_s=5e-3)
+    t0 = time.perf_counter()
+    clock.start(t0)
+    for _ in range(3):
+        clock.wait()
+    # counted from here: a loaded machine may have stalled the first waits too
+    stalls, skipped, total = clock.stalls, clock.skipped, clock.stall_total
+    time.sleep(0.03)  # a 30 ms stall of the "host"
+    clock.wait()
+    st = clock.stats()
+    assert st.stalls == clock.stalls == stalls + 1
+    behind = st.stall_total - total
+    assert behind >= 0.03 - 3 * T_s and st.stall_max >= behind
+    # the deadlines that passed are skipped, whole periods, and counted
+    assert st.skipped == clock.skipped == skipped + int(behind / T_s)
+    assert int(behind / T_s) >= 26
+    # the schedule moved forward by exactly those periods: no catch-up burst
+    assert clock.next_deadline == pytest.approx(t0 + (clock.n + 1 + st.skipped) * T_s, abs=1e-9)
+    assert clock.next_deadline > t0 + 0.03
+
+
+def test_lateness_below_the_stall_threshold_is_caught_up() -> None:
+    T_s = 1e-3
+    clock = RealTimeClock(T_s, stall_s=1.0)
+    t0 = time.perf_counter()
+    clock.start(t0)
+    time.sleep(0.006)
+    clock.wait()
+    assert (clock.stalls, clock.skipped) == (0, 0)
+    assert clock.next_deadline == pytest.approx(t0 + (clock.n + 1) * T_s, abs=1e-12)
+
+
+def test_the_default_stall_threshold() -> None:
+    assert default_stall_s(1e-4) == STALL_MIN_S  # 10 kHz: 2 ms, 20 periods
+    assert default_stall_s(1e-3) == STALL_PERIODS * 1e-3  # 1 kHz: 4 periods
+    assert RealTimeClock(1e-3).stall_s == default_stall_s(1e-3)
+    with pytest.raises(ValueError):
+        RealTimeClock(1e-3, stall_s=0.0)

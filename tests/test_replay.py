@@ -83,7 +83,10 @@ def test_replay_on_virtual_bus_keeps_frames_order_and_timing(
     # one, the stamps follow the capture's (stretched) time line
     want = (np.array([m.timestamp for m in chosen]) - chosen[0].timestamp) / speed
     rel = np.array([m.timestamp for m in got]) - got[0].timestamp
-    assert res.error_worst_us >= res.error_median_us >= -1.0
+    # python-can's MessageSync does not sleep for less than 100 us, so it sends
+    # up to 100 us early by design; the deadline clock never sends early
+    early_us = 1.0 if clock == "deadline" else 100.0
+    assert res.error_worst_us >= res.error_median_us >= -early_us
     _keeps_the_time_line(rel, want, 2e-3)
     # and the replay took the capture's time, not less (frames were not just dumped)
     assert res.wall_s >= 0.99 * want[-1]

@@ -134,6 +134,10 @@ def test_realtime_run_records_what_the_nodes_were_granted(tmp_path: Path) -> Non
         assert (reps["plant"]["rt"]["priority"], reps["controller"]["rt"]["priority"]) == (30, 29)
     m = json.loads((out / "metrics.json").read_text())
     assert m["jitter_us"]["busy_median"] > 0
+    # host stalls are counted apart from the late periods (none is an error here)
+    assert m["host_stalls"] >= 0 and m["periods_skipped"] >= 0
+    assert m["host_stall_ms_max"] >= 0.0
+    assert (m["periods_skipped"] > 0) == (m["host_stalls"] > 0)
 
 
 def test_a_realtime_run_that_did_not_keep_time_gets_a_warning() -> None:
@@ -146,6 +150,10 @@ def test_a_realtime_run_that_did_not_keep_time_gets_a_warning() -> None:
     line = realtime_warning(bad)
     assert line is not None and "\n" not in line
     assert "8.1 % of periods ran with a late duty" in line and "114.0 ms" in line
+    assert "stall" not in line
+    stalled = {**bad, "host_stalls": 2, "host_stall_ms_max": 114.0, "periods_skipped": 150}
+    line = realtime_warning(stalled)
+    assert line is not None and "2 host stalls (longest 114.0 ms, 150 periods skipped)" in line
 
 
 def test_the_paper_column_names_the_method_its_numbers_belong_to() -> None:

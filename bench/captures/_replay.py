@@ -611,12 +611,14 @@ def replay_frames(
                     yield can.Message(timestamp=base_ts + j * period + offs[i], check=False)
                 j += 1
 
-        t_start = perf()
+        # MessageSync takes its time origin when its first frame is asked for:
+        # the same instant here, not when that frame is handed over (on a busy
+        # machine later, which would make every later frame look early)
         i = 0
-        for stamp in can.MessageSync(timed(), timestamps=True, skip=math.inf):
+        sync = iter(can.MessageSync(timed(), timestamps=True, skip=math.inf))
+        t_start = perf()
+        for stamp in sync:
             now = perf()
-            if i == 0:
-                t_start = now
             target = t_start + (stamp.timestamp - frames[0].timestamp)
             errors.append(now - target)
             sent_at.append(now)

@@ -245,8 +245,9 @@ def _serve_realtime(
 
     Each instant's frames leave at that instant (the deadline), so the
     controller has one period to answer, as in a drive; the plant then runs
-    the period with the newest duty meant for it.  The clock's overruns and
-    jitter statistics go to the node's report.
+    the period with the newest duty meant for it.  A host stall resynchronises
+    the clock instead of a catch-up burst (:class:`plant_rt.RealTimeClock`).
+    The clock's overruns, stalls and jitter statistics go to the node's report.
     """
     clock = RealTimeClock(node.plant.T_s)
     with no_gc():
@@ -269,6 +270,10 @@ def _serve_realtime(
         "busy_median": 1e6 * st.busy_median,
         "busy_p99": 1e6 * st.busy_p99,
         "busy_max": 1e6 * st.busy_max,
+        "stalls": float(st.stalls),
+        "stall_total": 1e6 * st.stall_total,
+        "stall_max": 1e6 * st.stall_max,
+        "skipped": float(st.skipped),
     }
 
 

@@ -1,9 +1,11 @@
 """Encoding and decoding of the bench's frames with the DBC.
 
 One :class:`Codec` wraps one cantools database. Signals cross it as physical
-values (``dict`` of name to number); bytes are packed and unpacked only by
-cantools, from the DBC's scalings. On top of cantools the codec adds what the
-wire contract (``dbc/bench.dbc``) asks for:
+values (``dict`` of name to number); bytes are packed and unpacked from the
+DBC's scalings by functions compiled from the DBC when it is loaded
+(:mod:`bench.wire._hotcodec`) and checked there to give cantools' bytes and
+values exactly (cantools itself packs any message they do not handle). On
+top of that the codec adds what the wire contract (``dbc/bench.dbc``) asks for:
 
 - the E2E CRC (CRC-8 SAE J1850 with the message's ``E2EDataId``, see
   :mod:`bench.wire._e2e`) is filled in on encode and checked on decode;
@@ -34,6 +36,7 @@ from cantools.database.can import Database, Message
 
 from bench._errors import DbcError
 from bench.wire._e2e import CRC8_J1850_TABLE, e2e_crc, e2e_start
+from bench.wire._hotcodec import agrees_with_cantools, compile_message
 
 __all__ = [
     "REJECT_BAD_CRC",
@@ -147,6 +150,7 @@ class _Spec:
         "length",
         "message",
         "name",
+        "pack",
         "sigs",
         "step_bits",
         "unpack",
@@ -202,7 +206,17 @@ class _Spec:
         self.checked: tuple[tuple[str, float, float], ...] = tuple(checked)
         names = {s.name for s in sigs}
         self.derive_i_c = message.name == "PhaseSamples" and {"i_a", "i_b"} <= names
-        self.unpack = _make_unpack(message)
+        compiled = compile_message(message)
+        if compiled is not None and agrees_with_cantools(message, compiled):
+            self.pack: Callable[[Mapping[str, float]], bytearray] = compiled.pack
+            self.unpack: Callable[[bytes | bytearray], dict[str, float]] = compiled.unpack
+        else:
+            self.pack = functools.partial(_cantools_pack, message)
+            self.unpack = _make_unpack(message)
+
+
+def _cantools_pack(message: Message, values: Mapping[str, float]) -> bytearray:
+    return bytearray(message.encode(dict(values), strict=False))
 
 
 def _make_unpack(message: Message) -> Callable[[bytes | bytearray], dict[str, float]]:
@@ -376,10 +390,10 @@ class Codec:
             values[sig.name] = v
         if spec.crc_index >= 0:
             values[_CRC_SIGNAL] = 0
-            data = bytearray(spec.message.encode(values, strict=False))
+            data = spec.pack(values)
             data[spec.crc_index] = e2e_crc(spec.e2e_start, data, spec.crc_index)
         else:
-            data = bytearray(spec.message.encode(values, strict=False))
+            data = spec.pack(values)
         return can.Message(
             arbitration_id=spec.frame_id,
             is_extended_id=spec.is_extended,
