@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test lint unit vcan suite perf clean
+.PHONY: demo test lint unit vcan suite perf rtcheck clean
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/pip || tools/make-venv $(PYTHON) $(VENV)
@@ -36,6 +36,9 @@ suite: $(STAMP)
 
 perf: $(STAMP)
 	$(BIN)/bench perf --out docs/perf
+
+rtcheck: $(STAMP)
+	$(BIN)/bench rtcheck --out docs/realtime --doc docs/REALTIME.md
 
 clean:
 	rm -rf $(VENV) runs .pytest_cache .mypy_cache .ruff_cache

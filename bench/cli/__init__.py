@@ -34,6 +34,7 @@ SUBCOMMANDS = (
     "rerun",
     "codegen",
     "perf",
+    "rtcheck",
     "soak",
 )
 

@@ -133,13 +133,16 @@ def command_frames(
     return out
 
 
-def run_inprocess(scn: Scenario, estimator: str, codec: Codec) -> list[can.Message]:
+def run_inprocess(
+    scn: Scenario, estimator: str, codec: Codec, *, plant_times: list[float] | None = None
+) -> list[can.Message]:
     """Run a scenario in lockstep in this process; return every frame in wire order.
 
     The frames are the same objects the CAN nodes would send (same DBC
     encoding, so the same quantization), passed by hand; injected lockstep
     latency goes through the same :class:`~bench.nodes._link.LockstepLink` logic
-    the link process runs.
+    the link process runs.  ``plant_times`` (when given) gets the plant node's
+    computation of every period (s): the plant step and its frames encoded.
     """
     from bench.nodes._link import LockstepLink
 
@@ -184,7 +187,12 @@ def run_inprocess(scn: Scenario, estimator: str, codec: Codec) -> list[can.Messa
             break
         if not pn.ready():
             raise RuntimeError(f"in-process loop stalled at step {pn.plant.k}")
-        out = pn.advance_lockstep()
+        if plant_times is None:
+            out = pn.advance_lockstep()
+        else:
+            t0 = time.perf_counter()
+            out = pn.advance_lockstep()
+            plant_times.append(time.perf_counter() - t0)
     return frames
 
 

@@ -1,0 +1,252 @@
+"""``bench rtcheck``: what real time this host can keep, measured before a run finds out.
+
+Two measurements, then a verdict per PWM rate:
+
+- Wake-up latency, as ``cyclictest`` measures it: a process sleeps to
+  absolute deadlines (:class:`plant_rt.RealTimeClock`, the plant's own clock)
+  at the period of each rate, doing no work, for ``seconds``; the lateness
+  of every wake-up is kept (median, p99, p99.9, max), and host stalls
+  (wake-ups later than the clock's stall threshold) are counted.  Once with
+  normal scheduling and once under ``SCHED_FIFO`` with memory locked
+  (``--rt-priority``; refused without root or ``CAP_SYS_NICE``, which the
+  result says).  Each runs in a process of its own, as a node would.
+- The plant's computation per period: the plant node of ``wen-5.1`` (the
+  plant step, its sample and truth frames encoded) run in-process against
+  the project's controller, timed per period (median and p99), in the same
+  process and under the same scheduling as the wake-ups; plus the cost of
+  sending one period's frames (``PhaseSamples`` and ``PlantTruth``) on the
+  default transport, medians and p99s added.
+
+Verdict per rate and setting, with ``T`` the period, ``c`` the plant's
+computation and ``w`` the wake-up latency: ``yes`` when the p99s fit,
+``c_p99 + w_p99 <= 0.8 T`` (20 % left for receiving the duty and the
+controller's share of the machine); ``marginal`` when only the medians fit,
+``c_med + w_med <= T`` (most periods on time, some late); ``no`` otherwise.
+"""
+
+from __future__ import annotations
+
+import multiprocessing as mp
+import time
+from dataclasses import asdict, dataclass
+from typing import Any
+
+#: Share of the period the p99 computation and wake-up latency may use for ``yes``.
+MARGIN = 0.8
+#: The SCHED_FIFO priority the check asks for (the plant's in ``bench run --rt-priority 80``).
+FIFO_PRIORITY = 80
+
+
+@dataclass(frozen=True, slots=True)
+class Latency:
+    """Wake-up lateness at one period (us), and the host stalls seen."""
+
+    period_us: float
+    n: int
+    median: float
+    p99: float
+    p999: float
+    max: float
+    stalls: int
+    granted: bool
+    refused: tuple[str, ...]
+    compute_median: float
+    compute_p99: float
+
+
+def _quantile(xs: list[float], q: float) -> float:
+    return xs[min(len(xs) - 1, int(q * (len(xs) - 1) + 0.5))]
+
+
+def _measure_wakeups(T_s: float, seconds: float, fifo: bool, out: Any) -> None:
+    """Child process: sleep to absolute deadlines for ``seconds``; the lateness to ``out``."""
+    from bench.nodes._rt import apply_rt, no_gc
+    from plant_rt import RealTimeClock
+
+    rt = apply_rt(FIFO_PRIORITY if fifo else None, None, role="rtcheck")
+    compute = plant_compute_us()
+    send = send_cost_us()
+    compute = {k: compute[k] + send[k] for k in ("median", "p99")}
+    clock = RealTimeClock(T_s)
+    late: list[float] = []
+    with no_gc():
+        clock.start()
+        t_end = time.perf_counter() + seconds
+        while time.perf_counter() < t_end:
+            late.append(clock.wait())
+    late.sort()
+    out.put(
+        Latency(
+            period_us=1e6 * T_s,
+            n=len(late),
+            median=1e6 * _quantile(late, 0.5),
+            p99=1e6 * _quantile(late, 0.99),
+            p999=1e6 * _quantile(late, 0.999),
+            max=1e6 * late[-1],
+            stalls=clock.stalls,
+            granted=not (fifo and rt.refused),
+            refused=tuple(rt.refused),
+            compute_median=compute["median"],
+            compute_p99=compute["p99"],
+        )
+    )
+
+
+def wakeup_latency(T_s: float, seconds: float, *, fifo: bool) -> Latency:
+    """Wake-up latency of a fresh process at period ``T_s`` (normal or ``SCHED_FIFO``)."""
+    ctx = mp.get_context("spawn")
+    q = ctx.Queue()
+    p = ctx.Process(target=_measure_wakeups, args=(T_s, seconds, fifo, q))
+    p.start()
+    try:
+        res: Latency = q.get(timeout=seconds + 60.0)
+    finally:
+        p.join(timeout=10.0)
+    return res
+
+
+def plant_compute_us(periods: int = 4000) -> dict[str, float]:
+    """The plant node's computation per period (us): median and p99 over ``periods``."""
+    from bench.nodes._loops import run_inprocess
+    from bench.scenarios._schema import load_scenario
+    from bench.scenarios._setup import sample_period
+    from bench.wire._codec import Codec
+
+    scn = load_scenario("wen-5.1")
+    scn = scn.with_overrides(duration=periods * sample_period(scn))
+    times: list[float] = []
+    run_inprocess(scn, "tt-dq", Codec(), plant_times=times)
+    times = sorted(times[len(times) // 10 :])  # the start-up's first periods left out
+    return {
+        "periods": float(len(times)),
+        "median": 1e6 * _quantile(times, 0.5),
+        "p99": 1e6 * _quantile(times, 0.99),
+    }
+
+
+def send_cost_us(periods: int = 2000) -> dict[str, float]:
+    """Sending one period's plant frames on the default transport (us): median and p99."""
+    import os
+    import random
+
+    from bench.wire._bus import BusSpec, default_transport
+    from bench.wire._codec import Codec
+
+    iface, chan, _ = default_transport()
+    port = (
+        44000 + 2 * random.Random(os.getpid()).randrange(5000) if iface == "udp_multicast" else None
+    )
+    codec = Codec()
+    frames = [
+        codec.encode(
+            "PhaseSamples", {"i_a": 1.0, "i_b": -0.5, "u_dc": 540.0, "status": 1, "step": 3}
+        ),
+        codec.encode(
+            "PlantTruth",
+            {"theta_e": 1.0, "w_m": 10.0, "tau_e": 1.0, "tau_L": 0.5, "step": 3, "duty_age": 1},
+        ),
+    ]
+    bus = BusSpec(iface, chan, port).open()
+    times: list[float] = []
+    try:
+        for _ in range(periods):
+            t0 = time.perf_counter()
+            for f in frames:
+                bus.send(f)
+            times.append(time.perf_counter() - t0)
+    finally:
+        bus.shutdown()
+    times.sort()
+    return {"median": 1e6 * _quantile(times, 0.5), "p99": 1e6 * _quantile(times, 0.99)}
+
+
+def verdict(T_us: float, lat: Latency) -> str:
+    """``yes``, ``marginal`` or ``no`` (module doc)."""
+    if lat.compute_p99 + lat.p99 <= MARGIN * T_us:
+        return "yes"
+    if lat.compute_median + lat.median <= T_us:
+        return "marginal"
+    return "no"
+
+
+def run_rtcheck(rates_hz: list[float], seconds: float) -> dict[str, Any]:
+    """Measure and judge every rate, normal and ``SCHED_FIFO``; the result as JSON data."""
+    out: dict[str, Any] = {"seconds": seconds, "rates": {}}
+    for rate in rates_hz:
+        T_s = 1.0 / rate
+        row: dict[str, Any] = {}
+        for setting, fifo in (("normal", False), ("sched_fifo", True)):
+            lat = wakeup_latency(T_s, seconds, fifo=fifo)
+            row[setting] = {
+                **asdict(lat),
+                "refused": list(lat.refused),
+                "verdict": verdict(1e6 * T_s, lat) if lat.granted else "not granted",
+            }
+        out["rates"][f"{rate:g}"] = row
+    return out
+
+
+def _by_rate(res: dict[str, Any]) -> list[tuple[str, dict[str, Any]]]:
+    """The rates in numeric order (a JSON file keeps them sorted as text)."""
+    return sorted(res["rates"].items(), key=lambda kv: float(kv[0]))
+
+
+def format_rtcheck(res: dict[str, Any]) -> str:
+    """The measurements as a table, and which rates this host sustains with which setting."""
+    lines = [
+        f"{'rate':>8} {'setting':<11} {'plant compute median':>21} {'p99':>8} "
+        f"{'wake-up median':>15} {'p99':>8} {'p99.9':>8} {'max':>9} {'stalls':>7}  verdict",
+    ]
+    for rate, row in _by_rate(res):
+        for setting, r in row.items():
+            lines.append(
+                f"{rate + ' Hz':>8} {setting:<11} {r['compute_median']:>18.1f} us "
+                f"{r['compute_p99']:>8.1f} {r['median']:>12.1f} us {r['p99']:>8.1f} "
+                f"{r['p999']:>8.1f} {r['max'] / 1e3:>6.1f} ms {r['stalls']:>7}  {r['verdict']}"
+            )
+    ok = [
+        f"{rate} Hz ({setting})"
+        for rate, row in _by_rate(res)
+        for setting, r in row.items()
+        if r["verdict"] == "yes"
+    ]
+    lines += ["", "sustained: " + (", ".join(ok) if ok else "none of the rates checked")]
+    refused = {
+        w for row in res["rates"].values() for w in row.get("sched_fifo", {}).get("refused", [])
+    }
+    if refused:
+        lines.append("SCHED_FIFO refused: " + "; ".join(sorted(refused)))
+    return "\n".join(lines)
+
+
+#: The markers of the measured block in docs/REALTIME.md.
+DOC_BEGIN = "<!-- rtcheck:begin (written by bench rtcheck --doc; do not edit) -->"
+DOC_END = "<!-- rtcheck:end -->"
+
+
+def render_doc_block(res: dict[str, Any]) -> str:
+    """The measured block of docs/REALTIME.md, from ``rtcheck.json``."""
+    return "\n".join(
+        [
+            DOC_BEGIN,
+            "",
+            f"`bench rtcheck --seconds {res['seconds']:g}` on this project's 2-core shared "
+            "virtual machine (every figure below is from `docs/realtime/rtcheck.json`):",
+            "",
+            "```",
+            format_rtcheck(res),
+            "```",
+            "",
+            DOC_END,
+        ]
+    )
+
+
+def update_doc(doc: str, res: dict[str, Any]) -> str:
+    """``doc`` with its measured block replaced (appended when it has none)."""
+    block = render_doc_block(res)
+    if DOC_BEGIN in doc and DOC_END in doc:
+        head, _, rest = doc.partition(DOC_BEGIN)
+        _, _, tail = rest.partition(DOC_END)
+        return head + block + tail
+    return doc.rstrip() + "\n\n" + block + "\n"
