@@ -399,3 +399,20 @@ def test_without_a_terminal_one_line_error() -> None:
     )
     assert out.returncode == 2
     assert out.stderr == "bench: error: monitor: needs a terminal (standard input and output)\n"
+
+
+def test_periods_not_received_from_gaps_in_the_step_counter(codec: Codec) -> None:
+    """Steps 1-3, 7, 8 (4-6 never came), a retransmitted 5, a repeated 8, a wrap past 1023."""
+    model = MonitorModel(codec)
+    t = 0.0
+    for k in (1, 2, 3, 7, 5, 8, 8, *range(9, 1024), 1024, 1025):
+        t += 1e-3
+        model.on_frame(t, _samples(codec, k))
+    assert model.numbers(t).missed == 3
+    # another run after a pause: its steps start again, nothing is missed
+    for k in (0, 1, 2):
+        t += 3.0 if k == 0 else 1e-3
+        model.on_frame(t, _samples(codec, k))
+    assert model.numbers(t).missed == 3
+    model.reset(t)
+    assert model.numbers(t).missed == 0

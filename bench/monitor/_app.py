@@ -31,6 +31,7 @@ from rich.text import Text
 from textual.app import App, ComposeResult
 from textual.binding import Binding, BindingType
 from textual.containers import Grid, Horizontal, Vertical
+from textual.css.query import NoMatches
 from textual.widgets import Footer, Static
 from textual_plotext import PlotextPlot
 
@@ -123,6 +124,7 @@ def format_numbers(n: Numbers, window_s: float, paused: bool) -> tuple[str, str,
     ]
     health += rejected or [" none"]
     health.append(f"view dropped {n.dropped} of {n.dropped + n.decoded}")
+    health.append(f"periods not received {n.missed}")
     health.append(f"window {window_s:g} s" + ("  PAUSED" if paused else ""))
     return plant, frames, "\n".join(health)
 
@@ -194,6 +196,7 @@ class MonitorApp(App[None]):
         self.clock = clock
         self.paused = False
         self.t_view = clock()
+        self._had_data: dict[str, bool] = {}
         windows = [w for w in WINDOWS_S if w <= model.pars.max_window_s] or [WINDOWS_S[0]]
         self.windows = tuple(windows)
         self.i_window = min(
@@ -271,6 +274,12 @@ class MonitorApp(App[None]):
             self.draw()
 
     def draw(self) -> None:
+        try:
+            self._draw()
+        except NoMatches:  # a redraw racing the screen's teardown at exit
+            pass
+
+    def _draw(self) -> None:
         now = self.t_view
         n = self.model.numbers(now)
         status = self.query_one("#status", Static)
@@ -300,8 +309,12 @@ class MonitorApp(App[None]):
             plt.clear_data()
             buckets = max(8, widget.size.width)
             lo, hi = math.inf, -math.inf
-            for color, name in zip(_COLORS, by_plot.get(pid, []), strict=False):
-                t, v = self.model.traces[name].window(t0, now)
+            windows = [self.model.traces[name].window(t0, now) for name in by_plot.get(pid, [])]
+            has_data = any(len(t) for t, _ in windows)
+            if not has_data and not self._had_data.get(pid, True):
+                continue  # empty before and now: no need to build it again
+            self._had_data[pid] = has_data
+            for color, (t, v) in zip(_COLORS, windows, strict=False):
                 x, y = envelope(t, v, t0, now, buckets)
                 if len(x):
                     plt.plot((x - now).tolist(), y.tolist(), marker=MARKER, color=color)

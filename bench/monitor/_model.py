@@ -110,10 +110,11 @@ class MonitorPars:
         Frames waiting for the view at most; more are dropped from the view.
     max_view_frames : int or None
         Frames decoded per :meth:`MonitorModel.update` at most (the newest
-        are kept); None: as many as ``decode_budget_s`` allows at the
-        measured cost per frame.
-    decode_budget_s : float
-        Time one update may spend decoding (s).
+        are kept); None: as many as ``decode_share`` allows at the measured
+        cost per frame.
+    decode_share : float
+        Share of the time between two updates that decoding may take: 0.2,
+        a fifth of a core, so the view stays a light process beside the bench.
     trace_points : int
         Points kept per trace.
     max_window_s : float
@@ -138,7 +139,7 @@ class MonitorPars:
     rate_window_s: float = 1.0
     queue_frames: int = 100_000
     max_view_frames: int | None = None
-    decode_budget_s: float = 0.05
+    decode_share: float = 0.2
     trace_points: int = 1 << 16
     max_window_s: float = 20.0
     bitrate: float = 1e6
@@ -255,6 +256,10 @@ class Numbers:
 
     Values a frame has not given yet are None. Angles and errors in degrees
     electrical, speeds in rpm mechanical, currents in A, torques in N m.
+    ``dropped``: frames the monitor received but did not decode for the
+    view; ``missed``: periods whose sample frame never reached the monitor
+    (gaps of the step counter: lost on the bus, or from the monitor's own
+    socket when it fell behind).
     """
 
     now: float
@@ -296,6 +301,7 @@ class Numbers:
     rejected: dict[str, dict[str, int]]
     foreign_ids: tuple[int, ...]
     dropped: int
+    missed: int
     decoded: int
     bus_name: str
 
@@ -321,6 +327,8 @@ class _Wire:
     longest_stall_s: float = 0.0
     restarts: int = 0
     dropped: int = 0
+    last_raw_step: int | None = None
+    missed: int = 0
 
 
 class MonitorModel:
@@ -346,6 +354,13 @@ class MonitorModel:
             n for n in codec.names if "Plant" in (codec.message(n).senders or [])
         )
         self._period_name = "PhaseSamples" if "PhaseSamples" in codec.names else None
+        # the period message's step counter, read from the raw payload (no decoding)
+        self._step_at: tuple[int, int, int] | None = None  # (length, shift, bits)
+        if self._period_name is not None:
+            msg = codec.message(self._period_name)
+            sig = msg.get_signal_by_name("step")
+            if sig.byte_order == "little_endian" and not sig.is_signed:
+                self._step_at = (msg.length, sig.start, sig.length)
         self._wire_us_cache: dict[tuple[int, bool, bool, bool], float] = {}
         self._choices = {
             (n, s.name): {int(k): str(v) for k, v in s.choices.items()}
@@ -367,6 +382,7 @@ class MonitorModel:
         self._wire = _Wire()
         self._rate_marks: deque[tuple[float, dict[str, tuple[int, float]]]] = deque()
         self._t_start: float | None = None
+        self._t_update: float | None = None
 
     # -- the reading thread ------------------------------------------------
 
@@ -429,6 +445,7 @@ class MonitorModel:
                 if last is None or t > last:
                     w.last_plant_t = t
                 if name == self._period_name:
+                    self._count_missed(w, msg.data, t)
                     lp = w.last_period_t
                     if lp is not None:
                         gap = t - lp
@@ -445,6 +462,28 @@ class MonitorModel:
                 self._queue.append((t, msg))
             else:
                 w.dropped += 1
+
+    def _count_missed(self, w: _Wire, data: bytearray, t: float) -> None:
+        """Periods whose sample frame never reached the monitor (gaps in the step counter).
+
+        A frame behind the newest (a retransmission) or a repeat counts
+        nothing; after a pause of ``stopped_after_s`` the counter starts
+        afresh (another run).
+        """
+        at = self._step_at
+        if at is None or len(data) != at[0]:
+            return
+        bits = at[2]
+        raw = (int.from_bytes(data, "little") >> at[1]) & ((1 << bits) - 1)
+        last = w.last_raw_step
+        lp = w.last_period_t
+        if last is None or (lp is not None and t - lp >= self.pars.stopped_after_s):
+            w.last_raw_step = raw
+            return
+        ahead = (raw - last) % (1 << bits)
+        if 0 < ahead < 1 << (bits - 1):
+            w.missed += ahead - 1
+            w.last_raw_step = raw
 
     # -- the view's thread -------------------------------------------------
 
@@ -478,7 +517,7 @@ class MonitorModel:
             for tally in w.tally.values():
                 tally.frames, tally.wire_us = 0, 0.0
             w.foreign_ids.clear()
-            w.stalls, w.longest_stall_s, w.restarts, w.dropped = 0, 0.0, 0, 0
+            w.stalls, w.longest_stall_s, w.restarts, w.dropped, w.missed = 0, 0.0, 0, 0, 0
         self.rejected = {}
         self.decoded = 0
         self.dropped_view = 0
@@ -492,12 +531,14 @@ class MonitorModel:
         """Decode the frames queued since the last update (view's thread)."""
         if self._t_start is None:
             self._t_start = now
+        since = min(max(now - self._t_update, 0.05), 1.0) if self._t_update is not None else 0.25
+        self._t_update = now
         with self.lock:
             queue, self._queue = self._queue, deque()
         n = len(queue)
         limit = self.pars.max_view_frames
         if limit is None:
-            limit = max(100, int(self.pars.decode_budget_s / max(self._cost_s, 1e-7)))
+            limit = max(100, int(self.pars.decode_share * since / max(self._cost_s, 1e-7)))
         if n > limit:
             self.dropped_view += n - limit
             for _ in range(n - limit):
@@ -677,6 +718,7 @@ class MonitorModel:
             foreign_ids = tuple(sorted(w.foreign_ids))
             n_foreign = w.tally["foreign"].frames if "foreign" in w.tally else 0
             dropped = w.dropped + self.dropped_view
+            missed = w.missed
         messages, total_rate, total_load = self._rates()
         stall_limit = max(p.stall_periods * (period_s or 0.0), p.stall_min_s)
         gap_plant = now - last_plant_t if last_plant_t is not None else 0.0
@@ -779,6 +821,7 @@ class MonitorModel:
             rejected={k: dict(v) for k, v in self.rejected.items()},
             foreign_ids=foreign_ids,
             dropped=dropped,
+            missed=missed,
             decoded=self.decoded,
             bus_name=p.bus_name(),
         )
