@@ -323,8 +323,9 @@ def test_trace_ring_keeps_the_newest_points_in_order() -> None:
 
 def test_receive_time_takes_the_kernel_stamp_only_when_it_is_this_clock() -> None:
     assert receive_time(99.7, 100.0) == 99.7
+    assert receive_time(75.0, 100.0) == 75.0  # read 25 s late: still the kernel's stamp
     assert receive_time(12.0, 100.0) == 100.0  # an adapter's own clock
-    assert receive_time(100.5, 100.0) == 100.0
+    assert receive_time(101.5, 100.0) == 100.0
 
 
 class _ListenOnlyBus(can.BusABC):
