@@ -97,6 +97,8 @@ class Tmux:
         subprocess.run(
             [self.exe, "-L", self.socket, "kill-server"], capture_output=True, timeout=30
         )
+        tmp = Path(os.environ.get("TMUX_TMPDIR") or "/tmp") / f"tmux-{os.getuid()}"
+        (tmp / self.socket).unlink(missing_ok=True)
         self.socket = f"bench-monitor-test-{os.getpid()}-{next(_N)}"
 
 
