@@ -10,7 +10,7 @@ import pytest
 
 from bench._busload import frame_time_us
 from bench._codec import Codec
-from bench.monitor import MonitorModel, MonitorPars, Trace, envelope
+from bench.monitor._model import MonitorModel, MonitorPars, Trace, envelope
 from bench.monitor._reader import BusReader, receive_time
 from tests import monitor_helpers as known
 

@@ -37,18 +37,17 @@ import subprocess
 import sys
 import threading
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from bench.monitor._model import MessageRate, MonitorModel, MonitorPars, Numbers, Trace, envelope
+if TYPE_CHECKING:
+    from bench.monitor._model import MonitorPars
 
+# Only the entry points here, and no heavy import at the top: the bench's
+# command line builds its parser with add_arguments for every command, and
+# the model (numpy, cantools) and the view (Textual) load only when the
+# monitor runs. The model is bench.monitor._model, the view bench.monitor._app.
 __all__ = [
-    "MessageRate",
-    "MonitorModel",
-    "MonitorPars",
-    "Numbers",
-    "Trace",
     "add_arguments",
-    "envelope",
     "main",
     "monitor_pars",
     "run_monitor",
@@ -170,6 +169,8 @@ def _bus_spec(args: argparse.Namespace) -> Any:
 
 def monitor_pars(args: argparse.Namespace) -> MonitorPars:
     """Settings of the options: the scenario's motor and period, the load's bit rates."""
+    from bench.monitor._model import MonitorPars
+
     n_p: int | None = None
     T_s: float | None = None
     n_steps: int | None = None
@@ -238,6 +239,7 @@ def _run_view(
 ) -> int:
     """The view over an open bus (shut down on return)."""
     from bench.monitor._app import MonitorApp
+    from bench.monitor._model import MonitorModel
     from bench.monitor._reader import BusReader
 
     # the size comes from the terminal: an exported COLUMNS or LINES would
