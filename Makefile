@@ -26,6 +26,7 @@ lint: $(STAMP)
 	$(BIN)/mypy
 
 unit: $(STAMP)
+	tools/need-tmux
 	$(BIN)/pytest -m "not socketcan"
 
 vcan: $(STAMP)

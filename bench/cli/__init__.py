@@ -32,6 +32,7 @@ SUBCOMMANDS = (
     "suite",
     "replay",
     "rerun",
+    "monitor",
     "codegen",
     "perf",
     "rtcheck",

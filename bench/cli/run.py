@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import threading
 from pathlib import Path
 from typing import Any
 
@@ -31,6 +32,35 @@ def run_node_args(args: argparse.Namespace) -> dict[str, list[str]]:
     return out
 
 
+class _View:
+    """``bench run --monitor``: the live view in a thread of its own while the run goes on."""
+
+    def __init__(self, spec: Any, scenario: Path, title: str) -> None:
+        from bench.monitor import run_monitor
+
+        self.stop = threading.Event()
+        self.thread = threading.Thread(
+            target=run_monitor,
+            args=(spec, None, self.stop, title),
+            kwargs={"scenario": scenario},
+            daemon=True,
+        )
+        self.thread.start()
+
+    def close(self) -> None:
+        """Close the view and restore the terminal before the run's report is printed."""
+        self.stop.set()
+        self.thread.join(timeout=10.0)
+
+
+def _start_monitor(spec: Any, scn: Any, est: str, mode: str, out: Path) -> _View:
+    from bench.scenarios._schema import write_effective
+
+    out.mkdir(parents=True, exist_ok=True)
+    scenario = write_effective(scn, out / "scenario.json")  # the run writes the same file
+    return _View(spec, scenario, f"{scn.name} {est} {mode}")
+
+
 def cmd_run(args: argparse.Namespace) -> int:
     from bench.runs._results import fault_warning, format_metrics, realtime_warning
     from bench.runs._run import run_scenario
@@ -45,20 +75,27 @@ def cmd_run(args: argparse.Namespace) -> int:
             f"--estimator: unknown estimator {est!r} (known: {', '.join(ESTIMATOR_NAMES)})"
         )
     check_estimator_fits(scn, est)
+    if args.monitor and not (sys.stdin.isatty() and sys.stdout.isatty() and sys.stderr.isatty()):
+        raise BenchError("--monitor: needs a terminal (run bench monitor beside it instead)")
     spec = bus_spec(args, announce=True)
     out = Path(args.out) if args.out else Path("runs") / f"{scn.name}-{est}"
     # the heading of the report on stdout: stderr carries progress and errors only
     print(f"run: {scn.name} with {est}, {args.mode}, {spec.describe()} -> {out}", flush=True)
-    res = run_scenario(
-        scn,
-        est,
-        spec=spec,
-        out_dir=out,
-        mode=args.mode,
-        log_format=args.log_format,
-        progress=not args.quiet,
-        node_args=run_node_args(args),
-    )
+    view = _start_monitor(spec, scn, est, args.mode, out) if args.monitor else None
+    try:
+        res = run_scenario(
+            scn,
+            est,
+            spec=spec,
+            out_dir=out,
+            mode=args.mode,
+            log_format=args.log_format,
+            progress=not (args.quiet or args.monitor),
+            node_args=run_node_args(args),
+        )
+    finally:
+        if view is not None:
+            view.close()
     for role, rep in res.meta.get("node_reports", {}).items():
         for why in ((rep or {}).get("rt") or {}).get("refused", []):
             print(f"{role}: real-time setting refused: {why}", file=sys.stderr)
@@ -100,6 +137,11 @@ def register(sub: Any) -> None:
         "--log-format", choices=("blf", "asc", "log"), default="blf", help="capture format"
     )
     p.add_argument("--quiet", "-q", action="store_true", help="no progress line")
+    p.add_argument(
+        "--monitor",
+        action="store_true",
+        help="show the live view (bench monitor) of this run in place of the progress line",
+    )
     p.add_argument(
         "--watchdog-ms",
         type=POS_FLOAT,
