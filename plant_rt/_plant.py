@@ -22,9 +22,11 @@ exponentials) would need a constant rotor angle and a linear machine; RK4
 keeps the rotation, the saturation and the cross-saturation, and its error
 on a sub-interval no longer than ``T_s / substeps`` is the average model's
 (about ``(h / tau)^5 / 120`` with ``tau = L / R`` >= 18 ms for both presets).
-At most 3 legs x 4 instants (2 edges, 2 dead-interval ends) plus the grid
-give 15 sub-intervals per period; a diode that stops conducting inside a
-dead interval adds one more (see :meth:`Plant.step`).
+A period has at most 3 legs x 5 instants (2 edges, 2 dead-interval ends, one
+dead interval carried from the previous period) plus the grid and the
+sensor instant, 18 sub-intervals; 14 is typical (three switching legs with
+dead time, substeps = 2). A diode that stops conducting inside a dead
+interval adds one (class notes).
 """
 
 from __future__ import annotations
@@ -209,8 +211,8 @@ class Plant:
     once; if its floating voltage lies beyond a diode's threshold
     (``u_dc + v_f`` or ``-v_f``) that diode conducts instead. Two floating
     legs leave no current path: the currents stay zero for the rest of that
-    dead interval. The pole voltage is that of a gated leg whose current is
-    exactly zero (no drop).
+    dead interval. A gated leg whose current is zero (within 1e-9 i_max) has
+    no drop.
 
     DC link. With ``r_dc > 0`` the DC-link voltage is the capacitor voltage,
     ``c_dc d u_dc / dt = (u_src - u_dc) / r_dc - i_dc`` (``u_src`` =
@@ -326,6 +328,7 @@ class Plant:
         if self._t_meas > 0.0:
             cuts.add(self._t_meas)
         self._cuts = tuple(sorted(cuts))
+        self._segs = self._segments()
         # Average model on the legacy per-period path unless a feature needs substeps.
         self._avg_general = self._dc_dyn or self._t_meas > 0.0
 
@@ -580,7 +583,7 @@ class Plant:
         s_al = s_be = 0.0
         j_load = -1
         tau_L = 0.0
-        for ta, tb, j in self._segments():
+        for ta, tb, j in self._segs:
             if j != j_load:
                 tau_L = self._tau_load(t0 + j * h_grid)
                 j_load = j
@@ -626,7 +629,7 @@ class Plant:
         j_load = -1
         tau_L = 0.0
         i_a, i_b, i_c = self.currents_abc()
-        for ta, tb, j in self._segments():
+        for ta, tb, j in self._segs:
             if j != j_load:
                 tau_L = self._tau_load(t0 + j * h_grid)
                 j_load = j
@@ -767,11 +770,12 @@ class Plant:
         if fx >= 0:
             ua, ub = self._rk4(h, v[0], v[1], v[2], fx, tau_L)
             self._zero_phase(fx)
+            i_new = self.currents_abc()
         elif cond[0] == 0 and cond[1] == 0 and cond[2] == 0:
             ua, ub = self._rk4_const(h, v[0], v[1], v[2], tau_L)
+            i_new = self.currents_abc()
         else:
-            ua, ub = self._dead_with_clamp(h, v, cond, tau_L, i_abc)
-        i_new = self.currents_abc()
+            ua, ub, i_new = self._dead_with_clamp(h, v, cond, tau_L, i_abc)
         if self._dc_dyn:
             i_dc1 = sum(i_new[x] for x in range(3) if upper[x])
             self._dc_update(h, 0.5 * (i_dc0 + i_dc1), i_dc1)
@@ -798,13 +802,14 @@ class Plant:
         cond: list[int],
         tau_L: float,
         i_abc: tuple[float, float, float],
-    ) -> tuple[float, float]:
+    ) -> tuple[float, float, tuple[float, float, float]]:
         """A sub-interval with diode-conducting dead legs: stop a diode at its current zero.
 
         Integrates the whole sub-interval; if a diode's current has reversed,
         redoes the step up to the (linearly interpolated) zero of the first
         such phase, clamps that phase to zero and integrates the rest with it
-        floating. Returns the mean stator voltage in alpha-beta.
+        floating. Returns the mean stator voltage in alpha-beta and the phase
+        currents at the end.
         """
         saved = self._save()
         ua, ub = self._rk4_const(h, v[0], v[1], v[2], tau_L)
@@ -819,7 +824,7 @@ class Plant:
                     frac = f
                     first = x
         if first < 0:
-            return ua, ub
+            return ua, ub, i_new
         self._restore(saved)
         h1 = frac * h
         ua1, ub1 = self._rk4_const(h1, v[0], v[1], v[2], tau_L) if h1 > 0.0 else (ua, ub)
@@ -827,7 +832,7 @@ class Plant:
         h2 = h - h1
         ua2, ub2 = self._rk4(h2, v[0], v[1], v[2], first, tau_L)
         self._zero_phase(first)
-        return (h1 * ua1 + h2 * ua2) / h, (h1 * ub1 + h2 * ub2) / h
+        return (h1 * ua1 + h2 * ua2) / h, (h1 * ub1 + h2 * ub2) / h, self.currents_abc()
 
     def _save(self) -> tuple[float, ...]:
         m = self.meter
