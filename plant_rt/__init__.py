@@ -4,7 +4,7 @@ Never imports :mod:`controller`, never touches CAN.
 """
 
 from plant_rt._clock import JitterStats, RealTimeClock
-from plant_rt._inverter import InverterPars
+from plant_rt._inverter import InverterPars, device_drop_error
 from plant_rt._load import (
     ConstantLoad,
     LoadProfile,
@@ -13,9 +13,26 @@ from plant_rt._load import (
     SpeedProportionalLoad,
     StepLoad,
 )
-from plant_rt._machine import MotorPars, SaturationPars, flux_d, magnetic_energy, torque
+from plant_rt._machine import (
+    CrossSaturationPars,
+    MotorPars,
+    SaturationPars,
+    cross_saturation_check,
+    flux_d,
+    flux_dq,
+    magnetic_energy,
+    torque,
+)
 from plant_rt._plant import EnergyMeter, Plant, Sample, Truth
 from plant_rt._presets import PRESETS, Preset, UnknownPresetError, preset
+from plant_rt._profiles import (
+    PROFILE_NAMES,
+    PlantProfile,
+    UnknownProfileError,
+    drive_profile,
+    ideal_profile,
+    plant_profile,
+)
 from plant_rt._protection import (
     FAULT_NAMES,
     FAULT_NONE,
@@ -36,7 +53,9 @@ __all__ = [
     "FAULT_OVER_VOLTAGE",
     "FAULT_WATCHDOG",
     "PRESETS",
+    "PROFILE_NAMES",
     "ConstantLoad",
+    "CrossSaturationPars",
     "EnergyMeter",
     "InverterPars",
     "JitterStats",
@@ -44,6 +63,7 @@ __all__ = [
     "LoadSum",
     "MotorPars",
     "Plant",
+    "PlantProfile",
     "Preset",
     "Protection",
     "ProtectionPars",
@@ -56,8 +76,15 @@ __all__ = [
     "StepLoad",
     "Truth",
     "UnknownPresetError",
+    "UnknownProfileError",
+    "cross_saturation_check",
+    "device_drop_error",
+    "drive_profile",
     "flux_d",
+    "flux_dq",
+    "ideal_profile",
     "magnetic_energy",
+    "plant_profile",
     "preset",
     "torque",
 ]

@@ -12,6 +12,21 @@ over the period in the stationary alpha-beta frame, not in d-q, so every RK4
 stage rotates it into d-q with the stage's own rotor angle (at 1 kHz and
 300 rpm the rotor turns 0.126 rad electrical per period). The load torque is
 evaluated once per substep, at its start.
+
+Switching inverter (``InverterPars.model = "switching"``): the period is cut
+at every switching edge, every end of a dead interval (:mod:`plant_rt._pwm`),
+the substep grid ``j T_s / substeps`` and the sensor instant, and each
+sub-interval, over which every pole voltage is constant, is one RK4 step with
+the rotor angle moving inside it. Exact sub-interval solutions (matrix
+exponentials) would need a constant rotor angle and a linear machine; RK4
+keeps the rotation, the saturation and the cross-saturation, and its error
+on a sub-interval no longer than ``T_s / substeps`` is the average model's
+(about ``(h / tau)^5 / 120`` with ``tau = L / R`` >= 18 ms for both presets).
+A period has at most 3 legs x 5 instants (2 edges, 2 dead-interval ends, one
+dead interval carried from the previous period) plus the grid and the
+sensor instant, 18 sub-intervals; 14 is typical (three switching legs with
+dead time, substeps = 2). A diode that stops conducting inside a dead
+interval adds one (class notes).
 """
 
 from __future__ import annotations
@@ -19,9 +34,23 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from plant_rt._inverter import INV_SQRT3, SQRT3, InverterPars, clamp_duty, dead_time_error
+from plant_rt._inverter import (
+    INV_SQRT3,
+    SQRT3,
+    InverterPars,
+    clamp_duty,
+    dead_time_error,
+    device_drop_error,
+)
 from plant_rt._load import ConstantLoad, LoadProfile
-from plant_rt._machine import MotorPars, flux_d, magnetic_energy
+from plant_rt._machine import (
+    MotorPars,
+    cross_saturation_check,
+    flux_d,
+    flux_dq,
+    magnetic_energy,
+)
+from plant_rt._pwm import DEAD, HIGH, PwmTimeline
 from plant_rt._sensors import SensorPars, Sensors
 
 TWO_PI = 2.0 * math.pi
@@ -135,7 +164,7 @@ class Plant:
     motor : MotorPars
         Machine and mechanical parameters.
     inverter : InverterPars
-        DC-link voltage and dead time.
+        Inverter model, DC link, dead time and device drops.
     T_s : float
         PWM period (s).
     sensors : SensorPars, optional
@@ -143,16 +172,62 @@ class Plant:
     load : LoadProfile, optional
         Load-torque profile; no load by default.
     substeps : int, optional
-        RK4 steps per PWM period.
+        RK4 steps per PWM period (average model); the switching model cuts
+        its sub-intervals at the same grid, so none is longer than
+        ``T_s / substeps``, and evaluates the load torque at each grid point.
     saturation : bool, optional
         Use the saturated d-axis flux model (:class:`SaturationPars`).
     theta_m0, w_m0 : float, optional
         Initial mechanical angle (rad) and speed (rad/s).
     meter : bool, optional
         Integrate the energy flows (:class:`EnergyMeter`); slower.
+    cross_saturation : bool, optional
+        Use the cross-saturation flux map (:class:`CrossSaturationPars`,
+        on top of the d-axis model when ``saturation`` is set).
+    i_d0, i_q0 : float, optional
+        Initial d- and q-axis currents (A).
 
     Notes
     -----
+    Switching inverter. Each leg's pole voltage over a sub-interval follows
+    its gate state (:mod:`plant_rt._pwm`) and the direction of its phase
+    current at the start of the sub-interval (a conducting device's drop
+    does not change sign inside one)::
+
+        upper on:  u_dc - v_ce (i > 0, transistor)  or  u_dc + v_f (i < 0, diode)
+        lower on:  -v_f       (i > 0, diode)       or  +v_ce      (i < 0, transistor)
+        dead:      -v_f       (i > 0, lower diode) or  u_dc + v_f (i < 0, upper diode)
+
+    Zero-current clamp. In a dead interval the current can only flow
+    through a diode, which blocks it from reversing. When the voltage
+    drives a diode's current through zero before the dead interval ends,
+    the diode stops conducting there and the phase floats with zero current
+    until the incoming switch turns on: the sub-interval is integrated
+    once, the zero crossing located by linear interpolation of that phase's
+    current, the step redone up to it, the phase current projected to zero
+    and the rest integrated with the phase floating (pole voltage solved
+    from ``d i_x / dt = 0``, the same floating-phase model as the disabled
+    bridge below). A dead leg whose current is zero at the start floats at
+    once; if its floating voltage lies beyond a diode's threshold
+    (``u_dc + v_f`` or ``-v_f``) that diode conducts instead. Two floating
+    legs leave no current path: the currents stay zero for the rest of that
+    dead interval. A gated leg whose current is zero (within 1e-9 i_max) has
+    no drop.
+
+    DC link. With ``r_dc > 0`` the DC-link voltage is the capacitor voltage,
+    ``c_dc d u_dc / dt = (u_src - u_dc) / r_dc - i_dc`` (``u_src`` =
+    ``InverterPars.u_dc``), or ``u_dc = u_src - r_dc i_dc`` without a
+    capacitor. ``i_dc`` is the current of the legs on the positive rail
+    (upper switch or upper diode); the average model takes its period mean
+    ``sum_x d_x i_x``. Each sub-interval (substep) uses the voltage at its
+    start and then advances the capacitor exactly (exponential with
+    ``r_dc c_dc``) for the mean of ``i_dc`` at its start and end, so the
+    switching model resolves the ripple edge to edge. Without a capacitor
+    the link voltage is set from ``i_dc`` at the start of each
+    sub-interval: in the switching model it droops only while a pulse
+    draws current, whereas the average model applies the mean droop to the
+    whole period (the limit of a large capacitor).
+
     Disabled inverter (``enable=False``, all switches open): the legs become
     a diode bridge. A conducting phase sits on the negative rail when its
     current flows into the machine and on the positive rail otherwise, so
@@ -160,8 +235,8 @@ class Plant:
     zero floats: its pole voltage is solved from ``d i_x / dt = 0`` and,
     if it leaves [0, u_dc], that phase's diode starts to conduct. With all
     currents zero the bridge starts to rectify when the line back-EMF
-    exceeds ``u_dc``. Simplifications: the DC link is stiff, diodes are
-    ideal, and the conduction state is decided at the start of each
+    exceeds ``u_dc``. Simplifications: diodes are ideal (no forward
+    voltage), and the conduction state is decided at the start of each
     substep; a phase whose current changes sign within a substep is set to
     zero at its end (projection), so the current-zero instant is resolved
     to one substep.
@@ -179,23 +254,32 @@ class Plant:
         theta_m0: float = 0.0,
         w_m0: float = 0.0,
         meter: bool = False,
+        cross_saturation: bool = False,
+        i_d0: float = 0.0,
+        i_q0: float = 0.0,
     ) -> None:
         if not T_s > 0.0:
             raise ValueError(f"T_s must be > 0, got {T_s}")
         if int(substeps) != substeps or substeps < 1:
             raise ValueError(f"substeps must be a positive integer, got {substeps}")
+        sens = sensors if sensors is not None else SensorPars()
+        if not sens.t_delay < T_s:
+            raise ValueError(f"SensorPars.t_delay must be below T_s = {T_s} s, got {sens.t_delay}")
+        if cross_saturation:
+            cross_saturation_check(motor, bool(saturation), 2.0 * motor.i_max)
         self.motor = motor
         self.inverter = inverter
         self.T_s = float(T_s)
         self.substeps = int(substeps)
         self.saturation = bool(saturation)
-        self.sensor_pars = sensors if sensors is not None else SensorPars()
+        self.cross_saturation = bool(cross_saturation)
+        self.sensor_pars = sens
         self._sensors = Sensors(self.sensor_pars)
         self._load: LoadProfile = load if load is not None else ConstantLoad(0.0)
         self.k = 0
         # States.
-        self._i_d = 0.0
-        self._i_q = 0.0
+        self._i_d = float(i_d0)
+        self._i_q = float(i_q0)
         self._w_m = float(w_m0)
         self._th_m = float(theta_m0) % TWO_PI
         self._w_imp: float | None = None
@@ -218,6 +302,35 @@ class Plant:
         self._sample: Sample | None = None
         # Mean stator voltage in alpha-beta over the last period (V).
         self.u_s_ab = (0.0, 0.0)
+        # Cross-saturation constants.
+        self._c_dq = float(motor.cross.c_dq)
+        self._i_0 = motor.psi_f / motor.L_d
+        # Inverter: switching timeline, device drops, DC link.
+        self._switching = inverter.model == "switching"
+        self._pwm = (
+            PwmTimeline(self.T_s, inverter.t_dead, inverter.sample_at) if self._switching else None
+        )
+        self._v_ce = float(inverter.v_ce)
+        self._v_f = float(inverter.v_f)
+        self._drops = inverter.v_ce > 0.0 or inverter.v_f > 0.0
+        self._u_src = float(inverter.u_dc)
+        self._r_dc = float(inverter.r_dc)
+        self._c_dc = float(inverter.c_dc)
+        self._dc_dyn = inverter.r_dc > 0.0
+        # Sensor delay: the state at T_s - t_delay of each period, sampled at the next.
+        self._t_meas = self.T_s - sens.t_delay if sens.t_delay > 0.0 else 0.0
+        self._meas: tuple[int, float, float, float, float] | None = None
+        # Cut points of the switching model's sub-intervals: the substep grid
+        # (load evaluated at each) and the sensor instant.
+        grid = [j * self._h for j in range(1, self.substeps)]
+        self._grid = (0.0, *grid)
+        cuts = set(grid)
+        if self._t_meas > 0.0:
+            cuts.add(self._t_meas)
+        self._cuts = tuple(sorted(cuts))
+        self._segs = self._segments()
+        # Average model on the legacy per-period path unless a feature needs substeps.
+        self._avg_general = self._dc_dyn or self._t_meas > 0.0
 
     # ------------------------------------------------------------------ API
     @property
@@ -257,14 +370,24 @@ class Plant:
         return i_al, -0.5 * i_al + 0.5 * SQRT3 * i_be, -0.5 * i_al - 0.5 * SQRT3 * i_be
 
     def sample(self) -> Sample:
-        """Measurement at ``t = k T_s``; repeated calls within a period return the same one."""
+        """Measurement at ``t = k T_s``; repeated calls within a period return the same one.
+
+        With a sensor delay (``SensorPars.t_delay``) the values are those of
+        ``k T_s - t_delay``, recorded while the previous period was
+        integrated (the present values at ``k = 0`` or after a jump in ``k``).
+        """
         smp = self._sample
         if smp is not None and smp.k == self.k:
             return smp
-        i_a, i_b, i_c = self.currents_abc()
+        meas = self._meas
+        if meas is not None and meas[0] == self.k:
+            _, i_a, i_b, i_c, u_dc = meas
+        else:
+            i_a, i_b, i_c = self.currents_abc()
+            u_dc = self._u_dc
         sens = self._sensors
         m_a, m_b, m_c = sens.currents(i_a, i_b, i_c)
-        smp = Sample(self.k, m_a, m_b, m_c, sens.voltage(self._u_dc))
+        smp = Sample(self.k, m_a, m_b, m_c, sens.voltage(u_dc))
         self._sample = smp
         return smp
 
@@ -283,6 +406,11 @@ class Plant:
 
     def torque(self) -> float:
         """Electromagnetic torque at ``t = k T_s`` (N m)."""
+        if self.cross_saturation:
+            i_d = self._i_d
+            i_q = self._i_q
+            psi_d, psi_q, _, _, _ = flux_dq(self.motor, i_d, i_q, self.saturation, True)
+            return self._k_tau * (psi_d * i_q - psi_q * i_d)
         psi_d, _ = flux_d(self.motor, self._i_d, self.saturation)
         return self._k_tau * (psi_d - self._L_q * self._i_d) * self._i_q
 
@@ -308,7 +436,9 @@ class Plant:
 
     def stored_energy(self) -> tuple[float, float]:
         """Magnetic field energy and kinetic energy at ``t = k T_s`` (J)."""
-        w_mag = magnetic_energy(self.motor, self._i_d, self._i_q, self.saturation)
+        w_mag = magnetic_energy(
+            self.motor, self._i_d, self._i_q, self.saturation, self.cross_saturation
+        )
         return w_mag, 0.5 * self.motor.J * self._w_m * self._w_m
 
     def back_emf_abc(self) -> tuple[float, float, float]:
@@ -337,7 +467,11 @@ class Plant:
         meter = self.meter
         if meter is not None:
             meter.q_a = meter.q_b = meter.q_c = 0.0
-        if enable:
+        if enable and self._switching:
+            self._step_switching(d_a, d_b, d_c, t0)
+        elif enable and self._avg_general:
+            self._step_average_general(d_a, d_b, d_c, t0)
+        elif enable:
             u_dc = self._u_dc
             v_a = clamp_duty(d_a) * u_dc
             v_b = clamp_duty(d_b) * u_dc
@@ -353,24 +487,366 @@ class Plant:
                     v_b += dead_time_error(i_b, u_dc, t_dead, self.T_s)
                 if 0.0 < v_c < u_dc:
                     v_c += dead_time_error(i_c, u_dc, t_dead, self.T_s)
+            if self._drops:
+                v_a, v_b, v_c = self._add_drops(v_a, v_b, v_c, u_dc)
             u_al = (2.0 * v_a - v_b - v_c) / 3.0
             u_be = (v_b - v_c) * INV_SQRT3
+            cross = self.cross_saturation
             for j in range(self.substeps):
                 tau_L = self._tau_load(t0 + j * h)
-                if meter is None:
-                    self._rk4_fast(h, u_al, u_be, tau_L)
-                else:
+                if meter is not None:
                     self._rk4(h, v_a, v_b, v_c, -1, tau_L)
+                elif cross:
+                    self._rk4_cross(h, u_al, u_be, tau_L)
+                else:
+                    self._rk4_fast(h, u_al, u_be, tau_L)
             self.u_s_ab = (u_al, u_be)
-        else:
+        elif not (self._dc_dyn or self._t_meas > 0.0):
+            if self._pwm is not None:
+                self._pwm.disable()
             sa = sb = 0.0
             for j in range(self.substeps):
                 ua, ub = self._substep_off(h, self._tau_load(t0 + j * h))
                 sa += ua
                 sb += ub
             self.u_s_ab = (sa / self.substeps, sb / self.substeps)
+        else:
+            self._step_off_general(t0)
         self._th_m %= TWO_PI
         self.k += 1
+
+    # ------------------------------------------------------- inverter models
+    def _add_drops(
+        self, v_a: float, v_b: float, v_c: float, u_dc: float
+    ) -> tuple[float, float, float]:
+        """Average model: the period-mean device drops (:func:`device_drop_error`).
+
+        ``v_x / u_dc`` is the leg's time on the positive rail after dead time;
+        the current direction is the one at the start of the period.
+        """
+        i_a, i_b, i_c = self.currents_abc()
+        v_ce = self._v_ce
+        v_f = self._v_f
+        return (
+            v_a + device_drop_error(i_a, v_a / u_dc, v_ce, v_f),
+            v_b + device_drop_error(i_b, v_b / u_dc, v_ce, v_f),
+            v_c + device_drop_error(i_c, v_c / u_dc, v_ce, v_f),
+        )
+
+    def _segments(self) -> list[tuple[float, float, int]]:
+        """The substep grid cut at the sensor instant: ``(t_start, t_end, grid index)``."""
+        T = self.T_s
+        grid = self._grid
+        out: list[tuple[float, float, int]] = []
+        t0 = 0.0
+        j = 0
+        for t1 in (*self._cuts, T):
+            while j + 1 < len(grid) and t0 >= grid[j + 1]:
+                j += 1
+            out.append((t0, t1, j))
+            t0 = t1
+        return out
+
+    def _step_average_general(self, d_a: float, d_b: float, d_c: float, t0: float) -> None:
+        """Average model with a dynamic DC link or a sensor delay: one RK4 step per segment.
+
+        The duties' mean pole voltages are recomputed on each segment from the
+        DC-link voltage at its start; the dead-time and drop errors take the
+        current directions at the start of the period, as on the fast path.
+        """
+        d_a = clamp_duty(d_a)
+        d_b = clamp_duty(d_b)
+        d_c = clamp_duty(d_c)
+        t_dead = self.inverter.t_dead
+        T = self.T_s
+        i_a, i_b, i_c = self.currents_abc()
+        # effective fractions on the positive rail after dead time
+        if t_dead > 0.0:
+            r = t_dead / T
+            if 0.0 < d_a < 1.0:
+                d_a += dead_time_error(i_a, 1.0, r, 1.0)
+            if 0.0 < d_b < 1.0:
+                d_b += dead_time_error(i_b, 1.0, r, 1.0)
+            if 0.0 < d_c < 1.0:
+                d_c += dead_time_error(i_c, 1.0, r, 1.0)
+        if self._drops:
+            v_ce = self._v_ce
+            v_f = self._v_f
+            e_a = device_drop_error(i_a, d_a, v_ce, v_f)
+            e_b = device_drop_error(i_b, d_b, v_ce, v_f)
+            e_c = device_drop_error(i_c, d_c, v_ce, v_f)
+        else:
+            e_a = e_b = e_c = 0.0
+        meter = self.meter
+        cross = self.cross_saturation
+        h_grid = self._h
+        s_al = s_be = 0.0
+        j_load = -1
+        tau_L = 0.0
+        for ta, tb, j in self._segs:
+            if j != j_load:
+                tau_L = self._tau_load(t0 + j * h_grid)
+                j_load = j
+            h = tb - ta
+            if self._dc_dyn:
+                i0 = d_a * i_a + d_b * i_b + d_c * i_c
+                if self._c_dc == 0.0:
+                    self._u_dc = self._u_src - self._r_dc * i0
+            u_dc = self._u_dc
+            v_a = d_a * u_dc + e_a
+            v_b = d_b * u_dc + e_b
+            v_c = d_c * u_dc + e_c
+            u_al = (2.0 * v_a - v_b - v_c) / 3.0
+            u_be = (v_b - v_c) * INV_SQRT3
+            if meter is not None:
+                self._rk4(h, v_a, v_b, v_c, -1, tau_L)
+            elif cross:
+                self._rk4_cross(h, u_al, u_be, tau_L)
+            else:
+                self._rk4_fast(h, u_al, u_be, tau_L)
+            s_al += h * u_al
+            s_be += h * u_be
+            i_a, i_b, i_c = self.currents_abc()
+            if self._dc_dyn:
+                i1 = d_a * i_a + d_b * i_b + d_c * i_c
+                self._dc_update(h, 0.5 * (i0 + i1), i1)
+            if tb == self._t_meas:
+                self._record_meas(i_a, i_b, i_c)
+        self.u_s_ab = (s_al / T, s_be / T)
+
+    def _step_off_general(self, t0: float) -> None:
+        """Disabled bridge with a dynamic DC link or a sensor delay.
+
+        A conducting phase whose current flows out of the machine (``i_x <
+        0``) sits on the positive rail through its upper diode, so the DC
+        link receives ``i_dc = sum_x min(i_x, 0)`` (negative: it charges).
+        """
+        if self._pwm is not None:
+            self._pwm.disable()
+        T = self.T_s
+        h_grid = self._h
+        s_al = s_be = 0.0
+        j_load = -1
+        tau_L = 0.0
+        i_a, i_b, i_c = self.currents_abc()
+        for ta, tb, j in self._segs:
+            if j != j_load:
+                tau_L = self._tau_load(t0 + j * h_grid)
+                j_load = j
+            h = tb - ta
+            i0 = min(i_a, 0.0) + min(i_b, 0.0) + min(i_c, 0.0)
+            if self._dc_dyn and self._c_dc == 0.0:
+                self._u_dc = self._u_src - self._r_dc * i0
+            ua, ub = self._substep_off(h, tau_L)
+            s_al += h * ua
+            s_be += h * ub
+            i_a, i_b, i_c = self.currents_abc()
+            if self._dc_dyn:
+                i1 = min(i_a, 0.0) + min(i_b, 0.0) + min(i_c, 0.0)
+                self._dc_update(h, 0.5 * (i0 + i1), i1)
+            if tb == self._t_meas:
+                self._record_meas(i_a, i_b, i_c)
+        self.u_s_ab = (s_al / T, s_be / T)
+
+    def _dc_update(self, h: float, i_dc: float, i_dc_end: float) -> None:
+        """Advance the DC link over ``h``: mean inverter current ``i_dc``, ``i_dc_end`` at the end (A).
+
+        With a capacitor its voltage moves exactly for a constant ``i_dc``;
+        without one the link is algebraic, ``u_src - r_dc i_dc`` with the
+        current at hand (the callers set it from the current at the start of
+        each step, this sets it from the one at its end).
+        """
+        r = self._r_dc
+        if self._c_dc > 0.0:
+            u_inf = self._u_src - r * i_dc
+            self._u_dc = u_inf + (self._u_dc - u_inf) * math.exp(-h / (r * self._c_dc))
+        else:
+            self._u_dc = self._u_src - r * i_dc_end
+
+    def _record_meas(self, i_a: float, i_b: float, i_c: float) -> None:
+        """Keep the currents and DC-link voltage for the next period's (delayed) sample."""
+        self._meas = (self.k + 1, i_a, i_b, i_c, self._u_dc)
+
+    def _step_switching(self, d_a: float, d_b: float, d_c: float, t0: float) -> None:
+        """Switching model: one period, sub-interval by sub-interval (class notes)."""
+        pwm = self._pwm
+        assert pwm is not None
+        T = self.T_s
+        segs = pwm.period(clamp_duty(d_a), clamp_duty(d_b), clamp_duty(d_c), self._cuts)
+        grid = self._grid
+        n_grid = len(grid)
+        j = 0
+        tau_L = self._tau_load(t0)
+        t_meas = self._t_meas
+        i_abc = self.currents_abc()
+        s_al = s_be = 0.0
+        for ta, tb, sa, sb, sc in segs:
+            while j + 1 < n_grid and ta >= grid[j + 1]:
+                j += 1
+                tau_L = self._tau_load(t0 + grid[j])
+            h = tb - ta
+            ua, ub, i_abc = self._sw_interval(h, sa, sb, sc, tau_L, i_abc)
+            s_al += h * ua
+            s_be += h * ub
+            if tb == t_meas:
+                self._record_meas(*i_abc)
+        self.u_s_ab = (s_al / T, s_be / T)
+
+    def _sw_interval(
+        self,
+        h: float,
+        sa: int,
+        sb: int,
+        sc: int,
+        tau_L: float,
+        i_abc: tuple[float, float, float],
+    ) -> tuple[float, float, tuple[float, float, float]]:
+        """Integrate one sub-interval with constant gate states.
+
+        Returns the mean stator voltage in alpha-beta over it and the phase
+        currents at its end.
+        """
+        v_ce = self._v_ce
+        v_f = self._v_f
+        eps = self._i_eps
+        states = (sa, sb, sc)
+        i_dc0 = 0.0
+        if self._dc_dyn:
+            # legs on the positive rail: upper switch on, or dead with the upper diode conducting
+            for x in range(3):
+                if states[x] == HIGH or (states[x] == DEAD and i_abc[x] < -eps):
+                    i_dc0 += i_abc[x]
+            if self._c_dc == 0.0:
+                self._u_dc = self._u_src - self._r_dc * i_dc0
+        u_dc = self._u_dc
+        v = [0.0, 0.0, 0.0]
+        # direction of a dead leg's diode current: +1 lower diode, -1 upper diode
+        cond = [0, 0, 0]
+        upper = [False, False, False]  # pole on the positive rail (DC-link current)
+        floating: list[int] = []
+        for x in range(3):
+            s = states[x]
+            i = i_abc[x]
+            if s == HIGH:
+                upper[x] = True
+                v[x] = u_dc - v_ce if i > eps else (u_dc + v_f if i < -eps else u_dc)
+            elif s == DEAD:
+                if i > eps:
+                    v[x] = -v_f
+                    cond[x] = 1
+                elif i < -eps:
+                    v[x] = u_dc + v_f
+                    cond[x] = -1
+                    upper[x] = True
+                else:
+                    floating.append(x)
+            else:
+                v[x] = -v_f if i > eps else (v_ce if i < -eps else 0.0)
+        if len(floating) >= 2:
+            # no current path: the currents stay zero for the rest of the dead interval
+            self._i_d = 0.0
+            self._i_q = 0.0
+            ua, ub = self._open_circuit(h, tau_L)
+            if self._dc_dyn:
+                self._dc_update(h, 0.0, 0.0)
+            return ua, ub, (0.0, 0.0, 0.0)
+        fx = -1
+        if floating:
+            x = floating[0]
+            u_al0 = (2.0 * v[0] - v[1] - v[2]) / 3.0
+            u_be0 = (v[1] - v[2]) * INV_SQRT3
+            v_x = self._f_float(
+                self._i_d, self._i_q, self._w_m, self._th_m, u_al0, u_be0, x, tau_L
+            )[4]
+            if v_x > u_dc + v_f:  # the upper diode takes the current
+                v[x] = u_dc + v_f
+                cond[x] = -1
+                upper[x] = True
+            elif v_x < -v_f:  # the lower diode takes it
+                v[x] = -v_f
+                cond[x] = 1
+            else:
+                fx = x
+        if fx >= 0:
+            ua, ub = self._rk4(h, v[0], v[1], v[2], fx, tau_L)
+            self._zero_phase(fx)
+            i_new = self.currents_abc()
+        elif cond[0] == 0 and cond[1] == 0 and cond[2] == 0:
+            ua, ub = self._rk4_const(h, v[0], v[1], v[2], tau_L)
+            i_new = self.currents_abc()
+        else:
+            ua, ub, i_new = self._dead_with_clamp(h, v, cond, tau_L, i_abc)
+        if self._dc_dyn:
+            i_dc1 = sum(i_new[x] for x in range(3) if upper[x])
+            self._dc_update(h, 0.5 * (i_dc0 + i_dc1), i_dc1)
+        return ua, ub, i_new
+
+    def _rk4_const(
+        self, h: float, v_a: float, v_b: float, v_c: float, tau_L: float
+    ) -> tuple[float, float]:
+        """One RK4 step with constant pole voltages; returns the stator voltage in alpha-beta."""
+        if self.meter is not None:
+            return self._rk4(h, v_a, v_b, v_c, -1, tau_L)
+        u_al = (2.0 * v_a - v_b - v_c) / 3.0
+        u_be = (v_b - v_c) * INV_SQRT3
+        if self.cross_saturation:
+            self._rk4_cross(h, u_al, u_be, tau_L)
+        else:
+            self._rk4_fast(h, u_al, u_be, tau_L)
+        return u_al, u_be
+
+    def _dead_with_clamp(
+        self,
+        h: float,
+        v: list[float],
+        cond: list[int],
+        tau_L: float,
+        i_abc: tuple[float, float, float],
+    ) -> tuple[float, float, tuple[float, float, float]]:
+        """A sub-interval with diode-conducting dead legs: stop a diode at its current zero.
+
+        Integrates the whole sub-interval; if a diode's current has reversed,
+        redoes the step up to the (linearly interpolated) zero of the first
+        such phase, clamps that phase to zero and integrates the rest with it
+        floating. Returns the mean stator voltage in alpha-beta and the phase
+        currents at the end.
+        """
+        saved = self._save()
+        ua, ub = self._rk4_const(h, v[0], v[1], v[2], tau_L)
+        i_new = self.currents_abc()
+        first = -1
+        frac = 1.0
+        for x in range(3):
+            c = cond[x]
+            if c != 0 and i_new[x] * c < 0.0:
+                f = i_abc[x] / (i_abc[x] - i_new[x])
+                if f < frac:
+                    frac = f
+                    first = x
+        if first < 0:
+            return ua, ub, i_new
+        self._restore(saved)
+        h1 = frac * h
+        ua1, ub1 = self._rk4_const(h1, v[0], v[1], v[2], tau_L) if h1 > 0.0 else (ua, ub)
+        self._zero_phase(first)
+        h2 = h - h1
+        ua2, ub2 = self._rk4(h2, v[0], v[1], v[2], first, tau_L)
+        self._zero_phase(first)
+        return (h1 * ua1 + h2 * ua2) / h, (h1 * ub1 + h2 * ub2) / h, self.currents_abc()
+
+    def _save(self) -> tuple[float, ...]:
+        m = self.meter
+        st = (self._i_d, self._i_q, self._w_m, self._th_m)
+        if m is None:
+            return st
+        return (*st, m.e_in, m.e_cu, m.e_em, m.e_fric, m.e_load, m.q_a, m.q_b, m.q_c)
+
+    def _restore(self, st: tuple[float, ...]) -> None:
+        self._i_d, self._i_q, self._w_m, self._th_m = st[0], st[1], st[2], st[3]
+        m = self.meter
+        if m is not None:
+            m.e_in, m.e_cu, m.e_em, m.e_fric, m.e_load = st[4], st[5], st[6], st[7], st[8]
+            m.q_a, m.q_b, m.q_c = st[9], st[10], st[11]
 
     # ------------------------------------------------------------ internals
     def _tau_load(self, t: float) -> float:
@@ -400,6 +876,14 @@ class Plant:
         u_d = c * u_al + s * u_be
         u_q = c * u_be - s * u_al
         w_e = n_p * w_m
+        if self.cross_saturation:
+            psi_d, psi_q, L_dd, L_dq, L_qq = flux_dq(self.motor, i_d, i_q, self.saturation, True)
+            e_d = u_d - self._R * i_d + w_e * psi_q
+            e_q = u_q - self._R * i_q - w_e * psi_d
+            det = L_dd * L_qq - L_dq * L_dq
+            tau_e = self._k_tau * (psi_d * i_q - psi_q * i_d)
+            dw = 0.0 if self._w_imp is not None else (tau_e - tau_L - self._b * w_m) * self._inv_J
+            return (L_qq * e_d - L_dq * e_q) / det, (L_dd * e_q - L_dq * e_d) / det, dw, tau_e
         L_q = self._L_q
         if self.saturation:
             x = i_d * self._inv_i_sat
@@ -444,6 +928,8 @@ class Plant:
         u_d = c * u_al0 + s * u_be0
         u_q = c * u_be0 - s * u_al0
         w_e = n_p * w_m
+        if self.cross_saturation:
+            return self._f_float_cross(i_d, i_q, w_m, c, s, u_d, u_q, x, tau_L)
         L_q = self._L_q
         psi_d, L_dd = flux_d(self.motor, i_d, self.saturation)
         R = self._R
@@ -463,6 +949,120 @@ class Plant:
             tau_e,
             v_x,
         )
+
+    def _f_float_cross(
+        self,
+        i_d: float,
+        i_q: float,
+        w_m: float,
+        c: float,
+        s: float,
+        u_d: float,
+        u_q: float,
+        x: int,
+        tau_L: float,
+    ) -> tuple[float, float, float, float, float]:
+        """:meth:`_f_float` with the cross-saturated flux map (full inductance matrix).
+
+        ``d i / dt = Y (e + (2/3) v_x e_x)`` with ``Y`` the inverse of the
+        incremental inductance matrix and ``e_x = (c_x, -s_x)`` phase x's axis
+        in d-q; ``v_x`` makes ``d i_x / dt = 0``.
+        """
+        w_e = self._n_p * w_m
+        psi_d, psi_q, L_dd, L_dq, L_qq = flux_dq(self.motor, i_d, i_q, self.saturation, True)
+        R = self._R
+        e_d = u_d - R * i_d + w_e * psi_q
+        e_q = u_q - R * i_q - w_e * psi_d
+        det = L_dd * L_qq - L_dq * L_dq
+        f_d = (L_qq * e_d - L_dq * e_q) / det
+        f_q = (L_dd * e_q - L_dq * e_d) / det
+        c_x = c * _COS_PHI[x] + s * _SIN_PHI[x]
+        s_x = s * _COS_PHI[x] - c * _SIN_PHI[x]
+        y_d = (L_qq * c_x + L_dq * s_x) / det
+        y_q = (-L_dq * c_x - L_dd * s_x) / det
+        a = c_x * f_d - s_x * f_q - w_e * (i_d * s_x + i_q * c_x)
+        g = (2.0 / 3.0) * (c_x * y_d - s_x * y_q)
+        v_x = -a / g
+        tau_e = self._k_tau * (psi_d * i_q - psi_q * i_d)
+        dw = 0.0 if self._w_imp is not None else (tau_e - tau_L - self._b * w_m) * self._inv_J
+        return (
+            f_d + (2.0 / 3.0) * v_x * y_d,
+            f_q + (2.0 / 3.0) * v_x * y_q,
+            dw,
+            tau_e,
+            v_x,
+        )
+
+    def _rk4_cross(self, h: float, u_al: float, u_be: float, tau_L: float) -> None:
+        """:meth:`_rk4_fast` with the cross-saturated flux map (:class:`CrossSaturationPars`).
+
+        ``L_inc d i_dq / dt = u_dq - R i_dq - w_e J psi_dq``, solved with the
+        2x2 incremental inductance matrix at every stage.
+        """
+        cos = math.cos
+        sin = math.sin
+        n_p = self._n_p
+        R = self._R
+        L_d = self._L_d
+        L_q = self._L_q
+        psi_f = self._psi_f
+        k_tau = self._k_tau
+        sat = self.saturation
+        free = self._w_imp is None
+        b = self._b
+        inv_J = self._inv_J
+        c_dq = self._c_dq
+        i_0 = self._i_0
+        i_d0 = self._i_d
+        i_q0 = self._i_q
+        w0 = self._w_m
+        th0 = self._th_m
+        i_d = i_d0
+        i_q = i_q0
+        w = w0
+        th = th0
+        s_d = s_q = s_w = s_th = 0.0
+        di_d = di_q = dw = 0.0
+        for o, wgt in _RK4_STAGES:
+            if o != 0.0:
+                i_d = i_d0 + o * h * di_d
+                i_q = i_q0 + o * h * di_q
+                th = th0 + o * h * w
+                w = w0 + o * h * dw
+            th_e = n_p * th
+            c = cos(th_e)
+            s = sin(th_e)
+            w_e = n_p * w
+            if sat:
+                x = i_d * self._inv_i_sat
+                r = math.sqrt(1.0 + x * x)
+                psi_d = psi_f + L_d * (i_d - self._sig_isat * (r - 1.0))
+                L_dd = L_d * (1.0 - self._sig * x / r)
+            else:
+                psi_d = psi_f + L_d * i_d
+                L_dd = L_d
+            m = i_d + i_0
+            hq = 0.5 * c_dq * i_q
+            L_qq = L_q - 0.5 * c_dq * i_d * (i_d + 2.0 * i_0)
+            psi_d -= hq * m * i_q
+            psi_q = L_qq * i_q
+            L_dd -= hq * i_q
+            L_dq = -c_dq * m * i_q
+            e_d = c * u_al + s * u_be - R * i_d + w_e * psi_q
+            e_q = c * u_be - s * u_al - R * i_q - w_e * psi_d
+            inv_det = 1.0 / (L_dd * L_qq - L_dq * L_dq)
+            di_d = (L_qq * e_d - L_dq * e_q) * inv_det
+            di_q = (L_dd * e_q - L_dq * e_d) * inv_det
+            dw = (k_tau * (psi_d * i_q - psi_q * i_d) - tau_L - b * w) * inv_J if free else 0.0
+            s_d += wgt * di_d
+            s_q += wgt * di_q
+            s_w += wgt * dw
+            s_th += wgt * w
+        h6 = h / 6.0
+        self._i_d = i_d0 + h6 * s_d
+        self._i_q = i_q0 + h6 * s_q
+        self._w_m = w0 + h6 * s_w
+        self._th_m = th0 + h6 * s_th
 
     def _rk4_fast(self, h: float, u_al: float, u_be: float, tau_L: float) -> None:
         """One RK4 step with a stator voltage constant in alpha-beta.

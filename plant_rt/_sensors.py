@@ -3,12 +3,17 @@
 Each measured value is ``quantise(gain * x + offset + noise)``. Noise is
 white and Gaussian, drawn from one ``random.Random(seed)`` stream in a fixed
 order (i_a, i_b, i_c, u_dc), so a run is reproducible from its seed.
+
+``x`` is the true value at the sample instant ``k T_s`` or, with a sensor
+delay ``t_delay``, at ``k T_s - t_delay`` (the plant records the state at
+that instant while it integrates the previous period).
 """
 
 from __future__ import annotations
 
 import math
 import random
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 
@@ -40,6 +45,20 @@ class SensorPars:
         Standard deviation of the voltage noise (V).
     seed : int
         Seed of the noise generator.
+    t_delay : float
+        Sensor delay (s), in [0, T_s): the sample taken at ``k T_s`` carries
+        the currents and the DC-link voltage of ``k T_s - t_delay`` (the
+        group delay of an anti-aliasing filter or of the sensor). The plant
+        checks it against its period.
+
+    Notes
+    -----
+    The keys of a scenario's ``[sensors]`` table map onto these fields
+    through :meth:`from_keys` (``adc_bits`` -> ``bits``,
+    ``current_full_scale_a`` -> ``i_fs``, ``current_offset_a`` ->
+    ``offset_abc``, ``current_gain_error`` -> ``gain_abc - 1``,
+    ``current_noise_a`` -> ``noise_i``, ``sample_delay_s`` -> ``t_delay``);
+    the properties of the same names read them back.
     """
 
     bits: int | None = None
@@ -52,6 +71,7 @@ class SensorPars:
     noise_i: float = 0.0
     noise_u: float = 0.0
     seed: int = 0
+    t_delay: float = 0.0
 
     def __post_init__(self) -> None:
         if self.bits is not None and not 1 <= self.bits <= 32:
@@ -62,6 +82,80 @@ class SensorPars:
             raise ValueError("SensorPars.noise_i and SensorPars.noise_u must be >= 0")
         if len(self.gain_abc) != 3 or len(self.offset_abc) != 3:
             raise ValueError("SensorPars.gain_abc and SensorPars.offset_abc need three values")
+        if not (self.t_delay >= 0.0 and math.isfinite(self.t_delay)):
+            raise ValueError(f"SensorPars.t_delay must be finite and >= 0, got {self.t_delay}")
+
+    @classmethod
+    def from_keys(
+        cls,
+        *,
+        adc_bits: int | None = None,
+        current_full_scale_a: float = 50.0,
+        current_offset_a: float | Sequence[float] = 0.0,
+        current_gain_error: float | Sequence[float] = 0.0,
+        current_noise_a: float = 0.0,
+        sample_delay_s: float = 0.0,
+        seed: int = 0,
+    ) -> SensorPars:
+        """Sensor errors from the keys of a scenario's ``[sensors]`` table.
+
+        Parameters
+        ----------
+        adc_bits : int or None
+            ADC resolution (bits); None or 0: no quantisation.
+        current_full_scale_a : float
+            Current full scale (A), see ``i_fs``.
+        current_offset_a : float or sequence of three floats
+            Offset of each current sensor (A); one value applies to all three.
+        current_gain_error : float or sequence of three floats
+            Relative gain error of each current sensor (-): gain ``1 + e``.
+        current_noise_a : float
+            Standard deviation of the current noise (A).
+        sample_delay_s : float
+            Sensor delay (s), see ``t_delay``.
+        seed : int
+            Seed of the noise generator.
+        """
+        return cls(
+            bits=adc_bits or None,
+            i_fs=float(current_full_scale_a),
+            offset_abc=_three(current_offset_a, "current_offset_a"),
+            gain_abc=_three(current_gain_error, "current_gain_error", add=1.0),
+            noise_i=float(current_noise_a),
+            seed=int(seed),
+            t_delay=float(sample_delay_s),
+        )
+
+    @property
+    def adc_bits(self) -> int | None:
+        """ADC resolution (bits), the ``[sensors]`` key of ``bits``."""
+        return self.bits
+
+    @property
+    def current_full_scale_a(self) -> float:
+        """Current full scale (A), the ``[sensors]`` key of ``i_fs``."""
+        return self.i_fs
+
+    @property
+    def current_offset_a(self) -> tuple[float, float, float]:
+        """Current-sensor offsets (A), the ``[sensors]`` key of ``offset_abc``."""
+        return self.offset_abc
+
+    @property
+    def current_gain_error(self) -> tuple[float, float, float]:
+        """Relative current-sensor gain errors ``gain_abc - 1`` (-)."""
+        g = self.gain_abc
+        return g[0] - 1.0, g[1] - 1.0, g[2] - 1.0
+
+    @property
+    def current_noise_a(self) -> float:
+        """Current noise (A rms), the ``[sensors]`` key of ``noise_i``."""
+        return self.noise_i
+
+    @property
+    def sample_delay_s(self) -> float:
+        """Sensor delay (s), the ``[sensors]`` key of ``t_delay``."""
+        return self.t_delay
 
     @property
     def lsb_i(self) -> float:
@@ -72,6 +166,16 @@ class SensorPars:
     def lsb_u(self) -> float:
         """Voltage ADC step (V); 0 without quantisation."""
         return 0.0 if self.bits is None else self.u_fs / 2**self.bits
+
+
+def _three(v: float | Sequence[float], name: str, add: float = 0.0) -> tuple[float, float, float]:
+    if isinstance(v, int | float):
+        x = float(v) + add
+        return x, x, x
+    vals = [float(e) + add for e in v]
+    if len(vals) != 3:
+        raise ValueError(f"SensorPars.from_keys: {name} needs one value or three, got {len(vals)}")
+    return vals[0], vals[1], vals[2]
 
 
 class Sensors:

@@ -93,3 +93,118 @@ def test_bad_sensor_pars_rejected() -> None:
         SensorPars(bits=0)
     with pytest.raises(ValueError, match="noise"):
         SensorPars(noise_i=-1.0)
+
+
+# ------------------------------------------------------------------ scenario keys, delay
+SENSOR_KEYS = (
+    "current_offset_a",
+    "current_gain_error",
+    "adc_bits",
+    "current_full_scale_a",
+    "current_noise_a",
+)
+
+
+def test_sensor_keys_map_onto_fields() -> None:
+    """The ``[sensors]`` keys build SensorPars directly (one value for all phases or one
+    per phase; the gain error is relative) and read back under the same names; bits 0
+    means no ADC."""
+    s = SensorPars.from_keys(
+        current_offset_a=(0.01, -0.02, 0.0),
+        current_gain_error=0.005,
+        adc_bits=12,
+        current_full_scale_a=16.0,
+        current_noise_a=0.003,
+        sample_delay_s=5e-6,
+        seed=9,
+    )
+    assert (s.bits, s.i_fs, s.noise_i, s.seed, s.t_delay) == (12, 16.0, 0.003, 9, 5e-6)
+    assert s.offset_abc == (0.01, -0.02, 0.0)
+    assert s.gain_abc == (1.005, 1.005, 1.005)
+    for key in SENSOR_KEYS:
+        assert hasattr(s, key)
+    assert s.current_gain_error == pytest.approx((0.005, 0.005, 0.005), abs=1e-15)
+    assert s.current_offset_a == s.offset_abc and s.adc_bits == 12
+    assert s.current_full_scale_a == 16.0 and s.current_noise_a == 0.003
+    assert s.sample_delay_s == 5e-6
+    assert SensorPars.from_keys(adc_bits=0).bits is None
+    assert SensorPars.from_keys(current_offset_a=0.02).offset_abc == (0.02, 0.02, 0.02)
+    assert SensorPars.from_keys() == SensorPars()
+    with pytest.raises(ValueError, match="current_gain_error"):
+        SensorPars.from_keys(current_gain_error=(0.01, 0.02))
+
+
+def test_keys_quantisation_step_offset_and_gain_are_exact() -> None:
+    """12 bits over +-16 A: the step is 2 * 16 / 2^12 = 7.8125 mA and every sample is a
+    whole number of steps, the one nearest gain * i + offset (round half up)."""
+    s = SensorPars.from_keys(
+        adc_bits=12,
+        current_full_scale_a=16.0,
+        current_offset_a=(0.01, -0.01, 0.01),
+        current_gain_error=(0.0, 0.005, -0.005),
+    )
+    lsb = 2.0 * 16.0 / 2**12
+    assert s.lsb_i == lsb == 0.0078125
+    plant = make(s)
+    smp = plant.sample()
+    true = plant.currents_abc()
+    for meas, i, g, o in zip(
+        (smp.i_a, smp.i_b, smp.i_c), true, (1.0, 1.005, 0.995), (0.01, -0.01, 0.01), strict=True
+    ):
+        assert meas == math.floor((g * i + o) / lsb + 0.5) * lsb
+    # at zero current the sample is the offset, quantised
+    p = preset("wen2023")
+    rest = Plant(p.motor, p.inverter, p.T_s, sensors=s).sample()
+    assert (rest.i_a, rest.i_b) == (lsb, -lsb)
+
+
+def test_sample_delay_reads_the_current_t_delay_before_the_sample_instant() -> None:
+    """Locked rotor at theta_e = 0, a constant d-axis voltage V from rest: i_a = i_d =
+    (V / R_s) (1 - exp(-t R_s / L_d)). With t_delay the sample of step k carries
+    i_a(k T_s - t_delay) (the first sample, with no history, the present value)."""
+    p = preset("wen2023")
+    m = p.motor
+    t_delay = 37e-6
+    plant = Plant(m, p.inverter, p.T_s, sensors=SensorPars(t_delay=t_delay))
+    plant.impose_speed(0.0)
+    v = 60.0
+    d = (0.5 + v / 540.0, 0.5 - 0.5 * v / 540.0, 0.5 - 0.5 * v / 540.0)  # u_alpha = v
+    assert plant.sample().i_a == 0.0
+    for k in range(1, 30):
+        plant.step(*d)
+        t = k * p.T_s - t_delay
+        want = v / m.R_s * (1.0 - math.exp(-t * m.R_s / m.L_d))
+        assert plant.sample().i_a == pytest.approx(want, rel=1e-9)
+        assert plant.currents_abc()[0] > plant.sample().i_a  # the present value is later
+
+
+def test_sample_delay_during_a_disabled_period() -> None:
+    """A plant with T_s, two substeps and t_delay = T_s / 2 integrates the same
+    half-period steps as one with T_s / 2 and one substep; its delayed sample is that
+    plant's state at the half period, enabled or with the bridge open."""
+    p = preset("wen2023")
+    T = p.T_s
+    a = Plant(p.motor, p.inverter, T, sensors=SensorPars(t_delay=0.5 * T), w_m0=50.0)
+    b = Plant(p.motor, p.inverter, 0.5 * T, substeps=1, w_m0=50.0)
+    peak = 0.0
+    for k in range(40):
+        d = (0.7, 0.3, 0.4)
+        en = k < 20
+        a.step(*d, enable=en)
+        b.step(*d, enable=en)
+        mid = b.currents_abc()
+        b.step(*d, enable=en)
+        s = a.sample()
+        assert (s.i_a, s.i_b, s.i_c) == pytest.approx(mid, rel=1e-12, abs=1e-12)
+        assert a.currents_abc() == pytest.approx(b.currents_abc(), rel=1e-12, abs=1e-12)
+        peak = max(peak, abs(mid[0]))
+    assert peak > 0.1
+    assert a.currents_abc() == (0.0, 0.0, 0.0)  # the open bridge took the current to zero
+
+
+def test_bad_delay_rejected() -> None:
+    p = preset("wen2023")
+    with pytest.raises(ValueError, match="t_delay"):
+        SensorPars(t_delay=-1e-6)
+    with pytest.raises(ValueError, match="t_delay"):
+        Plant(p.motor, p.inverter, p.T_s, sensors=SensorPars(t_delay=p.T_s))
