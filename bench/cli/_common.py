@@ -21,6 +21,9 @@ from typing import Any
 from bench._errors import BenchError, InterfaceError
 
 MODES = ("lockstep", "realtime")
+#: ``--plant-profile`` choices: :data:`plant_rt.PROFILE_NAMES` (tested equal; not
+#: imported here, so that building the parser stays light).
+PLANT_PROFILES = ("ideal", "drive")
 #: Help of the LOG argument of the capture commands.
 LOG_HELP = "a capture python-can reads (.blf, .asc, .log, .trc, .csv, .mf4) or a run folder"
 
@@ -141,7 +144,10 @@ def scenario_from_args(args: argparse.Namespace) -> Any:
     if getattr(args, "duration", None) is not None and args.duration <= 0:
         raise BenchError(f"--duration must be > 0, got {args.duration}")
     return scn.with_overrides(
-        duration=getattr(args, "duration", None), seed=getattr(args, "seed", None), latency=lat
+        duration=getattr(args, "duration", None),
+        seed=getattr(args, "seed", None),
+        latency=lat,
+        plant_profile=getattr(args, "plant_profile", None),
     )
 
 
@@ -234,3 +240,12 @@ def same_bus(a: Any, b: Any) -> bool:
 
 def files_line(out_dir: Path, names: list[str]) -> str:
     return f"files: {out_dir}/ ({', '.join(names)})"
+
+
+def add_plant_profile(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--plant-profile",
+        choices=PLANT_PROFILES,
+        help="ideal: the papers' plant; drive: switching inverter, dead time, device drops, "
+        "ADC, offsets, cross-saturation (default: the scenario's plant_profile)",
+    )

@@ -11,6 +11,7 @@ from bench.cli._common import (
     POS_INT,
     STOP,
     add_bus,
+    add_plant_profile,
     add_rt,
     add_scenario_overrides,
     bus_spec,
@@ -53,6 +54,7 @@ def register(sub: Any) -> None:
     p = sub.add_parser("plant", help="serve the plant emulator on a bus (one node)")
     p.add_argument("scenario")
     add_scenario_overrides(p)
+    add_plant_profile(p)
     add_bus(p)
     p.add_argument("--truth-every", type=POS_INT, default=1, help="send PlantTruth every N periods")
     p.add_argument(

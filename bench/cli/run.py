@@ -12,6 +12,7 @@ from bench._errors import EXIT_PLANT_TRIPPED, BenchError
 from bench.cli._common import (
     POS_FLOAT,
     add_bus,
+    add_plant_profile,
     add_rt,
     add_scenario_overrides,
     bus_spec,
@@ -131,6 +132,7 @@ def register(sub: Any) -> None:
         "--estimator", "-e", help="sfhf, tt-ab, tt-dq, square-wave, square-wave-nocic, sensored"
     )
     add_scenario_overrides(p)
+    add_plant_profile(p)
     add_bus(p)
     p.add_argument("--out", "-o", help="run folder (default runs/SCENARIO-ESTIMATOR)")
     p.add_argument(

@@ -35,7 +35,35 @@ Schema (all keys optional unless marked *required*)::
                                      # (amplitudes <= u_dc/sqrt(3) of the preset, f_h below
                                      # Nyquist; the keys of both families are accepted, since
                                      # the estimator may be chosen on the command line)
-    [noise]
+    extends = "wen-5.1"              # start from a shipped scenario (or a path): this file's
+                                     # keys replace the base's, table by table, key by key
+    plant_profile = "ideal"          # "ideal" (the papers' plant) | "drive" (switching inverter,
+                                     # dead time, drops, ADC, offsets, cross-saturation;
+                                     # plant_rt/_profiles.py); the tables below change single
+                                     # values of the profile
+    [inverter]
+    model = "average"                # "average" | "switching"
+    t_dead = 0.0                     # dead time per transition, s
+    v_ce = 0.0                       # transistor on-state drop, V
+    v_f = 0.0                        # diode forward drop, V
+    u_dc = 540.0                     # DC-link source voltage, V (default: the preset's)
+    r_dc = 0.0                       # DC source resistance, Ohm
+    c_dc = 0.0                       # DC-link capacitance, F (0: none)
+    sample_at = "peak"               # ADC instant: carrier "peak" | "valley"
+    [sensors]
+    current_offset_a = 0.0           # per phase, A (one number, or [a, b, c])
+    current_gain_error = 0.0         # relative, per phase (gain 1 + e; one number, or [a, b, c])
+    adc_bits = 0                     # 0: no quantization
+    current_full_scale_a = 50.0      # +- A
+    current_noise_a = 0.0            # white noise, A rms
+    sample_delay_s = 0.0             # sensor chain delay, s (below one period)
+    [magnetics]
+    saturation = true                # d-axis saturation (the polarity test needs it)
+    cross_saturation = false         # cross-saturation flux map (the preset's c_dq)
+    sigma = 0.15                     # d-axis saturation depth, - (plant_rt.SaturationPars)
+    i_sat = 2.0                      # d-axis saturation current, A
+    c_dq = 0.0                       # cross-saturation coefficient (plant_rt.CrossSaturationPars)
+    [noise]                          # older form of [sensors] (kept; [sensors] wins)
     current_std_a = 0.0              # white noise on each phase current, A rms
     adc_bits = 0                     # 0: no quantization
     adc_full_scale_a = 0.0
@@ -289,6 +317,12 @@ class Scenario:
     paper_result: dict[str, Any] = field(default_factory=dict)
     #: Explicit motor parameters (SI units) replacing the preset's (``[motor]``).
     motor: dict[str, float] = field(default_factory=dict)
+    #: The plant profile (``ideal`` or ``drive``, :mod:`plant_rt._profiles`).
+    plant_profile: str = "ideal"
+    #: ``[inverter]``, ``[sensors]``, ``[magnetics]``: values replacing the profile's.
+    inverter: dict[str, Any] = field(default_factory=dict)
+    sensors: dict[str, Any] = field(default_factory=dict)
+    magnetics: dict[str, Any] = field(default_factory=dict)
 
     def with_overrides(self, **kw: Any) -> Scenario:
         """A copy with some fields replaced (command-line options).
@@ -339,6 +373,10 @@ class Scenario:
             "controller_model": {k: getattr(self.controller_model, k) for k in MODEL_ERROR_KEYS},
             "motor": dict(self.motor),
             "paper_result": dict(self.paper_result),
+            "plant_profile": self.plant_profile,
+            "inverter": dict(self.inverter),
+            "sensors": dict(self.sensors),
+            "magnetics": dict(self.magnetics),
         }
 
 
@@ -366,7 +404,26 @@ _TOP_KEYS = {
     "controller_model",
     "motor",
     "paper_result",
+    "plant_profile",
+    "inverter",
+    "sensors",
+    "magnetics",
+    "extends",
 }
+
+#: ``[inverter]`` keys: fields of :class:`plant_rt.InverterPars`, with their checks.
+INVERTER_KEYS = ("model", "t_dead", "v_ce", "v_f", "u_dc", "r_dc", "c_dc", "sample_at")
+#: ``[sensors]`` keys: the keywords of :meth:`plant_rt.SensorPars.from_keys`.
+SENSOR_KEYS = (
+    "current_offset_a",
+    "current_gain_error",
+    "adc_bits",
+    "current_full_scale_a",
+    "current_noise_a",
+    "sample_delay_s",
+)
+#: ``[magnetics]`` keys.
+MAGNETICS_KEYS = ("saturation", "cross_saturation", "sigma", "i_sat", "c_dq")
 
 #: Keys of the ``[motor]`` table: the fields of :class:`plant_rt.MotorPars`.
 MOTOR_KEYS = (
@@ -826,6 +883,7 @@ def parse_scenario(data: dict[str, Any], src: str) -> Scenario:
     if err := saliency_error(r.src, preset, motor, (*ests, estimator)):
         raise err
     f_eff = PRESETS[preset].f_sw if f_sw == -1.0 else f_sw
+    profile, inverter, sensors, magnetics = _parse_plant(r, 1.0 / f_eff)
     _check_delay_us(r.src, latency, f_eff)
     opts = _parse_estimator_options(r, preset, f_eff)
     paper = r.table("paper_result").t
@@ -839,7 +897,7 @@ def parse_scenario(data: dict[str, Any], src: str) -> Scenario:
             "nothing would be scored",
         )
     return Scenario(
-        name=r.string("name", src[:-5] if src.endswith(".toml") else src),
+        name=r.string("name", Path(src[:-5]).name if src.endswith(".toml") else src),
         source=src,
         preset=preset,
         duration=duration,
@@ -863,7 +921,100 @@ def parse_scenario(data: dict[str, Any], src: str) -> Scenario:
         controller_model=controller_model,
         paper_result=dict(paper),
         motor=motor,
+        plant_profile=profile,
+        inverter=inverter,
+        sensors=sensors,
+        magnetics=magnetics,
     )
+
+
+def _three(r: _Reader, key: str) -> float | tuple[float, float, float]:
+    """One number, or [a, b, c] (a value per phase)."""
+    v = r.t[key]
+    if isinstance(v, list):
+        if len(v) != 3 or not all(
+            isinstance(x, int | float) and not isinstance(x, bool) for x in v
+        ):
+            raise r.fail(key, f"expected a number or [a, b, c], got {v!r}")
+        if not all(math.isfinite(x) for x in v):
+            raise r.fail(key, "must be finite")
+        return (float(v[0]), float(v[1]), float(v[2]))
+    return r.num(key)
+
+
+def _parse_plant(
+    r: _Reader, T_s: float
+) -> tuple[str, dict[str, Any], dict[str, Any], dict[str, Any]]:
+    """``plant_profile`` and the ``[inverter]``, ``[sensors]``, ``[magnetics]`` tables.
+
+    Each table holds only the values it changes in the profile; every value is
+    checked here, so a plant that cannot be built is one line at load time.
+    """
+    from plant_rt import PROFILE_NAMES
+
+    profile = r.string("plant_profile", "ideal")
+    if profile not in PROFILE_NAMES:
+        raise r.fail(
+            "plant_profile", f"unknown profile {profile!r} (known: {', '.join(PROFILE_NAMES)})"
+        )
+    it = r.table("inverter", set(INVERTER_KEYS))
+    inverter: dict[str, Any] = {}
+    for k in INVERTER_KEYS:
+        if k not in it.t:
+            continue
+        if k == "model":
+            inverter[k] = it.string(k)
+            if inverter[k] not in ("average", "switching"):
+                raise it.fail(k, f'expected "average" or "switching", got {inverter[k]!r}')
+        elif k == "sample_at":
+            inverter[k] = it.string(k)
+            if inverter[k] not in ("peak", "valley"):
+                raise it.fail(k, f'expected "peak" or "valley", got {inverter[k]!r}')
+        elif k == "u_dc":
+            inverter[k] = it.num(k)
+            if not inverter[k] > 0.0:
+                raise it.fail(k, f"must be > 0 V, got {inverter[k]}")
+        elif k == "t_dead":
+            inverter[k] = it.num(k, lo=0.0, hi=0.5 * T_s)
+        else:
+            inverter[k] = it.num(k, lo=0.0)
+    st = r.table("sensors", set(SENSOR_KEYS))
+    sensors: dict[str, Any] = {}
+    for k in SENSOR_KEYS:
+        if k not in st.t:
+            continue
+        if k in ("current_offset_a", "current_gain_error"):
+            sensors[k] = _three(st, k)
+        elif k == "adc_bits":
+            sensors[k] = st.integer(k, 0, lo=0)
+            if sensors[k] > 24:
+                raise st.fail(k, f"must be at most 24 bits, got {sensors[k]}")
+        elif k == "current_full_scale_a":
+            sensors[k] = st.num(k)
+            if not sensors[k] > 0.0:
+                raise st.fail(k, f"must be > 0 A, got {sensors[k]}")
+        elif k == "sample_delay_s":
+            sensors[k] = st.num(k, lo=0.0)
+            if not sensors[k] < T_s:
+                raise st.fail(k, f"must be below one PWM period ({T_s:g} s), got {sensors[k]}")
+        else:
+            sensors[k] = st.num(k, lo=0.0)
+    mg = r.table("magnetics", set(MAGNETICS_KEYS))
+    magnetics: dict[str, Any] = {}
+    for k in MAGNETICS_KEYS:
+        if k not in mg.t:
+            continue
+        if k in ("saturation", "cross_saturation"):
+            magnetics[k] = mg.boolean(k, False)
+        elif k == "sigma":
+            magnetics[k] = mg.num(k, lo=0.0, hi=0.99)
+        elif k == "i_sat":
+            magnetics[k] = mg.num(k)
+            if not magnetics[k] > 0.0:
+                raise mg.fail(k, f"must be > 0 A, got {magnetics[k]}")
+        else:
+            magnetics[k] = mg.num(k, lo=0.0)
+    return profile, inverter, sensors, magnetics
 
 
 def scenario_from_dict(d: dict[str, Any], src: str) -> Scenario:
@@ -894,11 +1045,46 @@ def load_scenario(name_or_path: str) -> Scenario:
         if not isinstance(d, dict):
             raise ScenarioError(f"{path}: not a scenario file")
         return scenario_from_dict(d, str(d.get("source", path)))
+    src = name_or_path if not Path(name_or_path).exists() else str(path)
+    return parse_scenario(_resolved_toml(path, src, ()), src)
+
+
+def _read_toml(path: Path) -> dict[str, Any]:
     try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
+        return tomllib.loads(path.read_text(encoding="utf-8"))
     except tomllib.TOMLDecodeError as e:
         raise ScenarioError(f"{path}: not valid TOML: {e}") from None
     except OSError as e:
         raise ScenarioError(f"{path}: cannot read: {e.strerror}") from None
-    src = name_or_path if not Path(name_or_path).exists() else str(path)
-    return parse_scenario(data, src)
+
+
+def _resolved_toml(path: Path, src: str, seen: tuple[Path, ...]) -> dict[str, Any]:
+    """The TOML table of ``path`` with its ``extends`` chain merged in, base first.
+
+    ``extends`` names a shipped scenario or a path (relative to the file that
+    names it); the file's keys replace the base's, tables merged key by key
+    (a profile such as ``speed_rpm`` is one value, replaced whole).  The
+    base's ``name`` is not inherited: a file is named after itself.
+    """
+    data = _read_toml(path)
+    base_name = data.pop("extends", None)
+    if base_name is None:
+        return data
+    if not isinstance(base_name, str):
+        raise ScenarioError(f"{src}: field 'extends': expected a scenario name or path")
+    rel = path.parent / base_name
+    base_path = scenario_path(str(rel) if rel.suffix == ".toml" and rel.exists() else base_name)
+    key = base_path.resolve()
+    if key in seen or key == path.resolve():
+        raise ScenarioError(f"{src}: field 'extends': {base_name} extends itself (a cycle)")
+    if base_path.suffix != ".toml":
+        raise ScenarioError(f"{src}: field 'extends': {base_name} is not a TOML scenario")
+    base = _resolved_toml(base_path, base_name, (*seen, path.resolve()))
+    base.pop("name", None)
+    merged = dict(base)
+    for k, v in data.items():
+        if isinstance(v, dict) and isinstance(merged.get(k), dict):
+            merged[k] = {**merged[k], **v}
+        else:
+            merged[k] = v
+    return merged

@@ -15,7 +15,7 @@ from bench.scenarios._schema import ModelErrors, Scenario, saliency_error
 from bench.wire._protocol import CMD_START, CMD_STOP, RPM_PER_RAD_S
 from controller import Controller, ControllerPars, MotorModel
 from controller._registry import ESTIMATOR_NAMES, injection_family
-from plant_rt import ConstantLoad, Plant, Preset, SensorPars, preset
+from plant_rt import ConstantLoad, Plant, PlantProfile, Preset, SensorPars, plant_profile, preset
 
 
 @dataclass(frozen=True, slots=True)
@@ -60,23 +60,74 @@ def lockstep_delay(scn: Scenario) -> int:
     return scn.latency.duty_delay_steps + scn.latency.sample_delay_steps
 
 
-def build_plant(scn: Scenario) -> Plant:
+#: ``[sensors]`` key -> the :class:`plant_rt.SensorPars` fields it sets.
+_SENSOR_FIELDS = {
+    "adc_bits": ("bits",),
+    "current_full_scale_a": ("i_fs",),
+    "current_offset_a": ("offset_abc",),
+    "current_gain_error": ("gain_abc",),
+    "current_noise_a": ("noise_i",),
+    "sample_delay_s": ("t_delay",),
+}
+
+
+def plant_setup(scn: Scenario) -> tuple[Preset, PlantProfile]:
+    """The plant of a scenario: its motor preset and its effective profile.
+
+    The profile (``plant_profile``, :mod:`plant_rt._profiles`) gives the
+    inverter, the sensors and the magnetic effects; the scenario's
+    ``[inverter]``, ``[sensors]`` and ``[magnetics]`` tables (and the older
+    ``[noise]`` table and top-level ``saturation``) change single values of it.
+    ``[magnetics]`` ``sigma``, ``i_sat`` and ``c_dq`` change the motor's.
+    """
     p = get_preset(scn)
+    mg = scn.magnetics
+    sat = p.motor.sat
+    if "sigma" in mg or "i_sat" in mg:
+        sat = replace(sat, **{k: mg[k] for k in ("sigma", "i_sat") if k in mg})
+    cross = replace(p.motor.cross, c_dq=mg["c_dq"]) if "c_dq" in mg else p.motor.cross
+    if sat is not p.motor.sat or cross is not p.motor.cross:
+        p = replace(p, motor=replace(p.motor, sat=sat, cross=cross))
+    try:
+        return _plant_setup(scn, p, mg)
+    except ValueError as e:  # a combination the plant refuses (each value was checked on load)
+        raise ScenarioError(f"{scn.source}: plant ({scn.plant_profile} profile): {e}") from None
+
+
+def _plant_setup(scn: Scenario, p: Preset, mg: dict[str, Any]) -> tuple[Preset, PlantProfile]:
+    prof = plant_profile(scn.plant_profile, p, scn.seed)
     nz = scn.noise
-    sensors = SensorPars(
-        bits=nz.adc_bits or None,
-        i_fs=nz.adc_full_scale_a or 50.0,
-        noise_i=nz.current_std_a,
-        seed=scn.seed,
+    legacy: dict[str, Any] = {"seed": scn.seed}
+    if nz.adc_bits:
+        legacy.update(bits=nz.adc_bits, i_fs=nz.adc_full_scale_a or 50.0)
+    if nz.current_std_a:
+        legacy["noise_i"] = nz.current_std_a
+    sensors = replace(prof.sensors, **legacy)
+    if scn.sensors:
+        given = SensorPars.from_keys(**scn.sensors)
+        fields = [f for k in scn.sensors for f in _SENSOR_FIELDS[k]]
+        sensors = replace(sensors, **{f: getattr(given, f) for f in fields})
+    inverter = replace(prof.inverter, **scn.inverter)
+    return p, replace(
+        prof,
+        inverter=inverter,
+        sensors=sensors,
+        saturation=bool(mg.get("saturation", scn.saturation)),
+        cross_saturation=bool(mg.get("cross_saturation", prof.cross_saturation)),
     )
+
+
+def build_plant(scn: Scenario) -> Plant:
+    p, prof = plant_setup(scn)
     theta_m0 = math.radians(scn.theta_e0_deg) / p.motor.n_p
     return Plant(
         p.motor,
-        p.inverter,
+        prof.inverter,
         sample_period(scn),
-        sensors=sensors,
+        sensors=prof.sensors,
         load=ConstantLoad(scn.load_nm(0.0)),
-        saturation=scn.saturation,
+        saturation=prof.saturation,
+        cross_saturation=prof.cross_saturation,
         theta_m0=theta_m0,
     )
 
