@@ -16,6 +16,7 @@ from controller._api import (
 )
 from controller._controller import Controller, ControllerPars
 from controller._filters import BPF_WEN, HPF_WEN, LPF_WEN, discretize
+from controller._flux_observer import FluxObserver, pll_gains
 from controller._params import MotorModel
 from controller._pi import PIController
 from controller._pll import PositionObserver
@@ -40,6 +41,7 @@ __all__ = [
     "ControllerPars",
     "Estimator",
     "EstimatorInput",
+    "FluxObserver",
     "Measurement",
     "MotorModel",
     "PIController",
@@ -54,6 +56,7 @@ __all__ = [
     "inv_park",
     "make_estimator",
     "park",
+    "pll_gains",
     "svpwm",
     "wrap_2pi",
     "wrap_pi",
