@@ -16,6 +16,8 @@ from controller._api import (
 )
 from controller._controller import Controller, ControllerPars
 from controller._filters import BPF_WEN, HPF_WEN, LPF_WEN, discretize
+from controller._flux_observer import FluxObserver, pll_gains
+from controller._hybrid import HybridDesign, HybridEstimator, TransitionBand, design
 from controller._params import MotorModel
 from controller._pi import PIController
 from controller._pll import PositionObserver
@@ -40,20 +42,26 @@ __all__ = [
     "ControllerPars",
     "Estimator",
     "EstimatorInput",
+    "FluxObserver",
+    "HybridDesign",
+    "HybridEstimator",
     "Measurement",
     "MotorModel",
     "PIController",
     "PolarityTest",
     "PositionObserver",
     "RotatingInjectionPars",
+    "TransitionBand",
     "UnknownEstimatorError",
     "clarke",
+    "design",
     "discretize",
     "hf_amplitudes",
     "inv_clarke",
     "inv_park",
     "make_estimator",
     "park",
+    "pll_gains",
     "svpwm",
     "wrap_2pi",
     "wrap_pi",

@@ -111,6 +111,13 @@ class EstimatorInput:
         Truth, for the ``sensored`` estimator only.
     w_e : float or None
         Truth, for the ``sensored`` estimator only.
+    u_alpha, u_beta : float
+        Stator voltage the controller commanded for the period that ended at
+        this sample, ``[(k-1) T_s, k T_s]`` (V, stationary frame, HF injection
+        included): the command computed from sample ``k - 2``. With the
+        average inverter in its linear range this is the voltage that drove
+        the current from sample ``k - 1`` to sample ``k``; model-based
+        observers integrate it. Zero before the first two commands.
     """
 
     k: int
@@ -119,6 +126,8 @@ class EstimatorInput:
     torque: float
     theta_e: float | None = None
     w_e: float | None = None
+    u_alpha: float = 0.0
+    u_beta: float = 0.0
 
 
 class Estimator(Protocol):

@@ -28,6 +28,12 @@ Delay compensation: the voltage computed from sample ``k`` acts over
 ``[(k+1) T_s, (k+2) T_s]``, whose mid-point is ``1.5 T_s`` after the sample,
 so the inverse Park uses ``theta_hat + 1.5 T_s w_hat``.
 
+Voltage bookkeeping: the stator-voltage command of every period (fundamental
+plus HF, stationary frame) is kept for two periods, so the estimator gets
+with sample ``k`` the voltage that acted over ``[(k-1) T_s, k T_s]`` (computed
+from sample ``k - 2``; :attr:`EstimatorInput.u_alpha`), which model-based
+observers integrate. The polarity test's pulses are recorded the same way.
+
 Voltage limit: the fundamental reference is limited to ``u_dc/sqrt(3) -
 |u_h|`` (the linear range of SVPWM less the HF injection) before the HF
 voltage is added, so the injection is never clipped and the current PIs
@@ -182,6 +188,9 @@ class Controller:
         #: Realised fundamental voltage of the last step, estimated frame (V).
         self.u_d = 0.0
         self.u_q = 0.0
+        # stator-voltage commands (V, stationary): *_1 computed from the last
+        # sample (acting now), *_2 from the one before (acted until this sample)
+        self._u_a1 = self._u_b1 = self._u_a2 = self._u_b2 = 0.0
         self._n_mode = 0
         self._settled = False
         self._i_ref: tuple[float, float] | None = None
@@ -212,6 +221,7 @@ class Controller:
         self.lpf_w.reset()
         self.estimator.reset(self.pars.theta0)
         self.i_d_ref = self.i_q_ref = self.tau_ref = 0.0
+        self._u_a1 = self._u_b1 = self._u_a2 = self._u_b2 = 0.0
         self._n_mode = 0
         self._settled = False
         if self.family == "none" or not self.pars.startup:
@@ -236,7 +246,18 @@ class Controller:
         m = self.motor
         if mode == MODE_POLARITY:
             return self._polarity_step(k, i_alpha, i_beta, u_dc)
-        est.update(EstimatorInput(k, i_alpha, i_beta, self.tau_ref, meas.theta_e, meas.w_e))
+        est.update(
+            EstimatorInput(
+                k,
+                i_alpha,
+                i_beta,
+                self.tau_ref,
+                meas.theta_e,
+                meas.w_e,
+                self._u_a2,
+                self._u_b2,
+            )
+        )
         th = est.theta_hat
         w = est.w_hat
         c = math.cos(th)
@@ -284,7 +305,13 @@ class Controller:
         th_u = th + self.t_delay * w
         c_u = math.cos(th_u)
         s_u = math.sin(th_u)
-        d_a, d_b, d_c = svpwm(c_u * u_dl - s_u * u_ql + u_ah, s_u * u_dl + c_u * u_ql + u_bh, u_dc)
+        u_a = c_u * u_dl - s_u * u_ql + u_ah
+        u_b = s_u * u_dl + c_u * u_ql + u_bh
+        d_a, d_b, d_c = svpwm(u_a, u_b, u_dc)
+        self._u_a2 = self._u_a1
+        self._u_b2 = self._u_b1
+        self._u_a1 = u_a
+        self._u_b1 = u_b
         # The speed reported is the filtered estimate the speed loop uses, not
         # the observer's raw output (which carries the demodulation ripple).
         out = ControlOutput(
@@ -335,5 +362,11 @@ class Controller:
             self.mode = MODE_ALIGN
             self._settled = True
             self._n_mode = 0
-        d_a, d_b, d_c = svpwm(c * u_d, s * u_d, u_dc)
+        u_a = c * u_d
+        u_b = s * u_d
+        d_a, d_b, d_c = svpwm(u_a, u_b, u_dc)
+        self._u_a2 = self._u_a1
+        self._u_b2 = self._u_b1
+        self._u_a1 = u_a
+        self._u_b1 = u_b
         return ControlOutput(k, d_a, d_b, d_c, True, th, 0.0, 0.0, MODE_POLARITY, i_d, i_q)

@@ -2,7 +2,9 @@
 
 Each estimator module exposes ``create(motor, T_s, **options) -> Estimator``.
 The names are part of the command-line contract (DESIGN.md): ``sfhf``,
-``tt-ab``, ``tt-dq``, ``square-wave``, ``square-wave-nocic``, ``sensored``.
+``tt-ab``, ``tt-dq``, ``square-wave``, ``square-wave-nocic``, ``sensored``,
+``hybrid-tt-dq``, ``hybrid-square-wave`` (the injection family of a hybrid is
+its injection estimator's: it injects below its transition band).
 """
 
 from __future__ import annotations
@@ -21,6 +23,8 @@ _ESTIMATORS: dict[str, tuple[str, dict[str, Any], str]] = {
     "square-wave": ("controller._square_wave", {"cic": True}, "square"),
     "square-wave-nocic": ("controller._square_wave", {"cic": False}, "square"),
     "sensored": ("controller._sensored", {}, "none"),
+    "hybrid-tt-dq": ("controller._hybrid", {"hf": "tt-dq"}, "rotating"),
+    "hybrid-square-wave": ("controller._hybrid", {"hf": "square-wave"}, "square"),
 }
 
 ESTIMATOR_NAMES: tuple[str, ...] = tuple(_ESTIMATORS)
