@@ -17,7 +17,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from bench._setup import motor_model
+from bench.scenarios._setup import motor_model
 from controller import FluxObserver, Measurement, MotorModel, pll_gains
 from plant_rt import ConstantLoad, preset
 from tests.loop_helpers import RPM, make_loop

@@ -16,8 +16,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from bench._scenario import load_scenario
-from bench._setup import motor_model
+from bench.scenarios._schema import load_scenario
+from bench.scenarios._setup import motor_model
 from controller import HybridEstimator, TransitionBand, design, make_estimator
 from controller._hybrid import ABOVE, BELOW, INSIDE
 from controller._registry import injection_family

@@ -5,7 +5,7 @@ from pathlib import Path
 import pytest
 
 from bench._errors import ScenarioError
-from bench.scenarios._schema import SHIPPED, Profile, load_scenario
+from bench.scenarios._schema import PAPER, SHIPPED, Profile, load_scenario
 
 
 @pytest.mark.parametrize("name", SHIPPED)
@@ -14,7 +14,8 @@ def test_shipped_scenarios_load(name: str) -> None:
     assert s.name == name
     assert s.duration > s.score_from_s
     assert s.estimator in s.estimators
-    assert s.paper_result, "every shipped scenario carries the paper's numbers"
+    # the papers' scenarios carry the papers' numbers; the full speed range is beyond them
+    assert bool(s.paper_result) == (name in PAPER)
 
 
 def test_wen_5_2_speed_steps_follow_the_paper_with_1s_lead_in() -> None:
@@ -94,3 +95,26 @@ def test_a_short_file_scenario_without_scoring_start_scores_its_second_half(tmp_
     assert (
         load_scenario(_write(tmp_path, 'preset = "wen2023"\nduration = 2.0\n')).score_from_s == 0.5
     )
+
+
+def test_every_scenario_file_is_shipped_by_name() -> None:
+    from pathlib import Path
+
+    import bench.scenarios
+
+    on_disk = sorted(p.stem for p in Path(bench.scenarios.__file__).parent.glob("*.toml"))
+    assert sorted(SHIPPED) == on_disk
+
+
+def test_the_hybrids_own_options_are_scenario_keys(tmp_path: Path) -> None:
+    from bench.scenarios._setup import build_controller
+
+    f = tmp_path / "fast.toml"
+    f.write_text('extends = "wide-speed-wen"\n[estimator_options]\nalpha_o = 300.0\nu_err = 2.0\n')
+    s = load_scenario(str(f))
+    assert s.estimator_options["alpha_o"] == 300.0
+    build_controller(s, "hybrid-tt-dq")
+    bad = tmp_path / "bad.toml"
+    bad.write_text('extends = "wide-speed-wen"\n[estimator_options]\nu_err = -1.0\n')
+    with pytest.raises(ScenarioError, match="u_err"):
+        load_scenario(str(bad))

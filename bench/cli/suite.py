@@ -43,12 +43,12 @@ def _common(p: argparse.ArgumentParser) -> None:
 
 
 def cmd_paper(args: argparse.Namespace) -> int:
-    from bench.scenarios._schema import SHIPPED
+    from bench.scenarios._schema import PAPER, SHIPPED
     from bench.studies._suite import SuiteOptions, run_suite
     from bench.studies._sweep import SWEEPS
     from controller._registry import ESTIMATOR_NAMES
 
-    scenarios = _csv(args.scenarios) or SHIPPED
+    scenarios = _csv(args.scenarios) or PAPER
     for s in scenarios:
         if s not in SHIPPED and not Path(s).is_file():
             raise BenchError(

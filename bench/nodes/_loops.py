@@ -133,6 +133,13 @@ def command_frames(
     return out
 
 
+#: In-process loop: the commands are handed to the nodes this many periods
+#: ahead of the plant, as ``bench run`` paces them on a bus.  All at once
+#: would not do: the 16-bit ``BenchCommand.step`` wraps after 65,536 periods
+#: (6.5 s at 10 kHz) and the nodes keep at most ``MAX_PENDING_COMMANDS``.
+INPROCESS_LEAD = 1000
+
+
 def run_inprocess(
     scn: Scenario, estimator: str, codec: Codec, *, plant_times: list[float] | None = None
 ) -> list[can.Message]:
@@ -155,10 +162,20 @@ def run_inprocess(
         else None
     )
     frames: list[can.Message] = []
-    for _, m in command_frames(scn, codec):
-        frames.append(m)
-        pn.on_message(m)
-        cn.on_message(m)
+    cmds = command_frames(scn, codec)
+    sent = 0
+
+    def feed(up_to: int) -> None:
+        """Hand the nodes the commands up to step ``up_to``, as ``bench run`` paces them."""
+        nonlocal sent
+        while sent < len(cmds) and cmds[sent][0] <= up_to:
+            m = cmds[sent][1]
+            frames.append(m)
+            pn.on_message(m)
+            cn.on_message(m)
+            sent += 1
+
+    feed(INPROCESS_LEAD)
     pn.apply_commands()
     out = pn.frames_now()
     while True:
@@ -187,6 +204,7 @@ def run_inprocess(
             break
         if not pn.ready():
             raise RuntimeError(f"in-process loop stalled at step {pn.plant.k}")
+        feed(pn.plant.k + INPROCESS_LEAD)
         if plant_times is None:
             out = pn.advance_lockstep()
         else:

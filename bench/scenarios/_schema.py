@@ -110,7 +110,8 @@ from typing import Any
 
 from bench._errors import ScenarioError
 
-SHIPPED = (
+#: The papers' scenarios (what ``bench suite paper`` runs).
+PAPER = (
     "wen-5.1",
     "wen-5.2",
     "wen-5.3",
@@ -122,6 +123,9 @@ SHIPPED = (
     "xue-fig17",
     "xue-fig18",
 )
+#: Every scenario shipped in ``bench/scenarios/``: the papers', and the full
+#: speed range (HF injection handed over to a flux observer) for both motors.
+SHIPPED = (*PAPER, "wide-speed-wen", "wide-speed-xue")
 
 
 @dataclass(frozen=True, slots=True)
@@ -437,7 +441,11 @@ MOTOR_KEYS = (
 #: checked by its key's name.
 _OPTION_AMPLITUDES = ("V_h", "U_h")  # injection amplitude (V): (0, u_dc / sqrt(3)]
 _OPTION_FREQUENCIES = ("f_h",)  # injection frequency (Hz): (0, Nyquist)
-_OPTION_NONNEGATIVE = ("w_o", "delay_comp")  # PLL bandwidth (0 freezes it), periods (0: off)
+_OPTION_NONNEGATIVE = (
+    "w_o",
+    "delay_comp",
+    "u_err",
+)  # PLL bandwidth (0 freezes it), periods (0: off), V
 _OPTION_INTEGERS = ("M",)  # CIC differential delay (PWM periods), >= 1
 _OPTION_FILTERS = ("bpf", "hpf", "lpf")  # continuous prototypes [[b...], [a...]]
 _OPTION_CHOICES = {"normalise": ("model", "measured")}
@@ -454,8 +462,9 @@ def estimator_option_keys() -> dict[str, Any]:
 
     Rotating injection (``sfhf``, ``tt-ab``, ``tt-dq``): the fields of
     :class:`controller._rotating.RotatingInjectionPars`; square-wave: the
-    keyword parameters of :class:`controller._square_wave.SquareWaveEstimator`.
-    ``sensored`` takes none.
+    keyword parameters of :class:`controller._square_wave.SquareWaveEstimator`;
+    the hybrids add the hand-over's own (``controller._hybrid``).  ``sensored``
+    takes none.
     """
     from controller._rotating import RotatingInjectionPars
     from controller._square_wave import SquareWaveEstimator
@@ -464,6 +473,11 @@ def estimator_option_keys() -> dict[str, Any]:
     for k, p in inspect.signature(SquareWaveEstimator.__init__).parameters.items():
         if k not in _SQUARE_WAVE_FIXED:
             keys[k] = p.default
+    # the hybrids' own (controller._hybrid): the hand-over design and the observer's gains
+    from controller._hybrid import _OWN_OPTIONS
+
+    for k in _OWN_OPTIONS:
+        keys.setdefault(k, None)
     return keys
 
 

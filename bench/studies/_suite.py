@@ -40,7 +40,7 @@ from pathlib import Path
 from typing import Any, Protocol
 
 from bench._errors import BenchError
-from bench.scenarios._schema import SHIPPED, Scenario, load_scenario
+from bench.scenarios._schema import PAPER, Scenario, load_scenario
 from bench.studies._extras import run_extras
 
 #: Simulated seconds of a run in ``--quick`` mode (smoke test, not comparable with the papers).
@@ -288,7 +288,7 @@ def suite_transport(interface: str | None = None, channel: str | None = None) ->
 def paper_jobs(
     runs_dir: Path,
     *,
-    scenarios: Sequence[str] = SHIPPED,
+    scenarios: Sequence[str] = PAPER,
     estimators: Sequence[str] | None = None,
     quick: bool = False,
     transport: tuple[str, str] | None = None,
@@ -377,7 +377,7 @@ class SuiteOptions:
 
     out_dir: Path
     runs_dir: Path
-    scenarios: tuple[str, ...] = SHIPPED
+    scenarios: tuple[str, ...] = PAPER
     estimators: tuple[str, ...] | None = None
     quick: bool = False
     sweeps: tuple[str, ...] = ()
