@@ -159,3 +159,11 @@ class Estimator(Protocol):
     def reset(self, theta0: float) -> None:
         """Restart from angle ``theta0`` (rad) at zero speed (e.g. after a polarity flip)."""
         ...
+
+    def gains(self) -> dict[str, float]:
+        """Every gain, bandwidth, filter corner and delay of the estimator, by name.
+
+        Recorded in ``meta.json`` through :meth:`controller.Controller.gains`
+        (which records none for an estimator without this method).
+        """
+        ...
