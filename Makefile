@@ -34,6 +34,7 @@ vcan: $(STAMP)
 
 suite: $(STAMP)
 	$(BIN)/bench suite paper --out docs/results
+	$(BIN)/bench suite report docs/results --readme README.md
 
 perf: $(STAMP)
 	$(BIN)/bench perf --out docs/perf

@@ -14,7 +14,9 @@ from controller._api import (
     EstimatorInput,
     Measurement,
 )
+from controller._compensation import CompensationPars
 from controller._controller import Controller, ControllerPars
+from controller._design import PM_TARGET_DEG
 from controller._filters import BPF_WEN, HPF_WEN, LPF_WEN, discretize
 from controller._flux_observer import FluxObserver, pll_gains
 from controller._hybrid import HybridDesign, HybridEstimator, TransitionBand, design
@@ -37,6 +39,8 @@ __all__ = [
     "MODE_FAULT",
     "MODE_POLARITY",
     "MODE_RUN",
+    "PM_TARGET_DEG",
+    "CompensationPars",
     "ControlOutput",
     "Controller",
     "ControllerPars",

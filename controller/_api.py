@@ -118,6 +118,10 @@ class EstimatorInput:
         average inverter in its linear range this is the voltage that drove
         the current from sample ``k - 1`` to sample ``k``; model-based
         observers integrate it. Zero before the first two commands.
+    running : bool
+        The speed loop is released (``MODE_RUN``); False during the start-up
+        at standstill (alignment), where only the injection can see the
+        angle and its estimator's transients are not a speed.
     """
 
     k: int
@@ -128,6 +132,7 @@ class EstimatorInput:
     w_e: float | None = None
     u_alpha: float = 0.0
     u_beta: float = 0.0
+    running: bool = True
 
 
 class Estimator(Protocol):
@@ -167,4 +172,12 @@ class Estimator(Protocol):
 
     def reset(self, theta0: float) -> None:
         """Restart from angle ``theta0`` (rad) at zero speed (e.g. after a polarity flip)."""
+        ...
+
+    def gains(self) -> dict[str, float]:
+        """Every gain, bandwidth, filter corner and delay of the estimator, by name.
+
+        Recorded in ``meta.json`` through :meth:`controller.Controller.gains`
+        (which records none for an estimator without this method).
+        """
         ...

@@ -24,6 +24,29 @@ Gains from bandwidths (model parameters of :class:`MotorModel`):
 
   giving ``w_m / w_m,ref = alpha_s / (s + alpha_s)`` for a rigid inertia.
 
+Speed-loop bandwidth by design (:func:`speed_loop_margin`). The target
+is ``min(2 pi 5, alpha_c / 10)``, which the load steps of the scenarios
+need (full load, 7.5 N m on 0.003 kg m^2 in Wen 5.3 and 5.4). The speed
+estimate is filtered at ``w_f = 4 alpha_s``; the filter removes the
+demodulation ripple and cuts the fast path from the current, through
+the demodulator's BPF, back to the speed estimate. The loop ``C(s)
+alpha_c/(s + alpha_c) 1/(J s) w_f/(s + w_f) E(s) e^{-1.5 s T_s}`` also
+holds the estimator's speed response ``E = w_hat / w``. With an exact
+speed ``E = 1``: the sensored baseline, and the square-wave observer,
+whose torque feed-forward gives the speed without the correction loop's
+lag in the nominal case. The loop then has 44 degrees of phase margin at
+the target (35 at 1 kHz, where the delay counts). A rotating-injection
+PLL says what its ``E`` is (its ``speed_response``): the demodulation
+filters and the PLL, a low-pass at the PLL's bandwidth. ``alpha_s`` is
+lowered from the target only as far as needed to keep
+:data:`SPEED_PM_MIN_DEG` (30 degrees). That is the usual minimum for an
+outer loop, not the 45 of the angle loops: at 45 the tt-dq PLL would cut
+the speed loop to 1.6 Hz, too slow for the full-load steps (wen-5.3 then
+loses the rotor). With tt-dq's designed PLL (58.5 rad/s) the target
+would keep 3 degrees, so its speed loop runs at 18.8 rad/s (3.0 Hz).
+sfhf runs at 4.9 Hz and tt-ab at 4.4 Hz. The sensored and the
+square-wave drives keep the target exactly.
+
 Delay compensation: the voltage computed from sample ``k`` acts over
 ``[(k+1) T_s, (k+2) T_s]``, whose mid-point is ``1.5 T_s`` after the sample,
 so the inverse Park uses ``theta_hat + 1.5 T_s w_hat``.
@@ -38,14 +61,39 @@ Voltage limit: the fundamental reference is limited to ``u_dc/sqrt(3) -
 |u_h|`` (the linear range of SVPWM less the HF injection) before the HF
 voltage is added, so the injection is never clipped and the current PIs
 integrate what was actually applied.
+
+Current fed to the PIs (``current_feedback``): ``"filtered"`` (default)
+is the estimator's current with the HF response removed, so the PIs do
+not react to the injection. ``"raw"`` is the sampled current, HF
+included. That is the assumption of Wen Sec. 3.3, eqs. (14)-(16): the
+PI then shapes the HF response. With the gains above, ``k_p + R_s = 2
+alpha_c L`` and ``k_i = alpha_c^2 L``, so eq. (14) becomes ``i/u =
+s^2 / (L s (s + alpha_c)^2)``. That is the inductance's response times
+``s^2/(s + alpha_c)^2``, the same factor on both axes, whose phase
+``phi_pi = 2 atan(alpha_c / w)`` is odd in the frequency ``w`` the HF
+current has in the estimated frame. The decoupling always uses the
+filtered current.
+
+Drive countermeasures (``compensation``, :mod:`controller._compensation`),
+each off by default: dead-time feed-forward on the duties, the
+cross-saturation angle correction (the angle used for the transforms and
+reported is ``theta_hat`` of the estimator minus its cross-saturation
+offset), and a current-offset calibration with the PWM disabled before
+each start (the controller reports ``MODE_ALIGN`` with the PWM disabled
+meanwhile).
+
+:meth:`Controller.gains` lists every gain, bandwidth, corner and delay
+the controller uses, the estimator's included.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
+
+import numpy as np
 
 from controller._api import (
     MODE_ALIGN,
@@ -55,6 +103,13 @@ from controller._api import (
     ControlOutput,
     EstimatorInput,
     Measurement,
+)
+from controller._compensation import (
+    CompensationPars,
+    DeadTimeCompensator,
+    OffsetCalibration,
+    cross_saturation_offset,
+    offset_periods,
 )
 from controller._filters import lpf_first_order
 from controller._params import MotorModel
@@ -66,10 +121,14 @@ from controller._svpwm import svpwm
 _TWO_PI = 2.0 * math.pi
 _SQRT3_INV = 1.0 / math.sqrt(3.0)
 
+#: Least phase margin of the speed loop, estimator included (deg); module docstring.
+SPEED_PM_MIN_DEG = 30.0
+
 
 @dataclass(frozen=True, slots=True)
 class ControllerPars:
-    """Controller settings; ``None`` fields get defaults derived from ``motor`` and ``T_s``.
+    """Controller settings; ``None`` fields get defaults derived from ``motor`` and ``T_s``
+    (``alpha_s`` and ``w_f`` by the :class:`Controller`, which holds the values it uses).
 
     Parameters
     ----------
@@ -86,8 +145,9 @@ class ControllerPars:
         100 Hz, well below the 500 Hz injection, and at most 1/20 of the
         sampling rate.
     alpha_s : float, optional
-        Speed-loop bandwidth (rad/s). Default ``min(2 pi 5, alpha_c / 10)``,
-        below the position observers' bandwidth.
+        Speed-loop bandwidth (rad/s). Default: the target ``min(2 pi 5,
+        alpha_c / 10)``, lowered for an estimator whose speed estimate lags
+        (module docstring); the controller's ``alpha_s`` holds the value used.
     w_f : float, optional
         Corner of the low-pass filter on the estimated speed used by the
         speed loop and the decoupling (rad/s). Default ``4 alpha_s``.
@@ -111,6 +171,12 @@ class ControllerPars:
         released (s).
     i_pulse : float, optional
         Polarity-test peak current (A). Default ``0.5 i_max``.
+    compensation : CompensationPars
+        Dead-time feed-forward, cross-saturation correction, offset
+        calibration (:mod:`controller._compensation`); all off by default.
+    current_feedback : str
+        ``"filtered"`` (HF removed, default) or ``"raw"`` (Wen Sec. 3.3: the
+        current PIs see the HF current).
     """
 
     motor: MotorModel
@@ -128,25 +194,79 @@ class ControllerPars:
     t_align: float = 0.1
     t_settle: float = 0.05
     i_pulse: float | None = None
+    compensation: CompensationPars = field(default_factory=CompensationPars)
+    current_feedback: str = "filtered"
 
     def __post_init__(self) -> None:
         if not self.T_s > 0.0:
             raise ValueError(f"ControllerPars.T_s must be > 0, got {self.T_s}")
+        if self.current_feedback not in ("filtered", "raw"):
+            raise ValueError(
+                f"ControllerPars.current_feedback must be 'filtered' or 'raw', "
+                f"got {self.current_feedback!r}"
+            )
         injection_family(self.estimator)
         a_c = self.alpha_c
         if a_c is None:
             a_c = min(_TWO_PI * 100.0, _TWO_PI / (20.0 * self.T_s))
             object.__setattr__(self, "alpha_c", a_c)
-        if self.alpha_s is None:
-            object.__setattr__(self, "alpha_s", min(_TWO_PI * 5.0, a_c / 10.0))
-        if self.w_f is None:
-            object.__setattr__(self, "w_f", 4.0 * float(self.alpha_s or 0.0))
         if self.i_max is None:
             object.__setattr__(self, "i_max", self.motor.i_max)
         if self.tau_max is None:
             object.__setattr__(self, "tau_max", self.motor.tau_max)
         if self.i_pulse is None:
             object.__setattr__(self, "i_pulse", 0.5 * float(self.i_max or 0.0))
+
+
+def speed_loop_margin(
+    alpha_s: float,
+    alpha_c: float,
+    w_f: float,
+    T_s: float,
+    speed_resp: Callable[[np.ndarray], np.ndarray] | None,
+) -> tuple[float, float]:
+    """Phase margin (deg) and crossover (rad/s) of the speed loop (module docstring).
+
+    ``L = (2 alpha_s s + alpha_s^2) / s^2 * alpha_c / (s + alpha_c) * w_f / (s + w_f) * E
+    * exp(-1.5 s T_s)``; the inertia cancels. ``E = speed_resp(w)``, or 1.
+    """
+    from controller._design import margins
+
+    def loop(w: np.ndarray) -> np.ndarray:
+        s = 1j * w
+        out = (2.0 * alpha_s * s + alpha_s * alpha_s) / (s * s)
+        out = out * alpha_c / (s + alpha_c) * np.exp(-1.5 * s * T_s)
+        out = out * w_f / (s + w_f)
+        return out * speed_resp(w) if speed_resp is not None else out
+
+    return margins(loop, 1e-3 * alpha_s, 0.999 * math.pi / T_s, 2)
+
+
+def speed_bandwidth(
+    target: float,
+    alpha_c: float,
+    T_s: float,
+    speed_resp: Callable[[np.ndarray], np.ndarray] | None,
+    w_f: float | None,
+) -> float:
+    """Largest ``alpha_s <= target`` whose loop with ``speed_resp`` and the filter ``w_f``
+    (None: ``4 alpha_s``) keeps :data:`SPEED_PM_MIN_DEG` (module docstring)."""
+    from controller._design import solve_largest
+
+    def wf(a: float) -> float:
+        return 4.0 * a if w_f is None else w_f
+
+    if speed_resp is None:
+        return target
+    if speed_loop_margin(target, alpha_c, wf(target), T_s, speed_resp)[0] >= SPEED_PM_MIN_DEG:
+        return target
+    return solve_largest(
+        lambda a: speed_loop_margin(a, alpha_c, wf(a), T_s, speed_resp)[0],
+        SPEED_PM_MIN_DEG,
+        1e-3 * target,
+        target,
+        rising=False,
+    )
 
 
 class Controller:
@@ -167,11 +287,14 @@ class Controller:
         self.family = injection_family(pars.estimator)
         self.estimator = make_estimator(pars.estimator, m, T_s, **dict(pars.estimator_options))
         a_c = float(pars.alpha_c or 0.0)
-        a_s = float(pars.alpha_s or 0.0)
+        a_s, w_f = self._speed_loop_design()
+        #: Speed-loop bandwidth (rad/s) and speed-estimate filter corner (rad/s) in use.
+        self.alpha_s = a_s
+        self.w_f = w_f
         self.pi_d = PIController(2 * a_c * m.L_d - m.R_s, a_c * a_c * m.L_d, T_s, a_c * m.L_d)
         self.pi_q = PIController(2 * a_c * m.L_q - m.R_s, a_c * a_c * m.L_q, T_s, a_c * m.L_q)
         self.pi_w = PIController(2 * a_s * m.J, a_s * a_s * m.J, T_s, a_s * m.J)
-        self.lpf_w = lpf_first_order(float(pars.w_f or 0.0), T_s)
+        self.lpf_w = lpf_first_order(w_f, T_s)
         self.k_tau = 1.5 * m.n_p * m.psi_f
         self.i_max = float(pars.i_max or 0.0)
         self.tau_max = float(pars.tau_max or 0.0)
@@ -179,6 +302,28 @@ class Controller:
         self.polarity = PolarityTest(m.L_d, T_s, float(pars.i_pulse or 0.0))
         self.n_align = round(pars.t_align / T_s)
         self.n_settle = round(pars.t_settle / T_s)
+        cp = pars.compensation
+        self.raw_feedback = pars.current_feedback == "raw"
+        self.dead_time: DeadTimeCompensator | None = None
+        hf_next = getattr(self.estimator, "hf_current_next", None)
+        self._hf_next: Callable[[], tuple[float, float]] | None = (
+            hf_next if cp.dead_time and callable(hf_next) else None
+        )
+        if cp.dead_time:
+            band, sine = self._dead_time_sign_model()
+            if cp.i_band is not None:
+                band = cp.i_band
+            self.dead_time = DeadTimeCompensator(T_s, cp.t_dead, cp.v_ce, cp.v_f, band, sine)
+        self.cross_sat = cp.cross_saturation and self.family != "none"
+        self.calibration: OffsetCalibration | None = None
+        if cp.offset_calibration:
+            n_cal = cp.offset_periods
+            if n_cal is None:
+                tol = cp.offset_tol
+                if tol is None:
+                    tol = 0.5 * cp.adc_lsb if cp.adc_lsb > 0.0 else 1e-3 * self.i_max
+                n_cal = offset_periods(cp.current_noise, cp.adc_lsb, tol)
+            self.calibration = OffsetCalibration(n_cal)
         self.mode = MODE_DISABLED
         self.w_m_ref = 0.0
         self.i_d_ref = 0.0
@@ -224,6 +369,8 @@ class Controller:
         self._u_a1 = self._u_b1 = self._u_a2 = self._u_b2 = 0.0
         self._n_mode = 0
         self._settled = False
+        if self.calibration is not None:
+            self.calibration.restart()
         if self.family == "none" or not self.pars.startup:
             self.mode = MODE_RUN
         else:
@@ -239,9 +386,22 @@ class Controller:
             return ControlOutput(
                 k, 0.5, 0.5, 0.5, False, est.theta_hat % _TWO_PI, est.w_hat, 0.0, mode
             )
-        # Measure (amplitude-invariant Clarke).
-        i_alpha = (2.0 * meas.i_a - meas.i_b - meas.i_c) / 3.0
-        i_beta = (meas.i_b - meas.i_c) * _SQRT3_INV
+        # Measure (amplitude-invariant Clarke), offsets removed when calibrated.
+        i_a = meas.i_a
+        i_b = meas.i_b
+        i_c = meas.i_c
+        cal = self.calibration
+        if cal is not None:
+            if not cal.done:
+                cal.add(i_a, i_b, i_c)
+                return ControlOutput(
+                    k, 0.5, 0.5, 0.5, False, est.theta_hat % _TWO_PI, 0.0, 0.0, MODE_ALIGN
+                )
+            i_a -= cal.o_a
+            i_b -= cal.o_b
+            i_c -= cal.o_c
+        i_alpha = (2.0 * i_a - i_b - i_c) / 3.0
+        i_beta = (i_b - i_c) * _SQRT3_INV
         u_dc = meas.u_dc
         m = self.motor
         if mode == MODE_POLARITY:
@@ -256,9 +416,12 @@ class Controller:
                 meas.w_e,
                 self._u_a2,
                 self._u_b2,
+                mode == MODE_RUN,
             )
         )
         th = est.theta_hat
+        if self.cross_sat:
+            th -= cross_saturation_offset(m.k_dq, self.i_q_ref, m.L_d, m.L_q)
         w = est.w_hat
         c = math.cos(th)
         s = math.sin(th)
@@ -266,6 +429,12 @@ class Controller:
         i_bf = est.i_beta_f
         i_d = c * i_af + s * i_bf
         i_q = c * i_bf - s * i_af
+        if self.raw_feedback:
+            i_d_pi = c * i_alpha + s * i_beta
+            i_q_pi = c * i_beta - s * i_alpha
+        else:
+            i_d_pi = i_d
+            i_q_pi = i_q
         # Compute output: speed loop.
         w_m = self.lpf_w.update(w / m.n_p)
         self.w_m_hat = w_m
@@ -289,8 +458,8 @@ class Controller:
             i_d_ref = i_q_ref = tau = 0.0
         # Current loop with decoupling (estimated speed, filtered).
         w_e = m.n_p * w_m
-        u_d = self.pi_d.output(i_d_ref, i_d, -w_e * m.L_q * i_q)
-        u_q = self.pi_q.output(i_q_ref, i_q, w_e * (m.L_d * i_d + m.psi_f))
+        u_d = self.pi_d.output(i_d_ref, i_d_pi, -w_e * m.L_q * i_q)
+        u_q = self.pi_q.output(i_q_ref, i_q_pi, w_e * (m.L_d * i_d + m.psi_f))
         u_ah, u_bh = est.injection()
         u_lim = u_dc * _SQRT3_INV - math.sqrt(u_ah * u_ah + u_bh * u_bh)
         mag2 = u_d * u_d + u_q * u_q
@@ -308,10 +477,25 @@ class Controller:
         u_a = c_u * u_dl - s_u * u_ql + u_ah
         u_b = s_u * u_dl + c_u * u_ql + u_bh
         d_a, d_b, d_c = svpwm(u_a, u_b, u_dc)
+        # the voltage commanded for period k + 1 (the dead-time feed-forward below
+        # makes the inverter give it), which a model-based estimator integrates
         self._u_a2 = self._u_a1
         self._u_b2 = self._u_b1
         self._u_a1 = u_a
         self._u_b1 = u_b
+        dt = self.dead_time
+        if dt is not None:
+            # phase currents expected at the mid-point of period k + 1: the reference,
+            # plus the injection's HF current where the estimator predicts it
+            i_ar = c_u * i_d_ref - s_u * i_q_ref
+            i_br = s_u * i_d_ref + c_u * i_q_ref
+            hf = self._hf_next
+            if hf is not None:
+                h_a, h_b = hf()
+                i_ar += h_a
+                i_br += h_b
+            h = 0.5 * math.sqrt(3.0) * i_br
+            d_a, d_b, d_c = dt.duties(d_a, d_b, d_c, i_ar, -0.5 * i_ar + h, -0.5 * i_ar - h, u_dc)
         # The speed reported is the filtered estimate the speed loop uses, not
         # the observer's raw output (which carries the demodulation ripple).
         out = ControlOutput(
@@ -328,6 +512,98 @@ class Controller:
         self.i_q_ref = i_q_ref
         self.tau_ref = tau
         self._advance_mode(i_alpha, i_beta, u_dc)
+        return out
+
+    def _speed_loop_design(self) -> tuple[float, float]:
+        """``(alpha_s, w_f)``: given values, or the design of the module docstring."""
+        p = self.pars
+        a_c = float(p.alpha_c or 0.0)
+        resp = getattr(self.estimator, "speed_response", None)
+        self._speed_resp: Callable[[np.ndarray], np.ndarray] | None = (
+            resp if callable(resp) else None
+        )
+        if p.alpha_s is not None:
+            a_s = float(p.alpha_s)
+        else:
+            a_s = speed_bandwidth(
+                min(_TWO_PI * 5.0, a_c / 10.0), a_c, self.T_s, self._speed_resp, p.w_f
+            )
+        w_f = float(p.w_f) if p.w_f is not None else 4.0 * a_s
+        return a_s, w_f
+
+    def _dead_time_sign_model(self) -> tuple[float, bool]:
+        """Smoothing band (A) and law (sinusoid: True) of the current sign for the dead time.
+
+        Rotating injection whose estimator predicts its HF current
+        (``hf_current_next``): the sign is that of the reference plus the
+        predicted HF current at the mid-point of the period, and the band is
+        how far the HF current moves in half a period, ``I_p w_h T_s / 2``
+        (triangle law). Rotating injection without that prediction: the HF
+        period's mean, band ``I_p`` (sinusoid law). Square wave: the HF
+        triangle of the period itself, band ``U_h T_s / (2 L_d)``. No
+        injection: 0 (hard sign). :mod:`controller._compensation` derives the
+        laws.
+        """
+        est = self.estimator
+        if self.family == "rotating":
+            I_p = float(getattr(est, "I_p", 0.0))
+            if self._hf_next is not None:
+                return 0.5 * I_p * float(getattr(est, "wT", 0.0)), False
+            return I_p, True
+        if self.family == "square":
+            return float(getattr(est, "U_h", 0.0)) * self.T_s / (2.0 * self.motor.L_d), False
+        return 0.0, False
+
+    def gains(self) -> dict[str, float]:
+        """Every gain, bandwidth, filter corner and delay the controller uses (for ``meta.json``).
+
+        Keys: current loops (``alpha_c`` rad/s, ``k_p_d``/``k_i_d``/``k_t_d`` and
+        the q-axis ones, V/A and V/(A s)), speed loop (``alpha_s`` rad/s,
+        ``k_p_w``, ``k_i_w``, ``k_t_w``), speed-estimate filter ``w_f`` (rad/s),
+        delay compensation ``delay_periods``, limits, start-up timing, the
+        countermeasures (``comp.*``; flags as 0/1), the current fed to the PIs
+        (``raw_current_feedback``), and the estimator's own (``estimator.*``).
+        """
+        p = self.pars
+        cp = p.compensation
+        out: dict[str, float] = {
+            "T_s": self.T_s,
+            "alpha_c": float(p.alpha_c or 0.0),
+            "k_p_d": self.pi_d.k_p,
+            "k_i_d": self.pi_d.k_i,
+            "k_t_d": self.pi_d.k_t,
+            "k_p_q": self.pi_q.k_p,
+            "k_i_q": self.pi_q.k_i,
+            "k_t_q": self.pi_q.k_t,
+            "alpha_s": self.alpha_s,
+            "k_p_w": self.pi_w.k_p,
+            "k_i_w": self.pi_w.k_i,
+            "k_t_w": self.pi_w.k_t,
+            "w_f": self.w_f,
+            "speed_pm_deg": speed_loop_margin(
+                self.alpha_s, float(p.alpha_c or 0.0), self.w_f, self.T_s, self._speed_resp
+            )[0],
+            "delay_periods": p.delay_periods,
+            "i_max": self.i_max,
+            "tau_max": self.tau_max,
+            "t_align": p.t_align,
+            "t_settle": p.t_settle,
+            "i_pulse": float(p.i_pulse or 0.0),
+            "raw_current_feedback": 1.0 if self.raw_feedback else 0.0,
+            "comp.dead_time": 1.0 if self.dead_time is not None else 0.0,
+            "comp.t_dead": cp.t_dead,
+            "comp.v_ce": cp.v_ce,
+            "comp.v_f": cp.v_f,
+            "comp.i_band": self.dead_time.i_band if self.dead_time is not None else 0.0,
+            "comp.cross_saturation": 1.0 if self.cross_sat else 0.0,
+            "comp.k_dq": self.motor.k_dq,
+            "comp.offset_calibration": 1.0 if self.calibration is not None else 0.0,
+            "comp.offset_periods": float(self.calibration.n) if self.calibration else 0.0,
+        }
+        g = getattr(self.estimator, "gains", None)
+        est_gains: dict[str, float] = g() if callable(g) else {}
+        for key, v in est_gains.items():
+            out["estimator." + key] = float(v)
         return out
 
     def _advance_mode(self, i_alpha: float, i_beta: float, u_dc: float) -> None:

@@ -96,8 +96,11 @@ band can fix that.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, Protocol
+
+import numpy as np
 
 from controller._api import Estimator, EstimatorInput
 from controller._flux_observer import FluxObserver
@@ -342,6 +345,24 @@ class HybridEstimator:
         self.weight = 0.0
         self.gain = 1.0
         self.y = 0.0
+        # The controller designs its speed loop with the estimator's speed
+        # response: below the band, the slowest regime, the hybrid is its
+        # injection estimator, so that estimator's response is the design case.
+        self.speed_response: Callable[[np.ndarray], np.ndarray] | None = getattr(
+            hf, "speed_response", None
+        )
+        # The injection's amplitude in the dead-time sign model and compensation.
+        for name in ("I_p", "wT", "U_h"):
+            if hasattr(hf, name):
+                setattr(self, name, getattr(hf, name))
+
+    def hf_current_next(self) -> tuple[float, float]:
+        """The injection estimator's predicted HF current, scaled by the injection's fade."""
+        predict = getattr(self.hf, "hf_current_next", None)
+        if predict is None:
+            return 0.0, 0.0
+        h_a, h_b = predict()
+        return self.gain * h_a, self.gain * h_b
 
     def reset(self, theta0: float) -> None:
         """Restart both estimators at ``theta0`` (rad), standstill, injection on."""
@@ -353,6 +374,23 @@ class HybridEstimator:
         self.weight = 0.0
         self.gain = 1.0
         self.y = 0.0
+
+    def gains(self) -> dict[str, float]:
+        """The injection estimator's gains, the band (rad/s electrical) and the observer's."""
+        inner: dict[str, float] = self.hf.gains() if hasattr(self.hf, "gains") else {}
+        obs = self.observer
+        return {
+            **inner,
+            "band.w_lo": self.band.w_lo,
+            "band.w_mid": self.band.w_mid,
+            "band.w_hi": self.band.w_hi,
+            "band.h": self.band.h,
+            "observer.alpha_o": obs.alpha_o,
+            "observer.zeta_f": obs.zeta_f,
+            "observer.w_min": obs.w_min,
+            "observer.k_p": obs.k_p,
+            "observer.k_i": obs.k_i,
+        }
 
     def injection(self) -> tuple[float, float]:
         """The injection estimator's HF voltage times ``g``; exactly zero above the band."""
@@ -409,9 +447,11 @@ class HybridEstimator:
         else:
             self.i_alpha_f = x.i_alpha + g * (hf.i_alpha_f - x.i_alpha)
             self.i_beta_f = x.i_beta + g * (hf.i_beta_f - x.i_beta)
-        # schedule: play operator on |w|, then the weight and the injection factor
+        # schedule: play operator on |w|, then the weight and the injection factor;
+        # held below the band during the start-up at standstill (not running),
+        # where the injection estimator's convergence transients are not a speed
         band = self.band
-        y = band.play(self.y, w_s)
+        y = band.play(self.y, w_s) if x.running else 0.0
         self.y = y
         self.weight, self.gain = band.weights(y)
 

@@ -27,11 +27,25 @@ matrix is ``I + T_s A_cl``, so the poles are at ``z = 1 - a T_s`` (triple),
 exactly the Euler image of ``s = -a``. The update is explicit: it uses the
 error of the present sample, which (in the square-wave estimator) does not
 depend on the state being updated.
+
+Transfer functions of the update (:func:`observer_response`), from the
+error ``e(k)`` to the states after the step of sample ``k``::
+
+    X     = g_1 E / (1 - z^-1)
+    W     = (T z^-1 X + g_2 E) / (1 - z^-1)
+    Theta = (T z^-1 W + g_3 E) / (1 - z^-1)
+
+with ``g_i = T_s K_i / J`` (``3 a``, ``3 a^2``, ``a^3`` times ``T_s``): the
+inertia cancels, so the loop from the error to the angle does not depend
+on ``J`` at all. A wrong ``J`` enters only through the torque
+feed-forward, as a disturbance the loop has to reject.
 """
 
 from __future__ import annotations
 
 import math
+
+import numpy as np
 
 _TWO_PI = 2.0 * math.pi
 
@@ -124,3 +138,13 @@ class LuenbergerObserver:
         self.theta_hat = th
         self.w_hat = w + self.T_s * self.x + self._g2 * e + self._gt * tau_e
         self.x += self._g1 * e
+
+
+def observer_response(a: float, T_s: float, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(Theta/E, W/E)`` of :meth:`LuenbergerObserver.step` at ``z`` (module docstring)."""
+    zi = 1.0 / np.asarray(z, complex)
+    d = 1.0 - zi
+    x = T_s * a**3 / d
+    w = (T_s * zi * x + 3.0 * T_s * a * a) / d
+    th = (T_s * zi * w + 3.0 * T_s * a) / d
+    return th, w

@@ -31,6 +31,10 @@ class MotorModel:
         Current limit, peak phase current (A).
     tau_max : float
         Torque limit (N m).
+    k_dq : float
+        Cross-saturation coefficient (H/A): incremental cross inductance
+        ``L_dq = k_dq i_q`` (:mod:`controller._compensation`); usually
+        negative, 0 without cross-saturation.
     """
 
     n_p: int
@@ -42,3 +46,4 @@ class MotorModel:
     b: float
     i_max: float
     tau_max: float
+    k_dq: float = 0.0

@@ -4,6 +4,10 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
+from controller._design import LoopResponse, margins, solve_largest
+
 _TWO_PI = 2.0 * math.pi
 
 
@@ -13,13 +17,16 @@ class PositionObserver:
     Wen Fig. 4 (and below eqs. (9), (28), (34)): ``w_hat = k_p err + k_i int(err)``,
     ``theta_hat = int(w_hat)``. With the error normalised to ``err ~ theta -
     theta_hat`` the loop is ``s^2 + k_p s + k_i`` (ignoring the demodulation
-    LPF); the gains put both poles at ``-w_o``: ``k_p = 2 w_o``, ``k_i = w_o^2``.
+    filters); the gains put both poles at ``-w_o``: ``k_p = 2 w_o``, ``k_i = w_o^2``.
     Because the demodulated error is normalised by the HF current amplitudes,
-    the bandwidth does not depend on ``V_h`` or on the motor.
+    the bandwidth does not depend on ``V_h`` or on the motor. How ``w_o`` is
+    chosen for each demodulator, with its filters in the loop:
+    :func:`design_bandwidth`.
 
     Timing: :attr:`theta_hat` is the estimate at the sample instant ``k T_s``;
     :meth:`update` with the error of sample ``k`` moves it to ``(k+1) T_s``
-    (forward Euler with the updated speed).
+    (forward Euler with the updated speed). Its transfer function from the
+    error to the angle is :func:`open_loop`.
 
     Parameters
     ----------
@@ -50,3 +57,61 @@ class PositionObserver:
         self.theta_hat = theta0 % _TWO_PI
         self.w_hat = w0
         self.w_i = w0
+
+
+def open_loop(w_o: float, T_s: float, w: np.ndarray) -> np.ndarray:
+    """Transfer function of :class:`PositionObserver` from ``err(k)`` to ``theta_hat(k)``.
+
+    From :meth:`PositionObserver.update`: ``W_i = T k_i E / (1 - z^-1)``,
+    ``W = k_p E + W_i`` and ``(z - 1) Theta = T W``, so::
+
+        O(z) = T (k_p + T k_i z / (z - 1)) / (z - 1)
+
+    with its one period of delay (the error of sample ``k`` moves the angle
+    of sample ``k + 1``), evaluated at ``z = e^{j w T_s}``.
+    """
+    z = np.exp(1j * np.asarray(w, float) * T_s)
+    return T_s * (2.0 * w_o + T_s * w_o * w_o * z / (z - 1.0)) / (z - 1.0)
+
+
+def design_bandwidth(
+    chain: LoopResponse, T_s: float, pm_deg: float, w_c_max: float
+) -> tuple[float, float, float]:
+    """PLL bandwidth ``w_o`` from a phase-margin target with the demodulator's filters in the loop.
+
+    The loop is ``L = O(z) G(z)``: :func:`open_loop` and ``chain``, the
+    demodulator's response from ``theta_hat`` to ``err`` (its in-loop
+    filters). ``w_o`` is the largest bandwidth that keeps
+
+    1. the phase margin at ``pm_deg`` or more, and
+    2. the gain crossover at or below ``w_c_max``, the corner of the
+       demodulation low-pass filter: above it the error signal is, by that
+       filter's design (Wen Sec. 3.2), ripple at twice the injection
+       frequency and not position, so a faster loop would only pass that
+       ripple to the angle. This bound matters only for a demodulator with
+       no filter in its loop (tt-ab).
+
+    With ``k_p = 2 w_o``, ``k_i = w_o^2`` and nothing else in the loop the
+    margin is 76 degrees whatever ``w_o``, so the filters and the delays
+    alone take the margin down to the target.
+
+    Returns
+    -------
+    w_o, pm, w_c : float
+        Bandwidth (rad/s), achieved phase margin (deg) and crossover (rad/s).
+    """
+    w_hi = 0.999 * math.pi / T_s
+
+    def pm_of(w_o: float) -> float:
+        return margins(lambda w: open_loop(w_o, T_s, w) * chain(w), 1e-3 * w_o, w_hi, 2)[0]
+
+    def wc_of(w_o: float) -> float:
+        return margins(lambda w: open_loop(w_o, T_s, w) * chain(w), 1e-3 * w_o, w_hi, 2)[1]
+
+    lo = 1e-3 / T_s * 1e-2
+    hi = 0.3 / T_s
+    w_pm = solve_largest(pm_of, pm_deg, lo, hi, rising=False)
+    w_bw = solve_largest(wc_of, w_c_max, lo, hi, rising=True)
+    w_o = min(w_pm, w_bw)
+    pm, w_c = margins(lambda w: open_loop(w_o, T_s, w) * chain(w), 1e-3 * w_o, w_hi, 2)
+    return w_o, pm, w_c

@@ -27,17 +27,56 @@ the HF current *sampled at* ``k T_s`` has the phase of eq. (4)/(7) with
 at 500 Hz and 10 kHz). Hence every demodulation reference ``w_h t`` uses
 ``t = k T_s``, the sample instant, and the model amplitudes include the
 factor ``x/sin(x)``.
+
+PLL bandwidth by design (:func:`controller._pll.design_bandwidth`). The
+observer closes its loop through whatever part of the demodulation comes
+after ``theta_hat`` enters it; the injection itself does not depend on
+``theta_hat``, so the computation delay of the PWM is not in this loop,
+only the PLL's own one-period update. Small-signal, with the error
+normalised to ``err ~ theta_e - theta_hat``, the response ``G`` from
+``theta_hat`` to ``err`` is
+
+- ``sfhf``: the heterodyne with ``2 theta_hat`` comes after the BPF and
+  HPF, before the LPF: ``G = k LPF(z)``, with ``k = |H_B(-w_h)
+  H_H(-2 w_h)|`` (0.98 here: the negative sequence that reaches the
+  heterodyne is that much smaller than the ``I_n`` it is normalised by);
+- ``tt-ab``: ``theta_hat`` enters after the LPF: ``G = |H_B(w_h)|^2``
+  (1 with the BPF pre-warped at ``w_h``);
+- ``tt-dq``: the current is rotated by ``theta_hat`` before the BPF, so a
+  change of ``theta_hat`` phase-modulates both sequences, at ``+w_h`` and
+  ``-w_h`` in the estimated frame, and the product ``i_dh i_qh`` adds the
+  two envelopes::
+
+      G(W) = |H(w_h)|^2 [H(w_h + W) / H(w_h) + H(W - w_h) / H(-w_h)] / 2 * LPF(W)
+
+  with ``H`` the discrete BPF (each sequence's envelope seen through the
+  BPF, normalised to the carrier it rides on), evaluated at
+  standstill.
+
+``w_o`` is the largest bandwidth that keeps the phase margin at
+:data:`controller._design.PM_TARGET_DEG` with the actual discretised
+filters, and the crossover below the LPF's -3 dB corner. At 10 kHz with
+eqs. (11)-(13) this gives ``tt-dq`` 58.5 rad/s (2 pi 9.3 Hz) and ``sfhf``
+190 rad/s (2 pi 30 Hz), both at 45 degrees, and ``tt-ab`` 303 rad/s
+(2 pi 48 Hz): its crossover sits at the LPF corner, with 75 degrees of margin.
+The old common ``2 pi 20`` left ``tt-dq`` 21 degrees and a noise
+amplification peak of 2.9 (1.35 now).
 """
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
+from typing import ClassVar
+
+import numpy as np
 
 from controller._api import EstimatorInput
+from controller._design import PM_TARGET_DEG, freq_response
 from controller._filters import BPF_WEN, HPF_WEN, LPF_WEN, discretize
 from controller._params import MotorModel
-from controller._pll import PositionObserver
+from controller._pll import PositionObserver, design_bandwidth
 
 _TWO_PI = 2.0 * math.pi
 
@@ -53,15 +92,14 @@ class RotatingInjectionPars:
         ``I_p`` = 0.24 A on the wen2023 motor at 500 Hz.
     f_h : float
         Injection frequency (Hz), eq. (3).
-    w_o : float
+    w_o : float or None
         Position-observer (PLL) bandwidth (rad/s); 0 freezes the observer.
-        The demodulation chain bounds it: the BPF passes the phase
-        modulation of each sequence through its envelope, a pole at half its
-        bandwidth (314 rad/s for eq. 11), and the LPF (eq. 13) adds one at
-        628 rad/s. With ``k_p = 2 w_o``, ``k_i = w_o^2`` the default
-        ``2 pi 20`` crosses over at about 210 rad/s with 21 degrees of phase
-        margin; 30 Hz loses it (6 degrees), lower values track accelerations
-        worse (steady error ``a / w_o^2`` for an angular acceleration ``a``).
+        None derives it for each demodulator from ``pm_deg`` with its
+        in-loop filters (module docstring). A lower value tracks
+        accelerations worse (steady error ``a / w_o^2`` for an angular
+        acceleration ``a``), a higher one loses phase margin.
+    pm_deg : float
+        Phase-margin target of the PLL loop (deg), used when ``w_o`` is None.
     normalise : str
         ``"model"``: divide the demodulated signal by the model amplitudes
         (``2 I_p I_n`` or ``2 I_n`` from :func:`hf_amplitudes`);
@@ -79,7 +117,8 @@ class RotatingInjectionPars:
 
     V_h: float = 50.0
     f_h: float = 500.0
-    w_o: float = 2.0 * math.pi * 20.0
+    w_o: float | None = None
+    pm_deg: float = PM_TARGET_DEG
     normalise: str = "model"
     bpf: tuple[tuple[float, ...], tuple[float, ...]] = BPF_WEN
     hpf: tuple[tuple[float, ...], tuple[float, ...]] = HPF_WEN
@@ -96,6 +135,111 @@ def hf_amplitudes(motor: MotorModel, V_h: float, w_h: float, T_s: float) -> tupl
     kappa = x / math.sin(x) if x > 0.0 else 1.0
     k = kappa * V_h / (2.0 * w_h * motor.L_d * motor.L_q)
     return k * (motor.L_d + motor.L_q), k * (motor.L_q - motor.L_d)
+
+
+def lpf_corner(lpf_z: tuple[tuple[float, ...], tuple[float, ...]], T_s: float) -> float:
+    """-3 dB corner (rad/s) of the discrete low-pass ``lpf_z`` (unity DC gain assumed)."""
+    from scipy.optimize import brentq
+
+    b, a = lpf_z
+    g0 = abs(complex(freq_response(b, a, np.array([0.0]), T_s)[0]))
+
+    def f(w: float) -> float:
+        return abs(complex(freq_response(b, a, np.array([w]), T_s)[0])) / g0 - math.sqrt(0.5)
+
+    w_n = 0.999 * math.pi / T_s
+    if f(w_n) > 0.0:
+        return w_n
+    return float(brentq(f, 1e-6 / T_s, w_n, xtol=1e-9))
+
+
+def in_loop_response(
+    loop: str,
+    T_s: float,
+    w_h: float,
+    filters: tuple[tuple[tuple[float, ...], tuple[float, ...]], ...],
+    w: np.ndarray,
+) -> np.ndarray:
+    """Response ``G`` from ``theta_hat`` to ``err`` of a demodulator (module docstring).
+
+    ``loop`` is ``"none"`` (tt-ab), ``"lpf"`` (sfhf) or ``"bpf+lpf"`` (tt-dq);
+    ``filters`` the discrete ``(bpf_z, hpf_z, lpf_z)``.
+    """
+    bpf_z, hpf_z, lpf_z = filters
+    w = np.asarray(w, float)
+    one = np.array([1.0])
+    h_p = complex(freq_response(*bpf_z, w_h * one, T_s)[0])
+    h_n = complex(freq_response(*bpf_z, -w_h * one, T_s)[0])
+    if loop == "none":
+        return np.full(w.shape, abs(h_p * h_n), dtype=complex)
+    g = freq_response(*lpf_z, w, T_s)
+    if loop == "lpf":
+        k = abs(h_n * complex(freq_response(*hpf_z, -2.0 * w_h * one, T_s)[0]))
+        return k * g
+    if loop != "bpf+lpf":
+        raise ValueError(f"unknown loop {loop!r}")
+    env = 0.5 * (
+        freq_response(*bpf_z, w_h + w, T_s) / h_p + freq_response(*bpf_z, w - w_h, T_s) / h_n
+    )
+    return abs(h_p * h_n) * env * g
+
+
+def theta_response(
+    loop: str,
+    T_s: float,
+    w_h: float,
+    filters: tuple[tuple[tuple[float, ...], tuple[float, ...]], ...],
+    w: np.ndarray,
+) -> np.ndarray:
+    """Response from the rotor angle ``theta_e`` to ``err`` (small signal, at standstill).
+
+    The rotor angle phase-modulates the negative sequence only (``2 theta_e``
+    in eq. 7), before every filter: a phase modulation through a filter
+    ``H`` on a carrier ``w_0`` comes out as ``(P(W) + conj P(-W)) / 2``
+    with ``P(W) = H(w_0 + W) / H(w_0)``. For tt-dq and tt-ab that is the
+    BPF's on ``-w_h``, then the LPF. For sfhf it is the BPF's on ``-w_h``
+    times the HPF's on ``-2 w_h`` (the synchronous frame), then the LPF. The
+    static gains are those of :func:`in_loop_response`. For tt-dq it equals
+    the in-loop response: at standstill the two sequences' envelopes are
+    alike.
+    """
+    bpf_z, hpf_z, lpf_z = filters
+    w = np.asarray(w, float)
+    one = np.array([1.0])
+    h_p = complex(freq_response(*bpf_z, w_h * one, T_s)[0])
+    h_n = complex(freq_response(*bpf_z, -w_h * one, T_s)[0])
+
+    def p(x: np.ndarray) -> np.ndarray:
+        out = freq_response(*bpf_z, x - w_h, T_s) / h_n
+        if loop == "lpf":
+            h_h = complex(freq_response(*hpf_z, -2.0 * w_h * one, T_s)[0])
+            out = out * freq_response(*hpf_z, x - 2.0 * w_h, T_s) / h_h
+        return out
+
+    env = 0.5 * (p(w) + np.conj(p(-w)))
+    g = freq_response(*lpf_z, w, T_s)
+    if loop == "lpf":
+        k = abs(h_n * complex(freq_response(*hpf_z, -2.0 * w_h * one, T_s)[0]))
+        return k * env * g
+    return abs(h_p * h_n) * env * g
+
+
+@functools.lru_cache(maxsize=64)
+def pll_design(
+    loop: str,
+    T_s: float,
+    w_h: float,
+    filters: tuple[tuple[tuple[float, ...], tuple[float, ...]], ...],
+    pm_deg: float,
+) -> tuple[float, float, float]:
+    """``(w_o, pm, w_c)`` of :func:`controller._pll.design_bandwidth` for a demodulator
+    (``filters``: the discrete ``(bpf_z, hpf_z, lpf_z)``)."""
+    return design_bandwidth(
+        lambda w: in_loop_response(loop, T_s, w_h, filters, w),
+        T_s,
+        pm_deg,
+        lpf_corner(filters[2], T_s),
+    )
 
 
 class RotatingHFEstimator:
@@ -117,6 +261,10 @@ class RotatingHFEstimator:
         Injection, filter and observer settings.
     """
 
+    #: What of the demodulation lies between ``theta_hat`` and ``err``
+    #: (:func:`in_loop_response`): ``"none"``, ``"lpf"`` or ``"bpf+lpf"``.
+    IN_LOOP: ClassVar[str] = "none"
+
     def __init__(self, motor: MotorModel, T_s: float, pars: RotatingInjectionPars) -> None:
         if motor.L_q <= motor.L_d:
             raise ValueError("rotating HF injection needs saliency L_q > L_d")
@@ -136,10 +284,17 @@ class RotatingHFEstimator:
         a_l = pars.lpf[1]
         w_lpf = abs(a_l[-1] / a_l[0]) if len(a_l) == 2 else self.w_h / 5.0
         self.lpf_z = discretize(*pars.lpf, T_s, w_lpf)
+        self.filters_z = (self.bpf_z, self.hpf_z, self.lpf_z)
         if pars.normalise not in ("model", "measured"):
             raise ValueError(f"normalise must be 'model' or 'measured', got {pars.normalise!r}")
         self.measured = pars.normalise == "measured"
-        self.pll = PositionObserver(pars.w_o, T_s)
+        w_o = pars.w_o
+        if w_o is None:
+            w_o = pll_design(self.IN_LOOP, T_s, self.w_h, self.filters_z, pars.pm_deg)[0]
+        elif w_o < 0.0:
+            raise ValueError(f"w_o must be >= 0, got {w_o}")
+        self.w_o = float(w_o)
+        self.pll = PositionObserver(self.w_o, T_s)
         self.theta_hat = 0.0
         self.w_hat = 0.0
         self.err = 0.0
@@ -161,6 +316,76 @@ class RotatingHFEstimator:
         self.err = err
         self.pll.update(err)
         self.w_hat = self.pll.w_hat
+
+    def gains(self) -> dict[str, float]:
+        """Every gain and corner of the estimator (rad/s unless named otherwise)."""
+        pm, w_c = self.phase_margin()
+        return {
+            "V_h": self.V_h,
+            "w_h": self.w_h,
+            "w_o": self.w_o,
+            "k_p": self.pll.k_p,
+            "k_i": self.pll.k_i,
+            "pm_target_deg": self.pars.pm_deg,
+            "pm_deg": pm,
+            "w_c": w_c,
+            "lpf_corner": lpf_corner(self.lpf_z, self.T_s),
+            "I_p": self.I_p,
+            "I_n": self.I_n,
+        }
+
+    def phase_margin(self) -> tuple[float, float]:
+        """Phase margin (deg) and crossover (rad/s) of the PLL loop as built (NaN if frozen)."""
+        from controller._design import margins
+        from controller._pll import open_loop
+
+        if self.w_o <= 0.0:
+            return math.nan, math.nan
+        return margins(
+            lambda w: (
+                open_loop(self.w_o, self.T_s, w)
+                * in_loop_response(self.IN_LOOP, self.T_s, self.w_h, self.filters_z, w)
+            ),
+            1e-3 * self.w_o,
+            0.999 * math.pi / self.T_s,
+            2,
+        )
+
+    def speed_response(self, w: np.ndarray) -> np.ndarray:
+        """Response from the true electrical speed to ``w_hat`` at ``w`` (rad/s).
+
+        With ``G_m`` (:func:`theta_response`), ``G`` (:func:`in_loop_response`),
+        the PLL's ``O`` (:func:`controller._pll.open_loop`) and ``C_w = k_p + T
+        k_i z / (z - 1)`` (``w_hat`` from ``err``): ``err = G_m theta / (1 + G
+        O)`` and ``theta = T w / (z - 1)``, so ``w_hat / w = C_w G_m T / ((z - 1)
+        (1 + G O))``, 1 at DC. The controller designs its speed loop with it.
+        """
+        from controller._pll import open_loop
+
+        w = np.asarray(w, float)
+        T = self.T_s
+        z = np.exp(1j * w * T)
+        f = self.filters_z
+        g = in_loop_response(self.IN_LOOP, T, self.w_h, f, w)
+        g_m = theta_response(self.IN_LOOP, T, self.w_h, f, w)
+        c_w = self.pll.k_p + T * self.pll.k_i * z / (z - 1.0)
+        return c_w * g_m * T / ((z - 1.0) * (1.0 + g * open_loop(self.w_o, T, w)))
+
+    def hf_current_next(self) -> tuple[float, float]:
+        """Model HF current (alpha, beta) (A) at the mid-point of period ``k + 1``.
+
+        Eq. (4)/(7) in alpha-beta at ``t = (k + 1.5) T_s`` with the model
+        amplitudes and ``theta_hat``: what the dead-time compensation needs to
+        know the sign of each phase current in the period its duties act in
+        (:mod:`controller._compensation`).
+        """
+        ph = (self._k + 1.5) * self.wT
+        ng = 2.0 * self.pll.theta_hat - ph
+        # I_p e^{j(ph - pi/2)} + I_n e^{j(ng + pi/2)}
+        return (
+            self.I_p * math.sin(ph) - self.I_n * math.sin(ng),
+            -self.I_p * math.cos(ph) + self.I_n * math.cos(ng),
+        )
 
     def injection(self) -> tuple[float, float]:
         """HF voltage (V) for period ``k + 1``: eq. (3) at ``t = (k + 1.5) T_s``."""

@@ -36,6 +36,10 @@ class SensoredEstimator:
         """No HF injection."""
         return 0.0, 0.0
 
+    def gains(self) -> dict[str, float]:
+        """No gains: the angle and speed come from the sensor."""
+        return {}
+
     def reset(self, theta0: float) -> None:
         """Nothing to restart: the angle comes from the sensor."""
         self.theta_hat = theta0

@@ -39,6 +39,8 @@ from controller._rotating import RotatingHFEstimator, RotatingInjectionPars
 class SFHFEstimator(RotatingHFEstimator):
     """Rotating injection with SFHF separation and heterodyne demodulation (Wen eq. 9)."""
 
+    IN_LOOP = "lpf"
+
     def __init__(self, motor: MotorModel, T_s: float, pars: RotatingInjectionPars) -> None:
         super().__init__(motor, T_s, pars)
         self._bpf = Biquad2(*self.bpf_z)

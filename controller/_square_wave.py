@@ -56,11 +56,35 @@ the present estimate (as in Xue Fig. 10) instead of against the injection
 direction that produced the signal. Here the 2 periods plus the 1.5 add up
 to the loop's latency ``tau_L = 3.5 T_s`` instead, which sets the bandwidth.
 
-Observer bandwidth: the triple pole ``a`` is chosen from that latency.
-With ``L(s) = (3 a s^2 + 3 a^2 s + a^3) / s^3 * exp(-s tau_L)`` the phase
-margin is 54 deg and the gain margin 14 dB for ``a tau_L = 0.1``, so
-``a = 0.1 / (3.5 T_s)`` (28.6 rad/s at 1 kHz). The zero-order-hold variant
-uses the same ``a`` so the two can be compared.
+Observer pole by design (:func:`observer_pole`). The loop, broken at
+the envelope (one sample every ``R = 2`` periods), is exactly linear and
+shift-invariant at that slow rate; from one envelope sample to the next
+(unit ``T_s``, ``z = e^{j w T_s}``):
+
+- hold for ``R = 2`` periods, ``1 + z^-1``, then the CIC ``(1 + z^-1)/2``
+  (``1`` for ``square-wave-nocic``), giving ``err``;
+- the observer (:func:`controller._luenberger.observer_response`) and the
+  injection angle ``phi = theta_hat + c T_s w_hat`` (the delay
+  compensation ``c = 1.5`` is a lead inside the loop);
+- one period of computation delay ``z^-1``: ``phi`` computed at ``k`` acts
+  over period ``k + 1``; the error of each period is ``theta_e - phi``;
+- the envelope formed at ``k`` from periods ``k - 2`` and ``k - 1``,
+  ``(z^-1 + z^-2)/2``, read every second period.
+
+With ``F(z)`` the product of these, the slow-rate loop gain is
+``L = (F(z) + F(-z)) / 2`` (the decimation folds ``-z`` onto ``z``; the
+fold is small near crossover), with no approximation. The delays add up
+to the latency of the bookkeeping above: ``1 + 1 + 0.5 + 0.5 + 0.5 = 3.5
+T_s``. The pole ``a`` is the largest one whose loop keeps the phase margin
+:data:`controller._design.PM_TARGET_DEG` (45 degrees). At 1 kHz this
+gives ``a = 50.8`` rad/s (crossover 161 rad/s, gain margin 10 dB upward
+and 18 dB downward: the type-3 loop also goes unstable if its gain drops
+a lot). The zero-order-hold variant has one box less in the loop and
+gets its own, larger pole at the same margin (``60.9`` rad/s); ``a``
+overrides both. The old ``a = 0.1 / (3.5 T_s)`` (28.6 rad/s) had a
+margin of 57 degrees. It rejected load steps, and a feed-forward made
+wrong by a wrong inertia, ``(50.8 / 28.6)^2 = 3.2`` times worse. The
+inertia does not enter the loop (:mod:`controller._luenberger`).
 
 Injection amplitude: at 1 kHz the d-axis current ramps by ``U_h T_s / L_d``
 per period; ``U_h = 20 V`` gives 5.7 A peak to peak (+/-2.8 A) on the
@@ -77,12 +101,16 @@ half a period).
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import Any
 
+import numpy as np
+
 from controller._api import EstimatorInput
 from controller._cic import CicInterpolator
-from controller._luenberger import LuenbergerObserver
+from controller._design import PM_TARGET_DEG, margins, solve_largest
+from controller._luenberger import LuenbergerObserver, observer_response
 from controller._params import MotorModel
 
 _TWO_PI = 2.0 * math.pi
@@ -92,8 +120,47 @@ _TWO_PI = 2.0 * math.pi
 LOOP_LATENCY_PERIODS = 3.5
 #: Derived delay compensation (periods): computation delay 1 + half a period.
 DELAY_COMP_PERIODS = 1.5
-#: a * tau_L of the observer (54 deg phase margin, 14 dB gain margin).
-OBSERVER_A_TAU = 0.1
+
+
+def open_loop(
+    a: float, T_s: float, w: np.ndarray, cic: bool, M: int, delay_comp: float
+) -> np.ndarray:
+    """Slow-rate loop gain of the square-wave observer at ``w`` (rad/s, below ``pi / (2 T_s)``).
+
+    Module docstring, "Observer pole by design": ``L = (F(z) + F(-z)) / 2``.
+    """
+
+    def f(z: np.ndarray) -> np.ndarray:
+        zi = 1.0 / z
+        hold = 1.0 + zi
+        interp = hold * (sum(zi**n for n in range(M)) / M if cic else 1.0)
+        th, wo = observer_response(a, T_s, z)
+        pair = 0.5 * (zi + zi * zi)
+        return interp * (th + delay_comp * T_s * wo) * zi * pair
+
+    z = np.exp(1j * np.asarray(w, float) * T_s)
+    return 0.5 * (f(z) + f(-z))
+
+
+def loop_margins(
+    a: float, T_s: float, cic: bool = True, M: int = 2, delay_comp: float = DELAY_COMP_PERIODS
+) -> tuple[float, float]:
+    """Phase margin (deg) and crossover (rad/s) of the observer loop (:func:`open_loop`)."""
+    return margins(
+        lambda w: open_loop(a, T_s, w, cic, M, delay_comp), 1e-3 * a, 0.999 * math.pi / (2 * T_s), 3
+    )
+
+
+@functools.lru_cache(maxsize=64)
+def observer_pole(T_s: float, cic: bool, M: int, delay_comp: float, pm_deg: float) -> float:
+    """Largest triple pole ``a`` (rad/s) whose loop keeps the phase margin ``pm_deg`` (deg)."""
+    return solve_largest(
+        lambda a: loop_margins(a, T_s, cic, M, delay_comp)[0],
+        pm_deg,
+        1e-3 / T_s,
+        0.3 / T_s,
+        rising=False,
+    )
 
 
 class SquareWaveEstimator:
@@ -111,12 +178,15 @@ class SquareWaveEstimator:
     U_h : float
         Injection amplitude (V).
     a : float or None
-        Observer triple pole (rad/s); None derives it from the loop latency.
+        Observer triple pole (rad/s); None derives it from ``pm_deg``
+        (:func:`observer_pole`).
     M : int
         CIC differential delay (PWM periods).
     delay_comp : float or None
         Delay compensation of the injection angle (periods); None uses the
         derived 1.5. Zero disables it (for tests and comparisons).
+    pm_deg : float
+        Phase-margin target of the observer loop (deg), used when ``a`` is None.
     """
 
     def __init__(
@@ -128,6 +198,7 @@ class SquareWaveEstimator:
         a: float | None = None,
         M: int = 2,
         delay_comp: float | None = None,
+        pm_deg: float = PM_TARGET_DEG,
     ) -> None:
         if not T_s > 0.0:
             raise ValueError(f"T_s must be > 0, got {T_s}")
@@ -144,9 +215,10 @@ class SquareWaveEstimator:
         self.U_h = U_h
         self.R = 2  # PWM periods per injection period (500 Hz at 1 kHz)
         self.M = M
-        if a is None:
-            a = OBSERVER_A_TAU / (LOOP_LATENCY_PERIODS * T_s)
         self.delay_comp = DELAY_COMP_PERIODS if delay_comp is None else float(delay_comp)
+        self.pm_deg = pm_deg
+        if a is None:
+            a = observer_pole(T_s, cic, M, self.delay_comp, pm_deg)
         self._t_comp = self.delay_comp * T_s
         self.observer = LuenbergerObserver(motor.J, motor.n_p, a, T_s)
         #: err = Im(E conj u)/|E| * _k_err ~ dtheta
@@ -168,6 +240,27 @@ class SquareWaveEstimator:
         self._id1 = self._iq1 = 0.0  # samples k-1, k-2 in the estimated rotor frame (A)
         self._id2 = self._iq2 = 0.0
         self._reset_state()
+
+    def gains(self) -> dict[str, float]:
+        """Every gain of the estimator: observer pole and gains, phase margin, delays."""
+        obs = self.observer
+        pm, w_c = loop_margins(obs.a, self.T_s, self.cic, self.M, self.delay_comp)
+        return {
+            "U_h": self.U_h,
+            "a": obs.a,
+            "K_1": obs.K_1,
+            "K_2": obs.K_2,
+            "K_3": obs.K_3,
+            "J": obs.J,
+            "pm_target_deg": self.pm_deg,
+            "pm_deg": pm,
+            "w_c": w_c,
+            "delay_comp_periods": self.delay_comp,
+            "loop_latency_periods": LOOP_LATENCY_PERIODS
+            if self.cic
+            else LOOP_LATENCY_PERIODS - 0.5,
+            "cic_M": float(self.M) if self.cic else 0.0,
+        }
 
     # -- state ---------------------------------------------------------------
 
@@ -304,6 +397,6 @@ def create(motor: MotorModel, T_s: float, cic: bool = True, **options: Any) -> S
     """Build the ``square-wave`` (``cic=True``) or ``square-wave-nocic`` estimator.
 
     ``options`` are the keyword parameters of :class:`SquareWaveEstimator`
-    (``U_h``, ``a``, ``M``, ``delay_comp``); unknown keys raise ``TypeError``.
+    (``U_h``, ``a``, ``M``, ``delay_comp``, ``pm_deg``); unknown keys raise ``TypeError``.
     """
     return SquareWaveEstimator(motor, T_s, cic=cic, **options)

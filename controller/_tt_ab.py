@@ -35,6 +35,8 @@ from controller._rotating import RotatingHFEstimator, RotatingInjectionPars
 class TTABEstimator(RotatingHFEstimator):
     """Rotating injection with TT demodulation in alpha-beta (Wen eqs. 23-28)."""
 
+    IN_LOOP = "none"
+
     def __init__(self, motor: MotorModel, T_s: float, pars: RotatingInjectionPars) -> None:
         super().__init__(motor, T_s, pars)
         self._bpf = Biquad2(*self.bpf_z)

@@ -36,6 +36,8 @@ from controller._rotating import RotatingHFEstimator, RotatingInjectionPars
 class TTDQEstimator(RotatingHFEstimator):
     """Rotating injection with TT demodulation in the estimated d-q axes (Wen eqs. 31-34)."""
 
+    IN_LOOP = "bpf+lpf"
+
     def __init__(self, motor: MotorModel, T_s: float, pars: RotatingInjectionPars) -> None:
         super().__init__(motor, T_s, pars)
         self._bpf = Biquad2(*self.bpf_z)

@@ -121,16 +121,22 @@ def test_observer_locks_at_zero_error_not_ninety(name: str, err0_deg: float) -> 
     theta = 2.0
     est.reset(theta - math.radians(err0_deg))
     I_p, I_n = est.I_p, est.I_n  # type: ignore[attr-defined]
+    es = []
+    wis = []
     for k in range(4000):
         z = _currents(k, theta, I_p, I_n, 0.0, 0.0)
         est.update(EstimatorInput(k, z.real, z.imag, 0.0))
-    e = (theta - est.theta_hat + math.pi / 2) % math.pi - math.pi / 2  # modulo pi
+        es.append((theta - est.theta_hat + math.pi / 2) % math.pi - math.pi / 2)  # modulo pi
+        wis.append(est.pll.w_i)  # type: ignore[attr-defined]
+    # mean over the last HF period: tt-ab's PLL (no filter in its loop, crossover at the
+    # LPF corner) passes about 0.8 degrees of the demodulation ripple at 2 w_h
+    e = float(np.mean(es[-20:]))
     want = 0.0
     if name == "sfhf":
         h_n = _h(est.bpf_z, -W_H) * _h(est.hpf_z, -2 * W_H)  # type: ignore[attr-defined]
         want = -float(np.angle(h_n)) / 2
     assert math.degrees(abs(e - want)) < 0.5
-    assert abs(est.pll.w_i) < 0.5  # type: ignore[attr-defined]  # integral part: no drift
+    assert abs(float(np.mean(wis[-20:]))) < 0.5  # integral part: no drift
 
 
 def test_printed_sign_of_eq6_would_lock_at_ninety_degrees() -> None:

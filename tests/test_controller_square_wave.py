@@ -18,7 +18,7 @@ from controller._cic import CicFilter, CicInterpolator
 from controller._luenberger import LuenbergerObserver
 from controller._params import MotorModel
 from controller._registry import make_estimator
-from controller._square_wave import SquareWaveEstimator, create
+from controller._square_wave import SquareWaveEstimator, create, observer_pole
 
 T_S = 1e-3
 # Xue Table 1; psi_f and J as in the xue2022 preset (not used by the HF model)
@@ -257,8 +257,10 @@ def test_registry_and_options() -> None:
     assert isinstance(est2, SquareWaveEstimator) and not est2.cic and est2.U_h == 15.0
     with pytest.raises(TypeError):
         create(MOTOR, T_S, no_such_option=1)
-    # default observer pole from the loop latency 3.5 T_s
-    assert est.observer.a == pytest.approx(0.1 / (3.5 * T_S))
+    # default observer pole: the design for a 45 degree phase margin (test_gain_design.py)
+    assert est.observer.a == pytest.approx(observer_pole(T_S, True, 2, 1.5, 45.0), rel=1e-12)
+    assert est2.observer.a == pytest.approx(observer_pole(T_S, False, 2, 1.5, 45.0), rel=1e-12)
+    assert SquareWaveEstimator(MOTOR, T_S, a=33.0).observer.a == 33.0
 
 
 def test_injection_is_square_wave_along_predicted_axis() -> None:

@@ -198,7 +198,9 @@ def test_tt_dq_ramp_lag_grows_as_the_model_gain_falls() -> None:
     w_o^2)`` (plus a speed-dependent offset that the same window removes
     when the ramp value is taken relative to the plateau after it). With
     ``L_d x0.9``, ``L_q x1.1`` (``g = 0.619``) the prediction is 1.62 times
-    the nominal lag (1.3 degrees at 1000 rpm/s). Measured 1.67: the
+    the nominal lag (5.4 degrees at 1000 rpm/s with the designed 58.5 rad/s
+    PLL), times the ratio of the accelerations reached. Measured 1.68 (1.57
+    predicted with the 3 % slower ramp of the second run): the
     demodulation ripple couples into the observer in proportion to ``g`` and
     moves the constant-speed offset by a few tenths of a degree, differently
     at the ramp's mean speed (225 rpm) and at the plateau (300 rpm); asserted
@@ -207,20 +209,25 @@ def test_tt_dq_ramp_lag_grows_as_the_model_gain_falls() -> None:
     prof = [[0.0, 0.0], [0.05, 0.0], [0.35, 300.0]]
     kw: dict[str, object] = {"duration": 0.7, "speed_rpm": prof}
     lags = []
+    slopes = []
     for cm in (None, {"L_d": 0.9, "L_q": 1.1}):
         scn = _scn(cm, **kw)
         tab = trace(run_inprocess(scn, "tt-dq", CODEC), scn)
         t, e = tab["t"], tab["theta_err_deg"]
         ramp = float(np.mean(e[(t > 0.25) & (t < 0.35)]))
         plateau = float(np.mean(e[(t > 0.55) & (t < 0.7)]))
-        # the speed follows the same ramp in both runs (about 1000 rpm/s)
+        # the speed follows the ramp (about 1000 rpm/s) in both runs; the speed loop
+        # (3 Hz with tt-dq's PLL) lets it lag by a few per cent, differently in the two
+        # runs, so the lag is compared per unit of the acceleration actually reached
         slope = np.polyfit(t[(t > 0.25) & (t < 0.35)], tab["w_m_rpm"][(t > 0.25) & (t < 0.35)], 1)[
             0
         ]
-        assert slope == pytest.approx(1000.0, rel=0.02)
+        assert slope == pytest.approx(1000.0, rel=0.08)
+        slopes.append(slope)
         lags.append(ramp - plateau)
     assert lags[0] > 0.8  # the nominal lag is real, not noise
-    assert lags[1] / lags[0] == pytest.approx(1.0 / _gain(0.9, 1.1), rel=0.10)
+    want = slopes[1] / slopes[0] / _gain(0.9, 1.1)
+    assert lags[1] / lags[0] == pytest.approx(want, rel=0.10)
 
 
 def test_the_plant_state_is_untouched_by_a_model_error_under_sensored_foc() -> None:

@@ -219,3 +219,18 @@ def test_speed_error_closed_form_is_the_derivative_of_eq_12() -> None:
     w_el = np.gradient(e, t)
     want_rpm = np.max(np.abs(w_el)) / n_p * 60.0 / (2.0 * math.pi)
     assert _luenberger_speed_peak_rpm(n_p, d_tau, J, a) == pytest.approx(want_rpm, rel=1e-4)
+
+
+def test_the_readme_claims_table_is_the_committed_summarys() -> None:
+    import json
+    from pathlib import Path
+
+    from bench.studies._report import README_BEGIN, evaluate_claims, readme_block, update_readme
+
+    root = Path(__file__).resolve().parent.parent
+    summary = json.loads((root / "docs" / "results" / "summary.json").read_text())
+    summary["claims"] = evaluate_claims(summary)
+    readme = (root / "README.md").read_text()
+    assert README_BEGIN in readme
+    assert readme_block(summary) in readme
+    assert update_readme(readme, summary) == readme

@@ -110,12 +110,16 @@ def cmd_sweep(args: argparse.Namespace) -> int:
 
 
 def cmd_report(args: argparse.Namespace) -> int:
-    from bench.studies._report import rerender
+    from bench.studies._report import rerender, update_readme
 
     out = Path(args.dir)
     summary = rerender(out)
     _print_claims(summary)
     print(f"report: {out / 'report.md'}")
+    if args.readme:
+        readme = Path(args.readme)
+        readme.write_text(update_readme(readme.read_text(encoding="utf-8"), summary))
+        print(f"claims table: {readme}")
     return 0
 
 
@@ -171,4 +175,7 @@ def register(sub: Any) -> None:
         "report", help="re-evaluate the claims of a suite folder's summary.json, rewrite report.md"
     )
     q.add_argument("dir", help="folder with summary.json (e.g. docs/results)")
+    q.add_argument(
+        "--readme", help="also rewrite the claims table of this README (between its markers)"
+    )
     q.set_defaults(func=cmd_report)

@@ -120,12 +120,13 @@ class RunJob:
     def __call__(self) -> dict[str, Any]:
         t0 = time.perf_counter()
         try:
-            metrics = self._run()
+            metrics, meta = self._run()
         except Exception as e:  # one failing run must not end the suite
             return {"error": f"{type(e).__name__}: {e}", "wall_s": time.perf_counter() - t0}
-        return {"metrics": metrics, "wall_s": time.perf_counter() - t0}
+        gains = meta.get("controller_gains") or {}
+        return {"metrics": metrics, "gains": gains, "wall_s": time.perf_counter() - t0}
 
-    def _run(self) -> dict[str, Any]:
+    def _run(self) -> tuple[dict[str, Any], dict[str, Any]]:
         from bench.runs._results import finish_run, run_metadata
         from bench.runs._run import run_scenario
         from bench.wire._bus import BusSpec
@@ -150,7 +151,7 @@ class RunJob:
                 wall_s=time.perf_counter() - t0,
                 capture=None,
             )
-            return res.metrics
+            return res.metrics, res.meta
         iface, chan, port = self.transport
         res = run_scenario(
             self.scenario,
@@ -160,7 +161,7 @@ class RunJob:
             progress=False,
             codec=codec,
         )
-        return res.metrics
+        return res.metrics, res.meta
 
 
 def _call(job: Job) -> dict[str, Any]:
@@ -368,6 +369,8 @@ def run_record(job: RunJob, res: dict[str, Any], out_dir: Path) -> dict[str, Any
         m = res["metrics"]
         rec["metrics"] = {k: m[k] for k in SUMMARY_METRICS if k in m}
         rec.update(run_extras(job.run_dir / "signals.csv", scn))
+        if res.get("gains"):
+            rec["gains"] = res["gains"]
     return rec
 
 
