@@ -13,6 +13,7 @@ from __future__ import annotations
 
 __all__ = [
     "EXIT_INTERRUPTED",
+    "EXIT_LOCK_LOST",
     "EXIT_PLANT_TRIPPED",
     "EXIT_USER_ERROR",
     "BenchError",
@@ -27,6 +28,10 @@ EXIT_USER_ERROR = 2
 #: Exit status of ``bench run`` / ``bench analyze`` when the plant tripped a
 #: protection (every file written; the metrics are not a scenario result).
 EXIT_PLANT_TRIPPED = 3
+#: Exit status of ``bench run`` / ``bench analyze`` when the estimator lost the
+#: rotor angle (|dtheta| > 90 deg electrical for more than 50 ms after the
+#: scoring start; every file written).
+EXIT_LOCK_LOST = 4
 #: Exit status of an interrupted command (Ctrl-C), with the files of the part that ran.
 EXIT_INTERRUPTED = 130
 

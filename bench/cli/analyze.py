@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -14,7 +15,7 @@ def cmd_analyze(args: argparse.Namespace) -> int:
     from bench.captures._read import (
         analyze_capture,
     )
-    from bench.runs._results import format_metrics
+    from bench.runs._results import format_metrics, outcome
 
     plots = not getattr(args, "no_plots", False)
     res = analyze_capture(
@@ -25,9 +26,12 @@ def cmd_analyze(args: argparse.Namespace) -> int:
     )
     scn = res.meta.get("scenario", {})
     print(format_metrics(res.metrics, scn.get("paper_result"), scn.get("estimator")))
+    status, warnings = outcome(res.metrics, float(res.meta.get("T_s") or 0.0))
+    for line in warnings:
+        print(line, file=sys.stderr)
     names = ["signals.csv", "metrics.json", "meta.json"] + (["run.png"] if plots else [])
     print(files_line(res.out_dir, names))
-    return 0
+    return status
 
 
 def register(sub: Any) -> None:

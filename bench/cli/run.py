@@ -8,7 +8,7 @@ import threading
 from pathlib import Path
 from typing import Any
 
-from bench._errors import EXIT_PLANT_TRIPPED, BenchError
+from bench._errors import BenchError
 from bench.cli._common import (
     POS_FLOAT,
     add_bus,
@@ -63,7 +63,7 @@ def _start_monitor(spec: Any, scn: Any, est: str, mode: str, out: Path) -> _View
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    from bench.runs._results import fault_warning, format_metrics, realtime_warning
+    from bench.runs._results import format_metrics, outcome, realtime_warning
     from bench.runs._run import run_scenario
     from bench.scenarios._setup import sample_period
 
@@ -103,9 +103,9 @@ def cmd_run(args: argparse.Namespace) -> int:
     print(format_metrics(res.metrics, scn.paper_result, scn.estimator))
     if args.mode == "realtime" and (warn := realtime_warning(res.metrics)):
         print(warn, file=sys.stderr)
-    tripped = fault_warning(res.metrics, sample_period(scn))
-    if tripped:
-        print(tripped, file=sys.stderr)
+    status, warnings = outcome(res.metrics, sample_period(scn))
+    for line in warnings:
+        print(line, file=sys.stderr)
     missing = int(res.metrics.get("steps_missing", 0))
     if missing and not res.meta.get("interrupted"):
         print(
@@ -120,7 +120,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         print("bench: interrupted", file=sys.stderr)
         return 130
     # every file is written; the status says the run is not a scenario result
-    return EXIT_PLANT_TRIPPED if tripped else 0
+    return status
 
 
 def register(sub: Any) -> None:

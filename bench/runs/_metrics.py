@@ -10,6 +10,8 @@ two things: ``speed_err_max_rpm`` is the estimation error |w_hat - w_true|,
 
 from __future__ import annotations
 
+from typing import Any
+
 import itertools
 import math
 from collections.abc import Mapping
@@ -83,6 +85,35 @@ def overshoot_rpm(t: Array, w_ref: Array, w: Array, *, min_step_rpm: float = 1.0
     return worst
 
 
+#: Lost rotor angle (DESIGN.md, exit status 4): |dtheta| above this (deg electrical) ...
+LOCK_LOST_DEG = 90.0
+#: ... for longer than this (s), after the scoring start.  Beyond 90 degrees the
+#: estimate's d axis is nearer the magnet's south than its north: the torque
+#: the controller asks for has the wrong sign, which no estimator recovers from
+#: by itself; 50 ms rules out a single wrapped sample or a glitch.
+LOCK_LOST_S = 0.05
+
+
+def lock_lost(t: Array, err_deg: Array) -> tuple[bool, float | None]:
+    """Whether |dtheta| stayed above :data:`LOCK_LOST_DEG` for more than :data:`LOCK_LOST_S`.
+
+    ``t`` and ``err_deg`` are the scored rows, in time order.  Returns
+    ``(True, t_0)`` with ``t_0`` the start of the first such excursion, else
+    ``(False, None)``.
+    """
+    above = np.abs(err_deg) > LOCK_LOST_DEG
+    if not np.any(above):
+        return False, None
+    # runs of consecutive rows above the threshold: [start, end) index pairs
+    edges = np.diff(np.concatenate(([0], above.view(np.int8), [0])))
+    starts = np.flatnonzero(edges == 1)
+    ends = np.flatnonzero(edges == -1)
+    for a, b in zip(starts, ends, strict=True):
+        if float(t[b - 1] - t[a]) > LOCK_LOST_S:
+            return True, float(t[a])
+    return False, None
+
+
 def compute_metrics(
     table: Mapping[str, Array],
     *,
@@ -91,7 +122,7 @@ def compute_metrics(
     score_from_s: float = 0.0,
     thd_window_s: tuple[float, float] | None = None,
     overshoot: bool = False,
-) -> dict[str, float]:
+) -> dict[str, Any]:
     """The metrics of DESIGN.md from a per-step table.
 
     ``table`` needs the columns ``t``, ``theta_e``, ``theta_hat``,
@@ -108,7 +139,7 @@ def compute_metrics(
     err = wrap_pi(table["theta_e"][sel] - table["theta_hat"][sel])
     err_deg = np.degrees(err)
     w = table["w_m_rpm"][sel]
-    m: dict[str, float] = {
+    m: dict[str, Any] = {
         "theta_err_max_deg": float(np.max(err_deg)),
         "theta_err_min_deg": float(np.min(err_deg)),
         "theta_err_mean_deg": float(np.mean(err_deg)),
@@ -122,6 +153,9 @@ def compute_metrics(
         "scored_steps": int(np.count_nonzero(sel)),
         "sim_s": float(len(t) * T_s),
     }
+    lost, lost_at = lock_lost(t[sel], err_deg)
+    m["lock_lost"] = lost
+    m["lock_lost_at_s"] = lost_at
     if overshoot:
         m["speed_overshoot_rpm"] = overshoot_rpm(t[sel], table["w_ref_rpm"][sel], w)
     if thd_window_s is not None:
