@@ -1,0 +1,212 @@
+"""The node processes of a run: command lines, start-up handshake, and how they end.
+
+``bench run`` starts ``bench plant``, ``bench controller`` and, when latency
+is injected, ``bench link`` as OS processes, each with its stderr in
+``ROLE.log`` and its counters in ``ROLE.json`` of the run folder.  A node is
+started only once the previous one has printed ``READY``.
+"""
+
+from __future__ import annotations
+
+import select
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+from bench._errors import BenchError
+from bench.scenarios._schema import Scenario
+from bench.wire._bus import BusSpec
+
+
+def _node_cmd(role: str, scenario_file: Path, spec: BusSpec, extra: list[str]) -> list[str]:
+    return [sys.executable, "-m", "bench", role, str(scenario_file), *spec.args(), *extra]
+
+
+def _scenario_args(scn: Scenario, mode: str) -> list[str]:
+    return [
+        "--mode",
+        mode,
+        "--duration",
+        repr(scn.duration),
+        "--delay-steps",
+        str(scn.latency.duty_delay_steps),
+        "--sample-delay-steps",
+        str(scn.latency.sample_delay_steps),
+    ]
+
+
+def _wait_ready(
+    proc: subprocess.Popen[str],
+    role: str,
+    log: Path,
+    timeout: float = 60.0,
+    stop: Any = lambda: False,
+) -> None:
+    """Wait for the node's READY line; return early when ``stop()`` (a signal came)."""
+    assert proc.stdout is not None
+    t0 = time.monotonic()
+    while time.monotonic() - t0 < timeout:
+        if stop():
+            return
+        if not select.select([proc.stdout], [], [], 0.1)[0] and proc.poll() is None:
+            continue
+        line = proc.stdout.readline()
+        if line.strip() == "READY":
+            return
+        if line == "" and proc.poll() is not None:
+            tail = log.read_text(errors="replace").strip().splitlines()[-1:] if log.exists() else []
+            raise BenchError(f"{role} process exited before it was ready: {' '.join(tail)}")
+    raise BenchError(f"{role} process not ready after {timeout:.0f} s")
+
+
+def ended_early(procs: list[tuple[str, subprocess.Popen[str]]]) -> str | None:
+    """``"link"`` when the latency link ended while the plant still runs, else ``None``.
+
+    The link is the bench's own infrastructure and never ends by itself during
+    a run; without it the plant would only wait for its watchdog.  A node that
+    dies (the controller) is left to the plant, as a drive would be: the
+    plant's watchdog and safe state are what such a run tests.
+    """
+    for role, p in procs:
+        if role == "link" and p.poll() is not None:
+            return role
+    return None
+
+
+def last_line(out_dir: Path, role: str) -> str:
+    """The last line a node process wrote to its log (empty if none)."""
+    f = out_dir / f"{role}.log"
+    lines = f.read_text(errors="replace").strip().splitlines() if f.exists() else []
+    return lines[-1] if lines else "no output"
+
+
+def _peer_args(spec: BusSpec) -> list[str]:
+    a = [f"{spec.interface}:{spec.channel}"]
+    if spec.port is not None:
+        a.append(f"--to-port={spec.port}")
+    return a
+
+
+def node_roles(
+    scn: Scenario,
+    estimator: str,
+    spec: BusSpec,
+    spec_b: BusSpec,
+    *,
+    mode: str,
+    pace: int,
+    node_args: dict[str, list[str]] | None,
+) -> list[tuple[str, BusSpec, list[str]]]:
+    """The processes of a run in start order: (role, its bus, its options).
+
+    The link (when latency is injected) starts first, then the controller,
+    then the plant, which keeps the clock.  ``node_args`` adds options per
+    role; ``pace`` is the plant's ``--pace-every`` (0: off).
+    """
+    scn_args = _scenario_args(scn, mode)
+    extra = node_args or {}
+    pace_args = ["--pace-every", str(pace)] if pace else []
+    roles: list[tuple[str, BusSpec, list[str]]] = [
+        ("controller", spec_b, ["--estimator", estimator, *scn_args, *extra.get("controller", [])]),
+        ("plant", spec, [*scn_args, *pace_args, *extra.get("plant", [])]),
+    ]
+    if scn.latency.any:
+        lt = scn.latency
+        link_args = [
+            "--to", *_peer_args(spec_b), "--seed", str(scn.seed), "--mode", mode,
+            "--delay-steps", str(lt.duty_delay_steps),
+            "--sample-delay-steps", str(lt.sample_delay_steps),
+            "--duty-delay-us", repr(lt.duty_delay_us),
+            "--sample-delay-us", repr(lt.sample_delay_us),
+            "--duty-jitter-us", repr(lt.duty.jitter_us),
+            "--sample-jitter-us", repr(lt.sample.jitter_us),
+            "--jitter-dist", lt.jitter_dist,
+            "--duty-drop-prob", repr(lt.duty.drop_prob),
+            "--sample-drop-prob", repr(lt.sample.drop_prob),
+        ]  # fmt: skip
+        roles.insert(0, ("link", spec, link_args))
+    return roles
+
+
+def start_nodes(
+    roles: list[tuple[str, BusSpec, list[str]]],
+    scenario_file: Path,
+    out_dir: Path,
+    env: dict[str, str],
+    procs: list[tuple[str, subprocess.Popen[str]]],
+    *,
+    stop: Any,
+) -> None:
+    """Start each role's process and wait for its ``READY``; appended to ``procs`` as started.
+
+    ``procs`` is filled in place so that the caller can kill what was started
+    when a later node fails to start.  ``stop()`` (a signal came) ends the
+    start-up early.
+    """
+    for role, sp, extra in roles:
+        if stop():
+            return
+        log = out_dir / f"{role}.log"
+        cmd = (
+            _node_cmd(role, scenario_file, sp, [*extra, "--report", str(out_dir / f"{role}.json")])
+            if role != "link"
+            else [sys.executable, "-m", "bench", "link", *sp.args(), *extra]
+        )
+        p = subprocess.Popen(
+            cmd,
+            stdout=subprocess.PIPE,
+            stderr=log.open("w"),
+            text=True,
+            env=env,
+            start_new_session=True,
+        )
+        procs.append((role, p))
+        _wait_ready(p, role, log, stop=stop)
+
+
+def stop_nodes(
+    procs: list[tuple[str, subprocess.Popen[str]]],
+    bus: Any,
+    cmds: list[tuple[int, Any]],
+    *,
+    link: bool,
+    interrupted: bool,
+    ended: str | None,
+) -> None:
+    """End the node processes: a normal end waits for them, an interrupted one does not.
+
+    The stop command is in the schedule; it is sent once more to be sure.
+    With latency the controller never sees the last sample, so the nodes
+    that do not end by themselves get SIGTERM (they stop cleanly on it).
+    Interrupted (SIGINT/SIGTERM) or a node ended early: no waiting, every
+    node gets SIGTERM at once, and is killed if it does not end in time.
+    """
+    roles = dict(procs)
+    plant = roles.get("plant")
+    if plant is not None and not interrupted and not ended and cmds:
+        bus.send(cmds[-1][1])
+        try:
+            plant.wait(timeout=30.0)
+        except subprocess.TimeoutExpired:
+            plant.send_signal(signal.SIGTERM)
+        ctrl = roles.get("controller")
+        if ctrl is not None and not link:
+            # it stops by itself at the stop command's step
+            try:
+                ctrl.wait(timeout=10.0)
+            except subprocess.TimeoutExpired:
+                pass
+        time.sleep(0.2)
+    for _, p in procs:
+        if p.poll() is None:
+            p.send_signal(signal.SIGTERM)
+    deadline = time.monotonic() + (2.0 if interrupted else 10.0)
+    for _, p in procs:
+        try:
+            p.wait(timeout=max(0.1, deadline - time.monotonic()))
+        except subprocess.TimeoutExpired:
+            p.kill()
+            p.wait()

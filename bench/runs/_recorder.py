@@ -1,0 +1,134 @@
+"""The recorder of a run: every frame of the bus(es) into one python-can log file.
+
+:class:`Recorder` keeps every frame (tagged with its bus: 1 the plant side, 2
+the controller side of a latency link), writes it to the capture and follows
+the plant's step from the sample counters, which paces the bench's commands
+(:mod:`bench.runs._run`).  :class:`Recording` opens the buses, the writer
+and the notifiers of one run and closes them in order.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from pathlib import Path
+
+import can
+
+from bench.nodes._loops import STATE_DONE
+from bench.wire._bus import BusSpec
+from bench.wire._codec import Codec
+
+
+class Recorder(can.Listener):
+    """Keeps every frame (with the index of the bus it came from) and writes the capture."""
+
+    def __init__(self, codec: Codec, writer: can.Listener, channel: int) -> None:
+        self.codec = codec
+        self.writer = writer
+        self.channel = channel
+        self.frames: list[can.Message] = []
+        self.samples_id = codec.frame_id("PhaseSamples")
+        self.status_id = codec.frame_id("PlantStatus")
+        self.last_raw_step = -1
+        #: The plant's step from the sample counter, unwrapped here where every
+        #: frame is seen in order (a poller could miss a whole counter cycle).
+        self.step = -1
+        self._m_step = 1 << codec.step_bits("PhaseSamples")
+        self.done = threading.Event()
+        self.lock = threading.Lock()
+
+    def on_message_received(self, msg: can.Message) -> None:
+        msg.channel = self.channel
+        with self.lock:
+            self.frames.append(msg)
+            self.writer.on_message_received(msg)
+        if msg.arbitration_id == self.samples_id:
+            d = self.codec.decode(msg)
+            if d is not None and d.reason is None:
+                raw = int(d.signals["step"])
+                last = self.last_raw_step
+                if last < 0:
+                    self.step, self.last_raw_step = raw, raw
+                else:
+                    ahead = (raw - last) % self._m_step
+                    if ahead < self._m_step // 2:  # behind: a retransmitted old frame
+                        self.step += ahead
+                        self.last_raw_step = raw
+        elif msg.arbitration_id == self.status_id:
+            d = self.codec.decode(msg)
+            if d is not None and d.reason is None and int(d.signals["state"]) == STATE_DONE:
+                self.done.set()
+
+
+def drain(recorders: list[Recorder], quiet_s: float = 0.5, limit_s: float = 10.0) -> None:
+    """Wait until the recorders have read what is still queued in their sockets.
+
+    On a slow host (User-Mode Linux) the recorder thread lags the nodes by
+    thousands of frames; stopping it as soon as the nodes end would lose them.
+    Returns once no frame came in for ``quiet_s``, or after ``limit_s``.
+    """
+    t_end = time.monotonic() + limit_s
+    last = -1
+    while time.monotonic() < t_end:
+        n = sum(len(r.frames) for r in recorders)
+        if n == last:
+            return
+        last = n
+        time.sleep(quiet_s)
+
+
+class Recording:
+    """The buses of a run (one, or two with a latency link), each with its recorder.
+
+    Opening the buses comes first, so a bus that cannot be opened leaves no
+    empty capture behind.  :meth:`close` drains what is still queued, then
+    stops the notifiers, the writer and the buses.
+    """
+
+    def __init__(self, specs: list[BusSpec], capture: Path, codec: Codec) -> None:
+        self.buses: list[can.BusABC] = []
+        try:
+            for spec in specs:
+                self.buses.append(spec.open())
+        except BaseException:
+            for b in self.buses:
+                b.shutdown()
+            raise
+        self.writer = can.Logger(str(capture))
+        self.recorders = [Recorder(codec, self.writer, i + 1) for i in range(len(self.buses))]
+        for r in self.recorders[1:]:
+            r.lock = self.recorders[0].lock  # one writer: one lock, or the capture is corrupted
+        self.notifiers = [
+            can.Notifier(b, [r], timeout=0.05)
+            for b, r in zip(self.buses, self.recorders, strict=True)
+        ]
+
+    @property
+    def plant_bus(self) -> can.BusABC:
+        """The plant's bus (the bench sends its commands there)."""
+        return self.buses[0]
+
+    @property
+    def plant_step(self) -> int:
+        """The plant's newest step the recorder has seen (-1 before the first sample)."""
+        return self.recorders[0].step
+
+    @property
+    def plant_done(self) -> bool:
+        """Whether the plant has said that the run is over (``PlantStatus``)."""
+        return self.recorders[0].done.is_set()
+
+    def frames(self) -> list[can.Message]:
+        """Every recorded frame, in time order across the buses."""
+        if len(self.recorders) == 1:
+            return self.recorders[0].frames
+        return sorted((m for r in self.recorders for m in r.frames), key=lambda m: m.timestamp)
+
+    def close(self) -> None:
+        drain(self.recorders)
+        for nt in self.notifiers:
+            nt.stop()
+        self.writer.stop()
+        for b in self.buses:
+            b.shutdown()

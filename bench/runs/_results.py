@@ -1,0 +1,305 @@
+"""A run's files from its frames: table, metrics, metadata, plots, and the printed summary.
+
+:func:`finish_run` is the one path from frames to files, used by a live run
+(:mod:`bench.runs._run`) and by ``bench analyze`` of a capture alike, so both
+give the same files.  :func:`format_metrics` is the table a run prints beside
+the paper's number; :func:`fault_warning` and :func:`realtime_warning` are
+the warning lines that go with it.
+"""
+
+from __future__ import annotations
+
+import json
+import platform
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import can
+import numpy as np
+
+from bench.nodes._counters import REPEATED_COUNTER
+from bench.runs._analysis import analyze_frames, write_csv
+from bench.runs._metrics import compute_metrics
+from bench.scenarios._schema import Scenario
+from bench.scenarios._setup import get_preset, lockstep_delay, n_steps, sample_period
+from bench.wire._codec import Codec
+from bench.wire._protocol import unwrap
+
+
+@dataclass(slots=True)
+class RunResult:
+    out_dir: Path
+    metrics: dict[str, Any]
+    capture: Path
+    meta: dict[str, Any] = field(default_factory=dict)
+
+
+def _versions() -> dict[str, str]:
+    import cantools
+    import matplotlib
+    import numpy
+    import scipy
+
+    return {
+        "python": platform.python_version(),
+        "python-can": can.__version__,
+        "cantools": cantools.__version__,
+        "numpy": numpy.__version__,
+        "scipy": scipy.__version__,
+        "matplotlib": matplotlib.__version__,
+        "platform": platform.platform(),
+    }
+
+
+def run_metadata(
+    scn: Scenario, estimator: str, *, mode: str, transport: str, link: bool
+) -> dict[str, Any]:
+    p = get_preset(scn)
+    from dataclasses import asdict
+
+    return {
+        "scenario": scn.to_dict(),
+        "estimator": estimator,
+        "mode": mode,
+        "transport": transport,
+        "latency_link": link,
+        "lockstep_delay_steps": lockstep_delay(scn),
+        "T_s": sample_period(scn),
+        "f_sw": 1.0 / sample_period(scn),
+        "preset": {
+            "name": p.name,
+            "motor": asdict(p.motor),
+            "inverter": asdict(p.inverter),
+            "f_sw": p.f_sw,
+            "doc": p.doc,
+        },
+        "seed": scn.seed,
+        "versions": _versions(),
+    }
+
+
+def finish_run(
+    frames: list[can.Message],
+    codec: Codec,
+    scn: Scenario,
+    out_dir: Path,
+    *,
+    meta: dict[str, Any],
+    wall_s: float,
+    capture: Path | None,
+    plots: bool = True,
+) -> RunResult:
+    """Table, metrics, metadata and plots from a run's frames."""
+    T_s = sample_period(scn)
+    n_p = get_preset(scn).motor.n_p
+    cap = analyze_frames(frames, codec, T_s=T_s, n_p=n_p)
+    write_csv(str(out_dir / "signals.csv"), cap.table)
+    m: dict[str, Any] = compute_metrics(
+        cap.table,
+        T_s=T_s,
+        n_p=n_p,
+        score_from_s=scn.score_from_s,
+        thd_window_s=scn.thd_window_s,
+        overshoot="speed_overshoot_rpm" in scn.paper_result,
+    )
+    reports = meta.get("node_reports", {})
+    plant_r = reports.get("plant", {})
+    ctrl_r = reports.get("controller", {})
+    m["wall_s"] = wall_s
+    # simulated time per wall second of the plant's stepping loop (process
+    # start-up excluded); the whole run's wall time when no plant report
+    loop_s = plant_r.get("loop_s") or wall_s
+    m["realtime_factor"] = m["sim_s"] / loop_s if loop_s > 0 else float("nan")
+    m["deadline_misses"] = int(plant_r.get("overruns", 0))
+    m["late_duty_periods"] = int(plant_r.get("late_duties", 0))
+    m["frames_rejected"] = int(
+        cap.frames_rejected + plant_r.get("frames_rejected", 0) + ctrl_r.get("frames_rejected", 0)
+    )
+    reasons: dict[str, int] = dict(cap.rejected)
+    repeated = 0
+    for r in (plant_r, ctrl_r):
+        for k, v in r.get("reject_reasons", {}).items():
+            if k == REPEATED_COUNTER:
+                # expected, not a fault: every command is sent twice, and a
+                # retransmitted frame answers a lost one; counted on its own
+                repeated += int(v)
+            else:
+                reasons[k] = reasons.get(k, 0) + int(v)
+    m["frames_rejected_by_reason"] = reasons
+    m["frames_repeated_ignored"] = repeated
+    m["frames_recorded"] = cap.frames
+    m["frames_unknown_id"] = cap.unknown_ids
+    m["incomplete_steps"] = cap.incomplete_steps
+    # periods 0 .. n - 1 of the scenario without a row: frames the recording lost
+    # (or a run stopped early); the metrics above cover only the rows present
+    n_run = n_steps(scn)
+    present = np.unique(cap.table["step"][cap.table["step"] < n_run]).size
+    m["steps_missing"] = int(n_run - present)
+    m["frames_duplicate"] = cap.duplicates
+    m["frames_out_of_order"] = cap.out_of_order
+    m["retransmits"] = int(plant_r.get("retransmits", 0))
+    m["late_commands"] = int(plant_r.get("late_commands", 0) + ctrl_r.get("late_commands", 0))
+    age = cap.table["duty_age"]
+    age = age[age < 255]
+    if len(age):
+        m["loop_latency_steps"] = {
+            "median": float(np.median(age)),
+            "min": float(age.min()),
+            "max": float(age.max()),
+        }
+    if any(getattr(f, "channel", None) == 2 for f in frames[:2000]):
+        from bench.runs._analysis import measure_latency
+
+        m["latency_measured"] = measure_latency(frames, codec)
+        lt = scn.latency
+        m["latency_configured"] = {
+            "samples_steps": lt.sample_delay_steps,
+            "duties_steps": lt.duty_delay_steps,
+            "samples_us": lt.sample_delay_us,
+            "duties_us": lt.duty_delay_us,
+            "samples_jitter_us": lt.sample.jitter_us,
+            "duties_jitter_us": lt.duty.jitter_us,
+            "jitter_dist": lt.jitter_dist,
+            "samples_drop_prob": lt.sample.drop_prob,
+            "duties_drop_prob": lt.duty.drop_prob,
+        }
+    if plant_r.get("jitter"):
+        jit = plant_r["jitter"]
+        m["jitter_us"] = jit
+        # host stalls, apart from the late periods (plant_rt/_clock.py): the
+        # periods that passed during a stall were skipped, not computed
+        m["host_stalls"] = int(jit.get("stalls", 0))
+        m["host_stall_ms_total"] = 1e-3 * float(jit.get("stall_total", 0.0))
+        m["host_stall_ms_max"] = 1e-3 * float(jit.get("stall_max", 0.0))
+        m["periods_skipped"] = int(jit.get("skipped", 0))
+    # the first trip, from the capture; the plant's report (its latched, so
+    # last, fault) only when the capture lost the status frame
+    fault, fault_step = plant_fault(frames, codec)
+    if fault == "none" and plant_r.get("fault") not in (None, "none"):
+        fault, fault_step = str(plant_r["fault"]), int(plant_r.get("fault_step", -1))
+    m["plant_fault"] = fault
+    m["plant_fault_step"] = fault_step
+    meta = dict(
+        meta,
+        scored_from_s=scn.score_from_s,
+        capture=capture.name if capture else None,
+        wall_s=wall_s,
+    )
+    (out_dir / "metrics.json").write_text(json.dumps(m, indent=2, sort_keys=True) + "\n")
+    (out_dir / "meta.json").write_text(
+        json.dumps(meta, indent=2, sort_keys=True, default=str) + "\n"
+    )
+    if plots:
+        from bench.runs._plots import plot_run
+
+        plot_run(cap.table, out_dir, title=f"{scn.name} / {meta.get('estimator', '?')}")
+    return RunResult(out_dir=out_dir, metrics=m, capture=capture or out_dir, meta=meta)
+
+
+def plant_fault(frames: list[can.Message], codec: Codec) -> tuple[str, int]:
+    """The plant's first protection trip in a capture: (fault name, period), or ("none", -1).
+
+    From the ``PlantStatus`` frames the plant sends when it trips; their
+    16-bit step is unwrapped against the 32-bit step of the last
+    ``PlantTruth`` frame before it (the plant's own period count, whatever
+    the capture's length, start, retransmissions or number of buses).
+    """
+    from plant_rt import FAULT_NAMES
+
+    id_status, id_truth = codec.frame_id("PlantStatus"), codec.frame_id("PlantTruth")
+    m = 1 << codec.step_bits("PlantStatus")
+    last_truth: can.Message | None = None
+    for f in frames:
+        if f.arbitration_id == id_truth:
+            last_truth = f
+        elif f.arbitration_id == id_status:
+            d = codec.decode(f)
+            if d is None or d.reason is not None or int(d.signals["fault_code"]) == 0:
+                continue
+            t = codec.decode(last_truth) if last_truth is not None else None
+            ref = int(t.signals["step"]) if t is not None and t.reason is None else 0
+            code = int(d.signals["fault_code"])
+            return FAULT_NAMES.get(code, str(code)), unwrap(int(d.signals["step"]), ref, m)
+    return "none", -1
+
+
+def fault_warning(m: dict[str, Any], T_s: float) -> str | None:
+    """One line when the plant tripped a protection during the run."""
+    fault = m.get("plant_fault", "none")
+    if fault in (None, "none"):
+        return None
+    k = int(m.get("plant_fault_step", -1))
+    return (
+        f"warning: the plant tripped its {fault} protection in period {k} "
+        f"(t = {k * T_s:.4f} s) and switched the inverter off (safe state, until a reset); "
+        "the metrics include that part"
+    )
+
+
+#: Real-time runs with more late periods than this get a warning (fraction).
+REALTIME_LATE_WARN = 0.01
+
+
+def realtime_warning(m: dict[str, Any]) -> str | None:
+    """One line when a real-time run did not keep time well enough to read as a drive's."""
+    steps = max(1, int(m.get("steps", 0)))
+    late = m.get("late_duty_periods", 0) / steps
+    over = m.get("deadline_misses", 0) / steps
+    if max(late, over) <= REALTIME_LATE_WARN:
+        return None
+    worst = (m.get("jitter_us") or {}).get("max", float("nan")) * 1e-3
+    stalls = int(m.get("host_stalls", 0))
+    host = (
+        f"; {stalls} host stalls (longest {m.get('host_stall_ms_max', 0.0):.1f} ms, "
+        f"{int(m.get('periods_skipped', 0))} periods skipped)"
+        if stalls
+        else ""
+    )
+    return (
+        f"warning: real time not kept: {100 * late:.1f} % of periods ran with a late duty, "
+        f"{100 * over:.1f} % started late (worst wake-up {worst:.1f} ms){host}; the figures "
+        "include this machine's scheduling, not only the controller (see README, --rt-priority)"
+    )
+
+
+METRIC_ROWS = (
+    ("theta_err_max_deg", "deg"),
+    ("theta_err_min_deg", "deg"),
+    ("theta_err_mean_deg", "deg"),
+    ("theta_err_abs_mean_deg", "deg"),
+    ("theta_err_rms_deg", "deg"),
+    ("theta_err_abs_max_rad", "rad"),
+    ("speed_err_max_rpm", "rpm"),
+    ("speed_track_err_max_rpm", "rpm"),
+    ("speed_overshoot_rpm", "rpm"),
+    ("thd_phase_a_pct", "%"),
+    ("steps", ""),
+    ("sim_s", "s"),
+    ("wall_s", "s"),
+    ("realtime_factor", "x"),
+    ("deadline_misses", ""),
+    ("frames_rejected", ""),
+    ("retransmits", ""),
+)
+
+
+def format_metrics(
+    m: dict[str, Any], paper: dict[str, Any] | None = None, paper_method: str | None = None
+) -> str:
+    """The metrics as an aligned text table, with the paper's number where it has one.
+
+    ``paper_method``: the method the paper's numbers belong to (the
+    scenario's own estimator), named in the column's heading.
+    """
+    paper = paper or {}
+    head = f"paper ({paper_method})" if paper and paper_method else "paper"
+    lines = [f"{'metric':<26}{'bench':>12}  {head}"]
+    for key, unit in METRIC_ROWS:
+        if key not in m:
+            continue
+        v = m[key]
+        vs = f"{v:12.3f}" if isinstance(v, float) else f"{v:>12}"
+        ps = f"{paper[key]:>8}" if key in paper else f"{'':>8}"
+        lines.append(f"{key:<26}{vs}  {ps} {unit}")
+    return "\n".join(lines)
