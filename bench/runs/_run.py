@@ -126,6 +126,7 @@ def run_scenario(
     failures = {role: p.returncode for role, p in procs if p.returncode not in (0, None)}
     meta = run_metadata(scn, estimator, mode=mode, transport=spec.describe(), link=link)
     meta["node_reports"] = _node_reports(out_dir)
+    meta["engine"] = (meta["node_reports"].get("plant") or {}).get("engine")  # the plant's
     meta["exit_codes"] = {role: p.returncode for role, p in procs}
     if interrupted():
         meta["interrupted"] = True

@@ -60,7 +60,8 @@ def lockstep_delay(scn: Scenario) -> int:
     return scn.latency.duty_delay_steps + scn.latency.sample_delay_steps
 
 
-def build_plant(scn: Scenario) -> Plant:
+def build_plant(scn: Scenario, engine: str = "auto") -> Plant:
+    """The scenario's plant; ``engine`` as :class:`plant_rt.Plant`'s (``--engine``)."""
     p = get_preset(scn)
     nz = scn.noise
     sensors = SensorPars(
@@ -78,6 +79,7 @@ def build_plant(scn: Scenario) -> Plant:
         load=ConstantLoad(scn.load_nm(0.0)),
         saturation=scn.saturation,
         theta_m0=theta_m0,
+        engine=engine,
     )
 
 

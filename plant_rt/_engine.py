@@ -1,0 +1,64 @@
+"""The plant's engines: the per-period step in pure Python or compiled.
+
+``"python"``: :class:`plant_rt.Plant` as written in :mod:`plant_rt._plant`.
+``"compiled"``: the same step in C (``plant_rt/_cplant.c``, built by
+``pip install`` when the machine has a C compiler and Python's headers), a
+second implementation that mirrors the Python one operation for operation
+and gives the same trace bit for bit (``tests/test_plant_engine.py``). It
+covers the enabled periods of the average and the switching model; the
+disabled bridge, the energy meter and the sensors stay in Python on the
+same state. ``"auto"``: compiled when it is built, else Python.
+"""
+
+from __future__ import annotations
+
+from types import ModuleType
+from typing import Literal
+
+EngineName = Literal["auto", "compiled", "python"]
+ENGINES: tuple[str, ...] = ("auto", "compiled", "python")
+"""The engine choices of :class:`plant_rt.Plant` (``engine=``)."""
+
+_cplant: ModuleType | None
+_why_not: str | None
+try:
+    from plant_rt import _cplant
+except ImportError as e:  # not built on this machine
+    _cplant = None
+    _why_not = f"the compiled plant engine is not built ({e}); the plant runs in pure Python"
+else:
+    _why_not = None
+
+
+def compiled_engine_missing() -> str | None:
+    """None when the compiled engine is built, else one line saying why the plant runs in Python."""
+    return _why_not
+
+
+def resolve_engine(engine: str, meter: bool = False) -> str:
+    """The engine a plant runs on, ``"compiled"`` or ``"python"``.
+
+    Parameters
+    ----------
+    engine : {"auto", "compiled", "python"}
+        The choice; ``"auto"`` takes the compiled engine when it is built.
+    meter : bool
+        The plant integrates its energy flows (only the Python engine does).
+
+    Raises
+    ------
+    ValueError
+        For an unknown name, or ``"compiled"`` when it is not built or with
+        the energy meter.
+    """
+    if engine not in ENGINES:
+        raise ValueError(f"unknown plant engine {engine!r} (known: {', '.join(ENGINES)})")
+    if engine == "python":
+        return "python"
+    if engine == "compiled":
+        if _why_not is not None:
+            raise ValueError(_why_not)
+        if meter:
+            raise ValueError("the energy meter (meter=True) runs on the python engine only")
+        return "compiled"
+    return "compiled" if _why_not is None and not meter else "python"
