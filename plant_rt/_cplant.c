@@ -12,9 +12,12 @@
  * here.  Built with -ffp-contract=off (no fused multiply-add) for that
  * reason.
  *
- * What stays in Python (plant_rt.Plant calls it and then hands the state
- * back with set_state): the disabled bridge (enable=False), the energy
- * meter, the sensors and everything outside step().
+ * The sensors of Plant.sample (plant_rt._sensors.Sensors: gain, offset,
+ * noise from the plant's own random.Random, ADC) are mirrored the same way
+ * in measure().  What stays in Python (plant_rt.Plant calls it and then
+ * hands the state back with set_state): the disabled bridge
+ * (enable=False), the energy meter and everything else outside step() and
+ * sample().
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
@@ -63,6 +66,9 @@ typedef struct {
     int load_const;
     double tau_const;
     int err;  /* a load callback raised */
+    /* sensors (plant_rt._sensors.Sensors) */
+    double g[3], o[3], lsb_i, code_max, noise_i, gain_u, off_u, lsb_u, ucode_max, noise_u;
+    PyObject *rng;
 } Core;
 
 /* ------------------------------------------------------------ helpers */
@@ -963,9 +969,111 @@ static int Core_init(Core *s, PyObject *args, PyObject *kw)
     return r;
 }
 
+/* ------------------------------------------------------------- sensors */
+static int gauss(Core *s, double sd, double *out)
+{
+    PyObject *r = PyObject_CallMethod(s->rng, "gauss", "dd", 0.0, sd);
+    if (r == NULL) return -1;
+    double v = PyFloat_AsDouble(r);
+    Py_DECREF(r);
+    if (v == -1.0 && PyErr_Occurred()) return -1;
+    *out += v;
+    return 0;
+}
+
+/* math.floor(x) as Python does it, which raises for NaN and infinity */
+static int py_floor(double x, double *out)
+{
+    if (isnan(x)) {
+        PyErr_SetString(PyExc_ValueError, "cannot convert float NaN to integer");
+        return -1;
+    }
+    if (isinf(x)) {
+        PyErr_SetString(PyExc_OverflowError, "cannot convert float infinity to integer");
+        return -1;
+    }
+    *out = floor(x);
+    return 0;
+}
+
+/* Sensors._quant_i */
+static int quant_i(Core *s, double x, double *out)
+{
+    double lsb = s->lsb_i;
+    if (lsb == 0.0) {
+        *out = x;
+        return 0;
+    }
+    double code;
+    if (py_floor(x / lsb + 0.5, &code) < 0) return -1;
+    double lo = -s->code_max - 1.0;
+    code = code < s->code_max ? code : s->code_max;
+    code = lo > code ? lo : code;
+    *out = code * lsb;
+    return 0;
+}
+
+static PyObject *Core_set_sensors(Core *s, PyObject *args)
+{
+    PyObject *rng;
+    if (!PyArg_ParseTuple(args, "ddddddddddddddO", &s->g[0], &s->g[1], &s->g[2], &s->o[0],
+                          &s->o[1], &s->o[2], &s->lsb_i, &s->code_max, &s->noise_i, &s->gain_u,
+                          &s->off_u, &s->lsb_u, &s->ucode_max, &s->noise_u, &rng))
+        return NULL;
+    Py_INCREF(rng);
+    Py_XSETREF(s->rng, rng);
+    Py_RETURN_NONE;
+}
+
+/* Sensors.currents and Sensors.voltage of the true values (i_a, i_b, i_c, u_dc),
+   or of the present state without arguments */
+static PyObject *Core_measure(Core *s, PyObject *const *args, Py_ssize_t nargs)
+{
+    double i[3], u;
+    if (nargs == 4) {
+        for (int k = 0; k < 3; k++) {
+            i[k] = PyFloat_AsDouble(args[k]);
+            if (i[k] == -1.0 && PyErr_Occurred()) return NULL;
+        }
+        u = PyFloat_AsDouble(args[3]);
+        if (u == -1.0 && PyErr_Occurred()) return NULL;
+    } else if (nargs == 0) {
+        currents_abc(s, i);
+        u = s->u_dc;
+    } else {
+        PyErr_SetString(PyExc_TypeError, "measure() or measure(i_a, i_b, i_c, u_dc)");
+        return NULL;
+    }
+    if (s->rng == NULL) {
+        PyErr_SetString(PyExc_RuntimeError, "measure() before set_sensors()");
+        return NULL;
+    }
+    double m[3];
+    for (int k = 0; k < 3; k++) m[k] = s->g[k] * i[k] + s->o[k];
+    double sd = s->noise_i;
+    if (sd > 0.0)
+        for (int k = 0; k < 3; k++)
+            if (gauss(s, sd, &m[k]) < 0) return NULL;
+    double q[3];
+    for (int k = 0; k < 3; k++)
+        if (quant_i(s, m[k], &q[k]) < 0) return NULL;
+    double mu = s->gain_u * u + s->off_u;
+    if (s->noise_u > 0.0 && gauss(s, s->noise_u, &mu) < 0) return NULL;
+    double lsb = s->lsb_u;
+    if (lsb != 0.0) {
+        double code;
+        if (py_floor(mu / lsb + 0.5, &code) < 0) return NULL;
+        code = s->ucode_max < code ? s->ucode_max : code;
+        code = 0.0 > code ? 0.0 : code;
+        mu = code * lsb;
+    }
+    return Py_BuildValue("(dddd)", q[0], q[1], q[2], mu);
+}
+
 static void Core_dealloc(Core *s)
 {
     Py_XDECREF(s->load);
+    Py_XDECREF(s->rng);
     PyMem_Free(s->grid);
     PyMem_Free(s->cuts);
     PyMem_Free(s->seg_a);
@@ -1052,6 +1160,11 @@ static PyMethodDef Core_methods[] = {
      "set_load(load, tau_const): the load profile; tau_const a float for a constant load"},
     {"meas", (PyCFunction)Core_meas, METH_NOARGS,
      "meas() -> (i_a, i_b, i_c, u_dc) recorded at the sensor instant of the last period"},
+    {"set_sensors", (PyCFunction)Core_set_sensors, METH_VARARGS,
+     "set_sensors(g_a, g_b, g_c, o_a, o_b, o_c, lsb_i, code_max, noise_i, gain_u_dc, "
+     "offset_u_dc, lsb_u, ucode_max, noise_u, rng): the constants of plant_rt._sensors.Sensors"},
+    {"measure", (PyCFunction)(void (*)(void))Core_measure, METH_FASTCALL,
+     "measure([i_a, i_b, i_c, u_dc]) -> measured (i_a, i_b, i_c, u_dc), as Sensors does"},
     {"pwm_disable", (PyCFunction)Core_pwm_disable, METH_NOARGS,
      "all switches were opened for a period (PwmTimeline.disable)"},
     {NULL, NULL, 0, NULL},

@@ -22,11 +22,15 @@ ENGINES: tuple[str, ...] = ("auto", "compiled", "python")
 _cplant: ModuleType | None
 _why_not: str | None
 try:
-    from plant_rt import _cplant
+    import plant_rt._cplant as _built
 except ImportError as e:  # not built on this machine
     _cplant = None
-    _why_not = f"the compiled plant engine is not built ({e}); the plant runs in pure Python"
+    _why_not = (
+        f"the compiled plant engine is not built ({e}; it needs a C compiler and Python's "
+        "headers when the project is installed): the plant runs in pure Python"
+    )
 else:
+    _cplant = _built
     _why_not = None
 
 

@@ -355,6 +355,8 @@ class Plant:
             if self.engine == "compiled" and _cplant is not None
             else None
         )
+        if self._core is not None:
+            self._core.set_sensors(*self._sensors.constants())
 
     # ------------------------------------------------------------------ API
     @property
@@ -407,6 +409,15 @@ class Plant:
         if smp is not None and smp.k == self.k:
             return smp
         meas = self._meas
+        core = self._core
+        if core is not None:  # the same sensors, compiled
+            if meas is not None and meas[0] == self.k:
+                m_a, m_b, m_c, m_u = core.measure(meas[1], meas[2], meas[3], meas[4])
+            else:
+                m_a, m_b, m_c, m_u = core.measure()
+            smp = Sample(self.k, m_a, m_b, m_c, m_u)
+            self._sample = smp
+            return smp
         if meas is not None and meas[0] == self.k:
             _, i_a, i_b, i_c, u_dc = meas
         else:

@@ -6,8 +6,8 @@ scenario's first second in the in-process loop, the drive profile's
 switching plant in a closed loop, and each feature of the step (DC link,
 sensor delay, dead time and drops, cross-saturation, imposed speed, loads
 that depend on time and speed, the disabled bridge between enabled
-periods). Equal means equal bits: the states after every period and every
-frame on the wire.
+periods, the sensors with noise and ADC). Equal means equal bits: the
+states and samples after every period and every frame on the wire.
 """
 
 from __future__ import annotations
@@ -174,6 +174,11 @@ def _features(base: InverterPars) -> dict[str, dict[str, Any]]:
         "dc_link_capacitor": {"inverter": replace(base, r_dc=0.5, c_dc=200e-6)},
         "dc_link_resistive": {"inverter": replace(base, r_dc=0.5)},
         "sensor_delay": {"sensors": SensorPars(t_delay=30e-6)},
+        "sensor_noise_adc": {
+            "sensors": SensorPars(
+                bits=10, i_fs=16.0, u_fs=800.0, noise_i=0.05, noise_u=0.5, seed=7, t_delay=10e-6
+            )
+        },
         "dead_time_drops": {"inverter": replace(base, t_dead=3e-6, v_ce=1.2, v_f=0.9)},
         "valley": {"inverter": replace(base, sample_at="valley", t_dead=2e-6)},
         "cross_saturation": {"cross_saturation": True},
