@@ -8,6 +8,21 @@ and gives the same trace bit for bit (``tests/test_plant_engine.py``). It
 covers the enabled periods of the average and the switching model; the
 disabled bridge, the energy meter and the sensors stay in Python on the
 same state. ``"auto"``: compiled when it is built, else Python.
+
+Why C. Measured on the average model's period (wen2023, 10 kHz, the
+duties of a closed loop replayed, median of 7 runs, one process): the
+Python step 5.5 us; the same ``.py`` files compiled by Cython in
+pure-Python mode 6.4 us (no gain without rewriting them in Cython's
+types); by mypyc 1.2 us (4.5x, and 20 us for the switching model's
+sample and step); a numba kernel 0.47 us per call, after 0.28 s to import
+numba and a JIT compile at the first start of every node process unless
+its cache is kept; a C extension 0.19 us; Rust through PyO3 0.21 us, with
+a Rust toolchain and crates to fetch on every machine. C needs only what
+any compiled option needs (gcc and Python's headers, which
+``tools/need-cc`` installs), builds in under a second, imports in a
+millisecond, and lets both engines live in one process, so that the test
+compares them directly; its cost is the second implementation, which the
+bit-for-bit tests keep equal to this one.
 """
 
 from __future__ import annotations
