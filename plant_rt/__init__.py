@@ -4,6 +4,7 @@ Never imports :mod:`controller`, never touches CAN.
 """
 
 from plant_rt._clock import JitterStats, RealTimeClock
+from plant_rt._engine import ENGINES, compiled_engine_missing, resolve_engine
 from plant_rt._inverter import InverterPars, device_drop_error
 from plant_rt._load import (
     ConstantLoad,
@@ -46,6 +47,7 @@ from plant_rt._protection import (
 from plant_rt._sensors import SensorPars
 
 __all__ = [
+    "ENGINES",
     "FAULT_NAMES",
     "FAULT_NONE",
     "FAULT_OVER_CURRENT",
@@ -77,6 +79,7 @@ __all__ = [
     "Truth",
     "UnknownPresetError",
     "UnknownProfileError",
+    "compiled_engine_missing",
     "cross_saturation_check",
     "device_drop_error",
     "drive_profile",
@@ -86,5 +89,6 @@ __all__ = [
     "magnetic_energy",
     "plant_profile",
     "preset",
+    "resolve_engine",
     "torque",
 ]

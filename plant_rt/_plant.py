@@ -34,6 +34,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from plant_rt._engine import _cplant, resolve_engine
 from plant_rt._inverter import (
     INV_SQRT3,
     SQRT3,
@@ -156,6 +157,11 @@ class EnergyMeter:
     q_c: float = 0.0
 
 
+def _constant_tau(load: LoadProfile) -> float | None:
+    """The torque of a :class:`ConstantLoad` (the compiled core then needs no call), else None."""
+    return float(load.tau_L) if type(load) is ConstantLoad else None
+
+
 class Plant:
     """IPMSM drive plant advanced one PWM period at a time.
 
@@ -186,6 +192,11 @@ class Plant:
         on top of the d-axis model when ``saturation`` is set).
     i_d0, i_q0 : float, optional
         Initial d- and q-axis currents (A).
+    engine : {"auto", "compiled", "python"}, optional
+        Which implementation runs the enabled periods (:mod:`plant_rt._engine`):
+        the compiled step gives the Python step's trace bit for bit, several
+        times faster; ``"auto"`` takes it when it is built and the energy
+        meter is off. The engine in use is :attr:`engine`.
 
     Notes
     -----
@@ -257,6 +268,7 @@ class Plant:
         cross_saturation: bool = False,
         i_d0: float = 0.0,
         i_q0: float = 0.0,
+        engine: str = "auto",
     ) -> None:
         if not T_s > 0.0:
             raise ValueError(f"T_s must be > 0, got {T_s}")
@@ -331,6 +343,20 @@ class Plant:
         self._segs = self._segments()
         # Average model on the legacy per-period path unless a feature needs substeps.
         self._avg_general = self._dc_dyn or self._t_meas > 0.0
+        # Engine: the compiled core reads the constants above and keeps the
+        # states of the enabled periods; step() copies them back each period.
+        self.engine = resolve_engine(engine, meter)
+        self._t_dead = float(inverter.t_dead)
+        self._pwm_peak = inverter.sample_at == "peak"
+        self._sat_sigma = float(motor.sat.sigma)
+        self._sat_i_sat = float(motor.sat.i_sat)
+        self._core = (
+            _cplant.Core(self, _constant_tau(self._load))
+            if self.engine == "compiled" and _cplant is not None
+            else None
+        )
+        if self._core is not None:
+            self._core.set_sensors(*self._sensors.constants())
 
     # ------------------------------------------------------------------ API
     @property
@@ -346,6 +372,8 @@ class Plant:
     def set_load(self, profile: LoadProfile) -> None:
         """Replace the load profile (times in the profile are absolute, s)."""
         self._load = profile
+        if self._core is not None:
+            self._core.set_load(profile, _constant_tau(profile))
 
     def impose_speed(self, w_m: float | None) -> None:
         """Hold the mechanical speed at ``w_m`` (rad/s) like a dynamometer; None releases it."""
@@ -354,6 +382,7 @@ class Plant:
         else:
             self._w_imp = float(w_m)
             self._w_m = self._w_imp
+        self._state_to_core()
 
     @property
     def imposed_speed(self) -> float | None:
@@ -380,6 +409,15 @@ class Plant:
         if smp is not None and smp.k == self.k:
             return smp
         meas = self._meas
+        core = self._core
+        if core is not None:  # the same sensors, compiled
+            if meas is not None and meas[0] == self.k:
+                m_a, m_b, m_c, m_u = core.measure(meas[1], meas[2], meas[3], meas[4])
+            else:
+                m_a, m_b, m_c, m_u = core.measure()
+            smp = Sample(self.k, m_a, m_b, m_c, m_u)
+            self._sample = smp
+            return smp
         if meas is not None and meas[0] == self.k:
             _, i_a, i_b, i_c, u_dc = meas
         else:
@@ -462,6 +500,17 @@ class Plant:
         enable : bool
             False opens all switches (diode bridge, see class notes).
         """
+        core = self._core
+        if core is not None and enable:
+            (self._i_d, self._i_q, self._w_m, self._th_m, self._u_dc, u_al, u_be) = core.step(
+                d_a, d_b, d_c, self.k * self.T_s
+            )
+            self.u_s_ab = (u_al, u_be)
+            if self._t_meas > 0.0:
+                i_a, i_b, i_c, u_dc = core.meas()
+                self._meas = (self.k + 1, i_a, i_b, i_c, u_dc)
+            self.k += 1
+            return
         h = self._h
         t0 = self.k * self.T_s
         meter = self.meter
@@ -514,6 +563,17 @@ class Plant:
             self._step_off_general(t0)
         self._th_m %= TWO_PI
         self.k += 1
+        if core is not None:  # the disabled bridge ran here: the core takes the state over
+            self._state_to_core()
+            if self._switching:
+                core.pwm_disable()
+
+    def _state_to_core(self) -> None:
+        """Hand the states changed on the Python side to the compiled core."""
+        if self._core is not None:
+            self._core.set_state(
+                self._i_d, self._i_q, self._w_m, self._th_m, self._u_dc, self._w_imp is not None
+            )
 
     # ------------------------------------------------------- inverter models
     def _add_drops(

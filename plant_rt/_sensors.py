@@ -200,6 +200,23 @@ class Sensors:
         self._code_max = 2 ** (bits - 1) - 1
         self._ucode_max = 2**bits - 1
 
+    def constants(self) -> tuple[float | int | random.Random, ...]:
+        """What the compiled engine's sensors need (``plant_rt/_cplant.c``, ``set_sensors``)."""
+        p = self.pars
+        return (
+            *self._g,
+            *self._o,
+            self._lsb_i,
+            self._code_max,
+            p.noise_i,
+            p.gain_u_dc,
+            p.offset_u_dc,
+            self._lsb_u,
+            self._ucode_max,
+            p.noise_u,
+            self._rng,
+        )
+
     def _quant_i(self, x: float) -> float:
         lsb = self._lsb_i
         if lsb == 0.0:

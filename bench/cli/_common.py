@@ -24,6 +24,8 @@ MODES = ("lockstep", "realtime")
 #: ``--plant-profile`` choices: :data:`plant_rt.PROFILE_NAMES` (tested equal; not
 #: imported here, so that building the parser stays light).
 PLANT_PROFILES = ("ideal", "drive")
+#: The plant's engines, as ``plant_rt.ENGINES`` (not imported here: the CLI starts without plant_rt).
+ENGINES = ("auto", "compiled", "python")
 #: Help of the LOG argument of the capture commands.
 LOG_HELP = "a capture python-can reads (.blf, .asc, .log, .trc, .csv, .mf4) or a run folder"
 
@@ -101,6 +103,30 @@ def add_rt(p: argparse.ArgumentParser, *, cpu: bool = True) -> None:
     )
     if cpu:
         g.add_argument("--cpu", type=int, metavar="N", help="real time: pin the node to CPU N")
+
+
+def add_engine(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--engine",
+        choices=ENGINES,
+        default="auto",
+        help="the plant's engine: compiled (C, built when the project is installed), python, "
+        "or auto (compiled when it is built; default)",
+    )
+
+
+def plant_engine(args: argparse.Namespace) -> str:
+    """``--engine``, checked: one line when auto falls back to Python, an error when compiled cannot run."""
+    from plant_rt import compiled_engine_missing, resolve_engine
+
+    try:
+        resolve_engine(args.engine)
+    except ValueError as e:
+        raise BenchError(f"--engine {args.engine}: {e}") from None
+    why = compiled_engine_missing()
+    if args.engine == "auto" and why:
+        print(why, file=sys.stderr)
+    return str(args.engine)
 
 
 def node_rt(args: argparse.Namespace, role: str) -> dict[str, object] | None:

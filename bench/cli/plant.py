@@ -11,11 +11,13 @@ from bench.cli._common import (
     POS_INT,
     STOP,
     add_bus,
+    add_engine,
     add_plant_profile,
     add_rt,
     add_scenario_overrides,
     bus_spec,
     node_rt,
+    plant_engine,
     ready,
     scenario_from_args,
     stop_on_signals,
@@ -36,6 +38,7 @@ def cmd_plant(args: argparse.Namespace) -> int:
         truth_every=args.truth_every,
         watchdog_s=None if args.watchdog_ms is None else args.watchdog_ms * 1e-3,
         watchdog_rounds=args.watchdog_rounds,
+        engine=plant_engine(args),
     )
     if args.mode == "lockstep":
         node.pace_every = args.pace_every
@@ -77,5 +80,6 @@ def register(sub: Any) -> None:
         help="lockstep: run period k only once a bench command for step k or later has come "
         "(the sender keeps one at least every N periods); 0: off (bench run sets it)",
     )
+    add_engine(p)
     add_rt(p)
     p.set_defaults(func=cmd_plant)

@@ -12,10 +12,12 @@ from bench._errors import BenchError
 from bench.cli._common import (
     POS_FLOAT,
     add_bus,
+    add_engine,
     add_plant_profile,
     add_rt,
     add_scenario_overrides,
     bus_spec,
+    plant_engine,
     scenario_from_args,
 )
 from bench.scenarios._setup import check_estimator_fits
@@ -23,7 +25,7 @@ from bench.scenarios._setup import check_estimator_fits
 
 def run_node_args(args: argparse.Namespace) -> dict[str, list[str]]:
     """Options ``bench run`` passes on to its plant and controller processes."""
-    out: dict[str, list[str]] = {"plant": [], "controller": []}
+    out: dict[str, list[str]] = {"plant": ["--engine", args.engine], "controller": []}
     if args.watchdog_ms is not None:
         out["plant"] += ["--watchdog-ms", repr(args.watchdog_ms)]
     if args.rt_priority is not None:
@@ -76,6 +78,7 @@ def cmd_run(args: argparse.Namespace) -> int:
             f"--estimator: unknown estimator {est!r} (known: {', '.join(ESTIMATOR_NAMES)})"
         )
     check_estimator_fits(scn, est)
+    plant_engine(args)
     if args.monitor and not (sys.stdin.isatty() and sys.stdout.isatty() and sys.stderr.isatty()):
         raise BenchError("--monitor: needs a terminal (run bench monitor beside it instead)")
     spec = bus_spec(args, announce=True)
@@ -149,5 +152,6 @@ def register(sub: Any) -> None:
         type=POS_FLOAT,
         help="real time: the plant's safe state after this long without a valid duty",
     )
+    add_engine(p)
     add_rt(p, cpu=False)
     p.set_defaults(func=cmd_run)

@@ -67,13 +67,14 @@ def make_plant_node(
     protection: ProtectionPars | None = None,
     watchdog_s: float | None = None,
     watchdog_rounds: int = WATCHDOG_ROUNDS,
+    engine: str = "auto",
 ) -> PlantNode:
     """The plant node of a scenario, with protection and watchdogs.
 
     ``protection`` defaults to :meth:`ProtectionPars.from_preset` of the
     scenario's preset; ``watchdog_s`` to :func:`watchdog_periods`' default.
     """
-    plant = build_plant(scn)
+    plant = build_plant(scn, engine)
     if protection is None:
         protection = ProtectionPars.from_preset(plant.motor, plant.inverter)
     return PlantNode(
@@ -141,7 +142,12 @@ INPROCESS_LEAD = 1000
 
 
 def run_inprocess(
-    scn: Scenario, estimator: str, codec: Codec, *, plant_times: list[float] | None = None
+    scn: Scenario,
+    estimator: str,
+    codec: Codec,
+    *,
+    plant_times: list[float] | None = None,
+    engine: str = "auto",
 ) -> list[can.Message]:
     """Run a scenario in lockstep in this process; return every frame in wire order.
 
@@ -150,10 +156,11 @@ def run_inprocess(
     latency goes through the same :class:`~bench.nodes._link.LockstepLink` logic
     the link process runs.  ``plant_times`` (when given) gets the plant node's
     computation of every period (s): the plant step and its frames encoded.
+    ``engine`` is the plant's (:class:`plant_rt.Plant`).
     """
     from bench.nodes._link import LockstepLink
 
-    pn = make_plant_node(scn, codec)
+    pn = make_plant_node(scn, codec, engine=engine)
     cn = make_controller_node(scn, estimator, codec)
     lt = scn.latency
     link = (

@@ -424,6 +424,7 @@ class PlantNode:
         out = self.counters.as_dict()
         out.update(
             steps=self.plant.k,
+            engine=self.plant.engine,
             jitter=self.jitter,
             loop_s=self.loop_s,
             fault=FAULT_NAMES.get(self.fault, str(self.fault)),

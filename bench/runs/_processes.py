@@ -175,8 +175,12 @@ def stop_nodes(
     link: bool,
     interrupted: bool,
     ended: str | None,
-) -> None:
+) -> set[str]:
     """End the node processes: a normal end waits for them, an interrupted one does not.
+
+    Returns the roles this sent SIGTERM to: a node that ends on that signal
+    (status -SIGTERM, when it came as the process was already shutting down
+    and its own handler could no longer run) was asked to stop, it did not fail.
 
     The stop command is in the schedule; it is sent once more to be sure.
     With latency the controller never sees the last sample, so the nodes
@@ -185,6 +189,7 @@ def stop_nodes(
     node gets SIGTERM at once, and is killed if it does not end in time.
     """
     roles = dict(procs)
+    asked: set[str] = set()
     plant = roles.get("plant")
     if plant is not None and not interrupted and not ended and cmds:
         bus.send(cmds[-1][1])
@@ -192,6 +197,7 @@ def stop_nodes(
             plant.wait(timeout=30.0)
         except subprocess.TimeoutExpired:
             plant.send_signal(signal.SIGTERM)
+            asked.add("plant")
         ctrl = roles.get("controller")
         if ctrl is not None and not link:
             # it stops by itself at the stop command's step
@@ -200,9 +206,10 @@ def stop_nodes(
             except subprocess.TimeoutExpired:
                 pass
         time.sleep(0.2)
-    for _, p in procs:
+    for role, p in procs:
         if p.poll() is None:
             p.send_signal(signal.SIGTERM)
+            asked.add(role)
     deadline = time.monotonic() + (2.0 if interrupted else 10.0)
     for _, p in procs:
         try:
@@ -210,3 +217,20 @@ def stop_nodes(
         except subprocess.TimeoutExpired:
             p.kill()
             p.wait()
+    return asked
+
+
+def node_failures(
+    procs: list[tuple[str, subprocess.Popen[str]]], asked: set[str]
+) -> dict[str, int]:
+    """The roles whose process failed, with their exit status.
+
+    A process that ended with -SIGTERM after :func:`stop_nodes` asked it to
+    stop (``asked``) did not fail; any other non-zero status is a failure.
+    """
+    return {
+        role: p.returncode
+        for role, p in procs
+        if p.returncode not in (0, None)
+        and not (role in asked and p.returncode == -signal.SIGTERM)
+    }

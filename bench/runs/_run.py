@@ -30,7 +30,14 @@ import can
 
 from bench._errors import BenchError
 from bench.nodes._loops import command_frames
-from bench.runs._processes import ended_early, last_line, node_roles, start_nodes, stop_nodes
+from bench.runs._processes import (
+    ended_early,
+    last_line,
+    node_failures,
+    node_roles,
+    start_nodes,
+    stop_nodes,
+)
 from bench.runs._recorder import Recording
 from bench.runs._results import RunResult, finish_run, run_metadata
 from bench.scenarios._schema import Scenario, write_effective
@@ -106,6 +113,7 @@ def run_scenario(
     env = dict(os.environ, PYTHONUNBUFFERED="1")
     procs: list[tuple[str, subprocess.Popen[str]]] = []
     ended: str | None = None
+    asked: set[str] = set()
     rec = Recording([spec, spec_b] if link else [spec], capture, codec)
     t_wall0 = time.perf_counter()
     with _catch_signals() as interrupted:
@@ -115,7 +123,9 @@ def run_scenario(
             plant = dict(procs).get("plant")
             if plant is not None and not interrupted():
                 ended = _drive(rec, cmds, procs, plant, scn, mode, pace, progress, interrupted)
-            stop_nodes(procs, rec.plant_bus, cmds, link=link, interrupted=interrupted(), ended=ended)
+            asked = stop_nodes(
+                procs, rec.plant_bus, cmds, link=link, interrupted=interrupted(), ended=ended
+            )
         finally:
             for _, p in procs:
                 if p.poll() is None:
@@ -123,9 +133,10 @@ def run_scenario(
                     p.wait()
             rec.close()
     wall = time.perf_counter() - t_wall0
-    failures = {role: p.returncode for role, p in procs if p.returncode not in (0, None)}
+    failures = node_failures(procs, asked)
     meta = run_metadata(scn, estimator, mode=mode, transport=spec.describe(), link=link)
     meta["node_reports"] = _node_reports(out_dir)
+    meta["engine"] = (meta["node_reports"].get("plant") or {}).get("engine")  # the plant's
     meta["exit_codes"] = {role: p.returncode for role, p in procs}
     if interrupted():
         meta["interrupted"] = True

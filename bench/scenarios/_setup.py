@@ -117,7 +117,8 @@ def _plant_setup(scn: Scenario, p: Preset, mg: dict[str, Any]) -> tuple[Preset, 
     )
 
 
-def build_plant(scn: Scenario) -> Plant:
+def build_plant(scn: Scenario, engine: str = "auto") -> Plant:
+    """The scenario's plant; ``engine`` as :class:`plant_rt.Plant`'s (``--engine``)."""
     p, prof = plant_setup(scn)
     theta_m0 = math.radians(scn.theta_e0_deg) / p.motor.n_p
     return Plant(
@@ -129,6 +130,7 @@ def build_plant(scn: Scenario) -> Plant:
         saturation=prof.saturation,
         cross_saturation=prof.cross_saturation,
         theta_m0=theta_m0,
+        engine=engine,
     )
 
 
