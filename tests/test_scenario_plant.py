@@ -126,3 +126,54 @@ def test_meta_of_an_ideal_run_names_its_plant() -> None:
     )
     assert meta["plant"]["profile"] == "ideal"
     assert json.loads(json.dumps(meta, default=str))["plant"]["inverter"]["model"] == "average"
+
+
+def test_the_controller_table_switches_the_drives_countermeasures(tmp_path: Path) -> None:
+    from bench.scenarios._setup import build_controller
+
+    f = scenario(
+        tmp_path,
+        'extends = "xue-fig15"\nplant_profile = "drive"\n[controller]\n'
+        "dead_time_compensation = true\ncross_saturation_compensation = true\n"
+        'offset_calibration = true\ncurrent_feedback = "raw"\nv_f = 1.2\n',
+    )
+    scn = load_scenario(str(f))
+    ctrl = build_controller(scn, "square-wave")
+    comp = ctrl.pars.compensation
+    # the controller's own settings default to the plant's bridge, as a drive is configured
+    assert comp.dead_time and comp.t_dead == 2e-6 and comp.v_ce == 1.5 and comp.v_f == 1.2
+    assert comp.offset_calibration and comp.adc_lsb == pytest.approx(2 * 40.0 / 4096)
+    assert comp.cross_saturation and ctrl.pars.current_feedback == "raw"
+    g = ctrl.gains()
+    assert g["comp.dead_time"] == 1.0 and g["comp.t_dead"] == 2e-6  # in meta.json's gains
+    # k_dq from the plant's flux map at i_d = 0: dpsi_d/di_q = k_dq i_q
+    p, prof = plant_setup(scn)
+    from plant_rt import flux_dq
+
+    i_q, h = 3.0, 1e-4
+    dpsi = (
+        flux_dq(p.motor, 0.0, i_q + h, True, True)[0]
+        - flux_dq(p.motor, 0.0, i_q - h, True, True)[0]
+    )
+    assert ctrl.motor.k_dq * i_q == pytest.approx(dpsi / (2 * h), rel=1e-6)
+    # off unless asked
+    plain = build_controller(load_scenario("xue-fig15"), "square-wave").pars
+    assert not (plain.compensation.dead_time or plain.compensation.offset_calibration)
+    assert plain.current_feedback == "filtered"
+
+
+@pytest.mark.parametrize(
+    ("text", "field"),
+    [
+        ("dead_time_compensation = 1", "controller.dead_time_compensation"),
+        ('current_feedback = "both"', "controller.current_feedback"),
+        ("offset_periods = 0", "controller.offset_periods"),
+        ("t_dead = 1.0", "controller.t_dead"),
+        ("deadtime = true", "controller.deadtime"),
+    ],
+)
+def test_a_wrong_controller_value_is_one_line(tmp_path: Path, text: str, field: str) -> None:
+    f = scenario(tmp_path, f'extends = "xue-fig13"\n[controller]\n{text}\n')
+    with pytest.raises(ScenarioError) as e:
+        load_scenario(str(f))
+    assert f"field '{field}'" in str(e.value)

@@ -63,6 +63,17 @@ Schema (all keys optional unless marked *required*)::
     sigma = 0.15                     # d-axis saturation depth, - (plant_rt.SaturationPars)
     i_sat = 2.0                      # d-axis saturation current, A
     c_dq = 0.0                       # cross-saturation coefficient (plant_rt.CrossSaturationPars)
+    [controller]                     # what a real drive does against the plant (all off by
+    dead_time_compensation = false   # default): dead-time and device-drop feed-forward, with
+    t_dead = 2e-6                    # the controller's own setting (s, V; default: the plant's
+    v_ce = 1.5                       # inverter, as a drive is configured for its own bridge)
+    v_f = 1.5
+    cross_saturation_compensation = false   # correct the HF estimators' cross-saturation angle
+    k_dq = -1e-4                     # L_dq = k_dq i_q (H/A; default: the plant's flux map at i_d = 0)
+    offset_calibration = false       # measure the current offsets at standstill before the start
+    offset_periods = 200             # its length (default: derived from the sensors' noise and LSB)
+    current_feedback = "filtered"    # "filtered" | "raw" (the current PI sees the HF current,
+                                     # as Wen Sec. 3.3 assumes)
     [noise]                          # older form of [sensors] (kept; [sensors] wins)
     current_std_a = 0.0              # white noise on each phase current, A rms
     adc_bits = 0                     # 0: no quantization
@@ -327,6 +338,8 @@ class Scenario:
     inverter: dict[str, Any] = field(default_factory=dict)
     sensors: dict[str, Any] = field(default_factory=dict)
     magnetics: dict[str, Any] = field(default_factory=dict)
+    #: ``[controller]``: the drive's countermeasures and options.
+    controller: dict[str, Any] = field(default_factory=dict)
 
     def with_overrides(self, **kw: Any) -> Scenario:
         """A copy with some fields replaced (command-line options).
@@ -381,6 +394,7 @@ class Scenario:
             "inverter": dict(self.inverter),
             "sensors": dict(self.sensors),
             "magnetics": dict(self.magnetics),
+            "controller": dict(self.controller),
         }
 
 
@@ -413,6 +427,7 @@ _TOP_KEYS = {
     "sensors",
     "magnetics",
     "extends",
+    "controller",
 }
 
 #: ``[inverter]`` keys: fields of :class:`plant_rt.InverterPars`, with their checks.
@@ -428,6 +443,18 @@ SENSOR_KEYS = (
 )
 #: ``[magnetics]`` keys.
 MAGNETICS_KEYS = ("saturation", "cross_saturation", "sigma", "i_sat", "c_dq")
+#: ``[controller]`` keys.
+CONTROLLER_KEYS = (
+    "dead_time_compensation",
+    "t_dead",
+    "v_ce",
+    "v_f",
+    "cross_saturation_compensation",
+    "k_dq",
+    "offset_calibration",
+    "offset_periods",
+    "current_feedback",
+)
 
 #: Keys of the ``[motor]`` table: the fields of :class:`plant_rt.MotorPars`.
 MOTOR_KEYS = (
@@ -898,6 +925,7 @@ def parse_scenario(data: dict[str, Any], src: str) -> Scenario:
         raise err
     f_eff = PRESETS[preset].f_sw if f_sw == -1.0 else f_sw
     profile, inverter, sensors, magnetics = _parse_plant(r, 1.0 / f_eff)
+    controller = _parse_controller(r, 1.0 / f_eff)
     _check_delay_us(r.src, latency, f_eff)
     opts = _parse_estimator_options(r, preset, f_eff)
     paper = r.table("paper_result").t
@@ -939,6 +967,7 @@ def parse_scenario(data: dict[str, Any], src: str) -> Scenario:
         inverter=inverter,
         sensors=sensors,
         magnetics=magnetics,
+        controller=controller,
     )
 
 
@@ -1029,6 +1058,30 @@ def _parse_plant(
         else:
             magnetics[k] = mg.num(k, lo=0.0)
     return profile, inverter, sensors, magnetics
+
+
+def _parse_controller(r: _Reader, T_s: float) -> dict[str, Any]:
+    """The ``[controller]`` table: the values it sets, each checked."""
+    ct = r.table("controller", set(CONTROLLER_KEYS))
+    out: dict[str, Any] = {}
+    for k in CONTROLLER_KEYS:
+        if k not in ct.t:
+            continue
+        if k in ("dead_time_compensation", "cross_saturation_compensation", "offset_calibration"):
+            out[k] = ct.boolean(k, False)
+        elif k == "t_dead":
+            out[k] = ct.num(k, lo=0.0, hi=0.5 * T_s)
+        elif k == "k_dq":
+            out[k] = ct.num(k)
+        elif k == "offset_periods":
+            out[k] = ct.integer(k, 1, lo=1)
+        elif k == "current_feedback":
+            out[k] = ct.string(k)
+            if out[k] not in ("filtered", "raw"):
+                raise ct.fail(k, f'expected "filtered" or "raw", got {out[k]!r}')
+        else:
+            out[k] = ct.num(k, lo=0.0)
+    return out
 
 
 def scenario_from_dict(d: dict[str, Any], src: str) -> Scenario:

@@ -13,7 +13,7 @@ from typing import Any
 from bench._errors import ScenarioError
 from bench.scenarios._schema import ModelErrors, Scenario, saliency_error
 from bench.wire._protocol import CMD_START, CMD_STOP, RPM_PER_RAD_S
-from controller import Controller, ControllerPars, MotorModel
+from controller import CompensationPars, Controller, ControllerPars, MotorModel
 from controller._registry import ESTIMATOR_NAMES, injection_family
 from plant_rt import ConstantLoad, Plant, PlantProfile, Preset, SensorPars, plant_profile, preset
 
@@ -173,6 +173,11 @@ def build_controller(scn: Scenario, estimator: str) -> Controller:
         kw["startup"] = False
         kw["theta0"] = math.radians(scn.theta_e0_deg)
     model = motor_model(p, scn.controller_model)
+    comp, k_dq = _countermeasures(scn)
+    if k_dq is not None:
+        model = replace(model, k_dq=k_dq)
+    if scn.controller.get("current_feedback"):
+        kw["current_feedback"] = scn.controller["current_feedback"]
     if err := saliency_error(scn.source, scn.preset, scn.motor, [estimator]):
         raise err
     if injection_family(estimator) != "none" and not model.L_q > model.L_d:
@@ -187,11 +192,47 @@ def build_controller(scn: Scenario, estimator: str) -> Controller:
             T_s=sample_period(scn),
             estimator=estimator,
             estimator_options=dict(scn.estimator_options),
+            compensation=comp,
             **kw,
         )
         return Controller(pars)
     except TypeError as e:
         raise ScenarioError(f"{scn.source}: field 'estimator_options': {e}") from None
+
+
+def _countermeasures(scn: Scenario) -> tuple[CompensationPars, float | None]:
+    """The ``[controller]`` table's countermeasures, and the model's ``k_dq`` (None: kept).
+
+    What the table leaves open comes from the plant as built, as a drive's
+    designer configures it for the bridge and motor it drives: the dead time
+    and device drops of the plant's inverter; the current sensors' noise and
+    LSB (2 full scale / 2^bits) for the offset calibration's length; and the
+    cross-saturation coefficient from the plant's flux map at ``i_d = 0``
+    (:class:`plant_rt.CrossSaturationPars`: ``L_dq = -c_dq (i_d + psi_f / L_d)
+    i_q``, so ``k_dq = -c_dq psi_f / L_d``).
+    """
+    c = scn.controller
+    if not c:
+        return CompensationPars(), None
+    p, prof = plant_setup(scn)
+    inv, sens = prof.inverter, prof.sensors
+    lsb = 2.0 * sens.i_fs / (1 << sens.bits) if sens.bits else 0.0
+    comp = CompensationPars(
+        dead_time=bool(c.get("dead_time_compensation", False)),
+        t_dead=float(c.get("t_dead", inv.t_dead)),
+        v_ce=float(c.get("v_ce", inv.v_ce)),
+        v_f=float(c.get("v_f", inv.v_f)),
+        cross_saturation=bool(c.get("cross_saturation_compensation", False)),
+        offset_calibration=bool(c.get("offset_calibration", False)),
+        offset_periods=c.get("offset_periods"),
+        current_noise=float(sens.noise_i),
+        adc_lsb=lsb,
+    )
+    k_dq: float | None = None
+    if comp.cross_saturation:
+        m = p.motor
+        k_dq = float(c.get("k_dq", -m.cross.c_dq * m.psi_f / m.L_d))
+    return comp, k_dq
 
 
 def command_schedule(scn: Scenario) -> list[PlannedCommand]:
