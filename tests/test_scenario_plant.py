@@ -147,7 +147,7 @@ def test_the_controller_table_switches_the_drives_countermeasures(tmp_path: Path
     g = ctrl.gains()
     assert g["comp.dead_time"] == 1.0 and g["comp.t_dead"] == 2e-6  # in meta.json's gains
     # k_dq from the plant's flux map at i_d = 0: dpsi_d/di_q = k_dq i_q
-    p, prof = plant_setup(scn)
+    p, _ = plant_setup(scn)
     from plant_rt import flux_dq
 
     i_q, h = 3.0, 1e-4
