@@ -6,7 +6,13 @@ import numpy as np
 import pytest
 
 from bench._errors import EXIT_LOCK_LOST, EXIT_PLANT_TRIPPED
-from bench.runs._metrics import LOCK_LOST_DEG, LOCK_LOST_S, compute_metrics, lock_lost
+from bench.runs._metrics import (
+    LOCK_LOST_DEG,
+    LOCK_LOST_S,
+    LOCK_WINDOW_S,
+    compute_metrics,
+    lock_lost,
+)
 from bench.runs._results import outcome
 
 T_S = 1e-4
@@ -23,9 +29,17 @@ def trace(excursions: list[tuple[float, float, float]], n: int = 20000) -> tuple
 
 def test_an_excursion_longer_than_50_ms_above_90_deg_is_lost_lock_at_its_start() -> None:
     t, e = trace([(0.5, 0.04, 170.0), (1.0, 0.07, -120.0)])
-    lost, at = lock_lost(t, e)
+    lost, at = lock_lost(t, e, T_S)
     assert lost and at == pytest.approx(1.0)
-    assert (LOCK_LOST_DEG, LOCK_LOST_S) == (90.0, 0.05)
+    assert (LOCK_LOST_DEG, LOCK_LOST_S, LOCK_WINDOW_S) == (90.0, 0.05, 0.2)
+
+
+@pytest.mark.parametrize("slip_period_s", [0.02, 0.06, 0.099, 0.3])
+def test_an_estimate_spinning_against_the_rotor_is_lost_lock(slip_period_s: float) -> None:
+    t = (np.arange(20000) * T_S).astype(np.float64)
+    e = np.degrees(np.angle(np.exp(2j * np.pi * t / slip_period_s))).astype(np.float64)  # 50 % > 90
+    lost, at = lock_lost(t, e, T_S)
+    assert lost and at is not None and at < 0.3
 
 
 @pytest.mark.parametrize(
@@ -33,12 +47,12 @@ def test_an_excursion_longer_than_50_ms_above_90_deg_is_lost_lock_at_its_start()
     [
         [(0.5, 0.049, 179.0)],  # too short
         [(0.5, 0.2, 89.9)],  # not beyond 90 deg
-        [(0.5, 0.03, 150.0), (0.5301, 0.03, 150.0)],  # two short ones with a sample between
+        [(0.5, 0.03, 150.0), (0.75, 0.03, 150.0)],  # two short ones, 250 ms apart
     ],
 )
 def test_short_or_small_excursions_are_not_lost_lock(exc: list[tuple[float, float, float]]) -> None:
     t, e = trace(exc)
-    assert lock_lost(t, e) == (False, None)
+    assert lock_lost(t, e, T_S) == (False, None)
 
 
 def test_the_metrics_carry_it_from_the_scored_window_only() -> None:

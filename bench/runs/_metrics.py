@@ -87,31 +87,42 @@ def overshoot_rpm(t: Array, w_ref: Array, w: Array, *, min_step_rpm: float = 1.0
 
 #: Lost rotor angle (DESIGN.md, exit status 4): |dtheta| above this (deg electrical) ...
 LOCK_LOST_DEG = 90.0
-#: ... for longer than this (s), after the scoring start.  Beyond 90 degrees the
-#: estimate's d axis is nearer the magnet's south than its north: the torque
-#: the controller asks for has the wrong sign, which no estimator recovers from
-#: by itself; 50 ms rules out a single wrapped sample or a glitch.
+#: ... for longer than this (s), after the scoring start ...
 LOCK_LOST_S = 0.05
+#: ... in total within any window of this length (s).  Beyond 90 degrees the
+#: estimate's d axis is nearer the magnet's south than its north: the torque
+#: the controller asks for has the wrong sign.  50 ms rules out a single
+#: wrapped sample or a glitch.  Counting the time in a window, not only one
+#: unbroken stretch, also catches an estimate that spins against the rotor:
+#: it spends half of each slip period beyond 90 degrees, in stretches that can
+#: be shorter than 50 ms; with a 200 ms window any slip period shorter than
+#: 100 ms gives more than 50 ms (a longer one gives a stretch longer than 50 ms).
+LOCK_WINDOW_S = 0.2
 
 
-def lock_lost(t: Array, err_deg: Array) -> tuple[bool, float | None]:
-    """Whether |dtheta| stayed above :data:`LOCK_LOST_DEG` for more than :data:`LOCK_LOST_S`.
+def lock_lost(t: Array, err_deg: Array, T_s: float) -> tuple[bool, float | None]:
+    """Whether |dtheta| was above :data:`LOCK_LOST_DEG` for more than :data:`LOCK_LOST_S`
+    within some :data:`LOCK_WINDOW_S` (one period ``T_s`` per row).
 
     ``t`` and ``err_deg`` are the scored rows, in time order.  Returns
-    ``(True, t_0)`` with ``t_0`` the start of the first such excursion, else
-    ``(False, None)``.
+    ``(True, t_0)`` with ``t_0`` the first row above the threshold in the
+    first such window, else ``(False, None)``.
     """
     above = np.abs(err_deg) > LOCK_LOST_DEG
     if not np.any(above):
         return False, None
-    # runs of consecutive rows above the threshold: [start, end) index pairs
-    edges = np.diff(np.concatenate(([0], above.view(np.int8), [0])))
-    starts = np.flatnonzero(edges == 1)
-    ends = np.flatnonzero(edges == -1)
-    for a, b in zip(starts, ends, strict=True):
-        if float(t[b - 1] - t[a]) > LOCK_LOST_S:
-            return True, float(t[a])
-    return False, None
+    w = max(1, int(round(LOCK_WINDOW_S / T_s)))
+    need = LOCK_LOST_S / T_s
+    c = np.concatenate(([0], np.cumsum(above)))
+    n = len(above)
+    ends = np.arange(1, n + 1)
+    counts = c[ends] - c[np.maximum(ends - w, 0)]
+    hit = np.flatnonzero(counts > need)
+    if len(hit) == 0:
+        return False, None
+    end = int(hit[0])
+    first = int(np.flatnonzero(above[max(0, end - w + 1) : end + 1])[0]) + max(0, end - w + 1)
+    return True, float(t[first])
 
 
 def compute_metrics(
@@ -153,7 +164,7 @@ def compute_metrics(
         "scored_steps": int(np.count_nonzero(sel)),
         "sim_s": float(len(t) * T_s),
     }
-    lost, lost_at = lock_lost(t[sel], err_deg)
+    lost, lost_at = lock_lost(t[sel], err_deg, T_s)
     m["lock_lost"] = lost
     m["lock_lost_at_s"] = lost_at
     if overshoot:
