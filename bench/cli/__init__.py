@@ -24,6 +24,8 @@ from bench._errors import BenchError
 #: The subcommand modules, in the order ``bench --help`` lists them.
 SUBCOMMANDS = (
     "run",
+    "show",
+    "list",
     "plant",
     "controller",
     "link",

@@ -1,0 +1,78 @@
+"""``bench show``: the effective scenario, its motor, PWM rate, commands and transport."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from typing import Any
+
+from bench.cli._common import add_bus, add_plant_profile, add_scenario_overrides
+
+
+def cmd_show(args: argparse.Namespace) -> int:
+    from bench.cli._common import bus_spec, scenario_from_args
+    from bench.scenarios._describe import describe
+
+    scn = scenario_from_args(args)
+    d = describe(scn)
+    spec = bus_spec(args, announce=False)
+    port = spec.port if args.port is not None or spec.interface != "udp_multicast" else None
+    d["transport"] = {
+        "interface": spec.interface,
+        "channel": spec.channel,
+        "port": port,
+        "note": (
+            "bench run picks a UDP port of its own per run and prints it; bench plant without "
+            "--port uses python-can's default (43113)"
+            if spec.interface == "udp_multicast" and port is None
+            else ""
+        ),
+    }
+    if args.json:
+        print(json.dumps(d, indent=2))
+        return 0
+    m, pwm = d["motor"], d["pwm"]
+    print(f"scenario {scn.name}: {scn.description} ({scn.paper or 'no paper'})")
+    print(f"PWM {pwm['f_sw_hz']:g} Hz (T_s {pwm['T_s']:g} s), {pwm['periods']} periods")
+    keys = ("n_p", "R_s", "L_d", "L_q", "psi_f", "J", "b", "i_rated", "i_max", "tau_rated")
+    units = ("", "Ohm", "H", "H", "Wb", "kg m^2", "N m s", "A", "A", "N m")
+    print(
+        f"motor {m['preset']}"
+        + (f" ([motor] sets {', '.join(m['replaced'])})" if m["replaced"] else "")
+    )
+    for k, u in zip(keys, units, strict=True):
+        print(f"  {k:10s} {m[k]:g} {u}".rstrip())
+    print(f"  {'w_m_rated':10s} {m['w_m_rated']:g} rad/s (mechanical)")
+    pl = d["plant"]
+    inv = pl["inverter"]
+    print(
+        f"plant {pl['profile']}: {inv['model']} inverter, u_dc {inv['u_dc']:g} V, "
+        f"t_dead {inv['t_dead']:g} s, drops {inv['v_ce']:g}/{inv['v_f']:g} V"
+    )
+    tr = d["transport"]
+    print(
+        f"transport {tr['interface']} {tr['channel']}"
+        + (f" port {tr['port']}" if tr["port"] is not None else "")
+        + (f" ({tr['note']})" if tr["note"] else "")
+    )
+    print(f"commands ({len(d['commands'])} BenchCommand frames; step = the period they apply in):")
+    print(f"  {'step':>8} {'cmd':>6} {'speed_ref rpm':>14} {'load N m':>9}")
+    for c in d["commands"]:
+        print(
+            f"  {c['step']:>8} {c['cmd_name']:>6} {c['speed_ref_rpm']:>14.1f} {c['load_nm']:>9.3f}"
+        )
+    return 0
+
+
+def register(sub: Any) -> None:
+    p = sub.add_parser(
+        "show",
+        help="the effective scenario: motor parameters, PWM rate, plant, the command schedule "
+        "as BenchCommand frames and the transport",
+    )
+    p.add_argument("scenario", help="shipped scenario name or a .toml path")
+    add_scenario_overrides(p)
+    add_plant_profile(p)
+    add_bus(p)
+    p.add_argument("--json", action="store_true", help="everything as JSON")
+    p.set_defaults(func=cmd_show)
