@@ -18,6 +18,7 @@ ROOT = Path(__file__).resolve().parent.parent
 #: ``bench``'s layers, lowest first (the first name after ``bench.``).
 LAYERS = (
     "_errors",
+    "_jsonio",
     "wire",
     "scenarios",
     "nodes",

@@ -21,6 +21,7 @@ from typing import Any
 
 import can
 
+from bench import _jsonio as jsonio
 from bench._errors import CaptureError, ScenarioError
 from bench.runs._results import RunResult, finish_run
 from bench.scenarios._schema import Scenario, load_scenario, scenario_from_dict
@@ -357,7 +358,9 @@ def analyze_capture(
     if problem:
         res.metrics["capture_truncated"] = True
         res.metrics["capture_read_error"] = problem
-        (out / "metrics.json").write_text(json.dumps(res.metrics, indent=2, sort_keys=True) + "\n")
+        (out / "metrics.json").write_text(
+            jsonio.dumps(res.metrics, indent=2, sort_keys=True) + "\n"
+        )
     return res
 
 

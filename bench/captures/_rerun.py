@@ -43,6 +43,7 @@ from typing import Any
 import can
 import numpy as np
 
+from bench import _jsonio as jsonio
 from bench._errors import BenchError, CaptureError
 from bench.captures._read import (
     capture_scenario,
@@ -364,7 +365,7 @@ def rerun_capture(
     dest = out_dir or ((path if path.is_dir() else path.parent) / f"rerun-{estimator}")
     dest.mkdir(parents=True, exist_ok=True)
     write_csv(str(dest / "signals.csv"), new.table)
-    (dest / "metrics.json").write_text(json.dumps(m_new, indent=2, sort_keys=True) + "\n")
+    (dest / "metrics.json").write_text(jsonio.dumps(m_new, indent=2, sort_keys=True) + "\n")
     (dest / "rerun.json").write_text(
         json.dumps(report, indent=2, sort_keys=True, default=str) + "\n"
     )

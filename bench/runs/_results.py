@@ -18,6 +18,7 @@ from typing import Any
 import can
 import numpy as np
 
+from bench import _jsonio as jsonio
 from bench._errors import EXIT_LOCK_LOST, EXIT_PLANT_TRIPPED
 from bench.nodes._counters import REPEATED_COUNTER
 from bench.runs._analysis import analyze_frames, write_csv
@@ -208,7 +209,7 @@ def finish_run(
         capture=capture.name if capture else None,
         wall_s=wall_s,
     )
-    (out_dir / "metrics.json").write_text(json.dumps(m, indent=2, sort_keys=True) + "\n")
+    (out_dir / "metrics.json").write_text(jsonio.dumps(m, indent=2, sort_keys=True) + "\n")
     (out_dir / "meta.json").write_text(
         json.dumps(meta, indent=2, sort_keys=True, default=str) + "\n"
     )

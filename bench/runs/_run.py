@@ -28,6 +28,7 @@ from typing import Any
 
 import can
 
+from bench import _jsonio as jsonio
 from bench._errors import BenchError
 from bench.nodes._loops import command_frames
 from bench.runs._processes import (
@@ -287,6 +288,6 @@ def _score(
     if not frames:
         capture.unlink(missing_ok=True)
     metrics: dict[str, Any] = {"steps": 0, "frames_recorded": len(frames), "wall_s": wall}
-    (out_dir / "metrics.json").write_text(json.dumps(metrics, indent=2) + "\n")
+    (out_dir / "metrics.json").write_text(jsonio.dumps(metrics, indent=2) + "\n")
     (out_dir / "meta.json").write_text(json.dumps(meta, indent=2, default=str) + "\n")
     return RunResult(out_dir=out_dir, metrics=metrics, capture=capture, meta=meta)
