@@ -234,3 +234,66 @@ def test_the_readme_claims_table_is_the_committed_summarys() -> None:
     assert README_BEGIN in readme
     assert readme_block(summary) in readme
     assert update_readme(readme, summary) == readme
+
+
+def _hybrid_run(dips: list[float]) -> dict[str, Any]:
+    """A ``wide-speed-xue`` run's record with the per-band metrics of a hybrid estimator."""
+    r = _run("wide-speed-xue", "hybrid-square-wave", {})
+    m = r["metrics"]
+    m.update(steps=23501, sim_s=23.501, band_lo_rpm=50.38, band_hi_rpm=123.16)
+    m["band_split_hz"] = 250.0
+    per = {
+        "below": (10786, 0.884, 0.604, 7.24, 0.762, 0.377),
+        "inside": (482, 0.203, 0.091, 9.23, 0.476, 0.362),
+        "above": (11732, 0.302, 0.127, 9.34, 4.5e-7, 0.0031),
+    }
+    for band, (n, mx, mean, spd, loss, rip) in per.items():
+        m[f"band_{band}_steps"] = n
+        m[f"band_{band}_theta_err_abs_max_deg"] = mx
+        m[f"band_{band}_theta_err_abs_mean_deg"] = mean
+        m[f"band_{band}_speed_err_max_rpm"] = spd
+        m[f"band_{band}_injection_loss_w"] = loss
+        m[f"band_{band}_torque_ripple_rms_nm"] = rip
+    m["handover_at_s"] = [10.06 + i for i in range(len(dips))]
+    m["handover_dips_pct"] = dips
+    m["handover_dip_max_pct"] = max(dips, default=0.0)
+    return r
+
+
+def test_report_shows_the_per_band_table_of_hybrid_runs() -> None:
+    """A summary with a hybrid run gets the per-band table: one row per band with the run's
+    own numbers (time from the band's periods), and the hand-overs' dips against the 5 %
+    goal; a summary without one has no such section, and the claims do not change."""
+    base = good_summary()
+    assert "per speed band" not in render_markdown(build_summary(base["runs"], {}, base["suite"]))
+    runs = [*copy.deepcopy(base["runs"]), _hybrid_run([3.53, 4.36])]
+    s = build_summary(runs, {}, base["suite"])
+    assert verdicts(s) == verdicts(build_summary(base["runs"], {}, base["suite"]))
+    md = render_markdown(s)
+    assert "## Full speed range: metrics per speed band" in md
+    rows = [r for r in table_rows(md) if r[:2] == ["wide-speed-xue", "hybrid-square-wave"]]
+    assert [r[2] for r in rows] == [
+        "below (< 50 rpm)",
+        "inside (50 to 123 rpm)",
+        "above (> 123 rpm)",
+    ]
+    below, inside, above = rows
+    assert below[3:] == ["10.79", "0.88", "0.60", "7.2", "0.762", "0.377"]
+    assert inside[3] == "0.48" and inside[7] == "0.476"
+    assert above[7] == "4.5e-07" and above[8] == "0.003"
+    assert "3.53 % at 10.06 s, 4.36 % at 11.06 s; largest 4.36 %, within the goal of 5 %" in md
+    # over the goal, and a run without hand-over
+    md = render_markdown(
+        build_summary([_hybrid_run([1.0, 6.2]), _hybrid_run([])], {}, base["suite"])
+    )
+    assert "largest 6.20 %, over the goal of 5 %" in md
+    assert "no hand-over; largest 0.00 %, within the goal" in md
+    # a band the run never reached: its cells say so
+    r = _hybrid_run([])
+    for k in list(r["metrics"]):
+        if k.startswith("band_above_") and k != "band_above_steps":
+            r["metrics"][k] = None
+    r["metrics"]["band_above_steps"] = 0
+    rows = table_rows(render_markdown(build_summary([r], {}, base["suite"])))
+    above = next(row for row in rows if row[2].startswith("above"))
+    assert above[3] == "0" and above[4:] == ["n/a"] * 5

@@ -171,3 +171,24 @@ def test_suite_runs_over_the_can_transport_equal_in_process(
     # the progress display: one line per finished run (stderr is not a terminal here)
     done = [ln for ln in err.splitlines() if re.match(r"\[\d/2\] xue-fig13", ln)]
     assert len(done) == 2 and all(" done " in ln for ln in done), err
+
+
+def test_run_record_keeps_a_hybrid_runs_band_metrics(tmp_path: Path) -> None:
+    """``summary.json`` keeps the per-band figures and hand-overs of a hybrid run (the
+    report's per-band table reads them there); other metrics stay to the fixed list."""
+    from bench.studies._suite import SUMMARY_METRICS, RunJob, run_record
+
+    scn = load_scenario("wide-speed-xue")
+    job = RunJob(scn, "hybrid-square-wave", tmp_path / "run", None)
+    band = {
+        "band_lo_rpm": 50.4,
+        "band_below_steps": 10,
+        "band_above_injection_loss_w": None,
+        "handover_at_s": [10.06],
+        "handover_dips_pct": [3.5],
+        "handover_dip_max_pct": 3.5,
+    }
+    metrics = {"theta_err_max_deg": 1.0, "frames_recorded": 99, **band}
+    rec = run_record(job, {"metrics": metrics, "wall_s": 1.0}, tmp_path)
+    assert rec["metrics"] == {"theta_err_max_deg": 1.0, **band}
+    assert "frames_recorded" not in SUMMARY_METRICS

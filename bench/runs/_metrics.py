@@ -6,15 +6,19 @@ is reported separately by the plots, not hidden: the scored window is in the
 metadata).  Two speed errors are reported because the papers use the word for
 two things: ``speed_err_max_rpm`` is the estimation error |w_hat - w_true|,
 ``speed_track_err_max_rpm`` the tracking error |w_ref - w_true|.
+
+A hybrid estimator's run is also scored per speed band (:func:`band_metrics`):
+below, inside and above its transition band, with the injection's copper loss,
+the torque ripple and the speed dip at each hand-over.
 """
 
 from __future__ import annotations
 
-from typing import Any
-
 import itertools
 import math
 from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -174,4 +178,300 @@ def compute_metrics(
         if np.count_nonzero(win) > 10:
             f1 = abs(float(np.mean(table["w_m_rpm"][win]))) / 60.0 * n_p
             m["thd_phase_a_pct"] = thd_pct(table["i_a"][win], T_s, f1)
+    return m
+
+
+# ---------------------------------------------------------------- per speed band
+
+#: The speed bands of a hybrid estimator's run, in the order of
+#: ``controller._hybrid``'s ``BELOW``, ``INSIDE``, ``ABOVE`` (0, 1, 2).
+BANDS = ("below", "inside", "above")
+#: The per-band quantities, each under ``band_<band>_<quantity>`` in ``metrics.json``.
+BAND_QUANTITIES = (
+    "steps",
+    "theta_err_abs_max_deg",
+    "theta_err_abs_mean_deg",
+    "speed_err_max_rpm",
+    "injection_loss_w",
+    "torque_ripple_rms_nm",
+)
+#: Order of the Butterworth low-pass that separates the fundamental from the
+#: injection; run forwards and backwards (zero phase), so its magnitude is
+#: ``1 / (1 + (f / f_c)^8)``.
+SPLIT_ORDER = 4
+#: The separation's corner is this fraction of the injection's lowest
+#: frequency in the rotor frame (:func:`split_corner_hz`).
+SPLIT_RATIO = 0.5
+#: A hand-over's window lasts this many ``1 / alpha_s`` after the true speed leaves
+#: the band (:func:`handover_dips`): the speed loop's response to a torque
+#: disturbance, ``-s / (J (s + alpha_s)^2)``, peaks ``1 / alpha_s`` after it, and the
+#: schedule has finished by the band's edge; three leave room for the speed filter
+#: ``w_f = 4 alpha_s`` and the estimate's lag.
+HANDOVER_TAIL = 3.0
+
+
+def speed_band(w_e: Array, edges: tuple[float, float]) -> npt.NDArray[np.int64]:
+    """0 below, 1 inside, 2 above the band ``edges`` (rad/s) for the true speeds ``w_e``.
+
+    :meth:`controller.TransitionBand.band_of` for an array: ``|w_e| < lo`` below,
+    ``|w_e| > hi`` above, inside otherwise (edges included).
+    """
+    s = np.abs(w_e)
+    lo, hi = edges
+    out: npt.NDArray[np.int64] = np.where(s < lo, 0, np.where(s > hi, 2, 1))
+    return out
+
+
+def split_corner_hz(f_inj_min: float) -> float:
+    """Corner (Hz) of the low-pass that splits fundamental and injection current.
+
+    Target: the injection, whose lowest frequency in the true rotor frame is
+    ``f_inj_min``, keeps its power to within 1 % in the HF part, and the
+    fundamental's d-q content (DC at steady speed; the speed loop's few hertz
+    and the current loop's bandwidth, 50 and 100 Hz on the presets, in
+    transients) stays out of it. With the zero-phase magnitude ``1 / (1 + (f /
+    f_c)^8)`` and ``f_c = f_inj_min / 2``, the injection's amplitude is kept to
+    ``1 - 1/257`` (its power to 0.8 %), and a fundamental component at ``f_c / 2``
+    leaks ``0.4 %`` of its amplitude into the HF part, at ``f_c / 5`` 3e-6.
+    """
+    return SPLIT_RATIO * f_inj_min
+
+
+def lowpass_zero_phase(x: Array, T_s: float, f_c: float) -> Array:
+    """``x`` through the Butterworth low-pass of order :data:`SPLIT_ORDER` at ``f_c`` (Hz),
+    forwards and backwards (zero phase, magnitude squared)."""
+    from scipy.signal import butter, sosfiltfilt
+
+    sos = butter(SPLIT_ORDER, f_c, fs=1.0 / T_s, output="sos")
+    out: Array = sosfiltfilt(sos, np.asarray(x, dtype=float))
+    return out
+
+
+def injection_loss_w(i_d: Array, i_q: Array, *, R_s: float, T_s: float, f_c: float) -> Array:
+    """Copper loss of the injection current per PWM period (W), from the sampled currents.
+
+    The injection's current is the HF part of the current in the true rotor
+    frame, ``i_h = i_dq - LP(i_dq)`` with the zero-phase low-pass at ``f_c``
+    (:func:`split_corner_hz`): there the fundamental is DC at steady speed,
+    and the injection sits at ``f_h - f_e`` (rotating) or at half the PWM rate
+    (square wave). Its loss is ``1.5 R_s |i_h|^2`` (amplitude-invariant d-q),
+    the share of ``R_s i^2`` the injection adds (the cross term with the
+    fundamental averages out, ``i_h`` having zero mean). Between two samples
+    the inverter holds one voltage for the period, so the HF current is a ramp
+    (``L di/dt = u``, ``R_s`` small against ``w L``): the mean of ``|i_h|^2``
+    over period ``k`` is that of the line from ``a = i_h(k)`` to ``b =
+    i_h(k+1)``, ``(|a|^2 + a.b + |b|^2) / 3``. A square wave of samples
+    ``+/- I`` gives ``I^2 / 3``, the triangle's mean square; samples of a
+    sinusoid of amplitude ``I`` give ``I^2 (2 + cos(w T_s)) / 6``, ``I^2 / 2``
+    to ``(w T_s)^2 / 6`` (1.6 % at 500 Hz and 10 kHz). The last period, with
+    no next sample, counts ``|a|^2``.
+
+    It is the drive's HF current, not a model of it: whatever the controller
+    adds at those frequencies counts (on ``wide-speed-wen`` at 170 rpm the
+    duties carry 54 V at 500 Hz for the 50 V injected), and so does anything
+    else in the d-q currents above ``f_c``: on an inverter with dead time its
+    sixth harmonic once ``6 f_e`` passes ``f_c``, and the sensors' noise and
+    quantisation; above the band, where the injection is exactly zero, the
+    figure is that floor.
+    """
+    h_d = i_d - lowpass_zero_phase(i_d, T_s, f_c)
+    h_q = i_q - lowpass_zero_phase(i_q, T_s, f_c)
+    n_d = np.append(h_d[1:], h_d[-1:])
+    n_q = np.append(h_q[1:], h_q[-1:])
+    ms = (h_d * h_d + h_q * h_q + h_d * n_d + h_q * n_q + n_d * n_d + n_q * n_q) / 3.0
+    out: Array = 1.5 * R_s * ms
+    return out
+
+
+def torque_ripple_nm(tau_e: Array, *, T_s: float, f_c: float) -> Array:
+    """The torque around its low-pass (N m): ``tau_e - LP(tau_e)``, the same zero-phase
+    low-pass at ``f_c`` as :func:`injection_loss_w`.
+
+    Its rms over a band's samples is the band's torque ripple: the torque at
+    the injection's frequencies (``I_p``, ``I_n`` times the flux and the
+    saliency) and whatever else the sampled torque carries above ``f_c``;
+    the speed loop's slow torque changes and a load ramp stay in the low-pass.
+    """
+    out: Array = tau_e - lowpass_zero_phase(tau_e, T_s, f_c)
+    return out
+
+
+@dataclass(frozen=True, slots=True)
+class SpeedLoop:
+    """A run's speed loop and mechanics, for :func:`expected_speed`.
+
+    Parameters
+    ----------
+    k_t, k_p, k_i : float
+        The controller's 2DOF speed PI: reference gain and proportional gain
+        (N m s/rad), integral gain (N m/rad), on the mechanical speed.
+    w_f : float
+        Corner of the low-pass on the speed the PI measures (rad/s).
+    J : float
+        The plant's inertia (kg m^2).
+    b : float
+        The plant's viscous friction (N m s/rad).
+    alpha_s : float
+        The speed loop's designed bandwidth (rad/s), for the hand-overs' window.
+    """
+
+    k_t: float
+    k_p: float
+    k_i: float
+    w_f: float
+    J: float
+    b: float
+    alpha_s: float
+
+
+def expected_speed(w_ref: Array, tau_L: Array, w0: float, loop: SpeedLoop, T_s: float) -> Array:
+    """The speed (rpm) the speed loop gives for the reference ``w_ref`` (rpm) and the
+    load ``tau_L`` (N m) with the true speed measured and ideal torque.
+
+    The 2DOF PI of :mod:`controller._controller`, ``tau = k_t w_ref - k_p y + u_i``,
+    ``du_i/dt = k_i (w_ref - y)``, on the speed measured through the low-pass
+    ``y = w_f / (s + w_f) w``, around the plant's mechanics ``(J s + b) w = tau -
+    tau_L``; no current-loop lag, no delay, no estimator::
+
+        D(s) w = (k_t s + k_i)(s + w_f) w_ref - s (s + w_f) tau_L
+        D(s) = (J s + b) s (s + w_f) + (k_p s + k_i) w_f
+
+    With the designed gains (``k_t = alpha_s J``, ``k_p = 2 alpha_s J``, ``k_i =
+    alpha_s^2 J``), ``b = 0`` and no filter this is ``alpha_s / (s + alpha_s)``
+    from the reference, and a constant load leaves no error; on a ramp of slope
+    ``a`` the filter makes the lag ``(a / alpha_s)(1 - alpha_s / w_f)``.
+    Discretised with a zero-order hold (the references are held over each
+    period) and started at rest at ``w0`` under the first row's load.
+    """
+    from scipy.signal import cont2discrete, dlsim, tf2ss
+
+    J, b, w_f = loop.J, loop.b, loop.w_f
+    den = np.polyadd(np.polymul([J, b], [1.0, w_f, 0.0]), [loop.k_p * w_f, loop.k_i * w_f])
+    num_r = np.polymul([loop.k_t, loop.k_i], [1.0, w_f])
+    num_l = -60.0 / (2.0 * math.pi) * np.array([1.0, w_f, 0.0])  # rad/s -> rpm
+    r = np.asarray(w_ref, dtype=float)
+    if not np.all(np.isfinite(r)):  # rows before the first command a capture holds
+        r = np.where(np.isfinite(r), r, w0)
+    load = np.nan_to_num(np.asarray(tau_L, dtype=float))
+    u = np.column_stack([r - w0, load - load[0]])
+    out: Array = np.full(len(r), w0)
+    for j, num in enumerate((num_r, num_l)):
+        A, B, C, D, _ = cont2discrete(tf2ss(num, den), T_s, method="zoh")
+        _, y, _ = dlsim((A, B, C, D, T_s), u[:, j])
+        out = out + np.ravel(y)
+    return out
+
+
+def handover_dips(
+    t: Array,
+    w: Array,
+    w_exp: Array,
+    inside: npt.NDArray[np.bool_],
+    *,
+    tail_s: float,
+    floor: float,
+) -> list[tuple[float, float]]:
+    """``(t_0, dip %)`` for each hand-over: the true speed's largest dip below the expected.
+
+    A hand-over is a stretch of rows with the true speed ``w`` inside the band
+    (``inside``), lengthened by ``tail_s`` after the speed leaves it (the
+    speed loop answers a torque disturbance within a few ``1 / alpha_s``);
+    stretches that then overlap are one hand-over. Its dip is the largest
+    ``100 sign(w_exp) (w_exp - w) / |w_exp|`` over the stretch's rows where
+    ``|w_exp| >= floor`` (the band's lower edge: a stretch that goes on into a
+    reversal or a stop is not measured against a speed near zero), 0 when the
+    speed never falls short: how far the speed's magnitude falls below the
+    designed response to the reference ``w_exp`` (:func:`expected_speed`), in
+    per cent of that speed. ``t_0`` is where the stretch begins.
+    """
+    if not np.any(inside):
+        return []
+    edges = np.diff(np.concatenate(([0], inside.view(np.int8), [0])))
+    starts = np.flatnonzero(edges == 1)
+    ends = np.flatnonzero(edges == -1)
+    n = len(t)
+    spans: list[list[int]] = []
+    for a0, b0 in zip(starts.tolist(), ends.tolist(), strict=True):
+        end = int(np.searchsorted(t, t[b0 - 1] + tail_s, side="right"))
+        end = min(max(end, b0), n)
+        if spans and a0 <= spans[-1][1]:
+            spans[-1][1] = max(spans[-1][1], end)
+        else:
+            spans.append([a0, end])
+    out = []
+    for a, b in spans:
+        we = w_exp[a:b]
+        at_speed = np.abs(we) >= floor
+        dip = 0.0
+        if np.any(at_speed):
+            we = we[at_speed]
+            short = np.sign(we) * (we - w[a:b][at_speed]) / np.abs(we)
+            dip = max(0.0, 100.0 * float(np.max(short)))
+        out.append((float(t[a]), dip))
+    return out
+
+
+def band_metrics(
+    table: Mapping[str, Array],
+    *,
+    T_s: float,
+    n_p: int,
+    edges: tuple[float, float],
+    R_s: float,
+    f_c: float,
+    loop: SpeedLoop,
+    score_from_s: float = 0.0,
+) -> dict[str, Any]:
+    """The per-band metrics of a hybrid estimator's run (README, ``metrics.json``).
+
+    ``edges`` (rad/s, electrical) split the scored rows on the *true* speed
+    into below / inside / above the transition band
+    (:attr:`controller.TransitionBand.edges`, the band the run's controller
+    used). Per band, under ``band_<band>_<quantity>``: the scored rows
+    (``steps``); max and mean |dtheta| (deg, electrical); max |w_hat - w| (rpm);
+    the mean injection loss (W, :func:`injection_loss_w`, with the plant's
+    ``R_s``); the rms of the torque ripple (N m, :func:`torque_ripple_nm`);
+    ``None`` for a band with no rows. ``f_c`` (Hz) is the separation's corner
+    (:func:`split_corner_hz`). The hand-overs' dips (:func:`handover_dips`,
+    against :func:`expected_speed` of the run's speed ``loop``) go in
+    ``handover_dips_pct``, with their starts in ``handover_at_s`` and the
+    largest in ``handover_dip_max_pct`` (0 without a hand-over). The filters
+    run over the whole table, the scored rows are taken afterwards; the rows
+    are taken as one per period (a row the recording lost shortens the time
+    axis by a period).
+    """
+    t = table["t"]
+    sel = t >= score_from_s
+    if "mode" in table:
+        sel &= table["mode"] != 0
+    rpm_to_e = n_p * 2.0 * math.pi / 60.0
+    w = table["w_m_rpm"]
+    band = speed_band(w * rpm_to_e, edges)
+    err_deg = np.degrees(np.abs(wrap_pi(table["theta_e"] - table["theta_hat"])))
+    speed_err = np.abs(table["w_hat_rpm"] - w)
+    loss = injection_loss_w(table["i_d"], table["i_q"], R_s=R_s, T_s=T_s, f_c=f_c)
+    ripple = torque_ripple_nm(table["tau_e"], T_s=T_s, f_c=f_c)
+    lo_rpm, hi_rpm = edges[0] / rpm_to_e, edges[1] / rpm_to_e
+    m: dict[str, Any] = {"band_lo_rpm": lo_rpm, "band_hi_rpm": hi_rpm, "band_split_hz": f_c}
+    for j, name in enumerate(BANDS):
+        rows = sel & (band == j)
+        k = int(np.count_nonzero(rows))
+        m[f"band_{name}_steps"] = k
+        vals: dict[str, float | None] = dict.fromkeys(BAND_QUANTITIES[1:])
+        if k:
+            vals = {
+                "theta_err_abs_max_deg": float(np.max(err_deg[rows])),
+                "theta_err_abs_mean_deg": float(np.mean(err_deg[rows])),
+                "speed_err_max_rpm": float(np.max(speed_err[rows])),
+                "injection_loss_w": float(np.mean(loss[rows])),
+                "torque_ripple_rms_nm": float(np.sqrt(np.mean(ripple[rows] ** 2))),
+            }
+        for q, v in vals.items():
+            m[f"band_{name}_{q}"] = v
+    w_exp = expected_speed(table["w_ref_rpm"], table["tau_L"], float(w[0]), loop, T_s)
+    tail = HANDOVER_TAIL / loop.alpha_s
+    dips = handover_dips(t[sel], w[sel], w_exp[sel], band[sel] == 1, tail_s=tail, floor=lo_rpm)
+    m["handover_at_s"] = [a for a, _ in dips]
+    m["handover_dips_pct"] = [d for _, d in dips]
+    m["handover_dip_max_pct"] = max((d for _, d in dips), default=0.0)
     return m

@@ -10,6 +10,7 @@ the warning lines that go with it.
 from __future__ import annotations
 
 import json
+import math
 import platform
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -22,7 +23,14 @@ from bench import _jsonio as jsonio
 from bench._errors import EXIT_LOCK_LOST, EXIT_PLANT_TRIPPED
 from bench.nodes._counters import REPEATED_COUNTER
 from bench.runs._analysis import analyze_frames, write_csv
-from bench.runs._metrics import compute_metrics
+from bench.runs._metrics import (
+    BAND_QUANTITIES,
+    BANDS,
+    SpeedLoop,
+    band_metrics,
+    compute_metrics,
+    split_corner_hz,
+)
 from bench.scenarios._schema import Scenario
 from bench.scenarios._setup import get_preset, lockstep_delay, n_steps, plant_setup, sample_period
 from bench.wire._codec import Codec
@@ -126,6 +134,7 @@ def finish_run(
         thd_window_s=scn.thd_window_s,
         overshoot="speed_overshoot_rpm" in scn.paper_result,
     )
+    m.update(hybrid_band_metrics(cap.table, scn, str(meta.get("estimator", ""))))
     reports = meta.get("node_reports", {})
     plant_r = reports.get("plant", {})
     ctrl_r = reports.get("controller", {})
@@ -218,6 +227,70 @@ def finish_run(
 
         plot_run(cap.table, out_dir, title=f"{scn.name} / {meta.get('estimator', '?')}")
     return RunResult(out_dir=out_dir, metrics=m, capture=capture or out_dir, meta=meta)
+
+
+def injection_floor_hz(hf: Any, T_s: float, w_top: float) -> float:
+    """Lowest frequency (Hz) of an injection estimator's HF current in the true rotor frame,
+    wherever it injects (true electrical speed up to ``w_top`` rad/s).
+
+    Rotating injection (``w_h``, rad/s): the positive and negative sequences sit
+    at ``+/-(w_h - w_e)`` in the rotor frame, lowest at the top speed. Square wave
+    (``R`` PWM periods per injection period): along the estimated d axis, which
+    turns with the rotor, so ``1 / (R T_s)`` at any speed (half the PWM rate).
+    """
+    w_h = getattr(hf, "w_h", None)
+    if w_h is not None:
+        return (float(w_h) - w_top) / (2.0 * math.pi)
+    R = getattr(hf, "R", None)
+    if R:
+        return 1.0 / (int(R) * T_s)
+    raise ValueError(
+        f"{type(hf).__name__}: neither a rotating (w_h) nor a square-wave (R) injection"
+    )
+
+
+def hybrid_band_metrics(table: dict[str, Any], scn: Scenario, estimator: str) -> dict[str, Any]:
+    """The per-band metrics of a hybrid estimator's run (:func:`bench.runs._metrics.band_metrics`);
+    ``{}`` for any other estimator.
+
+    Everything comes from the controller the run used, built again from the
+    scenario (:func:`bench.scenarios._setup.build_controller`): the band's
+    edges on the true speed (:attr:`controller.TransitionBand.edges`), the
+    injection's lowest rotor-frame frequency (:func:`injection_floor_hz`, up to
+    the band's upper edge: no injection above it) for the separation's corner,
+    the speed PI's gains and filter for the hand-overs' expected speed. The
+    mechanics and the loss are the plant's: its ``J``, ``b`` and ``R_s``, not the
+    controller's model of them.
+    """
+    from bench._errors import BenchError
+    from bench.scenarios._setup import build_controller
+    from controller import HybridEstimator
+
+    if not estimator.startswith("hybrid"):
+        return {}
+    try:
+        ctrl = build_controller(scn, estimator)
+    except (BenchError, ValueError, TypeError):  # an estimator that does not fit: said elsewhere
+        return {}
+    est = ctrl.estimator
+    if not isinstance(est, HybridEstimator):
+        return {}
+    T_s = sample_period(scn)
+    edges = est.band.edges
+    f_c = split_corner_hz(injection_floor_hz(est.hf, T_s, edges[1]))
+    motor = plant_setup(scn)[0].motor
+    pi = ctrl.pi_w
+    loop = SpeedLoop(pi.k_t, pi.k_p, pi.k_i, ctrl.w_f, motor.J, motor.b, ctrl.alpha_s)
+    return band_metrics(
+        table,
+        T_s=T_s,
+        n_p=motor.n_p,
+        edges=edges,
+        R_s=motor.R_s,
+        f_c=f_c,
+        loop=loop,
+        score_from_s=scn.score_from_s,
+    )
 
 
 def plant_fault(frames: list[can.Message], codec: Codec) -> tuple[str, int]:
@@ -332,6 +405,23 @@ METRIC_ROWS = (
     ("retransmits", ""),
 )
 
+#: Units of the per-band quantities (``band_<band>_<quantity>``).
+_BAND_UNITS = {
+    "steps": "",
+    "theta_err_abs_max_deg": "deg",
+    "theta_err_abs_mean_deg": "deg",
+    "speed_err_max_rpm": "rpm",
+    "injection_loss_w": "W",
+    "torque_ripple_rms_nm": "N m",
+}
+#: Rows of a hybrid estimator's run, after :data:`METRIC_ROWS`.
+BAND_ROWS = (
+    ("band_lo_rpm", "rpm"),
+    ("band_hi_rpm", "rpm"),
+    *((f"band_{b}_{q}", _BAND_UNITS[q]) for b in BANDS for q in BAND_QUANTITIES),
+    ("handover_dip_max_pct", "%"),
+)
+
 
 def format_metrics(
     m: dict[str, Any], paper: dict[str, Any] | None = None, paper_method: str | None = None
@@ -343,12 +433,12 @@ def format_metrics(
     """
     paper = paper or {}
     head = f"paper ({paper_method})" if paper and paper_method else "paper"
-    lines = [f"{'metric':<26}{'bench':>12}  {head}"]
-    for key, unit in METRIC_ROWS:
-        if key not in m:
-            continue
+    rows = [(k, u) for k, u in (*METRIC_ROWS, *BAND_ROWS) if k in m]
+    wk = max([26, *(len(k) + 1 for k, _ in rows)])
+    lines = [f"{'metric':<{wk}}{'bench':>12}  {head}"]
+    for key, unit in rows:
         v = m[key]
-        vs = f"{v:12.3f}" if isinstance(v, float) else f"{v:>12}"
+        vs = f"{v:12.3f}" if isinstance(v, float) else f"{'-' if v is None else v:>12}"
         ps = f"{paper[key]:>8}" if key in paper else f"{'':>8}"
-        lines.append(f"{key:<26}{vs}  {ps} {unit}")
+        lines.append(f"{key:<{wk}}{vs}  {ps} {unit}")
     return "\n".join(lines)

@@ -71,6 +71,13 @@ def _f(x: Any, nd: int = 2) -> str:
     return "n/a"
 
 
+def _g(x: Any, nd: int = 3) -> str:
+    """``x`` to ``nd`` significant digits (a figure that may be tiny, such as a floor)."""
+    if isinstance(x, int | float) and math.isfinite(float(x)):
+        return f"{float(x):.{nd}g}"
+    return "n/a"
+
+
 def _run(summary: dict[str, Any], scn: str, est: str) -> dict[str, Any] | None:
     for r in summary.get("runs", []):
         if r["scenario"] == scn and r["estimator"] == est:
@@ -396,6 +403,97 @@ def _xue_section(summary: dict[str, Any]) -> list[str]:
     return [*lines, ""]
 
 
+#: The goal of the hand-over (issue 19): no speed dip larger than this (% of the speed).
+HANDOVER_DIP_GOAL_PCT = 5.0
+
+
+def _band_section(summary: dict[str, Any]) -> list[str]:
+    """The per-band table of the hybrid estimators' runs (none: no section)."""
+    runs = [r for r in summary.get("runs", []) if "band_below_steps" in r.get("metrics", {})]
+    if not runs:
+        return []
+    rows = []
+    dips = []
+    for r in runs:
+        m = r["metrics"]
+        lo, hi = m.get("band_lo_rpm", math.nan), m.get("band_hi_rpm", math.nan)
+        steps, sim_s = m.get("steps"), m.get("sim_s")
+        per = sim_s / steps if isinstance(steps, int) and steps and sim_s else math.nan
+        names = {
+            "below": f"below (< {_f(lo, 0)} rpm)",
+            "inside": f"inside ({_f(lo, 0)} to {_f(hi, 0)} rpm)",
+            "above": f"above (> {_f(hi, 0)} rpm)",
+        }
+        for band, label in names.items():
+            n = m.get(f"band_{band}_steps", 0)
+            rows.append(
+                [
+                    r["scenario"],
+                    r["estimator"],
+                    label,
+                    _f(n * per, 2) if n else "0",
+                    _f(m.get(f"band_{band}_theta_err_abs_max_deg")),
+                    _f(m.get(f"band_{band}_theta_err_abs_mean_deg")),
+                    _f(m.get(f"band_{band}_speed_err_max_rpm"), 1),
+                    _g(m.get(f"band_{band}_injection_loss_w")),
+                    _f(m.get(f"band_{band}_torque_ripple_rms_nm"), 3),
+                ]
+            )
+        each = ", ".join(
+            f"{d:.2f} % at {t:.2f} s"
+            for t, d in zip(
+                m.get("handover_at_s", []), m.get("handover_dips_pct", []), strict=False
+            )
+        )
+        worst = m.get("handover_dip_max_pct", math.nan)
+        verdict = (
+            "not measured"
+            if not isinstance(worst, int | float) or not math.isfinite(worst)
+            else ("within" if worst <= HANDOVER_DIP_GOAL_PCT else "over")
+            + f" the goal of {HANDOVER_DIP_GOAL_PCT:g} %"
+        )
+        dips.append(
+            f"- {r['scenario']} / {r['estimator']}: {each or 'no hand-over'}; largest "
+            f"{_f(worst)} %, {verdict}."
+        )
+    lines = [
+        "## Full speed range: metrics per speed band",
+        "",
+        "Runs of the hybrid estimators (HF injection handed over to the flux observer), "
+        "split on the true speed at the edges of the band their controller used (below: the "
+        "injection estimator alone; above: the observer alone, no injection). Injection loss: "
+        "the mean copper loss 1.5 R_s |i_h|^2 of the current's HF part in the rotor frame "
+        "(above the corner `band_split_hz`, half the injection's lowest frequency), with the "
+        "plant's R_s; above the band it reads the floor of noise and quantisation. Torque "
+        "ripple: rms of the torque around its low-pass at the same corner.",
+        "",
+    ]
+    lines += _table(
+        [
+            "scenario",
+            "method",
+            "band",
+            "time (s)",
+            "max abs dtheta (deg)",
+            "mean abs dtheta (deg)",
+            "max speed error (rpm)",
+            "injection loss (W)",
+            "torque ripple rms (N m)",
+        ],
+        rows,
+    )
+    lines += [
+        "",
+        "Speed dip at each hand-over (the true speed below the speed loop's designed response "
+        "to the reference, in % of that speed, while the speed is in the band and for "
+        "3 / alpha_s after):",
+        "",
+        *dips,
+        "",
+    ]
+    return lines
+
+
 def _in_order(d: dict[str, Any], order: tuple[str, ...]) -> list[tuple[str, Any]]:
     """The items of ``d`` with the keys of ``order`` first, in that order, then the rest.
 
@@ -506,6 +604,7 @@ def render_markdown(summary: dict[str, Any]) -> str:
         ]
         lines += _wen_section(summary)
     lines += _xue_section(summary)
+    lines += _band_section(summary)
     lines += _limits_section(summary)
     lines += _sweep_section(summary)
     failed = [r for r in summary["runs"] if "error" in r]

@@ -72,6 +72,9 @@ SUMMARY_METRICS = (
     "frames_rejected",
 )
 
+#: ... and those of a hybrid estimator's run: every metric whose name starts so.
+BAND_METRIC_PREFIXES = ("band_", "handover_")
+
 
 class Job(Protocol):
     @property
@@ -368,6 +371,8 @@ def run_record(job: RunJob, res: dict[str, Any], out_dir: Path) -> dict[str, Any
     else:
         m = res["metrics"]
         rec["metrics"] = {k: m[k] for k in SUMMARY_METRICS if k in m}
+        # a hybrid estimator's per-band figures and hand-overs (bench.runs._metrics.band_metrics)
+        rec["metrics"].update({k: v for k, v in m.items() if k.startswith(BAND_METRIC_PREFIXES)})
         rec.update(run_extras(job.run_dir / "signals.csv", scn))
         if res.get("gains"):
             rec["gains"] = res["gains"]
