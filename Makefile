@@ -41,8 +41,10 @@ suite: $(STAMP)
 	$(BIN)/bench suite paper --out docs/results
 	$(BIN)/bench suite report docs/results --readme README.md
 
+# Benchmarks: docs/perf/perf.json, and docs/BENCHMARKS.md and the README's
+# perf block rendered from it (a few minutes).
 perf: $(STAMP)
-	$(BIN)/bench perf --out docs/perf
+	$(BIN)/bench perf --out docs/perf --doc docs/BENCHMARKS.md --readme README.md
 
 rtcheck: $(STAMP)
 	$(BIN)/bench rtcheck --out docs/realtime --doc docs/REALTIME.md

@@ -1,10 +1,37 @@
-"""``bench perf --quick`` runs and writes a complete perf.json (no timing assertion)."""
+"""``bench perf``: the quick run writes every figure, and the docs are renderings of perf.json.
 
+No timing is asserted: the figures are benchmarks, judged in the page they
+render, never in a test.
+"""
+
+from __future__ import annotations
+
+import copy
 import json
 import math
 from pathlib import Path
+from typing import Any
+
+import pytest
 
 from bench.cli import main
+from bench.studies._perf import (
+    _DOC_BUSLOAD,
+    _DOC_DEFINITIONS,
+    _DOC_HEAD,
+    README_BEGIN,
+    README_END,
+    TARGET_LIST,
+    late_figures,
+    render_benchmarks,
+    render_readme_block,
+    update_readme,
+    verdicts,
+)
+from plant_rt import compiled_engine_missing
+
+ROOT = Path(__file__).resolve().parent.parent
+RATES = ("1kHz", "4kHz", "10kHz")
 
 
 def _numbers(x: object) -> list[float]:
@@ -19,32 +46,133 @@ def _numbers(x: object) -> list[float]:
     return []
 
 
-def test_perf_quick_writes_every_section(tmp_path: Path, capsys) -> None:
-    assert main(["perf", "--quick", "--out", str(tmp_path)]) == 0
+def _committed() -> dict[str, Any]:
+    return json.loads((ROOT / "docs" / "perf" / "perf.json").read_text())
+
+
+def test_perf_quick_writes_every_figure_and_renders_the_docs(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    doc = tmp_path / "BENCHMARKS.md"
+    readme = tmp_path / "README.md"
+    readme.write_text(f"# x\n\n## Performance\n\n{README_BEGIN}\nold\n{README_END}\n\nafter\n")
+    argv = ["perf", "--quick", "--out", str(tmp_path), "--doc", str(doc), "--readme", str(readme)]
+    assert main(argv) == 0
     res = json.loads((tmp_path / "perf.json").read_text())
-    for section in ("inprocess", "lockstep", "realtime", "codec", "busload", "verdicts"):
-        assert res[section], section
-    for est in ("sfhf", "tt-ab", "tt-dq", "square-wave", "square-wave-nocic", "sensored"):
-        assert res["inprocess"][est]["us_per_step"] > 0
-    assert set(res["realtime"]) == {"1kHz", "4kHz", "10kHz"}
+    # the keys scripts read
+    assert res["inprocess"]["rtf_10khz_tt_dq"] > 0
     assert res["lockstep"]["steps_per_s"] > 0
+    for name in RATES:
+        assert res["realtime_fifo"][name]["overrun_pct"] >= 0
+        assert res["realtime_fifo"][name]["busy_us_median"] > 0
+    assert res["codec"]["analyze_frames"] >= 20_000
     assert res["codec"]["analyze_frames_per_s"] > 0
-    assert len(res["busload"]) >= 4
-    nums = [v for s in ("inprocess", "lockstep", "codec", "busload") for v in _numbers(res[s])]
+    # both engines (the compiled one where it is built), in the same run
+    eng = res["engines"]["measured"]
+    assert eng == ["python"] + ([] if compiled_engine_missing() else ["compiled"])
+    inp = res["inprocess"]
+    for key in ("tt_dq_10khz", "switching_10khz"):
+        for e in eng:
+            assert inp[key][e]["us_per_step"] > 0 and inp[key][e]["rtf"] > 0
+        if "compiled" in eng:
+            ratio = inp[key]["python"]["us_per_step"] / inp[key]["compiled"]["us_per_step"]
+            assert inp[key]["compiled_over_python"] == pytest.approx(ratio)
+    for model in ("average", "switching"):
+        a = inp["alone_us_per_period"][model]
+        assert all(a[e] > 0 for e in eng)
+    assert inp["alone_us_per_period"]["controller_tt_dq_us"] > 0
+    for e in eng:
+        n = inp["plant_node_10khz"][e]
+        assert n["us_p99"] >= n["us_p50"] > 0
+    for est in ("sfhf", "tt-ab", "tt-dq", "square-wave", "square-wave-nocic", "sensored"):
+        assert inp[est]["us_per_step"] > 0
+    nums = [
+        v
+        for s in ("inprocess", "lockstep", "codec", "busload", "transport_send_us")
+        for v in _numbers(res[s])
+    ]
     assert all(math.isfinite(v) and v > 0 for v in nums)
-    assert set(res["realtime_fifo"]) == {"1kHz", "4kHz", "10kHz"}
+    assert len(res["busload"]) >= 4
+    # real time: the stall figures beside the late periods, and the sum they make
     for sec in ("realtime", "realtime_fifo"):
-        for name in ("1kHz", "4kHz", "10kHz"):
+        assert set(res[sec]) == set(RATES)
+        for name in RATES:
             r = res[sec][name]
             assert (
                 r["steps"] > 0
-                and r["overrun_pct"] >= 0
                 and r["jitter_us_max"] >= r["jitter_us_median"]
                 and r["busy_us_p99"] >= r["busy_us_median"] > 0
             )
             assert r["policy"] in ("normal", "fifo")
-        assert all(r["policy"] == "normal" for r in res["realtime"].values())
+            for k in ("host_stalls", "host_stall_ms_total", "host_stall_ms_max", "periods_skipped"):
+                assert r[k] >= 0
+            assert r["host_stall_ms_total"] >= r["host_stall_ms_max"]
+            assert (
+                r["missed_pct"]
+                >= r["overrun_pct"] * r["steps"] / (r["steps"] + r["periods_skipped"]) - 1e-9
+            )
+    assert all(r["policy"] == "normal" for r in res["realtime"].values())
+    assert set(res["verdicts"]) == {t.key for t in TARGET_LIST}
     for v in res["verdicts"].values():
-        assert v["config"]
+        assert v["config"] and isinstance(v["met"], bool)
     out = capsys.readouterr().out
     assert "targets:" in out and "perf.json" in out
+    # the page and the README block are the renderings of that perf.json
+    page = doc.read_text()
+    assert page == render_benchmarks(res)
+    for t in TARGET_LIST:
+        assert t.figure in page
+    text = readme.read_text()
+    assert "old" not in text and text.endswith("after\n")
+    assert render_readme_block(res) in text
+    # --from-json renders the same page without measuring
+    doc2 = tmp_path / "again.md"
+    assert main(["perf", "--from-json", str(tmp_path / "perf.json"), "--doc", str(doc2)]) == 0
+    assert doc2.read_text() == page
+
+
+def test_the_committed_benchmarks_page_is_the_committed_perf_json() -> None:
+    res = _committed()
+    assert (ROOT / "docs" / "BENCHMARKS.md").read_text() == render_benchmarks(res)
+
+
+def test_the_readme_block_is_the_committed_perf_json() -> None:
+    res = _committed()
+    readme = (ROOT / "README.md").read_text()
+    assert render_readme_block(res) in readme
+    assert update_readme(readme, res) == readme
+
+
+def test_the_committed_verdicts_follow_the_targets() -> None:
+    res = _committed()
+    assert res["verdicts"] == verdicts(res)
+    assert res["targets"] == {t.key: t.value for t in TARGET_LIST}
+
+
+def test_the_hand_written_text_holds_no_figure() -> None:
+    for text in (_DOC_HEAD, _DOC_DEFINITIONS, _DOC_BUSLOAD):
+        assert not any(ch.isdigit() for ch in text), text
+
+
+def test_a_missed_target_is_explained_and_a_met_one_is_not() -> None:
+    res = copy.deepcopy(_committed())
+    fifo10 = res["realtime_fifo"]["10kHz"]
+    fifo10.update(missed_pct=50.0, busy_us_median=150.0, host_stalls=3.0)
+    res["verdicts"] = verdicts(res)
+    assert not res["verdicts"]["realtime_missed_pct_10khz_fifo"]["met"]
+    page = render_benchmarks(res)
+    assert "**Real time, 10 kHz with `--rt-priority`.** 50.0 % of the periods" in page
+    assert "exceeds the 100 us period" in page  # the computation, not the host
+    fifo10.update(missed_pct=1.0)
+    res["verdicts"] = verdicts(res)
+    assert res["verdicts"]["realtime_missed_pct_10khz_fifo"]["met"]
+    assert "**Real time, 10 kHz with `--rt-priority`.**" not in render_benchmarks(res)
+
+
+def test_late_figures_count_skipped_periods_as_missed() -> None:
+    # 1,000 periods computed, 13 late of which 2 ended a host stall; the stalls skipped 40
+    f = late_figures(1000, 13, 2, 40)
+    assert f["overrun_pct"] == pytest.approx(1.3)
+    assert f["missed_pct"] == pytest.approx(100.0 * 53 / 1040)
+    assert f["late_outside_stalls_pct"] == pytest.approx(1.1)
+    assert late_figures(500, 0, 0, 0)["missed_pct"] == 0.0

@@ -1,28 +1,38 @@
 """``bench perf``: how fast the bench does its job, measured in one run.
 
-Five sections, each a median of several repeats inside this one process
-(timings on shared machines are noisy: compare ratios within a run, never
+Sections, each figure a median of several repeats inside this one process
+(timings on a shared machine are noisy: compare ratios within a run, never
 single absolute numbers across runs):
 
-1. in-process closed loop (plant + controller, no CAN): microseconds per PWM
-   step per estimator and the real-time factor at 10 kHz;
-2. two processes in lockstep over the CAN transport: steps per second,
-   real-time factor at 10 kHz, and the round trip sample -> duty on the bus;
+1. in-process (no CAN), on both plant engines (``python`` and ``compiled``,
+   :mod:`plant_rt._engine`) in the same run: the closed loop plant + tt-dq
+   controller at 10 kHz with the scenario's average-model plant and with the
+   switching plant of the ``drive`` profile, the plant alone per period, the
+   controller alone per step, and the plant node's computation per period
+   (the plant step and its frames encoded); every estimator's loop on the
+   default engine;
+2. two processes in lockstep over the CAN transport: periods per second and
+   the round trip sample -> duty on the bus;
 3. real-time mode at 1, 4 and 10 kHz, with normal scheduling and under
-   ``SCHED_FIFO``: deadline-overrun rate, wake-up jitter and the plant's
-   computation time per period;
-4. the DBC codec: microseconds per encode and per decode, and the
-   throughput of the capture analysis in frames per second;
-5. the bus-load table: the highest PWM rate that fits the shipped DBC on
-   classic CAN at 500 kbit/s and 1 Mbit/s and on CAN FD.
+   ``SCHED_FIFO`` (``--rt-priority``): late periods, the host stalls apart
+   (number, total, longest, periods skipped; :class:`plant_rt.RealTimeClock`),
+   wake-up lateness and the plant's computation per period;
+4. the codec (the hot path compiled from the DBC and cantools' own) and
+   ``bench analyze`` on a capture of at least 200,000 frames, written once
+   with python-can from a scenario run in-process;
+5. the bus-load table: the highest PWM rate the shipped DBC fits on real buses.
 
-Each target is printed with "met" or "MISSED"; for a missed in-process
-target the profile's top entries say where the time goes.
+Every figure goes to ``perf.json``; :data:`TARGETS` (issue 14) are judged in
+``verdicts``.  ``docs/BENCHMARKS.md`` is rendered from ``perf.json`` alone
+(:func:`render_benchmarks`, no figure typed by hand), and so is the block of
+the README's Performance section (:func:`render_readme_block`);
+``tests/test_perf.py`` checks that the committed files agree.
 """
 
 from __future__ import annotations
 
 import cProfile
+import functools
 import io
 import json
 import math
@@ -32,80 +42,376 @@ import pstats
 import statistics
 import tempfile
 import time
-from dataclasses import replace
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
-TARGETS = {
-    "inprocess_rtf_10khz": 10.0,
-    "lockstep_rtf_10khz": 1.0,
-    "realtime_overrun_pct_1khz": 0.1,
-    "realtime_overrun_pct_4khz": 1.0,
-    "analyze_frames_per_s": 200_000.0,
-}
 #: SCHED_FIFO priority of the plant in the real-time section (controller one below).
 RT_PRIORITY = 80
+#: Fewest frames of the capture ``bench analyze`` is timed on (full run).
+ANALYZE_MIN_FRAMES = 200_000
+#: PWM rate of the 10 kHz figures.
+F_10KHZ = 10e3
+#: Speed reference of the in-process loops (rpm), and the periods run before timing.
+SPEED_REF_RPM = 100.0
+SETTLE_STEPS = 2000
 
 
-def _median_of(fn: Any, repeats: int) -> float:
+@dataclass(frozen=True, slots=True)
+class Target:
+    """One target of issue 14, judged on one figure of ``perf.json``.
+
+    Parameters
+    ----------
+    key : str
+        Name in ``perf.json``'s ``targets`` and ``verdicts``.
+    figure : str
+        What is measured (one table cell).
+    at_least : bool
+        True: the figure must be at least ``value``; False: at most.
+    value : float
+        The target, in ``unit``.
+    unit : str
+        Unit of the figure and the target as printed.
+    """
+
+    key: str
+    figure: str
+    at_least: bool
+    value: float
+    unit: str
+
+
+#: The targets of issue 14, in its order.
+TARGET_LIST = (
+    Target(
+        "inprocess_rtf_10khz_tt_dq",
+        "in-process closed loop, tt-dq, 10 kHz",
+        True,
+        30.0,
+        "x real time",
+    ),
+    Target(
+        "inprocess_compiled_over_python_tt_dq",
+        "the same, compiled engine against the pure-Python engine",
+        True,
+        10.0,
+        "x",
+    ),
+    Target(
+        "switching_rtf_10khz",
+        "the switching inverter (drive profile), in-process, tt-dq, 10 kHz",
+        True,
+        10.0,
+        "x real time",
+    ),
+    Target(
+        "lockstep_periods_per_s",
+        "two processes in lockstep over the default transport",
+        True,
+        4000.0,
+        "periods/s",
+    ),
+    Target(
+        "plant_node_us_p50_10khz",
+        "plant node computation per period at 10 kHz, p50 (real-time run)",
+        False,
+        40.0,
+        "us",
+    ),
+    Target(
+        "realtime_missed_pct_4khz_fifo",
+        "real time with `--rt-priority`, 4 kHz: periods missed",
+        False,
+        1.0,
+        "%",
+    ),
+    Target(
+        "realtime_missed_pct_10khz_fifo",
+        "real time with `--rt-priority`, 10 kHz: periods missed",
+        False,
+        5.0,
+        "%",
+    ),
+    Target(
+        "realtime_missed_pct_1khz_normal",
+        "real time, 1 kHz, normal scheduling: periods missed",
+        False,
+        0.1,
+        "%",
+    ),
+    Target(
+        "analyze_frames_per_s",
+        f"`bench analyze` on a capture of at least {ANALYZE_MIN_FRAMES:,} frames: "
+        "decoding it into the per-period table",
+        True,
+        1e6,
+        "frames/s",
+    ),
+    Target(
+        "analyze_end_to_end_frames_per_s",
+        "the same, the whole command: reading the file, decoding, metrics, signals.csv (no plot)",
+        True,
+        1e6,
+        "frames/s",
+    ),
+)
+TARGETS = {t.key: t.value for t in TARGET_LIST}
+
+
+def _median_of(fn: Callable[[], float], repeats: int) -> float:
     return statistics.median(fn() for _ in range(repeats))
 
 
-def inprocess_loop(estimator: str, n_steps: int) -> float:
-    """Seconds per step of plant + controller in one process, no CAN."""
+def _medians_interleaved(fns: Mapping[str, Callable[[], float]], repeats: int) -> dict[str, float]:
+    """The median of ``repeats`` calls of each function, the calls taken in turn.
+
+    Taking them in turn (a, b, a, b, ...) exposes each to the same load of the
+    shared machine, so their ratio is fairer than from two blocks of runs.
+    """
+    got: dict[str, list[float]] = {k: [] for k in fns}
+    for _ in range(repeats):
+        for k, fn in fns.items():
+            got[k].append(fn())
+    return {k: statistics.median(v) for k, v in got.items()}
+
+
+def _quantile(xs: list[float], q: float) -> float:
+    """``q``-quantile of a sorted, non-empty list (nearest rank)."""
+    return xs[min(len(xs) - 1, int(q * (len(xs) - 1) + 0.5))]
+
+
+def engines() -> tuple[str, ...]:
+    """The plant engines this machine has: ``python``, and ``compiled`` when it is built."""
+    from plant_rt import compiled_engine_missing
+
+    return ("python",) if compiled_engine_missing() else ("python", "compiled")
+
+
+# -- 1. in-process ------------------------------------------------------------------------
+
+
+def _loop_scenario(estimator: str, profile: str = "ideal") -> Any:
     from bench.scenarios._schema import load_scenario
+
+    scn = load_scenario("xue-fig13" if estimator.startswith("square") else "wen-5.1")
+    return scn if profile == scn.plant_profile else replace(scn, plant_profile=profile)
+
+
+Duty = tuple[float, float, float, bool]
+
+
+def _closed_loop(
+    estimator: str, engine: str, profile: str
+) -> tuple[Callable[[int, bool], None], list[Any], list[Duty]]:
+    """``run(n, record)``: a fresh plant and controller stepped ``n`` periods in a closed loop.
+
+    With ``record``, each period's measurement and applied duty are appended
+    to the two lists returned (the plant-alone and controller-alone figures).
+    """
     from bench.scenarios._setup import build_controller, build_plant
     from controller import Measurement
 
-    scn = load_scenario("xue-fig13" if estimator.startswith("square") else "wen-5.1")
-    plant = build_plant(scn)
+    scn = _loop_scenario(estimator, profile)
+    plant = build_plant(scn, engine)
     ctrl = build_controller(scn, estimator)
     ctrl.set_enable(True)
-    ctrl.set_speed_ref(100.0 * 2.0 * math.pi / 60.0)
+    ctrl.set_speed_ref(SPEED_REF_RPM * 2.0 * math.pi / 60.0)
     truth = estimator == "sensored"
-    d = (0.5, 0.5, 0.5, False)
+    meas: list[Any] = []
+    duties: list[Duty] = []
+    d: Duty = (0.5, 0.5, 0.5, False)
 
-    def run(n: int) -> None:
+    def run(n: int, record: bool) -> None:
         nonlocal d
         for _ in range(n):
             s = plant.sample()
             tr = plant.truth() if truth else None
-            o = ctrl.step(
-                Measurement(
-                    s.k,
-                    s.i_a,
-                    s.i_b,
-                    s.i_c,
-                    s.u_dc,
-                    tr.theta_e if tr else None,
-                    tr.w_e if tr else None,
-                )
+            m = Measurement(
+                s.k,
+                s.i_a,
+                s.i_b,
+                s.i_c,
+                s.u_dc,
+                tr.theta_e if tr else None,
+                tr.w_e if tr else None,
             )
+            o = ctrl.step(m)
             plant.step(*d)
+            if record:
+                meas.append(m)
+                duties.append(d)
             d = (o.d_a, o.d_b, o.d_c, o.enable)
 
-    run(2000)  # settle past the start-up first (not timed)
+    return run, meas, duties
+
+
+def inprocess_loop(
+    estimator: str, n_steps: int, engine: str = "auto", profile: str = "ideal"
+) -> float:
+    """Seconds per step of plant + controller in one process, no CAN.
+
+    The scenario's plant (``wen-5.1``, or ``xue-fig13`` for the square-wave
+    estimators) with plant profile ``profile`` on ``engine``; the controller
+    runs at :data:`SPEED_REF_RPM`; the first :data:`SETTLE_STEPS` periods (the
+    start-up) are not timed.
+    """
+    run, _, _ = _closed_loop(estimator, engine, profile)
+    run(SETTLE_STEPS, False)
     t0 = time.perf_counter()
-    run(n_steps)
+    run(n_steps, False)
     return (time.perf_counter() - t0) / n_steps
 
 
+def plant_and_controller_alone(profile: str, n_steps: int, repeats: int) -> dict[str, float]:
+    """Seconds per period of the plant alone (each engine) and of the tt-dq controller alone.
+
+    One closed loop (``wen-5.1``'s motor at 10 kHz, tt-dq) is recorded once;
+    the plant alone is a fresh plant fed the recorded duties (``sample()`` and
+    ``step()``), the controller alone a fresh controller fed the recorded
+    measurements.  Both engines give the same trace bit for bit, so each does
+    exactly its work inside the loop, without the other; the start-up's
+    periods are replayed too but not timed.
+    """
+    from bench.scenarios._setup import build_controller, build_plant
+
+    eng = engines()
+    run, meas, duties = _closed_loop("tt-dq", eng[-1], profile)
+    run(SETTLE_STEPS + n_steps, True)
+    scn = _loop_scenario("tt-dq", profile)
+
+    def plant_alone(e: str) -> float:
+        p = build_plant(scn, e)
+        for d in duties[:SETTLE_STEPS]:
+            p.sample()
+            p.step(*d)
+        t0 = time.perf_counter()
+        for d in duties[SETTLE_STEPS:]:
+            p.sample()
+            p.step(*d)
+        return (time.perf_counter() - t0) / n_steps
+
+    fns = {f"plant_{e}": functools.partial(plant_alone, e) for e in eng}
+    out = _medians_interleaved(fns, repeats)
+
+    def ctrl_alone() -> float:
+        ctrl = build_controller(scn, "tt-dq")
+        ctrl.set_enable(True)
+        ctrl.set_speed_ref(SPEED_REF_RPM * 2.0 * math.pi / 60.0)
+        for m in meas[:SETTLE_STEPS]:
+            ctrl.step(m)
+        t0 = time.perf_counter()
+        for m in meas[SETTLE_STEPS:]:
+            ctrl.step(m)
+        return (time.perf_counter() - t0) / n_steps
+
+    out["controller"] = _median_of(ctrl_alone, repeats)
+    return out
+
+
+def plant_node_compute(engine: str, periods: int, repeats: int) -> dict[str, float]:
+    """The plant node's computation per period in-process (s): p50 and p99, medians of runs.
+
+    ``wen-5.1`` with tt-dq through :func:`bench.nodes._loops.run_inprocess`:
+    the plant's step and its frames encoded, as ``bench rtcheck`` measures it;
+    the first tenth of the periods (the start-up) is left out.
+    """
+    from bench.nodes._loops import run_inprocess
+    from bench.scenarios._schema import load_scenario
+    from bench.scenarios._setup import sample_period
+    from bench.wire._codec import Codec
+
+    scn = load_scenario("wen-5.1")
+    scn = scn.with_overrides(duration=periods * sample_period(scn))
+    codec = Codec()
+    p50: list[float] = []
+    p99: list[float] = []
+    for _ in range(repeats):
+        times: list[float] = []
+        run_inprocess(scn, "tt-dq", codec, plant_times=times, engine=engine)
+        times = sorted(times[len(times) // 10 :])
+        p50.append(_quantile(times, 0.5))
+        p99.append(_quantile(times, 0.99))
+    return {"p50": statistics.median(p50), "p99": statistics.median(p99)}
+
+
 def profile_inprocess(estimator: str, n_steps: int, top: int = 8) -> list[str]:
-    """The top entries (by own time) of a profile of the in-process loop."""
+    """The top entries (by own time) of a profile of the in-process loop (default engine).
+
+    Only the stepping is profiled (after the start-up), not building the plant
+    and the controller.
+    """
+    run, _, _ = _closed_loop(estimator, "auto", "ideal")
+    run(SETTLE_STEPS, False)
     pr = cProfile.Profile()
     pr.enable()
-    inprocess_loop(estimator, n_steps)
+    run(n_steps, False)
     pr.disable()
     buf = io.StringIO()
     st = pstats.Stats(pr, stream=buf)
     st.sort_stats("tottime").print_stats(top)
-    lines = [ln.rstrip() for ln in buf.getvalue().splitlines() if ln.strip()]
+    root = str(Path(__file__).resolve().parent.parent.parent) + os.sep
+    lines = [ln.rstrip().replace(root, "") for ln in buf.getvalue().splitlines() if ln.strip()]
     start = next((i for i, ln in enumerate(lines) if ln.lstrip().startswith("ncalls")), 0)
     return lines[start : start + top + 1]
 
 
-def lockstep_two_process(duration: float, out: Path) -> dict[str, float]:
-    """Two processes in lockstep over the default transport (sensored, 10 kHz)."""
+def _per_engine(sec: dict[str, float], f_sw: float) -> dict[str, Any]:
+    """Seconds per step on each engine -> us per step, real-time factor, compiled/python."""
+    out: dict[str, Any] = {
+        e: {"us_per_step": 1e6 * s, "rtf": 1.0 / (s * f_sw)} for e, s in sec.items()
+    }
+    if "compiled" in sec:
+        out["compiled_over_python"] = sec["python"] / sec["compiled"]
+    return out
+
+
+def inprocess_section(quick: bool, repeats: int, n_steps: int) -> dict[str, Any]:
+    """Section 1: every estimator on the default engine, and tt-dq on both engines."""
+    from controller._registry import ESTIMATOR_NAMES
+    from plant_rt import resolve_engine
+
+    eng = engines()
+    inproc: dict[str, Any] = {"engine_default": resolve_engine("auto")}
+    for est in ESTIMATOR_NAMES:
+        sec = _median_of(functools.partial(inprocess_loop, est, n_steps), repeats)
+        f = 1e3 if est.startswith("square") else F_10KHZ
+        inproc[est] = {"us_per_step": 1e6 * sec, "f_sw": f, "rtf": 1.0 / (sec * f)}
+    inproc["rtf_10khz_tt_dq"] = 1.0 / (inproc["tt-dq"]["us_per_step"] * 1e-6 * F_10KHZ)
+    for key, profile in (("tt_dq_10khz", "ideal"), ("switching_10khz", "drive")):
+        fns = {e: functools.partial(inprocess_loop, "tt-dq", n_steps, e, profile) for e in eng}
+        inproc[key] = _per_engine(_medians_interleaved(fns, repeats), F_10KHZ)
+    alone: dict[str, Any] = {}
+    for key, profile in (("average", "ideal"), ("switching", "drive")):
+        a = plant_and_controller_alone(profile, n_steps // 2, repeats)
+        row: dict[str, Any] = {e: 1e6 * a[f"plant_{e}"] for e in eng}
+        if "compiled" in eng:
+            row["compiled_over_python"] = a["plant_python"] / a["plant_compiled"]
+        alone[key] = row
+        if profile == "ideal":
+            alone["controller_tt_dq_us"] = 1e6 * a["controller"]
+    inproc["alone_us_per_period"] = alone
+    periods = 1000 if quick else 4000
+    node = {}
+    for e in eng:
+        r = plant_node_compute(e, periods, repeats)
+        node[e] = {"us_p50": 1e6 * r["p50"], "us_p99": 1e6 * r["p99"]}
+    inproc["plant_node_10khz"] = node
+    return inproc
+
+
+# -- 2. lockstep ----------------------------------------------------------------------------
+
+
+def lockstep_two_process(duration: float, out: Path) -> dict[str, Any]:
+    """Two processes in lockstep over the default transport (sensored, 10 kHz).
+
+    ``steps_per_s``: periods per second of the plant's stepping loop (from the
+    start command to the last period); ``wall_steps_per_s``: the same over the
+    whole ``bench run``, the processes' start and stop included.  ``rtt_us_*``:
+    the round trip from a period's sample to its duty, as the recorder saw them.
+    """
     import can
     import numpy as np
 
@@ -142,14 +448,44 @@ def lockstep_two_process(duration: float, out: Path) -> dict[str, float]:
             if k in t_s:
                 rtt.append(1e6 * (f.timestamp - t_s.pop(k)))
     arr = np.array(rtt) if rtt else np.array([math.nan])
-    steps_per_s = m["steps"] / m["wall_s"]
+    plant_r = res.meta.get("node_reports", {}).get("plant", {}) or {}
+    loop_s = float(plant_r.get("loop_s") or m["wall_s"])
+    steps_per_s = m["steps"] / loop_s
     return {
         "transport": f"{iface}",
+        "engine": str(res.meta.get("engine") or "?"),
         "steps_per_s": steps_per_s,
-        "rtf_10khz": steps_per_s / 10e3,
+        "wall_steps_per_s": m["steps"] / m["wall_s"],
+        "rtf_10khz": steps_per_s / F_10KHZ,
         "rtt_us_p50": float(np.percentile(arr, 50)),
         "rtt_us_p99": float(np.percentile(arr, 99)),
         "rtt_us_max": float(np.max(arr)),
+    }
+
+
+# -- 3. real time ---------------------------------------------------------------------------
+
+
+def late_figures(computed: int, late: int, stalls: int, skipped: int) -> dict[str, float]:
+    """A real-time run's late periods, in percent, from the plant clock's counters.
+
+    ``computed`` periods ran, ``late`` of them started after their deadline
+    (``overruns``, the wake-ups that ended a stall included), ``stalls`` host
+    stalls resynchronised the clock and skipped ``skipped`` periods.
+
+    - ``overrun_pct``: late periods of those computed;
+    - ``missed_pct``: late and skipped periods of those scheduled
+      (``computed + skipped``): every period not computed on time;
+    - ``late_outside_stalls_pct``: late periods other than the wake-ups that
+      ended a stall, of those computed: the bench's own lateness.
+    """
+    n = max(1, computed)
+    return {
+        "overrun_pct": 100.0 * late / n,
+        "missed_pct": 100.0 * (late + skipped) / (n + skipped),
+        "late_outside_stalls_pct": 100.0 * max(0, late - stalls) / n,
+        "host_stalls": float(stalls),
+        "periods_skipped": float(skipped),
     }
 
 
@@ -159,7 +495,12 @@ def realtime_run(
     """The plant on its wall clock at ``f_sw`` (sensored controller, default transport).
 
     ``priority``: run both nodes under ``SCHED_FIFO`` (``--rt-priority``);
-    the result's ``policy`` says what the system granted.
+    the result's ``policy`` says what the system granted.  ``overrun_pct``:
+    periods that started late, of the periods computed; ``missed_pct``: those
+    and the periods skipped by the clock's resynchronisations after host
+    stalls, of the periods scheduled (every period not computed on time);
+    ``late_outside_stalls_pct``: the late periods other than the wake-ups
+    that ended a stall, of the periods computed.
     """
     from bench.runs._run import run_scenario
     from bench.scenarios._schema import Profile, load_scenario
@@ -197,9 +538,17 @@ def realtime_run(
     jit = m.get("jitter_us") or {}
     return {
         "f_sw": f_sw,
+        "engine": str(res.meta.get("engine") or "?"),
         "steps": float(n),
-        "overrun_pct": 100.0 * m["deadline_misses"] / n,
+        **late_figures(
+            n,
+            int(m["deadline_misses"]),
+            int(m.get("host_stalls", 0)),
+            int(m.get("periods_skipped", 0)),
+        ),
         "late_duty_pct": 100.0 * m.get("late_duty_periods", 0) / n,
+        "host_stall_ms_total": float(m.get("host_stall_ms_total", 0.0)),
+        "host_stall_ms_max": float(m.get("host_stall_ms_max", 0.0)),
         "jitter_us_median": float(jit.get("median", math.nan)),
         "jitter_us_p99": float(jit.get("p99", math.nan)),
         "jitter_us_max": float(jit.get("max", math.nan)),
@@ -209,50 +558,109 @@ def realtime_run(
     }
 
 
-def codec_and_analysis(repeats: int, n_frames: int) -> dict[str, float]:
-    """Codec microseconds per frame and analysis throughput on a synthetic capture."""
-    from bench.nodes._loops import run_inprocess
-    from bench.runs._analysis import analyze_frames
-    from bench.scenarios._schema import Profile, load_scenario
+# -- 4. codec and analysis ------------------------------------------------------------------
+
+
+def codec_figures(repeats: int) -> dict[str, float]:
+    """Microseconds per frame: the codec's encode and decode, and cantools' own on the payload."""
     from bench.wire._codec import Codec
+    from bench.wire._hotcodec import compile_message
 
     codec = Codec()
     sig = {"i_a": 1.234, "i_b": -0.5, "u_dc": 540.0, "step": 17, "status": 1}
     msg = codec.encode("PhaseSamples", sig)
+    values = {**sig, "crc": 0}
+    message = codec.message("PhaseSamples")
+    hot = compile_message(message)
+    data = bytes(msg.data)
     n = 20000
 
-    def enc() -> float:
+    def per_call(fn: Callable[[], object]) -> float:
         t0 = time.perf_counter()
         for _ in range(n):
-            codec.encode("PhaseSamples", sig)
+            fn()
         return (time.perf_counter() - t0) / n
 
-    def dec() -> float:
-        t0 = time.perf_counter()
-        for _ in range(n):
-            codec.decode(msg)
-        return (time.perf_counter() - t0) / n
+    out = {
+        "encode_us": 1e6
+        * _median_of(lambda: per_call(lambda: codec.encode("PhaseSamples", sig)), repeats),
+        "decode_us": 1e6 * _median_of(lambda: per_call(lambda: codec.decode(msg)), repeats),
+        "cantools_pack_us": 1e6
+        * _median_of(lambda: per_call(lambda: message.encode(values, strict=False)), repeats),
+        "cantools_unpack_us": 1e6
+        * _median_of(
+            lambda: per_call(lambda: message.decode_simple(data, decode_choices=False)), repeats
+        ),
+    }
+    if hot is not None:
+        out["hot_pack_us"] = 1e6 * _median_of(lambda: per_call(lambda: hot.pack(values)), repeats)
+        out["hot_unpack_us"] = 1e6 * _median_of(lambda: per_call(lambda: hot.unpack(data)), repeats)
+    return out
 
+
+def analysis_figures(repeats: int, min_frames: int, folder: Path) -> dict[str, float]:
+    """``bench analyze`` on a capture of at least ``min_frames`` frames, built once.
+
+    The capture: ``wen-5.1`` with tt-dq run in-process (its frames exactly as
+    the nodes send them) long enough for ``min_frames`` frames, written as BLF
+    with python-can and a ``meta.json`` naming the scenario, as a run leaves
+    it.  Timed, medians of ``repeats``: reading the capture
+    (:func:`bench.captures._read.read_capture`), decoding the frames read into
+    the per-period table (:func:`bench.runs._analysis.analyze_frames`, the
+    figure of the target) and the whole ``bench analyze`` without the plot
+    (:func:`bench.captures._read.analyze_capture`: read, decode, metrics,
+    ``signals.csv``).
+    """
+    import can
+
+    from bench.captures._read import analyze_capture, read_capture
+    from bench.nodes._loops import run_inprocess
+    from bench.runs._analysis import analyze_frames
+    from bench.scenarios._schema import load_scenario
+    from bench.scenarios._setup import sample_period
+    from bench.wire._codec import Codec
+
+    codec = Codec()
     scn = load_scenario("wen-5.1")
-    steps = max(100, n_frames // 4)
-    scn = replace(
-        scn,
-        duration=steps * 1e-4,
-        score_from_s=0.0,
-        speed_rpm=Profile(((0.0, 0.0), (0.05, 100.0))),
-    )
-    frames = run_inprocess(scn, "sensored", codec)
+    T_s = sample_period(scn)
+    periods = math.ceil(1.02 * min_frames / 4)  # four frames a period, and some margin
+    scn = scn.with_overrides(duration=periods * T_s)
+    frames = run_inprocess(scn, "tt-dq", codec)
+    t0 = time.time()
+    for i, f in enumerate(frames):  # wire order, and the timestamps a recorder would give
+        f.timestamp = t0 + i * T_s / 4
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / "capture.blf"
+    with can.BLFWriter(str(path)) as w:
+        for f in frames:
+            w.on_message_received(f)
+    (folder / "meta.json").write_text(json.dumps({"scenario": scn.to_dict()}) + "\n")
 
-    def ana() -> float:
-        t0 = time.perf_counter()
-        analyze_frames(frames, codec, T_s=1e-4, n_p=4)
-        return len(frames) / (time.perf_counter() - t0)
+    read: list[Any] = []
 
+    def read_rate() -> float:
+        t = time.perf_counter()
+        got, _ = read_capture(path)
+        dt = time.perf_counter() - t
+        read[:] = got
+        return len(got) / dt
+
+    def analyze_rate() -> float:
+        t = time.perf_counter()
+        analyze_frames(read, codec, T_s=T_s, n_p=4)
+        return len(read) / (time.perf_counter() - t)
+
+    def whole_rate() -> float:
+        t = time.perf_counter()
+        analyze_capture(path, out_dir=folder / "out", codec=codec, echo=lambda s: None, plots=False)
+        return len(read) / (time.perf_counter() - t)
+
+    read_fps = _median_of(read_rate, repeats)
     return {
-        "encode_us": 1e6 * _median_of(enc, repeats),
-        "decode_us": 1e6 * _median_of(dec, repeats),
-        "analyze_frames": float(len(frames)),
-        "analyze_frames_per_s": _median_of(ana, repeats),
+        "analyze_frames": float(len(read)),
+        "analyze_frames_per_s": _median_of(analyze_rate, repeats),
+        "capture_read_frames_per_s": read_fps,
+        "analyze_end_to_end_frames_per_s": _median_of(whole_rate, repeats),
     }
 
 
@@ -264,10 +672,20 @@ def busload_limits() -> list[dict[str, Any]]:
     return [{k: r[k] for k in keep} for r in busload_table(Codec(), rates=[1e3])]
 
 
-def run_perf(out_dir: Path, *, quick: bool) -> dict[str, Any]:
-    """Measure everything; write ``perf.json`` into ``out_dir``; return the results."""
-    from controller._registry import ESTIMATOR_NAMES
+# -- the run ----------------------------------------------------------------------------------
 
+
+def run_perf(
+    out_dir: Path, *, quick: bool, echo: Callable[[str], None] | None = None
+) -> dict[str, Any]:
+    """Measure everything; write ``perf.json`` into ``out_dir``; return the results.
+
+    ``echo`` gets one line as each section starts (progress).
+    """
+    from plant_rt import compiled_engine_missing
+
+    say = echo or (lambda s: None)
+    t_start = time.perf_counter()
     out_dir.mkdir(parents=True, exist_ok=True)
     repeats = 3 if quick else 5
     n_steps = 2000 if quick else 20000
@@ -277,20 +695,21 @@ def run_perf(out_dir: Path, *, quick: bool) -> dict[str, Any]:
             "platform": platform.platform(),
             "python": platform.python_version(),
             "cpus": os.cpu_count(),
+            "loadavg_1min_start": os.getloadavg()[0],
         },
+        "engines": {"measured": list(engines()), "compiled_missing": compiled_engine_missing()},
         "targets": TARGETS,
     }
-    inproc: dict[str, Any] = {}
-    for est in ESTIMATOR_NAMES:
-        sec = _median_of(lambda est=est: inprocess_loop(est, n_steps), repeats)
-        f = 1e3 if est.startswith("square") else 10e3
-        inproc[est] = {"us_per_step": 1e6 * sec, "f_sw": f, "rtf": 1.0 / (sec * f)}
-    inproc["rtf_10khz_tt_dq"] = 1.0 / (inproc["tt-dq"]["us_per_step"] * 1e-6 * 10e3)
-    res["inprocess"] = inproc
-    if inproc["rtf_10khz_tt_dq"] < TARGETS["inprocess_rtf_10khz"]:
+    say("1. in-process loops, both engines")
+    res["inprocess"] = inprocess_section(quick, repeats, n_steps)
+    if res["inprocess"]["rtf_10khz_tt_dq"] < TARGETS["inprocess_rtf_10khz_tt_dq"]:
         res["inprocess_profile_tt_dq"] = profile_inprocess("tt-dq", n_steps)
     with tempfile.TemporaryDirectory() as tmp:
         tmpd = Path(tmp)
+        say("2. the transport's send cost, and two processes in lockstep")
+        from bench.studies._rtcheck import send_cost_us
+
+        res["transport_send_us"] = send_cost_us(500 if quick else 2000)
         runs = [
             lockstep_two_process(0.2 if quick else 1.0, tmpd / f"ls{i}")
             for i in range(1 if quick else 3)
@@ -306,90 +725,614 @@ def run_perf(out_dir: Path, *, quick: bool) -> dict[str, Any]:
         rt: dict[str, Any] = {}
         fifo: dict[str, Any] = {}
         for f in (1e3, 4e3, 10e3):
-            dur = (0.3 if quick else 2.0) * (1.0 if f <= 1e3 else 0.5)
+            dur = 0.3 if quick else {1e3: 5.0, 4e3: 3.0, 10e3: 2.0}[f]
             name = f"{f / 1e3:g}kHz"
+            say(f"3. real time at {name}, normal scheduling and SCHED_FIFO")
             rt[name] = realtime_run(f, dur, tmpd / f"rt{int(f)}")
             fifo[name] = realtime_run(f, dur, tmpd / f"rtf{int(f)}", priority=RT_PRIORITY)
         res["realtime"] = rt
         # the same with both nodes under SCHED_FIFO (bench run --rt-priority)
         res["realtime_fifo"] = fifo
-    res["codec"] = codec_and_analysis(repeats, 20000 if quick else 200000)
+        say("4. codec, and bench analyze on a large capture")
+        res["codec"] = {
+            **codec_figures(repeats),
+            **analysis_figures(3, 20_000 if quick else ANALYZE_MIN_FRAMES, tmpd / "analyze"),
+        }
     res["busload"] = busload_limits()
     res["verdicts"] = verdicts(res)
+    res["wall_s"] = time.perf_counter() - t_start
+    res["machine"]["loadavg_1min_end"] = os.getloadavg()[0]
     (out_dir / "perf.json").write_text(json.dumps(res, indent=2, default=float) + "\n")
     return res
 
 
-def _best_realtime(res: dict[str, Any], name: str) -> tuple[float, str]:
-    """Lowest overrun rate at ``name`` over the configurations the system granted."""
-    best = (res["realtime"][name]["overrun_pct"], "normal scheduling")
-    r = res.get("realtime_fifo", {}).get(name)
-    if r and r.get("policy") == "fifo" and r["overrun_pct"] < best[0]:
-        best = (r["overrun_pct"], f"--rt-priority {RT_PRIORITY}")
-    return best
+def _fastest(row: dict[str, Any]) -> tuple[str, dict[str, Any]]:
+    """The compiled engine's entry when it was measured, else the Python engine's."""
+    e = "compiled" if "compiled" in row else "python"
+    return e, row[e]
+
+
+def _fifo_config(res: dict[str, Any], name: str) -> str:
+    pol = res["realtime_fifo"][name].get("policy", "normal")
+    return f"--rt-priority {RT_PRIORITY}" + ("" if pol == "fifo" else " (refused: normal)")
 
 
 def verdicts(res: dict[str, Any]) -> dict[str, dict[str, Any]]:
-    """Each target against its figure (real time: the better granted configuration)."""
-    v: dict[str, tuple[float, str]] = {
-        "inprocess_rtf_10khz": (res["inprocess"]["rtf_10khz_tt_dq"], "tt-dq"),
-        "lockstep_rtf_10khz": (res["lockstep"]["rtf_10khz"], str(res["lockstep"]["transport"])),
-        "realtime_overrun_pct_1khz": _best_realtime(res, "1kHz"),
-        "realtime_overrun_pct_4khz": _best_realtime(res, "4kHz"),
-        "analyze_frames_per_s": (res["codec"]["analyze_frames_per_s"], "bench analyze"),
+    """Each target of :data:`TARGET_LIST` against its figure, and the configuration measured."""
+    inp = res["inprocess"]
+    e_loop, loop = _fastest(inp["tt_dq_10khz"])
+    e_sw, sw = _fastest(inp["switching_10khz"])
+    ls = res["lockstep"]
+    figures: dict[str, tuple[float, str]] = {
+        "inprocess_rtf_10khz_tt_dq": (loop["rtf"], f"{e_loop} engine"),
+        "inprocess_compiled_over_python_tt_dq": (
+            float(inp["tt_dq_10khz"].get("compiled_over_python", math.nan)),
+            "same run",
+        ),
+        "switching_rtf_10khz": (sw["rtf"], f"{e_sw} engine"),
+        "lockstep_periods_per_s": (ls["steps_per_s"], f"{ls['transport']}, {ls.get('engine')}"),
+        "plant_node_us_p50_10khz": (
+            res["realtime_fifo"]["10kHz"]["busy_us_median"],
+            _fifo_config(res, "10kHz"),
+        ),
+        "realtime_missed_pct_4khz_fifo": (
+            res["realtime_fifo"]["4kHz"]["missed_pct"],
+            _fifo_config(res, "4kHz"),
+        ),
+        "realtime_missed_pct_10khz_fifo": (
+            res["realtime_fifo"]["10kHz"]["missed_pct"],
+            _fifo_config(res, "10kHz"),
+        ),
+        "realtime_missed_pct_1khz_normal": (
+            res["realtime"]["1kHz"]["missed_pct"],
+            "normal scheduling",
+        ),
+        "analyze_frames_per_s": (
+            res["codec"]["analyze_frames_per_s"],
+            f"{res['codec']['analyze_frames']:,.0f} frames",
+        ),
+        "analyze_end_to_end_frames_per_s": (
+            res["codec"]["analyze_end_to_end_frames_per_s"],
+            f"{res['codec']['analyze_frames']:,.0f} frames, BLF",
+        ),
     }
     out = {}
-    for k, (val, how) in v.items():
-        tgt = TARGETS[k]
-        met = val <= tgt if "overrun" in k else val >= tgt
-        out[k] = {"value": val, "target": tgt, "met": bool(met), "config": how}
+    for t in TARGET_LIST:
+        val, how = figures[t.key]
+        met = val >= t.value if t.at_least else val <= t.value
+        out[t.key] = {"value": val, "target": t.value, "met": bool(met), "config": how}
     return out
 
 
-def format_perf(res: dict[str, Any]) -> str:
-    lines = ["1. in-process closed loop (plant + controller, no CAN)"]
-    for est, r in res["inprocess"].items():
-        if isinstance(r, dict):
-            lines.append(
-                f"   {est:<18} {r['us_per_step']:7.1f} us/step  real-time factor {r['rtf']:6.2f}x at {r['f_sw'] / 1e3:g} kHz"
+# -- text: the console, docs/BENCHMARKS.md and the README block --------------------------------
+
+
+def _num(v: float, unit: str = "") -> str:
+    """A figure as printed everywhere: three significant digits, thousands separated."""
+    if not math.isfinite(v):
+        return "n/a"
+    a = abs(v)
+    if a >= 1000:
+        s = f"{v:,.0f}"
+    elif a >= 100:
+        s = f"{v:.0f}"
+    elif a >= 10:
+        s = f"{v:.1f}"
+    elif a >= 1:
+        s = f"{v:.2f}"
+    else:
+        s = f"{v:.3f}" if a >= 0.01 or a == 0 else f"{v:.2g}"
+    if not unit:
+        return s
+    return s + unit if unit.startswith("x") else f"{s} {unit}"
+
+
+def _target_text(t: Target) -> str:
+    return f"{'>=' if t.at_least else '<='} {_num(t.value, t.unit)}"
+
+
+def _table(head: list[str], rows: list[list[str]]) -> list[str]:
+    return [
+        "| " + " | ".join(head) + " |",
+        "|" + "|".join("---" for _ in head) + "|",
+        *["| " + " | ".join(r) + " |" for r in rows],
+    ]
+
+
+def targets_table(res: dict[str, Any]) -> list[str]:
+    """Markdown rows: every target of issue 14 against its figure, met or missed."""
+    rows = []
+    for t in TARGET_LIST:
+        v = res["verdicts"][t.key]
+        rows.append(
+            [
+                t.figure,
+                _num(v["value"], t.unit),
+                _target_text(t),
+                "met" if v["met"] else "**missed**",
+                v["config"],
+            ]
+        )
+    return _table(["figure", "measured", "target", "", "measured with"], rows)
+
+
+def _engine_rows(res: dict[str, Any]) -> list[list[str]]:
+    inp = res["inprocess"]
+    eng = res["engines"]["measured"]
+
+    def row(label: str, vals: dict[str, float], unit: str, ratio: float | None) -> list[str]:
+        cells = [_num(vals[e], unit) if e in vals else "n/a" for e in ("python", "compiled")]
+        return [label, *cells, _num(ratio, "x") if ratio is not None else ""]
+
+    out = []
+    for key, label in (
+        ("tt_dq_10khz", "closed loop plant + tt-dq controller, average model, 10 kHz"),
+        ("switching_10khz", "closed loop plant + tt-dq controller, switching plant, 10 kHz"),
+    ):
+        r = inp[key]
+        us = {e: r[e]["us_per_step"] for e in eng}
+        rtf = {e: r[e]["rtf"] for e in eng}
+        ratio = r.get("compiled_over_python")
+        out.append([label + ": per step", *row("", us, "us", ratio)[1:]])
+        out.append([label + ": real-time factor", *row("", rtf, "x", None)[1:]])
+    alone = inp["alone_us_per_period"]
+    for key, label in (("average", "average model"), ("switching", "switching plant")):
+        a = alone[key]
+        out.append(
+            row(
+                f"plant alone per period, {label}",
+                {e: a[e] for e in eng},
+                "us",
+                a.get("compiled_over_python"),
             )
+        )
+    node = inp["plant_node_10khz"]
+    out.append(
+        row(
+            "plant node per period, in-process, 10 kHz: p50 (step and frames encoded)",
+            {e: node[e]["us_p50"] for e in eng},
+            "us",
+            None,
+        )
+    )
+    out.append(
+        row("the same, p99", {e: node[e]["us_p99"] for e in eng}, "us", None),
+    )
+    return out
+
+
+def figures_sections(res: dict[str, Any]) -> list[str]:
+    """The Markdown of every figure of ``perf.json``, by section."""
+    inp = res["inprocess"]
+    lines = ["### 1. In-process (no CAN)", ""]
+    lines += _table(
+        ["figure", "python engine", "compiled engine", "compiled / python"], _engine_rows(res)
+    )
+    lines += [
+        "",
+        "| the tt-dq controller alone per step (Python, the same on both engines) | "
+        + _num(inp["alone_us_per_period"]["controller_tt_dq_us"], "us")
+        + " |",
+        "|---|---|",
+        "",
+        f"Every estimator's closed loop on the default engine ({inp['engine_default']}):",
+        "",
+    ]
+    rows = [
+        [est, _num(r["us_per_step"], "us"), _num(r["f_sw"] / 1e3, "kHz"), _num(r["rtf"], "x")]
+        for est, r in inp.items()
+        if isinstance(r, dict) and "f_sw" in r
+    ]
+    lines += _table(["estimator", "per step", "PWM rate", "real-time factor"], rows)
     ls = res["lockstep"]
     lines += [
-        f"2. two processes, lockstep over {ls['transport']}",
-        f"   {ls['steps_per_s']:8.0f} steps/s  real-time factor at 10 kHz {ls['rtf_10khz']:.2f}x",
-        f"   sample -> duty round trip on the bus: p50 {ls['rtt_us_p50']:.0f} us, p99 {ls['rtt_us_p99']:.0f} us, max {ls['rtt_us_max']:.0f} us",
-        "3. real-time mode (plant on its wall clock)",
+        "",
+        f"### 2. Two processes in lockstep over {ls['transport']} "
+        f"(plant engine {ls.get('engine')})",
+        "",
     ]
-    for label, sec in (("normal", res["realtime"]), ("fifo", res.get("realtime_fifo", {}))):
+    lines += _table(
+        [
+            "periods/s",
+            "the same over the whole run",
+            "real-time factor at 10 kHz",
+            "round trip p50",
+            "p99",
+            "max",
+            "sending one period's plant frames p50 / p99",
+        ],
+        [
+            [
+                _num(ls["steps_per_s"]),
+                _num(ls["wall_steps_per_s"]),
+                _num(ls["rtf_10khz"], "x"),
+                _num(ls["rtt_us_p50"], "us"),
+                _num(ls["rtt_us_p99"], "us"),
+                _num(ls["rtt_us_max"], "us"),
+                f"{_num(res['transport_send_us']['median'])} / "
+                f"{_num(res['transport_send_us']['p99'])} us",
+            ]
+        ],
+    )
+    lines += [
+        "",
+        "Periods/s: the plant's stepping loop, from the start command to its last period; "
+        "the whole run adds the processes' start and stop.",
+    ]
+    lines += ["", "### 3. Real time (plant on its wall clock, sensored controller)", ""]
+    rows = []
+    for label, sec in (("normal", res["realtime"]), ("SCHED_FIFO", res["realtime_fifo"])):
         for name, r in sec.items():
             got = r.get("policy", "normal")
-            tag = label if got == label else f"{label} refused, ran {got}"
-            lines.append(
-                f"   {name:>6} {tag:<8} overruns {r['overrun_pct']:6.2f} %  late duties {r['late_duty_pct']:6.2f} %  "
-                f"wake-up late p50/p99/max {r['jitter_us_median']:.0f}/{r['jitter_us_p99']:.0f}/{r['jitter_us_max']:.0f} us  "
-                f"compute p50/p99 {r.get('busy_us_median', math.nan):.0f}/{r.get('busy_us_p99', math.nan):.0f} us "
-                f"of {1e6 / r['f_sw']:.0f}"
+            tag = label if (got == "fifo") == (label == "SCHED_FIFO") else f"{label} refused"
+            rows.append(
+                [
+                    name,
+                    tag,
+                    _num(r["steps"]),
+                    _num(r["missed_pct"], "%"),
+                    _num(r["overrun_pct"], "%"),
+                    _num(r["late_outside_stalls_pct"], "%"),
+                    _num(r["late_duty_pct"], "%"),
+                    f"{r['host_stalls']:.0f} / {_num(r['host_stall_ms_total'], 'ms')} / "
+                    f"{_num(r['host_stall_ms_max'], 'ms')}"
+                    if r["host_stalls"]
+                    else "none",
+                    f"{r['periods_skipped']:,.0f}",
+                    f"{_num(r['jitter_us_median'])} / {_num(r['jitter_us_p99'])} / "
+                    f"{_num(r['jitter_us_max'])} us",
+                    f"{_num(r['busy_us_median'])} / {_num(r['busy_us_p99'])} of "
+                    f"{_num(1e6 / r['f_sw'])} us",
+                ]
             )
+    lines += _table(
+        [
+            "rate",
+            "scheduling",
+            "periods computed",
+            "missed (late or skipped)",
+            "late",
+            "late outside stalls",
+            "late duties",
+            "host stalls: n / total / longest",
+            "periods skipped",
+            "wake-up late p50 / p99 / max",
+            "computation p50 / p99",
+        ],
+        rows,
+    )
     c = res["codec"]
-    lines += [
-        "4. DBC codec and analysis",
-        f"   encode {c['encode_us']:.2f} us/frame, decode {c['decode_us']:.2f} us/frame, "
-        f"analyze {c['analyze_frames_per_s']:,.0f} frames/s ({c['analyze_frames']:.0f} frames)",
-        "5. bus load: highest PWM rate that fits (100 % / 80 % load, worst-case stuffing)",
+    lines += ["", "### 4. Codec and analysis", ""]
+    rows = [
+        ["codec encode, `PhaseSamples` (clip, pack, CRC, frame)", _num(c["encode_us"], "us/frame")],
+        [
+            "codec decode, `PhaseSamples` (unpack, CRC, range check)",
+            _num(c["decode_us"], "us/frame"),
+        ],
     ]
-    for r in res["busload"]:
-        if "max_rate_hz" in r:
-            lines.append(
-                f"   {r.get('layout', ''):<18} {r.get('bus', ''):<20} {r['max_rate_hz'] / 1e3:6.2f} kHz"
-                + f" / {r['max_rate_hz_practical'] / 1e3:.2f} kHz"
-            )
-    lines.append("targets:")
-    for k, v in res["verdicts"].items():
-        lines.append(
-            f"   {k:<28} {v['value']:>12.3f}  target {v['target']:>10g}  {'met' if v['met'] else 'MISSED'}"
-            f"  ({v['config']})"
+    if "hot_pack_us" in c:
+        rows += [
+            [
+                "payload pack: hot path / cantools",
+                f"{_num(c['hot_pack_us'])} / {_num(c['cantools_pack_us'])} us",
+            ],
+            [
+                "payload unpack: hot path / cantools",
+                f"{_num(c['hot_unpack_us'])} / {_num(c['cantools_unpack_us'])} us",
+            ],
+        ]
+    rows += [
+        ["capture analysed (BLF written with python-can)", _num(c["analyze_frames"], "frames")],
+        ["reading it (python-can's BLF reader)", _num(c["capture_read_frames_per_s"], "frames/s")],
+        [
+            "decoding it into the per-period table (`analyze_frames`)",
+            _num(c["analyze_frames_per_s"], "frames/s"),
+        ],
+        [
+            "`bench analyze` end to end (read, decode, metrics, CSV; no plot)",
+            _num(c["analyze_end_to_end_frames_per_s"], "frames/s"),
+        ],
+    ]
+    lines += _table(["figure", "measured"], rows)
+    lines += [
+        "",
+        "### 5. Bus load: highest PWM rate the shipped DBC fits (worst-case stuffing)",
+        "",
+    ]
+    rows = [
+        [
+            r["layout"],
+            r["bus"],
+            _num(r["period_us_max"], "us"),
+            _num(r["max_rate_hz"] / 1e3, "kHz"),
+            _num(r["max_rate_hz_practical"] / 1e3, "kHz"),
+        ]
+        for r in res["busload"]
+    ]
+    lines += _table(
+        ["frames every period", "bus", "wire time per period", "at 100 % load", "at 80 % load"],
+        rows,
+    )
+    return lines
+
+
+def _missed_reasons(res: dict[str, Any]) -> list[str]:
+    """One paragraph per missed target: what limits it, every number from ``res``."""
+    v = res["verdicts"]
+    inp = res["inprocess"]
+    out: list[str] = []
+    alone = inp["alone_us_per_period"]
+    e_loop, loop = _fastest(inp["tt_dq_10khz"])
+    ctrl_us = alone["controller_tt_dq_us"]
+    plant_us = alone["average"].get(e_loop, math.nan)
+    if not v["inprocess_rtf_10khz_tt_dq"]["met"]:
+        need = 1e6 / (F_10KHZ * TARGETS["inprocess_rtf_10khz_tt_dq"])
+        out.append(
+            f"- **In-process closed loop.** The target asks for at most {_num(need, 'us')} per "
+            f"step; the loop takes {_num(loop['us_per_step'], 'us')} on the {e_loop} engine. "
+            f"The plant alone takes {_num(plant_us, 'us')} per period there, the tt-dq "
+            f"controller alone {_num(ctrl_us, 'us')} per step: the controller is Python "
+            "(Clarke and Park, three PIs, the demodulator's filters, the PLL, SVPWM on "
+            "Python floats), and it alone is over the budget. Reaching the target needs the "
+            "controller's step compiled as the plant's is."
         )
-    if "inprocess_profile_tt_dq" in res:
-        lines.append("profile of the in-process tt-dq loop (top by own time):")
-        lines += ["   " + ln for ln in res["inprocess_profile_tt_dq"]]
-    return "\n".join(lines)
+    if not v["inprocess_compiled_over_python_tt_dq"]["met"] and "compiled" in inp["tt_dq_10khz"]:
+        py = inp["tt_dq_10khz"]["python"]["us_per_step"]
+        out.append(
+            f"- **Compiled against Python.** The compiled engine speeds up the plant "
+            f"{_num(alone['average'].get('compiled_over_python', math.nan), 'x')}, but only "
+            "the plant: the controller's step is the same Python on both engines, so the "
+            f"loop's ratio is bounded by the Python loop ({_num(py, 'us')}) over the "
+            f"controller's step ({_num(ctrl_us, 'us')}), that is "
+            f"{_num(py / ctrl_us, 'x')} at most, short of the target whatever the plant costs."
+        )
+    if not v["switching_rtf_10khz"]["met"]:
+        e_sw, sw = _fastest(inp["switching_10khz"])
+        out.append(
+            f"- **Switching plant.** The loop takes {_num(sw['us_per_step'], 'us')} per step on "
+            f"the {e_sw} engine, of which the switching plant alone "
+            f"{_num(alone['switching'].get(e_sw, math.nan), 'us')} and the controller "
+            f"{_num(ctrl_us, 'us')}: the Python controller again."
+        )
+    ls = res["lockstep"]
+    if not v["lockstep_periods_per_s"]["met"]:
+        budget = 1e6 / TARGETS["lockstep_periods_per_s"]
+        e_n = "compiled" if "compiled" in inp["plant_node_10khz"] else "python"
+        nodes_us = inp["plant_node_10khz"][e_n]["us_p50"] + ctrl_us
+        text = (
+            f"- **Two-process lockstep.** The target leaves {_num(budget, 'us')} per period for "
+            f"everything; the sample -> duty round trip on the bus alone has a median of "
+            f"{_num(ls['rtt_us_p50'], 'us')}, of which the two nodes' computation in-process "
+            f"(the plant node's step and encoding, the controller's step) is about "
+            f"{_num(nodes_us, 'us')}. The rest is the transport: every period is one round "
+            f"trip through {ls['transport']} and python-can in both processes, and the "
+            "recorder, a third process, receives every frame too; the three share two cores."
+        )
+        if ls["transport"] == "udp_multicast":
+            text += (
+                " On udp_multicast each frame is packed with msgpack, sent on a socket, "
+                "and every process wakes from `select` and unpacks every frame of the bus, "
+                "its own included; SocketCAN (vcan or a real interface) spares a node its "
+                "own frames."
+            )
+        out.append(text)
+    fifo10 = res["realtime_fifo"]["10kHz"]
+    if not v["plant_node_us_p50_10khz"]["met"]:
+        node = inp["plant_node_10khz"]
+        e_n = "compiled" if "compiled" in node else "python"
+        out.append(
+            f"- **Plant node computation at 10 kHz.** In the real-time run the plant node "
+            f"takes {_num(fifo10['busy_us_median'], 'us')} per period (median, from its "
+            "wake-up to its next wait). In-process, without a bus, the same node's step and "
+            f"frame encoding take {_num(node[e_n]['us_p50'], 'us')} ({e_n} engine): the rest is "
+            "the transport, sending the period's frames and receiving and decoding every "
+            "frame on the bus through python-can; sending one period's two frames alone "
+            f"takes {_num(res['transport_send_us']['median'], 'us')} (median) on "
+            f"{ls['transport']}."
+        )
+    for key, sec, name, label in (
+        ("realtime_missed_pct_4khz_fifo", "realtime_fifo", "4kHz", "4 kHz with `--rt-priority`"),
+        ("realtime_missed_pct_10khz_fifo", "realtime_fifo", "10kHz", "10 kHz with `--rt-priority`"),
+        ("realtime_missed_pct_1khz_normal", "realtime", "1kHz", "1 kHz, normal scheduling"),
+    ):
+        if v[key]["met"]:
+            continue
+        r = res[sec][name]
+        T_us = 1e6 / r["f_sw"]
+        stalls = (
+            f"{r['host_stalls']:.0f} host stalls (longest {_num(r['host_stall_ms_max'], 'ms')}, "
+            f"{_num(r['host_stall_ms_total'], 'ms')} in all) skipped "
+            f"{r['periods_skipped']:,.0f} periods"
+            if r["host_stalls"]
+            else "there was no host stall"
+        )
+        text = (
+            f"- **Real time, {label}.** {_num(r['missed_pct'], '%')} of the periods were "
+            f"missed: {_num(r['late_outside_stalls_pct'], '%')} started late outside host "
+            f"stalls, and {stalls}. "
+        )
+        if r["host_stalls"] and r["late_outside_stalls_pct"] <= TARGETS[key]:
+            text += (
+                "Outside the stalls the plant kept the target: the host's stalls, counted "
+                "apart, are what misses it. "
+            )
+        if r["busy_us_median"] > T_us:
+            text += (
+                f"The plant's computation per period ({_num(r['busy_us_median'], 'us')} "
+                f"median) exceeds the {_num(T_us, 'us')} period: the plant falls behind its "
+                "clock by itself, and what the clock counts as stalls here is that backlog "
+                "reaching the stall threshold, not the host. The computation is mostly the "
+                "transport (see the plant node above)."
+            )
+        if ls["rtt_us_p50"] > T_us:
+            text += (
+                f" The controller's answer also missed its period in "
+                f"{_num(r['late_duty_pct'], '%')} of the periods: the sample -> duty round trip "
+                f"through the transport (median {_num(ls['rtt_us_p50'], 'us')} in lockstep) "
+                "is longer than the period."
+            )
+        elif r["busy_us_p99"] > T_us:
+            text += (
+                f"The plant's computation fits the {_num(T_us, 'us')} period at the median "
+                f"({_num(r['busy_us_median'], 'us')}) but not at the 99th percentile "
+                f"({_num(r['busy_us_p99'], 'us')}): every slow period makes the next late. "
+                "The computation is measured on the wall clock, so it includes the time the "
+                "plant was preempted: on this shared two-core virtual machine the controller, "
+                "the recorder and other work compete for the same cores"
+                + (
+                    ", and under normal scheduling any of them may run before the plant."
+                    if r.get("policy") != "fifo"
+                    else "."
+                )
+            )
+        else:
+            text += (
+                f"The plant's computation fits the {_num(T_us, 'us')} period "
+                f"({_num(r['busy_us_median'], 'us')} median, {_num(r['busy_us_p99'], 'us')} "
+                f"p99); the worst wake-up was {_num(r['jitter_us_max'] / 1e3, 'ms')} late: the "
+                "missed periods are the times this shared virtual machine did not run the "
+                "plant at its deadline (docs/REALTIME.md: a core of its own, `isolcpus`, "
+                "PREEMPT_RT)."
+            )
+        out.append(text)
+    c = res["codec"]
+    if not v["analyze_frames_per_s"]["met"]:
+        out.append(
+            f"- **Analysis, decoding.** Decoding the capture runs at "
+            f"{_num(c['analyze_frames_per_s'])} frames/s, vectorised with numpy over the "
+            "whole capture once the frames are in memory; what is left per frame is "
+            "reading each python-can message object's fields."
+        )
+    if not v["analyze_end_to_end_frames_per_s"]["met"]:
+        n = c["analyze_frames"]
+        t_all = n / c["analyze_end_to_end_frames_per_s"]
+        t_read = n / c["capture_read_frames_per_s"]
+        t_dec = n / c["analyze_frames_per_s"]
+        out.append(
+            f"- **Analysis, the whole command.** Of its {_num(t_all, 's')} on this capture, "
+            f"reading the BLF file takes {_num(t_read, 's')} (python-can's reader, "
+            f"{_num(c['capture_read_frames_per_s'])} frames/s: it inflates the file and "
+            "builds one Python message object per frame), decoding "
+            f"{_num(t_dec, 's')}, and the metrics and writing `signals.csv` and the JSON "
+            f"files the remaining {_num(max(0.0, t_all - t_read - t_dec), 's')}."
+            + (
+                " The reader alone is below the target: meeting it needs a BLF reader that "
+                "fills arrays instead of building message objects."
+                if c["capture_read_frames_per_s"] < TARGETS["analyze_end_to_end_frames_per_s"]
+                else ""
+            )
+        )
+    return out
+
+
+#: Text of docs/BENCHMARKS.md that is not a figure (it holds no number).
+_DOC_HEAD = """\
+# Benchmarks
+
+<!-- Written by `bench perf --doc` from docs/perf/perf.json: do not edit; rerun `make perf`.
+     tests/test_perf.py checks that this page is the rendering of that file. -->
+
+Produced by
+
+```sh
+make perf    # = .venv/bin/bench perf --out docs/perf --doc docs/BENCHMARKS.md --readme README.md
+```
+
+which measures everything in one run, writes [`docs/perf/perf.json`](perf/perf.json) and
+renders this page from it (every figure below comes from that file; `bench perf
+--from-json docs/perf/perf.json --doc docs/BENCHMARKS.md` renders it again without
+measuring).  `bench perf --quick` runs the same sections briefly; the tests use it and
+check only that every figure is there.  Each figure is a median of several runs inside
+the one process; the machine is shared, so timings vary between runs: compare the ratios
+measured in the same run.
+"""
+
+_DOC_DEFINITIONS = """\
+Real-time terms (`plant_rt/_clock.py`): a period is *late* when the plant woke up after
+its deadline; a wake-up later than the stall threshold is a *host stall*: the clock
+resynchronises instead of running the missed periods back to back, and those periods are
+*skipped* (never computed).  *Missed* counts every period not computed on time, late or
+skipped, of the periods scheduled: the targets are judged on it.  *Late outside stalls*
+leaves out the wake-ups that ended a stall: the bench's own lateness.  *Late duties*: the
+controller's answer missed its period.  *Computation*: the plant node's work per period,
+from its wake-up to its next wait (send the instant's frames, receive and decode
+everything on the bus, step the model, encode the next frames).
+"""
+
+_DOC_BUSLOAD = """\
+The bus load is the physical limit a real bus sets whatever the computer: the two-frame
+loop of a real drive on classic CAN fits the rate of the "control" rows, which is why the
+Xue scenarios at their low PWM rate are the ones to run against real hardware.
+"""
+
+
+def render_benchmarks(res: dict[str, Any]) -> str:
+    """``docs/BENCHMARKS.md``: every figure of ``perf.json``, the targets, what limits them."""
+    m = res["machine"]
+    missing = res["engines"].get("compiled_missing")
+    lines = [
+        _DOC_HEAD,
+        f"Machine of this run: {m['cpus']} cores, `{m['platform']}`, Python {m['python']}; "
+        f"transport {res['lockstep']['transport']}; plant engines measured: "
+        f"{', '.join(res['engines']['measured'])}"
+        + (f" ({missing})" if missing else "")
+        + f". The run took {_num(res.get('wall_s', math.nan) / 60.0, 'min')}; the machine's "
+        f"one-minute load average was {_num(m.get('loadavg_1min_start', math.nan))} at its "
+        f"start and {_num(m.get('loadavg_1min_end', math.nan))} at its end (this run's own "
+        "processes included)"
+        + (" (`--quick`: short runs, figures not comparable)." if res.get("quick") else "."),
+        "",
+        "## Targets (issue 14)",
+        "",
+        *targets_table(res),
+        "",
+        "## What limits the missed targets",
+        "",
+    ]
+    reasons = _missed_reasons(res)
+    lines += reasons if reasons else ["Every target is met in this run."]
+    lines += ["", "## All figures", "", _DOC_DEFINITIONS, *figures_sections(res), "", _DOC_BUSLOAD]
+    if res.get("inprocess_profile_tt_dq"):
+        lines += [
+            "## Profile of the in-process tt-dq loop (default engine, top entries by own time)",
+            "",
+            "```",
+            *res["inprocess_profile_tt_dq"],
+            "```",
+            "",
+        ]
+    return "\n".join(lines).rstrip() + "\n"
+
+
+#: The markers of the generated block in the README's Performance section.
+README_BEGIN = (
+    "<!-- perf:begin (written by bench perf --readme from docs/perf/perf.json; do not edit) -->"
+)
+README_END = "<!-- perf:end -->"
+
+
+def render_readme_block(res: dict[str, Any]) -> str:
+    """The README's block: the targets table of the last ``make perf``."""
+    return "\n".join(
+        [
+            README_BEGIN,
+            "",
+            *targets_table(res),
+            "",
+            README_END,
+        ]
+    )
+
+
+def update_readme(text: str, res: dict[str, Any]) -> str:
+    """``text`` with its perf block replaced; a README without the markers is an error."""
+    if README_BEGIN not in text or README_END not in text:
+        raise ValueError("no perf block (the markers of bench perf --readme) in this README")
+    head, _, rest = text.partition(README_BEGIN)
+    _, _, tail = rest.partition(README_END)
+    return head + render_readme_block(res) + tail
+
+
+def format_perf(res: dict[str, Any]) -> str:
+    """The console output: the targets, then every figure (the page's Markdown tables)."""
+    return "\n".join(["targets:", *targets_table(res), "", *figures_sections(res)])
