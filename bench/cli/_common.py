@@ -275,3 +275,20 @@ def add_plant_profile(p: argparse.ArgumentParser) -> None:
         help="ideal: the papers' plant; drive: switching inverter, dead time, device drops, "
         "ADC, offsets, cross-saturation (default: the scenario's plant_profile)",
     )
+
+
+def serve_node(args: argparse.Namespace, spec: Any, role: str, node: Any, loop: Any) -> int:
+    """Run one node's ``loop(bus)`` on ``spec``'s bus until it ends or a signal stops it.
+
+    The node's counters (and the real-time settings it was granted) go to
+    ``--report`` whatever ends the loop.
+    """
+    bus = spec.open()
+    stop_on_signals()
+    rt = node_rt(args, role)
+    try:
+        loop(bus)
+    finally:
+        bus.shutdown()
+        write_report(args.report, {**node.report(), "rt": rt})
+    return 0

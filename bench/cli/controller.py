@@ -12,11 +12,9 @@ from bench.cli._common import (
     add_rt,
     add_scenario_overrides,
     bus_spec,
-    node_rt,
     ready,
     scenario_from_args,
-    stop_on_signals,
-    write_report,
+    serve_node,
 )
 
 
@@ -29,22 +27,20 @@ def cmd_controller(args: argparse.Namespace) -> int:
     spec = bus_spec(args, announce=False)
     codec = Codec()
     node = make_controller_node(scn, est, codec)
-    bus = spec.open()
-    stop_on_signals()
-    rt = node_rt(args, "controller")
-    try:
-        controller_loop(
+    return serve_node(
+        args,
+        spec,
+        "controller",
+        node,
+        lambda bus: controller_loop(
             bus,
             node,
             realtime=args.mode == "realtime",
             on_ready=ready,
             stop=STOP.is_set,
             sample_timeout_s=args.sample_timeout_ms * 1e-3,
-        )
-    finally:
-        bus.shutdown()
-        write_report(args.report, {**node.report(), "rt": rt})
-    return 0
+        ),
+    )
 
 
 def register(sub: Any) -> None:

@@ -16,12 +16,10 @@ from bench.cli._common import (
     add_rt,
     add_scenario_overrides,
     bus_spec,
-    node_rt,
     plant_engine,
     ready,
     scenario_from_args,
-    stop_on_signals,
-    write_report,
+    serve_node,
 )
 
 
@@ -42,15 +40,15 @@ def cmd_plant(args: argparse.Namespace) -> int:
     )
     if args.mode == "lockstep":
         node.pace_every = args.pace_every
-    bus = spec.open()
-    stop_on_signals()
-    rt = node_rt(args, "plant")
-    try:
-        plant_loop(bus, node, realtime=args.mode == "realtime", on_ready=ready, stop=STOP.is_set)
-    finally:
-        bus.shutdown()
-        write_report(args.report, {**node.report(), "rt": rt})
-    return 0
+    return serve_node(
+        args,
+        spec,
+        "plant",
+        node,
+        lambda bus: plant_loop(
+            bus, node, realtime=args.mode == "realtime", on_ready=ready, stop=STOP.is_set
+        ),
+    )
 
 
 def register(sub: Any) -> None:
