@@ -351,10 +351,20 @@ class HybridEstimator:
         self.speed_response: Callable[[np.ndarray], np.ndarray] | None = getattr(
             hf, "speed_response", None
         )
-        # The injection's amplitude in the dead-time sign model and compensation.
-        for name in ("I_p", "wT", "U_h"):
-            if hasattr(hf, name):
-                setattr(self, name, getattr(hf, name))
+
+    # The injection's amplitudes and period, which the controller's dead-time sign
+    # model reads from its estimator (0.0 where the injection has none).
+    @property
+    def I_p(self) -> float:
+        return float(getattr(self.hf, "I_p", 0.0))
+
+    @property
+    def wT(self) -> float:
+        return float(getattr(self.hf, "wT", 0.0))
+
+    @property
+    def U_h(self) -> float:
+        return float(getattr(self.hf, "U_h", 0.0))
 
     def hf_current_next(self) -> tuple[float, float]:
         """The injection estimator's predicted HF current, scaled by the injection's fade."""
