@@ -263,12 +263,11 @@ class FluxObserver:
         self._ia1 = i_a
         self._ib1 = i_b
 
-    def update(self, i_alpha: float, i_beta: float, u_alpha: float, u_beta: float) -> None:
-        """Sensorless step: sample ``k`` (A) and the voltage of ``[(k-1) T_s, k T_s]`` (V)."""
-        th = self._th_next
-        c = math.cos(th)
-        s = math.sin(th)
-        self._predict(i_alpha, i_beta, u_alpha, u_beta, c, s)
+    def _flux_error(
+        self, i_alpha: float, i_beta: float, c: float, s: float
+    ) -> tuple[float, float, float, float, float]:
+        """In the frame at ``(c, s)``: the flux error ``e`` (model minus estimate), the
+        active flux ``psi_a`` (both d, q; Wb) and ``|psi_a|^2``."""
         i_d = c * i_alpha + s * i_beta
         i_q = c * i_beta - s * i_alpha
         pa = self.psi_alpha
@@ -277,7 +276,17 @@ class FluxObserver:
         e_q = self.L_q * i_q - (c * pb - s * pa)
         a_d = self.psi_f + self._dL * i_d
         a_q = -self._dL * i_q
-        den = a_d * a_d + a_q * a_q
+        return e_d, e_q, a_d, a_q, a_d * a_d + a_q * a_q
+
+    def update(self, i_alpha: float, i_beta: float, u_alpha: float, u_beta: float) -> None:
+        """Sensorless step: sample ``k`` (A) and the voltage of ``[(k-1) T_s, k T_s]`` (V)."""
+        th = self._th_next
+        c = math.cos(th)
+        s = math.sin(th)
+        self._predict(i_alpha, i_beta, u_alpha, u_beta, c, s)
+        pa = self.psi_alpha
+        pb = self.psi_beta
+        e_d, e_q, a_d, a_q, den = self._flux_error(i_alpha, i_beta, c, s)
         if den > 0.0:
             inv = 1.0 / den
             x = (e_d * a_d + e_q * a_q) * inv  # Re(e / psi_a)
@@ -314,15 +323,9 @@ class FluxObserver:
         c = math.cos(theta)
         s = math.sin(theta)
         self._predict(i_alpha, i_beta, u_alpha, u_beta, c, s)
-        i_d = c * i_alpha + s * i_beta
-        i_q = c * i_beta - s * i_alpha
         pa = self.psi_alpha
         pb = self.psi_beta
-        e_d = self.psi_f + self.L_d * i_d - (c * pa + s * pb)
-        e_q = self.L_q * i_q - (c * pb - s * pa)
-        a_d = self.psi_f + self._dL * i_d
-        a_q = -self._dL * i_q
-        den = a_d * a_d + a_q * a_q
+        e_d, e_q, a_d, a_q, den = self._flux_error(i_alpha, i_beta, c, s)
         self.eps = (e_d * a_q - e_q * a_d) / den if den > 0.0 else 0.0
         self.accel = 0.0
         g = self._k1T(w)
