@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test lint unit vcan suite perf rtcheck clean
+.PHONY: demo test lint unit vcan suite reference perf rtcheck clean
 
 # pip builds the compiled plant engine (setup.py); tools/need-cc installs its
 # compiler and headers first when it may, and the last line says when the
@@ -37,8 +37,14 @@ unit: $(STAMP)
 vcan: $(STAMP)
 	tools/vcan-tests
 
+# The paper suite into a new folder (SUITE_OUT); `make reference` replaces the
+# committed reference (docs/results and the README's claims table).
+SUITE_OUT ?= runs/suite-$(shell date -u +%Y%m%dT%H%M%SZ)
 suite: $(STAMP)
-	$(BIN)/bench suite paper --out docs/results
+	$(BIN)/bench suite paper --out $(SUITE_OUT)
+
+reference: $(STAMP)
+	$(BIN)/bench suite paper --out docs/results --overwrite
 	$(BIN)/bench suite report docs/results --readme README.md
 
 # Benchmarks: docs/perf/perf.json, and docs/BENCHMARKS.md and the README's

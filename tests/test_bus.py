@@ -212,7 +212,8 @@ def test_no_config_uses_default_transport(no_python_can_config, monkeypatch):
     ("interface", "channel", "kwargs", "match"),
     [
         ("nosuchbus", None, {}, r"interface 'nosuchbus': unknown"),
-        ("pcan", None, {}, r"interface pcan: needs a channel"),
+        # the driver's library is checked first (absent here), then the channel
+        ("pcan", None, {}, r"interface pcan: (needs a channel|its driver needs PEAK's PCAN-Basic)"),
         # without AF_CAN in the kernel the bench says so before naming the channel
         (
             "socketcan",
@@ -264,3 +265,61 @@ def test_socketcan_vcan0_send_receive(codec, name):
 @pytest.mark.usefixtures("vcan0")
 def test_socketcan_default_transport_is_vcan0():
     assert default_transport()[:2] == ("socketcan", "vcan0")
+
+
+@pytest.mark.parametrize(
+    ("interface", "needs"),
+    [
+        ("kvaser", "Kvaser's CANlib libcanlib.so"),
+        ("pcan", "PEAK's PCAN-Basic library libpcanbasic.so"),
+        ("slcan", "pip install 'can-hil-bench[slcan]'"),
+    ],
+)
+def test_a_missing_driver_library_is_one_line_naming_what_to_install(
+    interface: str, needs: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import ctypes
+    import ctypes.util
+    import importlib.util
+
+    from bench.cli import main
+
+    def no_lib(name: str) -> None:
+        raise OSError(f"{name}: cannot open shared object file")
+
+    monkeypatch.setattr(ctypes.cdll, "LoadLibrary", no_lib)
+    monkeypatch.setattr(ctypes.util, "find_library", lambda name: None)
+    real_find_spec = importlib.util.find_spec
+    monkeypatch.setattr(
+        importlib.util,
+        "find_spec",
+        lambda name, *a: None if name == "serial" else real_find_spec(name, *a),
+    )
+    with pytest.raises(InterfaceError) as info:
+        open_bus(interface, "0")
+    assert "\n" not in str(info.value) and needs in str(info.value)
+    # the command line: exit 2, before any process starts
+    assert main(["plant", "xue-fig13", "-i", interface, "-c", "0"]) == 2
+
+
+def test_slcan_gets_the_data_rate_as_a_bit_timing(monkeypatch: pytest.MonkeyPatch) -> None:
+    """python-can's slcan ignores ``data_bitrate``; the bench passes a BitTimingFd, which
+    its ``set_bitrate(nom, data)`` reads (the CANable's data-rate command)."""
+    import can
+
+    import bench.wire._bus as busmod
+
+    seen: dict[str, object] = {}
+
+    def fake_bus(**kw: object) -> None:
+        seen.update(kw)
+        raise can.CanInitializationError("no device")
+
+    monkeypatch.setattr(busmod, "missing_driver", lambda name: None)
+    monkeypatch.setattr(can, "Bus", fake_bus)
+    with pytest.raises(InterfaceError):
+        open_bus("slcan", "/dev/ttyACM0@115200", bitrate=1_000_000, data_bitrate=5_000_000)
+    timing = seen["timing"]
+    assert isinstance(timing, can.BitTimingFd)
+    assert (timing.nom_bitrate, timing.data_bitrate) == (1_000_000, 5_000_000)
+    assert "data_bitrate" not in seen and "bitrate" not in seen

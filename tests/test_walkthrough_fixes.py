@@ -241,9 +241,13 @@ def test_rerun_names_the_method_of_the_papers_column(
 
     scn = load_scenario("xue-fig13")
     assert main(["rerun", str(xue_run), "-e", "sensored", "--no-plots", "-o", str(tmp_path)]) == 0
-    head = capsys.readouterr().out.splitlines()[0]
-    assert head.split()[-2:] == ["paper", f"({scn.estimator})"]
-    # the heading bench run prints for the same scenario
-    assert head == format_metrics({}, scn.paper_result, scn.estimator).splitlines()[0]
+    out = capsys.readouterr().out
+    head = out.splitlines()[0]
+    # another method than the paper's: no paper column beside it, a line naming whose it is
+    assert head.split() == ["metric", "bench"]
+    assert f"(the paper's numbers are for {scn.estimator}; this run is sensored)" in out
+    # the heading bench run prints for the paper's own method
+    own = format_metrics({}, scn.paper_result, scn.estimator, scn.estimator).splitlines()[0]
+    assert own.split()[-2:] == ["paper", f"({scn.estimator})"]
     res = rerun_capture(xue_run, "sensored", out_dir=tmp_path, plots=False, echo=quiet)
     assert res.paper_method == "square-wave"

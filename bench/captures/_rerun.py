@@ -54,7 +54,7 @@ from bench.captures._read import (
 from bench.captures._replay import (
     channel_tag,
 )
-from bench.runs._analysis import analyze_frames, write_csv
+from bench.runs._analysis import analyze_frames, signals_doc, write_csv
 from bench.wire._batch_decode import decode_batch
 from bench.wire._codec import Codec
 
@@ -365,14 +365,24 @@ def rerun_capture(
     dest = out_dir or ((path if path.is_dir() else path.parent) / f"rerun-{estimator}")
     dest.mkdir(parents=True, exist_ok=True)
     write_csv(str(dest / "signals.csv"), new.table)
+    (dest / "signals.md").write_text(signals_doc())
     (dest / "metrics.json").write_text(jsonio.dumps(m_new, indent=2, sort_keys=True) + "\n")
     (dest / "rerun.json").write_text(
         json.dumps(report, indent=2, sort_keys=True, default=str) + "\n"
     )
     if plots:
         from bench.runs._plots import plot_run
+        from bench.runs._results import fundamental_corner_hz
 
-        plot_run(new.table, dest, title=f"{scn.name} / rerun {estimator} on {recorded or '?'}")
+        plot_run(
+            new.table,
+            dest,
+            title=f"{scn.name} / rerun {estimator} on {recorded or '?'}",
+            metrics=m_new,
+            scored_from_s=scn.score_from_s,
+            f_split_hz=fundamental_corner_hz(scn, estimator, new.table),
+            paper=scn.paper,
+        )
     say(
         f"rerun: {estimator} on {len(new_tele)} recorded steps ({view_name}); "
         + (
@@ -381,7 +391,9 @@ def rerun_capture(
             else "no recorded estimate to compare"
         )
     )
-    files = ["signals.csv", "metrics.json", "rerun.json"] + (["run.png"] if plots else [])
+    files = ["signals.csv", "signals.md", "metrics.json", "rerun.json"] + (
+        ["run.png"] if plots else []
+    )
     return RerunResult(
         out_dir=dest,
         metrics=m_new,

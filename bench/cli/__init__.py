@@ -15,9 +15,10 @@ stderr, exit code 2, no traceback.
 from __future__ import annotations
 
 import argparse
+import builtins
 import importlib
 import sys
-from typing import NoReturn
+from typing import Any, NoReturn
 
 from bench._errors import BenchError
 
@@ -30,6 +31,7 @@ SUBCOMMANDS = (
     "controller",
     "link",
     "analyze",
+    "plot",
     "busload",
     "suite",
     "replay",
@@ -42,8 +44,36 @@ SUBCOMMANDS = (
 )
 
 
+class _Help(argparse.HelpFormatter):
+    """Every option's default in its help line, unless the line already names it.
+
+    Options without a default (None: the scenario's value, or not used) and
+    flags (off unless given) get no suffix.
+    """
+
+    def _get_help_string(self, action: argparse.Action) -> str | None:
+        text = action.help or ""
+        d = action.default
+        if (
+            action.option_strings
+            and d is not None
+            and d is not False
+            and d is not argparse.SUPPRESS
+            and "default" not in text
+        ):
+            # builtins.list: the subcommand module bench.cli.list shadows the name here
+            shown = ",".join(map(str, d)) if isinstance(d, builtins.list | tuple) else d
+            text += f" (default: {shown})".replace("%", "%%")
+        return text
+
+
 class _Parser(argparse.ArgumentParser):
-    """Command-line mistakes as one line (with where to look), exit code 2."""
+    """Command-line mistakes as one line (with where to look), exit code 2;
+    defaults shown in ``--help`` (:class:`_Help`)."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        kwargs.setdefault("formatter_class", _Help)
+        super().__init__(*args, **kwargs)
 
     def error(self, message: str) -> NoReturn:
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")

@@ -35,14 +35,21 @@ def add_bus(p: argparse.ArgumentParser) -> None:
     g.add_argument(
         "--interface",
         "-i",
-        help="python-can interface (socketcan, udp_multicast, virtual, pcan, ...)",
+        help="python-can interface: socketcan, udp_multicast, pcan, kvaser, slcan, ... "
+        "(default: vcan0 when it exists, else udp_multicast; or python-can's configuration)",
     )
     g.add_argument(
         "--channel", "-c", help="channel (vcan0, can0, PCAN_USBBUS1, a multicast group, ...)"
     )
     g.add_argument("--port", type=int, help="UDP port (udp_multicast only)")
-    g.add_argument("--bitrate", type=int, help="nominal bit rate (real adapters)")
-    g.add_argument("--data-bitrate", type=int, help="CAN FD data bit rate (real adapters)")
+    g.add_argument(
+        "--bitrate", type=int, help="nominal bit rate, bit/s (real adapters; socketcan: ip link)"
+    )
+    g.add_argument(
+        "--data-bitrate",
+        type=int,
+        help="CAN FD data bit rate, bit/s (real adapters, slcan included; socketcan: ip link)",
+    )
 
 
 def rt_priority(text: str) -> int:
@@ -139,7 +146,13 @@ def node_rt(args: argparse.Namespace, role: str) -> dict[str, object] | None:
 
 
 def add_scenario_overrides(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--mode", choices=MODES, default="lockstep")
+    p.add_argument(
+        "--mode",
+        choices=MODES,
+        default="lockstep",
+        help="lockstep: the plant waits for each duty (deterministic); realtime: the plant "
+        "on its own clock at the PWM rate (run bench rtcheck first)",
+    )
     p.add_argument("--duration", type=POS_FLOAT, help="simulated seconds (overrides the scenario)")
     p.add_argument(
         "--delay-steps",

@@ -25,11 +25,17 @@ def cmd_analyze(args: argparse.Namespace) -> int:
         plots=plots,
     )
     scn = res.meta.get("scenario", {})
-    print(format_metrics(res.metrics, scn.get("paper_result"), scn.get("estimator")))
+    print(
+        format_metrics(
+            res.metrics, scn.get("paper_result"), scn.get("estimator"), res.meta.get("estimator")
+        )
+    )
     status, warnings = outcome(res.metrics, float(res.meta.get("T_s") or 0.0))
     for line in warnings:
         print(line, file=sys.stderr)
-    names = ["signals.csv", "metrics.json", "meta.json"] + (["run.png"] if plots else [])
+    names = ["signals.csv", "signals.md", "metrics.json", "meta.json"] + (
+        ["run.png"] if plots else []
+    )
     print(files_line(res.out_dir, names))
     return status
 

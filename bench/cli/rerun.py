@@ -23,7 +23,7 @@ def cmd_rerun(args: argparse.Namespace) -> int:
 
     r: dict[str, Any] = res.report
     est = r["estimate"]
-    print(format_metrics(res.metrics, res.paper_result, res.paper_method))
+    print(format_metrics(res.metrics, res.paper_result, res.paper_method, args.estimator))
     if r["recorded_metrics"] is not None:
         rm = r["recorded_metrics"]
         print(

@@ -16,7 +16,7 @@ from bench.cli._common import POS_FLOAT, rates_khz
 
 def cmd_rtcheck(args: argparse.Namespace) -> int:
     from bench._errors import BenchError
-    from bench.studies._rtcheck import format_rtcheck, run_rtcheck, update_doc
+    from bench.studies._rtcheck import format_rtcheck, host_file, run_rtcheck, update_doc
 
     out = Path(args.out) if args.out else None
     if out is not None:
@@ -28,6 +28,14 @@ def cmd_rtcheck(args: argparse.Namespace) -> int:
     print(f"rtcheck: {args.seconds:g} s per rate and setting, rates {args.rate} kHz")
     res = run_rtcheck(rates, args.seconds)
     print(format_rtcheck(res))
+    # this host's result, for the warning of bench run --mode realtime
+    try:
+        host = host_file()
+        host.parent.mkdir(parents=True, exist_ok=True)
+        host.write_text(json.dumps(res, indent=2, sort_keys=True) + "\n")
+        print(f"written: {host} (read by bench run --mode realtime)")
+    except OSError as e:
+        print(f"not written: {host_file()} ({e.strerror})")
     if out is not None:
         (out / "rtcheck.json").write_text(json.dumps(res, indent=2, sort_keys=True) + "\n")
         print(f"written: {out / 'rtcheck.json'}")

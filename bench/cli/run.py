@@ -85,6 +85,12 @@ def cmd_run(args: argparse.Namespace) -> int:
     out = Path(args.out) if args.out else Path("runs") / f"{scn.name}-{est}"
     # the heading of the report on stdout: stderr carries progress and errors only
     print(f"run: {scn.name} with {est}, {args.mode}, {spec.describe()} -> {out}", flush=True)
+    if args.mode == "realtime":
+        from bench.studies._rtcheck import host_warning, load_host_result
+
+        f_sw = 1.0 / sample_period(scn)
+        if warn := host_warning(f_sw, args.rt_priority is not None, load_host_result()):
+            print(warn, file=sys.stderr, flush=True)
     view = _start_monitor(spec, scn, est, args.mode, out) if args.monitor else None
     try:
         res = run_scenario(
@@ -103,7 +109,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     for role, rep in res.meta.get("node_reports", {}).items():
         for why in ((rep or {}).get("rt") or {}).get("refused", []):
             print(f"{role}: real-time setting refused: {why}", file=sys.stderr)
-    print(format_metrics(res.metrics, scn.paper_result, scn.estimator))
+    print(format_metrics(res.metrics, scn.paper_result, scn.estimator, est))
     if args.mode == "realtime" and (warn := realtime_warning(res.metrics)):
         print(warn, file=sys.stderr)
     status, warnings = outcome(res.metrics, sample_period(scn))
@@ -116,7 +122,13 @@ def cmd_run(args: argparse.Namespace) -> int:
             "recording lost); the metrics cover the rows present",
             file=sys.stderr,
         )
-    names = [f"capture{Path(res.capture).suffix}", "signals.csv", "metrics.json", "meta.json"]
+    names = [
+        f"capture{Path(res.capture).suffix}",
+        "signals.csv",
+        "signals.md",
+        "metrics.json",
+        "meta.json",
+    ]
     written = [n for n in [*names, "run.png"] if (out / n).is_file()]
     print(f"files: {out}/ ({', '.join(written)})")
     if res.meta.get("interrupted"):
@@ -132,7 +144,10 @@ def register(sub: Any) -> None:
         "scenario", help="shipped scenario name (wen-5.1, xue-fig13, ...) or a .toml path"
     )
     p.add_argument(
-        "--estimator", "-e", help="sfhf, tt-ab, tt-dq, square-wave, square-wave-nocic, sensored"
+        "--estimator",
+        "-e",
+        help="sfhf, tt-ab, tt-dq, square-wave, square-wave-nocic, hybrid-tt-dq, "
+        "hybrid-square-wave, sensored (default: the scenario's estimator; bench list)",
     )
     add_scenario_overrides(p)
     add_plant_profile(p)

@@ -31,7 +31,21 @@ def _check_names(names: tuple[str, ...] | None, known: tuple[str, ...], opt: str
             raise BenchError(f"{opt}: unknown name {n!r} (known: {', '.join(known)})")
 
 
+def _check_new(out: Path, overwrite: bool) -> None:
+    """A suite writes into a folder without a suite's results, unless told to overwrite."""
+    if (out / "summary.json").exists() and not overwrite:
+        raise BenchError(
+            f"--out {out}: holds a suite's results (summary.json); choose another folder "
+            "or give --overwrite to replace them"
+        )
+
+
 def _common(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace the results of an earlier suite in --out (refused otherwise)",
+    )
     p.add_argument(
         "--jobs",
         "-j",
@@ -61,6 +75,7 @@ def cmd_paper(args: argparse.Namespace) -> int:
     if args.jobs < 1:
         raise BenchError(f"--jobs must be >= 1, got {args.jobs}")
     out = Path(args.out) if args.out else Path("runs") / "suite-paper"
+    _check_new(out, args.overwrite)
     runs_dir = Path(args.runs_dir) if args.runs_dir else Path("runs") / "suite-runs"
     summary = run_suite(
         SuiteOptions(
@@ -92,6 +107,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     if args.jobs < 1:
         raise BenchError(f"--jobs must be >= 1, got {args.jobs}")
     out = Path(args.out) if args.out else Path("runs") / "suite-sweep"
+    _check_new(out, args.overwrite)
     summary = run_suite(
         SuiteOptions(
             out_dir=out,

@@ -17,6 +17,8 @@ from collections.abc import Iterable
 from dataclasses import dataclass, field
 
 import can
+from typing import Any
+
 import numpy as np
 import numpy.typing as npt
 
@@ -48,7 +50,7 @@ COLUMNS: tuple[tuple[str, str], ...] = (
     ("d_c", "duty, 0..1"),
     ("enable", "PWM enabled by the controller, 0/1"),
     ("est_err", "estimator error signal, rad"),
-    ("mode", "controller mode"),
+    ("mode", "controller mode: 0 disabled, 1 align, 2 polarity test, 3 run, 4 fault (DBC)"),
     ("duty_age", "age of the duty applied in the previous period, PWM periods (255: none)"),
 )
 
@@ -285,6 +287,41 @@ def write_csv(path: str, table: dict[str, Array]) -> None:
     data = np.column_stack([table[n] for n in names])
     fmt = ["%d", "%.6f"] + ["%.9g"] * (len(names) - 2)
     np.savetxt(path, data, delimiter=",", header=",".join(names), comments="", fmt=fmt)
+
+
+def signals_doc(codec: Codec | None = None) -> str:
+    """``signals.md``: every column of ``signals.csv`` with its unit, and the mode codes.
+
+    From :data:`COLUMNS` and the DBC's value tables (``CtrlTelemetry.mode``), so
+    the description cannot differ from what the table holds.
+    """
+    from bench.wire._codec import default_codec
+
+    codec = codec or default_codec()
+    modes: dict[Any, Any] = codec.message("CtrlTelemetry").get_signal_by_name("mode").choices or {}
+    lines = [
+        "# signals.csv",
+        "",
+        "One row per PWM period k (the plant's sample instant t = k T_s), in the "
+        "columns below; angles are electrical, speeds mechanical. Written by "
+        "`bench run` and `bench analyze` from the capture; `bench plot RUN_DIR "
+        "--signals a,b` draws any of them.",
+        "",
+        "| column | meaning, unit |",
+        "|---|---|",
+        *(f"| `{name}` | {what} |" for name, what in COLUMNS),
+        "",
+        "`mode` (the controller's, `CtrlTelemetry.mode` in `dbc/bench.dbc`):",
+        "",
+        "| code | mode |",
+        "|---|---|",
+        *(f"| {int(k)} | {v} |" for k, v in sorted(modes.items())),
+        "",
+        "A row with `mode` 0 (controller disabled) is not scored. Columns a capture "
+        "does not carry (an external controller without telemetry) are empty (NaN).",
+        "",
+    ]
+    return "\n".join(lines)
 
 
 def read_csv(path: str) -> dict[str, Array]:

@@ -22,7 +22,7 @@ import numpy as np
 from bench import _jsonio as jsonio
 from bench._errors import EXIT_LOCK_LOST, EXIT_PLANT_TRIPPED
 from bench.nodes._counters import REPEATED_COUNTER
-from bench.runs._analysis import analyze_frames, write_csv
+from bench.runs._analysis import analyze_frames, signals_doc, write_csv
 from bench.runs._metrics import (
     BAND_QUANTITIES,
     BANDS,
@@ -126,6 +126,7 @@ def finish_run(
     n_p = get_preset(scn).motor.n_p
     cap = analyze_frames(frames, codec, T_s=T_s, n_p=n_p)
     write_csv(str(out_dir / "signals.csv"), cap.table)
+    (out_dir / "signals.md").write_text(signals_doc(codec))
     m: dict[str, Any] = compute_metrics(
         cap.table,
         T_s=T_s,
@@ -225,8 +226,39 @@ def finish_run(
     if plots:
         from bench.runs._plots import plot_run
 
-        plot_run(cap.table, out_dir, title=f"{scn.name} / {meta.get('estimator', '?')}")
+        from bench.runs._plots import controller_label
+
+        plot_run(
+            cap.table,
+            out_dir,
+            title=f"{scn.name} / {controller_label(meta)}",
+            metrics=m,
+            scored_from_s=scn.score_from_s,
+            f_split_hz=fundamental_corner_hz(scn, str(meta.get("estimator", "")), cap.table),
+            paper=scn.paper,
+            n_p=n_p,
+        )
     return RunResult(out_dir=out_dir, metrics=m, capture=capture or out_dir, meta=meta)
+
+
+def fundamental_corner_hz(scn: Scenario, estimator: str, table: dict[str, Any]) -> float | None:
+    """Corner (Hz) of the low-pass that gives ``run.png`` the fundamental current:
+    :func:`bench.runs._metrics.split_corner_hz` of the estimator's injection up to the
+    run's top speed; None when the estimator injects nothing (the raw current is the
+    fundamental) or is not a built-in one."""
+    from bench.scenarios._setup import build_controller
+
+    try:
+        est = build_controller(scn, estimator).estimator
+    except Exception:  # an external or unfitting controller: no injection known
+        return None
+    hf = getattr(est, "hf", est)
+    n_p = get_preset(scn).motor.n_p
+    w_top = float(np.max(np.abs(table["w_m_rpm"]))) * math.pi / 30.0 * n_p if len(table["t"]) else 0.0
+    try:
+        return split_corner_hz(injection_floor_hz(hf, sample_period(scn), w_top))
+    except ValueError:
+        return None
 
 
 def injection_floor_hz(hf: Any, T_s: float, w_top: float) -> float:
@@ -424,15 +456,26 @@ BAND_ROWS = (
 
 
 def format_metrics(
-    m: dict[str, Any], paper: dict[str, Any] | None = None, paper_method: str | None = None
+    m: dict[str, Any],
+    paper: dict[str, Any] | None = None,
+    paper_method: str | None = None,
+    estimator: str | None = None,
 ) -> str:
     """The metrics as an aligned text table, with the paper's number where it has one.
 
     ``paper_method``: the method the paper's numbers belong to (the
-    scenario's own estimator), named in the column's heading.
+    scenario's own estimator), named in the column's heading.  ``estimator``:
+    the run's; when it is another, the paper's column is left out (its
+    numbers are not this method's) and a last line says where they apply.
     """
     paper = paper or {}
+    note = ""
+    if paper and paper_method and estimator and estimator != paper_method:
+        note = f"\n(the paper's numbers are for {paper_method}; this run is {estimator})"
+        paper = {}
     head = f"paper ({paper_method})" if paper and paper_method else "paper"
+    if note:
+        head = ""
     rows = [(k, u) for k, u in (*METRIC_ROWS, *BAND_ROWS) if k in m]
     wk = max([26, *(len(k) + 1 for k, _ in rows)])
     lines = [f"{'metric':<{wk}}{'bench':>12}  {head}"]
@@ -441,4 +484,4 @@ def format_metrics(
         vs = f"{v:12.3f}" if isinstance(v, float) else f"{'-' if v is None else v:>12}"
         ps = f"{paper[key]:>8}" if key in paper else f"{'':>8}"
         lines.append(f"{key:<{wk}}{vs}  {ps} {unit}")
-    return "\n".join(lines)
+    return "\n".join(lines) + note

@@ -770,10 +770,22 @@ def readme_block(summary: dict[str, Any]) -> str:
         for c in summary["claims"]
         if c["verdict"] != NOT_RUN
     ]
+    info = summary.get("suite") or {}
+    took = (
+        [
+            f"From `{info.get('command', 'bench suite paper')}`: "
+            f"{float(info['wall_s']) / 60:.1f} min wall time with {info.get('workers', '?')} "
+            f"worker(s), {info.get('mode', '?')} over {str(info.get('transport', '?')).split()[0]}.",
+            "",
+        ]
+        if info.get("wall_s") is not None
+        else []
+    )
     return "\n".join(
         [
             README_BEGIN,
             "",
+            *took,
             *_table(["claim", "source", "verdict", "measured"], rows),
             "",
             README_END,

@@ -26,9 +26,12 @@ controller's share of the machine); ``marginal`` when only the medians fit,
 
 from __future__ import annotations
 
+import math
 import multiprocessing as mp
+import os
 import time
 from dataclasses import asdict, dataclass
+from pathlib import Path
 from typing import Any
 
 #: Share of the period the p99 computation and wake-up latency may use for ``yes``.
@@ -250,3 +253,51 @@ def update_doc(doc: str, res: dict[str, Any]) -> str:
         _, _, tail = rest.partition(DOC_END)
         return head + block + tail
     return doc.rstrip() + "\n\n" + block + "\n"
+
+
+def host_file() -> Path:
+    """Where ``bench rtcheck`` keeps this host's last result for ``bench run`` to read:
+    ``$XDG_CACHE_HOME/can-hil-bench/rtcheck.json`` (``~/.cache/...`` by default)."""
+    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
+    return Path(base) / "can-hil-bench" / "rtcheck.json"
+
+
+def host_warning(f_sw: float, fifo: bool, res: dict[str, Any] | None) -> str | None:
+    """The line ``bench run --mode realtime`` prints before it starts, from this host's
+    ``bench rtcheck`` result ``res`` (None: never measured); None when the host keeps
+    ``f_sw`` (Hz) with that scheduling (verdict ``yes``)."""
+    setting = "sched_fifo" if fifo else "normal"
+    how = "with --rt-priority" if fifo else "with normal scheduling"
+    if res is None:
+        return (
+            "warning: this host's real-time capacity is not measured; run `bench rtcheck` "
+            "first (docs/REALTIME.md: a 2-core shared machine misses 1 kHz periods with "
+            "normal scheduling and 4 kHz with SCHED_FIFO)"
+        )
+    r = (res.get("rates") or {}).get(str(int(round(f_sw))), {}).get(setting)
+    if r is None:
+        return (
+            f"warning: bench rtcheck has not measured {f_sw:g} Hz {how} on this host; "
+            f"run `bench rtcheck --rate {f_sw / 1e3:g}`"
+        )
+    if r.get("verdict") == "yes":
+        return None
+    return (
+        f"warning: bench rtcheck rates this host '{r.get('verdict')}' at {f_sw:g} Hz {how} "
+        f"(wake-up p99 {float(r.get('p99', math.nan)):.0f} us, plant computation p99 "
+        f"{float(r.get('compute_p99', math.nan)):.0f} us, period {1e6 / f_sw:.0f} us): "
+        "expect late periods, and an injection estimator may lose its angle or trip"
+        + ("" if fifo else "; --rt-priority 80 may help")
+    )
+
+
+def load_host_result() -> dict[str, Any] | None:
+    """This host's last ``bench rtcheck`` result, or None."""
+    import json
+
+    f = host_file()
+    try:
+        data = json.loads(f.read_text())
+    except (OSError, ValueError):
+        return None
+    return data if isinstance(data, dict) else None

@@ -218,10 +218,15 @@ def open_bus(
         if channel is None:
             raise InterfaceError(f"interface {interface}: needs a channel (--channel)")
         args.update(fd=fd, receive_own_messages=receive_own_messages)
-        if bitrate is not None:
-            args["bitrate"] = int(bitrate)
-        if data_bitrate is not None:
-            args["data_bitrate"] = int(data_bitrate)
+        if interface == "slcan" and data_bitrate is not None:
+            # python-can's slcan sets the CAN FD data rate only from a BitTimingFd
+            # (nominal and data rate; CANable 2.0 firmware: 2 or 5 Mbit/s data)
+            args["timing"] = slcan_fd_timing(bitrate or 1_000_000, int(data_bitrate))
+        else:
+            if bitrate is not None:
+                args["bitrate"] = int(bitrate)
+            if data_bitrate is not None:
+                args["data_bitrate"] = int(data_bitrate)
     # A bus whose constructor failed is freed with the exception; python-can
     # then logs "... was not properly shut down", a second line after ours.
     log = logging.getLogger("can.bus")
@@ -238,11 +243,53 @@ def open_bus(
     raise InterfaceError(f"interface {interface} channel {channel}: {why}")
 
 
+#: What each adapter's python-can driver needs besides python-can, and where to get it.
+DRIVER_NEEDS = {
+    "slcan": "pyserial (pip install 'can-hil-bench[slcan]', or pip install pyserial)",
+    "serial": "pyserial (pip install 'can-hil-bench[slcan]', or pip install pyserial)",
+    "pcan": "PEAK's PCAN-Basic library libpcanbasic.so (PCAN-Basic for Linux, peak-system.com)",
+    "kvaser": "Kvaser's CANlib libcanlib.so (Kvaser Linux Drivers and SDK, kvaser.com)",
+}
+
+
+def missing_driver(interface: str) -> str | None:
+    """What ``interface``'s driver lacks on this machine (:data:`DRIVER_NEEDS`), or None."""
+    import ctypes
+    import ctypes.util
+    import importlib.util
+
+    if interface in ("slcan", "serial"):
+        return None if importlib.util.find_spec("serial") else DRIVER_NEEDS[interface]
+    if interface == "pcan":
+        return None if ctypes.util.find_library("pcanbasic") else DRIVER_NEEDS[interface]
+    if interface == "kvaser":
+        try:
+            ctypes.cdll.LoadLibrary("libcanlib.so")
+        except OSError:
+            return DRIVER_NEEDS[interface]
+    return None
+
+
+def slcan_fd_timing(bitrate: int, data_bitrate: int) -> can.BitTimingFd:
+    """The bit timing that makes python-can's slcan send the nominal and data rate
+    commands (it reads only ``nom_bitrate`` and ``data_bitrate``; an 80 MHz clock
+    at 80 % sample points gives a valid timing for 1/2/5 Mbit/s)."""
+    return can.BitTimingFd.from_sample_point(
+        f_clock=80_000_000,
+        nom_bitrate=int(bitrate),
+        nom_sample_point=80.0,
+        data_bitrate=int(data_bitrate),
+        data_sample_point=80.0,
+    )
+
+
 def check_interface(interface: str) -> None:
     """Raise :class:`InterfaceError` (one line) when ``interface`` cannot work here."""
     if interface not in _valid_interfaces():
         known = ", ".join(sorted(_valid_interfaces()))
         raise InterfaceError(f"interface {interface!r}: unknown; python-can knows: {known}")
+    if need := missing_driver(interface):
+        raise InterfaceError(f"interface {interface}: its driver needs {need}")
     if interface == "socketcan" and not _af_can_works():
         raise InterfaceError(
             "interface socketcan: this kernel has no SocketCAN (no AF_CAN sockets); "

@@ -1,0 +1,98 @@
+"""``bench plot``: a run folder's figure again, or a custom one from its ``signals.csv``."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+from typing import Any
+
+from bench._errors import BenchError
+from bench.cli._common import NONNEG_FLOAT
+
+
+def _json(path: Path) -> dict[str, Any]:
+    if not path.is_file():
+        return {}
+    data = json.loads(path.read_text())
+    return data if isinstance(data, dict) else {}
+
+
+def cmd_plot(args: argparse.Namespace) -> int:
+    from bench.runs._analysis import COLUMNS, read_csv
+    from bench.runs._plots import controller_label, plot_run, plot_signals
+
+    run = Path(args.run_dir)
+    csv = run / "signals.csv"
+    if not csv.is_file():
+        raise BenchError(f"{run}: no signals.csv (a run folder of bench run or bench analyze)")
+    if args.t_from is not None and args.t_to is not None and args.t_to <= args.t_from:
+        raise BenchError(f"--to {args.t_to} must be after --from {args.t_from}")
+    table = read_csv(str(csv))
+    units = dict(COLUMNS)
+    meta, metrics = _json(run / "meta.json"), _json(run / "metrics.json")
+    scn = meta.get("scenario") or {}
+    title = f"{scn.get('name', run.name)} / {controller_label(meta)}"
+    sel = table["t"] >= (args.t_from if args.t_from is not None else -1e300)
+    if args.t_to is not None:
+        sel &= table["t"] <= args.t_to
+    if not sel.any():
+        raise BenchError(f"{csv}: no rows between --from and --to")
+    if args.signals:
+        names = [s.strip() for s in args.signals.split(",") if s.strip()]
+        unknown = [s for s in names if s not in table]
+        if unknown or not names:
+            raise BenchError(
+                f"--signals: unknown column {', '.join(unknown) or '(none given)'} "
+                f"(columns of signals.csv: {', '.join(table)})"
+            )
+        out = Path(args.out) if args.out else run / "plot.png"
+        plot_signals(table, names, out, t_from=args.t_from, t_to=args.t_to, title=title,
+                     units=units)  # fmt: skip
+    else:
+        from bench.runs._results import fundamental_corner_hz
+        from bench.scenarios._schema import load_scenario
+
+        part = {k: v[sel] for k, v in table.items()}
+        f_c = None
+        try:
+            scenario = (
+                load_scenario(str(run / "scenario.json"))
+                if (run / "scenario.json").is_file()
+                else None
+            )
+        except Exception:  # an unreadable scenario: the figure without the fundamental
+            scenario = None
+        if scenario is not None:
+            f_c = fundamental_corner_hz(scenario, str(meta.get("estimator", "")), part)
+        out = Path(args.out) if args.out else run / "run.png"
+        plot_run(
+            part,
+            out.parent,
+            title=title,
+            metrics=metrics,
+            scored_from_s=float(meta.get("scored_from_s", scn.get("score_from_s", 0.0)) or 0.0),
+            f_split_hz=f_c,
+            paper=str(scn.get("paper", "")),
+            name=out.name,
+        )
+    print(f"plot: {out}")
+    return 0
+
+
+def register(sub: Any) -> None:
+    p = sub.add_parser(
+        "plot",
+        help="draw a run folder's run.png again, or chosen columns of its signals.csv",
+        description="Without --signals: run.png again (over --from/--to when given). With "
+        "--signals: one panel per column of signals.csv (see signals.md in the run folder).",
+    )
+    p.add_argument("run_dir", help="run folder holding signals.csv (and meta.json, metrics.json)")
+    p.add_argument("--signals", "-s", help="comma-separated columns, e.g. theta_e,theta_hat,i_d")
+    p.add_argument("--from", dest="t_from", type=NONNEG_FLOAT, metavar="S",
+                   help="start of the time window, s (default: the run's start)")  # fmt: skip
+    p.add_argument("--to", dest="t_to", type=NONNEG_FLOAT, metavar="S",
+                   help="end of the time window, s (default: the run's end)")  # fmt: skip
+    p.add_argument("--out", "-o",
+                   help="PNG to write (default RUN_DIR/plot.png with --signals, else RUN_DIR/run.png)")  # fmt: skip
+    p.set_defaults(func=cmd_plot)
