@@ -101,6 +101,9 @@ def run_scenario(
     """
     codec = codec or Codec()
     out_dir.mkdir(parents=True, exist_ok=True)
+    # an earlier run's files in the same folder would mix with these (scenario.json:
+    # bench run --monitor has just written this run's)
+    clear_run_files(out_dir, keep=("scenario.json",))
     capture = out_dir / f"capture{LOG_SUFFIX[log_format]}"
     link = scn.latency.any
     spec_b = spec.peer() if link else spec
@@ -117,22 +120,29 @@ def run_scenario(
     asked: set[str] = set()
     rec = Recording([spec, spec_b] if link else [spec], capture, codec)
     t_wall0 = time.perf_counter()
+    start_error: str | None = None
     with _catch_signals() as interrupted:
         try:
-            start_nodes(roles, scn_file, out_dir, env, procs, stop=interrupted)
-            cmds = command_frames(scn, codec, pace_every=pace)
-            plant = dict(procs).get("plant")
-            if plant is not None and not interrupted():
-                ended = _drive(rec, cmds, procs, plant, scn, mode, pace, progress, interrupted)
-            asked = stop_nodes(
-                procs, rec.plant_bus, cmds, link=link, interrupted=interrupted(), ended=ended
-            )
+            try:
+                start_nodes(roles, scn_file, out_dir, env, procs, stop=interrupted)
+            except BenchError as e:  # a node that never became ready: nothing to record
+                start_error = str(e)
+            if start_error is None:
+                cmds = command_frames(scn, codec, pace_every=pace)
+                plant = dict(procs).get("plant")
+                if plant is not None and not interrupted():
+                    ended = _drive(rec, cmds, procs, plant, scn, mode, pace, progress, interrupted)
+                asked = stop_nodes(
+                    procs, rec.plant_bus, cmds, link=link, interrupted=interrupted(), ended=ended
+                )
         finally:
             for _, p in procs:
                 if p.poll() is None:
                     p.kill()
                     p.wait()
             rec.close()
+    if start_error is not None:
+        raise failed_before_recording(out_dir, start_error)
     wall = time.perf_counter() - t_wall0
     failures = node_failures(procs, asked)
     meta = run_metadata(scn, estimator, mode=mode, transport=spec.describe(), link=link)
@@ -142,6 +152,15 @@ def run_scenario(
     if interrupted():
         meta["interrupted"] = True
     frames = rec.frames()
+    if not frames and (ended or failures) and not interrupted():
+        why = (
+            f"{ended} process ended before the run did ({last_line(out_dir, ended)})"
+            if ended
+            else "node process failed ("
+            + "; ".join(f"{r}: {last_line(out_dir, r)}" for r in failures)
+            + ")"
+        )
+        raise failed_before_recording(out_dir, why)
     result = _score(frames, codec, scn, out_dir, meta, wall, capture, partial=bool(interrupted() or failures))
     if ended and not interrupted():
         raise BenchError(
@@ -152,6 +171,42 @@ def run_scenario(
         logs = "; ".join(f"{r}: {last_line(out_dir, r)}" for r in failures)
         raise BenchError(f"node process failed ({logs}); files in {out_dir}")
     return result
+
+
+#: The files a run writes into its folder (besides the nodes' ``*.log``).
+RUN_FILES = (
+    "scenario.json",
+    "capture.blf",
+    "capture.asc",
+    "capture.log",
+    "signals.csv",
+    "signals.md",
+    "metrics.json",
+    "meta.json",
+    "run.png",
+    "plant.json",
+    "controller.json",
+    "error.txt",
+)
+
+
+def clear_run_files(out_dir: Path, keep: tuple[str, ...] = ()) -> None:
+    """Remove an earlier run's files (:data:`RUN_FILES`, but ``keep``) from ``out_dir``;
+    nothing else."""
+    for name in RUN_FILES:
+        if name not in keep:
+            (out_dir / name).unlink(missing_ok=True)
+
+
+def failed_before_recording(out_dir: Path, why: str) -> BenchError:
+    """A run that failed before its first recorded frame: its folder keeps only
+    ``error.txt`` (the reason) and the nodes' logs, and the error names it."""
+    clear_run_files(out_dir)
+    logs = sorted(p.name for p in out_dir.glob("*.log"))
+    (out_dir / "error.txt").write_text(
+        f"{why}\nnothing was recorded; the nodes' stderr: {', '.join(logs) or 'none'}\n"
+    )
+    return BenchError(f"{why}; nothing recorded, see {out_dir / 'error.txt'}")
 
 
 def _drive(
