@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test lint unit vcan suite reference perf rtcheck clean
+.PHONY: demo test lint unit vcan suite reference perf docs rtcheck clean
 
 # pip builds the compiled plant engine (setup.py); tools/need-cc installs its
 # compiler and headers first when it may, and the last line says when the
@@ -51,6 +51,10 @@ reference: $(STAMP)
 # perf block rendered from it (a few minutes).
 perf: $(STAMP)
 	$(BIN)/bench perf --out docs/perf --doc docs/BENCHMARKS.md --readme README.md
+
+# The scenario reference, from the schema (tests/test_scenarios_doc.py checks it).
+docs: $(STAMP)
+	$(BIN)/bench schema --doc docs/SCENARIOS.md
 
 rtcheck: $(STAMP)
 	$(BIN)/bench rtcheck --out docs/realtime --doc docs/REALTIME.md

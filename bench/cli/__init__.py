@@ -27,6 +27,7 @@ SUBCOMMANDS = (
     "run",
     "show",
     "list",
+    "schema",
     "plant",
     "controller",
     "link",

@@ -6,7 +6,9 @@ load-torque profiles, the injected latency, the sensing noise and the seed.
 The ten scenarios of the papers ship in ``bench/scenarios/``; a user's own file
 path works wherever a name does.
 
-Schema (all keys optional unless marked *required*)::
+Schema (all keys optional unless marked *required*; every key with its unit,
+default, range and meaning: docs/SCENARIOS.md, written by ``bench schema`` from
+this module and :mod:`bench.scenarios._reference`)::
 
     name = "wen-5.1"                 # defaults to the file's stem
     description = "..."
