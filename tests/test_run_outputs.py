@@ -239,3 +239,33 @@ def test_help_shows_every_default_and_no_virtual_bus() -> None:
             if a.default in (None, False, argparse.SUPPRESS):
                 continue
             assert "default" in p._get_formatter()._expand_help(a), (p.prog, a.dest)
+
+
+# ---------------------------------------------------------------- sweep plots
+
+
+def test_sweep_plots_mark_lost_lock_and_label_every_panel_and_fit(tmp_path: Path) -> None:
+    import matplotlib.pyplot as plt
+
+    from bench.studies._sweep import lost_points, plot_sweeps
+
+    old = {"x": [0.0, 0.2, 0.4], "theta_err_abs_max_deg": [1.0, 66.0, 180.0]}
+    assert lost_points(old).tolist() == [False, False, True]  # an older summary: max > 90 deg
+    new = dict(old, lock_lost=[False, True, True])
+    assert lost_points(new).tolist() == [False, True, True]  # the runs' own lock_lost
+    meth = dict(new, theta_err_mean_deg=[0.5, 3.0, -80.0], slope=2.0, intercept_deg=0.4)
+    sweeps = {"noise": {"label": "current noise (A)", "fit": True, "slope_per": 1.0,
+                        "slope_unit": "deg per A", "methods": {"tt-dq": meth}}}  # fmt: skip
+    figs: list[Any] = []
+    real_close = plt.close
+    plt.close = lambda fig=None: figs.append(fig)
+    try:
+        assert plot_sweeps(sweeps, tmp_path) == ["sweep-noise.png"]
+    finally:
+        plt.close = real_close
+    for ax in figs[0].axes:
+        labels = [t.get_text() for t in ax.get_legend().get_texts()]
+        assert "tt-dq" in labels and "lost lock (mean meaningless)" in labels
+    labels = [t.get_text() for t in figs[0].axes[0].get_legend().get_texts()]
+    assert "tt-dq fit: +2.00 deg per A" in labels
+    real_close(figs[0])

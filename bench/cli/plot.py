@@ -18,6 +18,29 @@ def _json(path: Path) -> dict[str, Any]:
     return data if isinstance(data, dict) else {}
 
 
+def _scenario(run: Path, meta: dict[str, Any]) -> Any:
+    """The run's scenario (``scenario.json``, else ``meta.json``'s), or None."""
+    from bench._errors import ScenarioError
+    from bench.scenarios._schema import load_scenario, scenario_from_dict
+
+    try:
+        if (run / "scenario.json").is_file():
+            return load_scenario(str(run / "scenario.json"))
+        if isinstance(meta.get("scenario"), dict):
+            return scenario_from_dict(meta["scenario"], str(run / "meta.json"))
+    except ScenarioError:  # an unreadable scenario: the figure without the fundamental
+        return None
+    return None
+
+
+def _pole_pairs(scenario: Any) -> int | None:
+    if scenario is None:
+        return None
+    from bench.scenarios._setup import get_preset
+
+    return int(get_preset(scenario).motor.n_p)
+
+
 def cmd_plot(args: argparse.Namespace) -> int:
     from bench.runs._analysis import COLUMNS, read_csv
     from bench.runs._plots import controller_label, plot_run, plot_signals
@@ -51,18 +74,10 @@ def cmd_plot(args: argparse.Namespace) -> int:
                      units=units)  # fmt: skip
     else:
         from bench.runs._results import fundamental_corner_hz
-        from bench.scenarios._schema import load_scenario
 
         part = {k: v[sel] for k, v in table.items()}
         f_c = None
-        try:
-            scenario = (
-                load_scenario(str(run / "scenario.json"))
-                if (run / "scenario.json").is_file()
-                else None
-            )
-        except Exception:  # an unreadable scenario: the figure without the fundamental
-            scenario = None
+        scenario = _scenario(run, meta)
         if scenario is not None:
             f_c = fundamental_corner_hz(scenario, str(meta.get("estimator", "")), part)
         out = Path(args.out) if args.out else run / "run.png"
@@ -74,6 +89,7 @@ def cmd_plot(args: argparse.Namespace) -> int:
             scored_from_s=float(meta.get("scored_from_s", scn.get("score_from_s", 0.0)) or 0.0),
             f_split_hz=f_c,
             paper=str(scn.get("paper", "")),
+            n_p=_pole_pairs(scenario),
             name=out.name,
         )
     print(f"plot: {out}")

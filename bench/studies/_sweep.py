@@ -319,6 +319,7 @@ def collect(
             "theta_err_rms_deg",
         ):
             meth[key].append(float(res.get(key, math.nan)))
+        meth.setdefault("lock_lost", []).append(bool(res.get("lock_lost")))
         if "error" in res:
             meth["errors"][f"{job.x:g}"] = res["error"]
     for sw in out.values():
@@ -330,6 +331,20 @@ def collect(
             meth["flat"] = is_flat(f)
             meth["fit_points"] = f.n
     return out
+
+
+#: A sweep point whose largest |position error| is above this (deg) lost the rotor
+#: angle when the summary has no ``lock_lost`` of its own (an older summary).
+LOST_ABS_MAX_DEG = 90.0
+
+
+def lost_points(meth: dict[str, Any]) -> Any:
+    """Per point of one method's sweep: whether the estimator lost the rotor angle
+    (the run's ``lock_lost``; an older summary: max |dtheta| above :data:`LOST_ABS_MAX_DEG`)."""
+    if "lock_lost" in meth and len(meth["lock_lost"]) == len(meth["x"]):
+        return np.asarray(meth["lock_lost"], dtype=bool)
+    peak = np.asarray(meth["theta_err_abs_max_deg"], dtype=float)
+    return np.nan_to_num(peak, nan=0.0) > LOST_ABS_MAX_DEG
 
 
 def plot_sweeps(sweeps: dict[str, Any], out_dir: Any) -> list[str]:
@@ -345,10 +360,15 @@ def plot_sweeps(sweeps: dict[str, Any], out_dir: Any) -> list[str]:
     out.mkdir(parents=True, exist_ok=True)
     names = []
     for kind, sw in sweeps.items():
-        fig, ax = plt.subplots(1, 2, figsize=(9, 3.4))
+        fig, ax = plt.subplots(1, 2, figsize=(10, 3.8))
+        lost_any = False
         for est, meth in sw["methods"].items():
             x = np.asarray(meth["x"], dtype=float)
-            (ln,) = ax[0].plot(x, meth["theta_err_mean_deg"], "o-", ms=4, lw=1, label=est)
+            mean = np.asarray(meth["theta_err_mean_deg"], dtype=float)
+            peak = np.asarray(meth["theta_err_abs_max_deg"], dtype=float)
+            lost = lost_points(meth)
+            lost_any |= bool(lost.any())
+            (ln,) = ax[0].plot(x, mean, "o-", ms=4, lw=1, label=est)
             if sw["fit"] and math.isfinite(meth["slope"]):
                 xs = np.array([x.min(), x.max()])
                 ax[0].plot(
@@ -357,15 +377,22 @@ def plot_sweeps(sweeps: dict[str, Any], out_dir: Any) -> list[str]:
                     ls=":",
                     color=ln.get_color(),
                     lw=1,
+                    label=f"{est} fit: {meth['slope']:+.2f} {sw['slope_unit']}",
                 )
-            ax[1].plot(x, meth["theta_err_abs_max_deg"], "o-", ms=4, lw=1, label=est)
+            ax[1].plot(x, peak, "o-", ms=4, lw=1, label=est, color=ln.get_color())
+            for a, y in ((ax[0], mean), (ax[1], peak)):
+                if lost.any():
+                    a.plot(x[lost], y[lost], "x", ms=10, mew=2, color="tab:red")
         ax[0].set_ylabel(r"mean $\Delta\theta$ (deg)")
         ax[1].set_ylabel(r"max $|\Delta\theta|$ (deg)")
         for a in ax:
             a.set_xlabel(sw["label"])
             a.grid(alpha=0.3)
+            if lost_any:  # one legend entry for the lost-lock marks
+                a.plot([], [], "x", ms=10, mew=2, color="tab:red",
+                       label="lost lock (mean meaningless)")  # fmt: skip
+            a.legend(fontsize=7)
         ax[1].set_yscale("log")
-        ax[0].legend(fontsize=8)
         fig.suptitle(f"position error vs {sw['label']} (in-process, {BASE_SCENARIO} base)")
         fig.tight_layout()
         name = f"sweep-{kind}.png"
