@@ -57,7 +57,7 @@ docs: $(STAMP)
 	$(BIN)/bench schema --doc docs/SCENARIOS.md
 
 rtcheck: $(STAMP)
-	$(BIN)/bench rtcheck --out docs/realtime --doc docs/REALTIME.md
+	$(BIN)/bench rtcheck --out docs/realtime --doc docs/REALTIME.md --doc README.md
 
 clean:
 	rm -rf $(VENV) runs .pytest_cache .mypy_cache .ruff_cache

@@ -39,8 +39,8 @@ def cmd_rtcheck(args: argparse.Namespace) -> int:
     if out is not None:
         (out / "rtcheck.json").write_text(json.dumps(res, indent=2, sort_keys=True) + "\n")
         print(f"written: {out / 'rtcheck.json'}")
-    if args.doc:
-        doc = Path(args.doc)
+    for name in args.doc or []:
+        doc = Path(name)
         text = doc.read_text(encoding="utf-8") if doc.exists() else ""
         doc.write_text(update_doc(text, res), encoding="utf-8")
         print(f"written: {doc} (measured block)")
@@ -64,6 +64,9 @@ def register(sub: Any) -> None:
     )
     p.add_argument("--out", "-o", help="also write rtcheck.json into this folder")
     p.add_argument(
-        "--doc", help="rewrite the measured block of this Markdown file (docs/REALTIME.md)"
+        "--doc",
+        action="append",
+        help="rewrite the measured block of this Markdown file (docs/REALTIME.md, "
+        "README.md; repeatable)",
     )
     p.set_defaults(func=cmd_rtcheck)
