@@ -215,6 +215,11 @@ def plot_run(
         ax_cur.plot(t, fundamental_a(table, T_s, f_split_hz), lw=0.9, color="tab:blue",
                     label=f"fundamental (d-q low-pass {f_split_hz:.0f} Hz)")  # fmt: skip
     _markers(ax_cur, t, table, m, T_s, scored_from_s, legend=False)
+    if m.get("plant_fault") in (None, "none"):
+        # scaled to the scored part: the start-up's polarity pulses would flatten it
+        peak = float(np.nanmax(np.abs(table["i_a"][scored]))) if np.any(scored) else 0.0
+        if math.isfinite(peak) and peak > 0.0:
+            ax_cur.set_ylim(-1.3 * peak, 1.3 * peak)
     ax_cur.set_ylabel(r"$i_a$ (A)")
     ax_cur.set_xlabel("time (s)")
     ax_cur.legend(loc="upper right", fontsize=7)
