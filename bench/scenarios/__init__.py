@@ -4,5 +4,7 @@
   mistake is one line naming the file, the field and the reason.
 - ``_setup``: the plant, the controller and the command schedule of a
   scenario, the motor preset it names, its PWM period.
+- ``_reference``: what every key means (unit, range, meaning), and
+  ``docs/SCENARIOS.md`` rendered from it and the schema (``bench schema``).
 - ``*.toml``: the papers' scenarios, one file each.
 """
