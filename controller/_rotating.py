@@ -116,6 +116,14 @@ class RotatingInjectionPars:
         load changes), and its speed estimate needs no lag compensation in
         the speed loop (:meth:`RotatingHFEstimator.speed_response` is 1 for
         tt-dq with an exact model). Not the paper's: an option a drive uses.
+        Its weakness is an unmodelled load change: the speed loop's answer
+        to it is fed forward as acceleration the rotor does not make, so the
+        speed loop regulates the observer's model until the load state has
+        learned the load (``1 / b``); on wen2023's full-load ramps (7.5 N m
+        on 0.003 kg m^2 in 0.3 s, wen-5.3 and wen-5.4) that loses the rotor,
+        where the PLL keeps it. It suits speed steps and ramps under a known
+        or slowly changing load (wen-5.2: ``bench suite robustness`` and
+        ``bench sweep`` compare the two with ``estimator_options.observer``).
     a : float or None
         Angle poles of the mechanical observer (rad/s); None derives them
         from ``pm_deg`` with the in-loop filters
