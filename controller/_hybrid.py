@@ -306,6 +306,20 @@ class _LuenbergerTracker:
         self.obs.reset(theta, w, accel + self._k_x * torque)
 
 
+class _MechanicalTracker(_LuenbergerTracker):
+    """Slaving of the rotating-injection estimators' mechanical observer: the square-wave
+    observer's load state, with its angle one period ahead as the PLL's."""
+
+    __slots__ = ("T_s",)
+
+    def __init__(self, obs: LuenbergerObserver, T_s: float) -> None:
+        super().__init__(obs)
+        self.T_s = T_s
+
+    def sync(self, theta: float, w: float, accel: float, torque: float) -> None:
+        self.obs.reset(theta + self.T_s * w, w, accel + self._k_x * torque)
+
+
 class HybridEstimator:
     """Injection estimator below the band, flux observer above, blended in between.
 
@@ -489,7 +503,12 @@ def create(motor: MotorModel, T_s: float, hf: str = "tt-dq", **options: Any) -> 
         from controller._tt_dq import TTDQEstimator
 
         tt = TTDQEstimator(motor, T_s, RotatingInjectionPars(**options))
-        tracker = _PllTracker(tt.pll, T_s)
+        pll = tt.pll
+        tracker = (
+            _PllTracker(pll, T_s)
+            if isinstance(pll, PositionObserver)
+            else _MechanicalTracker(pll, T_s)
+        )
         est = tt
     elif hf == "square-wave":
         from controller._square_wave import SquareWaveEstimator

@@ -44,8 +44,11 @@ feed-forward, as a disturbance the loop has to reject.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
+
+from controller._design import margins, solve_largest
 
 _TWO_PI = 2.0 * math.pi
 
@@ -63,6 +66,15 @@ class LuenbergerObserver:
         Triple closed-loop pole (rad/s), > 0.
     T_s : float
         Sampling period (s).
+    b : float or None
+        Load pole (rad/s): the poles are then ``-a`` (double) and ``-b``,
+        ``K_3 / J = 2 a + b``, ``K_2 / J = a^2 + 2 a b``, ``K_1 / J = a^2 b``.
+        None is Xue's triple pole (``b = a``). A ``b`` well below ``a``
+        makes the observer a PI tracker of bandwidth ``a`` with a torque
+        feed-forward and a slow load estimate: an unmodelled load step is
+        then followed as the PI tracker follows any acceleration (steady
+        error ``alpha / a^2`` until the load state learns it, at the rate
+        ``b``), while the accelerations the torque commands are fed forward.
 
     Attributes
     ----------
@@ -93,16 +105,21 @@ class LuenbergerObserver:
         "x",
     )
 
-    def __init__(self, J: float, n_p: int, a: float, T_s: float) -> None:
-        if not (J > 0.0 and a > 0.0 and T_s > 0.0):
-            raise ValueError(f"observer needs J, a, T_s > 0; got J={J}, a={a}, T_s={T_s}")
+    def __init__(self, J: float, n_p: int, a: float, T_s: float, b: float | None = None) -> None:
+        if not (J > 0.0 and a > 0.0 and T_s > 0.0 and (b is None or b > 0.0)):
+            raise ValueError(f"observer needs J, a, b, T_s > 0; got J={J}, a={a}, b={b}, T_s={T_s}")
         self.J = J
         self.n_p = n_p
         self.a = a
         self.T_s = T_s
-        self.K_1 = a**3 * J
-        self.K_2 = 3.0 * a**2 * J
-        self.K_3 = 3.0 * a * J
+        if b is None:
+            self.K_1 = a**3 * J
+            self.K_2 = 3.0 * a**2 * J
+            self.K_3 = 3.0 * a * J
+        else:
+            self.K_1 = a * a * b * J
+            self.K_2 = (a * a + 2.0 * a * b) * J
+            self.K_3 = (2.0 * a + b) * J
         # per-step gains (T_s K_i / J) and the feed-forward gain (T_s n_p / J)
         self._g1 = T_s * self.K_1 / J
         self._g2 = T_s * self.K_2 / J
@@ -140,11 +157,75 @@ class LuenbergerObserver:
         self.x += self._g1 * e
 
 
-def observer_response(a: float, T_s: float, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``(Theta/E, W/E)`` of :meth:`LuenbergerObserver.step` at ``z`` (module docstring)."""
+def observer_response(
+    a: float, T_s: float, z: np.ndarray, b: float | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """``(Theta/E, W/E)`` of :meth:`LuenbergerObserver.step` at ``z`` (module docstring);
+    ``b`` as in :class:`LuenbergerObserver`."""
     zi = 1.0 / np.asarray(z, complex)
     d = 1.0 - zi
-    x = T_s * a**3 / d
-    w = (T_s * zi * x + 3.0 * T_s * a * a) / d
-    th = (T_s * zi * w + 3.0 * T_s * a) / d
+    if b is None:
+        l1, l2, l3 = a**3, 3.0 * a * a, 3.0 * a
+    else:
+        l1, l2, l3 = a * a * b, a * a + 2.0 * a * b, 2.0 * a + b
+    x = T_s * l1 / d
+    w = (T_s * zi * x + T_s * l2) / d
+    th = (T_s * zi * w + T_s * l3) / d
     return th, w
+
+
+def design_pole(
+    chain: Callable[[np.ndarray], np.ndarray],
+    T_s: float,
+    pm_deg: float,
+    w_c_max: float,
+    load_ratio: float | None = None,
+) -> tuple[float, float, float]:
+    """Triple pole ``a`` from a phase-margin target with a demodulator's filters in the loop.
+
+    ``load_ratio``: the load pole as a fraction of ``a`` (``b = load_ratio
+    a``; None: triple pole). The loop, broken at the error, is ``L =
+    Theta/E(z) G(z)``: the
+    observer's angle response (:func:`observer_response`) and ``chain``,
+    the demodulator's response from ``theta_hat`` to its error (its in-loop
+    filters; :func:`controller._rotating.in_loop_response`). The torque
+    feed-forward is outside this loop. ``a`` is the largest pole that keeps
+
+    1. the phase margin at ``pm_deg`` or more, and
+    2. the gain crossover at or below ``w_c_max`` (the demodulation
+       low-pass corner, as for the PI observer:
+       :func:`controller._pll.design_bandwidth`).
+
+    With nothing in the loop (``G = 1``) the triple-pole loop crosses over
+    at about ``3.0 a`` with 72 degrees of margin whatever ``a`` (for ``a
+    T_s`` small), so the filters and the one-period update take the margin
+    down to the target.
+
+    Returns
+    -------
+    a, pm, w_c : float
+        Pole (rad/s), achieved phase margin (deg) and crossover (rad/s).
+    """
+    w_hi = 0.999 * math.pi / T_s
+
+    def loop(a: float) -> Callable[[np.ndarray], np.ndarray]:
+        def f(w: np.ndarray) -> np.ndarray:
+            z = np.exp(1j * np.asarray(w, float) * T_s)
+            b = None if load_ratio is None else load_ratio * a
+            return observer_response(a, T_s, z, b)[0] * chain(w)
+
+        return f
+
+    def pm_of(a: float) -> float:
+        return margins(loop(a), 1e-3 * a, w_hi, 3)[0]
+
+    def wc_of(a: float) -> float:
+        return margins(loop(a), 1e-3 * a, w_hi, 3)[1]
+
+    lo = 1e-5 / T_s
+    hi = 0.1 / T_s
+    a_pm = solve_largest(pm_of, pm_deg, lo, hi, rising=False)
+    a_bw = solve_largest(wc_of, w_c_max, lo, hi, rising=True)
+    a = min(a_pm, a_bw)
+    pm, w_c = margins(loop(a), 1e-3 * a, w_hi, 3)
+    return a, pm, w_c

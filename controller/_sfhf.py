@@ -79,7 +79,7 @@ class SFHFEstimator(RotatingHFEstimator):
         else:
             f = self._lpf.update(-(i_an * c_r + i_bn * s_r))
             err = f * self._inv_norm
-        self._publish(th, f, err, i_a - i_ah, i_b - i_bh)
+        self._publish(th, f, err, i_a - i_ah, i_b - i_bh, x.torque)
 
 
 def create(motor: MotorModel, T_s: float, **options: Any) -> SFHFEstimator:

@@ -61,7 +61,7 @@ class TTABEstimator(RotatingHFEstimator):
             err = f / (2.0 * max(math.hypot(s_2, c_2), self._floor))
         else:
             err = f * self._inv_norm
-        self._publish(th, f, err, i_a - i_ah, i_b - i_bh)
+        self._publish(th, f, err, i_a - i_ah, i_b - i_bh, x.torque)
 
 
 def create(motor: MotorModel, T_s: float, **options: Any) -> TTABEstimator:

@@ -71,7 +71,7 @@ class TTDQEstimator(RotatingHFEstimator):
             err = f * self._inv_norm
         i_df = i_d - i_dh
         i_qf = i_q - i_qh
-        self._publish(th, f, err, c * i_df - s * i_qf, s * i_df + c * i_qf)
+        self._publish(th, f, err, c * i_df - s * i_qf, s * i_df + c * i_qf, x.torque)
 
 
 def create(motor: MotorModel, T_s: float, **options: Any) -> TTDQEstimator:

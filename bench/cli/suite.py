@@ -58,7 +58,7 @@ def _common(p: argparse.ArgumentParser) -> None:
 
 def cmd_paper(args: argparse.Namespace) -> int:
     from bench.scenarios._schema import PAPER, SHIPPED
-    from bench.studies._suite import SuiteOptions, run_suite
+    from bench.studies._suite import PLANTS, SuiteOptions, run_suite
     from bench.studies._sweep import SWEEPS
     from controller._registry import ESTIMATOR_NAMES
 
@@ -70,6 +70,8 @@ def cmd_paper(args: argparse.Namespace) -> int:
             )
     estimators = _csv(args.estimators)
     _check_names(estimators, ESTIMATOR_NAMES, "--estimators")
+    plants = _csv(args.plants) or PLANTS
+    _check_names(plants, PLANTS, "--plants")
     sweeps = () if args.no_sweep else (_csv(args.sweeps) or tuple(SWEEPS))
     _check_names(sweeps, tuple(SWEEPS), "--sweeps")
     if args.jobs < 1:
@@ -83,6 +85,7 @@ def cmd_paper(args: argparse.Namespace) -> int:
             runs_dir=runs_dir,
             scenarios=tuple(scenarios),
             estimators=estimators,
+            plants=tuple(plants),
             quick=args.quick,
             sweeps=tuple(sweeps),
             sweep_quick=args.quick,
@@ -146,6 +149,12 @@ def _print_claims(summary: dict[str, Any]) -> None:
     sys.stdout.flush()
 
 
+def _sweep_names() -> str:
+    from bench.studies._sweep import SWEEPS
+
+    return ", ".join(SWEEPS)
+
+
 def register(sub: Any) -> None:
     """Add ``bench suite paper`` and ``bench suite sweep``."""
     p = sub.add_parser("suite", help="paper reproduction suite, sweeps of the claims, report")
@@ -160,8 +169,11 @@ def register(sub: Any) -> None:
     q.add_argument("--scenarios", help="comma-separated scenario names (default: all shipped)")
     q.add_argument("--estimators", help="comma-separated estimators to keep (default: all listed)")
     q.add_argument(
-        "--sweeps", help="comma-separated sweeps (speed, duty_delay, sample_delay, v_h, noise)"
+        "--plants",
+        help="comma-separated plants: ideal (the papers'), drive (drive profile, countermeasures "
+        "on), drive-nocomp (countermeasures off) (default: all three)",
     )
+    q.add_argument("--sweeps", help=f"comma-separated sweeps ({_sweep_names()}; default: all)")
     q.add_argument("--no-sweep", action="store_true", help="skip the sweeps")
     q.add_argument(
         "--quick",
@@ -178,11 +190,12 @@ def register(sub: Any) -> None:
     _common(q)
     q.set_defaults(func=cmd_paper)
 
-    q = ss.add_parser("sweep", help="position error vs speed, delay, V_h and noise (in-process)")
-    q.add_argument("--out", "-o", help="report folder (default runs/suite-sweep)")
-    q.add_argument(
-        "--sweeps", help="comma-separated sweeps (speed, duty_delay, sample_delay, v_h, noise)"
+    q = ss.add_parser(
+        "sweep",
+        help="position error vs speed, delay, V_h, noise, dead time and ADC bits (in-process)",
     )
+    q.add_argument("--out", "-o", help="report folder (default runs/suite-sweep)")
+    q.add_argument("--sweeps", help=f"comma-separated sweeps ({_sweep_names()}; default: all)")
     q.add_argument("--quick", action="store_true", help="fewer points, shorter runs")
     _common(q)
     q.set_defaults(func=cmd_sweep)

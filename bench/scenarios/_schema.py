@@ -477,7 +477,7 @@ _OPTION_NONNEGATIVE = (
 )  # PLL bandwidth (0 freezes it), periods (0: off), V
 _OPTION_INTEGERS = ("M",)  # CIC differential delay (PWM periods), >= 1
 _OPTION_FILTERS = ("bpf", "hpf", "lpf")  # continuous prototypes [[b...], [a...]]
-_OPTION_CHOICES = {"normalise": ("model", "measured")}
+_OPTION_CHOICES = {"normalise": ("model", "measured"), "observer": ("pll", "mechanical")}
 # any other key (``a``, the square-wave observer pole, rad/s): a number > 0
 #: Parameters of the square-wave estimator that are not options: the
 #: controller's (``motor``, ``T_s``) and the estimator name's (``cic``:

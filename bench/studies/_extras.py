@@ -61,7 +61,10 @@ def refresh_extras(summary: dict[str, Any]) -> None:
     for rec in summary.get("runs", []):
         if "error" in rec:
             continue
-        sig = runs_dir / rec["scenario"] / rec["estimator"] / "signals.csv"
+        sub = str(rec.get("files", "")).removeprefix("runs/") or (
+            f"{rec['scenario']}/{rec['estimator']}"
+        )
+        sig = runs_dir / sub / "signals.csv"
         meta = sig.parent / "meta.json"
         if not (sig.exists() and meta.exists()):
             continue

@@ -18,6 +18,15 @@ sweep points are single-threaded and gain about twice from two workers.
 On SocketCAN (one shared ``vcan0``) runs are not isolated from each other,
 so the suite runs them one at a time there.
 
+Plants.  Every scenario runs on three plants (``--plants``): ``ideal``, the
+papers' plant as shipped; ``drive``, the ``drive`` profile (switching
+inverter with dead time and device drops, 12-bit ADC with offsets and gain
+mismatch, cross-saturation: :mod:`plant_rt._profiles`) with the drive's
+countermeasures on (dead-time compensation, cross-saturation angle
+compensation, offset calibration: :mod:`controller._compensation`); and
+``drive-nocomp``, the same plant with every countermeasure off, to show how
+far each method degrades without them (:func:`plant_variant`).
+
 Files.  The full run folders (capture, ``signals.csv``, node logs) go to
 ``runs_dir``; the suite's output folder receives only ``report.md``,
 ``summary.json``, the sweep plots and per run ``metrics.json``, ``meta.json``
@@ -42,6 +51,7 @@ from typing import Any, Protocol
 from bench._errors import BenchError
 from bench.scenarios._schema import PAPER, Scenario, load_scenario
 from bench.studies._extras import run_extras
+from bench.studies._plants import PLANTS, plant_variant
 
 #: Simulated seconds of a run in ``--quick`` mode (smoke test, not comparable with the papers).
 QUICK_DURATION_S = 1.6
@@ -70,10 +80,18 @@ SUMMARY_METRICS = (
     "wall_s",
     "deadline_misses",
     "frames_rejected",
+    "lock_lost",
+    "lock_lost_at_s",
 )
 
 #: ... and those of a hybrid estimator's run: every metric whose name starts so.
 BAND_METRIC_PREFIXES = ("band_", "handover_")
+
+
+def run_subdir(plant: str, scenario: str, estimator: str) -> str:
+    """Where a run's files go under a runs or report folder: ``scenario/estimator`` on
+    the ideal plant, ``plant/scenario/estimator`` on the others."""
+    return f"{scenario}/{estimator}" if plant == "ideal" else f"{plant}/{scenario}/{estimator}"
 
 
 class Job(Protocol):
@@ -108,10 +126,12 @@ class RunJob:
     estimator: str
     run_dir: Path
     transport: tuple[str, str, int | None] | None
+    plant: str = "ideal"
 
     @property
     def label(self) -> str:
-        return f"{self.scenario.name}/{self.estimator}"
+        where = "" if self.plant == "ideal" else f" ({self.plant})"
+        return f"{self.scenario.name}/{self.estimator}{where}"
 
     @property
     def cost(self) -> float:
@@ -296,22 +316,25 @@ def paper_jobs(
     estimators: Sequence[str] | None = None,
     quick: bool = False,
     transport: tuple[str, str] | None = None,
+    plants: Sequence[str] = ("ideal",),
 ) -> list[RunJob]:
-    """One job per shipped scenario and estimator it lists (``estimators`` filters)."""
+    """One job per plant, shipped scenario and estimator it lists (``estimators`` filters)."""
     base_port = 40000 + 4 * random.Random(os.getpid()).randrange(3000)
     jobs: list[RunJob] = []
-    for name in scenarios:
-        scn = load_scenario(name)
-        if quick:
-            scn = quick_scenario(scn)
-        for est in scn.estimators:
-            if estimators is not None and est not in estimators:
-                continue
-            tr: tuple[str, str, int | None] | None = None
-            if transport is not None:
-                port = base_port + 4 * len(jobs) if transport[0] == "udp_multicast" else None
-                tr = (transport[0], transport[1], port)
-            jobs.append(RunJob(scn, est, runs_dir / scn.name / est, tr))
+    for plant in plants:
+        for name in scenarios:
+            scn = plant_variant(load_scenario(name), plant)
+            if quick:
+                scn = quick_scenario(scn)
+            for est in scn.estimators:
+                if estimators is not None and est not in estimators:
+                    continue
+                tr: tuple[str, str, int | None] | None = None
+                if transport is not None:
+                    port = base_port + 4 * len(jobs) if transport[0] == "udp_multicast" else None
+                    tr = (transport[0], transport[1], port)
+                run_dir = runs_dir / run_subdir(plant, scn.name, est)
+                jobs.append(RunJob(scn, est, run_dir, tr, plant))
     return jobs
 
 
@@ -340,7 +363,7 @@ def downscale_png(src: Path, dst: Path, width: int = PNG_WIDTH) -> None:
 
 def export_run(job: RunJob, out_dir: Path) -> Path:
     """Copy a run's small files (metrics, metadata, downscaled plot) under ``out_dir``."""
-    dst = out_dir / "runs" / job.scenario.name / job.estimator
+    dst = out_dir / "runs" / run_subdir(job.plant, job.scenario.name, job.estimator)
     dst.mkdir(parents=True, exist_ok=True)
     for name in ("metrics.json", "meta.json"):
         if (job.run_dir / name).exists():
@@ -356,6 +379,7 @@ def run_record(job: RunJob, res: dict[str, Any], out_dir: Path) -> dict[str, Any
     rec: dict[str, Any] = {
         "scenario": scn.name,
         "estimator": job.estimator,
+        "plant": job.plant,
         "paper": scn.paper,
         "description": scn.description,
         "duration_s": scn.duration,
@@ -363,7 +387,7 @@ def run_record(job: RunJob, res: dict[str, Any], out_dir: Path) -> dict[str, Any
         "paper_result": dict(scn.paper_result),
         "transport": "in-process" if job.transport is None else f"{job.transport[0]} lockstep",
         "wall_s": res.get("wall_s", math.nan),
-        "files": f"runs/{scn.name}/{job.estimator}",
+        "files": f"runs/{run_subdir(job.plant, scn.name, job.estimator)}",
     }
     if "error" in res:
         rec["error"] = res["error"]
@@ -387,6 +411,7 @@ class SuiteOptions:
     runs_dir: Path
     scenarios: tuple[str, ...] = PAPER
     estimators: tuple[str, ...] | None = None
+    plants: tuple[str, ...] = PLANTS
     quick: bool = False
     sweeps: tuple[str, ...] = ()
     sweep_quick: bool = False
@@ -416,6 +441,7 @@ def run_suite(opt: SuiteOptions) -> dict[str, Any]:
         estimators=opt.estimators,
         quick=opt.quick,
         transport=transport,
+        plants=opt.plants,
     )
     sweeps = sweep_jobs(opt.sweeps, quick=opt.sweep_quick) if opt.sweeps else []
     why = None if opt.estimators is None else unmatched_estimators(opt.scenarios, opt.estimators)
@@ -449,6 +475,7 @@ def run_suite(opt: SuiteOptions) -> dict[str, Any]:
         "transport": "in-process" if transport is None else f"{transport[0]} {transport[1]}",
         "mode": "lockstep",
         "quick": opt.quick,
+        "plants": list(opt.plants),
         "sweep_quick": opt.sweep_quick,
         "workers": workers,
         "wall_s": time.perf_counter() - t0,

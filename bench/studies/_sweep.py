@@ -13,6 +13,10 @@ rotating-injection demodulator versus
 - the HF injection amplitude ``V_h`` (estimator option of
   :class:`controller._rotating.RotatingInjectionPars`),
 - the white noise on the current measurements (``[noise] current_std_a``),
+- on the ``drive`` plant (:mod:`bench.studies._plants`), the inverter's dead
+  time (``[inverter] t_dead``, 0 to 3 us) with the drive's countermeasures on
+  and off, and the ADC's resolution (``[sensors] adc_bits``, countermeasures
+  on): what each hardware effect does to each method,
 
 and fit a straight line to the mean error (``deg per 100 rpm``, ``deg per
 period``), so a reader sees whether the bench agrees and where each method
@@ -38,6 +42,7 @@ from typing import Any
 import numpy as np
 
 from bench.scenarios._schema import Latency, Noise, Profile, Scenario, load_scenario
+from bench.studies._plants import plant_variant
 
 #: The rotating-injection demodulators whose claims the sweeps check.
 METHODS = ("sfhf", "tt-ab", "tt-dq")
@@ -121,8 +126,36 @@ SWEEPS: dict[str, SweepSpec] = {
             "deg per 0.1 A",
             fit=False,
         ),
+        SweepSpec(
+            "dead_time",
+            "dead time (us), drive plant, countermeasures on",
+            (0.0, 0.5, 1.0, 2.0, 3.0),
+            (0.0, 3.0),
+            1.0,
+            "deg per us",
+        ),
+        SweepSpec(
+            "dead_time_nocomp",
+            "dead time (us), drive plant, countermeasures off",
+            (0.0, 0.5, 1.0, 2.0, 3.0),
+            (0.0, 3.0),
+            1.0,
+            "deg per us",
+        ),
+        SweepSpec(
+            "adc_bits",
+            "ADC resolution (bits), drive plant, countermeasures on",
+            (8.0, 10.0, 12.0, 14.0, 16.0),
+            (8.0, 12.0),
+            1.0,
+            "deg per bit",
+            fit=False,
+        ),
     )
 }
+
+#: The sweeps on the ``drive`` plant, and whether the countermeasures are on.
+DRIVE_SWEEPS = {"dead_time": True, "dead_time_nocomp": False, "adc_bits": True}
 
 #: Base scenario of every sweep point, and the nominal speed of the
 #: non-speed sweeps (rpm).
@@ -192,6 +225,12 @@ def sweep_scenario(base: Scenario, kind: str, x: float, *, quick: bool = False) 
         scn = replace(scn, estimator_options={**scn.estimator_options, "V_h": float(x)})
     elif kind == "noise":
         scn = replace(scn, noise=Noise(current_std_a=float(x)))
+    elif kind in DRIVE_SWEEPS:
+        scn = plant_variant(scn, "drive" if DRIVE_SWEEPS[kind] else "drive-nocomp")
+        if kind == "adc_bits":
+            scn = replace(scn, sensors={**scn.sensors, "adc_bits": int(x)})
+        else:
+            scn = replace(scn, inverter={**scn.inverter, "t_dead": float(x) * 1e-6})
     elif kind != "speed":
         raise ValueError(f"unknown sweep {kind!r} (known: {', '.join(SWEEPS)})")
     return scn
