@@ -86,9 +86,9 @@ def _bad_cases() -> list[tuple[str, str, Any]]:
         for k, key in keys.items()
         if key.bad is not NO_BAD
     ]
-    from bench.scenarios._reference import OPTION_RANGES
+    from bench.scenarios._reference import option_range
 
-    cases += [("estimator_options", k, bad) for k, (_r, bad) in OPTION_RANGES.items()]
+    cases += [("estimator_options", k, option_range(k)[1]) for k in schema.estimator_option_keys()]
     return cases
 
 

@@ -424,20 +424,30 @@ KEYS: dict[str, dict[str, Key]] = {
     },
 }
 
-#: ``[estimator_options]``: range in words and a refused value, per key.
-OPTION_RANGES: dict[str, tuple[str, Any]] = {
-    "V_h": ("> 0 and <= u_dc / sqrt(3) of the preset", 1000.0),
-    "U_h": ("> 0 and <= u_dc / sqrt(3) of the preset", 1000.0),
-    "f_h": ("> 0 and below half the PWM rate", 6000.0),
-    "w_o": (">= 0 (0 freezes the observer)", -1.0),
-    "delay_comp": (">= 0 (0: off)", -1.0),
-    "u_err": (">= 0", -1.0),
-    "M": ("integer >= 1", 0),
-    "bpf": ("[[b_0, ...], [a_0, ...]], a_0 != 0", [[1.0]]),
-    "hpf": ("[[b_0, ...], [a_0, ...]], a_0 != 0", [[1.0]]),
-    "lpf": ("[[b_0, ...], [a_0, ...]], a_0 != 0", [[1.0]]),
-    "normalise": ("model, measured", "both"),
-}
+
+def option_range(key: str) -> tuple[str, Any]:
+    """An ``[estimator_options]`` key's range in words and a value the loader refuses,
+    from the kind the schema checks it as (``_OPTION_*`` of :mod:`bench.scenarios._schema`)."""
+    from bench.scenarios import _schema as sc
+
+    default = sc.estimator_option_keys().get(key)
+    if key in sc._OPTION_CHOICES:
+        return ", ".join(sc._OPTION_CHOICES[key]), "no-such-choice"
+    if key in sc._OPTION_FILTERS:
+        return "[[b_0, ...], [a_0, ...]], a_0 != 0", [[1.0]]
+    if key in sc._OPTION_INTEGERS:
+        return "integer >= 1", 0
+    if isinstance(default, bool):
+        return "true, false", 1
+    if key in sc._OPTION_NONNEGATIVE:
+        return ">= 0", -1.0
+    if key in sc._OPTION_AMPLITUDES:
+        return "> 0 and <= u_dc / sqrt(3) of the preset", 1000.0
+    if key in sc._OPTION_FREQUENCIES:
+        return "> 0 and below half the PWM rate", 6000.0
+    return "> 0", 0.0
+
+
 #: Meanings of the options no estimator docstring describes.
 OPTION_MEANINGS = {
     "alpha_o": ("rad/s", "Bandwidth of the hybrids' flux observer's speed tracker; "
@@ -588,7 +598,7 @@ def estimator_options() -> dict[str, dict[str, tuple[str, str, str, str]]]:
     }
 
     def row(k: str, doc: dict[str, tuple[str, str]], default: Any) -> tuple[str, str, str, str]:
-        rng = OPTION_RANGES.get(k, ("> 0", None))[0]
+        rng = option_range(k)[0]
         if k in doc:
             meaning = re.sub(r":\w+:`([^`]*)`", r"`\1`", doc[k][1].replace("``", "`"))
             unit = _unit_of(meaning)
