@@ -271,8 +271,7 @@ def host_warning(f_sw: float, fifo: bool, res: dict[str, Any] | None) -> str | N
     if res is None:
         return (
             "warning: this host's real-time capacity is not measured; run `bench rtcheck` "
-            "first (docs/REALTIME.md: a 2-core shared machine misses 1 kHz periods with "
-            "normal scheduling and 4 kHz with SCHED_FIFO)"
+            "first (docs/REALTIME.md: the settings, and a reference machine's figures)"
         )
     r = (res.get("rates") or {}).get(str(int(round(f_sw))), {}).get(setting)
     if r is None:
