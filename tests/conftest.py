@@ -8,10 +8,18 @@ missing interface is a failure, so a broken setup cannot pass as skipped.
 
 from __future__ import annotations
 
+import atexit
 import os
+import shutil
 import socket
+import tempfile
 
 import pytest
+
+# bench rtcheck keeps this host's result under $XDG_CACHE_HOME and bench run reads
+# it: the tests (and the node processes they start) use a folder of their own
+os.environ["XDG_CACHE_HOME"] = _CACHE = tempfile.mkdtemp(prefix="bench-tests-cache-")
+atexit.register(shutil.rmtree, _CACHE, ignore_errors=True)
 
 #: Set by tools/vcan-tests (``native`` or ``uml``).
 RUNNER_ENV = "VCAN_TESTS_RUNNER"

@@ -304,7 +304,9 @@ BAD = [
     (["1=udp_multicast:10.0.0.1:43000"], "10.0.0.1", "not a multicast group"),
     (["1=udp_multicast:239.1.1.1:99999"], "99999", "not a UDP port"),
     (["1=udp_multicast:[ff15::1]x"], "[ff15::1]x", "IPv6 group"),
-    (["1=pcan"], "1=pcan", "needs a channel"),
+    (["1=vector"], "1=vector", "needs a channel"),
+    # a driver library the adapter needs and this host lacks comes first, named
+    (["1=kvaser:0"], "1=kvaser", "its driver needs Kvaser's CANlib"),
 ]
 
 
