@@ -31,6 +31,7 @@ def quick_suite(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path, d
             out_dir=out,
             runs_dir=runs,
             scenarios=("wen-5.4", "xue-fig17"),
+            plants=("ideal", "drive"),
             quick=True,
             sweeps=("speed",),
             sweep_quick=True,
@@ -55,19 +56,30 @@ def test_quick_suite_writes_filled_report_and_summary(quick_suite: tuple[Path, P
     md = (out / "report.md").read_text()
     on_disk = json.loads((out / "summary.json").read_text())
     assert on_disk["claims"] == summary["claims"]
-    assert len(summary["runs"]) == 4 + 3  # every estimator each scenario lists
+    # every estimator each scenario lists, on each plant
+    assert len(summary["runs"]) == 2 * (4 + 3)
     for r in summary["runs"]:
         assert "error" not in r, r
         for k in ("theta_err_max_deg", "theta_err_abs_mean_deg", "speed_err_max_rpm"):
             assert math.isfinite(r["metrics"][k]), (r["scenario"], r["estimator"], k)
+    drive = [r for r in summary["runs"] if r["plant"] == "drive"]
+    assert len(drive) == 7 and all(r["files"].startswith("runs/drive/") for r in drive)
+    assert (out / "runs" / "drive" / "wen-5.4" / "tt-dq" / "metrics.json").is_file()
+    # each run claim once per plant: the drive's with its own numbers
+    ids = {c["id"]: c for c in summary["claims"]}
+    assert ids["wen-5.4-numbers@drive"]["plant"] == "drive"
+    assert ids["wen-5.4-numbers@drive"]["detail"] != ids["wen-5.4-numbers"]["detail"]
+    assert "drive plant, countermeasures on" in md
     thd = {
         r["estimator"]: r["metrics"]["thd_phase_a_pct"]
         for r in summary["runs"]
-        if r["scenario"] == "wen-5.4"
+        if r["scenario"] == "wen-5.4" and r["plant"] == "ideal"
     }
     assert len(thd) == 4 and all(math.isfinite(v) and v > 0 for v in thd.values())
     over = [
-        r["metrics"]["speed_overshoot_rpm"] for r in summary["runs"] if r["scenario"] == "xue-fig17"
+        r["metrics"]["speed_overshoot_rpm"]
+        for r in summary["runs"]
+        if r["scenario"] == "xue-fig17" and r["plant"] == "ideal"
     ]
     assert len(over) == 3 and all(math.isfinite(v) for v in over)
     rows = table_rows(md)
@@ -137,7 +149,12 @@ def test_suite_runs_over_the_can_transport_equal_in_process(
     Lockstep is exact, so the metrics equal the in-process suite's for the same
     quick scenario; the progress display prints a line per finished run.
     """
-    common = dict(scenarios=("xue-fig13",), estimators=("sensored", "square-wave"), quick=True)
+    common = dict(
+        scenarios=("xue-fig13",),
+        estimators=("sensored", "square-wave"),
+        plants=("ideal",),
+        quick=True,
+    )
     over_can = run_suite(
         SuiteOptions(
             out_dir=tmp_path / "can",
