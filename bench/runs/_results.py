@@ -96,7 +96,8 @@ def run_metadata(
         "seed": scn.seed,
         # every gain, bandwidth, filter corner and delay the controller uses
         # (controller.Controller.gains); none for an external controller
-        "controller_gains": _controller_gains(scn, estimator),
+        "controller": "external" if estimator == "external" else "bench",
+        "controller_gains": {} if estimator == "external" else _controller_gains(scn, estimator),
         "versions": _versions(),
     }
 
@@ -218,6 +219,8 @@ def finish_run(
         capture=capture.name if capture else None,
         wall_s=wall_s,
     )
+    # the DBC of the run (a capture analysed later keeps the one it was recorded with)
+    meta.setdefault("dbc_version", codec.version)
     (out_dir / "metrics.json").write_text(jsonio.dumps(m, indent=2, sort_keys=True) + "\n")
     (out_dir / "meta.json").write_text(
         json.dumps(meta, indent=2, sort_keys=True, default=str) + "\n"
@@ -225,8 +228,17 @@ def finish_run(
     if plots:
         from bench.runs._plots import plot_run
 
-        plot_run(cap.table, out_dir, title=f"{scn.name} / {meta.get('estimator', '?')}")
+        plot_run(cap.table, out_dir, title=f"{scn.name} / {controller_label(meta)}")
     return RunResult(out_dir=out_dir, metrics=m, capture=capture or out_dir, meta=meta)
+
+
+def controller_label(meta: dict[str, Any]) -> str:
+    """Who controlled a run, for titles and headings: the estimator of the bench's own
+    controller, or ``external controller`` (with the name given) for a controller under test."""
+    if meta.get("controller") == "external":
+        name = meta.get("controller_name")
+        return f"external controller {name}" if name and name != "external" else "external controller"
+    return str(meta.get("estimator", "?"))
 
 
 def injection_floor_hz(hf: Any, T_s: float, w_top: float) -> float:
@@ -301,7 +313,7 @@ def plant_fault(frames: list[can.Message], codec: Codec) -> tuple[str, int]:
     ``PlantTruth`` frame before it (the plant's own period count, whatever
     the capture's length, start, retransmissions or number of buses).
     """
-    from plant_rt import FAULT_NAMES
+    from bench.nodes._plant_node import fault_name
 
     id_status, id_truth = codec.frame_id("PlantStatus"), codec.frame_id("PlantTruth")
     m = 1 << codec.step_bits("PlantStatus")
@@ -316,7 +328,7 @@ def plant_fault(frames: list[can.Message], codec: Codec) -> tuple[str, int]:
             t = codec.decode(last_truth) if last_truth is not None else None
             ref = int(t.signals["step"]) if t is not None and t.reason is None else 0
             code = int(d.signals["fault_code"])
-            return FAULT_NAMES.get(code, str(code)), unwrap(int(d.signals["step"]), ref, m)
+            return fault_name(code), unwrap(int(d.signals["step"]), ref, m)
     return "none", -1
 
 
