@@ -13,10 +13,10 @@ the true angle and the recorder's angle error is zero.  Gains by design
 (internal-model control, as a drive's commissioning would set them):
 
 - current PI: bandwidth ``alpha_c``; ``k_p = alpha_c L``, ``k_i = alpha_c R_s``
-  cancels the winding's pole, closed loop ``alpha_c / (s + alpha_c)``; 2 pi 200 Hz,
-  a twentieth of the 10 kHz PWM rate, so the one-period computation delay
-  costs about 7 degrees of phase margin;
-- speed PI: bandwidth ``alpha_s`` = 2 pi 10 Hz, a twentieth of ``alpha_c``;
+  cancels the winding's pole, closed loop ``alpha_c / (s + alpha_c)``; a fiftieth
+  of the PWM rate (2 pi 200 Hz at 10 kHz), so the loop's delay (1.5 periods:
+  computation and PWM) costs 2 pi 1.5 / 50 = 0.19 rad (11 degrees) of phase margin;
+- speed PI: bandwidth ``alpha_s``, a twentieth of ``alpha_c``;
   ``k_p = alpha_s J / k_t``, ``k_i = alpha_s k_p / 4`` (integral corner
   two octaves below the crossover: about 76 degrees of phase margin).
 
@@ -109,8 +109,8 @@ class Foc:
         self.R_s, self.L_d, self.L_q = float(mo["R_s"]), float(mo["L_d"]), float(mo["L_q"])
         self.k_t = 1.5 * self.n_p * float(mo["psi_f"])
         self.i_max = float(mo["i_max"])
-        a_c = 2 * math.pi * 200.0
-        a_s = 2 * math.pi * 10.0
+        a_c = 2 * math.pi / (50.0 * self.T_s)
+        a_s = a_c / 20.0
         self.kp_d, self.ki_d = a_c * self.L_d, a_c * self.R_s
         self.kp_q, self.ki_q = a_c * self.L_q, a_c * self.R_s
         self.kp_w = a_s * float(mo["J"]) / self.k_t

@@ -28,21 +28,25 @@ GROUP = "239.74.163.2"
 
 
 def _run(
-    tmp: Path, *extra: str, mistake: str | None = None, dut_timeout: float = 60.0
+    tmp: Path,
+    *extra: str,
+    mistake: str | None = None,
+    dut_timeout: float = 60.0,
+    scenario: Path = SCENARIO,
 ) -> tuple[subprocess.CompletedProcess[str], Path]:
     """``bench run --controller external`` with the test controller beside it."""
     port = str(free_port())
-    show = tmp / "show.json"
+    show = tmp / f"show-{scenario.stem}.json"
     if not show.exists():
         out = subprocess.run(
-            [sys.executable, "-m", "bench", "show", str(SCENARIO), "--json"],
+            [sys.executable, "-m", "bench", "show", str(scenario), "--json"],
             cwd=ROOT,
             capture_output=True,
             text=True,
             check=True,
         )
         show.write_text(out.stdout)
-    run_dir = tmp / f"run-{mistake or 'ok'}"
+    run_dir = tmp / f"run-{scenario.stem}-{mistake or 'ok'}"
     ctrl = subprocess.Popen(
         [sys.executable, str(CONTROLLER), "--show", str(show), "-c", GROUP, "-p", port,
          "--idle-s", "30", *(["--mistake", mistake] if mistake else [])],
@@ -51,7 +55,7 @@ def _run(
     try:
         assert ctrl.stdout is not None and ctrl.stdout.readline().strip() == "READY"
         res = subprocess.run(
-            [sys.executable, "-m", "bench", "run", str(SCENARIO), "--controller", "external",
+            [sys.executable, "-m", "bench", "run", str(scenario), "--controller", "external",
              "--interface", "udp_multicast", "--channel", GROUP, "--port", port,
              "--dut-timeout", repr(dut_timeout), "--dut-name", "ext-py", "--out", str(run_dir),
              "-q", *extra],
@@ -118,6 +122,49 @@ def test_analyze_of_the_capture_gives_the_same_metrics(good_run: dict[str, Any])
             continue
         assert again[k] == v, k
     assert "external controller ext-py" in res.stdout or "ext-py" in (out / "meta.json").read_text()
+
+
+def test_analyze_duration_warning_status_counters_and_name(
+    good_run: dict[str, Any], tmp_path: Path
+) -> None:
+    """A 0.3 s run analysed against a 0.5 s scenario: the missing periods are said, and
+    ``--duration`` says the run was that long; the PlantStatus counters are read; the
+    controller's name goes into meta.json."""
+    longer = tmp_path / "longer.toml"
+    longer.write_text(SCENARIO.read_text().replace("duration = 0.3", "duration = 0.5"))
+    cap = good_run["dir"] / "capture.blf"
+
+    def analyze(*extra: str) -> tuple[subprocess.CompletedProcess[str], dict[str, Any]]:
+        out = tmp_path / f"a{len(extra)}"
+        res = subprocess.run(
+            [sys.executable, "-m", "bench", "analyze", str(cap), "--scenario", str(longer),
+             "--out", str(out), "--no-plots", *extra],
+            cwd=ROOT, capture_output=True, text=True, timeout=120,
+        )  # fmt: skip
+        assert res.returncode == 0, res.stderr
+        return res, json.loads((out / "metrics.json").read_text())
+
+    res, m = analyze()
+    assert m["steps_missing"] == 5000 - 3001 and "give --duration" in res.stderr
+    res, m = analyze("--duration", "0.3", "--dut-name", "fw-1.2")
+    assert m["steps_missing"] == 0 and "give --duration" not in res.stderr
+    assert m["plant_status_late_frames"] == 0 and m["plant_status_overruns"] == 0
+    assert "external controller fw-1.2" in res.stdout
+    meta = json.loads((tmp_path / "a4" / "meta.json").read_text())
+    assert meta["controller_name"] == "fw-1.2" and meta["dbc_version"] == "2.0"
+
+
+def test_external_controller_in_real_time(tmp_path: Path) -> None:
+    """Real time at 1 kHz: the plant's clock starts at the controller's first answer."""
+    scn = tmp_path / "rt-1khz.toml"
+    scn.write_text(SCENARIO.read_text() + "f_sw = 1000.0\n")
+    res, run_dir = _run(tmp_path, "--mode", "realtime", scenario=scn)
+    assert res.returncode == 0, res.stderr[-3000:]
+    m = json.loads((run_dir / "metrics.json").read_text())
+    meta = json.loads((run_dir / "meta.json").read_text())
+    assert meta["mode"] == "realtime" and meta["controller"] == "external"
+    assert m["steps"] == 301 and abs(m["theta_err_max_deg"]) < 0.01
+    assert m["plant_fault"] == "none"
 
 
 @pytest.mark.parametrize(

@@ -213,6 +213,14 @@ def finish_run(
         fault, fault_step = str(plant_r["fault"]), int(plant_r.get("fault_step", -1))
     m["plant_fault"] = fault
     m["plant_fault_step"] = fault_step
+    # the plant's own counters as it sent them (PlantStatus), e.g. for a capture
+    # of a controller under test analysed without the node's report
+    status = plant_status_counters(frames, codec)
+    if status is not None:
+        m["plant_status_late_frames"] = status["late_frames"]
+        m["plant_status_overruns"] = status["overruns"]
+        if not plant_r:
+            m["deadline_misses"] = status["overruns"]
     meta = dict(
         meta,
         scored_from_s=scn.score_from_s,
@@ -330,6 +338,22 @@ def plant_fault(frames: list[can.Message], codec: Codec) -> tuple[str, int]:
             code = int(d.signals["fault_code"])
             return fault_name(code), unwrap(int(d.signals["step"]), ref, m)
     return "none", -1
+
+
+def plant_status_counters(frames: list[can.Message], codec: Codec) -> dict[str, int] | None:
+    """The counters of the capture's last valid ``PlantStatus`` (None: the capture has none).
+
+    ``late_frames`` (periods without their own duty plus duties rejected) and
+    ``overruns`` (real-time deadlines missed) count from the plant's start, so
+    the last frame holds the run's totals (saturated at 65535).
+    """
+    id_status = codec.frame_id("PlantStatus")
+    for f in reversed(frames):
+        if f.arbitration_id == id_status:
+            d = codec.decode(f)
+            if d is not None and d.reason is None:
+                return {k: int(v) for k, v in d.signals.items() if k != "crc"}
+    return None
 
 
 def fault_warning(m: dict[str, Any], T_s: float) -> str | None:
