@@ -197,3 +197,28 @@ def test_codegen_scenario_header_compiles_with_the_scenarios_values(tmp_path: Pa
     assert int(got[2]) == d["pwm"]["periods"] and int(got[3]) == len(cmds)
     assert float(got[4]) == cmds[0]["speed_ref_rpm"]
     assert int(got[5]) == cmds[-1]["step"] and int(got[6]) == 2  # the stop at the end
+
+
+def test_a_scenario_for_an_external_controller_needs_no_estimator(tmp_path: Path) -> None:
+    """Without ``estimator`` keys the default (tt-dq) is not checked against the motor:
+    a machine without saliency loads (an external controller brings its own estimator);
+    naming an injection estimator for it still fails."""
+    text = (
+        'preset = "wen2023"\nduration = 0.1\nspeed_rpm = [[0.0, 100.0]]\n'
+        "[motor]\nL_d = 0.07\nL_q = 0.07\n"
+    )
+    f = tmp_path / "spm.toml"
+    f.write_text(text)
+    assert load_scenario(str(f)).motor["L_q"] == 0.07
+    f.write_text('estimator = "tt-dq"\n' + text)
+    with pytest.raises(Exception, match=r"saliency|L_d"):
+        load_scenario(str(f))
+
+
+def test_controller_label_marks_an_external_controller() -> None:
+    from bench.runs._results import controller_label
+
+    assert controller_label({"estimator": "tt-dq", "controller": "bench"}) == "tt-dq"
+    assert controller_label({"controller": "external"}) == "external controller"
+    ext = {"controller": "external", "controller_name": "fw-1.2"}
+    assert controller_label(ext) == "external controller fw-1.2"
