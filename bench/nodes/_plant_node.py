@@ -38,6 +38,15 @@ open) on a protection fault (:class:`plant_rt.Protection`) or when valid duty
 frames stop (watchdog), reports it with ``PlantStatus``, and stays there until
 a ``reset`` or ``enable`` bench command; the controller node disables its PWM
 when samples stop (real time).
+
+A duty for period 0 answers no sample (sample 0 is answered by duty 1): it
+comes from a controller that tags the duty of sample ``k`` with ``k``, which
+would run the loop without its computation delay. The plant rejects it
+(``wrong_step``) and trips with ``PlantStatus.fault_code`` 5 (``wrong_step``).
+``PlantStatus`` also goes out every ``status_every`` periods (the DBC's
+``GenMsgCycleTime``, 100 ms of plant time) while the run is on; its
+``late_frames`` counts the periods without their own duty and the duty frames
+rejected. docs/PROTOCOL.md is the same contract for a controller's author.
 """
 
 from __future__ import annotations
