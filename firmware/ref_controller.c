@@ -149,12 +149,11 @@ static void send_frame(int sock, const struct canfd_frame *fr, node_t *n)
     n->send_errors++;
 }
 
-/* Duty 0..1 to its raw value, clipped to the DBC range [0 | 1 - 2^-15]
- * (an unclipped 1.0 would not fit the 15-bit signal). */
+/* Duty to its raw value, clipped to the DBC range [0 | 1] (raw 0..16384; a raw
+ * value above 16384 is out of range and the plant rejects the frame). */
 static uint16_t duty_raw(double d)
 {
-    double lsb = bench_dbc_pwm_duty_duty_a_decode(1u);
-    return bench_dbc_pwm_duty_duty_a_encode(d < 0.0 ? 0.0 : (d > 1.0 - lsb ? 1.0 - lsb : d));
+    return bench_dbc_pwm_duty_duty_a_encode(d < 0.0 ? 0.0 : (d > 1.0 ? 1.0 : d));
 }
 
 /* Angle [rad] to the raw value of a 16-bit SigModular angle, modulo 2 pi. */

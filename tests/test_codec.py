@@ -103,7 +103,7 @@ def test_clipping_to_signal_range(codec):
     got = codec.quantize(
         "PwmDuty", {"duty_a": 1.5, "duty_b": -0.2, "duty_c": 1.0, "enable": 1, "step": 0}
     )
-    assert got["duty_a"] == got["duty_c"] == 1 - 2**-15
+    assert got["duty_a"] == got["duty_c"] == 1.0  # duty 1.0 is in the DBC range (raw 16384)
     assert got["duty_b"] == 0.0
     got = codec.quantize(
         "PhaseSamples", {"i_a": 1e3, "i_b": -1e3, "u_dc": 2000.0, "status": 1, "step": 0}

@@ -63,13 +63,13 @@ def test_e2e_is_crc_over_data_id_then_payload(data_id, payload, draw):
 
 def test_data_id_separates_messages():
     payload = bytes(range(8))
-    crcs = {e2e_crc(e2e_start(d), payload, 0) for d in (0x1010, 0x1011, 0x1020, 0x10F0)}
+    crcs = {e2e_crc(e2e_start(d), payload, 0) for d in (0x1210, 0x1011, 0x1020, 0x10F0)}
     assert len(crcs) == 4
 
 
 def test_single_bit_errors_detected():
     payload = bytearray(b"\x00\x12\x34\x56\x78\x9a\xbc\xde")
-    start = e2e_start(0x1010)
+    start = e2e_start(0x1210)
     good = e2e_crc(start, payload, 0)
     for bit in range(8, 64):
         bad = bytearray(payload)

@@ -81,6 +81,31 @@ def test_crc_and_e2e_data_ids(db):
         assert crc[0].length == 8 and crc[0].start == 0
         ids.append(m.dbc.attributes["E2EDataId"].value)
     assert len(ids) == 4 and len(set(ids)) == 4
+    # a data ID fed in the wrong byte order must fail the check: its two bytes
+    # differ, and swapped it is no other message's data ID
+    swapped = {(i >> 8) | ((i & 0xFF) << 8) for i in ids}
+    assert all(i & 0xFF != i >> 8 for i in ids)
+    assert not swapped & set(ids)
+
+
+def test_protocol_version_attribute(db):
+    """The DBC's version is in its VERSION line and its ProtocolVersion attribute, the same."""
+    from bench.wire._codec import Codec
+
+    assert db.version == str(db.dbc.attributes["ProtocolVersion"].value) == Codec().version
+    assert int(db.version.split(".")[0]) >= 2  # 2.0: duty scale and PwmDuty data ID changed
+
+
+def test_duty_one_encodes_strictly_and_above_one_is_out_of_range(db):
+    """cantools' strict encoding takes duty 1.0 (issue 16); a raw value above it is
+    expressible on the wire and outside the range, so the plant can reject it."""
+    m = db.get_message_by_name("PwmDuty")
+    sig = {"crc": 0, "duty_a": 1.0, "duty_b": 0.0, "duty_c": 0.5, "enable": 1, "step": 1}
+    got = m.decode(m.encode(sig, strict=True))
+    assert got["duty_a"] == 1.0 and got["duty_b"] == 0.0 and got["duty_c"] == 0.5
+    duty = m.get_signal_by_name("duty_a")
+    assert (duty.minimum, duty.maximum) == (0.0, 1.0)
+    assert (1 << duty.length) - 1 > round(1.0 / duty.scale)  # raw above 1.0 exists
 
 
 def test_value_tables(db):
@@ -94,12 +119,13 @@ def test_value_tables(db):
         5: "disable",
     }
     fault = db.get_message_by_name("PlantStatus").get_signal_by_name("fault_code")
-    assert [str(fault.choices[i]) for i in range(5)] == [
+    assert [str(fault.choices[i]) for i in range(6)] == [
         "none",
         "watchdog",
         "over_current",
         "over_voltage",
         "over_speed",
+        "wrong_step",
     ]
     mode = db.get_message_by_name("CtrlTelemetry").get_signal_by_name("mode")
     from controller._api import MODE_ALIGN, MODE_DISABLED, MODE_FAULT, MODE_POLARITY, MODE_RUN
@@ -143,11 +169,14 @@ def test_duty_resolution_does_not_limit_current_loop(db):
     duty = db.get_message_by_name("PwmDuty").get_signal_by_name("duty_a")
     i_lsb = db.get_message_by_name("PhaseSamples").get_signal_by_name("i_a").scale
     v_lsb = duty.scale * 540.0
-    assert v_lsb < 0.02  # < 20 mV of phase voltage at 540 V
-    # Largest current change one duty LSB makes in a period: xue2022 (L_d 3.53 mH, 1 kHz).
+    # 15 bits for 0..1 with half the raw range above 1 (out of range, detectable):
+    # LSB 2^-14, < 40 mV of phase voltage at 540 V (0.007 %)
+    assert v_lsb < 0.04
+    # Largest current change one duty LSB makes in a period: xue2022 (L_d 3.53 mH,
+    # 1 kHz), about 10 mA: below 5 LSB of i_a, and 0.1 % of the injection's HF current
     di = v_lsb * 1e-3 / 3.53e-3
-    assert di < 3 * i_lsb
-    assert duty.minimum == 0 and duty.maximum > 0.9999
+    assert di < 5 * i_lsb
+    assert duty.minimum == 0 and duty.maximum == 1.0
 
 
 def test_u_dc_range_and_resolution(db):

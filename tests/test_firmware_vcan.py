@@ -1,10 +1,11 @@
-"""The reference C controller closes a sensored FOC loop against `bench plant` on vcan0.
+"""The reference C controller closes a sensored FOC loop under ``bench run --controller external``.
 
-Three processes on one SocketCAN bus: ``python -m bench plant`` (lockstep),
-``firmware/ref_controller`` (C, raw AF_CAN sockets with CAN FD, built from the
-C code `bench codegen` generates) and this test as the bench: it records every
-frame, sends the scenario's bench commands ahead of the plant and analyses the
-capture as ``bench analyze`` would.
+Two processes on one SocketCAN bus: ``firmware/ref_controller`` (C, raw
+AF_CAN sockets with CAN FD, built from the C code `bench codegen` generates)
+and ``bench run SCENARIO --controller external``, which starts the plant,
+paces the scenario's commands, records every frame and scores the run, as a
+user puts a real controller under test (README, "Connect a real drive
+controller").
 """
 
 from __future__ import annotations
@@ -20,12 +21,9 @@ import can
 import numpy as np
 import pytest
 
-from bench.nodes._loops import command_frames
 from bench.runs._analysis import analyze_frames
-from bench.runs._recorder import Recorder, drain
 from bench.scenarios._schema import load_scenario
 from bench.scenarios._setup import get_preset, n_steps, sample_period
-from bench.wire._bus import BusSpec
 from bench.wire._codec import Codec
 from tests.conftest import require_vcan
 from tests.test_firmware import CC, MAKE, build_firmware
@@ -35,6 +33,7 @@ pytestmark = [
     pytest.mark.skipif(CC is None or MAKE is None, reason="needs a C compiler and make"),
 ]
 
+ROOT = Path(__file__).resolve().parents[1]
 SCENARIO = Path(__file__).parent / "data" / "firmware-100rpm.toml"
 #: Upper bound of the whole closed-loop run [s]; UML closes about 1000 periods/s.
 RUN_TIMEOUT_S = 240.0
@@ -64,65 +63,38 @@ def firmware_run(tmp_path_factory: pytest.TempPathFactory) -> dict:
     codec = Codec()
     scn = load_scenario(str(SCENARIO))
     n = n_steps(scn)
-    capture = out / "capture.blf"
-    writer = can.Logger(str(capture))
-    bus = BusSpec("socketcan", "vcan0").open()  # CAN FD, large receive buffer
-    rec = Recorder(codec, writer, 1)
-    notifier = can.Notifier(bus, [rec], timeout=0.05)
-    procs: list[subprocess.Popen[str]] = []
+    run_dir = out / "run"
+    ctrl = subprocess.Popen(
+        [str(exe), "-i", "vcan0", "-t", str(RUN_TIMEOUT_S)],
+        stdout=subprocess.PIPE,
+        stderr=(out / "ctrl.log").open("w"),
+        text=True,
+    )
     try:
-        ctrl = subprocess.Popen(
-            [str(exe), "-i", "vcan0", "-t", str(RUN_TIMEOUT_S)],
-            stdout=subprocess.PIPE,
-            stderr=(out / "ctrl.log").open("w"),
-            text=True,
-        )
-        procs.append(ctrl)
         _wait_ready(ctrl, "ref_controller")
-        plant = subprocess.Popen(
-            [sys.executable, "-m", "bench", "plant", str(SCENARIO),
-             "--interface", "socketcan", "--channel", "vcan0", "--mode", "lockstep",
-             "--report", str(out / "plant.json")],
-            stdout=subprocess.PIPE,
-            stderr=(out / "plant.log").open("w"),
-            text=True,
+        run = subprocess.run(
+            [sys.executable, "-m", "bench", "run", str(SCENARIO), "--controller", "external",
+             "--dut-name", "ref_controller", "--dut-timeout", str(READY_TIMEOUT_S),
+             "--interface", "socketcan", "--channel", "vcan0", "--out", str(run_dir), "-q"],
+            cwd=ROOT, capture_output=True, text=True, timeout=RUN_TIMEOUT_S,
         )  # fmt: skip
-        procs.append(plant)
-        _wait_ready(plant, "bench plant")
-        # bench commands ahead of the plant (each carries its apply step)
-        cmds = command_frames(scn, codec)
-        lead = 3000  # far ahead: the recorder's view of the step lags on a slow host
-        sent = full = 0
-        t0 = time.monotonic()
-        while not rec.done.is_set() and plant.poll() is None:
-            full = max(0, rec.step)
-            while sent < len(cmds) and cmds[sent][0] <= full + lead:
-                bus.send(cmds[sent][1])
-                sent += 1
-            if time.monotonic() - t0 > RUN_TIMEOUT_S:
-                pytest.fail(f"run not finished in {RUN_TIMEOUT_S} s (at step {full} of {n})")
-            time.sleep(0.002)
-        bus.send(cmds[-1][1])  # the stop command once more
-        plant.wait(timeout=30)
         ctrl_out, _ = ctrl.communicate(timeout=60)
     finally:
-        for p in procs:
-            if p.poll() is None:
-                p.kill()
-                p.wait()
-        drain([rec])  # the recorder may lag the nodes on a slow host
-        notifier.stop()
-        writer.stop()
-        bus.shutdown()
-    assert plant.returncode == 0, (out / "plant.log").read_text()[-2000:]
+        if ctrl.poll() is None:
+            ctrl.kill()
+            ctrl.wait()
+    assert run.returncode == 0, run.stderr[-3000:]
     assert ctrl.returncode == 0, ctrl_out + (out / "ctrl.log").read_text()[-2000:]
-    cap = analyze_frames(rec.frames, codec, T_s=sample_period(scn), n_p=get_preset(scn).motor.n_p)
+    frames = list(can.LogReader(str(run_dir / "capture.blf")))
+    cap = analyze_frames(frames, codec, T_s=sample_period(scn), n_p=get_preset(scn).motor.n_p)
     return {
         "scn": scn,
         "n": n,
         "cap": cap,
-        "frames": rec.frames,
-        "plant": json.loads((out / "plant.json").read_text()),
+        "frames": frames,
+        "plant": json.loads((run_dir / "plant.json").read_text()),
+        "metrics": json.loads((run_dir / "metrics.json").read_text()),
+        "meta": json.loads((run_dir / "meta.json").read_text()),
         "ctrl_summary": ctrl_out.strip().splitlines()[-1],
     }
 
@@ -171,3 +143,11 @@ def test_plant_accepted_every_c_frame(firmware_run: dict) -> None:
     )
     assert firmware_run["ctrl_summary"].startswith(f"ref_controller: {firmware_run['n'] + 1} steps")
     assert " 0 rejected" in firmware_run["ctrl_summary"]
+
+
+def test_the_run_is_scored_as_an_external_controllers(firmware_run: dict) -> None:
+    """bench run wrote the run's files, with the controller marked external and named."""
+    m, meta = firmware_run["metrics"], firmware_run["meta"]
+    assert meta["controller"] == "external" and meta["controller_name"] == "ref_controller"
+    assert m["steps_missing"] == 0 and m["plant_fault"] == "none" and m["frames_rejected"] == 0
+    assert abs(m["theta_err_max_deg"]) < 0.01

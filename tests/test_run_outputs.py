@@ -131,8 +131,9 @@ def test_the_title_names_the_controller_from_meta_json_and_the_papers_figure() -
     from bench.runs._plots import controller_label, paper_figure
 
     assert controller_label({"estimator": "tt-dq"}) == "tt-dq"
-    assert controller_label({"estimator": "x", "controller": {"name": "my-drive"}}) == "my-drive"
-    assert controller_label({"controller": "ecu-7"}) == "ecu-7"
+    assert controller_label({"estimator": "tt-dq", "controller": "bench"}) == "tt-dq"
+    ext = {"estimator": "external", "controller": "external", "controller_name": "my-drive"}
+    assert controller_label(ext) == "external controller my-drive"
     assert paper_figure("Wen et al. 2023, Sec. 5.1, Fig. 14, Table 5") == "Wen et al. 2023, Fig. 14"
     assert paper_figure("Xue et al. 2022, Sec. 4, Fig. 13") == "Xue et al. 2022, Fig. 13"
     assert paper_figure("") is None

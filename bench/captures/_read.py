@@ -303,6 +303,8 @@ def analyze_capture(
     codec: Codec | None = None,
     echo: Callable[[str], None] | None = None,
     plots: bool = True,
+    duration: float | None = None,
+    dut_name: str | None = None,
 ) -> RunResult:
     """Decode a capture into the files of a run.
 
@@ -319,6 +321,13 @@ def analyze_capture(
         warning line (default: stderr).
     plots : bool
         Draw ``run.png``.
+    duration : float, optional
+        The run's length (s) when it was shorter than its scenario's (a
+        controller under test stopped early): the periods after it are not
+        counted as missing.
+    dut_name : str, optional
+        The capture is of a controller under test of this name (for the
+        labels); default from ``meta.json``.
 
     The ``meta.json`` written carries the scenario used (as a live run's
     does), so a later ``bench analyze`` or ``bench rerun`` of the same folder
@@ -332,6 +341,10 @@ def analyze_capture(
     frames, problem = read_capture(path)
     capture = path if path.is_file() else _find_in_folder(path)
     scn, meta = capture_scenario(path, scenario)
+    if duration is not None:
+        scn = scn.with_overrides(duration=duration)
+    if dut_name is not None:
+        meta = dict(meta, controller="external", controller_name=dut_name, estimator="external")
     say = echo or (lambda s: print(s, file=sys.stderr))
     line, span = _summarize(frames, codec, problem)
     say(line)

@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from bench.cli._common import files_line
+from bench.cli._common import POS_FLOAT, files_line
 
 
 def cmd_analyze(args: argparse.Namespace) -> int:
@@ -15,6 +15,7 @@ def cmd_analyze(args: argparse.Namespace) -> int:
     from bench.captures._read import (
         analyze_capture,
     )
+    from bench.runs._plots import controller_label
     from bench.runs._results import format_metrics, outcome
 
     plots = not getattr(args, "no_plots", False)
@@ -23,8 +24,11 @@ def cmd_analyze(args: argparse.Namespace) -> int:
         out_dir=Path(args.out) if args.out else None,
         scenario=args.scenario,
         plots=plots,
+        duration=getattr(args, "duration", None),
+        dut_name=getattr(args, "dut_name", None),
     )
     scn = res.meta.get("scenario", {})
+    print(f"analyze: {args.log} ({controller_label(res.meta)})")
     print(
         format_metrics(
             res.metrics, scn.get("paper_result"), scn.get("estimator"), res.meta.get("estimator")
@@ -33,6 +37,14 @@ def cmd_analyze(args: argparse.Namespace) -> int:
     status, warnings = outcome(res.metrics, float(res.meta.get("T_s") or 0.0))
     for line in warnings:
         print(line, file=sys.stderr)
+    missing = int(res.metrics.get("steps_missing", 0))
+    if missing:
+        print(
+            f"warning: {missing} periods of the scenario have no row in the capture (a run "
+            "shorter than its scenario: give --duration S; else frames the recording lost); "
+            "the metrics cover the rows present",
+            file=sys.stderr,
+        )
     names = ["signals.csv", "signals.md", "metrics.json", "meta.json"] + (
         ["run.png"] if plots else []
     )
@@ -45,5 +57,16 @@ def register(sub: Any) -> None:
     p.add_argument("log", help="a capture python-can reads (.blf, .asc, .log, .trc, .csv, .mf4)")
     p.add_argument("--out", "-o", help="output folder (default: beside the capture)")
     p.add_argument("--scenario", help="scenario of the capture (default: from meta.json beside it)")
+    p.add_argument(
+        "--duration",
+        type=POS_FLOAT,
+        metavar="S",
+        help="the run's length when shorter than the scenario's (its later periods are not missing)",
+    )
+    p.add_argument(
+        "--dut-name",
+        metavar="NAME",
+        help="a capture of a controller under test: its name in meta.json and the plot titles",
+    )
     p.add_argument("--no-plots", action="store_true", help="skip run.png")
     p.set_defaults(func=cmd_analyze)

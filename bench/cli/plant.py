@@ -24,11 +24,15 @@ from bench.cli._common import (
 
 
 def cmd_plant(args: argparse.Namespace) -> int:
+    import sys
+
     from bench.nodes._loops import make_plant_node, plant_loop
     from bench.wire._codec import Codec
 
     scn = scenario_from_args(args)
     spec = bus_spec(args, announce=False)
+    # a controller author needs to know where to listen (bench show SCENARIO says it too)
+    print(f"plant: {scn.name}, {args.mode}, on {spec.describe()}", file=sys.stderr, flush=True)
     codec = Codec()
     node = make_plant_node(
         scn,
@@ -46,7 +50,12 @@ def cmd_plant(args: argparse.Namespace) -> int:
         "plant",
         node,
         lambda bus: plant_loop(
-            bus, node, realtime=args.mode == "realtime", on_ready=ready, stop=STOP.is_set
+            bus,
+            node,
+            realtime=args.mode == "realtime",
+            on_ready=ready,
+            stop=STOP.is_set,
+            dut_timeout_s=args.dut_timeout or 0.0,
         ),
     )
 
@@ -77,6 +86,13 @@ def register(sub: Any) -> None:
         metavar="N",
         help="lockstep: run period k only once a bench command for step k or later has come "
         "(the sender keeps one at least every N periods); 0: off (bench run sets it)",
+    )
+    p.add_argument(
+        "--dut-timeout",
+        type=POS_FLOAT,
+        metavar="S",
+        help="serve a controller under test: wait up to S seconds for its first PwmDuty "
+        "(real time: the clock starts then); a lockstep watchdog trip ends the run",
     )
     add_engine(p)
     add_rt(p)

@@ -70,21 +70,37 @@ def cmd_run(args: argparse.Namespace) -> int:
     from bench.scenarios._setup import sample_period
 
     scn = scenario_from_args(args)
-    est = args.estimator or scn.estimator
-    from controller._registry import ESTIMATOR_NAMES
+    external = args.controller == "external"
+    if external:
+        if args.estimator:
+            raise BenchError(
+                "--estimator: not with --controller external (the estimator is the device's)"
+            )
+        est = "external"
+    else:
+        est = args.estimator or scn.estimator
+        from controller._registry import ESTIMATOR_NAMES
 
-    if est not in ESTIMATOR_NAMES:
-        raise BenchError(
-            f"--estimator: unknown estimator {est!r} (known: {', '.join(ESTIMATOR_NAMES)})"
-        )
-    check_estimator_fits(scn, est)
+        if est not in ESTIMATOR_NAMES:
+            raise BenchError(
+                f"--estimator: unknown estimator {est!r} (known: {', '.join(ESTIMATOR_NAMES)})"
+            )
+        check_estimator_fits(scn, est)
     plant_engine(args)
     if args.monitor and not (sys.stdin.isatty() and sys.stdout.isatty() and sys.stderr.isatty()):
         raise BenchError("--monitor: needs a terminal (run bench monitor beside it instead)")
+    if external and args.interface is None and args.port is None:
+        # a controller under test must find the bus: python-can's own default port
+        from bench.wire._bus import UDP_DEFAULT_PORT
+
+        args.port = UDP_DEFAULT_PORT
     spec = bus_spec(args, announce=True)
     out = Path(args.out) if args.out else Path("runs") / f"{scn.name}-{est}"
+    who = f"external controller {args.dut_name}" if external and args.dut_name else est
+    if external and not args.dut_name:
+        who = "an external controller"
     # the heading of the report on stdout: stderr carries progress and errors only
-    print(f"run: {scn.name} with {est}, {args.mode}, {spec.describe()} -> {out}", flush=True)
+    print(f"run: {scn.name} with {who}, {args.mode}, {spec.describe()} -> {out}", flush=True)
     if args.mode == "realtime":
         from bench.studies._rtcheck import host_warning, load_host_result
 
@@ -102,6 +118,9 @@ def cmd_run(args: argparse.Namespace) -> int:
             log_format=args.log_format,
             progress=not (args.quiet or args.monitor),
             node_args=run_node_args(args),
+            controller=args.controller,
+            dut_timeout=args.dut_timeout,
+            dut_name=args.dut_name,
         )
     finally:
         if view is not None:
@@ -118,8 +137,8 @@ def cmd_run(args: argparse.Namespace) -> int:
     missing = int(res.metrics.get("steps_missing", 0))
     if missing and not res.meta.get("interrupted"):
         print(
-            f"warning: {missing} periods of the run have no row in signals.csv (frames the "
-            "recording lost); the metrics cover the rows present",
+            f"warning: {missing} periods of the run have no row in signals.csv (the run ended "
+            "early, or frames the recording lost); the metrics cover the rows present",
             file=sys.stderr,
         )
     names = [
@@ -152,6 +171,23 @@ def register(sub: Any) -> None:
     add_scenario_overrides(p)
     add_plant_profile(p)
     add_bus(p)
+    p.add_argument(
+        "--controller",
+        choices=("bench", "external"),
+        default="bench",
+        help="external: start no controller; the controller under test is any node on the bus "
+        "(docs/PROTOCOL.md)",
+    )
+    p.add_argument(
+        "--dut-timeout",
+        type=POS_FLOAT,
+        default=30.0,
+        metavar="S",
+        help="--controller external: wait this long for its first valid PwmDuty (default 30)",
+    )
+    p.add_argument(
+        "--dut-name", help="--controller external: its name in meta.json and the plot titles"
+    )
     p.add_argument("--out", "-o", help="run folder (default runs/SCENARIO-ESTIMATOR)")
     p.add_argument(
         "--log-format", choices=("blf", "asc", "log"), default="blf", help="capture format"

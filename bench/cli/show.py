@@ -15,24 +15,30 @@ def cmd_show(args: argparse.Namespace) -> int:
 
     scn = scenario_from_args(args)
     d = describe(scn)
+    from bench.wire._bus import UDP_DEFAULT_PORT
+    from bench.wire._codec import default_codec
+
     spec = bus_spec(args, announce=False)
-    port = spec.port if args.port is not None or spec.interface != "udp_multicast" else None
+    default_port = spec.interface == "udp_multicast" and args.port is None
+    port = UDP_DEFAULT_PORT if default_port else spec.port
     d["transport"] = {
         "interface": spec.interface,
         "channel": spec.channel,
         "port": port,
         "note": (
-            "bench run picks a UDP port of its own per run and prints it; bench plant without "
-            "--port uses python-can's default (43113)"
-            if spec.interface == "udp_multicast" and port is None
+            "the port of bench run --controller external and bench plant without --port "
+            "(python-can's default); bench run with its own controller picks one per run"
+            if default_port
             else ""
         ),
     }
+    d["dbc_version"] = default_codec().version
     if args.json:
         print(json.dumps(d, indent=2))
         return 0
     m, pwm = d["motor"], d["pwm"]
     print(f"scenario {scn.name}: {scn.description} ({scn.paper or 'no paper'})")
+    print(f"DBC version {d['dbc_version']} (docs/PROTOCOL.md)")
     print(f"PWM {pwm['f_sw_hz']:g} Hz (T_s {pwm['T_s']:g} s), {pwm['periods']} periods")
     keys = ("n_p", "R_s", "L_d", "L_q", "psi_f", "J", "b", "i_rated", "i_max", "tau_rated")
     units = ("", "Ohm", "H", "H", "Wb", "kg m^2", "N m s", "A", "A", "N m")

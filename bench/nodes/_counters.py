@@ -150,3 +150,42 @@ class CommandQueue:
             del self.pending[c.apply_step]
         self.next_step = min(self.pending) if self.pending else _FAR
         return out
+
+
+def rejection_text(counts: dict[str, int]) -> str:
+    """``"722 rejected (bad_crc)"``, or with several reasons ``"730 rejected (bad_crc 722, ...)"``."""
+    n = sum(counts.values())
+    if len(counts) == 1:
+        return f"{n} rejected ({next(iter(counts))})"
+    return f"{n} rejected ({', '.join(f'{k} {v}' for k, v in sorted(counts.items()))})"
+
+
+class RejectionSummary:
+    """Lines for stderr on the frames of one message rejected since the last line.
+
+    A running node or ``bench run`` calls :meth:`poll` with the running counts
+    by reason as often as it likes; at most once per ``every_s`` it returns
+    ``"PwmDuty: 722 rejected (bad_crc) in the last second"`` (nothing when no
+    frame was rejected in that time).
+    """
+
+    def __init__(self, message: str, every_s: float = 1.0) -> None:
+        self.message = message
+        self.every_s = every_s
+        self.t_last: float | None = None
+        self.seen: dict[str, int] = {}
+
+    def poll(self, counts: dict[str, int], now: float, force: bool = False) -> str | None:
+        """The line on what was rejected since the last one (``force``: even before a second)."""
+        if self.t_last is None:
+            self.t_last = now
+        if now - self.t_last < self.every_s and not force:
+            return None
+        new = {k: v - self.seen.get(k, 0) for k, v in counts.items() if v > self.seen.get(k, 0)}
+        span = now - self.t_last
+        self.t_last = now
+        self.seen = dict(counts)
+        if not new:
+            return None
+        when = "in the last second" if span < 1.5 * self.every_s else f"in the last {span:.0f} s"
+        return f"{self.message}: {rejection_text(new)} {when}"

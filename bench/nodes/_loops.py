@@ -10,6 +10,7 @@ frames between the same nodes without any bus: the reference trace.
 from __future__ import annotations
 
 import math
+import sys
 import time
 from collections.abc import Callable
 
@@ -17,7 +18,8 @@ import can
 
 from bench._errors import BenchError
 from bench.nodes._controller_node import ControllerNode
-from bench.nodes._plant_node import PlantNode
+from bench.nodes._counters import RejectionSummary, rejection_text
+from bench.nodes._plant_node import PlantNode, fault_name
 from bench.nodes._rt import no_gc
 from bench.nodes._send import send_all
 from bench.scenarios._schema import Scenario
@@ -32,7 +34,7 @@ from bench.scenarios._setup import (
 )
 from bench.wire._codec import Codec
 from bench.wire._protocol import CMD_NONE, STATE_IDLE
-from plant_rt import ProtectionPars, RealTimeClock
+from plant_rt import FAULT_WATCHDOG, ProtectionPars, RealTimeClock
 
 #: ``PlantStatus.state`` of the plant's last frame: the run is over, the plant idle.
 STATE_DONE = STATE_IDLE
@@ -75,6 +77,7 @@ def make_plant_node(
     scenario's preset; ``watchdog_s`` to :func:`watchdog_periods`' default.
     """
     plant = build_plant(scn, engine)
+    cycle_ms = codec.message("PlantStatus").cycle_time or 0
     if protection is None:
         protection = ProtectionPars.from_preset(plant.motor, plant.inverter)
     return PlantNode(
@@ -86,6 +89,7 @@ def make_plant_node(
         protection=protection,
         watchdog_periods=watchdog_periods(plant.T_s, watchdog_s),
         watchdog_rounds=watchdog_rounds,
+        status_every=max(1, round(cycle_ms * 1e-3 / plant.T_s)) if cycle_ms else 0,
     )
 
 
@@ -229,24 +233,137 @@ def plant_loop(
     on_ready: Callable[[], None] | None = None,
     stop: Callable[[], bool] = lambda: False,
     watchdog_s: float = STALL_S,
+    dut_timeout_s: float = 0.0,
 ) -> None:
-    """Serve the plant on ``bus`` until the scenario's end or a stop command."""
+    """Serve the plant on ``bus`` until the scenario's end or a stop command.
+
+    ``dut_timeout_s > 0``: the controller is a device under test, not the
+    bench's own (``bench run --controller external``): the plant waits up to
+    that long for its first answer (lockstep: no watchdog meanwhile; real
+    time: sample 0 is resent until then and the clock starts after it), and
+    in lockstep a watchdog trip ends the run.  Rejected duty frames and a
+    trip are reported on stderr as they happen (:class:`PlantDiagnostics`).
+    """
     ids = {node.codec.frame_id(n) for n in ("PwmDuty", "BenchCommand")}
     node.realtime = realtime
+    node.external = dut_timeout_s > 0
     if on_ready:
         on_ready()
     if not _wait_for_start(bus, node, ids, stop):
         return
     frames = node.frames_now()
+    diag = PlantDiagnostics(node)
     t_loop = time.perf_counter()
     try:
         if realtime:
-            _serve_realtime(bus, node, ids, frames, stop=stop)
+            if node.external:
+                if not _wait_first_answer(bus, node, ids, frames, stop, dut_timeout_s, diag):
+                    return
+                frames = []  # sample 0 is out; the clock starts with period 0
+            _serve_realtime(bus, node, ids, frames, stop=stop, diag=diag)
         else:
-            _serve_lockstep(bus, node, ids, frames, stop=stop, watchdog_s=watchdog_s)
+            _serve_lockstep(
+                bus,
+                node,
+                ids,
+                frames,
+                stop=stop,
+                watchdog_s=watchdog_s,
+                first_s=dut_timeout_s,
+                diag=diag,
+            )
     finally:
         node.loop_s = time.perf_counter() - t_loop
+        diag.poll(force=True)
     send_all(bus, [node.status_frame(STATE_DONE, node.fault)], node.counters)
+
+
+class PlantDiagnostics:
+    """What a running plant says on stderr, for the author of the controller on the bus.
+
+    Once a second, the ``PwmDuty`` frames rejected in that second
+    (``PwmDuty: 722 rejected (bad_crc) in the last second``), and a trip as
+    soon as it happens, with what the controller did wrong for ``wrong_step``.
+    """
+
+    def __init__(self, node: PlantNode) -> None:
+        self.node = node
+        self.summary = RejectionSummary("PwmDuty")
+        self.fault = node.fault
+        self.t_check = 0.0
+
+    def poll(self, force: bool = False) -> None:
+        now = time.monotonic()
+        if not force and now - self.t_check < 0.1:
+            return
+        self.t_check = now
+        node = self.node
+        if node.fault != self.fault:
+            self.fault = node.fault
+            if node.fault:
+                print(f"plant: {trip_text(node.fault, node.fault_step)}", file=sys.stderr)
+        line = self.summary.poll(node.duty_rejected, now, force)
+        if line:
+            print(f"plant: {line}", file=sys.stderr, flush=True)
+
+
+def trip_text(code: int, step: int) -> str:
+    """One line on a trip: its fault name, period, and for ``wrong_step`` the remedy."""
+    name = fault_name(code)
+    s = f"tripped {name} in period {step}, inverter off until a reset"
+    if name == "wrong_step":
+        s += (
+            ": a PwmDuty came with step 0, which answers no sample; the duty computed from "
+            "PhaseSamples step k must carry step k + 1 (docs/PROTOCOL.md, step numbering)"
+        )
+    elif name == "watchdog":
+        s += ": no valid PwmDuty for too long"
+    return s
+
+
+def stall_text(node: PlantNode, waited_s: float) -> str:
+    """Why a lockstep plant waits: the duty it needs, what came instead, what was rejected."""
+    need = node.needed_duty()
+    s = f"no valid PwmDuty for step {need} (the answer to sample {need - 1}) in {waited_s:.0f} s"
+    later = sorted(t for t in node.duties if t > need)
+    if later:
+        s += (
+            f"; PwmDuty for later steps came ({', '.join(map(str, later[:4]))}): the "
+            f"controller skipped sample {need - 1}"
+        )
+    if node.duty_rejected:
+        s += f"; PwmDuty: {rejection_text(node.duty_rejected)} since the start"
+    if not node.dut_answered and not node.duty_rejected:
+        s += " (is a controller running on this bus?)"
+    return s
+
+
+def _wait_first_answer(
+    bus: can.BusABC,
+    node: PlantNode,
+    ids: set[int],
+    frames: list[can.Message],
+    stop: Callable[[], bool],
+    limit_s: float,
+    diag: PlantDiagnostics,
+) -> bool:
+    """Real time with a controller under test: resend sample 0 until it answers (False: stopped)."""
+    t0 = time.monotonic()
+    t_sent = -1.0
+    while not node.dut_answered:
+        if stop():
+            return False
+        now = time.monotonic()
+        if now - t0 > limit_s:
+            raise BenchError(f"plant: {stall_text(node, limit_s)}")
+        if now - t_sent >= RETRANSMIT_S:
+            send_all(bus, frames, node.counters)
+            t_sent = now
+        msg = bus.recv(RETRANSMIT_S / 5)
+        if msg is not None and msg.arbitration_id in ids:
+            node.on_message(msg)
+        diag.poll()
+    return True
 
 
 def _wait_for_start(
@@ -273,6 +390,7 @@ def _serve_realtime(
     frames: list[can.Message],
     *,
     stop: Callable[[], bool],
+    diag: PlantDiagnostics | None = None,
 ) -> None:
     """Real time: one period per tick of the plant's own clock, with the newest duty.
 
@@ -291,6 +409,8 @@ def _serve_realtime(
                 if msg.arbitration_id in ids:
                     node.on_message(msg)
             frames = node.advance_realtime()
+            if diag is not None:
+                diag.poll()
             clock.wait()
         send_all(bus, frames, node.counters)
     node.counters.overruns = clock.overruns
@@ -318,12 +438,16 @@ def _serve_lockstep(
     *,
     stop: Callable[[], bool],
     watchdog_s: float,
+    first_s: float = 0.0,
+    diag: PlantDiagnostics | None = None,
 ) -> None:
     """Lockstep: a period runs once its duty (and, when paced, its bench command) has come.
 
     While it waits, the recent frames are resent every :data:`RETRANSMIT_S`
     (a lost frame on a lossy transport); after ``watchdog_s`` without
-    progress the plant gives up with a message naming what it waited for.
+    progress (``first_s``, when given, before the controller's first answer)
+    the plant gives up with a message naming what it waited for and what
+    was rejected (:func:`stall_text`).
     """
     send_all(bus, frames, node.counters)
     last_progress = time.monotonic()
@@ -332,13 +456,17 @@ def _serve_lockstep(
     def no_duty() -> None:
         nonlocal t_wait
         now = time.monotonic()
-        if now - last_progress > watchdog_s:
-            raise BenchError(
-                f"plant: no duty frame for step {node.needed_duty()} in {watchdog_s:.0f} s "
-                "(is a controller running on this bus?)"
-            )
+        limit = first_s if first_s > 0 and not node.dut_answered else watchdog_s
+        if diag is not None:
+            diag.poll()
+        if now - last_progress > limit:
+            raise BenchError(f"plant: {stall_text(node, limit)}")
         if now - t_wait >= RETRANSMIT_S:
             send_all(bus, node.on_duty_timeout(), node.counters)
+            if node.external and node.fault == FAULT_WATCHDOG:
+                # no duty will come: the run cannot go on (bench run: exit 3)
+                print(f"plant: {stall_text(node, now - last_progress)}", file=sys.stderr)
+                raise _RunOver
             send_all(bus, node.retransmit(), node.counters)
             t_wait = now
 
@@ -351,13 +479,22 @@ def _serve_lockstep(
 
     while not node.done and not stop():
         t_wait = time.monotonic()
-        if not _receive_until(bus, node, ids, node.ready, stop, no_duty):
+        try:
+            if not _receive_until(bus, node, ids, node.ready, stop, no_duty):
+                break
+        except _RunOver:
             break
         # paced by bench run: not ahead of the commands (and so of its recorder)
         if not _receive_until(bus, node, ids, node.paced, stop, no_command):
             break
         send_all(bus, node.advance_lockstep(), node.counters)
         last_progress = time.monotonic()
+        if diag is not None:
+            diag.poll()
+
+
+class _RunOver(Exception):
+    """A lockstep plant serving a controller under test tripped its watchdog: end the run."""
 
 
 def _receive_until(
@@ -370,8 +507,11 @@ def _receive_until(
 ) -> bool:
     """Feed the node its frames until ``done()`` (True) or ``stop()`` (False).
 
-    ``quiet()`` runs after each ``RETRANSMIT_S`` without a frame (it may raise).
+    ``quiet()`` runs after each ``RETRANSMIT_S`` without a frame, and at
+    least every ``RETRANSMIT_S`` while frames come that do not make ``done()``
+    (a controller answering with frames the node rejects); it may raise.
     """
+    t_quiet = time.monotonic()
     while not done():
         if stop():
             return False
@@ -379,8 +519,11 @@ def _receive_until(
         if msg is not None:
             if msg.arbitration_id in ids:
                 node.on_message(msg)
-            continue
+            now = time.monotonic()
+            if now - t_quiet < RETRANSMIT_S:
+                continue
         quiet()
+        t_quiet = time.monotonic()
     return True
 
 

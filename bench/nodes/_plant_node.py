@@ -38,6 +38,15 @@ open) on a protection fault (:class:`plant_rt.Protection`) or when valid duty
 frames stop (watchdog), reports it with ``PlantStatus``, and stays there until
 a ``reset`` or ``enable`` bench command; the controller node disables its PWM
 when samples stop (real time).
+
+A duty for period 0 answers no sample (sample 0 is answered by duty 1): it
+comes from a controller that tags the duty of sample ``k`` with ``k``, which
+would run the loop without its computation delay. The plant rejects it
+(``wrong_step``) and trips with ``PlantStatus.fault_code`` 5 (``wrong_step``).
+``PlantStatus`` also goes out every ``status_every`` periods (the DBC's
+``GenMsgCycleTime``, 100 ms of plant time) while the run is on; its
+``late_frames`` counts the periods without their own duty and the duty frames
+rejected. docs/PROTOCOL.md is the same contract for a controller's author.
 """
 
 from __future__ import annotations
@@ -60,6 +69,9 @@ from bench.wire._protocol import (
     CMD_RESET,
     CMD_START,
     CMD_STOP,
+    FAULT_WRONG_STEP,
+    NODE_FAULT_NAMES,
+    REJECT_WRONG_STEP,
     STATE_FAULT,
     STATE_IDLE,
     STATE_RUNNING,
@@ -76,6 +88,11 @@ from plant_rt import (
 )
 
 _SAFE_DUTY = (0.5, 0.5, 0.5, False)
+
+
+def fault_name(code: int) -> str:
+    """The DBC name of a ``PlantStatus.fault_code``: the machine's protections and the node's."""
+    return FAULT_NAMES.get(code) or NODE_FAULT_NAMES.get(code) or str(code)
 
 
 class PlantNode:
@@ -101,6 +118,10 @@ class PlantNode:
     watchdog_rounds : int
         Lockstep: trip when this many retransmission rounds in a row brought
         no valid duty frame (0: off).
+    status_every : int
+        Send ``PlantStatus`` every this many periods from the start command
+        (the DBC's ``GenMsgCycleTime`` in periods; 0: only on a change of
+        state and at the end).
     """
 
     def __init__(
@@ -114,6 +135,7 @@ class PlantNode:
         protection: ProtectionPars | None = None,
         watchdog_periods: int = 0,
         watchdog_rounds: int = 0,
+        status_every: int = 0,
     ) -> None:
         self.codec = codec
         self.plant = plant
@@ -161,6 +183,17 @@ class PlantNode:
         self.resets = 0
         self.last_duty_k = 0
         self.rounds_waiting = 0
+        self.status_every = max(0, int(status_every))
+        #: ``PwmDuty`` frames not used, by reason (repeats excluded): the
+        #: rejected part of ``PlantStatus.late_frames`` and of the stall message.
+        self.duty_rejected: dict[str, int] = {}
+        #: Whether a controller has answered at all (a duty accepted, or one for
+        #: period 0 that tripped ``wrong_step``).
+        self.dut_answered = False
+        #: Serving a controller under test (``bench plant --dut-timeout``): the
+        #: lockstep watchdog counts only from its first answer, and a lockstep
+        #: trip ends the run (no duty will come: the periods cannot advance).
+        self.external = False
         self._outbox: list[can.Message] = []
 
     # -- receiving ---------------------------------------------------------
@@ -173,7 +206,7 @@ class PlantNode:
             return
         if d.name == "PwmDuty":
             if d.reason is not None:
-                c.reject(d.reason)
+                self._reject_duty(d.reason)
                 return
             self._on_duty(d.signals)
         elif d.name == "BenchCommand":
@@ -186,25 +219,38 @@ class PlantNode:
         else:
             c.frames_ignored += 1
 
+    def _reject_duty(self, reason: str) -> None:
+        self.counters.reject(reason)
+        if reason != REPEATED_COUNTER:
+            self.duty_rejected[reason] = self.duty_rejected.get(reason, 0) + 1
+
     def _on_duty(self, s: dict[str, float]) -> None:
         c = self.counters
         k = self.plant.k
         t = unwrap(int(s["step"]), k - self.delay, self.m_step)
+        if t == 0:
+            # answers no sample (the first is sample 0, answered by duty 1): a
+            # controller that tags the duty of sample k with k, which would run
+            # the loop without its computation delay
+            self._reject_duty(REJECT_WRONG_STEP)
+            self.dut_answered = True
+            self.trip(FAULT_WRONG_STEP)
+            return
         if t > k + 1:
             # the controller answers sample k with duty k + 1 at the latest
-            c.reject(REJECT_FUTURE_COUNTER)
+            self._reject_duty(REJECT_FUTURE_COUNTER)
             return
         if self.realtime:
             if t == self.latest_duty_step or t in self.duties:
                 c.reject(REPEATED_COUNTER)
                 return
             if t < self.latest_duty_step:
-                c.reject(REJECT_STALE_COUNTER)
+                self._reject_duty(REJECT_STALE_COUNTER)
                 return
         else:
             needed = k - self.delay
             if t < needed - DUTY_REPEAT_WINDOW:
-                c.reject(REJECT_STALE_COUNTER)
+                self._reject_duty(REJECT_STALE_COUNTER)
                 return
             if t < needed or t in self.duties:
                 # already applied or already here: the answer to a retransmission
@@ -212,9 +258,11 @@ class PlantNode:
                 return
         d_a, d_b, d_c = float(s["duty_a"]), float(s["duty_b"]), float(s["duty_c"])
         if not (0.0 <= d_a <= 1.0 and 0.0 <= d_b <= 1.0 and 0.0 <= d_c <= 1.0):
-            c.reject(REJECT_OUT_OF_RANGE)  # unreachable with the shipped DBC; kept as a guard
+            # the codec rejects these already (DBC range [0|1]); kept as a guard
+            self._reject_duty(REJECT_OUT_OF_RANGE)
             return
         c.frames_accepted += 1
+        self.dut_answered = True
         duty = (d_a, d_b, d_c, bool(s["enable"]))
         self.last_duty_k = k
         # Both modes keep the duty until its period: in real time a fast
@@ -232,7 +280,7 @@ class PlantNode:
             return
         self.fault = code
         self.fault_step = self.plant.k
-        name = FAULT_NAMES.get(code, str(code))
+        name = fault_name(code)
         self.trips[name] = self.trips.get(name, 0) + 1
         self._outbox.append(self.status_frame(STATE_FAULT, code))
 
@@ -269,6 +317,8 @@ class PlantNode:
 
         Returns the frames to send (the fault status when the watchdog trips).
         """
+        if self.external and not self.dut_answered:
+            return self._flush_outbox([])  # waiting for the controller under test
         self.rounds_waiting += 1
         if (
             self.watchdog_rounds
@@ -359,6 +409,7 @@ class PlantNode:
         self.plant.step(d_a, d_b, d_c, en)
         self._check_protection()
         self.apply_commands()
+        self._periodic_status()
         return self._flush_outbox(self.frames_now())
 
     def retransmit(self) -> list[can.Message]:
@@ -404,7 +455,20 @@ class PlantNode:
         self.plant.step(d_a, d_b, d_c, en)
         self._check_protection()
         self.apply_commands()
+        self._periodic_status()
         return self._flush_outbox(self.frames_now())
+
+    def _periodic_status(self) -> None:
+        """Queue ``PlantStatus`` on its cycle (plant time), while the run is on."""
+        n = self.status_every
+        if n and self.started and not self.stopped and self.plant.k % n == 0:
+            state = STATE_FAULT if self.fault != FAULT_NONE else STATE_RUNNING
+            self._outbox.append(self.status_frame(state, self.fault))
+
+    @property
+    def late_frames(self) -> int:
+        """``PlantStatus.late_frames``: periods without their own duty plus duties rejected."""
+        return self.counters.late_duties + sum(self.duty_rejected.values())
 
     def status_frame(self, state: int, fault_code: int = 0) -> can.Message:
         c = self.counters
@@ -414,7 +478,7 @@ class PlantNode:
                 "state": state,
                 "fault_code": fault_code,
                 "overruns": min(c.overruns, 0xFFFF),
-                "late_frames": min(c.late_duties, 0xFFFF),
+                "late_frames": min(self.late_frames, 0xFFFF),
                 "step": self.plant.k % self.m_status,
             },
         )
@@ -427,7 +491,9 @@ class PlantNode:
             engine=self.plant.engine,
             jitter=self.jitter,
             loop_s=self.loop_s,
-            fault=FAULT_NAMES.get(self.fault, str(self.fault)),
+            fault=fault_name(self.fault),
+            duty_rejected=dict(self.duty_rejected),
+            late_frames=self.late_frames,
             fault_step=self.fault_step,
             # period in which the last valid duty frame arrived (the watchdog's reference)
             last_duty_arrival=self.last_duty_k,

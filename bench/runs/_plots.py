@@ -44,18 +44,12 @@ ANGLE_PERIODS = 3.0
 
 
 def controller_label(meta: dict[str, Any]) -> str:
-    """The controller a run used, from its ``meta.json``.
-
-    ``controller`` when it names one (a string, or a table with ``name`` or
-    ``label``: an external controller), the built-in ``estimator`` otherwise.
-    """
-    c = meta.get("controller")
-    if isinstance(c, str) and c:
-        return c
-    if isinstance(c, dict):
-        for k in ("label", "name"):
-            if c.get(k):
-                return str(c[k])
+    """Who controlled a run, from its ``meta.json``, for titles and headings: the
+    estimator of the bench's own controller, or ``external controller`` (with the name
+    given by ``--dut-name``) for a controller under test."""
+    if meta.get("controller") == "external":
+        name = meta.get("controller_name")
+        return f"external controller {name}" if name and name != "external" else "external controller"
     return str(meta.get("estimator") or "?")
 
 

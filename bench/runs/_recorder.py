@@ -23,7 +23,9 @@ from bench.wire._codec import Codec
 class Recorder(can.Listener):
     """Keeps every frame (with the index of the bus it came from) and writes the capture."""
 
-    def __init__(self, codec: Codec, writer: can.Listener, channel: int) -> None:
+    def __init__(
+        self, codec: Codec, writer: can.Listener, channel: int, *, watch_duties: bool = False
+    ) -> None:
         self.codec = codec
         self.writer = writer
         self.channel = channel
@@ -37,6 +39,13 @@ class Recorder(can.Listener):
         self._m_step = 1 << codec.step_bits("PhaseSamples")
         self.done = threading.Event()
         self.lock = threading.Lock()
+        #: ``PwmDuty`` frames checked here (a controller under test): valid ones,
+        #: and the rejected ones by the codec's reason (CRC, length, range).
+        self.duty_id = codec.frame_id("PwmDuty") if watch_duties else -1
+        self.duties_ok = 0
+        self.duty_rejected: dict[str, int] = {}
+        #: The newest ``PlantStatus``: fault code, step (raw), late_frames, overruns.
+        self.status: dict[str, int] = {}
 
     def on_message_received(self, msg: can.Message) -> None:
         msg.channel = self.channel
@@ -55,10 +64,18 @@ class Recorder(can.Listener):
                     if ahead < self._m_step // 2:  # behind: a retransmitted old frame
                         self.step += ahead
                         self.last_raw_step = raw
+        elif msg.arbitration_id == self.duty_id:
+            d = self.codec.decode(msg)
+            if d is not None and d.reason is None:
+                self.duties_ok += 1
+            elif d is not None and d.reason is not None:
+                self.duty_rejected[d.reason] = self.duty_rejected.get(d.reason, 0) + 1
         elif msg.arbitration_id == self.status_id:
             d = self.codec.decode(msg)
-            if d is not None and d.reason is None and int(d.signals["state"]) == STATE_DONE:
-                self.done.set()
+            if d is not None and d.reason is None:
+                self.status = {k: int(v) for k, v in d.signals.items()}
+                if int(d.signals["state"]) == STATE_DONE:
+                    self.done.set()
 
 
 def drain(recorders: list[Recorder], quiet_s: float = 0.5, limit_s: float = 10.0) -> None:
@@ -86,7 +103,9 @@ class Recording:
     stops the notifiers, the writer and the buses.
     """
 
-    def __init__(self, specs: list[BusSpec], capture: Path, codec: Codec) -> None:
+    def __init__(
+        self, specs: list[BusSpec], capture: Path, codec: Codec, *, watch_duties: bool = False
+    ) -> None:
         self.buses: list[can.BusABC] = []
         try:
             for spec in specs:
@@ -96,7 +115,12 @@ class Recording:
                 b.shutdown()
             raise
         self.writer = can.Logger(str(capture))
-        self.recorders = [Recorder(codec, self.writer, i + 1) for i in range(len(self.buses))]
+        # duties are watched where the controller sends them (its side of a link)
+        n = len(self.buses)
+        self.recorders = [
+            Recorder(codec, self.writer, i + 1, watch_duties=watch_duties and i == n - 1)
+            for i in range(n)
+        ]
         for r in self.recorders[1:]:
             r.lock = self.recorders[0].lock  # one writer: one lock, or the capture is corrupted
         self.notifiers = [
@@ -118,6 +142,11 @@ class Recording:
     def plant_done(self) -> bool:
         """Whether the plant has said that the run is over (``PlantStatus``)."""
         return self.recorders[0].done.is_set()
+
+    @property
+    def duty_watch(self) -> Recorder:
+        """The recorder of the controller's bus (where its ``PwmDuty`` frames are checked)."""
+        return self.recorders[-1]
 
     def frames(self) -> list[can.Message]:
         """Every recorded frame, in time order across the buses."""

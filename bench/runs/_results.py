@@ -96,7 +96,8 @@ def run_metadata(
         "seed": scn.seed,
         # every gain, bandwidth, filter corner and delay the controller uses
         # (controller.Controller.gains); none for an external controller
-        "controller_gains": _controller_gains(scn, estimator),
+        "controller": "external" if estimator == "external" else "bench",
+        "controller_gains": {} if estimator == "external" else _controller_gains(scn, estimator),
         "versions": _versions(),
     }
 
@@ -213,20 +214,28 @@ def finish_run(
         fault, fault_step = str(plant_r["fault"]), int(plant_r.get("fault_step", -1))
     m["plant_fault"] = fault
     m["plant_fault_step"] = fault_step
+    # the plant's own counters as it sent them (PlantStatus), e.g. for a capture
+    # of a controller under test analysed without the node's report
+    status = plant_status_counters(frames, codec)
+    if status is not None:
+        m["plant_status_late_frames"] = status["late_frames"]
+        m["plant_status_overruns"] = status["overruns"]
+        if not plant_r:
+            m["deadline_misses"] = status["overruns"]
     meta = dict(
         meta,
         scored_from_s=scn.score_from_s,
         capture=capture.name if capture else None,
         wall_s=wall_s,
     )
+    # the DBC of the run (a capture analysed later keeps the one it was recorded with)
+    meta.setdefault("dbc_version", codec.version)
     (out_dir / "metrics.json").write_text(jsonio.dumps(m, indent=2, sort_keys=True) + "\n")
     (out_dir / "meta.json").write_text(
         json.dumps(meta, indent=2, sort_keys=True, default=str) + "\n"
     )
     if plots:
-        from bench.runs._plots import plot_run
-
-        from bench.runs._plots import controller_label
+        from bench.runs._plots import controller_label, plot_run
 
         plot_run(
             cap.table,
@@ -333,7 +342,7 @@ def plant_fault(frames: list[can.Message], codec: Codec) -> tuple[str, int]:
     ``PlantTruth`` frame before it (the plant's own period count, whatever
     the capture's length, start, retransmissions or number of buses).
     """
-    from plant_rt import FAULT_NAMES
+    from bench.nodes._plant_node import fault_name
 
     id_status, id_truth = codec.frame_id("PlantStatus"), codec.frame_id("PlantTruth")
     m = 1 << codec.step_bits("PlantStatus")
@@ -348,8 +357,24 @@ def plant_fault(frames: list[can.Message], codec: Codec) -> tuple[str, int]:
             t = codec.decode(last_truth) if last_truth is not None else None
             ref = int(t.signals["step"]) if t is not None and t.reason is None else 0
             code = int(d.signals["fault_code"])
-            return FAULT_NAMES.get(code, str(code)), unwrap(int(d.signals["step"]), ref, m)
+            return fault_name(code), unwrap(int(d.signals["step"]), ref, m)
     return "none", -1
+
+
+def plant_status_counters(frames: list[can.Message], codec: Codec) -> dict[str, int] | None:
+    """The counters of the capture's last valid ``PlantStatus`` (None: the capture has none).
+
+    ``late_frames`` (periods without their own duty plus duties rejected) and
+    ``overruns`` (real-time deadlines missed) count from the plant's start, so
+    the last frame holds the run's totals (saturated at 65535).
+    """
+    id_status = codec.frame_id("PlantStatus")
+    for f in reversed(frames):
+        if f.arbitration_id == id_status:
+            d = codec.decode(f)
+            if d is not None and d.reason is None:
+                return {k: int(v) for k, v in d.signals.items() if k != "crc"}
+    return None
 
 
 def fault_warning(m: dict[str, Any], T_s: float) -> str | None:

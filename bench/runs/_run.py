@@ -9,8 +9,15 @@ capture, exactly as ``bench analyze`` would.
 
 :func:`run_scenario` reads as the run's steps: open the recording
 (:mod:`bench.runs._recorder`), start the nodes (:mod:`bench.runs._processes`),
-drive the commands (:func:`_drive`), stop the nodes, and score the frames
-(:func:`bench.runs._results.finish_run`).
+drive the commands (:func:`_drive`, paced by :class:`bench.runs._pacing.CommandPacer`),
+stop the nodes, and score the frames (:func:`bench.runs._results.finish_run`).
+
+With ``controller="external"`` (``bench run --controller external``) no
+controller process is started: the controller under test is whatever node on
+the bus answers the plant (docs/PROTOCOL.md).  The run waits for its first
+valid ``PwmDuty`` up to ``dut_timeout`` seconds (:class:`DutWatch`), says on
+stderr what the plant rejects while the run goes on, and is scored as any
+other run.
 """
 
 from __future__ import annotations
@@ -30,7 +37,8 @@ import can
 
 from bench import _jsonio as jsonio
 from bench._errors import BenchError
-from bench.nodes._loops import command_frames
+from bench.nodes._counters import RejectionSummary, rejection_text
+from bench.nodes._loops import trip_text
 from bench.runs._processes import (
     ended_early,
     last_line,
@@ -39,18 +47,23 @@ from bench.runs._processes import (
     start_nodes,
     stop_nodes,
 )
+from bench.runs._pacing import PACE_EVERY, CommandPacer
 from bench.runs._recorder import Recording
 from bench.runs._results import RunResult, finish_run, run_metadata
 from bench.scenarios._schema import Scenario, write_effective
 from bench.scenarios._setup import n_steps, sample_period
 from bench.wire._bus import BusSpec
 from bench.wire._codec import Codec
+from bench.wire._protocol import unwrap
 
 LOG_SUFFIX = {"blf": ".blf", "asc": ".asc", "log": ".log"}
 
-#: Lockstep pacing: a bench command (a keep-alive when nothing changes) at
-#: least every this many periods; see :attr:`bench.nodes._plant_node.PlantNode.pace_every`.
-PACE_EVERY = 100
+__all__ = ["DUT_TIMEOUT_S", "EXTERNAL", "PACE_EVERY", "DutWatch", "run_scenario"]
+
+#: ``bench run --controller external``: the controller is a node on the bus.
+EXTERNAL = "external"
+#: Default wait for the first valid duty of a controller under test (s).
+DUT_TIMEOUT_S = 30.0
 
 
 class _Interrupt:
@@ -94,12 +107,22 @@ def run_scenario(
     progress: bool = True,
     codec: Codec | None = None,
     node_args: dict[str, list[str]] | None = None,
+    controller: str = "bench",
+    dut_timeout: float = DUT_TIMEOUT_S,
+    dut_name: str | None = None,
 ) -> RunResult:
     """Run ``scn`` with ``estimator`` between two processes on ``spec``'s bus.
 
     ``node_args`` adds command-line options per role (``plant``, ``controller``).
+    ``controller="external"``: no controller process; the controller under test
+    (named ``dut_name`` in the labels) must send its first valid duty within
+    ``dut_timeout`` seconds, else the run ends with a :class:`BenchError`
+    naming the duty frames the bench rejected.
     """
     codec = codec or Codec()
+    external = controller == EXTERNAL
+    if external:
+        estimator = EXTERNAL
     out_dir.mkdir(parents=True, exist_ok=True)
     # an earlier run's files in the same folder would mix with these (scenario.json:
     # bench run --monitor has just written this run's)
@@ -113,12 +136,23 @@ def run_scenario(
     # sent, which follow what the recorder has seen: the recording never
     # falls so far behind that its socket overflows on a loaded machine.
     pace = PACE_EVERY if mode == "lockstep" else 0
+    node_args = dict(node_args or {})
+    if external:
+        # the plant gives up a little after this process would (which says why)
+        node_args["plant"] = [
+            *node_args.get("plant", []),
+            "--dut-timeout",
+            repr(dut_timeout + 10.0),
+        ]
     roles = node_roles(scn, estimator, spec, spec_b, mode=mode, pace=pace, node_args=node_args)
+    if external:
+        roles = [r for r in roles if r[0] != "controller"]
     env = dict(os.environ, PYTHONUNBUFFERED="1")
     procs: list[tuple[str, subprocess.Popen[str]]] = []
     ended: str | None = None
     asked: set[str] = set()
-    rec = Recording([spec, spec_b] if link else [spec], capture, codec)
+    rec = Recording([spec, spec_b] if link else [spec], capture, codec, watch_duties=external)
+    dut = DutWatch(rec, dut_timeout, spec_b.describe(), dut_name) if external else None
     t_wall0 = time.perf_counter()
     start_error: str | None = None
     with _catch_signals() as interrupted:
@@ -128,12 +162,17 @@ def run_scenario(
             except BenchError as e:  # a node that never became ready: nothing to record
                 start_error = str(e)
             if start_error is None:
-                cmds = command_frames(scn, codec, pace_every=pace)
+                pacer = CommandPacer(scn, codec, mode=mode, pace_every=pace)
                 plant = dict(procs).get("plant")
                 if plant is not None and not interrupted():
-                    ended = _drive(rec, cmds, procs, plant, scn, mode, pace, progress, interrupted)
+                    ended = _drive(rec, pacer, procs, plant, scn, progress, interrupted, dut)
                 asked = stop_nodes(
-                    procs, rec.plant_bus, cmds, link=link, interrupted=interrupted(), ended=ended
+                    procs,
+                    rec.plant_bus,
+                    pacer.frames,
+                    link=link,
+                    interrupted=interrupted(),
+                    ended=ended,
                 )
         finally:
             for _, p in procs:
@@ -146,6 +185,12 @@ def run_scenario(
     wall = time.perf_counter() - t_wall0
     failures = node_failures(procs, asked)
     meta = run_metadata(scn, estimator, mode=mode, transport=spec.describe(), link=link)
+    if external:
+        meta["controller"] = EXTERNAL
+        meta["controller_name"] = dut_name or EXTERNAL
+        meta["dut_timeout_s"] = dut_timeout
+        if dut is not None:
+            meta["dut_first_duty_s"] = dut.first_duty_s
     meta["node_reports"] = _node_reports(out_dir)
     meta["engine"] = (meta["node_reports"].get("plant") or {}).get("engine")  # the plant's
     meta["exit_codes"] = {role: p.returncode for role, p in procs}
@@ -161,7 +206,24 @@ def run_scenario(
             + ")"
         )
         raise failed_before_recording(out_dir, why)
-    result = _score(frames, codec, scn, out_dir, meta, wall, capture, partial=bool(interrupted() or failures))
+    # a plant that ended before the scenario's last period (a lockstep watchdog
+    # trip with a controller under test) leaves a shorter run: scored as far as it went
+    short = int((meta["node_reports"].get("plant") or {}).get("steps", n_steps(scn))) < n_steps(scn)
+    result = _score(
+        frames,
+        codec,
+        scn,
+        out_dir,
+        meta,
+        wall,
+        capture,
+        partial=bool(interrupted() or failures or ended or short),
+    )
+    if dut is not None:
+        dut.check(rec.plant_step)  # a trip the drive loop ended before printing
+        dut.plant_story(out_dir)
+    if ended == "dut" and dut is not None and not interrupted():
+        raise BenchError(f"{dut.failure_text()}; files in {out_dir}")
     if ended and not interrupted():
         raise BenchError(
             f"{ended} process ended before the run did ({last_line(out_dir, ended)}); "
@@ -211,56 +273,150 @@ def failed_before_recording(out_dir: Path, why: str) -> BenchError:
 
 def _drive(
     rec: Recording,
-    cmds: list[tuple[int, can.Message]],
+    pacer: CommandPacer,
     procs: list[tuple[str, subprocess.Popen[str]]],
     plant: subprocess.Popen[str],
     scn: Scenario,
-    mode: str,
-    pace: int,
     progress: bool,
     interrupted: _Interrupt,
+    dut: DutWatch | None,
 ) -> str | None:
-    """Send the bench commands ahead of the plant until it is done; the role that ended early.
+    """Send the bench commands ahead of the plant until it is done; what ended the run early.
 
-    Nodes queue commands by their apply step, so sending far ahead costs
-    nothing; the recorder's view of the plant's step lags on a slow host
-    (User-Mode Linux: by thousands of frames), and a late command would
-    change the trace.  In real time the plant's clock runs regardless: a
-    burst of commands at the start would make its first periods late, so
-    only a short lead.  Each command is sent twice.
+    The commands go out as :class:`CommandPacer` paces them, after the
+    recorder's view of the plant's step.  With a controller under test
+    (``dut``) its diagnostics go to stderr as the run goes on, and the run
+    ends (``"dut"``) when it has not answered in time.
     """
-    T_s = sample_period(scn)
-    lead = max(3000, int(0.5 / T_s)) if mode == "lockstep" else max(20, int(0.02 / T_s))
     bus = rec.plant_bus
     bar = _Progress(n_steps(scn)) if progress else None
-    sent = 0
     t_moved, seen_step = time.monotonic(), -1
     ended: str | None = None
     while not interrupted():
         full_step = max(0, rec.plant_step)
-        while sent < len(cmds) and cmds[sent][0] <= full_step + lead:
-            bus.send(cmds[sent][1])
-            bus.send(cmds[sent][1])
-            sent += 1
+        pacer.send_due(bus, full_step)
         if full_step != seen_step:
             t_moved, seen_step = time.monotonic(), full_step
-        elif pace and sent and time.monotonic() - t_moved > 1.0:
+        elif pacer.pace_every and pacer.sent and time.monotonic() - t_moved > 1.0:
             # a paced plant that stopped moving may have lost the newest
             # commands (a lossy transport): the last few once more
-            for _, m in cmds[max(0, sent - 8) : sent]:
-                bus.send(m)
+            pacer.resend_recent(bus)
             t_moved = time.monotonic()
         if rec.plant_done or plant.poll() is not None or interrupted():
             break
         ended = ended_early(procs)
         if ended:
             break
-        if bar is not None:
+        if dut is not None:
+            answered = dut.answered
+            if dut.check(full_step):
+                ended = "dut"
+                break
+            if dut.answered and not answered:
+                pacer.resend_all(bus)  # it may have started after the first commands
+        if bar is not None and (dut is None or dut.answered):
             bar.show(full_step)
         time.sleep(0.002)
     if bar is not None:
         bar.close()
     return ended
+
+
+class DutWatch:
+    """What ``bench run --controller external`` says on stderr about the controller under test.
+
+    - Until its first valid ``PwmDuty``: a progress line (every 5 s; in place
+      on a terminal) naming the bus and the time left of ``timeout_s``, and the
+      duty frames rejected so far.
+    - While the run goes on: once a second, the ``PwmDuty`` frames the bench's
+      codec rejected (``PwmDuty: 722 rejected (bad_crc) in the last second``),
+      the growth of the plant's ``PlantStatus.late_frames``, and a plant trip
+      as soon as its ``PlantStatus`` says so, by name.
+    """
+
+    def __init__(
+        self, rec: Recording, timeout_s: float, transport: str, name: str | None = None
+    ) -> None:
+        self.rec = rec
+        self.timeout_s = timeout_s
+        self.transport = transport
+        self.name = name or "the controller under test"
+        self.t0 = time.monotonic()
+        self.t_line = 0.0
+        self.tty = sys.stderr.isatty()
+        #: Seconds from the start to its first valid duty (None: none yet).
+        self.first_duty_s: float | None = None
+        self.rejects = RejectionSummary("PwmDuty")
+        self.late = RejectionSummary("PlantStatus")
+        self.fault = 0
+        self.late_seen = 0
+        self.t_late = self.t0
+
+    @property
+    def answered(self) -> bool:
+        return self.first_duty_s is not None
+
+    def _say(self, line: str) -> None:
+        print(line, file=sys.stderr, flush=True)
+
+    def check(self, plant_step: int) -> bool:
+        """Print what is new; True when the controller has not answered within the timeout."""
+        now = time.monotonic()
+        watch = self.rec.duty_watch
+        if self.first_duty_s is None:
+            if watch.duties_ok:
+                self.first_duty_s = now - self.t0
+                self._say(f"{self.name}: first valid PwmDuty after {self.first_duty_s:.1f} s")
+            elif now - self.t0 > self.timeout_s:
+                return True
+            elif now - self.t_line >= (0.5 if self.tty else 5.0):
+                self.t_line = now
+                rej = watch.duty_rejected
+                so_far = f"; PwmDuty: {rejection_text(rej)} so far" if rej else ""
+                lead = "\r" if self.tty else ""
+                print(
+                    f"{lead}waiting for {self.name} on {self.transport}: no valid PwmDuty "
+                    f"yet ({now - self.t0:.0f} s of {self.timeout_s:.0f} s){so_far} ",
+                    end="" if self.tty else "\n",
+                    file=sys.stderr,
+                    flush=True,
+                )
+        line = self.rejects.poll(watch.duty_rejected, now)
+        if line:
+            self._say(line)
+        st = self.rec.recorders[0].status
+        code = st.get("fault_code", 0)
+        if code and code != self.fault:
+            step = unwrap(st.get("step", 0), plant_step, 1 << 16)
+            self._say(f"plant: {trip_text(code, step)}")
+        self.fault = code
+        late = st.get("late_frames", 0)
+        if now - self.t_late >= 1.0:
+            if late > self.late_seen:
+                self._say(
+                    f"plant: {late - self.late_seen} periods without their own valid PwmDuty "
+                    "(late, missing or rejected; PlantStatus.late_frames) in the last second"
+                )
+            self.late_seen, self.t_late = late, now
+        return False
+
+    def plant_story(self, out_dir: Path) -> None:
+        """The plant's own account of why it waited (its stall line in ``plant.log``)."""
+        log = out_dir / "plant.log"
+        if log.is_file():
+            for line in log.read_text(errors="replace").splitlines():
+                if line.startswith("plant: no valid PwmDuty"):
+                    self._say(line)
+
+    def failure_text(self) -> str:
+        """The one line of a controller that never answered."""
+        rej = self.rec.duty_watch.duty_rejected
+        why = (
+            f"PwmDuty: {rejection_text(rej)} (docs/PROTOCOL.md, what the plant rejects)"
+            if rej
+            else f"no PwmDuty at all: is it running on {self.transport}?"
+        )
+        return f"no valid PwmDuty from {self.name} in {self.timeout_s:.0f} s; {why}"
 
 
 class _Progress:

@@ -923,7 +923,10 @@ def parse_scenario(data: dict[str, Any], src: str) -> Scenario:
                 if not v > 0.0:
                     raise mt.fail(k, f"must be > 0, got {v}")
                 motor[k] = v
-    if err := saliency_error(r.src, preset, motor, (*ests, estimator)):
+    # only estimators the file names: without any, the scenario may be for an
+    # external controller (bench run --controller external), and tt-dq is a default
+    named = (*ests, estimator) if "estimator" in data or "estimators" in data else ()
+    if err := saliency_error(r.src, preset, motor, named):
         raise err
     f_eff = PRESETS[preset].f_sw if f_sw == -1.0 else f_sw
     profile, inverter, sensors, magnetics = _parse_plant(r, 1.0 / f_eff)

@@ -46,6 +46,8 @@ UDP_GROUP_IPV6: str = UdpMulticastBus.DEFAULT_GROUP_IPv6
 """python-can's default IPv6 multicast group (link scope of one hop)."""
 UDP_GROUP_IPV4: str = UdpMulticastBus.DEFAULT_GROUP_IPv4
 """python-can's fallback IPv4 multicast group."""
+UDP_DEFAULT_PORT = 43113
+"""python-can's default udp_multicast port (``bench run --controller external`` uses it)."""
 
 VIRTUAL_CHANNEL = "bench"
 """Default channel of the in-process ``virtual`` bus."""
@@ -363,7 +365,7 @@ class BusSpec:
     def peer(self) -> BusSpec:
         """The second bus of a latency link (controller side)."""
         if self.interface == "udp_multicast":
-            return BusSpec(self.interface, self.channel, (self.port or 43113) + 1)
+            return BusSpec(self.interface, self.channel, (self.port or UDP_DEFAULT_PORT) + 1)
         if self.interface == "socketcan" and self.channel[-1:].isdigit():
             return BusSpec(self.interface, self.channel[:-1] + str(int(self.channel[-1]) + 1))
         return BusSpec(self.interface, self.channel + "-b", self.port)

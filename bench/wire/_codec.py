@@ -323,6 +323,13 @@ class Codec:
             raise DbcError(f"DBC {self.path}: no message named {name!r}") from None
 
     @property
+    def version(self) -> str:
+        """The DBC's version: its ``ProtocolVersion`` attribute, else its ``VERSION`` line."""
+        attrs = self.db.dbc.attributes if self.db.dbc is not None else {}
+        attr = attrs.get("ProtocolVersion")
+        return str(attr.value) if attr is not None else str(self.db.version or "")
+
+    @property
     def names(self) -> tuple[str, ...]:
         """Message names, in DBC order."""
         return tuple(self._by_name)

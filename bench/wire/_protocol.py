@@ -15,6 +15,16 @@ CMD_NONE, CMD_START, CMD_STOP, CMD_RESET, CMD_ENABLE, CMD_DISABLE = 0, 1, 2, 3, 
 #: Plant states (DBC value table of ``PlantStatus.state`` and ``PhaseSamples.status``).
 STATE_IDLE, STATE_RUNNING, STATE_FAULT = 0, 1, 2
 
+#: ``PlantStatus.fault_code`` of a protocol fault the plant node latches (the
+#: machine's own protections, 1..4, are :data:`plant_rt.FAULT_NAMES`): a
+#: ``PwmDuty`` for period 0, which answers no sample, so a controller that
+#: tags the duty computed from sample ``k`` with ``k`` instead of ``k + 1``.
+FAULT_WRONG_STEP = 5
+#: Names of the node's own fault codes (DBC value table of ``fault_code``).
+NODE_FAULT_NAMES = {FAULT_WRONG_STEP: "wrong_step"}
+#: Reason under which the plant counts a ``PwmDuty`` for period 0.
+REJECT_WRONG_STEP = "wrong_step"
+
 #: ``BenchCommand.speed_ref`` is in rpm (mechanical); the scenarios in rad/s.
 RPM_PER_RAD_S = 60.0 / (2.0 * math.pi)
 

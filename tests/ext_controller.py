@@ -1,0 +1,255 @@
+"""A drive controller written from docs/PROTOCOL.md and the DBC alone, as a user would.
+
+It imports nothing from the bench (``bench``, ``controller``, ``plant_rt``):
+python-can for the bus, cantools for the DBC, and the scenario's motor and
+PWM rate from ``bench show SCENARIO --json`` (a file given with ``--show``).
+It is the controller under test of ``tests/test_external_controller.py``::
+
+    python tests/ext_controller.py --show show.json -i udp_multicast -c GROUP -p PORT
+
+A sensored field-oriented speed controller: the angle and speed come from
+``PlantTruth`` (the bench's sensor), so its ``CtrlTelemetry.theta_hat`` is
+the true angle and the recorder's angle error is zero.  Gains by design
+(internal-model control, as a drive's commissioning would set them):
+
+- current PI: bandwidth ``alpha_c``; ``k_p = alpha_c L``, ``k_i = alpha_c R_s``
+  cancels the winding's pole, closed loop ``alpha_c / (s + alpha_c)``; a fiftieth
+  of the PWM rate (2 pi 200 Hz at 10 kHz), so the loop's delay (1.5 periods:
+  computation and PWM) costs 2 pi 1.5 / 50 = 0.19 rad (11 degrees) of phase margin;
+- speed PI: bandwidth ``alpha_s``, a twentieth of ``alpha_c``;
+  ``k_p = alpha_s J / k_t``, ``k_i = alpha_s k_p / 4`` (integral corner
+  two octaves below the crossover: about 76 degrees of phase margin).
+
+``--mistake`` makes it commit one of the errors docs/PROTOCOL.md warns
+about: ``crc-no-id`` (the E2E CRC without the data ID), ``step-k`` (the duty
+of sample k sent with step k, no one-period delay), ``out-of-range`` (duty
+1.2 sent without clipping), ``every-other`` (only even samples answered).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from pathlib import Path
+from typing import Any
+
+import can
+import cantools
+
+DBC = Path(__file__).resolve().parents[1] / "dbc" / "bench.dbc"
+MISTAKES = ("crc-no-id", "step-k", "out-of-range", "every-other")
+
+
+def crc8_j1850(data: bytes, reg: int = 0xFF) -> int:
+    """CRC-8 SAE J1850 (poly 0x1D, init 0xFF, xorout 0xFF), bit by bit as the DBC states it."""
+    for byte in data:
+        reg ^= byte
+        for _ in range(8):
+            reg = ((reg << 1) ^ 0x1D) & 0xFF if reg & 0x80 else (reg << 1) & 0xFF
+    return reg ^ 0xFF
+
+
+class Wire:
+    """The DBC's frames: cantools packs them, the E2E CRC is added as the DBC comment says."""
+
+    def __init__(self, mistake: str | None) -> None:
+        self.db: Any = cantools.database.load_file(str(DBC))
+        self.mistake = mistake
+
+    def data_id(self, name: str) -> int:
+        return int(self.db.get_message_by_name(name).dbc.attributes["E2EDataId"].value)
+
+    def crc(self, name: str, payload: bytes) -> int:
+        did = self.data_id(name)
+        head = b"" if self.mistake == "crc-no-id" else bytes((did & 0xFF, did >> 8))
+        return crc8_j1850(head + payload[1:])
+
+    def encode(self, name: str, sig: dict[str, float], strict: bool = True) -> can.Message:
+        m = self.db.get_message_by_name(name)
+        data = bytearray(
+            m.encode({"crc": 0, **sig} if name != "CtrlTelemetry" else sig, strict=strict)
+        )
+        if name != "CtrlTelemetry":
+            data[0] = self.crc(name, bytes(data))
+        return can.Message(
+            arbitration_id=m.frame_id, data=bytes(data), is_extended_id=False, is_fd=m.length > 8
+        )
+
+    def decode(self, msg: can.Message) -> tuple[str, dict[str, float]] | None:
+        """The message's name and signals; None for a frame to ignore (unknown, bad CRC)."""
+        try:
+            m = self.db.get_message_by_frame_id(msg.arbitration_id)
+        except KeyError:
+            return None
+        data = bytes(msg.data)
+        if len(data) != m.length:
+            return None
+        if any(s.name == "crc" for s in m.signals):
+            did = self.data_id(m.name)
+            if crc8_j1850(bytes((did & 0xFF, did >> 8)) + data[1:]) != data[0]:
+                return None
+        return m.name, dict(m.decode(data, decode_choices=False))
+
+
+def unwrap(raw: int, expected: int, bits: int) -> int:
+    mod = 1 << bits
+    d = (raw - expected + mod // 2) % mod - mod // 2
+    return expected + d
+
+
+class Foc:
+    """Sensored FOC with the gains of the module docstring."""
+
+    def __init__(self, show: dict[str, Any]) -> None:
+        mo = show["motor"]
+        self.T_s = float(show["pwm"]["T_s"])
+        self.n_p = int(mo["n_p"])
+        self.R_s, self.L_d, self.L_q = float(mo["R_s"]), float(mo["L_d"]), float(mo["L_q"])
+        self.k_t = 1.5 * self.n_p * float(mo["psi_f"])
+        self.i_max = float(mo["i_max"])
+        a_c = 2 * math.pi / (50.0 * self.T_s)
+        a_s = a_c / 20.0
+        self.kp_d, self.ki_d = a_c * self.L_d, a_c * self.R_s
+        self.kp_q, self.ki_q = a_c * self.L_q, a_c * self.R_s
+        self.kp_w = a_s * float(mo["J"]) / self.k_t
+        self.ki_w = a_s * self.kp_w / 4.0
+        self.x_d = self.x_q = self.x_w = 0.0
+        self.w_ref = 0.0  # mechanical rad/s
+        self.enabled = False
+
+    def step(
+        self, i_a: float, i_b: float, u_dc: float, theta: float, w_m: float
+    ) -> tuple[float, float, float]:
+        if not self.enabled:
+            self.x_d = self.x_q = self.x_w = 0.0
+            return 0.5, 0.5, 0.5
+        i_al = i_a
+        i_be = (i_a + 2 * i_b) / math.sqrt(3)
+        c, s = math.cos(theta), math.sin(theta)
+        i_d, i_q = c * i_al + s * i_be, -s * i_al + c * i_be
+        e_w = self.w_ref - w_m
+        i_q_ref = max(-self.i_max, min(self.i_max, self.kp_w * e_w + self.x_w))
+        self.x_w += self.ki_w * self.T_s * e_w
+        self.x_w = max(-self.i_max, min(self.i_max, self.x_w))
+        e_d, e_q = -i_d, i_q_ref - i_q
+        u_d = self.kp_d * e_d + self.x_d
+        u_q = self.kp_q * e_q + self.x_q
+        self.x_d += self.ki_d * self.T_s * e_d
+        self.x_q += self.ki_q * self.T_s * e_q
+        # applied in period k + 1: rotate by the angle the rotor turns until its middle
+        th = theta + 1.5 * self.n_p * w_m * self.T_s
+        c, s = math.cos(th), math.sin(th)
+        u_al, u_be = c * u_d - s * u_q, s * u_d + c * u_q
+        u = (u_al, -0.5 * u_al + math.sqrt(3) / 2 * u_be, -0.5 * u_al - math.sqrt(3) / 2 * u_be)
+        zero = -0.5 * (max(u) + min(u))  # min-max zero sequence (space-vector PWM)
+        return tuple(0.5 + (x + zero) / u_dc for x in u)  # type: ignore[return-value]
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--show", required=True, help="bench show SCENARIO --json output")
+    ap.add_argument("-i", "--interface", default="udp_multicast")
+    ap.add_argument("-c", "--channel", required=True)
+    ap.add_argument("-p", "--port", type=int)
+    ap.add_argument("--mistake", choices=MISTAKES)
+    ap.add_argument("--idle-s", type=float, default=60.0)
+    a = ap.parse_args()
+    show = json.loads(Path(a.show).read_text())
+    wire = Wire(a.mistake)
+    foc = Foc(show)
+    kw = {"port": a.port} if a.port else {}
+    bus = can.Bus(interface=a.interface, channel=a.channel, fd=True, **kw)
+    samples: dict[int, dict[str, float]] = {}
+    truth: dict[int, dict[str, float]] = {}
+    answers: dict[int, list[can.Message]] = {}
+    commands: dict[int, dict[str, float]] = {}
+    seen_cmds: set[tuple[int, int]] = set()
+    next_k = 0
+    stop = False
+    print("READY", flush=True)
+    try:
+        while not stop:
+            msg = bus.recv(a.idle_s)
+            if msg is None:
+                print("ext_controller: no frame, giving up", file=sys.stderr)
+                return 1
+            d = wire.decode(msg)
+            if d is None:
+                continue
+            name, sig = d
+            if name == "BenchCommand":
+                step = unwrap(int(sig["step"]), next_k, 16)
+                if (step, int(sig["seq"])) not in seen_cmds:
+                    seen_cmds.add((step, int(sig["seq"])))
+                    commands[step] = sig
+                continue
+            if name == "PhaseSamples":
+                k = unwrap(int(sig["step"]), next_k, 10)
+                if k < next_k:  # a resend (lockstep): the same answer again
+                    for m in answers.get(k, []):
+                        bus.send(m)
+                    continue
+                samples[k] = sig
+            elif name == "PlantTruth":
+                k = unwrap(int(sig["step"]), next_k, 32)
+                if k >= next_k:
+                    truth[k] = sig
+            else:
+                continue
+            while next_k in samples and next_k in truth:
+                k = next_k
+                s, tr = samples.pop(k), truth.pop(k)
+                for c in sorted(st for st in commands if st <= k):
+                    cmd = commands.pop(c)
+                    foc.w_ref = float(cmd["speed_ref"]) * math.pi / 30.0
+                    if int(cmd["cmd"]) in (1, 3, 4):  # start, reset, enable
+                        foc.enabled = True
+                    elif int(cmd["cmd"]) in (2, 5):  # stop, disable
+                        foc.enabled = False
+                        stop = stop or int(cmd["cmd"]) == 2
+                theta, w_m = float(tr["theta_e"]), float(tr["w_m"])
+                duty = foc.step(float(s["i_a"]), float(s["i_b"]), float(s["u_dc"]), theta, w_m)
+                if a.mistake == "out-of-range":
+                    duty = (1.2, duty[1], duty[2])
+                else:
+                    duty = tuple(min(1.0, max(0.0, x)) for x in duty)  # type: ignore[assignment]
+                out = [
+                    wire.encode(
+                        "PwmDuty",
+                        {
+                            "duty_a": duty[0],
+                            "duty_b": duty[1],
+                            "duty_c": duty[2],
+                            "enable": int(foc.enabled),
+                            "step": (k if a.mistake == "step-k" else k + 1) % 1024,
+                        },
+                        strict=a.mistake != "out-of-range",
+                    ),
+                    wire.encode(
+                        "CtrlTelemetry",
+                        {
+                            "theta_hat": theta,
+                            "w_hat": foc.n_p * w_m,
+                            "err": 0.0,
+                            "mode": 3 if foc.enabled else 0,
+                            "step": k,
+                        },
+                    ),
+                ]
+                if a.mistake == "every-other" and k % 2:
+                    out = []
+                answers[k] = out
+                answers.pop(k - 64, None)
+                for m in out:
+                    bus.send(m)
+                next_k = k + 1
+    finally:
+        bus.shutdown()
+    print(f"ext_controller: {next_k} periods", file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,190 @@
+"""A controller under test on the bus: ``bench run --controller external`` over udp_multicast.
+
+The controller is ``tests/ext_controller.py``, written from the DBC and
+docs/PROTOCOL.md with python-can and cantools only (no import of ``bench``,
+``controller`` or ``plant_rt``: checked here).  It runs as a process of its
+own beside ``bench run``, which starts only the plant, paces the commands,
+records and scores.  Each mistake docs/PROTOCOL.md warns about gives its
+named diagnostic and its documented exit status.
+"""
+
+from __future__ import annotations
+
+import ast
+import json
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from tests.ports import free_port
+
+ROOT = Path(__file__).resolve().parents[1]
+CONTROLLER = Path(__file__).parent / "ext_controller.py"
+SCENARIO = Path(__file__).parent / "data" / "firmware-100rpm.toml"
+GROUP = "239.74.163.2"
+
+
+def _run(
+    tmp: Path,
+    *extra: str,
+    mistake: str | None = None,
+    dut_timeout: float = 60.0,
+    scenario: Path = SCENARIO,
+) -> tuple[subprocess.CompletedProcess[str], Path]:
+    """``bench run --controller external`` with the test controller beside it."""
+    port = str(free_port())
+    show = tmp / f"show-{scenario.stem}.json"
+    if not show.exists():
+        out = subprocess.run(
+            [sys.executable, "-m", "bench", "show", str(scenario), "--json"],
+            cwd=ROOT,
+            capture_output=True,
+            text=True,
+            check=True,
+        )
+        show.write_text(out.stdout)
+    run_dir = tmp / f"run-{scenario.stem}-{mistake or 'ok'}"
+    ctrl = subprocess.Popen(
+        [sys.executable, str(CONTROLLER), "--show", str(show), "-c", GROUP, "-p", port,
+         "--idle-s", "30", *(["--mistake", mistake] if mistake else [])],
+        cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    try:
+        assert ctrl.stdout is not None and ctrl.stdout.readline().strip() == "READY"
+        res = subprocess.run(
+            [sys.executable, "-m", "bench", "run", str(scenario), "--controller", "external",
+             "--interface", "udp_multicast", "--channel", GROUP, "--port", port,
+             "--dut-timeout", repr(dut_timeout), "--dut-name", "ext-py", "--out", str(run_dir),
+             "-q", *extra],
+            cwd=ROOT, capture_output=True, text=True, timeout=240,
+        )  # fmt: skip
+    finally:
+        ctrl.kill()
+        ctrl.wait()
+    return res, run_dir
+
+
+def test_the_controller_imports_nothing_of_the_bench() -> None:
+    tree = ast.parse(CONTROLLER.read_text())
+    names = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            names |= {a.name.split(".")[0] for a in node.names}
+        elif isinstance(node, ast.ImportFrom) and node.module:
+            names.add(node.module.split(".")[0])
+    assert names and not names & {"bench", "controller", "plant_rt", "tests", "dbc"}
+
+
+@pytest.fixture(scope="module")
+def good_run(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
+    tmp = tmp_path_factory.mktemp("ext")
+    res, run_dir = _run(tmp)
+    return {"res": res, "dir": run_dir, "tmp": tmp}
+
+
+def test_external_controller_is_run_and_scored(good_run: dict[str, Any]) -> None:
+    res, run_dir = good_run["res"], good_run["dir"]
+    assert res.returncode == 0, res.stderr[-3000:]
+    assert "first valid PwmDuty" in res.stderr
+    m = json.loads((run_dir / "metrics.json").read_text())
+    meta = json.loads((run_dir / "meta.json").read_text())
+    assert m["steps"] == 3001 and m["steps_missing"] == 0
+    assert m["frames_rejected"] == 0 and m["plant_fault"] == "none"
+    # sensored: theta_hat is the true angle, so the recorder's error is zero
+    assert abs(m["theta_err_max_deg"]) < 0.01 and abs(m["theta_err_min_deg"]) < 0.01
+    # the IMC-tuned speed loop holds the 100 rpm reference after the 50 ms ramp
+    assert m["speed_err_max_rpm"] < 5.0
+    assert meta["controller"] == "external" and meta["controller_name"] == "ext-py"
+    assert meta["controller_gains"] == {} and meta["dbc_version"] == "2.0"
+    assert (run_dir / "run.png").is_file() and not (run_dir / "controller.log").exists()
+    # PlantStatus every 100 ms of plant time (0.3 s: at 1000 and 2000) and at the end
+    assert json.loads((run_dir / "plant.json").read_text())["late_frames"] == 0
+
+
+def test_analyze_of_the_capture_gives_the_same_metrics(good_run: dict[str, Any]) -> None:
+    run_dir = good_run["dir"]
+    out = good_run["tmp"] / "analyzed"
+    res = subprocess.run(
+        [sys.executable, "-m", "bench", "analyze", str(run_dir / "capture.blf"), "--out",
+         str(out), "--no-plots"],
+        cwd=ROOT, capture_output=True, text=True, timeout=120,
+    )  # fmt: skip
+    assert res.returncode == 0, res.stderr
+    live = json.loads((run_dir / "metrics.json").read_text())
+    again = json.loads((out / "metrics.json").read_text())
+    node_only = {"wall_s", "realtime_factor", "retransmits", "deadline_misses", "late_commands",
+                 "frames_repeated_ignored", "late_duty_periods"}  # fmt: skip
+    for k, v in live.items():
+        if k in node_only or isinstance(v, dict):
+            continue
+        assert again[k] == v, k
+    assert "external controller ext-py" in res.stdout or "ext-py" in (out / "meta.json").read_text()
+
+
+def test_analyze_duration_warning_status_counters_and_name(
+    good_run: dict[str, Any], tmp_path: Path
+) -> None:
+    """A 0.3 s run analysed against a 0.5 s scenario: the missing periods are said, and
+    ``--duration`` says the run was that long; the PlantStatus counters are read; the
+    controller's name goes into meta.json."""
+    longer = tmp_path / "longer.toml"
+    longer.write_text(SCENARIO.read_text().replace("duration = 0.3", "duration = 0.5"))
+    cap = good_run["dir"] / "capture.blf"
+
+    def analyze(*extra: str) -> tuple[subprocess.CompletedProcess[str], dict[str, Any]]:
+        out = tmp_path / f"a{len(extra)}"
+        res = subprocess.run(
+            [sys.executable, "-m", "bench", "analyze", str(cap), "--scenario", str(longer),
+             "--out", str(out), "--no-plots", *extra],
+            cwd=ROOT, capture_output=True, text=True, timeout=120,
+        )  # fmt: skip
+        assert res.returncode == 0, res.stderr
+        return res, json.loads((out / "metrics.json").read_text())
+
+    res, m = analyze()
+    assert m["steps_missing"] == 5000 - 3001 and "give --duration" in res.stderr
+    res, m = analyze("--duration", "0.3", "--dut-name", "fw-1.2")
+    assert m["steps_missing"] == 0 and "give --duration" not in res.stderr
+    assert m["plant_status_late_frames"] == 0 and m["plant_status_overruns"] == 0
+    assert "external controller fw-1.2" in res.stdout
+    meta = json.loads((tmp_path / "a4" / "meta.json").read_text())
+    assert meta["controller_name"] == "fw-1.2" and meta["dbc_version"] == "2.0"
+
+
+def test_external_controller_in_real_time(tmp_path: Path) -> None:
+    """Real time at 1 kHz: the plant's clock starts at the controller's first answer."""
+    scn = tmp_path / "rt-1khz.toml"
+    scn.write_text(SCENARIO.read_text() + "f_sw = 1000.0\n")
+    res, run_dir = _run(tmp_path, "--mode", "realtime", scenario=scn)
+    assert res.returncode == 0, res.stderr[-3000:]
+    m = json.loads((run_dir / "metrics.json").read_text())
+    meta = json.loads((run_dir / "meta.json").read_text())
+    assert meta["mode"] == "realtime" and meta["controller"] == "external"
+    assert m["steps"] == 301 and abs(m["theta_err_max_deg"]) < 0.01
+    assert m["plant_fault"] == "none"
+
+
+@pytest.mark.parametrize(
+    ("mistake", "status", "diagnostic"),
+    [
+        ("crc-no-id", 2, "PwmDuty: "),
+        ("step-k", 3, "wrong_step"),
+        ("out-of-range", 2, "rejected (out_of_range)"),
+        ("every-other", 3, "skipped sample"),
+    ],
+)
+def test_each_controller_mistake_is_named(
+    tmp_path: Path, mistake: str, status: int, diagnostic: str
+) -> None:
+    res, run_dir = _run(tmp_path, mistake=mistake, dut_timeout=4.0)
+    assert res.returncode == status, res.stderr[-3000:]
+    assert diagnostic in res.stderr + (run_dir / "plant.log").read_text(), res.stderr[-3000:]
+    assert "Traceback" not in res.stderr
+    if mistake == "crc-no-id":
+        assert "rejected (bad_crc)" in res.stderr
+    if status == 3:
+        m = json.loads((run_dir / "metrics.json").read_text())
+        assert m["plant_fault"] == {"step-k": "wrong_step", "every-other": "watchdog"}[mistake]
