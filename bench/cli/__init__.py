@@ -32,6 +32,7 @@ SUBCOMMANDS = (
     "analyze",
     "busload",
     "suite",
+    "sweep",
     "replay",
     "rerun",
     "monitor",

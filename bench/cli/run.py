@@ -20,7 +20,7 @@ from bench.cli._common import (
     plant_engine,
     scenario_from_args,
 )
-from bench.scenarios._setup import check_estimator_fits
+from bench.scenarios._setup import check_estimator_fits, check_estimator_name
 
 
 def run_node_args(args: argparse.Namespace) -> dict[str, list[str]]:
@@ -71,18 +71,13 @@ def cmd_run(args: argparse.Namespace) -> int:
 
     scn = scenario_from_args(args)
     est = args.estimator or scn.estimator
-    from controller._registry import ESTIMATOR_NAMES
-
-    if est not in ESTIMATOR_NAMES:
-        raise BenchError(
-            f"--estimator: unknown estimator {est!r} (known: {', '.join(ESTIMATOR_NAMES)})"
-        )
+    check_estimator_name(est)
     check_estimator_fits(scn, est)
     plant_engine(args)
     if args.monitor and not (sys.stdin.isatty() and sys.stdout.isatty() and sys.stderr.isatty()):
         raise BenchError("--monitor: needs a terminal (run bench monitor beside it instead)")
     spec = bus_spec(args, announce=True)
-    out = Path(args.out) if args.out else Path("runs") / f"{scn.name}-{est}"
+    out = Path(args.out) if args.out else Path("runs") / f"{scn.name}-{est.replace(':', '-')}"
     # the heading of the report on stdout: stderr carries progress and errors only
     print(f"run: {scn.name} with {est}, {args.mode}, {spec.describe()} -> {out}", flush=True)
     view = _start_monitor(spec, scn, est, args.mode, out) if args.monitor else None
@@ -132,7 +127,10 @@ def register(sub: Any) -> None:
         "scenario", help="shipped scenario name (wen-5.1, xue-fig13, ...) or a .toml path"
     )
     p.add_argument(
-        "--estimator", "-e", help="sfhf, tt-ab, tt-dq, square-wave, square-wave-nocic, sensored"
+        "--estimator",
+        "-e",
+        help="sfhf, tt-ab, tt-dq, square-wave, square-wave-nocic, sensored, hybrid-tt-dq, "
+        "hybrid-square-wave, or a plug-in: package.module:factory (docs/ESTIMATORS.md)",
     )
     add_scenario_overrides(p)
     add_plant_profile(p)

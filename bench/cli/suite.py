@@ -44,9 +44,9 @@ def _common(p: argparse.ArgumentParser) -> None:
 
 def cmd_paper(args: argparse.Namespace) -> int:
     from bench.scenarios._schema import PAPER, SHIPPED
+    from bench.scenarios._setup import check_estimator_name
     from bench.studies._suite import SuiteOptions, run_suite
     from bench.studies._sweep import SWEEPS
-    from controller._registry import ESTIMATOR_NAMES
 
     scenarios = _csv(args.scenarios) or PAPER
     for s in scenarios:
@@ -55,7 +55,8 @@ def cmd_paper(args: argparse.Namespace) -> int:
                 f"--scenarios: unknown scenario {s!r} (shipped: {', '.join(SHIPPED)}; or a .toml path)"
             )
     estimators = _csv(args.estimators)
-    _check_names(estimators, ESTIMATOR_NAMES, "--estimators")
+    for e in estimators or ():
+        check_estimator_name(e, "--estimators")
     sweeps = () if args.no_sweep else (_csv(args.sweeps) or tuple(SWEEPS))
     _check_names(sweeps, tuple(SWEEPS), "--sweeps")
     if args.jobs < 1:
@@ -142,7 +143,11 @@ def register(sub: Any) -> None:
     q.add_argument("--out", "-o", help="report folder (default runs/suite-paper)")
     q.add_argument("--runs-dir", help="full run folders with captures (default runs/suite-runs)")
     q.add_argument("--scenarios", help="comma-separated scenario names (default: all shipped)")
-    q.add_argument("--estimators", help="comma-separated estimators to keep (default: all listed)")
+    q.add_argument(
+        "--estimators",
+        help="comma-separated estimators to keep (default: all listed); a plug-in "
+        "(package.module:factory or an installed name) runs on every scenario chosen",
+    )
     q.add_argument(
         "--sweeps", help="comma-separated sweeps (speed, duty_delay, sample_delay, v_h, noise)"
     )

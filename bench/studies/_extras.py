@@ -61,7 +61,7 @@ def refresh_extras(summary: dict[str, Any]) -> None:
     for rec in summary.get("runs", []):
         if "error" in rec:
             continue
-        sig = runs_dir / rec["scenario"] / rec["estimator"] / "signals.csv"
+        sig = runs_dir / rec["scenario"] / path_name(rec["estimator"]) / "signals.csv"
         meta = sig.parent / "meta.json"
         if not (sig.exists() and meta.exists()):
             continue
@@ -102,6 +102,11 @@ def where_max(tab: dict[str, Any], scn: Scenario) -> dict[str, Any] | None:
     else:
         context = f"steady, {float(tab['w_m_rpm'][i]):.0f} rpm, {float(tab['tau_L'][i]):.1f} N m"
     return {"t_s": ti, "theta_err_deg": float(tab["theta_err_deg"][i]), "context": context}
+
+
+def path_name(estimator: str) -> str:
+    """A folder name for ``estimator`` (a plug-in's ``package.module:factory`` has a colon)."""
+    return estimator.replace(":", "-")
 
 
 def write_json(path: Path, data: Any) -> None:

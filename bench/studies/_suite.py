@@ -41,7 +41,8 @@ from typing import Any, Protocol
 
 from bench._errors import BenchError
 from bench.scenarios._schema import PAPER, Scenario, load_scenario
-from bench.studies._extras import run_extras
+from bench.studies._extras import path_name, run_extras
+from controller._registry import ESTIMATOR_NAMES
 
 #: Simulated seconds of a run in ``--quick`` mode (smoke test, not comparable with the papers).
 QUICK_DURATION_S = 1.6
@@ -304,21 +305,29 @@ def paper_jobs(
         scn = load_scenario(name)
         if quick:
             scn = quick_scenario(scn)
-        for est in scn.estimators:
+        # a plug-in no scenario lists runs on every scenario chosen
+        extra = [
+            e for e in estimators or () if e not in ESTIMATOR_NAMES and e not in scn.estimators
+        ]
+        for est in (*scn.estimators, *extra):
             if estimators is not None and est not in estimators:
                 continue
             tr: tuple[str, str, int | None] | None = None
             if transport is not None:
                 port = base_port + 4 * len(jobs) if transport[0] == "udp_multicast" else None
                 tr = (transport[0], transport[1], port)
-            jobs.append(RunJob(scn, est, runs_dir / scn.name / est, tr))
+            jobs.append(RunJob(scn, est, runs_dir / scn.name / path_name(est), tr))
     return jobs
 
 
 def unmatched_estimators(scenarios: Sequence[str], estimators: Sequence[str]) -> str | None:
     """Which of ``estimators`` none of ``scenarios`` lists, and what they list (None: all listed)."""
     listed = {name: load_scenario(name).estimators for name in scenarios}
-    missing = [e for e in estimators if not any(e in ests for ests in listed.values())]
+    missing = [
+        e
+        for e in estimators
+        if e in ESTIMATOR_NAMES and not any(e in ests for ests in listed.values())
+    ]
     if not missing:
         return None
     what = "; ".join(f"{name} lists {', '.join(ests)}" for name, ests in listed.items())
@@ -340,7 +349,7 @@ def downscale_png(src: Path, dst: Path, width: int = PNG_WIDTH) -> None:
 
 def export_run(job: RunJob, out_dir: Path) -> Path:
     """Copy a run's small files (metrics, metadata, downscaled plot) under ``out_dir``."""
-    dst = out_dir / "runs" / job.scenario.name / job.estimator
+    dst = out_dir / "runs" / job.scenario.name / path_name(job.estimator)
     dst.mkdir(parents=True, exist_ok=True)
     for name in ("metrics.json", "meta.json"):
         if (job.run_dir / name).exists():
@@ -363,7 +372,7 @@ def run_record(job: RunJob, res: dict[str, Any], out_dir: Path) -> dict[str, Any
         "paper_result": dict(scn.paper_result),
         "transport": "in-process" if job.transport is None else f"{job.transport[0]} lockstep",
         "wall_s": res.get("wall_s", math.nan),
-        "files": f"runs/{scn.name}/{job.estimator}",
+        "files": f"runs/{scn.name}/{path_name(job.estimator)}",
     }
     if "error" in res:
         rec["error"] = res["error"]

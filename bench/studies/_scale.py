@@ -1,0 +1,91 @@
+"""Throughput of the sweep's executors: the same points on 1 and 2 local workers and on a
+local Dask cluster of 2 workers (``bench sweep ... --scale``).
+
+Each configuration runs the whole plan from scratch into a folder of its own
+(``OUT/scale-local-1`` ...).  Figures per configuration: points per second
+over the wall time (start of the workers included), the mean time a point
+computes inside its worker, and the per-point overhead ``workers * wall / n
+- compute`` (worker-seconds spent per point beyond the point itself: start
+of the pool or cluster, pickling, scheduling, idle tails).  The speed-up is
+the points per second over those of one local worker.  The machine's load
+from other work is recorded beside (``os.getloadavg``), since the figures
+depend on it.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+from typing import Any
+
+from bench.studies._grid import Plan, run_sweep
+
+#: (name, executor, workers) of the configurations compared.
+CONFIGS = (("local-1", "local", 1), ("local-2", "local", 2), ("dask-2", "dask", 2))
+#: Speed-up of 2 workers over 1 the issue sets as the target on 2 cores.
+TARGET_SPEEDUP = 1.7
+
+
+def measure_scale(plan: Plan, out: Path, *, progress: bool = False) -> dict[str, Any]:
+    """Run ``plan`` once per configuration of :data:`CONFIGS`; the figures of each."""
+    rows: dict[str, Any] = {}
+    for name, executor, workers in CONFIGS:
+        load0 = os.getloadavg()[0]
+        res = run_sweep(
+            plan,
+            out / f"scale-{name}",
+            executor=executor,
+            workers=workers,
+            progress=progress,
+            resume=False,
+            plots=False,
+        )
+        tp = dict(res.summary.get("throughput") or {})
+        tp["load_before"] = load0
+        tp["load_after"] = os.getloadavg()[0]
+        rows[name] = tp
+    base = rows["local-1"].get("points_per_s") or float("nan")
+    for tp in rows.values():
+        tp["speedup"] = (tp.get("points_per_s") or float("nan")) / base
+    return {
+        "plan": plan.to_dict(),
+        "points": len(plan.points()) * len(plan.estimators),
+        "cpus": os.cpu_count(),
+        "target_speedup": TARGET_SPEEDUP,
+        "configs": rows,
+    }
+
+
+def scale_table(scale: dict[str, Any]) -> str:
+    """The figures as a Markdown table."""
+    lines = [
+        "| executor | workers | points/s | speed-up over 1 worker | s per point (compute) "
+        "| overhead s per point | first result after (s) | load avg before/after |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for name, tp in scale["configs"].items():
+        lines.append(
+            f"| {tp.get('executor', name)} | {tp.get('workers', '?')} "
+            f"| {tp.get('points_per_s', float('nan')):.3f} | {tp.get('speedup', float('nan')):.2f}x "
+            f"| {tp.get('point_compute_s', float('nan')):.3f} "
+            f"| {tp.get('overhead_s_per_point', float('nan')):.3f} "
+            f"| {tp.get('first_result_s', float('nan')):.2f} "
+            f"| {tp.get('load_before', float('nan')):.1f} / {tp.get('load_after', float('nan')):.1f} |"
+        )
+    return "\n".join(lines)
+
+
+def write_scale(scale: dict[str, Any], out: Path) -> str:
+    """Write ``scale.json`` and ``scale.md`` to ``out``; the table."""
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "scale.json").write_text(json.dumps(scale, indent=2, default=str) + "\n")
+    table = scale_table(scale)
+    p = scale["plan"]
+    head = (
+        f"{scale['points']} runs of {p['scenario']} ({', '.join(p['estimators'])}; "
+        f"{p['duration'] or 'scenario'} s each) on {scale['cpus']} CPUs; "
+        f"target: >= {scale['target_speedup']}x with 2 workers"
+    )
+    (out / "scale.md").write_text(f"{head}\n\n{table}\n")
+    return f"{head}\n{table}"
