@@ -28,6 +28,10 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     from bench.scenarios._setup import check_estimator_name
     from bench.studies._grid import Plan, parse_grid, parse_random, run_sweep
 
+    if args.scheduler and args.executor != "dask":
+        raise BenchError("--scheduler needs --executor dask")
+    if args.workers < 1:
+        raise BenchError(f"--workers must be >= 1, got {args.workers}")
     scn = load_scenario(args.scenario)
     ests = tuple(args.estimator or (scn.estimator,))
     for e in ests:

@@ -281,7 +281,7 @@ def run_sweep(
     wanted = {t.id for t in tasks}
     todo = [t for t in tasks if t.id not in done]
     if progress:
-        where = executor if not scheduler else f"dask at {scheduler}"
+        where = f"dask at {scheduler}" if executor == "dask" and scheduler else executor
         print(
             f"sweep: {len(tasks)} runs ({len(tasks) - len(todo)} already done in {log}), "
             f"{len(todo)} to run on {where}, {workers} worker(s)",
