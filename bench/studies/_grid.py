@@ -533,24 +533,27 @@ def heatmap(
     z = np.full((len(ys), len(xs)), np.nan)
     for (x, y), s in st.items():
         z[ys.index(y), xs.index(x)] = float(s["value"])
-    fig, ax = plt.subplots(figsize=(1.2 + 0.9 * len(xs) + 1.6, 1.2 + 0.6 * len(ys) + 0.6))
+    fig, ax = plt.subplots(figsize=(max(6.0, 2.8 + 0.9 * len(xs)), 1.9 + 0.6 * len(ys)))
     with np.errstate(divide="ignore", invalid="ignore"):
         im = ax.imshow(np.log10(z), origin="lower", cmap="viridis", aspect="auto")
+    fin = np.log10(z[np.isfinite(z) & (z > 0)])
+    lo_hi = (float(fin.min()), float(fin.max())) if fin.size else (0.0, 0.0)
     cb = fig.colorbar(im, ax=ax)
     cb.set_label(r"log$_{10}$ " + PLOT_LABEL, fontsize=8)
     for (x, y), s in st.items():
         i, j = ys.index(y), xs.index(x)
         v = float(s["value"])
         txt = f"{v:.3g}" if math.isfinite(v) else "fail"
-        ax.text(j, i, txt, ha="center", va="bottom", fontsize=7, color="w")
+        hi = math.isfinite(v) and v > 0 and math.log10(v) > 0.5 * (lo_hi[0] + lo_hi[1])
+        ax.text(j, i, txt, ha="center", va="bottom", fontsize=7, color="k" if hi else "w")
         if s["lost"] or s["failed"]:
             ax.plot(j, i - 0.2, "x", ms=10, mew=2, color="red")
         elif bound is not None and not v <= bound:
             ax.plot(j, i - 0.2, "o", ms=6, mfc="none", mew=1.5, color="orange")
     ax.set_xticks(range(len(xs)), [str(x) for x in xs])
     ax.set_yticks(range(len(ys)), [str(y) for y in ys])
-    ax.set_xlabel(xkey)
-    ax.set_ylabel(ykey)
+    ax.set_xlabel(xkey, fontsize=8)
+    ax.set_ylabel(ykey.replace(".", ".\n", 1), fontsize=8)
     handles = [Line2D([], [], ls="", marker="x", color="red", mew=2, label="lost lock")]
     if bound is not None:
         handles.append(
@@ -565,7 +568,7 @@ def heatmap(
             )
         )
     ax.legend(handles=handles, fontsize=7, loc="upper left", bbox_to_anchor=(0.0, -0.18), ncol=2)
-    ax.set_title(title, fontsize=9)
+    ax.set_title(title, fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=80)
     plt.close(fig)
