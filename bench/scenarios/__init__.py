@@ -4,5 +4,7 @@
   mistake is one line naming the file, the field and the reason.
 - ``_setup``: the plant, the controller and the command schedule of a
   scenario, the motor preset it names, its PWM period.
+- ``_dotted``: a scenario with single keys changed by their dotted name
+  (``controller_model.L_q``), for sweeps.
 - ``*.toml``: the papers' scenarios, one file each.
 """

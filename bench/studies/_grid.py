@@ -501,14 +501,47 @@ def plot_sweep(records: Sequence[dict[str, Any]], plan: Plan, out: Path) -> list
         fig.savefig(out / name, dpi=80)
         plt.close(fig)
         return [f"plots/{name}"]
+    scattered = any(k in plan.random for k in keys)
     for est in plan.estimators:
         recs = [r for r in records if r["estimator"] == est]
         if not recs:
             continue
-        name = f"heatmap-{path_name(est)}-{_slug(keys[0])}-{_slug(keys[1])}.png"
-        heatmap(recs, keys[0], keys[1], out / name, f"{title} {est}")
+        kind = "scatter" if scattered else "heatmap"
+        name = f"{kind}-{path_name(est)}-{_slug(keys[0])}-{_slug(keys[1])}.png"
+        if scattered:  # random draws are no grid: one dot per point
+            scatter(recs, keys[0], keys[1], out / name, f"{title} {est}")
+        else:
+            heatmap(recs, keys[0], keys[1], out / name, f"{title} {est}")
         names.append(f"plots/{name}")
     return names
+
+
+def scatter(recs: Sequence[dict[str, Any]], xkey: str, ykey: str, path: Path, title: str) -> None:
+    """Randomly drawn points over two keys, coloured by :data:`PLOT_METRIC`; lost lock as x."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    x = np.array([_num(r["values"].get(xkey)) for r in recs])
+    y = np.array([_num(r["values"].get(ykey)) for r in recs])
+    v = np.array([_num(r["metrics"].get(PLOT_METRIC)) for r in recs])
+    bad = np.array([bool(r["metrics"].get("lock_lost")) or "error" in r["metrics"] for r in recs])
+    fig, ax = plt.subplots(figsize=(6.0, 4.2))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        sc = ax.scatter(x[~bad], y[~bad], c=np.log10(v[~bad]), cmap="viridis", s=30)
+    if np.any(~bad):
+        fig.colorbar(sc, ax=ax).set_label(r"log$_{10}$ " + PLOT_LABEL, fontsize=8)
+    if np.any(bad):
+        ax.plot(x[bad], y[bad], "x", ms=9, mew=2, color="red", ls="", label="lost lock")
+        ax.legend(fontsize=7)
+    ax.set_xlabel(xkey, fontsize=8)
+    ax.set_ylabel(ykey, fontsize=8)
+    ax.grid(alpha=0.3)
+    ax.set_title(title, fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=80)
+    plt.close(fig)
 
 
 def heatmap(
