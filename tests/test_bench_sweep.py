@@ -186,3 +186,15 @@ def test_cli_mistakes_are_one_line(tmp_path: Path, capsys: pytest.CaptureFixture
         assert main(argv) == 2
         err = capsys.readouterr().err.strip()
         assert err.count("\n") == 0 and says in err, err
+
+
+def test_scale_figures_go_between_the_markers() -> None:
+    from bench.studies._scale import BEGIN, END, scale_table, update_doc
+
+    cfg = {"executor": "local", "workers": 2, "points_per_s": 1.5, "speedup": 1.8}
+    table = scale_table({"configs": {"local-2": cfg}})
+    assert "| local | 2 | 1.500 | 1.80x |" in table
+    doc = f"intro\n{BEGIN}\nold\n{END}\nrest\n"
+    new = update_doc(doc, table)
+    assert "old" not in new and table in new and new.endswith(f"{END}\nrest\n")
+    assert update_doc(new, "x") == f"intro\n{BEGIN}\nx\n{END}\nrest\n"

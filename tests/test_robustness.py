@@ -21,8 +21,8 @@ def test_every_study_builds_valid_scenarios_for_every_paper() -> None:
             tasks = build_tasks(study_plan(paper, study, 1.6))
             n += len(tasks)
             assert all(t.scenario.duration == 1.6 for t in tasks)
-        # 9 + 9 + 3 + 5 + 8 + 4 points per estimator
-        assert n == 38 * len(paper.estimators)
+        # 9 + 9 + 3 + 7 + 8 + 4 points per estimator
+        assert n == 40 * len(paper.estimators)
     adc = build_tasks(study_plan(PAPERS["wen"], STUDIES["adc-bits"], 1.6))
     i_max = get_preset(load_scenario("wen-5.1")).motor.i_max
     assert all(t.scenario.sensors["current_full_scale_a"] == 2.0 * i_max for t in adc)
@@ -66,7 +66,8 @@ def test_meets_needs_lock_no_error_and_the_bound() -> None:
     assert meets(recs[0]["metrics"], 4.0) and not meets(recs[1]["metrics"], 4.0)
     r = region(recs, "a", 4.0)
     assert r["points"] == 4 and r["ok"] == 1
-    assert [b["why"] for b in r["not_ok"]] == ["4.1 deg", "lost lock", "failed"]
+    assert [b["why"] for b in r["not_ok"]] == ["4.1 deg", "lost lock", "not run: ValueError: x"]
+    assert r["locked"] == 2
 
 
 def test_a_small_study_writes_its_report(tmp_path: Path) -> None:

@@ -62,10 +62,15 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         raise BenchError("give at least one --grid KEY=V1,V2,... or --random KEY=SPEC")
     out = Path(args.out)
     if args.scale:
-        from bench.studies._scale import measure_scale, write_scale
+        from bench.studies._scale import measure_scale, update_doc, write_scale
 
         scale = measure_scale(plan, out, progress=not args.quiet)
-        print(write_scale(scale, out))
+        text = write_scale(scale, out)
+        print(text)
+        if args.doc:
+            doc = Path(args.doc)
+            doc.write_text(update_doc(doc.read_text(encoding="utf-8"), text), encoding="utf-8")
+            print(f"written: {doc}")
         return 0
     res = run_sweep(
         plan,
@@ -146,6 +151,9 @@ def register(sub: Any) -> None:
         "--scale",
         action="store_true",
         help="measure points/s with 1 and 2 local workers and a 2-worker local Dask cluster",
+    )
+    p.add_argument(
+        "--doc", help="with --scale: also write the figures into this Markdown file's scale block"
     )
     p.add_argument("--quiet", "-q", action="store_true", help="no progress display")
     p.set_defaults(func=cmd_sweep)

@@ -576,10 +576,13 @@ def heatmap(
     for (x, y), s in st.items():
         i, j = ys.index(y), xs.index(x)
         v = float(s["value"])
-        txt = f"{v:.3g}" if math.isfinite(v) else "fail"
+        txt = f"{v:.3g}" if math.isfinite(v) else "not run"
         hi = math.isfinite(v) and v > 0 and math.log10(v) > 0.5 * (lo_hi[0] + lo_hi[1])
-        ax.text(j, i, txt, ha="center", va="bottom", fontsize=7, color="k" if hi else "w")
-        if s["lost"] or s["failed"]:
+        ink = "k" if hi or not math.isfinite(v) else "w"
+        ax.text(j, i, txt, ha="center", va="bottom", fontsize=7, color=ink)
+        if s["failed"]:
+            ax.plot(j, i - 0.2, "s", ms=7, mfc="none", mew=1.5, color="k")
+        elif s["lost"]:
             ax.plot(j, i - 0.2, "x", ms=10, mew=2, color="red")
         elif bound is not None and not v <= bound:
             ax.plot(j, i - 0.2, "o", ms=6, mfc="none", mew=1.5, color="orange")
@@ -588,6 +591,10 @@ def heatmap(
     ax.set_xlabel(xkey, fontsize=8)
     ax.set_ylabel(ykey.replace(".", ".\n", 1), fontsize=8)
     handles = [Line2D([], [], ls="", marker="x", color="red", mew=2, label="lost lock")]
+    if any(s["failed"] for s in st.values()):
+        handles.append(
+            Line2D([], [], ls="", marker="s", mfc="none", color="k", label="failed or not run")
+        )
     if bound is not None:
         handles.append(
             Line2D(
@@ -600,7 +607,7 @@ def heatmap(
                 label=f"above {bound:.3g} deg",
             )
         )
-    ax.legend(handles=handles, fontsize=7, loc="upper left", bbox_to_anchor=(0.0, -0.18), ncol=2)
+    ax.legend(handles=handles, fontsize=7, loc="upper left", bbox_to_anchor=(0.0, -0.18), ncol=3)
     ax.set_title(title, fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=80)

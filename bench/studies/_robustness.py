@@ -85,6 +85,13 @@ class Study:
     #: values set at every point (not swept); ``"adc_fs"`` is replaced by 2 i_max
     fixed: dict[str, Any]
 
+    @property
+    def nominal(self) -> dict[str, Any]:
+        """The point with the scenario's own values: factor 1, no noise, no dead time, no ADC."""
+        return {
+            k: (1.0 if k.startswith("controller_model.") else v[0]) for k, v in self.grid.items()
+        }
+
 
 STUDIES: dict[str, Study] = {
     s.name: s
@@ -110,7 +117,7 @@ STUDIES: dict[str, Study] = {
         Study(
             "current-noise",
             "white noise on the phase currents (A rms)",
-            {"sensors.current_noise_a": [0.0, 0.05, 0.1, 0.2, 0.4]},
+            {"sensors.current_noise_a": [0.0, 0.01, 0.02, 0.05, 0.1, 0.2, 0.4]},
             {},
         ),
         Study(
@@ -168,13 +175,33 @@ def region(records: list[dict[str, Any]], est: str, bound_deg: float) -> dict[st
         if meets(m, bound_deg):
             continue
         if "error" in m:
-            why = "failed"
+            why = "not run: " + short_error(str(m["error"]))
         elif m.get("lock_lost"):
             why = "lost lock"
         else:
             why = f"{m.get('theta_err_abs_max_deg', math.nan):.3g} deg"
         bad.append({"values": r["values"], "why": why})
-    return {"points": len(recs), "ok": len(recs) - len(bad), "not_ok": bad}
+    locked = sum(
+        1 for r in recs if "error" not in r["metrics"] and not r["metrics"].get("lock_lost")
+    )
+    return {"points": len(recs), "ok": len(recs) - len(bad), "locked": locked, "not_ok": bad}
+
+
+def short_error(e: str) -> str:
+    """The reason of a point that did not run, in a few words."""
+    if "without saliency" in e:
+        return "the controller's model has no saliency (L_q <= L_d)"
+    return e[:100]
+
+
+def nominal_record(
+    records: list[dict[str, Any]], est: str, nominal: dict[str, Any]
+) -> dict[str, Any] | None:
+    """The record of ``est`` at the scenario's own values (``nominal``), if the study ran it."""
+    for r in records:
+        if r["estimator"] == est and all(r["values"].get(k) == v for k, v in nominal.items()):
+            return r
+    return None
 
 
 def line_plot(
@@ -307,6 +334,12 @@ def run_robustness(
                 "missing": res.summary["missing"],
                 "figures": figs,
                 "regions": {e: region(res.records, e, paper.bound_deg) for e in paper.estimators},
+                "nominal": {
+                    e: (
+                        (nominal_record(res.records, e, study.nominal) or {}).get("metrics") or {}
+                    ).get("theta_err_abs_max_deg")
+                    for e in paper.estimators
+                },
             }
         summary["papers"][pname] = psum
     summary["wall_s"] = time.perf_counter() - t0
@@ -347,6 +380,19 @@ def render_report(summary: dict[str, Any]) -> str:
             "",
             f"Bound: {p['bound_deg']:.3g} deg, from {p['bound_source']}.",
             "",
+        ]
+        nom: dict[str, Any] = next(
+            (
+                s["nominal"]
+                for s in p["studies"].values()
+                if any(v is not None for v in s["nominal"].values())
+            ),
+            {},
+        )
+        if nom:
+            at = ", ".join(f"{e} {v:.3g} deg" for e, v in nom.items() if v is not None)
+            lines += [f"Max |dtheta| at the scenario's own values: {at}.", ""]
+        lines += [
             "| study | " + " | ".join(p["estimators"]) + " |",
             "|---" * (1 + len(p["estimators"])) + "|",
         ]
@@ -354,9 +400,14 @@ def render_report(summary: dict[str, Any]) -> str:
             cells = []
             for e in p["estimators"]:
                 r = s["regions"][e]
-                cells.append(f"{r['ok']}/{r['points']}")
+                cells.append(f"{r['ok']} / {r.get('locked', '?')} / {r['points']}")
             lines.append(f"| {s['title']} | " + " | ".join(cells) + " |")
-        lines += ["", "Points within the bound out of those run. Where each method leaves it:", ""]
+        lines += [
+            "",
+            "Each cell: points within the bound / points where the method kept lock / points "
+            "run. Where each method leaves the bound:",
+            "",
+        ]
         for s in p["studies"].values():
             lines.append(f"### {s['title']}")
             lines.append("")

@@ -89,3 +89,15 @@ def write_scale(scale: dict[str, Any], out: Path) -> str:
     )
     (out / "scale.md").write_text(f"{head}\n\n{table}\n")
     return f"{head}\n{table}"
+
+
+BEGIN = "<!-- scale:begin (bench sweep ... --scale; do not edit) -->"
+END = "<!-- scale:end -->"
+
+
+def update_doc(text: str, block: str) -> str:
+    """``text`` with the block between :data:`BEGIN` and :data:`END` replaced by ``block``."""
+    i, j = text.find(BEGIN), text.find(END)
+    if i < 0 or j < i:
+        raise ValueError(f"no {BEGIN} ... {END} markers")
+    return text[: i + len(BEGIN)] + "\n" + block.rstrip() + "\n" + text[j:]

@@ -201,12 +201,14 @@ def run_point(scn: Scenario, estimator: str) -> dict[str, Any]:
     """Run one sweep point in-process; the metrics of ``metrics.json``, or the error as text.
 
     The metrics are those :func:`bench.runs._metrics.compute_metrics` gives a
-    run (the speed overshoot and the THD where the scenario asks for them),
-    plus ``wall_s``, the seconds the point took.
+    run (the speed overshoot, the THD where the scenario asks for it, a
+    hybrid estimator's per-band figures), plus ``wall_s``, the seconds the
+    point took.
     """
     from bench.nodes._loops import run_inprocess
     from bench.runs._analysis import analyze_frames
     from bench.runs._metrics import compute_metrics
+    from bench.runs._results import hybrid_band_metrics
     from bench.scenarios._setup import get_preset, sample_period
     from bench.wire._codec import Codec
 
@@ -225,6 +227,7 @@ def run_point(scn: Scenario, estimator: str) -> dict[str, Any]:
             thd_window_s=scn.thd_window_s,
             overshoot=True,
         )
+        m.update(hybrid_band_metrics(cap.table, scn, estimator))
     except Exception as e:  # a diverging or failing point is a result of the sweep
         return {"error": f"{type(e).__name__}: {e}", "wall_s": time.perf_counter() - t0}
     return {**m, "wall_s": time.perf_counter() - t0}
