@@ -334,6 +334,8 @@ def run_robustness(
                 "missing": res.summary["missing"],
                 "figures": figs,
                 "regions": {e: region(res.records, e, paper.bound_deg) for e in paper.estimators},
+                "points": len(res.records),
+                "compute_s": sum(float(r["metrics"].get("wall_s") or 0.0) for r in res.records),
                 "nominal": {
                     e: (
                         (nominal_record(res.records, e, study.nominal) or {}).get("metrics") or {}
@@ -343,6 +345,9 @@ def run_robustness(
             }
         summary["papers"][pname] = psum
     summary["wall_s"] = time.perf_counter() - t0
+    studies_run = [st for p in summary["papers"].values() for st in p["studies"].values()]
+    summary["points"] = sum(st["points"] for st in studies_run)
+    summary["compute_s"] = sum(st["compute_s"] for st in studies_run)
     (out / "summary.json").write_text(json.dumps(summary, indent=2, default=str) + "\n")
     (out / "report.md").write_text(render_report(summary))
     return summary
@@ -391,7 +396,15 @@ def render_report(summary: dict[str, Any]) -> str:
         )
         if nom:
             at = ", ".join(f"{e} {v:.3g} deg" for e, v in nom.items() if v is not None)
-            lines += [f"Max |dtheta| at the scenario's own values: {at}.", ""]
+            lines += [f"Max |dtheta| at the scenario's own values: {at}."]
+            over = [e for e, v in nom.items() if v is not None and v > p["bound_deg"]]
+            if over:
+                lines.append(
+                    f"{', '.join(over)} {'is' if len(over) == 1 else 'are'} above the bound "
+                    "already there, so outside it at every point; the middle figure of each "
+                    "cell (points in lock) says where they still work."
+                )
+            lines.append("")
         lines += [
             "| study | " + " | ".join(p["estimators"]) + " |",
             "|---" * (1 + len(p["estimators"])) + "|",
@@ -426,17 +439,22 @@ def render_report(summary: dict[str, Any]) -> str:
             lines.append("")
             lines += [f"![{f}]({f})" for f in s["figures"]]
             lines.append("")
+    total = summary.get("points", 0)
+    compute = summary.get("compute_s", 0.0)
+    lines += [
+        "## Run",
+        "",
+        f"{total} points; their own run times add up to {compute:.0f} s (each point's "
+        "wall time in its worker, on a machine shared with other work).",
+    ]
     if summary.get("throughput"):
         tps = summary["throughput"]
         n = sum(t["points"] for t in tps)
         wall = sum(t["wall_s"] for t in tps)
-        lines += [
-            "## Run",
-            "",
-            f"{n} points run in {wall:.0f} s ({n / wall:.2f} points/s) on "
-            f"{tps[0]['workers']} {tps[0]['executor']} worker(s), "
-            f"{tps[0].get('cpus')} CPUs shared with other work; total wall time of the "
-            f"command {summary['wall_s']:.0f} s.",
-            "",
-        ]
+        lines.append(
+            f"The last invocation ran {n} of them in {wall:.0f} s ({n / wall:.2f} points/s) on "
+            f"{tps[0]['workers']} {tps[0]['executor']} worker(s), {tps[0].get('cpus')} CPUs; "
+            "the others were finished already (points.jsonl) and were not run again."
+        )
+    lines.append("")
     return "\n".join(lines)
