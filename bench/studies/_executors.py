@@ -129,6 +129,11 @@ def _mmss(s: float) -> str:
     return f"{int(s // 60)}:{int(s % 60):02d}"
 
 
+def noop(task: Any) -> dict[str, Any]:
+    """A task that does nothing: what an executor costs per point, without the point."""
+    return {"task": task}
+
+
 def execute(
     tasks: Sequence[Any],
     fn: Callable[[Any], dict[str, Any]],

@@ -19,7 +19,11 @@ import os
 from pathlib import Path
 from typing import Any
 
+from bench.studies._executors import execute, noop
 from bench.studies._grid import Plan, run_sweep
+
+#: No-op tasks per executor for the dispatch overhead.
+N_NOOP = 200
 
 #: (name, executor, workers) of the configurations compared.
 CONFIGS = (("local-1", "local", 1), ("local-2", "local", 2), ("dask-2", "dask", 2))
@@ -44,6 +48,7 @@ def measure_scale(plan: Plan, out: Path, *, progress: bool = False) -> dict[str,
         tp = dict(res.summary.get("throughput") or {})
         tp["load_before"] = load0
         tp["load_after"] = os.getloadavg()[0]
+        tp.update(dispatch_overhead(executor, workers))
         rows[name] = tp
     base = rows["local-1"].get("points_per_s") or float("nan")
     for tp in rows.values():
@@ -57,12 +62,37 @@ def measure_scale(plan: Plan, out: Path, *, progress: bool = False) -> dict[str,
     }
 
 
+def dispatch_overhead(executor: str, workers: int, n: int = N_NOOP) -> dict[str, float]:
+    """What the executor costs without the points: ``n`` no-op tasks.
+
+    ``startup_s``: from the call to the first result (start of the pool or
+    cluster); ``dispatch_ms``: then per task, in the parent's wall time (send,
+    run nothing, return, record).
+    """
+    import time
+
+    t0 = time.perf_counter()
+    first: list[float] = []
+
+    def on_done(i: int, res: dict[str, object]) -> None:
+        if not first:
+            first.append(time.perf_counter())
+
+    info = execute(list(range(n)), noop, on_done, executor=executor, workers=workers)
+    end = t0 + info.wall_s
+    return {
+        "startup_s": first[0] - t0,
+        "dispatch_ms": 1e3 * (end - first[0]) / max(1, n - 1),
+    }
+
+
 def scale_table(scale: dict[str, Any]) -> str:
     """The figures as a Markdown table."""
     lines = [
         "| executor | workers | points/s | speed-up over 1 worker | s per point (compute) "
-        "| overhead s per point | first result after (s) | load avg before/after |",
-        "|---|---|---|---|---|---|---|---|",
+        "| overhead s per point | start-up (s) | dispatch per point (ms) "
+        "| load avg before/after |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
     for name, tp in scale["configs"].items():
         lines.append(
@@ -70,7 +100,8 @@ def scale_table(scale: dict[str, Any]) -> str:
             f"| {tp.get('points_per_s', float('nan')):.3f} | {tp.get('speedup', float('nan')):.2f}x "
             f"| {tp.get('point_compute_s', float('nan')):.3f} "
             f"| {tp.get('overhead_s_per_point', float('nan')):.3f} "
-            f"| {tp.get('first_result_s', float('nan')):.2f} "
+            f"| {tp.get('startup_s', float('nan')):.2f} "
+            f"| {tp.get('dispatch_ms', float('nan')):.2f} "
             f"| {tp.get('load_before', float('nan')):.1f} / {tp.get('load_after', float('nan')):.1f} |"
         )
     return "\n".join(lines)
