@@ -211,7 +211,9 @@ def run_task(p: Point) -> dict[str, Any]:
     """Run one task (module level: the executors pickle it by name)."""
     from bench.studies._sweep import run_point
 
+    cpu0 = time.process_time()
     res = run_point(p.scenario, p.estimator)
+    res["cpu_s"] = time.process_time() - cpu0
     res["worker"] = f"{socket.gethostname()}:{os.getpid()}"
     return res
 
@@ -289,6 +291,7 @@ def run_sweep(
         )
     bar = Bar(sum(t.cost for t in todo), len(todo), "sweep", enabled=progress)
     walls: list[float] = []
+    cpus: list[float] = []
     t_first: list[float] = []
     t0 = time.perf_counter()
 
@@ -307,6 +310,7 @@ def run_sweep(
             if not t_first:
                 t_first.append(time.perf_counter() - t0)
             walls.append(float(res.get("wall_s", math.nan)))
+            cpus.append(float(res.get("cpu_s", math.nan)))
             rec = {
                 "id": t.id,
                 "estimator": t.estimator,
@@ -343,6 +347,8 @@ def run_sweep(
             "wall_s": info.wall_s,
             "points_per_s": n / info.wall_s,
             "point_compute_s": compute,
+            # CPU seconds of a point in its worker: what it costs on an idle core
+            "point_cpu_s": float(np.nanmean(cpus)),
             # what a point costs beyond its own computation, the start of the
             # workers included: worker-seconds available per point minus the
             # point's own time

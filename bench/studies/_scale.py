@@ -89,16 +89,18 @@ def dispatch_overhead(executor: str, workers: int, n: int = N_NOOP) -> dict[str,
 def scale_table(scale: dict[str, Any]) -> str:
     """The figures as a Markdown table."""
     lines = [
-        "| executor | workers | points/s | speed-up over 1 worker | s per point (compute) "
+        "| executor | workers | points/s | speed-up over 1 worker | s per point (wall) "
+        "| CPU s per point "
         "| overhead s per point | start-up (s) | dispatch per point (ms) "
         "| load avg before/after |",
-        "|---|---|---|---|---|---|---|---|---|",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for name, tp in scale["configs"].items():
         lines.append(
             f"| {tp.get('executor', name)} | {tp.get('workers', '?')} "
             f"| {tp.get('points_per_s', float('nan')):.3f} | {tp.get('speedup', float('nan')):.2f}x "
             f"| {tp.get('point_compute_s', float('nan')):.3f} "
+            f"| {tp.get('point_cpu_s', float('nan')):.3f} "
             f"| {tp.get('overhead_s_per_point', float('nan')):.3f} "
             f"| {tp.get('startup_s', float('nan')):.2f} "
             f"| {tp.get('dispatch_ms', float('nan')):.2f} "
@@ -119,7 +121,7 @@ def write_scale(scale: dict[str, Any], out: Path) -> str:
         f"target: >= {scale['target_speedup']}x with 2 workers"
     )
     (out / "scale.md").write_text(f"{head}\n\n{table}\n")
-    return f"{head}\n{table}"
+    return f"{head}\n\n{table}"
 
 
 BEGIN = "<!-- scale:begin (bench sweep ... --scale; do not edit) -->"
