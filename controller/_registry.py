@@ -113,6 +113,22 @@ def _fail(name: str, why: str) -> EstimatorPluginError:
     return EstimatorPluginError(f"estimator plug-in {name!r}: {why} (docs/ESTIMATORS.md)")
 
 
+def _import_user_module(mod_name: str) -> Any:
+    """Import ``mod_name``; a module in the working folder is found too (as ``python -m`` does),
+    also when the ``bench`` script's own folder, not the working folder, heads ``sys.path``."""
+    import os
+    import sys
+
+    try:
+        return importlib.import_module(mod_name)
+    except ModuleNotFoundError as e:
+        cwd = os.getcwd()
+        if e.name != mod_name.partition(".")[0] or cwd in sys.path or "" in sys.path:
+            raise
+        sys.path.append(cwd)
+        return importlib.import_module(mod_name)
+
+
 def _load_factory(name: str) -> Callable[..., Any] | None:
     """The factory object named ``name``; None when no plug-in has that name."""
     if is_plugin_name(name):
@@ -120,7 +136,7 @@ def _load_factory(name: str) -> Callable[..., Any] | None:
         if not mod_name or not attr:
             raise _fail(name, "expected package.module:factory")
         try:
-            module = importlib.import_module(mod_name)
+            module = _import_user_module(mod_name)
         except Exception as e:  # the user's code: any error is the plug-in's
             raise _fail(name, f"cannot import {mod_name}: {type(e).__name__}: {e}") from None
         obj: Any = module

@@ -138,3 +138,17 @@ def test_the_example_closes_the_loop_through_a_sweep(
     assert "error" not in m and not m["lock_lost"]
     assert m["theta_err_abs_max_deg"] < 3.0
     assert math.isfinite(m["speed_err_max_rpm"])
+
+
+def test_a_module_in_the_working_folder_is_found(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """As ``python -m`` would: the ``bench`` script heads ``sys.path`` with its own folder."""
+    import sys
+
+    _write(tmp_path, "cwd_est", "from my_estimator import create\n")
+    monkeypatch.setattr(sys, "path", [p for p in sys.path if p not in ("", ".")])
+    monkeypatch.syspath_prepend(str(EXAMPLES))
+    monkeypatch.chdir(tmp_path)
+    assert str(tmp_path) not in sys.path
+    assert injection_family("cwd_est:create") == "none"

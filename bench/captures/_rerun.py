@@ -163,7 +163,7 @@ def rerun_capture(
         get_preset,
         sample_period,
     )
-    from controller._registry import ESTIMATOR_NAMES
+    from controller._registry import ESTIMATOR_NAMES, UnknownEstimatorError, check_estimator
 
     check_estimator_name(estimator)
     codec = codec or Codec()
@@ -175,7 +175,10 @@ def rerun_capture(
         say(incomplete_warning(path, problem, len(frames)))
     recorded = meta.get("estimator") if isinstance(meta.get("estimator"), str) else None
     if recorded is not None and recorded not in ESTIMATOR_NAMES:
-        recorded = None
+        try:  # a plug-in that still loads is known too
+            check_estimator(recorded)
+        except UnknownEstimatorError:
+            recorded = None
     mode = str(meta.get("mode", "lockstep"))
     T_s = sample_period(scn)
     n_p = get_preset(scn).motor.n_p
