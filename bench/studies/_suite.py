@@ -27,14 +27,12 @@ and a downscaled ``run.png``, so it can be committed.
 from __future__ import annotations
 
 import math
-import multiprocessing as mp
 import os
 import random
 import shutil
 import sys
 import time
 from collections.abc import Callable, Sequence
-from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Protocol
@@ -213,8 +211,8 @@ class Progress:
         if not (self.enabled and self.tty) or now - self.last < 0.5:
             return
         self.last = now
-        cur = ", ".join(running) or "-"
-        line = f"[{self.done}/{self.n}] running: {cur} | {self._times()}"
+        cur = f"running: {', '.join(running)} | " if running else ""
+        line = f"[{self.done}/{self.n}] {cur}{self._times()}"
         print(f"\r{line[:150]:<150}", end="", file=self.stream, flush=True)
 
     def close(self) -> None:
@@ -253,22 +251,17 @@ def run_jobs(
                 prog.show([jobs[i].label])
                 _record(i, jobs[i]())
         else:
-            with ProcessPoolExecutor(workers, mp_context=mp.get_context("spawn")) as ex:
-                pending: dict[Future[dict[str, Any]], int] = {}
-                queue = list(order)
-                while queue or pending:
-                    while queue and len(pending) < workers:
-                        i = queue.pop(0)
-                        pending[ex.submit(_call, jobs[i])] = i
-                    prog.show([jobs[i].label for i in pending.values()])
-                    done, _ = wait(pending, timeout=0.5, return_when=FIRST_COMPLETED)
-                    for f in done:
-                        i = pending.pop(f)
-                        try:
-                            res = f.result()
-                        except Exception as e:  # a worker that died
-                            res = {"error": f"{type(e).__name__}: {e}", "wall_s": math.nan}
-                        _record(i, res)
+            # the same engine as bench sweep: a process pool that resubmits the
+            # unfinished runs of a worker that died (bench.studies._executors)
+            from bench.studies._executors import LOST, execute
+
+            def _done(k: int, res: dict[str, Any]) -> None:
+                if res.get("error") == LOST:
+                    res = {"error": f"worker died: {res.get('why', '')}", "wall_s": math.nan}
+                _record(order[k], res)
+                prog.show([])
+
+            execute([jobs[i] for i in order], _call, _done, workers=workers)
     finally:
         prog.close()
     return [r if r is not None else {"error": "not run"} for r in results]
