@@ -467,45 +467,13 @@ def plot_sweep(records: Sequence[dict[str, Any]], plan: Plan, out: Path) -> list
     import matplotlib
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
 
     out.mkdir(parents=True, exist_ok=True)
     names: list[str] = []
     title = f"{plan.scenario}"
     if len(keys) == 1:
-        fig, ax = plt.subplots(figsize=(6.4, 3.6))
-        lost_drawn = False
-        for est in plan.estimators:
-            recs = [r for r in records if r["estimator"] == est]
-            st = cell_stats(recs, keys)
-            xs, numeric = _axis([c[0] for c in st])
-            pos = [(_num(x) if numeric else i) for i, x in enumerate(xs)]
-            ys = [st[(x,)]["value"] for x in xs]
-            (ln,) = ax.plot(pos, ys, "o-", ms=4, lw=1, label=est)
-            lx = [p for p, x in zip(pos, xs, strict=True) if st[(x,)]["lost"] or st[(x,)]["failed"]]
-            ly = [
-                (y if math.isfinite(float(y)) else 0.0)
-                for y, x in zip(ys, xs, strict=True)
-                if st[(x,)]["lost"] or st[(x,)]["failed"]
-            ]
-            if lx:
-                ax.plot(
-                    lx, ly, "x", ms=9, mew=2, color="red", label=None if lost_drawn else "lost lock"
-                )
-                lost_drawn = True
-            if not numeric:
-                ax.set_xticks(pos, [str(x) for x in xs])
-            _ = ln
-        ax.set_xlabel(keys[0])
-        ax.set_ylabel(PLOT_LABEL)
-        ax.set_yscale("log")
-        ax.grid(alpha=0.3)
-        ax.legend(fontsize=8)
-        ax.set_title(f"{title}: {PLOT_LABEL.split(' (')[0]} vs {keys[0]}", fontsize=9)
-        fig.tight_layout()
         name = f"line-{_slug(keys[0])}.png"
-        fig.savefig(out / name, dpi=80)
-        plt.close(fig)
+        line_plot(records, keys[0], plan.estimators, out / name, f"{title}: vs {keys[0]}")
         return [f"plots/{name}"]
     scattered = any(k in plan.random for k in keys)
     for est in plan.estimators:
@@ -545,6 +513,64 @@ def scatter(recs: Sequence[dict[str, Any]], xkey: str, ykey: str, path: Path, ti
     ax.set_ylabel(ykey, fontsize=8)
     ax.grid(alpha=0.3)
     ax.set_title(title, fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=80)
+    plt.close(fig)
+
+
+def line_plot(
+    records: Sequence[dict[str, Any]],
+    key: str,
+    estimators: Sequence[str],
+    path: Path,
+    title: str,
+    bound: float | None = None,
+) -> None:
+    """:data:`PLOT_METRIC` over one key, a line per estimator; lost lock or a failed run
+    as a red x (a failed one at the bottom of the axis); ``bound`` (deg) as a dashed line."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6.4, 3.6))
+    lost_drawn = False
+    fin = [_num(r["metrics"].get(PLOT_METRIC)) for r in records]
+    floor = min((v for v in fin if math.isfinite(v) and v > 0), default=1.0)
+    for est in estimators:
+        st = cell_stats([r for r in records if r["estimator"] == est], (key,))
+        if not st:
+            continue
+        xs, numeric = _axis([c[0] for c in st])
+        pos = [(_num(x) if numeric else float(i)) for i, x in enumerate(xs)]
+        ys = [float(st[(x,)]["value"]) for x in xs]
+        ax.plot(pos, ys, "o-", ms=4, lw=1, label=est)
+        bad = [
+            (p, y if math.isfinite(y) else floor)
+            for p, y, x in zip(pos, ys, xs, strict=True)
+            if st[(x,)]["lost"] or st[(x,)]["failed"]
+        ]
+        if bad:
+            ax.plot(
+                [b[0] for b in bad],
+                [b[1] for b in bad],
+                "x",
+                ms=9,
+                mew=2,
+                color="red",
+                label=None if lost_drawn else "lost lock / failed",
+            )
+            lost_drawn = True
+        if not numeric:
+            ax.set_xticks(pos, [str(x) for x in xs])
+    if bound is not None:
+        ax.axhline(bound, ls="--", color="k", lw=1, label=f"paper bound {bound:.3g} deg")
+    ax.set_xlabel(key)
+    ax.set_ylabel(PLOT_LABEL)
+    ax.set_yscale("log")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7)
+    ax.set_title(title, fontsize=9)
     fig.tight_layout()
     fig.savefig(path, dpi=80)
     plt.close(fig)

@@ -39,7 +39,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from bench.studies._grid import Plan, cell_stats, heatmap, run_sweep
+from bench.studies._grid import Plan, heatmap, line_plot, run_sweep
 
 #: Simulated seconds of every point, and the start of its scored window (s).
 DURATION_S = 1.6
@@ -202,53 +202,6 @@ def nominal_record(
         if r["estimator"] == est and all(r["values"].get(k) == v for k, v in nominal.items()):
             return r
     return None
-
-
-def line_plot(
-    records: list[dict[str, Any]],
-    key: str,
-    estimators: tuple[str, ...],
-    path: Path,
-    title: str,
-    bound: float,
-) -> None:
-    """Max |dtheta| over one key per estimator, the bound as a dashed line, lost lock as x."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(6.0, 3.4))
-    drawn = False
-    for est in estimators:
-        st = cell_stats([r for r in records if r["estimator"] == est], (key,))
-        xs = sorted(c[0] for c in st)
-        ys = [float(st[(x,)]["value"]) for x in xs]
-        ax.plot(xs, ys, "o-", ms=4, lw=1, label=est)
-        bad = [
-            (x, y) for x, y in zip(xs, ys, strict=True) if st[(x,)]["lost"] or st[(x,)]["failed"]
-        ]
-        if bad:
-            ax.plot(
-                [b[0] for b in bad],
-                [b[1] if math.isfinite(b[1]) else bound for b in bad],
-                "x",
-                ms=9,
-                mew=2,
-                color="red",
-                label=None if drawn else "lost lock",
-            )
-            drawn = True
-    ax.axhline(bound, ls="--", color="k", lw=1, label=f"paper bound {bound:.3g} deg")
-    ax.set_yscale("log")
-    ax.set_xlabel(key)
-    ax.set_ylabel(r"max $|\Delta\theta|$ (deg)")
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=7)
-    ax.set_title(title, fontsize=9)
-    fig.tight_layout()
-    fig.savefig(path, dpi=80)
-    plt.close(fig)
 
 
 def run_robustness(
