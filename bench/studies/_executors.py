@@ -134,6 +134,15 @@ def noop(task: Any) -> dict[str, Any]:
     return {"task": task}
 
 
+def burn(n: int) -> dict[str, Any]:
+    """A pure-Python busy loop of ``n`` additions: what one CPU gives a process."""
+    t0 = time.perf_counter()
+    x = 0
+    for i in range(n):
+        x += i
+    return {"wall_s": time.perf_counter() - t0, "x": x}
+
+
 def execute(
     tasks: Sequence[Any],
     fn: Callable[[Any], dict[str, Any]],
