@@ -208,3 +208,11 @@ def test_scale_figures_go_between_the_markers() -> None:
     new = update_doc(doc, table)
     assert "old" not in new and table in new and new.endswith(f"{END}\nrest\n")
     assert update_doc(new, "x") == f"intro\n{BEGIN}\nx\n{END}\nrest\n"
+
+
+def test_machine_calibration_reports_both_walls() -> None:
+    from bench.studies._scale import machine_speedup
+
+    ms = machine_speedup(n=10_000)
+    assert ms["wall_1_s"] > 0 and ms["wall_2_s"] > 0
+    assert ms["speedup"] == pytest.approx(2 * ms["wall_1_s"] / ms["wall_2_s"])
