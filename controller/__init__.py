@@ -23,7 +23,14 @@ from controller._hybrid import HybridDesign, HybridEstimator, TransitionBand, de
 from controller._params import MotorModel
 from controller._pi import PIController
 from controller._pll import PositionObserver
-from controller._registry import ESTIMATOR_NAMES, UnknownEstimatorError, make_estimator
+from controller._registry import (
+    ENTRY_POINT_GROUP,
+    ESTIMATOR_NAMES,
+    EstimatorPluginError,
+    UnknownEstimatorError,
+    check_estimator,
+    make_estimator,
+)
 from controller._rotating import RotatingInjectionPars, hf_amplitudes
 from controller._startup import PolarityTest
 from controller._svpwm import svpwm
@@ -31,6 +38,7 @@ from controller._transforms import clarke, inv_clarke, inv_park, park, wrap_2pi,
 
 __all__ = [
     "BPF_WEN",
+    "ENTRY_POINT_GROUP",
     "ESTIMATOR_NAMES",
     "HPF_WEN",
     "LPF_WEN",
@@ -46,6 +54,7 @@ __all__ = [
     "ControllerPars",
     "Estimator",
     "EstimatorInput",
+    "EstimatorPluginError",
     "FluxObserver",
     "HybridDesign",
     "HybridEstimator",
@@ -57,6 +66,7 @@ __all__ = [
     "RotatingInjectionPars",
     "TransitionBand",
     "UnknownEstimatorError",
+    "check_estimator",
     "clarke",
     "design",
     "discretize",

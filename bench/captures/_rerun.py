@@ -44,7 +44,7 @@ import can
 import numpy as np
 
 from bench import _jsonio as jsonio
-from bench._errors import BenchError, CaptureError
+from bench._errors import CaptureError
 from bench.captures._read import (
     capture_scenario,
     incomplete_warning,
@@ -85,7 +85,7 @@ def injection_note(estimator: str, recorded: str | None) -> str:
             f"injection that controller applied, not to the {fam} injection of {estimator}"
         )
     rec_fam = injection_family(recorded)
-    if estimator == recorded and fam == "none":
+    if estimator == recorded and estimator == "sensored":
         return (
             f"same estimator as recorded ({recorded}, no injection): it reads the recorded "
             "truth angle; the logged estimate is reproduced"
@@ -95,7 +95,7 @@ def injection_note(estimator: str, recorded: str | None) -> str:
             f"same estimator as recorded ({recorded}): the currents respond to its own "
             "injection; with the same settings its logged estimate is reproduced"
         )
-    if fam == "none":
+    if estimator == "sensored":
         return (
             f"the sensored baseline reads the recorded truth angle; the currents respond to "
             f"the {rec_fam} injection of {recorded}"
@@ -157,13 +157,15 @@ def rerun_capture(
     """
     from bench.nodes._loops import make_controller_node
     from bench.runs._metrics import compute_metrics
-    from bench.scenarios._setup import check_estimator_fits, get_preset, sample_period
-    from controller._registry import ESTIMATOR_NAMES
+    from bench.scenarios._setup import (
+        check_estimator_fits,
+        check_estimator_name,
+        get_preset,
+        sample_period,
+    )
+    from controller._registry import ESTIMATOR_NAMES, UnknownEstimatorError, check_estimator
 
-    if estimator not in ESTIMATOR_NAMES:
-        raise BenchError(
-            f"--estimator: unknown estimator {estimator!r} (known: {', '.join(ESTIMATOR_NAMES)})"
-        )
+    check_estimator_name(estimator)
     codec = codec or Codec()
     say = echo or (lambda s: print(s, file=sys.stderr))
     frames, problem = read_capture(path)
@@ -173,7 +175,10 @@ def rerun_capture(
         say(incomplete_warning(path, problem, len(frames)))
     recorded = meta.get("estimator") if isinstance(meta.get("estimator"), str) else None
     if recorded is not None and recorded not in ESTIMATOR_NAMES:
-        recorded = None
+        try:  # a plug-in that still loads is known too
+            check_estimator(recorded)
+        except UnknownEstimatorError:
+            recorded = None
     mode = str(meta.get("mode", "lockstep"))
     T_s = sample_period(scn)
     n_p = get_preset(scn).motor.n_p
@@ -362,7 +367,9 @@ def rerun_capture(
         "recorded_metrics": m_old,
         "capture_read_error": problem,
     }
-    dest = out_dir or ((path if path.is_dir() else path.parent) / f"rerun-{estimator}")
+    dest = out_dir or (
+        (path if path.is_dir() else path.parent) / f"rerun-{estimator.replace(':', '-')}"
+    )
     dest.mkdir(parents=True, exist_ok=True)
     write_csv(str(dest / "signals.csv"), new.table)
     (dest / "signals.md").write_text(signals_doc())

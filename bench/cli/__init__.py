@@ -35,6 +35,7 @@ SUBCOMMANDS = (
     "plot",
     "busload",
     "suite",
+    "sweep",
     "replay",
     "rerun",
     "monitor",

@@ -23,6 +23,9 @@ def cmd_list(args: argparse.Namespace) -> int:
     print("estimators (--estimator; injection family):")
     for name, fam in cat["estimators"].items():
         print(f"  {name:20s} {fam}")
+    for name, fam in cat["estimator_plugins"].items():
+        print(f"  {name:20s} {fam} (installed plug-in)")
+    print("  package.module:factory  your own estimator (docs/ESTIMATORS.md)")
     print("plant profiles (--plant-profile, plant_profile): " + ", ".join(cat["plant_profiles"]))
     return 0
 

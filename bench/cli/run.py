@@ -20,7 +20,7 @@ from bench.cli._common import (
     plant_engine,
     scenario_from_args,
 )
-from bench.scenarios._setup import check_estimator_fits
+from bench.scenarios._setup import check_estimator_fits, check_estimator_name
 
 
 def run_node_args(args: argparse.Namespace) -> dict[str, list[str]]:
@@ -79,12 +79,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         est = "external"
     else:
         est = args.estimator or scn.estimator
-        from controller._registry import ESTIMATOR_NAMES
-
-        if est not in ESTIMATOR_NAMES:
-            raise BenchError(
-                f"--estimator: unknown estimator {est!r} (known: {', '.join(ESTIMATOR_NAMES)})"
-            )
+        check_estimator_name(est)
         check_estimator_fits(scn, est)
     plant_engine(args)
     if args.monitor and not (sys.stdin.isatty() and sys.stdout.isatty() and sys.stderr.isatty()):
@@ -95,7 +90,7 @@ def cmd_run(args: argparse.Namespace) -> int:
 
         args.port = UDP_DEFAULT_PORT
     spec = bus_spec(args, announce=True)
-    out = Path(args.out) if args.out else Path("runs") / f"{scn.name}-{est}"
+    out = Path(args.out) if args.out else Path("runs") / f"{scn.name}-{est.replace(':', '-')}"
     who = f"external controller {args.dut_name}" if external and args.dut_name else est
     if external and not args.dut_name:
         who = "an external controller"
@@ -166,7 +161,8 @@ def register(sub: Any) -> None:
         "--estimator",
         "-e",
         help="sfhf, tt-ab, tt-dq, square-wave, square-wave-nocic, hybrid-tt-dq, "
-        "hybrid-square-wave, sensored (default: the scenario's estimator; bench list)",
+        "hybrid-square-wave, sensored, or a plug-in: package.module:factory "
+        "(docs/ESTIMATORS.md) (default: the scenario's estimator; bench list)",
     )
     add_scenario_overrides(p)
     add_plant_profile(p)

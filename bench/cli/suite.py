@@ -1,4 +1,4 @@
-"""``bench suite paper`` and ``bench suite sweep``: the papers' scenarios, sweeps and report.
+"""``bench suite paper``, ``sweep`` and ``robustness``: the papers' scenarios, sweeps and reports.
 
 ``bench suite paper [--out DIR]`` runs every shipped scenario with every
 estimator it lists (two processes over CAN, lockstep), the sweeps of the
@@ -6,7 +6,9 @@ claims (in-process), and writes ``report.md``, ``summary.json`` and plots to
 ``DIR`` (default ``runs/suite-paper``); the full run folders (captures,
 signal tables) go to ``--runs-dir``.  ``bench suite sweep`` runs only the
 sweeps.  ``bench suite report DIR`` rewrites ``DIR/report.md`` from
-``DIR/summary.json`` (claims re-evaluated, nothing re-run).  ``make suite`` is ``bench suite paper --out docs/results``.
+``DIR/summary.json`` (claims re-evaluated, nothing re-run).  ``bench suite
+robustness`` runs each paper's estimators under model errors, current noise,
+dead time and ADC resolution (:mod:`bench.studies._robustness`).  ``make suite`` is ``bench suite paper --out docs/results``.
 """
 
 from __future__ import annotations
@@ -58,9 +60,9 @@ def _common(p: argparse.ArgumentParser) -> None:
 
 def cmd_paper(args: argparse.Namespace) -> int:
     from bench.scenarios._schema import PAPER, SHIPPED
+    from bench.scenarios._setup import check_estimator_name
     from bench.studies._suite import PLANTS, SuiteOptions, run_suite
     from bench.studies._sweep import SWEEPS
-    from controller._registry import ESTIMATOR_NAMES
 
     scenarios = _csv(args.scenarios) or PAPER
     for s in scenarios:
@@ -69,7 +71,8 @@ def cmd_paper(args: argparse.Namespace) -> int:
                 f"--scenarios: unknown scenario {s!r} (shipped: {', '.join(SHIPPED)}; or a .toml path)"
             )
     estimators = _csv(args.estimators)
-    _check_names(estimators, ESTIMATOR_NAMES, "--estimators")
+    for e in estimators or ():
+        check_estimator_name(e, "--estimators")
     plants = _csv(args.plants) or PLANTS
     _check_names(plants, PLANTS, "--plants")
     sweeps = () if args.no_sweep else (_csv(args.sweeps) or tuple(SWEEPS))
@@ -128,6 +131,36 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_robustness(args: argparse.Namespace) -> int:
+    from bench.studies._robustness import DURATION_S, PAPERS, STUDIES, run_robustness
+
+    papers = _csv(args.papers) or tuple(PAPERS)
+    _check_names(papers, tuple(PAPERS), "--papers")
+    studies = _csv(args.studies) or tuple(STUDIES)
+    _check_names(studies, tuple(STUDIES), "--studies")
+    if args.scheduler and args.executor != "dask":
+        raise BenchError("--scheduler needs --executor dask")
+    if args.jobs < 1:
+        raise BenchError(f"--jobs must be >= 1, got {args.jobs}")
+    out = Path(args.out) if args.out else Path("runs") / "robustness"
+    summary = run_robustness(
+        out,
+        papers=tuple(papers),
+        studies=tuple(studies),
+        duration=args.duration or DURATION_S,
+        executor=args.executor,
+        workers=args.jobs,
+        scheduler=args.scheduler,
+        progress=not args.quiet,
+    )
+    for pname, p in summary["papers"].items():
+        for sname, st in p["studies"].items():
+            cells = ", ".join(f"{e} {r['ok']}/{r['points']}" for e, r in st["regions"].items())
+            print(f"{pname} {sname}: within the bound: {cells}")
+    print(f"report: {out / 'report.md'}, {out / 'summary.json'}")
+    return 0
+
+
 def cmd_report(args: argparse.Namespace) -> int:
     from bench.studies._report import rerender, update_readme
 
@@ -167,7 +200,11 @@ def register(sub: Any) -> None:
     q.add_argument("--out", "-o", help="report folder (default runs/suite-paper)")
     q.add_argument("--runs-dir", help="full run folders with captures (default runs/suite-runs)")
     q.add_argument("--scenarios", help="comma-separated scenario names (default: all shipped)")
-    q.add_argument("--estimators", help="comma-separated estimators to keep (default: all listed)")
+    q.add_argument(
+        "--estimators",
+        help="comma-separated estimators to keep (default: all listed); a plug-in "
+        "(package.module:factory or an installed name) runs on every scenario chosen",
+    )
     q.add_argument(
         "--plants",
         help="comma-separated plants: ideal (the papers'), drive (drive profile, countermeasures "
@@ -199,6 +236,23 @@ def register(sub: Any) -> None:
     q.add_argument("--quick", action="store_true", help="fewer points, shorter runs")
     _common(q)
     q.set_defaults(func=cmd_sweep)
+
+    q = ss.add_parser(
+        "robustness",
+        help="each paper estimator under model errors, noise, dead time and ADC bits (in-process)",
+    )
+    q.add_argument("--out", "-o", help="report folder, resumable (default runs/robustness)")
+    q.add_argument("--papers", help="comma-separated: wen, xue (default both)")
+    q.add_argument(
+        "--studies",
+        help="comma-separated: model-inductances, model-inertia-flux, model-resistance, "
+        "current-noise, dead-time, adc-bits (default all)",
+    )
+    q.add_argument("--duration", type=float, help="simulated seconds per point (default 1.6)")
+    q.add_argument("--executor", choices=("local", "dask"), default="local")
+    q.add_argument("--scheduler", help="Dask scheduler address (default: a local cluster)")
+    _common(q)
+    q.set_defaults(func=cmd_robustness)
 
     q = ss.add_parser(
         "report", help="re-evaluate the claims of a suite folder's summary.json, rewrite report.md"

@@ -6,5 +6,7 @@
   scenario, the motor preset it names, its PWM period.
 - ``_reference``: what every key means (unit, range, meaning), and
   ``docs/SCENARIOS.md`` rendered from it and the schema (``bench schema``).
+- ``_dotted``: a scenario with single keys changed by their dotted name
+  (``controller_model.L_q``), for sweeps.
 - ``*.toml``: the papers' scenarios, one file each.
 """

@@ -55,7 +55,12 @@ def describe(scn: Scenario) -> dict[str, Any]:
 
 def catalogue() -> dict[str, Any]:
     """The shipped scenarios, presets, estimators and plant profiles."""
-    from controller._registry import ESTIMATOR_NAMES, injection_family
+    from controller._registry import (
+        ESTIMATOR_NAMES,
+        UnknownEstimatorError,
+        entry_point_names,
+        injection_family,
+    )
     from plant_rt import PRESETS, PROFILE_NAMES
 
     scenarios = {}
@@ -72,9 +77,16 @@ def catalogue() -> dict[str, Any]:
         name: {"f_sw_hz": p.f_sw, "n_p": p.motor.n_p, "u_dc": p.inverter.u_dc}
         for name, p in PRESETS.items()
     }
+    plugins: dict[str, str] = {}
+    for e in entry_point_names():
+        try:
+            plugins[e] = injection_family(e)
+        except UnknownEstimatorError as err:  # an installed plug-in that does not load
+            plugins[e] = f"error: {err}"
     return {
         "scenarios": scenarios,
         "presets": presets,
         "estimators": {e: injection_family(e) for e in ESTIMATOR_NAMES},
+        "estimator_plugins": plugins,
         "plant_profiles": list(PROFILE_NAMES),
     }

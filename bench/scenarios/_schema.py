@@ -852,9 +852,19 @@ def _parse_estimator_options(r: _Reader, preset: str, f_s: float) -> dict[str, A
     return out
 
 
+def _estimator_error(name: str) -> str | None:
+    """Why ``name`` is no estimator (built in or plug-in), or None."""
+    from controller._registry import UnknownEstimatorError, check_estimator
+
+    try:
+        check_estimator(name)
+    except UnknownEstimatorError as e:
+        return str(e)
+    return None
+
+
 def parse_scenario(data: dict[str, Any], src: str) -> Scenario:
     """Validate a scenario table (already parsed from TOML)."""
-    from controller import ESTIMATOR_NAMES
     from plant_rt import PRESETS
 
     for k in data:
@@ -867,18 +877,14 @@ def parse_scenario(data: dict[str, Any], src: str) -> Scenario:
     if preset not in PRESETS:
         raise r.fail("preset", f"unknown preset {preset!r} (known: {', '.join(PRESETS)})")
     estimator = r.string("estimator", "tt-dq")
-    if estimator not in ESTIMATOR_NAMES:
-        raise r.fail(
-            "estimator", f"unknown estimator {estimator!r} (known: {', '.join(ESTIMATOR_NAMES)})"
-        )
+    if why := _estimator_error(estimator):
+        raise r.fail("estimator", why)
     ests = data.get("estimators", [estimator])
     if not isinstance(ests, list) or not all(isinstance(e, str) for e in ests):
         raise r.fail("estimators", "expected a list of estimator names")
     for e in ests:
-        if e not in ESTIMATOR_NAMES:
-            raise r.fail(
-                "estimators", f"unknown estimator {e!r} (known: {', '.join(ESTIMATOR_NAMES)})"
-            )
+        if why := _estimator_error(e):
+            raise r.fail("estimators", why)
     f_sw = r.num("f_sw", -1.0)
     if f_sw != -1.0 and not 100.0 <= f_sw <= 100e3:
         raise r.fail("f_sw", f"must be between 100 Hz and 100 kHz, got {f_sw}")

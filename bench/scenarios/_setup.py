@@ -14,7 +14,7 @@ from bench._errors import ScenarioError
 from bench.scenarios._schema import ModelErrors, Scenario, saliency_error
 from bench.wire._protocol import CMD_START, CMD_STOP, RPM_PER_RAD_S
 from controller import CompensationPars, Controller, ControllerPars, MotorModel
-from controller._registry import ESTIMATOR_NAMES, injection_family
+from controller._registry import UnknownEstimatorError, check_estimator, injection_family
 from plant_rt import ConstantLoad, Plant, PlantProfile, Preset, SensorPars, plant_profile, preset
 
 
@@ -161,10 +161,10 @@ def motor_model(p: Preset, errors: ModelErrors | None = None) -> MotorModel:
 
 
 def build_controller(scn: Scenario, estimator: str) -> Controller:
-    if estimator not in ESTIMATOR_NAMES:
-        raise ScenarioError(
-            f"unknown estimator {estimator!r} (known: {', '.join(ESTIMATOR_NAMES)})"
-        )
+    try:
+        check_estimator(estimator)
+    except UnknownEstimatorError as e:
+        raise ScenarioError(str(e)) from None
     p = get_preset(scn)
     kw: dict[str, Any] = {}
     if estimator == "sensored":
@@ -268,8 +268,19 @@ def rad_s(rpm: float) -> float:
     return rpm / RPM_PER_RAD_S
 
 
+def check_estimator_name(est: str, option: str = "--estimator") -> str:
+    """The one-line error of an unknown estimator or a broken plug-in; its family otherwise."""
+    from bench._errors import BenchError
+
+    try:
+        return check_estimator(est)
+    except UnknownEstimatorError as e:
+        raise BenchError(f"{option}: {e}") from None
+
+
 def check_estimator_fits(scn: Scenario, est: str) -> None:
     """Build the controller once, so a misfit is one line before any process starts."""
+    check_estimator_name(est)
     try:
         build_controller(scn, est)
     except (ValueError, TypeError) as e:

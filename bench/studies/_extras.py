@@ -107,6 +107,11 @@ def where_max(tab: dict[str, Any], scn: Scenario) -> dict[str, Any] | None:
     return {"t_s": ti, "theta_err_deg": float(tab["theta_err_deg"][i]), "context": context}
 
 
+def path_name(estimator: str) -> str:
+    """A folder name for ``estimator`` (a plug-in's ``package.module:factory`` has a colon)."""
+    return estimator.replace(":", "-")
+
+
 def write_json(path: Path, data: Any) -> None:
     path.write_text(json.dumps(data, indent=2, sort_keys=True, default=_json_default) + "\n")
 

@@ -36,22 +36,21 @@ and a downscaled ``run.png``, so it can be committed.
 from __future__ import annotations
 
 import math
-import multiprocessing as mp
 import os
 import random
 import shutil
 import sys
 import time
 from collections.abc import Callable, Sequence
-from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Protocol
 
 from bench._errors import BenchError
 from bench.scenarios._schema import PAPER, Scenario, load_scenario
-from bench.studies._extras import run_extras
+from bench.studies._extras import path_name, run_extras
 from bench.studies._plants import PLANTS, plant_variant
+from controller._registry import ESTIMATOR_NAMES
 
 #: Simulated seconds of a run in ``--quick`` mode (smoke test, not comparable with the papers).
 QUICK_DURATION_S = 1.6
@@ -91,7 +90,8 @@ BAND_METRIC_PREFIXES = ("band_", "handover_")
 def run_subdir(plant: str, scenario: str, estimator: str) -> str:
     """Where a run's files go under a runs or report folder: ``scenario/estimator`` on
     the ideal plant, ``plant/scenario/estimator`` on the others."""
-    return f"{scenario}/{estimator}" if plant == "ideal" else f"{plant}/{scenario}/{estimator}"
+    est = path_name(estimator)
+    return f"{scenario}/{est}" if plant == "ideal" else f"{plant}/{scenario}/{est}"
 
 
 class Job(Protocol):
@@ -232,8 +232,8 @@ class Progress:
         if not (self.enabled and self.tty) or now - self.last < 0.5:
             return
         self.last = now
-        cur = ", ".join(running) or "-"
-        line = f"[{self.done}/{self.n}] running: {cur} | {self._times()}"
+        cur = f"running: {', '.join(running)} | " if running else ""
+        line = f"[{self.done}/{self.n}] {cur}{self._times()}"
         print(f"\r{line[:150]:<150}", end="", file=self.stream, flush=True)
 
     def close(self) -> None:
@@ -272,22 +272,17 @@ def run_jobs(
                 prog.show([jobs[i].label])
                 _record(i, jobs[i]())
         else:
-            with ProcessPoolExecutor(workers, mp_context=mp.get_context("spawn")) as ex:
-                pending: dict[Future[dict[str, Any]], int] = {}
-                queue = list(order)
-                while queue or pending:
-                    while queue and len(pending) < workers:
-                        i = queue.pop(0)
-                        pending[ex.submit(_call, jobs[i])] = i
-                    prog.show([jobs[i].label for i in pending.values()])
-                    done, _ = wait(pending, timeout=0.5, return_when=FIRST_COMPLETED)
-                    for f in done:
-                        i = pending.pop(f)
-                        try:
-                            res = f.result()
-                        except Exception as e:  # a worker that died
-                            res = {"error": f"{type(e).__name__}: {e}", "wall_s": math.nan}
-                        _record(i, res)
+            # the same engine as bench sweep: a process pool that resubmits the
+            # unfinished runs of a worker that died (bench.studies._executors)
+            from bench.studies._executors import LOST, execute
+
+            def _done(k: int, res: dict[str, Any]) -> None:
+                if res.get("error") == LOST:
+                    res = {"error": f"worker died: {res.get('why', '')}", "wall_s": math.nan}
+                _record(order[k], res)
+                prog.show([])
+
+            execute([jobs[i] for i in order], _call, _done, workers=workers)
     finally:
         prog.close()
     return [r if r is not None else {"error": "not run"} for r in results]
@@ -326,7 +321,11 @@ def paper_jobs(
             scn = plant_variant(load_scenario(name), plant)
             if quick:
                 scn = quick_scenario(scn)
-            for est in scn.estimators:
+            # a plug-in no scenario lists runs on every scenario chosen
+            extra = [
+                e for e in estimators or () if e not in ESTIMATOR_NAMES and e not in scn.estimators
+            ]
+            for est in (*scn.estimators, *extra):
                 if estimators is not None and est not in estimators:
                     continue
                 tr: tuple[str, str, int | None] | None = None
@@ -341,7 +340,11 @@ def paper_jobs(
 def unmatched_estimators(scenarios: Sequence[str], estimators: Sequence[str]) -> str | None:
     """Which of ``estimators`` none of ``scenarios`` lists, and what they list (None: all listed)."""
     listed = {name: load_scenario(name).estimators for name in scenarios}
-    missing = [e for e in estimators if not any(e in ests for ests in listed.values())]
+    missing = [
+        e
+        for e in estimators
+        if e in ESTIMATOR_NAMES and not any(e in ests for ests in listed.values())
+    ]
     if not missing:
         return None
     what = "; ".join(f"{name} lists {', '.join(ests)}" for name, ests in listed.items())

@@ -1,0 +1,279 @@
+"""Where the points of a study run: local processes, or a Dask distributed cluster.
+
+Both executors are existing engines, not a home-made scheduler:
+
+- ``local``: :class:`concurrent.futures.ProcessPoolExecutor` with spawned
+  processes on this machine (the default).  A worker process that dies
+  breaks the pool; the points it had not finished are submitted again to a
+  new pool (at most :data:`MAX_ATTEMPTS` times each), the finished ones are
+  kept.
+- ``dask``: :mod:`distributed` (``pip install 'can-hil-bench[dask]'``).  With a
+  scheduler address (``tcp://HOST:8786``) the points go to the cluster
+  started there with ``dask scheduler`` and ``dask worker`` (or
+  dask-jobqueue, docs/SCALING.md); without one, to a local cluster of
+  ``workers`` single-threaded worker processes.  The scheduler reruns the
+  tasks of a worker that dies on another worker (``distributed.scheduler.
+  allowed-failures`` times); a point that still fails is reported as not
+  finished, so a resumed sweep runs it again.
+
+Every result is handed to ``on_done`` the moment it arrives, in the parent
+process, which writes it to disk: a point once finished is never lost,
+whatever happens to the workers afterwards.
+"""
+
+from __future__ import annotations
+
+import math
+import multiprocessing as mp
+import os
+import sys
+import time
+from collections.abc import Callable, Sequence
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
+from dataclasses import dataclass, field
+from typing import Any
+
+from bench._errors import BenchError
+
+EXECUTORS = ("local", "dask")
+
+#: How often a local point is submitted again after its worker died.
+MAX_ATTEMPTS = 3
+
+#: What a point whose worker died too often reports (not written: a resume reruns it).
+LOST = "lost"
+
+
+@dataclass(slots=True)
+class RunInfo:
+    """How a batch of points ran: executor, workers, wall time, points lost."""
+
+    executor: str
+    workers: int
+    scheduler: str | None = None
+    wall_s: float = 0.0
+    done: int = 0
+    lost: int = 0
+    restarts: int = 0
+    notes: list[str] = field(default_factory=list)
+
+
+class Bar:
+    """Progress of a study on stderr: a rich progress bar with an ETA on a terminal,
+    else one line per finished point with the elapsed and the estimated time left.
+
+    The time left scales the elapsed time by the share of the work still to do
+    (points weighted by ``cost``, e.g. simulated steps).
+    """
+
+    def __init__(self, total: float, n: int, title: str, *, enabled: bool = True) -> None:
+        self.total = total
+        self.n = n
+        self.enabled = enabled
+        self.done = 0
+        self.done_cost = 0.0
+        self.t0 = time.perf_counter()
+        self.tty = sys.stderr.isatty()
+        self._rich: Any = None
+        if enabled and self.tty:
+            from rich.console import Console
+            from rich.progress import (
+                BarColumn,
+                MofNCompleteColumn,
+                Progress,
+                TextColumn,
+                TimeElapsedColumn,
+                TimeRemainingColumn,
+            )
+
+            self._rich = Progress(
+                TextColumn("{task.description}"),
+                BarColumn(),
+                MofNCompleteColumn(),
+                TextColumn("elapsed"),
+                TimeElapsedColumn(),
+                TextColumn("left"),
+                TimeRemainingColumn(),
+                console=Console(file=sys.stderr),
+            )
+            self._rich.start()
+            self._task = self._rich.add_task(title, total=total)
+
+    def advance(self, label: str, cost: float, ok: bool) -> None:
+        self.done += 1
+        self.done_cost += cost
+        if not self.enabled:
+            return
+        if self._rich is not None:
+            self._rich.update(self._task, advance=cost)
+            return
+        el = time.perf_counter() - self.t0
+        left = el * (self.total - self.done_cost) / self.done_cost if self.done_cost else math.nan
+        print(
+            f"[{self.done}/{self.n}] {label} {'done' if ok else 'FAILED'}  "
+            f"{_mmss(el)} elapsed, ~{_mmss(left)} left",
+            file=sys.stderr,
+            flush=True,
+        )
+
+    def close(self) -> None:
+        if self._rich is not None:
+            self._rich.stop()
+
+
+def _mmss(s: float) -> str:
+    if not math.isfinite(s):
+        return "?"
+    s = max(0.0, s)
+    return f"{int(s // 60)}:{int(s % 60):02d}"
+
+
+def noop(task: Any) -> dict[str, Any]:
+    """A task that does nothing: what an executor costs per point, without the point."""
+    return {"task": task}
+
+
+def burn(n: int) -> dict[str, Any]:
+    """A pure-Python busy loop of ``n`` additions: what one CPU gives a process."""
+    t0 = time.perf_counter()
+    x = 0
+    for i in range(n):
+        x += i
+    return {"wall_s": time.perf_counter() - t0, "x": x}
+
+
+def execute(
+    tasks: Sequence[Any],
+    fn: Callable[[Any], dict[str, Any]],
+    on_done: Callable[[int, dict[str, Any]], None],
+    *,
+    executor: str = "local",
+    workers: int = 2,
+    scheduler: str | None = None,
+) -> RunInfo:
+    """Run ``fn(task)`` for every task; ``on_done(index, result)`` as each one finishes.
+
+    ``fn`` must be a module-level function and the tasks picklable; ``fn``
+    returns a dict (a failing point returns ``{"error": ...}`` itself).  A
+    point whose workers died :data:`MAX_ATTEMPTS` times is passed to
+    ``on_done`` as ``{"error": LOST, ...}``.
+    """
+    if executor not in EXECUTORS:
+        raise BenchError(f"--executor: unknown executor {executor!r} (known: local, dask)")
+    if workers < 1:
+        raise BenchError(f"--workers must be >= 1, got {workers}")
+    t0 = time.perf_counter()
+    if executor == "dask":
+        info = _dask(tasks, fn, on_done, workers, scheduler)
+    else:
+        if scheduler:
+            raise BenchError("--scheduler needs --executor dask")
+        info = _local(tasks, fn, on_done, workers)
+    info.wall_s = time.perf_counter() - t0
+    return info
+
+
+def _local(
+    tasks: Sequence[Any],
+    fn: Callable[[Any], dict[str, Any]],
+    on_done: Callable[[int, dict[str, Any]], None],
+    workers: int,
+) -> RunInfo:
+    info = RunInfo("local", workers)
+    todo = list(range(len(tasks)))
+    attempts = [0] * len(tasks)
+    while todo:
+        with ProcessPoolExecutor(workers, mp_context=mp.get_context("spawn")) as ex:
+            pending: dict[Future[dict[str, Any]], int] = {}
+            queue = list(todo)
+            todo = []
+            broken = False
+            while queue or pending:
+                # keep at most two points per worker queued: a broken pool loses only those
+                while queue and len(pending) < 2 * workers and not broken:
+                    i = queue.pop(0)
+                    attempts[i] += 1
+                    pending[ex.submit(fn, tasks[i])] = i
+                if not pending:
+                    break
+                done, _ = wait(pending, return_when=FIRST_COMPLETED)
+                for f in done:
+                    i = pending.pop(f)
+                    try:
+                        res = f.result()
+                    except BrokenProcessPool:
+                        broken = True
+                        todo.append(i)
+                        continue
+                    info.done += 1
+                    on_done(i, res)
+            if broken:
+                info.restarts += 1
+                todo += queue
+                for i in [i for i in todo if attempts[i] >= MAX_ATTEMPTS]:
+                    todo.remove(i)
+                    info.lost += 1
+                    on_done(i, {"error": LOST, "why": "its worker process died", "wall_s": 0.0})
+                if todo:
+                    info.notes.append(
+                        f"a worker process died; {len(todo)} unfinished points resubmitted"
+                    )
+    return info
+
+
+def _dask(
+    tasks: Sequence[Any],
+    fn: Callable[[Any], dict[str, Any]],
+    on_done: Callable[[int, dict[str, Any]], None],
+    workers: int,
+    scheduler: str | None,
+) -> RunInfo:
+    try:
+        from distributed import Client, LocalCluster, as_completed
+    except ImportError:
+        raise BenchError(
+            "--executor dask needs Dask distributed: pip install 'can-hil-bench[dask]'"
+        ) from None
+    import logging
+
+    info = RunInfo("dask", workers, scheduler)
+    logging.getLogger("distributed").setLevel(logging.ERROR)
+    cluster: Any = None
+    try:
+        if scheduler:
+            try:
+                client = Client(scheduler, timeout="20s")
+            except OSError as e:
+                raise BenchError(f"--scheduler {scheduler}: cannot connect ({e})") from None
+            info.workers = len(client.scheduler_info().get("workers", {}))
+        else:
+            cluster = LocalCluster(
+                n_workers=workers,
+                threads_per_worker=1,
+                processes=True,
+                dashboard_address=None,
+                silence_logs=logging.ERROR,
+            )
+            client = Client(cluster)
+        with client:
+            futs = [
+                client.submit(fn, t, pure=False, key=f"point-{i}-{os.getpid()}")
+                for i, t in enumerate(tasks)
+            ]
+            index = {f.key: i for i, f in enumerate(futs)}
+            for fut in as_completed(futs):
+                i = index[fut.key]
+                if fut.status == "finished":
+                    info.done += 1
+                    on_done(i, fut.result())
+                else:  # KilledWorker after the scheduler's retries, or a lost connection
+                    exc = fut.exception()
+                    info.lost += 1
+                    why = f"{type(exc).__name__}: {exc}"
+                    on_done(i, {"error": LOST, "why": why, "wall_s": 0.0})
+                fut.release()
+    finally:
+        if cluster is not None:
+            cluster.close()
+    return info
