@@ -760,6 +760,9 @@ typedef struct {
     int kind;
     int raw_feedback;
     int dirty;  /* stepped since the last store() */
+    int holds;  /* the core holds the states (loaded, and Python has not changed them since) */
+    PyObject *state;     /* bind(): the controller's __dict__ */
+    PyObject *fallback;  /* bind(): the Python step, for the periods the core leaves */
     /* the seam's classes and their slots' offsets (-1: read by name) */
     PyTypeObject *meas_t, *out_t;
     Py_ssize_t meas_off[N_MEAS], out_off[N_OUT];
@@ -796,10 +799,28 @@ static Py_ssize_t slot_offset(PyTypeObject *tp, const char *name)
     return off;
 }
 
+static int Core_traverse(Core *self, visitproc visit, void *arg)
+{
+    Py_VISIT(self->state);
+    Py_VISIT(self->fallback);
+    Py_VISIT(self->meas_t);
+    Py_VISIT(self->out_t);
+    return 0;
+}
+
+static int Core_clear(Core *self)
+{
+    Py_CLEAR(self->state);
+    Py_CLEAR(self->fallback);
+    Py_CLEAR(self->meas_t);
+    Py_CLEAR(self->out_t);
+    return 0;
+}
+
 static void Core_dealloc(Core *self)
 {
-    Py_XDECREF(self->meas_t);
-    Py_XDECREF(self->out_t);
+    PyObject_GC_UnTrack(self);
+    Core_clear(self);
     Py_TYPE(self)->tp_free((PyObject *)self);
 }
 
@@ -1259,9 +1280,66 @@ static PyObject *Core_step(Core *self, PyObject *meas)
     return out;
 }
 
+/* bind(state, fallback): run() keeps the states of the controller whose __dict__ is state */
+static PyObject *Core_bind(Core *self, PyObject *args)
+{
+    PyObject *state, *fallback;
+    if (!PyArg_ParseTuple(args, "O!O", &PyDict_Type, &state, &fallback))
+        return NULL;
+    Py_INCREF(state);
+    Py_XSETREF(self->state, state);
+    Py_INCREF(fallback);
+    Py_XSETREF(self->fallback, fallback);
+    self->holds = 0;
+    Py_RETURN_NONE;
+}
+
+/* run(meas): the controller's step: load the states if Python holds them, step in C, or
+ * hand the states and the period over to the Python step (fallback) */
+static PyObject *Core_run(Core *self, PyObject *meas)
+{
+    if (self->state == NULL) {
+        PyErr_SetString(PyExc_RuntimeError, "compiled controller: run() before bind()");
+        return NULL;
+    }
+    if (!self->holds) {
+        PyObject *r = Core_load(self, self->state);
+        if (r == NULL)
+            return NULL;
+        Py_DECREF(r);
+        self->holds = 1;
+    }
+    PyObject *out = Core_step(self, meas);
+    if (out != Py_None)
+        return out;
+    Py_DECREF(out);
+    if (self->dirty) {
+        PyObject *r = Core_store(self, self->state);
+        if (r == NULL)
+            return NULL;
+        Py_DECREF(r);
+    }
+    self->holds = 0;
+    return PyObject_CallOneArg(self->fallback, meas);
+}
+
 static PyObject *Core_get_dirty(Core *self, void *closure)
 {
     return PyBool_FromLong(self->dirty);
+}
+
+static PyObject *Core_get_holds(Core *self, void *closure)
+{
+    return PyBool_FromLong(self->holds);
+}
+
+static int Core_set_holds(Core *self, PyObject *v, void *closure)
+{
+    int t = v == NULL ? 0 : PyObject_IsTrue(v);
+    if (t < 0)
+        return -1;
+    self->holds = t;
+    return 0;
 }
 
 static PyMethodDef Core_methods[] = {
@@ -1271,11 +1349,17 @@ static PyMethodDef Core_methods[] = {
      "Write the states back into the controller's __dict__ and its objects."},
     {"step", (PyCFunction)Core_step, METH_O,
      "Controller.step(meas) compiled, or None for a period the Python step must run."},
+    {"bind", (PyCFunction)Core_bind, METH_VARARGS,
+     "bind(state, fallback): the controller's __dict__ and its Python step, for run()."},
+    {"run", (PyCFunction)Core_run, METH_O,
+     "The controller's step: compiled, or the Python step on the same states."},
     {NULL, NULL, 0, NULL},
 };
 
 static PyGetSetDef Core_getset[] = {
     {"dirty", (getter)Core_get_dirty, NULL, "stepped since the last load() or store()", NULL},
+    {"holds", (getter)Core_get_holds, (setter)Core_set_holds,
+     "the core holds the states (False: Python does; run() loads them first)", NULL},
     {NULL, NULL, NULL, NULL, NULL},
 };
 
@@ -1283,11 +1367,13 @@ static PyTypeObject CoreType = {
     PyVarObject_HEAD_INIT(NULL, 0)
     .tp_name = "controller._cctl.Core",
     .tp_basicsize = sizeof(Core),
-    .tp_flags = Py_TPFLAGS_DEFAULT,
+    .tp_flags = Py_TPFLAGS_DEFAULT | Py_TPFLAGS_HAVE_GC,
     .tp_doc = "The compiled controller step (controller._engine).",
     .tp_new = PyType_GenericNew,
     .tp_init = (initproc)Core_init,
     .tp_dealloc = (destructor)Core_dealloc,
+    .tp_traverse = (traverseproc)Core_traverse,
+    .tp_clear = (inquiry)Core_clear,
     .tp_methods = Core_methods,
     .tp_getset = Core_getset,
 };

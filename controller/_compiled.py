@@ -60,19 +60,19 @@ def _state(name: str, handed: bool) -> property:
 
     def get(self: CompiledController) -> Any:
         core = self._core
-        if core is not None and self._in_core:
+        if core is not None and core.holds:
             if core.dirty:
                 core.store(self.__dict__)
             if handed:
-                self._in_core = False
+                core.holds = False
         return self.__dict__[name]
 
     def put(self: CompiledController, value: Any) -> None:
         core = self._core
-        if core is not None and self._in_core:
+        if core is not None and core.holds:
             if core.dirty:
                 core.store(self.__dict__)
-            self._in_core = False
+            core.holds = False
         self.__dict__[name] = value
 
     return property(get, put, doc=f"``{name}`` (kept by the compiled core while it steps)")
@@ -86,7 +86,6 @@ class CompiledController(Controller):
     """
 
     _core: Any = None
-    _in_core = False
 
     def __init__(self, pars: ControllerPars, engine: str = "auto") -> None:
         super().__init__(pars, engine)
@@ -96,26 +95,14 @@ class CompiledController(Controller):
             # not built, not covered, or an estimator registered under a compiled one's name
             self.engine_note = why or f"the estimator of {est_mod} is not compiled: Python"
             return
-        self._core = _cctl.Core(kind, Measurement, ControlOutput)
+        core = _cctl.Core(kind, Measurement, ControlOutput)
+        self._core = core
         self.engine = "compiled"
         self.engine_note = None
-
-    def step(self, meas: Measurement) -> ControlOutput:
-        """Controller.step: in C, or in Python on the same states where the core leaves it."""
-        core = self._core
-        if core is None:
-            return super().step(meas)
-        d = self.__dict__
-        if not self._in_core:
-            core.load(d)
-            self._in_core = True
-        out: ControlOutput | None = core.step(meas)
-        if out is not None:
-            return out
-        if core.dirty:
-            core.store(d)
-        self._in_core = False
-        return super().step(meas)
+        # the step is the core's run(), called directly (no Python frame per period); it
+        # hands the periods it leaves to the Python step on the same states
+        core.bind(self.__dict__, super().step)
+        self.__dict__["step"] = core.run
 
 
 for _name in _STATE_VALUES:

@@ -246,3 +246,18 @@ def test_purity_the_core_never_reads_the_truth_of_a_sensorless_measurement() -> 
         m = Measurement(k, 0.1 * math.sin(k), -0.05, 0.05 - 0.1 * math.sin(k), 300.0)
         assert _bits(ctrl.step(NoTruth(m))) == _bits(ref.step(m))  # type: ignore[arg-type]
     assert ctrl.engine == "compiled"
+
+
+def test_a_compiled_controller_is_freed() -> None:
+    """The core refers back to its controller (its states and its Python step): the cycle
+    is the garbage collector's to break, so controllers built by the thousand are freed."""
+    import gc
+    import weakref
+
+    ctrl = build_controller(load_scenario("wen-5.1"), "tt-dq", "compiled")
+    ctrl.set_enable(True)
+    ctrl.step(Measurement(0, 0.0, 0.0, 0.0, 300.0))
+    ref = weakref.ref(ctrl)
+    del ctrl
+    gc.collect()
+    assert ref() is None

@@ -215,7 +215,7 @@ def _closed_loop(
 
     scn = _loop_scenario(estimator, profile)
     plant = build_plant(scn, engine)
-    ctrl = build_controller(scn, estimator)
+    ctrl = build_controller(scn, estimator, engine)
     ctrl.set_enable(True)
     ctrl.set_speed_ref(SPEED_REF_RPM * 2.0 * math.pi / 60.0)
     truth = estimator == "sensored"
