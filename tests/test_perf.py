@@ -80,7 +80,12 @@ def test_perf_quick_writes_every_figure_and_renders_the_docs(
     for model in ("average", "switching"):
         a = inp["alone_us_per_period"][model]
         assert all(a[e] > 0 for e in eng)
-    assert inp["alone_us_per_period"]["controller_tt_dq_us"] > 0
+    ctrl = inp["alone_us_per_period"]["controller_tt_dq"]
+    assert all(ctrl[e] > 0 for e in eng)
+    for est in ("sfhf", "tt-ab", "tt-dq", "square-wave", "square-wave-nocic", "sensored"):
+        # the compiled controller where it is built (both engines measured)
+        assert inp[est]["controller_engine"] == eng[-1]
+    assert inp["hybrid-tt-dq"]["controller_engine"] == "python"
     for e in eng:
         n = inp["plant_node_10khz"][e]
         assert n["us_p99"] >= n["us_p50"] > 0
