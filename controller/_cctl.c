@@ -1,9 +1,10 @@
 /* The compiled engine of controller.Controller: the per-period step in C.
  *
  * A second implementation of Controller.step (controller/_controller.py) in
- * the speed-control and alignment modes, with the estimators tt-dq, tt-ab and
- * sfhf (rotating injection, model normalisation), square-wave and
- * square-wave-nocic (Xue) and sensored.  Each Python block is one C struct
+ * the speed-control and alignment modes, with every shipped estimator: tt-dq,
+ * tt-ab and sfhf (rotating injection, model normalisation), square-wave and
+ * square-wave-nocic (Xue), sensored, and the hybrids hybrid-tt-dq and
+ * hybrid-square-wave.  Each Python block is one C struct
  * and one function of the same name, operation for operation in the same
  * order, so that the two engines give the same trace bit for bit
  * (tests/test_controller_engine.py runs every shipped scenario on both):
@@ -21,6 +22,13 @@
  *   SFHFEstimator.update         sfhf_update                (_sfhf.py)
  *   SquareWaveEstimator.update   sqw_update                 (_square_wave.py)
  *   SensoredEstimator.update     sens_update                (_sensored.py)
+ *   FluxObserver._k1T/_predict/_flux_error/update/update_slaved
+ *                                flux_k1T, flux_predict, flux_error, flux_update,
+ *                                flux_update_slaved         (_flux_observer.py)
+ *   TransitionBand.play/weights  band_play, band_weights    (_hybrid.py)
+ *   _PllTracker, _LuenbergerTracker (w_smooth, sync)
+ *                                tracker_w_smooth, tracker_sync (_hybrid.py)
+ *   HybridEstimator.update/injection hyb_update, est_injection (_hybrid.py)
  *   Controller.step              core_step                  (_controller.py)
  *
  * Keep them in step: a change of an equation in one of those files is a
@@ -53,6 +61,8 @@
 #define KIND_SFHF 3
 #define KIND_SQW 4
 #define KIND_SENSORED 5
+#define KIND_HYB_TTDQ 6
+#define KIND_HYB_SQW 7
 
 #define CIC_MAX 64
 #define CIC_REANCHOR 4096
@@ -748,6 +758,172 @@ static void sens_update(EST *e, double i_a, double i_b, double theta_e, double w
     e->i_beta_f = i_b;
 }
 
+/* ------------------------------------------- FluxObserver (_flux_observer.py) */
+typedef struct {
+    double L_d, L_q, psi_f, T_s, w_min, k_i, kp, ki_T, zT, rT2, dL;
+    double psi_alpha, psi_beta, ia1, ib1, theta_hat, w_hat, eps, accel, th_next;
+    int init;
+} FLUX;
+
+static double flux_k1T(const FLUX *o, double w)
+{
+    double a = w >= 0.0 ? w : -w;
+    if (a < o->w_min)
+        a = o->w_min;
+    double g = o->zT * a;
+    return g < 0.5 ? g : 0.5;
+}
+
+static void flux_predict(FLUX *o, double i_a, double i_b, double u_a, double u_b, double c,
+                         double s)
+{
+    if (o->init) {
+        double i_d = c * i_a + s * i_b;
+        double i_q = c * i_b - s * i_a;
+        double p_d = o->psi_f + o->L_d * i_d;
+        double p_q = o->L_q * i_q;
+        o->psi_alpha = c * p_d - s * p_q;
+        o->psi_beta = s * p_d + c * p_q;
+        o->init = 0;
+    } else {
+        double T = o->T_s;
+        double r = o->rT2;
+        o->psi_alpha += T * u_a - r * (i_a + o->ia1);
+        o->psi_beta += T * u_b - r * (i_b + o->ib1);
+    }
+    o->ia1 = i_a;
+    o->ib1 = i_b;
+}
+
+static void flux_error(const FLUX *o, double i_alpha, double i_beta, double c, double s,
+                       double *e_d, double *e_q, double *a_d, double *a_q, double *den)
+{
+    double i_d = c * i_alpha + s * i_beta;
+    double i_q = c * i_beta - s * i_alpha;
+    double pa = o->psi_alpha;
+    double pb = o->psi_beta;
+    *e_d = o->psi_f + o->L_d * i_d - (c * pa + s * pb);
+    *e_q = o->L_q * i_q - (c * pb - s * pa);
+    *a_d = o->psi_f + o->dL * i_d;
+    *a_q = -o->dL * i_q;
+    *den = *a_d * *a_d + *a_q * *a_q;
+}
+
+static void flux_update(FLUX *o, double i_alpha, double i_beta, double u_alpha, double u_beta)
+{
+    double th = o->th_next;
+    double c = cos(th);
+    double s = sin(th);
+    flux_predict(o, i_alpha, i_beta, u_alpha, u_beta, c, s);
+    double pa = o->psi_alpha;
+    double pb = o->psi_beta;
+    double e_d, e_q, a_d, a_q, den, x, eps;
+    flux_error(o, i_alpha, i_beta, c, s, &e_d, &e_q, &a_d, &a_q, &den);
+    if (den > 0.0) {
+        double inv = 1.0 / den;
+        x = (e_d * a_d + e_q * a_q) * inv;
+        eps = (e_d * a_q - e_q * a_d) * inv;
+    } else {
+        x = eps = 0.0;
+    }
+    double g = 2.0 * flux_k1T(o, o->w_hat) * x;
+    double cd = g * a_d;
+    double cq = g * a_q;
+    o->psi_alpha = pa + c * cd - s * cq;
+    o->psi_beta = pb + s * cd + c * cq;
+    double w_i = o->w_hat + o->ki_T * eps;
+    o->w_hat = w_i;
+    o->eps = eps;
+    o->accel = o->k_i * eps;
+    o->theta_hat = th;
+    th += o->T_s * (w_i + o->kp * eps);
+    if (th >= TWO_PI || th < 0.0)
+        th = py_mod(th, TWO_PI);
+    o->th_next = th;
+}
+
+static void flux_update_slaved(FLUX *o, double i_alpha, double i_beta, double u_alpha,
+                               double u_beta, double theta, double w)
+{
+    double c = cos(theta);
+    double s = sin(theta);
+    flux_predict(o, i_alpha, i_beta, u_alpha, u_beta, c, s);
+    double pa = o->psi_alpha;
+    double pb = o->psi_beta;
+    double e_d, e_q, a_d, a_q, den;
+    flux_error(o, i_alpha, i_beta, c, s, &e_d, &e_q, &a_d, &a_q, &den);
+    o->eps = den > 0.0 ? (e_d * a_q - e_q * a_d) / den : 0.0;
+    o->accel = 0.0;
+    double g = flux_k1T(o, w);
+    o->psi_alpha = pa + g * (c * e_d - s * e_q);
+    o->psi_beta = pb + g * (s * e_d + c * e_q);
+    o->w_hat = w;
+    double th = py_mod(theta, TWO_PI);
+    o->theta_hat = th;
+    th += o->T_s * w;
+    if (th >= TWO_PI || th < 0.0)
+        th = py_mod(th, TWO_PI);
+    o->th_next = th;
+}
+
+static int load_flux(FLUX *f, PyObject *o)
+{
+    TRY(get_d(o, "L_d", &f->L_d)); TRY(get_d(o, "L_q", &f->L_q));
+    TRY(get_d(o, "psi_f", &f->psi_f)); TRY(get_d(o, "T_s", &f->T_s));
+    TRY(get_d(o, "w_min", &f->w_min)); TRY(get_d(o, "k_i", &f->k_i));
+    TRY(get_d(o, "_kp", &f->kp)); TRY(get_d(o, "_ki_T", &f->ki_T)); TRY(get_d(o, "_zT", &f->zT));
+    TRY(get_d(o, "_rT2", &f->rT2)); TRY(get_d(o, "_dL", &f->dL));
+    TRY(get_d(o, "psi_alpha", &f->psi_alpha)); TRY(get_d(o, "psi_beta", &f->psi_beta));
+    TRY(get_d(o, "_ia1", &f->ia1)); TRY(get_d(o, "_ib1", &f->ib1));
+    TRY(get_d(o, "theta_hat", &f->theta_hat)); TRY(get_d(o, "w_hat", &f->w_hat));
+    TRY(get_d(o, "eps", &f->eps)); TRY(get_d(o, "accel", &f->accel));
+    TRY(get_d(o, "_th_next", &f->th_next)); TRY(get_bool(o, "_init", &f->init));
+    return 0;
+}
+
+static int store_flux(const FLUX *f, PyObject *o)
+{
+    TRY(set_d(o, "psi_alpha", f->psi_alpha)); TRY(set_d(o, "psi_beta", f->psi_beta));
+    TRY(set_d(o, "_ia1", f->ia1)); TRY(set_d(o, "_ib1", f->ib1));
+    TRY(set_d(o, "theta_hat", f->theta_hat)); TRY(set_d(o, "w_hat", f->w_hat));
+    TRY(set_d(o, "eps", f->eps)); TRY(set_d(o, "accel", f->accel));
+    TRY(set_d(o, "_th_next", f->th_next));
+    TRY(set_obj(o, "_init", PyBool_FromLong(f->init)));
+    return 0;
+}
+
+/* --------------------------------------- TransitionBand (_hybrid.py) */
+typedef struct { double w_lo, w_mid, w_hi, h; } BAND;
+
+static double band_play(const BAND *b, double y, double w)
+{
+    double s = w >= 0.0 ? w : -w;
+    if (s < y)
+        return s;
+    if (s - b->h > y)
+        return s - b->h;
+    return y;
+}
+
+static void band_weights(const BAND *b, double y, double *lam_out, double *g_out)
+{
+    double lam = (y - b->w_lo) / (b->w_mid - b->w_lo);
+    double g = (b->w_hi - y) / (b->w_hi - b->w_mid);
+    *lam_out = lam <= 0.0 ? 0.0 : (lam >= 1.0 ? 1.0 : lam);
+    *g_out = g <= 0.0 ? 0.0 : (g >= 1.0 ? 1.0 : g);
+}
+
+/* HybridEstimator's own state (its injection estimator and observer are the core's
+ * ROT or SQW and the FLUX below) */
+typedef struct {
+    int hf_kind;          /* KIND_TTDQ (_PllTracker) or KIND_SQW (_LuenbergerTracker) */
+    EST hf;               /* the injection estimator's Estimator attributes */
+    FLUX obs;
+    BAND band;
+    double tr_T_s, tr_k_x; /* the tracker's constants */
+    double weight, gain, y;
+} HYB;
+
 /* ------------------------------------------------------------ the core */
 #define N_MEAS 7
 #define N_OUT 11
@@ -776,10 +952,12 @@ typedef struct {
     double w_m_ref, i_d_ref, i_q_ref, tau_ref, w_m_hat, u_d, u_q, u_a1, u_b1, u_a2, u_b2;
     PI pi_d, pi_q, pi_w;
     FO lpf_w;
-    /* estimator */
+    /* estimator: its Estimator attributes; the rotating or square-wave state (of the
+     * hybrid's injection estimator for a hybrid) and the hybrid's own */
     EST est;
     ROT rot;
     SQW sqw;
+    HYB hyb;
 } Core;
 
 static Py_ssize_t slot_offset(PyTypeObject *tp, const char *name)
@@ -832,11 +1010,12 @@ static int Core_init(Core *self, PyObject *args, PyObject *kwds)
     if (!PyArg_ParseTupleAndKeywords(args, kwds, "iO!O!", kwlist, &kind, &PyType_Type, &mt,
                                      &PyType_Type, &ot))
         return -1;
-    if (kind < KIND_TTDQ || kind > KIND_SENSORED) {
+    if (kind < KIND_TTDQ || kind > KIND_HYB_SQW) {
         PyErr_Format(PyExc_ValueError, "compiled controller: unknown estimator kind %d", kind);
         return -1;
     }
     self->kind = kind;
+    self->hyb.hf_kind = kind == KIND_HYB_SQW ? KIND_SQW : KIND_TTDQ;
     Py_INCREF(mt);
     Py_XSETREF(self->meas_t, (PyTypeObject *)mt);
     Py_INCREF(ot);
@@ -889,15 +1068,68 @@ static int dict_set(PyObject *d, const char *name, PyObject *v)
     return r;
 }
 
-static int load_est(Core *self, PyObject *o)
+static int load_est(Core *self, int kind, EST *e, PyObject *o);
+static int store_est(Core *self, int kind, const EST *e, PyObject *o);
+
+static int load_hyb(Core *self, HYB *h, PyObject *o)
 {
-    EST *e = &self->est;
+    TRY(get_d(o, "weight", &h->weight)); TRY(get_d(o, "gain", &h->gain)); TRY(get_d(o, "y", &h->y));
+    PyObject *x;
+    int rc;
+    x = sub(o, "band");
+    if (x == NULL)
+        return -1;
+    rc = (get_d(x, "w_lo", &h->band.w_lo) < 0 || get_d(x, "w_mid", &h->band.w_mid) < 0
+          || get_d(x, "w_hi", &h->band.w_hi) < 0 || get_d(x, "h", &h->band.h) < 0) ? -1 : 0;
+    Py_DECREF(x);
+    TRY(rc);
+    x = sub(o, "tracker");
+    if (x == NULL)
+        return -1;
+    rc = h->hf_kind == KIND_TTDQ ? get_d(x, "T_s", &h->tr_T_s) : get_d(x, "_k_x", &h->tr_k_x);
+    Py_DECREF(x);
+    TRY(rc);
+    x = sub(o, "observer");
+    if (x == NULL)
+        return -1;
+    rc = load_flux(&h->obs, x);
+    Py_DECREF(x);
+    TRY(rc);
+    x = sub(o, "hf");
+    if (x == NULL)
+        return -1;
+    rc = load_est(self, h->hf_kind, &h->hf, x);
+    Py_DECREF(x);
+    return rc;
+}
+
+static int store_hyb(Core *self, const HYB *h, PyObject *o)
+{
+    TRY(set_d(o, "weight", h->weight)); TRY(set_d(o, "gain", h->gain)); TRY(set_d(o, "y", h->y));
+    PyObject *x = sub(o, "observer");
+    if (x == NULL)
+        return -1;
+    int rc = store_flux(&h->obs, x);
+    Py_DECREF(x);
+    TRY(rc);
+    x = sub(o, "hf");
+    if (x == NULL)
+        return -1;
+    rc = store_est(self, h->hf_kind, &h->hf, x);
+    Py_DECREF(x);
+    return rc;
+}
+
+static int load_est(Core *self, int kind, EST *e, PyObject *o)
+{
     TRY(get_d(o, "theta_hat", &e->theta_hat)); TRY(get_d(o, "w_hat", &e->w_hat));
     TRY(get_d(o, "err", &e->err));
     TRY(get_d(o, "i_alpha_f", &e->i_alpha_f)); TRY(get_d(o, "i_beta_f", &e->i_beta_f));
-    if (self->kind == KIND_SENSORED)
+    if (kind == KIND_SENSORED)
         return 0;
-    if (self->kind == KIND_SQW)
+    if (kind == KIND_HYB_TTDQ || kind == KIND_HYB_SQW)
+        return load_hyb(self, &self->hyb, o);
+    if (kind == KIND_SQW)
         return load_sqw(&self->sqw, o);
     ROT *r = &self->rot;
     TRY(get_d(o, "V_h", &r->V_h)); TRY(get_d(o, "wT", &r->wT));
@@ -909,27 +1141,28 @@ static int load_est(Core *self, PyObject *o)
     x = sub(o, name); if (x == NULL) return -1; rc = fn(dst, x); Py_DECREF(x); TRY(rc);
     LOAD_SUB("pll", load_pll, &r->pll);
     LOAD_SUB("_bpf", load_bq2, &r->bpf);
-    if (self->kind == KIND_TTAB) {
+    if (kind == KIND_TTAB) {
         LOAD_SUB("_lpf", load_fo2, &r->lpf_ab);
     } else {
         LOAD_SUB("_lpf", load_fo, &r->lpf);
     }
-    if (self->kind == KIND_SFHF) {
+    if (kind == KIND_SFHF) {
         LOAD_SUB("_hpf", load_fo2, &r->hpf);
     }
 #undef LOAD_SUB
     return 0;
 }
 
-static int store_est(Core *self, PyObject *o)
+static int store_est(Core *self, int kind, const EST *e, PyObject *o)
 {
-    EST *e = &self->est;
     TRY(set_d(o, "theta_hat", e->theta_hat)); TRY(set_d(o, "w_hat", e->w_hat));
     TRY(set_d(o, "err", e->err));
     TRY(set_d(o, "i_alpha_f", e->i_alpha_f)); TRY(set_d(o, "i_beta_f", e->i_beta_f));
-    if (self->kind == KIND_SENSORED)
+    if (kind == KIND_SENSORED)
         return 0;
-    if (self->kind == KIND_SQW)
+    if (kind == KIND_HYB_TTDQ || kind == KIND_HYB_SQW)
+        return store_hyb(self, &self->hyb, o);
+    if (kind == KIND_SQW)
         return store_sqw(&self->sqw, o);
     ROT *r = &self->rot;
     TRY(set_d(o, "f", r->f)); TRY(set_ll(o, "_k", r->k));
@@ -939,12 +1172,12 @@ static int store_est(Core *self, PyObject *o)
     x = sub(o, name); if (x == NULL) return -1; rc = fn(src, x); Py_DECREF(x); TRY(rc);
     STORE_SUB("pll", store_pll, &r->pll);
     STORE_SUB("_bpf", store_bq2, &r->bpf);
-    if (self->kind == KIND_TTAB) {
+    if (kind == KIND_TTAB) {
         STORE_SUB("_lpf", store_fo2, &r->lpf_ab);
     } else {
         STORE_SUB("_lpf", store_fo, &r->lpf);
     }
-    if (self->kind == KIND_SFHF) {
+    if (kind == KIND_SFHF) {
         STORE_SUB("_hpf", store_fo2, &r->hpf);
     }
 #undef STORE_SUB
@@ -1003,7 +1236,7 @@ static PyObject *Core_load(Core *self, PyObject *d)
         return NULL;
     if ((v = dict_item(d, "lpf_w")) == NULL || load_fo(&self->lpf_w, v) < 0)
         return NULL;
-    if ((v = dict_item(d, "estimator")) == NULL || load_est(self, v) < 0)
+    if ((v = dict_item(d, "estimator")) == NULL || load_est(self, self->kind, &self->est, v) < 0)
         return NULL;
     self->dirty = 0;
     Py_RETURN_NONE;
@@ -1040,7 +1273,8 @@ static PyObject *Core_store(Core *self, PyObject *d)
         return NULL;
     if ((v = dict_item(d, "lpf_w")) == NULL || store_fo(&self->lpf_w, v) < 0)
         return NULL;
-    if ((v = dict_item(d, "estimator")) == NULL || store_est(self, v) < 0)
+    if ((v = dict_item(d, "estimator")) == NULL
+        || store_est(self, self->kind, &self->est, v) < 0)
         return NULL;
     self->dirty = 0;
     Py_RETURN_NONE;
@@ -1107,11 +1341,14 @@ static PyObject *make_output(Core *self, PyObject *k, double d_a, double d_b, do
     return out;
 }
 
-static void est_update(Core *self, long long k, double i_alpha, double i_beta, double th_e,
-                       double w_e)
+static void hyb_update(Core *self, long long k, double i_alpha, double i_beta,
+                       double u_alpha, double u_beta, int running);
+
+static void est_update(Core *self, int kind, EST *e, long long k, double i_alpha,
+                       double i_beta, double th_e, double w_e, double u_alpha, double u_beta,
+                       int running)
 {
-    EST *e = &self->est;
-    switch (self->kind) {
+    switch (kind) {
     case KIND_TTDQ:
         ttdq_update(e, &self->rot, k, i_alpha, i_beta);
         break;
@@ -1124,14 +1361,109 @@ static void est_update(Core *self, long long k, double i_alpha, double i_beta, d
     case KIND_SQW:
         sqw_update(e, &self->sqw, i_alpha, i_beta, self->tau_ref);
         break;
+    case KIND_HYB_TTDQ:
+    case KIND_HYB_SQW:
+        hyb_update(self, k, i_alpha, i_beta, u_alpha, u_beta, running);
+        break;
     default:
         sens_update(e, i_alpha, i_beta, th_e, w_e);
     }
 }
 
-static void est_injection(Core *self, double *u_a, double *u_b)
+/* _PllTracker / _LuenbergerTracker: w_smooth and sync */
+static double tracker_w_smooth(Core *self)
 {
-    if (self->kind == KIND_SQW) {
+    return self->hyb.hf_kind == KIND_TTDQ ? self->rot.pll.w_i : self->sqw.obs.w_hat;
+}
+
+static void tracker_sync(Core *self, double theta, double w, double accel, double torque)
+{
+    HYB *h = &self->hyb;
+    if (h->hf_kind == KIND_TTDQ) {
+        PLL *p = &self->rot.pll; /* pll.reset(theta + T_s w, w) */
+        p->theta_hat = py_mod(theta + h->tr_T_s * w, TWO_PI);
+        p->w_hat = w;
+        p->w_i = w;
+    } else {
+        LUEN *o = &self->sqw.obs; /* obs.reset(theta, w, accel + k_x torque) */
+        o->theta_hat = py_mod(theta, TWO_PI);
+        o->w_hat = w;
+        o->x = accel + h->tr_k_x * torque;
+    }
+}
+
+/* HybridEstimator.update */
+static void hyb_update(Core *self, long long k, double i_alpha, double i_beta,
+                       double u_alpha, double u_beta, int running)
+{
+    HYB *h = &self->hyb;
+    EST *hf = &h->hf;
+    FLUX *obs = &h->obs;
+    EST *e = &self->est;
+    est_update(self, h->hf_kind, hf, k, i_alpha, i_beta, 0.0, 0.0, u_alpha, u_beta, running);
+    double lam = h->weight;
+    double th, w, w_s, err;
+    if (lam == 0.0) {
+        w_s = tracker_w_smooth(self);
+        th = hf->theta_hat;
+        flux_update_slaved(obs, i_alpha, i_beta, u_alpha, u_beta, th, w_s);
+        w = hf->w_hat;
+        err = hf->err;
+    } else {
+        flux_update(obs, i_alpha, i_beta, u_alpha, u_beta);
+        double w_o = obs->w_hat;
+        if (lam == 1.0) {
+            th = obs->theta_hat;
+            w = w_o;
+            w_s = w_o;
+            err = obs->eps;
+            tracker_sync(self, th, w_o, obs->accel, self->tau_ref);
+        } else {
+            double th_h = hf->theta_hat;
+            double d = py_mod(obs->theta_hat - th_h + M_PI, TWO_PI) - M_PI;
+            th = py_mod(th_h + lam * d, TWO_PI);
+            double w_h = hf->w_hat;
+            w = w_h + lam * (w_o - w_h);
+            double w_t = tracker_w_smooth(self);
+            w_s = w_t + lam * (w_o - w_t);
+            double e_h = hf->err;
+            err = e_h + lam * (obs->eps - e_h);
+        }
+    }
+    e->theta_hat = th;
+    e->w_hat = w;
+    e->err = err;
+    double g = h->gain;
+    if (g == 1.0) {
+        e->i_alpha_f = hf->i_alpha_f;
+        e->i_beta_f = hf->i_beta_f;
+    } else if (g == 0.0) {
+        e->i_alpha_f = i_alpha;
+        e->i_beta_f = i_beta;
+    } else {
+        e->i_alpha_f = i_alpha + g * (hf->i_alpha_f - i_alpha);
+        e->i_beta_f = i_beta + g * (hf->i_beta_f - i_beta);
+    }
+    double y = running ? band_play(&h->band, h->y, w_s) : 0.0;
+    h->y = y;
+    band_weights(&h->band, y, &h->weight, &h->gain);
+}
+
+static void est_injection(Core *self, int kind, double *u_a, double *u_b)
+{
+    if (kind == KIND_HYB_TTDQ || kind == KIND_HYB_SQW) {
+        double g = self->hyb.gain;
+        if (g == 0.0) {
+            *u_a = 0.0;
+            *u_b = 0.0;
+            return;
+        }
+        est_injection(self, self->hyb.hf_kind, u_a, u_b);
+        if (g != 1.0) {
+            *u_a = g * *u_a;
+            *u_b = g * *u_b;
+        }
+    } else if (kind == KIND_SQW) {
         *u_a = self->sqw.u_next_a;
         *u_b = self->sqw.u_next_b;
     } else if (self->kind == KIND_SENSORED) {
@@ -1161,7 +1493,7 @@ static PyObject *Core_step(Core *self, PyObject *meas)
     if (mode == MODE_ALIGN
         && (self->settled ? self->n_mode + 1 >= self->n_settle : self->n_mode + 1 >= self->n_align))
         Py_RETURN_NONE; /* the alignment ends in this period */
-    if (self->kind == KIND_SQW && sqw_needs_python(&self->sqw))
+    if ((self->kind == KIND_SQW || self->kind == KIND_HYB_SQW) && sqw_needs_python(&self->sqw))
         Py_RETURN_NONE;
     double i_a, i_b, i_c, u_dc, th_e = 0.0, w_e_true = 0.0;
     if (meas_double(self, meas, 1, &i_a) < 0 || meas_double(self, meas, 2, &i_b) < 0
@@ -1195,7 +1527,8 @@ static PyObject *Core_step(Core *self, PyObject *meas)
 
     double i_alpha = (2.0 * i_a - i_b - i_c) / 3.0;
     double i_beta = (i_b - i_c) * SQRT3_INV;
-    est_update(self, k, i_alpha, i_beta, th_e, w_e_true);
+    est_update(self, self->kind, e, k, i_alpha, i_beta, th_e, w_e_true, self->u_a2, self->u_b2,
+               mode == MODE_RUN);
     double th = e->theta_hat;
     double w = e->w_hat;
     double c = cos(th);
@@ -1239,7 +1572,7 @@ static PyObject *Core_step(Core *self, PyObject *meas)
     double u_d = pi_output(&self->pi_d, i_d_ref, i_d_pi, -w_e * self->L_q * i_q);
     double u_q = pi_output(&self->pi_q, i_q_ref, i_q_pi, w_e * (self->L_d * i_d + self->psi_f));
     double u_ah, u_bh;
-    est_injection(self, &u_ah, &u_bh);
+    est_injection(self, self->kind, &u_ah, &u_bh);
     double u_lim = u_dc * SQRT3_INV - sqrt(u_ah * u_ah + u_bh * u_bh);
     double mag2 = u_d * u_d + u_q * u_q;
     double u_dl, u_ql;
@@ -1404,5 +1737,7 @@ PyMODINIT_FUNC PyInit__cctl(void)
     PyModule_AddIntConstant(m, "KIND_SFHF", KIND_SFHF);
     PyModule_AddIntConstant(m, "KIND_SQW", KIND_SQW);
     PyModule_AddIntConstant(m, "KIND_SENSORED", KIND_SENSORED);
+    PyModule_AddIntConstant(m, "KIND_HYB_TTDQ", KIND_HYB_TTDQ);
+    PyModule_AddIntConstant(m, "KIND_HYB_SQW", KIND_HYB_SQW);
     return m;
 }

@@ -7,6 +7,8 @@ KIND_TTAB: int
 KIND_SFHF: int
 KIND_SQW: int
 KIND_SENSORED: int
+KIND_HYB_TTDQ: int
+KIND_HYB_SQW: int
 
 class Core:
     dirty: bool

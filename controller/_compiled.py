@@ -51,7 +51,11 @@ _MODULES = {
     3: "controller._sfhf",
     4: "controller._square_wave",
     5: "controller._sensored",
+    6: "controller._hybrid",
+    7: "controller._hybrid",
 }
+#: The module of a hybrid's injection estimator.
+_HF_MODULES = {6: "controller._tt_dq", 7: "controller._square_wave"}
 
 
 def _state(name: str, handed: bool) -> property:
@@ -90,8 +94,11 @@ class CompiledController(Controller):
     def __init__(self, pars: ControllerPars, engine: str = "auto") -> None:
         super().__init__(pars, engine)
         kind, why = compiled_cover(pars)
-        est_mod = type(self.__dict__["estimator"]).__module__
-        if _cctl is None or not kind or est_mod != _MODULES[kind]:
+        est = self.__dict__["estimator"]
+        est_mod = type(est).__module__
+        if kind in _HF_MODULES and type(getattr(est, "hf", None)).__module__ != _HF_MODULES[kind]:
+            est_mod = type(getattr(est, "hf", None)).__module__
+        if _cctl is None or not kind or est_mod != _MODULES.get(kind):
             # not built, not covered, or an estimator registered under a compiled one's name
             self.engine_note = why or f"the estimator of {est_mod} is not compiled: Python"
             return

@@ -10,13 +10,15 @@ gives the same trace bit for bit (``tests/test_controller_engine.py``).
 ``"auto"``: compiled when it is built and covers the controller, else Python.
 
 What it covers (:func:`compiled_cover`): the speed and current control of
-the alignment and run modes with the estimators ``tt-dq``, ``tt-ab`` and
-``sfhf`` (model normalisation), ``square-wave``, ``square-wave-nocic`` and
-``sensored``, with the current fed to the PIs filtered or raw. A controller
-outside it runs in Python whatever the choice, and says why
-(:attr:`controller.Controller.engine_note`): the hybrid estimators, the
-measured normalisation and the drive countermeasures (dead-time
-feed-forward, cross-saturation correction, offset calibration). Inside it,
+the alignment and run modes with every shipped estimator: ``tt-dq``,
+``tt-ab`` and ``sfhf`` (model normalisation), ``square-wave``,
+``square-wave-nocic``, ``sensored``, and the hybrids ``hybrid-tt-dq`` and
+``hybrid-square-wave`` (flux observer, hand-over band, trackers), with the
+current fed to the PIs filtered or raw. A controller outside it runs in
+Python whatever the choice, and says why
+(:attr:`controller.Controller.engine_note`): the measured normalisation and
+the drive countermeasures (dead-time feed-forward, cross-saturation
+correction, offset calibration). Inside it,
 the few periods the core leaves to Python (the polarity test, the
 hand-overs between modes, the CIC's periodic re-anchoring) run on the same
 states (:mod:`controller._compiled`).
@@ -61,6 +63,8 @@ _KINDS = {
     "square-wave": 4,
     "square-wave-nocic": 4,
     "sensored": 5,
+    "hybrid-tt-dq": 6,
+    "hybrid-square-wave": 7,
 }
 
 
@@ -78,9 +82,9 @@ def compiled_cover(pars: ControllerPars) -> tuple[int, str | None]:
     if kind == 0:
         return 0, f"the {name} estimator is not compiled: the controller runs in Python"
     opts = dict(pars.estimator_options)
-    if kind in (1, 2, 3) and opts.get("normalise", "model") != "model":
+    if kind in (1, 2, 3, 6) and opts.get("normalise", "model") != "model":
         return 0, f"{name} with normalise={opts['normalise']!r} is not compiled: Python"
-    if kind == 4 and int(opts.get("M", 2)) > 64:
+    if kind in (4, 7) and int(opts.get("M", 2)) > 64:
         return 0, f"{name} with a CIC delay M > 64 is not compiled: Python"
     cp = pars.compensation
     off = [

@@ -41,7 +41,16 @@ from controller import (
 )
 
 SCENARIOS = sorted(p.stem for p in (Path(loops.__file__).parents[1] / "scenarios").glob("*.toml"))
-COMPILED = ("tt-dq", "tt-ab", "sfhf", "square-wave", "square-wave-nocic", "sensored")
+COMPILED = (
+    "tt-dq",
+    "tt-ab",
+    "sfhf",
+    "square-wave",
+    "square-wave-nocic",
+    "sensored",
+    "hybrid-tt-dq",
+    "hybrid-square-wave",
+)
 
 
 @pytest.fixture(autouse=True)
@@ -113,14 +122,19 @@ def test_every_scenario_first_second_same_on_both_engines(
 
 
 def _loop(
-    scn_name: str, estimator: str, engine: str, n: int, events: dict[int, Any] | None = None
+    scn_name: str,
+    estimator: str,
+    engine: str,
+    n: int,
+    events: dict[int, Any] | None = None,
+    speed_rpm: float = 200.0,
 ) -> tuple[list[bytes], Controller]:
     """A closed loop on the compiled plant; ``events[k](ctrl)`` runs before period ``k``."""
     scn = load_scenario(scn_name)
     plant = build_plant(scn, "compiled")
     ctrl = build_controller(scn, estimator, engine)
     ctrl.set_enable(True)
-    ctrl.set_speed_ref(200.0 * 2.0 * math.pi / 60.0)
+    ctrl.set_speed_ref(speed_rpm * 2.0 * math.pi / 60.0)
     d = (0.5, 0.5, 0.5, False)
     out: list[bytes] = []
     truth = estimator == "sensored"
@@ -184,21 +198,72 @@ def test_commands_and_reads_between_engines_keep_the_trace(
     assert c_py.mode == 3 and e_py.w_hat != 0.0
 
 
+@pytest.mark.parametrize(
+    ("scn_name", "estimator", "top_rpm", "t_ramp"),
+    [
+        ("wide-speed-wen", "hybrid-tt-dq", 1300.0, 1.0),
+        ("wide-speed-xue", "hybrid-square-wave", 300.0, 1.5),
+    ],
+)
+def test_hybrids_through_their_band_and_back_same_on_both_engines(
+    scn_name: str, estimator: str, top_rpm: float, t_ramp: float
+) -> None:
+    """A hybrid from standstill up through its whole hand-over band (the flux observer
+    slaved, blended, alone with the injection off and the injection estimator slaved)
+    and back into it, the reference a 100 Hz staircase: the same trace on both engines."""
+    scn = load_scenario(scn_name)
+    T = sample_period(scn)
+    n0, n_up, n_top = round(0.4 / T), round(t_ramp / T), round(0.3 / T)
+    n = n0 + 2 * n_up + n_top
+
+    def ref(k: int) -> float:
+        if k < n0:
+            return 0.0
+        if k < n0 + n_up:
+            return top_rpm * (k - n0) / n_up
+        if k < n0 + n_up + n_top:
+            return top_rpm
+        return max(0.0, top_rpm * (1.0 - (k - n0 - n_up - n_top) / n_up))
+
+    every = round(0.01 / T)
+    rpm = 2.0 * math.pi / 60.0
+    weights: list[float] = []
+
+    def set_ref(k: int) -> Any:
+        def ev(c: Controller) -> None:
+            c.set_speed_ref(ref(k) * rpm)
+            if c.engine == "python":
+                weights.append(c.estimator.weight)  # type: ignore[attr-defined]
+
+        return ev
+
+    events = {k: set_ref(k) for k in range(0, n, every)}
+    py, c_py = _loop(scn_name, estimator, "python", n, events, speed_rpm=0.0)
+    cc, c_cc = _loop(scn_name, estimator, "compiled", n, events, speed_rpm=0.0)
+    assert (c_py.engine, c_cc.engine) == ("python", "compiled")
+    first = next((k for k in range(n) if py[k] != cc[k]), None)
+    assert first is None, f"the engines part at period {first}"
+    # the run crossed the band both ways: the observer alone, then the injection back
+    assert max(weights) == 1.0 and 0.0 < min(w for w in weights if w > 0.0) < 1.0
+    assert weights[-1] < 1.0
+
+
 def test_the_cover_and_the_reasons() -> None:
     """Compiled for the covered estimators; Python, with one line saying why, for the rest;
     the choices are the CLI's and an unknown one is refused."""
     scn = load_scenario("wen-5.1")
     assert ENGINES == CLI_ENGINES
-    for est in ("tt-dq", "tt-ab", "sfhf", "sensored"):
-        c = build_controller(scn, est, "compiled")
-        assert (c.engine, c.engine_note) == ("compiled", None)
+    for name in SCENARIOS:
+        for est in load_scenario(name).estimators:
+            c = build_controller(load_scenario(name), est, "compiled")
+            assert (c.engine, c.engine_note) == ("compiled", None), (name, est)
     c = build_controller(scn, "tt-dq", "python")
     assert (c.engine, c.engine_note) == ("python", None)
-    hybrid = build_controller(load_scenario("wide-speed-wen"), "hybrid-tt-dq", "compiled")
-    assert hybrid.engine == "python" and "hybrid-tt-dq" in str(hybrid.engine_note)
     pars = build_controller(scn, "tt-dq", "python").pars
     measured = replace(pars, estimator_options={"normalise": "measured"})
-    assert resolve_controller_engine("auto", measured)[0] == "python"
+    used, why = resolve_controller_engine("auto", measured)
+    assert used == "python" and "normalise='measured'" in str(why)
+    assert Controller(measured, "compiled").engine_note == why
     dead = replace(pars, compensation=CompensationPars(dead_time=True))
     used, why = resolve_controller_engine("compiled", dead)
     assert used == "python" and "dead-time" in str(why)
