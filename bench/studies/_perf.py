@@ -1119,10 +1119,14 @@ def _missed_reasons(res: dict[str, Any]) -> list[str]:
             f"{_num(alone['average'].get('compiled_over_python', math.nan), 'x')} and the "
             f"controller {_num(ctrl.get('compiled_over_python', math.nan), 'x')} faster than "
             f"Python, the loop only {_num(inp['tt_dq_10khz']['compiled_over_python'], 'x')}: "
-            f"the loop's own Python ({_num(rest_us, 'us')} per step on the compiled engine) "
-            "is the same on both engines, so the ratio is bounded by the Python loop "
-            f"({_num(py, 'us')}) over it, {_num(py / rest_us, 'x')} at most, whatever the "
-            "two steps cost."
+            "what is Python on both engines is the same on both and bounds the ratio. That "
+            f"is the loop's own Python ({_num(rest_us, 'us')} per step on the compiled "
+            f"engine; with it alone the bound is {_num(py / rest_us, 'x')}, the Python loop "
+            f"of {_num(py, 'us')} over it) and the Python of the plant's `sample()` and "
+            "`step()` around its C step, which the plant-alone figure "
+            f"({_num(plant_us, 'us')}) includes: a `Sample` built every period, the "
+            "states copied back from the core. The models' arithmetic is no longer what "
+            "the loop spends."
         )
     if not v["switching_rtf_10khz"]["met"]:
         e_sw, sw = _fastest(inp["switching_10khz"])
