@@ -6,15 +6,16 @@ STAMP := $(VENV)/.installed
 
 .PHONY: demo test lint unit vcan suite reference perf docs rtcheck clean
 
-# pip builds the compiled plant engine (setup.py); tools/need-cc installs its
-# compiler and headers first when it may, and the last line says when the
-# plant runs in pure Python instead.
-$(STAMP): pyproject.toml setup.py plant_rt/_cplant.c
+# pip builds the compiled plant and controller engines (setup.py); tools/need-cc
+# installs their compiler and headers first when it may, and the last lines say
+# when the plant or the controller runs in pure Python instead.
+$(STAMP): pyproject.toml setup.py plant_rt/_cplant.c controller/_cctl.c
 	test -x $(BIN)/pip || tools/make-venv $(PYTHON) $(VENV)
 	tools/need-cc $(BIN)/python
 	$(BIN)/python -m pip install -q --upgrade pip
 	$(BIN)/python -m pip install -q -e '.[dev,dask]'
 	$(BIN)/python -c 'import plant_rt; w = plant_rt.compiled_engine_missing(); w and print(w)'
+	$(BIN)/python -c 'import controller; w = controller.compiled_controller_missing(); w and print(w)'
 	touch $(STAMP)
 
 # The bench's main job: a paper scenario between two processes over CAN.

@@ -1,8 +1,10 @@
-"""Build of the compiled plant engine, ``plant_rt/_cplant.c`` (the rest is in pyproject.toml).
+"""Build of the compiled engines, ``plant_rt/_cplant.c`` and ``controller/_cctl.c``
+(the rest is in pyproject.toml).
 
-The extension is optional: on a machine without a C compiler or Python's
-headers the project installs all the same, one line says that the engine
-was not built, and the plant runs in pure Python (:mod:`plant_rt._engine`).
+The extensions are optional: on a machine without a C compiler or Python's
+headers the project installs all the same, one line per engine says that it
+was not built, and the plant and the controller run in pure Python
+(:mod:`plant_rt._engine`, :mod:`controller._engine`).
 ``-ffp-contract=off`` keeps the compiler from fusing a multiply and an add
 (one rounding instead of two, as on aarch64 by default), so that the C step
 rounds as the Python step does and the two engines agree bit for bit.
@@ -15,11 +17,17 @@ import sys
 from setuptools import Extension, setup
 from setuptools.command.build_ext import build_ext
 
+_WHAT = {
+    "plant_rt._cplant": ("plant_rt", "plant"),
+    "controller._cctl": ("controller", "controller"),
+}
 
-def _not_built(e: Exception) -> None:
+
+def _not_built(e: Exception, name: str | None = None) -> None:
+    pkg, what = _WHAT.get(name or "", ("can-hil-bench", "plant and controller"))
     print(
-        f"plant_rt: the compiled plant engine was not built ({type(e).__name__}: {e}); "
-        "the plant runs in pure Python",
+        f"{pkg}: the compiled {what} engine was not built ({type(e).__name__}: {e}); "
+        f"the {what} runs in pure Python",
         file=sys.stderr,
     )
 
@@ -37,7 +45,7 @@ class OptionalBuildExt(build_ext):
         try:
             super().build_extension(ext)
         except Exception as e:
-            _not_built(e)
+            _not_built(e, ext.name)
 
 
 setup(
@@ -46,7 +54,12 @@ setup(
             "plant_rt._cplant",
             ["plant_rt/_cplant.c"],
             extra_compile_args=["-O2", "-ffp-contract=off", "-fno-fast-math"],
-        )
+        ),
+        Extension(
+            "controller._cctl",
+            ["controller/_cctl.c"],
+            extra_compile_args=["-O2", "-ffp-contract=off", "-fno-fast-math"],
+        ),
     ],
     cmdclass={"build_ext": OptionalBuildExt},
 )

@@ -17,6 +17,7 @@ from controller._api import (
 from controller._compensation import CompensationPars
 from controller._controller import Controller, ControllerPars
 from controller._design import PM_TARGET_DEG
+from controller._engine import ENGINES, compiled_controller_missing, resolve_controller_engine
 from controller._filters import BPF_WEN, HPF_WEN, LPF_WEN, discretize
 from controller._flux_observer import FluxObserver, pll_gains
 from controller._hybrid import HybridDesign, HybridEstimator, TransitionBand, design
@@ -38,6 +39,7 @@ from controller._transforms import clarke, inv_clarke, inv_park, park, wrap_2pi,
 
 __all__ = [
     "BPF_WEN",
+    "ENGINES",
     "ENTRY_POINT_GROUP",
     "ESTIMATOR_NAMES",
     "HPF_WEN",
@@ -68,6 +70,7 @@ __all__ = [
     "UnknownEstimatorError",
     "check_estimator",
     "clarke",
+    "compiled_controller_missing",
     "design",
     "discretize",
     "hf_amplitudes",
@@ -76,6 +79,7 @@ __all__ = [
     "make_estimator",
     "park",
     "pll_gains",
+    "resolve_controller_engine",
     "svpwm",
     "wrap_2pi",
     "wrap_pi",

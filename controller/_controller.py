@@ -276,9 +276,32 @@ class Controller:
     ----------
     pars : ControllerPars
         Settings.
+    engine : {"auto", "compiled", "python"}, optional
+        Which implementation runs the periods (:mod:`controller._engine`):
+        ``"compiled"`` (C, the same trace bit for bit) where it covers the
+        estimator and settings, else Python; ``"auto"`` (default) the same,
+        and Python when the compiled engine is not built. The engine in use is
+        :attr:`engine`, and :attr:`engine_note` says why it is Python.
     """
 
-    def __init__(self, pars: ControllerPars) -> None:
+    #: The engine the periods run on, ``"compiled"`` or ``"python"``.
+    engine: str = "python"
+    #: Why the controller runs in Python although the compiled engine was asked for.
+    engine_note: str | None = None
+
+    def __new__(cls, pars: ControllerPars, engine: str = "auto") -> Controller:
+        from controller._engine import resolve_controller_engine
+
+        used, why = resolve_controller_engine(engine, pars)
+        if cls is Controller and used == "compiled":
+            from controller._compiled import CompiledController
+
+            return object.__new__(CompiledController)
+        obj = object.__new__(cls)
+        obj.engine_note = why
+        return obj
+
+    def __init__(self, pars: ControllerPars, engine: str = "auto") -> None:
         self.pars = pars
         m = pars.motor
         T_s = pars.T_s

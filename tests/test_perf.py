@@ -28,6 +28,7 @@ from bench.studies._perf import (
     update_readme,
     verdicts,
 )
+from controller import ESTIMATOR_NAMES
 from plant_rt import compiled_engine_missing
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -80,7 +81,11 @@ def test_perf_quick_writes_every_figure_and_renders_the_docs(
     for model in ("average", "switching"):
         a = inp["alone_us_per_period"][model]
         assert all(a[e] > 0 for e in eng)
-    assert inp["alone_us_per_period"]["controller_tt_dq_us"] > 0
+    ctrl = inp["alone_us_per_period"]["controller_tt_dq"]
+    assert all(ctrl[e] > 0 for e in eng)
+    for est in ESTIMATOR_NAMES:
+        # every estimator on the compiled controller where it is built
+        assert inp[est]["controller_engine"] == eng[-1]
     for e in eng:
         n = inp["plant_node_10khz"][e]
         assert n["us_p99"] >= n["us_p50"] > 0

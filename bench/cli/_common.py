@@ -24,7 +24,8 @@ MODES = ("lockstep", "realtime")
 #: ``--plant-profile`` choices: :data:`plant_rt.PROFILE_NAMES` (tested equal; not
 #: imported here, so that building the parser stays light).
 PLANT_PROFILES = ("ideal", "drive")
-#: The plant's engines, as ``plant_rt.ENGINES`` (not imported here: the CLI starts without plant_rt).
+#: The engines of the plant and the controller, as ``plant_rt.ENGINES`` and ``controller.ENGINES``
+#: (not imported here: the CLI starts without them).
 ENGINES = ("auto", "compiled", "python")
 #: Help of the LOG argument of the capture commands.
 LOG_HELP = "a capture python-can reads (.blf, .asc, .log, .trc, .csv, .mf4) or a run folder"
@@ -117,22 +118,35 @@ def add_engine(p: argparse.ArgumentParser) -> None:
         "--engine",
         choices=ENGINES,
         default="auto",
-        help="the plant's engine: compiled (C, built when the project is installed), python, "
-        "or auto (compiled when it is built; default)",
+        help="the engine of the plant and the controller: compiled (C, built when the project "
+        "is installed; the controller's where it covers the estimator), python, or auto "
+        "(compiled when it is built; default)",
     )
 
 
 def plant_engine(args: argparse.Namespace) -> str:
-    """``--engine``, checked: one line when auto falls back to Python, an error when compiled cannot run."""
+    """``--engine``, checked: one line when auto falls back to Python, an error when compiled
+    cannot run. It also becomes the controller's (``ENGINE_ENV``, which the controller
+    processes of a run inherit): a controller outside the compiled cover runs in Python."""
+    import os
+
+    from bench.scenarios._setup import ENGINE_ENV
+    from controller import compiled_controller_missing
     from plant_rt import compiled_engine_missing, resolve_engine
 
     try:
         resolve_engine(args.engine)
     except ValueError as e:
         raise BenchError(f"--engine {args.engine}: {e}") from None
+    c_why = compiled_controller_missing()
+    if args.engine == "compiled" and c_why:
+        raise BenchError(f"--engine {args.engine}: {c_why}")
     why = compiled_engine_missing()
-    if args.engine == "auto" and why:
-        print(why, file=sys.stderr)
+    if args.engine == "auto":
+        for line in (why, c_why):
+            if line:
+                print(line, file=sys.stderr)
+    os.environ[ENGINE_ENV] = str(args.engine)
     return str(args.engine)
 
 

@@ -7,6 +7,7 @@ objects here, so they agree on the motor, the rate and the references.
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -160,7 +161,19 @@ def motor_model(p: Preset, errors: ModelErrors | None = None) -> MotorModel:
     )
 
 
-def build_controller(scn: Scenario, estimator: str) -> Controller:
+#: The environment variable that holds ``--engine`` for the controllers built without an
+#: engine: the CLI sets it, and the controller processes a run starts inherit it.
+ENGINE_ENV = "CAN_HIL_ENGINE"
+
+
+def build_controller(scn: Scenario, estimator: str, engine: str | None = None) -> Controller:
+    """The scenario's controller for ``estimator``.
+
+    ``engine`` as :class:`controller.Controller`'s (compiled where the
+    compiled controller covers the estimator, else Python); None takes
+    :data:`ENGINE_ENV` (``--engine``), else ``"auto"``.
+    """
+    engine = engine or os.environ.get(ENGINE_ENV) or "auto"
     try:
         check_estimator(estimator)
     except UnknownEstimatorError as e:
@@ -195,7 +208,7 @@ def build_controller(scn: Scenario, estimator: str) -> Controller:
             compensation=comp,
             **kw,
         )
-        return Controller(pars)
+        return Controller(pars, engine)
     except TypeError as e:
         raise ScenarioError(f"{scn.source}: field 'estimator_options': {e}") from None
 

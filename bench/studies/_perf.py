@@ -4,13 +4,14 @@ Sections, each figure a median of several repeats inside this one process
 (timings on a shared machine are noisy: compare ratios within a run, never
 single absolute numbers across runs):
 
-1. in-process (no CAN), on both plant engines (``python`` and ``compiled``,
-   :mod:`plant_rt._engine`) in the same run: the closed loop plant + tt-dq
-   controller at 10 kHz with the scenario's average-model plant and with the
-   switching plant of the ``drive`` profile, the plant alone per period, the
-   controller alone per step, and the plant node's computation per period
-   (the plant step and its frames encoded); every estimator's loop on the
-   default engine;
+1. in-process (no CAN), on both engines in the same run (``python``: the
+   plant and the controller in Python; ``compiled``: both in C,
+   :mod:`plant_rt._engine` and :mod:`controller._engine`): the closed loop
+   plant + tt-dq controller at 10 kHz with the scenario's average-model plant
+   and with the switching plant of the ``drive`` profile, the plant alone per
+   period, the controller alone per step, and the plant node's computation
+   per period (the plant step and its frames encoded); every estimator's loop
+   on the default engine, with the controller engine it ran on;
 2. two processes in lockstep over the CAN transport: periods per second and
    the round trip sample -> duty on the bus;
 3. real-time mode at 1, 4 and 10 kHz, with normal scheduling and under
@@ -183,7 +184,8 @@ def _quantile(xs: list[float], q: float) -> float:
 
 
 def engines() -> tuple[str, ...]:
-    """The plant engines this machine has: ``python``, and ``compiled`` when it is built."""
+    """The engines this machine has: ``python``, and ``compiled`` when the plant's is built
+    (the controller's follows: compiled where it is built and covers the estimator)."""
     from plant_rt import compiled_engine_missing
 
     return ("python",) if compiled_engine_missing() else ("python", "compiled")
@@ -215,7 +217,7 @@ def _closed_loop(
 
     scn = _loop_scenario(estimator, profile)
     plant = build_plant(scn, engine)
-    ctrl = build_controller(scn, estimator)
+    ctrl = build_controller(scn, estimator, engine)
     ctrl.set_enable(True)
     ctrl.set_speed_ref(SPEED_REF_RPM * 2.0 * math.pi / 60.0)
     truth = estimator == "sensored"
@@ -265,7 +267,7 @@ def inprocess_loop(
 
 
 def plant_and_controller_alone(profile: str, n_steps: int, repeats: int) -> dict[str, float]:
-    """Seconds per period of the plant alone (each engine) and of the tt-dq controller alone.
+    """Seconds per period of the plant alone and of the tt-dq controller alone (each engine).
 
     One closed loop (``wen-5.1``'s motor at 10 kHz, tt-dq) is recorded once;
     the plant alone is a fresh plant fed the recorded duties (``sample()`` and
@@ -292,11 +294,8 @@ def plant_and_controller_alone(profile: str, n_steps: int, repeats: int) -> dict
             p.step(*d)
         return (time.perf_counter() - t0) / n_steps
 
-    fns = {f"plant_{e}": functools.partial(plant_alone, e) for e in eng}
-    out = _medians_interleaved(fns, repeats)
-
-    def ctrl_alone() -> float:
-        ctrl = build_controller(scn, "tt-dq")
+    def ctrl_alone(e: str) -> float:
+        ctrl = build_controller(scn, "tt-dq", e)
         ctrl.set_enable(True)
         ctrl.set_speed_ref(SPEED_REF_RPM * 2.0 * math.pi / 60.0)
         for m in meas[:SETTLE_STEPS]:
@@ -306,8 +305,9 @@ def plant_and_controller_alone(profile: str, n_steps: int, repeats: int) -> dict
             ctrl.step(m)
         return (time.perf_counter() - t0) / n_steps
 
-    out["controller"] = _median_of(ctrl_alone, repeats)
-    return out
+    fns = {f"plant_{e}": functools.partial(plant_alone, e) for e in eng}
+    fns.update({f"controller_{e}": functools.partial(ctrl_alone, e) for e in eng})
+    return _medians_interleaved(fns, repeats)
 
 
 def plant_node_compute(engine: str, periods: int, repeats: int) -> dict[str, float]:
@@ -369,6 +369,7 @@ def _per_engine(sec: dict[str, float], f_sw: float) -> dict[str, Any]:
 
 def inprocess_section(quick: bool, repeats: int, n_steps: int) -> dict[str, Any]:
     """Section 1: every estimator on the default engine, and tt-dq on both engines."""
+    from bench.scenarios._setup import build_controller
     from controller._registry import ESTIMATOR_NAMES
     from plant_rt import resolve_engine
 
@@ -377,7 +378,13 @@ def inprocess_section(quick: bool, repeats: int, n_steps: int) -> dict[str, Any]
     for est in ESTIMATOR_NAMES:
         sec = _median_of(functools.partial(inprocess_loop, est, n_steps), repeats)
         f = 1e3 if est.startswith("square") else F_10KHZ
-        inproc[est] = {"us_per_step": 1e6 * sec, "f_sw": f, "rtf": 1.0 / (sec * f)}
+        ctrl_engine = build_controller(_loop_scenario(est), est, "auto").engine
+        inproc[est] = {
+            "us_per_step": 1e6 * sec,
+            "f_sw": f,
+            "rtf": 1.0 / (sec * f),
+            "controller_engine": ctrl_engine,
+        }
     inproc["rtf_10khz_tt_dq"] = 1.0 / (inproc["tt-dq"]["us_per_step"] * 1e-6 * F_10KHZ)
     for key, profile in (("tt_dq_10khz", "ideal"), ("switching_10khz", "drive")):
         fns = {e: functools.partial(inprocess_loop, "tt-dq", n_steps, e, profile) for e in eng}
@@ -390,7 +397,10 @@ def inprocess_section(quick: bool, repeats: int, n_steps: int) -> dict[str, Any]
             row["compiled_over_python"] = a["plant_python"] / a["plant_compiled"]
         alone[key] = row
         if profile == "ideal":
-            alone["controller_tt_dq_us"] = 1e6 * a["controller"]
+            ctrl: dict[str, Any] = {e: 1e6 * a[f"controller_{e}"] for e in eng}
+            if "compiled" in eng:
+                ctrl["compiled_over_python"] = a["controller_python"] / a["controller_compiled"]
+            alone["controller_tt_dq"] = ctrl
     inproc["alone_us_per_period"] = alone
     periods = 1000 if quick else 4000
     node = {}
@@ -682,6 +692,7 @@ def run_perf(
 
     ``echo`` gets one line as each section starts (progress).
     """
+    from controller import compiled_controller_missing
     from plant_rt import compiled_engine_missing
 
     say = echo or (lambda s: None)
@@ -697,7 +708,11 @@ def run_perf(
             "cpus": os.cpu_count(),
             "loadavg_1min_start": os.getloadavg()[0],
         },
-        "engines": {"measured": list(engines()), "compiled_missing": compiled_engine_missing()},
+        "engines": {
+            "measured": list(engines()),
+            "compiled_missing": compiled_engine_missing(),
+            "controller_compiled_missing": compiled_controller_missing(),
+        },
         "targets": TARGETS,
     }
     say("1. in-process loops, both engines")
@@ -886,6 +901,15 @@ def _engine_rows(res: dict[str, Any]) -> list[list[str]]:
                 a.get("compiled_over_python"),
             )
         )
+    c = alone["controller_tt_dq"]
+    out.append(
+        row(
+            "tt-dq controller alone per step, 10 kHz",
+            {e: c[e] for e in eng},
+            "us",
+            c.get("compiled_over_python"),
+        )
+    )
     node = inp["plant_node_10khz"]
     out.append(
         row(
@@ -910,20 +934,25 @@ def figures_sections(res: dict[str, Any]) -> list[str]:
     )
     lines += [
         "",
-        "| the tt-dq controller alone per step (Python, the same on both engines) | "
-        + _num(inp["alone_us_per_period"]["controller_tt_dq_us"], "us")
-        + " |",
-        "|---|---|",
-        "",
-        f"Every estimator's closed loop on the default engine ({inp['engine_default']}):",
+        f"Every estimator's closed loop on the default engine (plant {inp['engine_default']}; "
+        "the controller's engine is compiled where the compiled controller covers the "
+        "estimator, else Python):",
         "",
     ]
     rows = [
-        [est, _num(r["us_per_step"], "us"), _num(r["f_sw"] / 1e3, "kHz"), _num(r["rtf"], "x")]
+        [
+            est,
+            str(r.get("controller_engine", "python")),
+            _num(r["us_per_step"], "us"),
+            _num(r["f_sw"] / 1e3, "kHz"),
+            _num(r["rtf"], "x"),
+        ]
         for est, r in inp.items()
         if isinstance(r, dict) and "f_sw" in r
     ]
-    lines += _table(["estimator", "per step", "PWM rate", "real-time factor"], rows)
+    lines += _table(
+        ["estimator", "controller engine", "per step", "PWM rate", "real-time factor"], rows
+    )
     ls = res["lockstep"]
     lines += [
         "",
@@ -1063,42 +1092,58 @@ def _missed_reasons(res: dict[str, Any]) -> list[str]:
     out: list[str] = []
     alone = inp["alone_us_per_period"]
     e_loop, loop = _fastest(inp["tt_dq_10khz"])
-    ctrl_us = alone["controller_tt_dq_us"]
+    ctrl = alone["controller_tt_dq"]
+    ctrl_us = ctrl.get(e_loop, math.nan)
     plant_us = alone["average"].get(e_loop, math.nan)
+    rest_us = loop["us_per_step"] - plant_us - ctrl_us
+    load = res["machine"].get("loadavg_1min_start", math.nan)
     if not v["inprocess_rtf_10khz_tt_dq"]["met"]:
         need = 1e6 / (F_10KHZ * TARGETS["inprocess_rtf_10khz_tt_dq"])
         out.append(
             f"- **In-process closed loop.** The target asks for at most {_num(need, 'us')} per "
-            f"step; the loop takes {_num(loop['us_per_step'], 'us')} on the {e_loop} engine. "
-            f"The plant alone takes {_num(plant_us, 'us')} per period there, the tt-dq "
-            f"controller alone {_num(ctrl_us, 'us')} per step: the controller is Python "
-            "(Clarke and Park, three PIs, the demodulator's filters, the PLL, SVPWM on "
-            "Python floats), and it alone is over the budget. Reaching the target needs the "
-            "controller's step compiled as the plant's is."
+            f"step; the loop takes {_num(loop['us_per_step'], 'us')} on the {e_loop} engine: "
+            f"the plant alone {_num(plant_us, 'us')} per period (its `sample()` and `step()` "
+            f"as Python calls them, the model's step inside), the tt-dq controller alone "
+            f"{_num(ctrl_us, 'us')} per step, and the loop's own Python the remaining "
+            f"{_num(rest_us, 'us')}: a `Measurement` and the duties built every period and "
+            "the calls between the two. On the compiled engine what is left is Python's cost "
+            "per call and per object around the two C steps, not the models' arithmetic. "
+            "The figures are wall-clock times on a shared two-core machine (one-minute load "
+            f"average {_num(load)} at the start of this run): other work on the cores "
+            "lengthens every one of them."
         )
     if not v["inprocess_compiled_over_python_tt_dq"]["met"] and "compiled" in inp["tt_dq_10khz"]:
         py = inp["tt_dq_10khz"]["python"]["us_per_step"]
         out.append(
-            f"- **Compiled against Python.** The compiled engine speeds up the plant "
-            f"{_num(alone['average'].get('compiled_over_python', math.nan), 'x')}, but only "
-            "the plant: the controller's step is the same Python on both engines, so the "
-            f"loop's ratio is bounded by the Python loop ({_num(py, 'us')}) over the "
-            f"controller's step ({_num(ctrl_us, 'us')}), that is "
-            f"{_num(py / ctrl_us, 'x')} at most, short of the target whatever the plant costs."
+            f"- **Compiled against Python.** The compiled engine runs the plant "
+            f"{_num(alone['average'].get('compiled_over_python', math.nan), 'x')} and the "
+            f"controller {_num(ctrl.get('compiled_over_python', math.nan), 'x')} faster than "
+            f"Python, the loop only {_num(inp['tt_dq_10khz']['compiled_over_python'], 'x')}: "
+            "what is Python on both engines is the same on both and bounds the ratio. That "
+            f"is the loop's own Python ({_num(rest_us, 'us')} per step on the compiled "
+            f"engine; with it alone the bound is {_num(py / rest_us, 'x')}, the Python loop "
+            f"of {_num(py, 'us')} over it) and the Python of the plant's `sample()` and "
+            "`step()` around its C step, which the plant-alone figure "
+            f"({_num(plant_us, 'us')}) includes: a `Sample` built every period, the "
+            "states copied back from the core. The models' arithmetic is no longer what "
+            "the loop spends."
         )
     if not v["switching_rtf_10khz"]["met"]:
         e_sw, sw = _fastest(inp["switching_10khz"])
+        sw_plant = alone["switching"].get(e_sw, math.nan)
+        c_sw = ctrl.get(e_sw, math.nan)
         out.append(
             f"- **Switching plant.** The loop takes {_num(sw['us_per_step'], 'us')} per step on "
-            f"the {e_sw} engine, of which the switching plant alone "
-            f"{_num(alone['switching'].get(e_sw, math.nan), 'us')} and the controller "
-            f"{_num(ctrl_us, 'us')}: the Python controller again."
+            f"the {e_sw} engine, of which the switching plant alone {_num(sw_plant, 'us')} "
+            f"(its carrier timeline and sub-intervals) and the controller {_num(c_sw, 'us')}; "
+            f"the loop's own Python the remaining "
+            f"{_num(sw['us_per_step'] - sw_plant - c_sw, 'us')}."
         )
     ls = res["lockstep"]
     if not v["lockstep_periods_per_s"]["met"]:
         budget = 1e6 / TARGETS["lockstep_periods_per_s"]
         e_n = "compiled" if "compiled" in inp["plant_node_10khz"] else "python"
-        nodes_us = inp["plant_node_10khz"][e_n]["us_p50"] + ctrl_us
+        nodes_us = inp["plant_node_10khz"][e_n]["us_p50"] + ctrl.get(e_n, math.nan)
         text = (
             f"- **Two-process lockstep.** The target leaves {_num(budget, 'us')} per period for "
             f"everything; the sample -> duty round trip on the bus alone has a median of "
@@ -1269,11 +1314,18 @@ Xue scenarios at their low PWM rate are the ones to run against real hardware.
 def render_benchmarks(res: dict[str, Any]) -> str:
     """``docs/BENCHMARKS.md``: every figure of ``perf.json``, the targets, what limits them."""
     m = res["machine"]
-    missing = res["engines"].get("compiled_missing")
+    missing = "; ".join(
+        w
+        for w in (
+            res["engines"].get("compiled_missing"),
+            res["engines"].get("controller_compiled_missing"),
+        )
+        if w
+    )
     lines = [
         _DOC_HEAD,
         f"Machine of this run: {m['cpus']} cores, `{m['platform']}`, Python {m['python']}; "
-        f"transport {res['lockstep']['transport']}; plant engines measured: "
+        f"transport {res['lockstep']['transport']}; engines (plant and controller) measured: "
         f"{', '.join(res['engines']['measured'])}"
         + (f" ({missing})" if missing else "")
         + f". The run took {_num(res.get('wall_s', math.nan) / 60.0, 'min')}; the machine's "

@@ -1,0 +1,141 @@
+"""The controller's engines: the per-period step in pure Python or compiled.
+
+``"python"``: :meth:`controller.Controller.step` as written in
+:mod:`controller._controller` and the estimators' modules. ``"compiled"``:
+the same step in C (``controller/_cctl.c``, built by ``pip install`` beside
+the plant's engine when the machine has a C compiler and Python's headers),
+a second implementation that mirrors the Python one block for block (one C
+function per Python filter, PI, PLL, observer and estimator update) and
+gives the same trace bit for bit (``tests/test_controller_engine.py``).
+``"auto"``: compiled when it is built and covers the controller, else Python.
+
+What it covers (:func:`compiled_cover`): the speed and current control of
+the alignment and run modes with every shipped estimator: ``tt-dq``,
+``tt-ab`` and ``sfhf`` (model normalisation), ``square-wave``,
+``square-wave-nocic``, ``sensored``, and the hybrids ``hybrid-tt-dq`` and
+``hybrid-square-wave`` (flux observer, hand-over band, trackers), with the
+current fed to the PIs filtered or raw. A controller outside it runs in
+Python whatever the choice, and says why
+(:attr:`controller.Controller.engine_note`): the measured normalisation, the
+mechanical position observer (``observer = "mechanical"``) and
+the drive countermeasures (dead-time feed-forward, cross-saturation
+correction, offset calibration). Inside it,
+the few periods the core leaves to Python (the polarity test, the
+hand-overs between modes, the CIC's periodic re-anchoring) run on the same
+states (:mod:`controller._compiled`).
+
+Equal means equal bits, not a tolerance: the C functions repeat the Python
+operations in the same order (Python's float ``%`` included), without fused
+multiply-adds, and call the same ``libm``; the one Python operation with no
+C twin here, the CIC's re-anchoring ``sum``, is left to Python. Purity is
+kept: the core reads a measurement's ``theta_e`` and ``w_e`` only for the
+sensored baseline.
+
+Why C, as for the plant (:mod:`plant_rt._engine`): the Python step costs
+about 5.5 us per period at 10 kHz with tt-dq, of which 1.2 us is only the
+construction of the frozen :class:`controller.ControlOutput`; mypyc on the
+unchanged modules gave 1.4x on the whole loop. The C step (0.24 us against
+5.1 us for Python in the same ``bench perf`` run, docs/BENCHMARKS.md) fills
+the output's slots directly, reads the measurement's the same way, and is
+called without a Python frame.
+"""
+
+from __future__ import annotations
+
+from types import ModuleType
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from controller._controller import ControllerPars
+
+ENGINES: tuple[str, ...] = ("auto", "compiled", "python")
+"""The engine choices of :class:`controller.Controller` (``engine=``)."""
+
+_cctl: ModuleType | None
+_why_not: str | None
+try:
+    import controller._cctl as _built
+except ImportError as e:  # not built on this machine
+    _cctl = None
+    _why_not = (
+        f"the compiled controller engine is not built ({e}; it needs a C compiler and Python's "
+        "headers when the project is installed): the controller runs in pure Python"
+    )
+else:
+    _cctl = _built
+    _why_not = None
+
+#: estimator name -> the kind of the compiled core (controller/_cctl.c)
+_KINDS = {
+    "tt-dq": 1,
+    "tt-ab": 2,
+    "sfhf": 3,
+    "square-wave": 4,
+    "square-wave-nocic": 4,
+    "sensored": 5,
+    "hybrid-tt-dq": 6,
+    "hybrid-square-wave": 7,
+}
+
+
+def compiled_controller_missing() -> str | None:
+    """None when the compiled engine is built, else one line saying why the controller runs
+    in Python."""
+    return _why_not
+
+
+def compiled_cover(pars: ControllerPars) -> tuple[int, str | None]:
+    """``(kind, None)`` when the compiled core covers the controller ``pars`` describes,
+    else ``(0, why)``: the one line saying what keeps it in Python."""
+    name = pars.estimator
+    kind = _KINDS.get(name, 0)
+    if kind == 0:
+        return 0, f"the {name} estimator is not compiled: the controller runs in Python"
+    opts = dict(pars.estimator_options)
+    if kind in (1, 2, 3, 6) and opts.get("normalise", "model") != "model":
+        return 0, f"{name} with normalise={opts['normalise']!r} is not compiled: Python"
+    if kind in (1, 2, 3, 6) and opts.get("observer", "pll") != "pll":
+        return 0, f"{name} with observer={opts['observer']!r} is not compiled: Python"
+    if kind in (4, 7) and int(opts.get("M", 2)) > 64:
+        return 0, f"{name} with a CIC delay M > 64 is not compiled: Python"
+    cp = pars.compensation
+    off = [
+        what
+        for what, on in (
+            ("dead-time feed-forward", cp.dead_time),
+            ("cross-saturation correction", cp.cross_saturation),
+            ("offset calibration", cp.offset_calibration),
+        )
+        if on
+    ]
+    if off:
+        return 0, f"the {', '.join(off)} is not compiled: the controller runs in Python"
+    return kind, None
+
+
+def resolve_controller_engine(engine: str, pars: ControllerPars) -> tuple[str, str | None]:
+    """The engine a controller runs on, ``"compiled"`` or ``"python"``, and why not compiled.
+
+    Parameters
+    ----------
+    engine : {"auto", "compiled", "python"}
+        The choice; ``"auto"`` and ``"compiled"`` take the compiled engine
+        when it is built and covers ``pars`` (:func:`compiled_cover`).
+    pars : ControllerPars
+        The controller's settings.
+
+    Raises
+    ------
+    ValueError
+        For an unknown name, or ``"compiled"`` when the engine is not built.
+    """
+    if engine not in ENGINES:
+        raise ValueError(f"unknown controller engine {engine!r} (known: {', '.join(ENGINES)})")
+    if engine == "python":
+        return "python", None
+    if _why_not is not None:
+        if engine == "compiled":
+            raise ValueError(_why_not)
+        return "python", _why_not
+    kind, why = compiled_cover(pars)
+    return ("compiled", None) if kind else ("python", why)

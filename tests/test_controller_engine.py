@@ -1,0 +1,331 @@
+"""The controller's two engines give the same trace bit for bit.
+
+The compiled step (``controller/_cctl.c``) is a second implementation of
+:meth:`controller.Controller.step` and of the estimators it covers; these
+tests keep the two equal. Equal means equal bits (not 1e-9 rad or A): the
+C functions repeat the Python operations in the same order, built without
+fused multiply-adds, and call the same ``libm`` ``sin``/``cos``/``sqrt``.
+Every shipped scenario's first second, each of its estimators, in the
+in-process loop (alignment, polarity test, speed steps): the same
+:class:`controller.ControlOutput` in every period. Then the handovers
+between the two engines (commands in the middle of a run, reading the
+states, the CIC's re-anchoring), and the cover: what runs compiled and
+what says why it runs in Python.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import struct
+from dataclasses import fields, replace
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+import bench.nodes._loops as loops
+from bench.cli._common import ENGINES as CLI_ENGINES
+from bench.scenarios._schema import load_scenario
+from bench.scenarios._setup import ENGINE_ENV, build_controller, build_plant, sample_period
+from bench.wire._codec import Codec
+from controller import (
+    ENGINES,
+    CompensationPars,
+    Controller,
+    ControllerPars,
+    ControlOutput,
+    Measurement,
+    compiled_controller_missing,
+    resolve_controller_engine,
+)
+
+SCENARIOS = sorted(p.stem for p in (Path(loops.__file__).parents[1] / "scenarios").glob("*.toml"))
+COMPILED = (
+    "tt-dq",
+    "tt-ab",
+    "sfhf",
+    "square-wave",
+    "square-wave-nocic",
+    "sensored",
+    "hybrid-tt-dq",
+    "hybrid-square-wave",
+)
+
+
+@pytest.fixture(autouse=True)
+def _compiled_built() -> None:
+    """The compiled engine must be built: a skip off CI, a failure in CI (never a silent pass)."""
+    why = compiled_controller_missing()
+    if why is None:
+        return
+    if os.environ.get("CI"):
+        pytest.fail(why)
+    pytest.skip(why)
+
+
+def _bits(o: ControlOutput) -> bytes:
+    """Every field of an output as bits (and its types: an int stays an int)."""
+    vals = [getattr(o, f.name) for f in fields(o)]
+    types = "".join(type(v).__name__[0] for v in vals)
+    return types.encode() + struct.pack(f"{len(vals)}d", *(float(v) for v in vals))
+
+
+def _pairs() -> list[tuple[str, str]]:
+    out = []
+    for name in SCENARIOS:
+        scn = load_scenario(name)
+        for est in dict.fromkeys((scn.estimator, *scn.estimators)):
+            out.append((name, est))
+    return out
+
+
+@pytest.mark.parametrize(("name", "estimator"), _pairs())
+def test_every_scenario_first_second_same_on_both_engines(
+    name: str, estimator: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Each shipped scenario's first second in the in-process loop with each of its
+    estimators: the same output in every period, bit for bit, and the same frames."""
+    scn = load_scenario(name).with_overrides(duration=1.0)
+    codec = Codec()
+    build = loops.build_controller
+    runs: dict[str, tuple[list[bytes], list[tuple[int, bytes]], str]] = {}
+    for engine in ("python", "compiled"):
+        outs: list[bytes] = []
+        used: list[str] = []
+
+        def build_recorded(
+            s: Any, e: str, *a: Any, eng: str = engine, outs: list[bytes] = outs, used: Any = used
+        ) -> Controller:
+            ctrl = build(s, e, eng)
+            step = ctrl.step
+
+            def recorded(meas: Measurement, step: Any = step) -> ControlOutput:
+                o: ControlOutput = step(meas)
+                outs.append(_bits(o))
+                return o
+
+            ctrl.step = recorded  # type: ignore[method-assign]
+            used.append(ctrl.engine)
+            return ctrl
+
+        monkeypatch.setattr(loops, "build_controller", build_recorded)
+        frames = loops.run_inprocess(scn, estimator, codec, engine="compiled")
+        runs[engine] = (outs, [(m.arbitration_id, bytes(m.data)) for m in frames], used[0])
+    (py, f_py, e_py), (cc, f_cc, e_cc) = runs["python"], runs["compiled"]
+    assert e_py == "python"
+    assert e_cc == ("compiled" if estimator in COMPILED else "python")
+    assert len(py) >= 0.99 / sample_period(scn)  # every period of the second
+    first = next((k for k in range(len(py)) if py[k] != cc[k]), None)
+    assert first is None, f"the engines part at period {first}"
+    assert len(py) == len(cc) and f_py == f_cc
+
+
+def _loop(
+    scn_name: str,
+    estimator: str,
+    engine: str,
+    n: int,
+    events: dict[int, Any] | None = None,
+    speed_rpm: float = 200.0,
+) -> tuple[list[bytes], Controller]:
+    """A closed loop on the compiled plant; ``events[k](ctrl)`` runs before period ``k``."""
+    scn = load_scenario(scn_name)
+    plant = build_plant(scn, "compiled")
+    ctrl = build_controller(scn, estimator, engine)
+    ctrl.set_enable(True)
+    ctrl.set_speed_ref(speed_rpm * 2.0 * math.pi / 60.0)
+    d = (0.5, 0.5, 0.5, False)
+    out: list[bytes] = []
+    truth = estimator == "sensored"
+    for k in range(n):
+        if events and k in events:
+            events[k](ctrl)
+        s = plant.sample()
+        tr = plant.truth() if truth else None
+        m = Measurement(
+            s.k, s.i_a, s.i_b, s.i_c, s.u_dc, tr.theta_e if tr else None, tr.w_e if tr else None
+        )
+        o = ctrl.step(m)
+        plant.step(*d)
+        out.append(_bits(o))
+        d = (o.d_a, o.d_b, o.d_c, o.enable)
+    return out, ctrl
+
+
+def _events(n: int) -> dict[int, Any]:
+    """Commands and reads in the middle of a run: each hands the states over between the
+    engines (a read brings Python up to date, a write or a taken object hands over)."""
+    return {
+        n // 5: lambda c: c.set_speed_ref(-100.0),
+        n // 4: lambda c: c.w_m_hat,  # a read: the core keeps stepping
+        n // 3: lambda c: c.set_current_ref((0.0, 1.0)),
+        n // 3 + 7: lambda c: c.estimator.theta_hat,  # a taken object: handed to Python
+        n // 2: lambda c: c.set_current_ref(None),
+        (2 * n) // 3: lambda c: c.set_enable(False),
+        (2 * n) // 3 + 20: lambda c: c.set_enable(True),  # a second start-up
+    }
+
+
+@pytest.mark.parametrize(
+    ("scn_name", "estimator", "n"),
+    [
+        ("wen-5.1", "tt-dq", 9000),
+        ("wen-5.1", "sfhf", 6000),
+        ("wen-5.1", "tt-ab", 6000),
+        ("wen-5.1", "sensored", 3000),
+        ("xue-fig13", "square-wave", 9000),  # past the CIC's re-anchoring at 4096
+        ("xue-fig13", "square-wave-nocic", 3000),
+    ],
+)
+def test_commands_and_reads_between_engines_keep_the_trace(
+    scn_name: str, estimator: str, n: int
+) -> None:
+    """Commands, reads, a stop and a second start in the middle of a run: the same trace
+    on both engines, and the states read from the compiled controller are Python's."""
+    py, c_py = _loop(scn_name, estimator, "python", n, _events(n))
+    cc, c_cc = _loop(scn_name, estimator, "compiled", n, _events(n))
+    assert (c_py.engine, c_cc.engine) == ("python", "compiled")
+    first = next((k for k in range(n) if py[k] != cc[k]), None)
+    assert first is None, f"the engines part at period {first}"
+    # the states after the run, read through the compiled controller, are the same bits
+    for name in ("w_m_hat", "u_d", "u_q", "tau_ref", "i_q_ref", "mode"):
+        assert getattr(c_cc, name) == getattr(c_py, name), name
+    e_py, e_cc = c_py.estimator, c_cc.estimator
+    assert (e_cc.theta_hat, e_cc.w_hat, e_cc.err) == (e_py.theta_hat, e_py.w_hat, e_py.err)
+    assert (c_cc.pi_d.u_i, c_cc.pi_w.u_i) == (c_py.pi_d.u_i, c_py.pi_w.u_i)
+    # and the run was a closed loop that ran: speed control reached, the estimate moved
+    assert c_py.mode == 3 and e_py.w_hat != 0.0
+
+
+@pytest.mark.parametrize(
+    ("scn_name", "estimator", "top_rpm", "t_ramp"),
+    [
+        ("wide-speed-wen", "hybrid-tt-dq", 1300.0, 1.0),
+        ("wide-speed-xue", "hybrid-square-wave", 300.0, 1.5),
+    ],
+)
+def test_hybrids_through_their_band_and_back_same_on_both_engines(
+    scn_name: str, estimator: str, top_rpm: float, t_ramp: float
+) -> None:
+    """A hybrid from standstill up through its whole hand-over band (the flux observer
+    slaved, blended, alone with the injection off and the injection estimator slaved)
+    and back into it, the reference a 100 Hz staircase: the same trace on both engines."""
+    scn = load_scenario(scn_name)
+    T = sample_period(scn)
+    n0, n_up, n_top = round(0.4 / T), round(t_ramp / T), round(0.3 / T)
+    n = n0 + 2 * n_up + n_top
+
+    def ref(k: int) -> float:
+        if k < n0:
+            return 0.0
+        if k < n0 + n_up:
+            return top_rpm * (k - n0) / n_up
+        if k < n0 + n_up + n_top:
+            return top_rpm
+        return max(0.0, top_rpm * (1.0 - (k - n0 - n_up - n_top) / n_up))
+
+    every = round(0.01 / T)
+    rpm = 2.0 * math.pi / 60.0
+    weights: list[float] = []
+
+    def set_ref(k: int) -> Any:
+        def ev(c: Controller) -> None:
+            c.set_speed_ref(ref(k) * rpm)
+            if c.engine == "python":
+                weights.append(c.estimator.weight)  # type: ignore[attr-defined]
+
+        return ev
+
+    events = {k: set_ref(k) for k in range(0, n, every)}
+    py, c_py = _loop(scn_name, estimator, "python", n, events, speed_rpm=0.0)
+    cc, c_cc = _loop(scn_name, estimator, "compiled", n, events, speed_rpm=0.0)
+    assert (c_py.engine, c_cc.engine) == ("python", "compiled")
+    first = next((k for k in range(n) if py[k] != cc[k]), None)
+    assert first is None, f"the engines part at period {first}"
+    # the run crossed the band both ways: the observer alone, then the injection back
+    assert max(weights) == 1.0 and 0.0 < min(w for w in weights if w > 0.0) < 1.0
+    assert weights[-1] < 1.0
+
+
+def test_the_cover_and_the_reasons() -> None:
+    """Compiled for the covered estimators; Python, with one line saying why, for the rest;
+    the choices are the CLI's and an unknown one is refused."""
+    scn = load_scenario("wen-5.1")
+    assert ENGINES == CLI_ENGINES
+    for name in SCENARIOS:
+        for est in load_scenario(name).estimators:
+            c = build_controller(load_scenario(name), est, "compiled")
+            assert (c.engine, c.engine_note) == ("compiled", None), (name, est)
+    c = build_controller(scn, "tt-dq", "python")
+    assert (c.engine, c.engine_note) == ("python", None)
+    pars = build_controller(scn, "tt-dq", "python").pars
+    measured = replace(pars, estimator_options={"normalise": "measured"})
+    used, why = resolve_controller_engine("auto", measured)
+    assert used == "python" and "normalise='measured'" in str(why)
+    assert Controller(measured, "compiled").engine_note == why
+    mech = replace(pars, estimator_options={"observer": "mechanical"})
+    used, why = resolve_controller_engine("auto", mech)
+    assert used == "python" and "observer='mechanical'" in str(why)
+    dead = replace(pars, compensation=CompensationPars(dead_time=True))
+    used, why = resolve_controller_engine("compiled", dead)
+    assert used == "python" and "dead-time" in str(why)
+    assert Controller(dead, "compiled").engine == "python"
+    with pytest.raises(ValueError, match="unknown controller engine"):
+        resolve_controller_engine("fast", pars)
+
+
+def test_the_environment_carries_the_engine(monkeypatch: pytest.MonkeyPatch) -> None:
+    """``--engine`` reaches the controllers built without an engine (and a run's controller
+    process) through the environment."""
+    scn = load_scenario("wen-5.1")
+    monkeypatch.setenv(ENGINE_ENV, "python")
+    assert build_controller(scn, "tt-dq").engine == "python"
+    monkeypatch.setenv(ENGINE_ENV, "compiled")
+    assert build_controller(scn, "tt-dq").engine == "compiled"
+    monkeypatch.delenv(ENGINE_ENV)
+    assert build_controller(scn, "tt-dq").engine == "compiled"  # auto, built
+
+
+def test_purity_the_core_never_reads_the_truth_of_a_sensorless_measurement() -> None:
+    """A sensorless estimator's compiled step does not read ``theta_e``/``w_e``: a
+    measurement whose truth cannot even be read steps all the same."""
+
+    class NoTruth:
+        def __init__(self, m: Measurement) -> None:
+            self.k, self.i_a, self.i_b, self.i_c, self.u_dc = m.k, m.i_a, m.i_b, m.i_c, m.u_dc
+
+        @property
+        def theta_e(self) -> float:
+            raise AssertionError("the truth was read")
+
+        w_e = theta_e
+
+    pars = ControllerPars(
+        motor=build_controller(load_scenario("wen-5.1"), "tt-dq", "python").pars.motor,
+        T_s=1e-4,
+        startup=False,
+    )
+    ctrl = Controller(pars, "compiled")
+    ctrl.set_enable(True)
+    ref = Controller(pars, "python")
+    ref.set_enable(True)
+    for k in range(50):
+        m = Measurement(k, 0.1 * math.sin(k), -0.05, 0.05 - 0.1 * math.sin(k), 300.0)
+        assert _bits(ctrl.step(NoTruth(m))) == _bits(ref.step(m))  # type: ignore[arg-type]
+    assert ctrl.engine == "compiled"
+
+
+def test_a_compiled_controller_is_freed() -> None:
+    """The core refers back to its controller (its states and its Python step): the cycle
+    is the garbage collector's to break, so controllers built by the thousand are freed."""
+    import gc
+    import weakref
+
+    ctrl = build_controller(load_scenario("wen-5.1"), "tt-dq", "compiled")
+    ctrl.set_enable(True)
+    ctrl.step(Measurement(0, 0.0, 0.0, 0.0, 300.0))
+    ref = weakref.ref(ctrl)
+    del ctrl
+    gc.collect()
+    assert ref() is None
