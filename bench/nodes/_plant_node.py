@@ -100,7 +100,7 @@ class PlantNode:
         arrived for this many PWM periods of the plant's clock (0: off).
     watchdog_rounds : int
         Lockstep: trip when this many retransmission rounds in a row brought
-        no valid duty frame (0: off).
+        no valid duty frame, once a first one has come (0: off).
     """
 
     def __init__(
@@ -268,11 +268,26 @@ class PlantNode:
         """Lockstep: one retransmission round passed without the needed duty.
 
         Returns the frames to send (the fault status when the watchdog trips).
+
+        The watchdog is armed by the first valid duty frame, as in real time.
+        A lockstep plant's periods do not pass while it waits, so the rounds
+        are wall-clock time of the bench's processes, and the wait for the
+        first duty is the longest of a run: the link forwards the command
+        burst, then the controller takes its first step (imports, first
+        allocations), which on a loaded host (User-Mode Linux beside other
+        jobs) took more than the 100 rounds; the trip then ran every later
+        period in the safe state and the trace left the in-process one (at
+        step 43 of the link test, where the ramp makes it visible).  Armed by
+        the first duty, a controller that never answers is reported by the
+        loop's stall error instead, and a trip needs a controller that went
+        silent mid-run; it is reported (``plant_fault``, exit 3), never a
+        silently different trace.
         """
         self.rounds_waiting += 1
         if (
             self.watchdog_rounds
             and self.started
+            and self.latest_duty_step >= 0  # armed by the first valid duty
             and self.fault == FAULT_NONE
             and self.rounds_waiting >= self.watchdog_rounds
         ):
