@@ -19,6 +19,7 @@ from bench.cli._common import (
     bus_spec,
     plant_engine,
     scenario_from_args,
+    writable_dir,
 )
 from bench.scenarios._setup import check_estimator_fits
 
@@ -82,7 +83,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     if args.monitor and not (sys.stdin.isatty() and sys.stdout.isatty() and sys.stderr.isatty()):
         raise BenchError("--monitor: needs a terminal (run bench monitor beside it instead)")
     spec = bus_spec(args, announce=True)
-    out = Path(args.out) if args.out else Path("runs") / f"{scn.name}-{est}"
+    out = writable_dir(Path(args.out) if args.out else Path("runs") / f"{scn.name}-{est}")
     # the heading of the report on stdout: stderr carries progress and errors only
     print(f"run: {scn.name} with {est}, {args.mode}, {spec.describe()} -> {out}", flush=True)
     view = _start_monitor(spec, scn, est, args.mode, out) if args.monitor else None

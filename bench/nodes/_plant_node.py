@@ -145,7 +145,8 @@ class PlantNode:
         self.jitter: dict[str, float] | None = None
         #: Wall seconds of the stepping loop (start command to the last period).
         self.loop_s: float | None = None
-        #: age (PWM periods) of the duty applied in the last period; 255: none.
+        #: age (PWM periods) of the duty applied in the last period, at most 254;
+        #: 255: none (before the first duty, and in the safe state after a trip).
         #: Sent in PlantTruth so the recorder measures the loop latency exactly.
         self.duty_age = 255
         self.sent: deque[list[can.Message]] = deque(maxlen=lockstep_delay + 3)
@@ -370,6 +371,7 @@ class PlantNode:
                 del self.duties[old]
         if self.fault != FAULT_NONE:
             en = False
+            self.duty_age = 255  # the safe state applies no duty (the DBC's 255)
         self.rounds_waiting = 0
         self.plant.step(d_a, d_b, d_c, en)
         self._check_protection()
@@ -416,6 +418,7 @@ class PlantNode:
             self.trip(FAULT_WATCHDOG)
         if self.fault != FAULT_NONE:
             en = False
+            self.duty_age = 255  # the safe state applies no duty (the DBC's 255)
         self.plant.step(d_a, d_b, d_c, en)
         self._check_protection()
         self.apply_commands()

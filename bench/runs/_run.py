@@ -33,14 +33,14 @@ from bench._errors import BenchError
 from bench.nodes._loops import command_frames
 from bench.runs._processes import (
     ended_early,
-    last_line,
+    how_ended,
     node_failures,
     node_roles,
     start_nodes,
     stop_nodes,
 )
 from bench.runs._recorder import Recording
-from bench.runs._results import RunResult, finish_run, run_metadata
+from bench.runs._results import RunResult, finish_run, run_metadata, scoring_scenario
 from bench.scenarios._schema import Scenario, write_effective
 from bench.scenarios._setup import n_steps, sample_period
 from bench.wire._bus import BusSpec
@@ -124,6 +124,18 @@ def run_scenario(
             plant = dict(procs).get("plant")
             if plant is not None and not interrupted():
                 ended = _drive(rec, cmds, procs, plant, scn, mode, pace, progress, interrupted)
+            if progress and (ended or interrupted()):
+                # said at once: stopping the nodes and scoring take a while on a loaded host
+                why = "interrupted"
+                if ended:
+                    code = dict(procs)[ended].returncode
+                    why = f"{ended} process ended ({how_ended(out_dir, ended, code)})"
+                print(
+                    f"{why} at step {max(0, rec.plant_step):,}: stopping the nodes and scoring "
+                    "what was recorded (Ctrl-C again to stop without scoring)",
+                    file=sys.stderr,
+                    flush=True,
+                )
             asked = stop_nodes(
                 procs, rec.plant_bus, cmds, link=link, interrupted=interrupted(), ended=ended
             )
@@ -142,14 +154,18 @@ def run_scenario(
     if interrupted():
         meta["interrupted"] = True
     frames = rec.frames()
-    result = _score(frames, codec, scn, out_dir, meta, wall, capture, partial=bool(interrupted() or failures))
+    partial = bool(interrupted() or failures or ended)
+    # a node that died: the numbers at once, the plots left to bench analyze (seconds of matplotlib)
+    plots = not ended or bool(interrupted())
+    result = _score(frames, codec, scn, out_dir, meta, wall, capture, partial=partial, plots=plots)
+    codes = dict(meta["exit_codes"])
     if ended and not interrupted():
         raise BenchError(
-            f"{ended} process ended before the run did ({last_line(out_dir, ended)}); "
+            f"{ended} process ended before the run did ({how_ended(out_dir, ended, codes[ended])}); "
             f"files in {out_dir}"
         )
     if failures and not interrupted():
-        logs = "; ".join(f"{r}: {last_line(out_dir, r)}" for r in failures)
+        logs = "; ".join(f"{r}: {how_ended(out_dir, r, codes[r])}" for r in failures)
         raise BenchError(f"node process failed ({logs}); files in {out_dir}")
     return result
 
@@ -197,7 +213,7 @@ def _drive(
             t_moved = time.monotonic()
         if rec.plant_done or plant.poll() is not None or interrupted():
             break
-        ended = ended_early(procs)
+        ended = ended_early(procs, lockstep=mode == "lockstep")
         if ended:
             break
         if bar is not None:
@@ -249,6 +265,23 @@ def _node_reports(out_dir: Path) -> dict[str, Any]:
     return reports
 
 
+def _partial_scoring(
+    frames: list[can.Message], codec: Codec, scn: Scenario, meta: dict[str, Any]
+) -> Scenario:
+    """The scenario a partial run is scored with: ``bench analyze``'s rule on its span."""
+    from bench.runs._analysis import analyze_frames
+
+    try:
+        steps = analyze_frames(frames, codec, T_s=1.0, n_p=1).table["step"]
+    except ValueError:
+        return scn  # no complete step: nothing to score
+    T_s = sample_period(scn)
+    scored, moved = scoring_scenario(scn, float(steps[0]) * T_s, float(steps[-1]) * T_s)
+    if moved:
+        meta["scoring"] = moved
+    return scored
+
+
 def _score(
     frames: list[can.Message],
     codec: Codec,
@@ -259,31 +292,27 @@ def _score(
     capture: Path,
     *,
     partial: bool,
+    plots: bool = True,
 ) -> RunResult:
     """The run's files from its frames; a ``partial`` run (interrupted, a node died) too.
 
-    A partial run that ended before the scored part is scored from 0 s; one
-    that ended before its first complete step keeps its capture (none without
-    a single frame: no reader takes an empty log) and a ``metrics.json`` that
-    says so.
+    A partial run is scored by the rule ``bench analyze`` applies to its
+    capture (:func:`bench.runs._results.scoring_scenario`): one that ended
+    before the scenario's scoring start is scored over the second half of
+    the steps it recorded, so the run and a later analysis of its capture
+    give the same numbers.  One that ended before its first complete step
+    keeps its capture (none without a single frame: no reader takes an
+    empty log) and a ``metrics.json`` that says so.
     """
+    if partial:
+        scn = _partial_scoring(frames, codec, scn, meta)
     try:
-        return finish_run(frames, codec, scn, out_dir, meta=meta, wall_s=wall, capture=capture)
+        return finish_run(
+            frames, codec, scn, out_dir, meta=meta, wall_s=wall, capture=capture, plots=plots
+        )
     except ValueError:
         if not partial:
             raise
-    try:
-        return finish_run(
-            frames,
-            codec,
-            scn.with_overrides(score_from_s=0.0),
-            out_dir,
-            meta=meta,
-            wall_s=wall,
-            capture=capture,
-        )
-    except ValueError:
-        pass
     meta["capture"] = capture.name if frames else None
     if not frames:
         capture.unlink(missing_ok=True)
