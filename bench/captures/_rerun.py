@@ -168,7 +168,8 @@ def rerun_capture(
     say = echo or (lambda s: print(s, file=sys.stderr))
     frames, problem = read_capture(path)
     scn, meta = capture_scenario(path, scenario)
-    check_estimator_fits(scn, estimator)  # a misfit is one line, as for ``bench run``
+    if note := check_estimator_fits(scn, estimator):  # a misfit is one line, as for ``bench run``
+        say(note)
     if problem:
         say(incomplete_warning(path, problem, len(frames)))
     recorded = meta.get("estimator") if isinstance(meta.get("estimator"), str) else None

@@ -78,7 +78,8 @@ def cmd_run(args: argparse.Namespace) -> int:
         raise BenchError(
             f"--estimator: unknown estimator {est!r} (known: {', '.join(ESTIMATOR_NAMES)})"
         )
-    check_estimator_fits(scn, est)
+    if note := check_estimator_fits(scn, est):
+        print(note, file=sys.stderr)
     plant_engine(args)
     if args.monitor and not (sys.stdin.isatty() and sys.stdout.isatty() and sys.stderr.isatty()):
         raise BenchError("--monitor: needs a terminal (run bench monitor beside it instead)")
