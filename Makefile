@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test lint unit vcan suite perf rtcheck clean
+.PHONY: demo test lint unit vcan suite perf rtcheck reliability clean
 
 # pip builds the compiled plant engine (setup.py); tools/need-cc installs its
 # compiler and headers first when it may, and the last line says when the
@@ -48,6 +48,12 @@ perf: $(STAMP)
 
 rtcheck: $(STAMP)
 	$(BIN)/bench rtcheck --out docs/realtime --doc docs/REALTIME.md
+
+# Reliability: fuzzing, injected faults, kills, signals, load and parallel runs;
+# docs/reliability/soak.json and docs/RELIABILITY.md rendered from it (a few minutes).
+reliability: $(STAMP)
+	mkdir -p docs/reliability
+	$(BIN)/bench soak --processes --out docs/reliability/soak.json --doc docs/RELIABILITY.md
 
 clean:
 	rm -rf $(VENV) runs .pytest_cache .mypy_cache .ruff_cache

@@ -211,7 +211,11 @@ def _drive(
             for _, m in cmds[max(0, sent - 8) : sent]:
                 bus.send(m)
             t_moved = time.monotonic()
-        if rec.plant_done or plant.poll() is not None or interrupted():
+        if rec.plant_done or interrupted():
+            break
+        if plant.poll() is not None:
+            # a plant that ends by itself ends well; killed or failed, it is named at once
+            ended = "plant" if plant.returncode != 0 else None
             break
         ended = ended_early(procs, lockstep=mode == "lockstep")
         if ended:
