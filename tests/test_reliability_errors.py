@@ -41,8 +41,8 @@ SCORED = ("theta_err_max_deg", "theta_err_mean_deg", "theta_err_rms_deg", "steps
 def one_line_exit_2(argv: list[str], capsys: pytest.CaptureFixture[str], what: str) -> None:
     assert main(argv) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert err[-1].startswith("bench: error: --out ") and what in err[-1], err
-    assert not any("Traceback" in line for line in err)
+    assert len(err) == 1, err
+    assert err[0].startswith("bench: error: --out ") and what in err[0], err
 
 
 @pytest.mark.parametrize("where", ["under_a_file", "proc"])
@@ -54,8 +54,8 @@ def test_unwritable_out_is_one_line_in_run_and_analyze(
     out = blocker / "sub" if where == "under_a_file" else Path("/proc/bench-out")
     if where == "proc" and not Path("/proc/self").exists():
         pytest.skip("no /proc")
-    run = ["run", "wen-5.1", "--duration", "0.01", "-i", "udp_multicast"]
-    one_line_exit_2([*run, "--port", str(free_port()), "--out", str(out)], capsys, str(out))
+    # no --interface: the transport would be announced first, were the folder not checked first
+    one_line_exit_2(["run", "wen-5.1", "--duration", "0.01", "--out", str(out)], capsys, str(out))
     capture = tmp_path / "capture.asc"
     capture.write_text("")  # never read: the output folder is checked first
     one_line_exit_2(["analyze", str(capture), "--out", str(out)], capsys, str(out))

@@ -83,8 +83,8 @@ def cmd_run(args: argparse.Namespace) -> int:
     plant_engine(args)
     if args.monitor and not (sys.stdin.isatty() and sys.stdout.isatty() and sys.stderr.isatty()):
         raise BenchError("--monitor: needs a terminal (run bench monitor beside it instead)")
-    spec = bus_spec(args, announce=True)
     out = writable_dir(Path(args.out) if args.out else Path("runs") / f"{scn.name}-{est}")
+    spec = bus_spec(args, announce=True)
     # the heading of the report on stdout: stderr carries progress and errors only
     print(f"run: {scn.name} with {est}, {args.mode}, {spec.describe()} -> {out}", flush=True)
     view = _start_monitor(spec, scn, est, args.mode, out) if args.monitor else None
