@@ -164,6 +164,31 @@ def test_controller_killed_in_lockstep_ends_the_run_at_once_naming_the_signal(
     assert json.loads((out / "metrics.json").read_text())["steps"] > 0
 
 
+@pytest.mark.skipif(sys.platform != "linux", reason="uses /proc")
+def test_an_interrupted_run_says_that_it_scores_what_was_recorded(tmp_path: Path) -> None:
+    out = tmp_path / "int"
+    cmd = [sys.executable, "-m", "bench", "run", "wen-5.1", "-e", "sensored", "--duration",
+           "30", "-i", "udp_multicast", "--channel", "239.74.163.2", "--port",
+           str(free_port()), "--out", str(out)]  # fmt: skip
+    proc = subprocess.Popen(cmd, cwd=ROOT, stderr=subprocess.PIPE, stdout=subprocess.DEVNULL)
+    try:
+        t0 = time.monotonic()
+        while _controller_pid(out) is None or not (out / "plant.log").exists():
+            assert time.monotonic() - t0 < 90, "the run did not start"
+            time.sleep(0.1)
+        time.sleep(1.0)
+        proc.send_signal(signal.SIGINT)
+        _, err_b = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    err = err_b.decode()
+    assert proc.returncode == 130, err
+    line = next(ln for ln in err.splitlines() if ln.startswith("interrupted at step"))
+    assert "stopping the nodes and scoring what was recorded" in line, err
+    assert err.strip().splitlines()[-1] == "bench: interrupted"
+
+
 def _controller_pid(out: Path) -> int | None:
     for pid in os.listdir("/proc"):
         if not pid.isdigit():
