@@ -477,7 +477,7 @@ name one interface must name a bus each.
 | `tests/test_reliability_watchdog.py` | real time: trip in exactly the configured period after the last duty; lockstep: armed by the first duty, trip after exactly the configured rounds; the controller disables its PWM when samples stop |
 | `tests/test_lockstep_under_load.py` | the link logic under random schedules with retransmissions and a start longer than the watchdog gives the in-process trace; lockstep through `bench link` with busy processes beside it, over udp_multicast and on vcan |
 | `tests/test_signals_process.py` | real processes: kill -9 of the controller in real time (watchdog fault frame, capture complete); SIGINT, SIGTERM mid-run and during start-up |
-| `tests/test_reliability_errors.py` | unwritable `--out`, unparsable capture lines, the scoring of a run cut short, kill -9 of the controller in lockstep (named, prompt), the transport line from python-can's configuration, `duty_age` in the safe state |
+| `tests/test_reliability_errors.py` | unwritable `--out`, unparsable capture lines, the scoring of a run cut short and the line that announces it, kill -9 of the controller in lockstep (named, prompt), the transport line from python-can's configuration, `duty_age` in the safe state |
 | `tests/test_scenario_plausible.py` | the physics checks of a scenario's motor, injection settings without `[motor]`, `sensored` from any scenario |
 | `tests/test_reliability_doc.py` | this page is the rendering of `docs/reliability/soak.json` |
 """
