@@ -275,17 +275,21 @@ def same_bus(a: Any, b: Any) -> bool:
 
 
 def writable_dir(path: Path, option: str = "--out") -> Path:
-    """``path`` created if needed and checked writable; one line (exit 2) when it is not.
+    """``path`` checked writable (creatable); one line (exit 2) when it is not.
 
     Checked before any work starts, so a folder that cannot be written
     (``/proc/x``, a path under a file, no permission) is the user's mistake
-    on one line, not a traceback after the run.
+    on one line, not a traceback after the run.  The folders the check
+    creates are removed again: a command refused later leaves nothing behind.
     """
+    missing = [p for p in (path, *path.parents) if not p.exists()]
     try:
         path.mkdir(parents=True, exist_ok=True)
         probe = path / f".bench-write-check-{os.getpid()}"
         probe.write_bytes(b"")
         probe.unlink()
+        for p in missing:  # deepest first
+            p.rmdir()
     except OSError as e:
         why = e.strerror or type(e).__name__
         if isinstance(e, FileExistsError) or (path.exists() and not path.is_dir()):
