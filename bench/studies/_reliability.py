@@ -464,8 +464,9 @@ injection family.  A text capture's unparsable lines are skipped and counted
 
 **Run isolation** is pending (issue 17): two runs on one bus (one
 udp_multicast port, one vcan) hear each other's frames.  `bench run` without
-`--interface` takes a udp_multicast port of its own per process; runs that
-name one interface must name a bus each.
+`--interface` on a host without vcan0 takes a udp_multicast port of its own
+per process; where vcan0 exists it is the default bus, shared by every run,
+so parallel runs must name a bus each (a vcan or a `--port` of their own).
 
 ## Tests
 
