@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test lint unit vcan suite reference perf docs rtcheck clean
+.PHONY: demo test lint unit vcan suite reference perf docs rtcheck reliability clean
 
 # pip builds the compiled plant and controller engines (setup.py); tools/need-cc
 # installs their compiler and headers first when it may, and the last lines say
@@ -59,6 +59,12 @@ docs: $(STAMP)
 
 rtcheck: $(STAMP)
 	$(BIN)/bench rtcheck --out docs/realtime --doc docs/REALTIME.md --doc README.md
+
+# Reliability: fuzzing, injected faults, kills, signals, load and parallel runs;
+# docs/reliability/soak.json and docs/RELIABILITY.md rendered from it (a few minutes).
+reliability: $(STAMP)
+	mkdir -p docs/reliability
+	$(BIN)/bench soak --processes --out docs/reliability/soak.json --doc docs/RELIABILITY.md
 
 clean:
 	rm -rf $(VENV) runs .pytest_cache .mypy_cache .ruff_cache

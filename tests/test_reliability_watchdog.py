@@ -100,7 +100,9 @@ def test_lockstep_watchdog_trips_after_the_configured_rounds_on_a_bus() -> None:
         target=plant_loop, args=(bus_p, node), kwargs={"realtime": False, "stop": stop.is_set}
     )
     t.start()
-    bus_r.send(command_frames(scn, CODEC)[0][1])  # start, and no controller on the bus
+    bus_r.send(command_frames(scn, CODEC)[0][1])  # start
+    # one duty arms the watchdog (period 1 runs with it), then the controller is gone
+    bus_r.send(duty(1))
     frames: list[can.Message] = []
     while not any(m.arbitration_id == STATUS for m in frames):
         m = bus_r.recv(5.0)
@@ -113,11 +115,30 @@ def test_lockstep_watchdog_trips_after_the_configured_rounds_on_a_bus() -> None:
     assert not t.is_alive()
     st = CODEC.decode(frames[-1])
     assert st is not None and st.signals["fault_code"] == FAULT_WATCHDOG
-    # periods 0 and 1 (period 0 needs no duty), then both again in every retransmission
-    # round before the trip: the trip comes in the round-th round
+    # periods 0, 1 and 2 (period 0 needs no duty, period 1 has its duty), then all
+    # three again in every retransmission round before the trip: the trip comes in
+    # the round-th round
     n_samples = sum(m.arbitration_id == CODEC.frame_id("PhaseSamples") for m in frames)
-    assert n_samples == 2 + 2 * (rounds - 1)
-    assert node.fault == FAULT_WATCHDOG and node.plant.k == 1
+    assert n_samples == 3 + 3 * (rounds - 1)
+    assert node.fault == FAULT_WATCHDOG and node.plant.k == 2
+
+
+def test_lockstep_watchdog_is_not_armed_before_the_first_duty() -> None:
+    """A slow first answer (a loaded host) does not trip it: the stall error reports a missing one."""
+    scn = load_scenario("wen-5.1").with_overrides(duration=1.0)
+    node = make_plant_node(scn, CODEC, watchdog_rounds=3)
+    node.on_message(command_frames(scn, CODEC)[0][1])
+    node.apply_commands()
+    node.frames_now()
+    node.advance_lockstep()  # period 0 needs no duty
+    for _ in range(10):
+        node.on_duty_timeout()
+    assert node.fault == FAULT_NONE and node.trips == {}
+    node.on_message(duty(1))
+    node.advance_lockstep()
+    for _ in range(3):
+        node.on_duty_timeout()
+    assert node.fault == FAULT_WATCHDOG
 
 
 def test_controller_disables_pwm_when_samples_stop_in_real_time() -> None:

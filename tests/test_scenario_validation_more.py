@@ -128,7 +128,7 @@ def test_nyquist_follows_the_scenarios_sample_rate(tmp_path: Path) -> None:
     s = load_scenario(
         _write(
             tmp_path,
-            "[estimator_options]\nf_h = 600.0\n",
+            "[motor]\n[estimator_options]\nf_h = 600.0\n",
             XUE.replace("f_sw = 1000.0", "f_sw = 2000.0"),
         )
     )
@@ -137,7 +137,7 @@ def test_nyquist_follows_the_scenarios_sample_rate(tmp_path: Path) -> None:
 
 def test_good_options_load_and_build_and_survive_the_effective_scenario(tmp_path: Path) -> None:
     extra = (
-        "[estimator_options]\nV_h = 40\nf_h = 400.0\nw_o = 0.0\n"
+        "[motor]\n[estimator_options]\nV_h = 40\nf_h = 400.0\nw_o = 0.0\n"
         'normalise = "measured"\nlpf = [[628.0], [1.0, 628.0]]\n'
     )
     s = load_scenario(_write(tmp_path, extra))

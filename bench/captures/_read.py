@@ -16,6 +16,7 @@ import io
 import json
 import sys
 from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -23,7 +24,7 @@ import can
 
 from bench import _jsonio as jsonio
 from bench._errors import CaptureError, ScenarioError
-from bench.runs._results import RunResult, finish_run
+from bench.runs._results import RunResult, finish_run, scoring_scenario
 from bench.scenarios._schema import Scenario, load_scenario, scenario_from_dict
 from bench.wire._codec import Codec
 
@@ -127,17 +128,132 @@ def _text_tail(path: Path) -> tuple[int | None, bool]:
     return size - len(tail) + nl + 1, no_footer
 
 
-def _open_reader(path: Path, cut_at: int | None) -> Iterable[can.Message]:
-    """python-can's reader of ``path``; only its first ``cut_at`` bytes when given."""
-    if cut_at is None:
-        return can.LogReader(str(path))
-    data = path.read_bytes()[:cut_at]
-    text = io.TextIOWrapper(io.BytesIO(data), encoding="utf-8", errors="replace")
-    return _TEXT_READERS[path.suffix.lower()](text)
+def _open_reader(path: Path) -> Iterable[can.Message]:
+    """python-can's reader of a binary capture (text ones: :func:`_read_text_lines`)."""
+    return can.LogReader(str(path))
+
+
+class _CountedLines(io.StringIO):
+    """A text capture's lines for a python-can reader, counting the lines it has taken."""
+
+    def __init__(self, lines: list[str]) -> None:
+        super().__init__("".join(lines))
+        self.taken = 0
+
+    # (iterating a subclass of StringIO goes through readline)
+    def readline(self, size: int | None = -1) -> str:  # type: ignore[override]
+        line = super().readline(-1 if size is None else size)
+        if line:
+            self.taken += 1
+        return line
+
+
+#: Unparsable lines of a text capture named in the warning (the rest are counted).
+SKIPPED_SHOWN = 3
+
+
+def _read_text_lines(
+    path: Path, cut_at: int | None
+) -> tuple[list[can.Message], list[tuple[int, str]], str | None]:
+    """Every frame of a text capture, skipping the lines python-can's reader cannot parse.
+
+    python-can's text readers stop at the first line they fail on, which
+    would drop the rest of the file.  The reader is restarted after the bad
+    line with the file's header (the lines before its first frame: the ASC
+    ``date``/``base``/trigger lines that set the time base, the CSV header
+    row), so one bad line costs one line.  Returns the frames, the skipped
+    lines (1-based line number, the reader's error) and why reading stopped
+    early (None: it read to the end): after :data:`MAX_SKIPPED` bad lines,
+    or :data:`MAX_SKIPPED` in a row before any frame (not a capture of this
+    format), the rest is not tried line by line.
+    """
+    data = path.read_bytes()
+    if cut_at is not None:
+        data = data[:cut_at]
+    lines = data.decode("utf-8", errors="replace").splitlines(keepends=True)
+    reader_cls = _TEXT_READERS[path.suffix.lower()]
+    frames: list[can.Message] = []
+    skipped: list[tuple[int, str]] = []
+    header: list[str] | None = None
+    start = 0  # index in ``lines`` of the first line after the header the reader gets
+    while True:
+        prefix = header or []
+        feed = _CountedLines([*prefix, *lines[start:]])
+        reader = reader_cls(feed)
+        try:
+            for msg in reader:
+                if header is None:
+                    # the lines before the one that gave the first frame
+                    header = lines[: max(0, feed.taken - 1)]
+                frames.append(msg)
+            return frames, skipped, None
+        except Exception as e:
+            bad = start + feed.taken - len(prefix) - 1  # index of the line it failed on
+            if bad < start:
+                raise  # failed in the header: nothing to skip
+            if header is None:
+                header = lines[:bad]
+            skipped.append((bad + 1, f"{type(e).__name__}: {e}"))
+            start = bad + 1
+            if len(skipped) >= MAX_SKIPPED:
+                return (
+                    frames,
+                    skipped,
+                    (f"reading stopped at line {bad + 1} after {len(skipped)} unparsable lines"),
+                )
+        finally:
+            try:
+                reader.stop()
+            except Exception:
+                pass
+
+
+#: Unparsable lines of a text capture tried one by one before the rest is given up.
+MAX_SKIPPED = 1000
+
+
+@dataclass(frozen=True, slots=True)
+class CaptureRead:
+    """What :func:`read_capture_counted` read from a capture.
+
+    Parameters
+    ----------
+    frames : list of can.Message
+        Every frame read, in file order.
+    problem : str or None
+        Why the capture is incomplete (cut short, a corrupt record); None when whole.
+    lines_skipped : list of (int, str)
+        Lines of a text capture that python-can could not parse, skipped:
+        (1-based line number, the reader's error).
+    """
+
+    frames: list[can.Message]
+    problem: str | None
+    lines_skipped: list[tuple[int, str]]
+
+
+def skipped_warning(path: Path, skipped: list[tuple[int, str]]) -> str:
+    """The one-line warning about the unparsable lines of a text capture."""
+    shown = "; ".join(f"line {n}: {why}" for n, why in skipped[:SKIPPED_SHOWN])
+    more = f"; and {len(skipped) - SKIPPED_SHOWN} more" if len(skipped) > SKIPPED_SHOWN else ""
+    return (
+        f"warning: {path}: {len(skipped)} unparsable line{'s' * (len(skipped) != 1)} "
+        f"skipped, the rest read ({shown}{more})"
+    )
 
 
 def read_capture(path: Path) -> tuple[list[can.Message], str | None]:
     """All frames python-can can read from ``path``, and why the capture is incomplete (or None).
+
+    Unparsable lines of a text capture are skipped (:func:`read_capture_counted`
+    says which).
+    """
+    got = read_capture_counted(path)
+    return got.frames, got.problem
+
+
+def read_capture_counted(path: Path) -> CaptureRead:
+    """All frames python-can can read from ``path``, why it is incomplete, the lines skipped.
 
     ``path`` may also be a run folder (its ``capture.*`` is read).  A reader
     that stops on a corrupt object keeps what it read; python-can's readers
@@ -166,8 +282,21 @@ def read_capture(path: Path) -> tuple[list[can.Message], str | None]:
             problems.append("its last line is cut short (no line end); that line was dropped")
         if no_footer:
             problems.append("no 'End TriggerBlock' line at its end (the file was cut short)")
+    if suffix in _TEXT_READERS:
+        try:
+            text_frames, skipped, stopped = _read_text_lines(path, cut_at)
+        except Exception as e:
+            raise CaptureError(
+                f"{path}: not a {suffix} capture python-can can read ({type(e).__name__}: {e})"
+            ) from None
+        if not text_frames:
+            first = f" (line {skipped[0][0]}: {skipped[0][1]})" if skipped else ""
+            raise CaptureError(f"{path}: no frames could be read{first}")
+        if stopped:
+            problems.insert(0, stopped)
+        return CaptureRead(text_frames, "; ".join(problems) or None, skipped)
     try:
-        reader = _open_reader(path, cut_at)
+        reader = _open_reader(path)
     except ValueError as e:
         raise CaptureError(f"{path}: not a capture python-can can read ({e})") from None
     except ImportError as e:
@@ -200,7 +329,7 @@ def read_capture(path: Path) -> tuple[list[can.Message], str | None]:
             f"{path}: {kind}no frames could be read" + (f" ({read_error})" if read_error else "")
         )
     problem = "; ".join(problems) if problems else None
-    return frames, problem
+    return CaptureRead(frames, problem, [])
 
 
 def scenario_from_meta(meta: dict[str, Any]) -> Scenario:
@@ -273,28 +402,6 @@ def incomplete_warning(path: Path, problem: str, n_frames: int) -> str:
     return f"warning: {path}: incomplete capture: {problem}; using the {n_frames} frames read"
 
 
-def scoring_scenario(scn: Scenario, t_first: float, t_end: float) -> tuple[Scenario, str | None]:
-    """The scenario to score a capture spanning ``t_first`` .. ``t_end`` (s) with, and what changed.
-
-    A live run shorter than its scenario's scoring start is scored over its
-    second half (:meth:`Scenario.with_overrides` with its ``duration``).  A
-    capture whose span ends at or before ``score_from_s`` is scored the same
-    way, from the middle of its span, with the scenario's duration set to the
-    span's end, so that a capture of a shortened run scores as the live run
-    did and the ``meta.json`` written with it scores the same again.
-    """
-    if scn.score_from_s < t_end:
-        return scn, None
-    t_end = round(t_end, 9)
-    start = round(t_first + (t_end - t_first) / 2, 9)
-    out = scn.with_overrides(duration=max(t_end, 1e-3), score_from_s=start)
-    return out, (
-        f"capture ends at {t_end:g} s, not after the scenario's scoring start "
-        f"({scn.score_from_s:g} s): scoring its second half, from {start:g} s "
-        "(as a run of that duration is scored)"
-    )
-
-
 def analyze_capture(
     path: Path,
     *,
@@ -338,7 +445,8 @@ def analyze_capture(
     from bench.scenarios._setup import sample_period
 
     codec = codec or Codec()
-    frames, problem = read_capture(path)
+    got = read_capture_counted(path)
+    frames, problem = got.frames, got.problem
     capture = path if path.is_file() else _find_in_folder(path)
     scn, meta = capture_scenario(path, scenario)
     if duration is not None:
@@ -350,6 +458,8 @@ def analyze_capture(
     say(line)
     if problem:
         say(incomplete_warning(capture, problem, len(frames)))
+    if got.lines_skipped:
+        say(skipped_warning(capture, got.lines_skipped))
     if span is not None:
         T_s = sample_period(scn)
         scn, moved = scoring_scenario(scn, span[0] * T_s, span[1] * T_s)
@@ -368,9 +478,12 @@ def analyze_capture(
         )
     except ValueError as e:
         raise CaptureError(f"{capture}: {e}") from None
+    if got.lines_skipped:
+        res.metrics["capture_lines_skipped"] = len(got.lines_skipped)
     if problem:
         res.metrics["capture_truncated"] = True
         res.metrics["capture_read_error"] = problem
+    if problem or got.lines_skipped:
         (out / "metrics.json").write_text(
             jsonio.dumps(res.metrics, indent=2, sort_keys=True) + "\n"
         )

@@ -48,8 +48,9 @@ from bench._errors import CaptureError
 from bench.captures._read import (
     capture_scenario,
     incomplete_warning,
-    read_capture,
+    read_capture_counted,
     scoring_scenario,
+    skipped_warning,
 )
 from bench.captures._replay import (
     channel_tag,
@@ -168,11 +169,15 @@ def rerun_capture(
     check_estimator_name(estimator)
     codec = codec or Codec()
     say = echo or (lambda s: print(s, file=sys.stderr))
-    frames, problem = read_capture(path)
+    got = read_capture_counted(path)
+    frames, problem = got.frames, got.problem
     scn, meta = capture_scenario(path, scenario)
-    check_estimator_fits(scn, estimator)  # a misfit is one line, as for ``bench run``
+    if note := check_estimator_fits(scn, estimator):  # a misfit is one line, as for ``bench run``
+        say(note)
     if problem:
         say(incomplete_warning(path, problem, len(frames)))
+    if got.lines_skipped:
+        say(skipped_warning(path, got.lines_skipped))
     recorded = meta.get("estimator") if isinstance(meta.get("estimator"), str) else None
     if recorded is not None and recorded not in ESTIMATOR_NAMES:
         try:  # a plug-in that still loads is known too

@@ -213,6 +213,7 @@ def bus_spec(args: argparse.Namespace, *, announce: bool, one_process: bool = Fa
     """
     from bench.wire._bus import BusSpec, check_interface, default_transport, python_can_config
 
+    why: str | None = None
     if args.interface is None and (cfg := python_can_config()) is not None:
         # python-can's own configuration (~/.canrc, CAN_INTERFACE, ...) names the bus
         args.interface = str(cfg.get("interface"))
@@ -220,11 +221,9 @@ def bus_spec(args: argparse.Namespace, *, announce: bool, one_process: bool = Fa
         for key in ("bitrate", "data_bitrate"):
             if getattr(args, key, None) is None and cfg.get(key) is not None:
                 setattr(args, key, int(cfg[key]))
-        if announce:
-            print(
-                f"transport: {args.interface} {args.channel} (python-can configuration)",
-                file=sys.stderr,
-            )
+        if getattr(args, "port", None) is None and cfg.get("port") is not None:
+            args.port = int(cfg["port"])
+        why = "python-can configuration"
     if args.interface is not None:
         check_interface(args.interface)
         if args.interface == "virtual" and not one_process:
@@ -237,27 +236,38 @@ def bus_spec(args: argparse.Namespace, *, announce: bool, one_process: bool = Fa
         if args.channel is not None:
             raise InterfaceError("--channel given without --interface")
         iface, chan, reason = default_transport()
-        if announce:
-            print(f"transport: {iface} {chan} ({reason})", file=sys.stderr)
         port = args.port
         if iface == "udp_multicast" and port is None:
             # a port of its own per run: parallel runs must not hear each other
             port = 44000 + 2 * random.Random(os.getpid()).randrange(5000)
-        return BusSpec(
+        spec = BusSpec(
             iface, chan, port, getattr(args, "bitrate", None), getattr(args, "data_bitrate", None)
         )
-    from bench.wire._bus import default_channel
+        why = reason
+    else:
+        from bench.wire._bus import default_channel
 
-    channel: str | None = args.channel or default_channel(args.interface)
-    if channel is None:
-        raise InterfaceError(f"--interface {args.interface}: this adapter needs --channel")
-    return BusSpec(
-        args.interface,
-        channel,
-        args.port,
-        getattr(args, "bitrate", None),
-        getattr(args, "data_bitrate", None),
-    )
+        channel: str | None = args.channel or default_channel(args.interface)
+        if channel is None:
+            raise InterfaceError(f"--interface {args.interface}: this adapter needs --channel")
+        spec = BusSpec(
+            args.interface,
+            channel,
+            args.port,
+            getattr(args, "bitrate", None),
+            getattr(args, "data_bitrate", None),
+        )
+    if announce and why is not None:
+        where = spec.describe()
+        if spec.interface == "udp_multicast" and spec.port is None:
+            where += f" port {DEFAULT_UDP_PORT}"
+            why += "; python-can's default port"
+        print(f"transport: {where} ({why})", file=sys.stderr)
+    return spec
+
+
+#: python-can's udp_multicast port when none is given.
+DEFAULT_UDP_PORT = 43113
 
 
 STOP = threading.Event()
@@ -287,8 +297,34 @@ def same_bus(a: Any, b: Any) -> bool:
     if a.interface != b.interface:
         return False
     if a.interface == "udp_multicast":
-        return (a.port or 43113) == (b.port or 43113)
+        return (a.port or DEFAULT_UDP_PORT) == (b.port or DEFAULT_UDP_PORT)
     return bool(a.channel == b.channel)
+
+
+def writable_dir(path: Path, option: str = "--out") -> Path:
+    """``path`` checked writable (creatable); one line (exit 2) when it is not.
+
+    Checked before any work starts, so a folder that cannot be written
+    (``/proc/x``, a path under a file, no permission) is the user's mistake
+    on one line, not a traceback after the run.  The folders the check
+    creates are removed again: a command refused later leaves nothing behind.
+    """
+    missing = [p for p in (path, *path.parents) if not p.exists()]
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        probe = path / f".bench-write-check-{os.getpid()}"
+        probe.write_bytes(b"")
+        probe.unlink()
+        for p in missing:  # deepest first
+            p.rmdir()
+    except OSError as e:
+        why = e.strerror or type(e).__name__
+        if isinstance(e, FileExistsError) or (path.exists() and not path.is_dir()):
+            why = "a file of that name is in the way"
+        elif isinstance(e, NotADirectoryError):
+            why = "a part of the path is a file, not a folder"
+        raise BenchError(f"{option} {path}: cannot write there ({why})") from None
+    return path
 
 
 def files_line(out_dir: Path, names: list[str]) -> str:

@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from bench.cli._common import POS_FLOAT, files_line
+from bench.cli._common import POS_FLOAT, files_line, writable_dir
 
 
 def cmd_analyze(args: argparse.Namespace) -> int:
@@ -19,6 +19,10 @@ def cmd_analyze(args: argparse.Namespace) -> int:
     from bench.runs._results import format_metrics, outcome
 
     plots = not getattr(args, "no_plots", False)
+    log = Path(args.log)
+    # the default folder is the capture's (a run folder itself); a missing capture is reported first
+    if args.out or log.exists():
+        writable_dir(Path(args.out) if args.out else log if log.is_dir() else log.parent)
     res = analyze_capture(
         Path(args.log),
         out_dir=Path(args.out) if args.out else None,

@@ -34,7 +34,8 @@ def cmd_replay(args: argparse.Namespace) -> int:
     from bench._errors import BenchError
     from bench.captures._read import (
         incomplete_warning,
-        read_capture,
+        read_capture_counted,
+        skipped_warning,
     )
     from bench.captures._replay import (
         CLOCKS,
@@ -76,9 +77,12 @@ def cmd_replay(args: argparse.Namespace) -> int:
         return spec
 
     path = Path(args.log)
-    frames, problem = read_capture(path)
+    got = read_capture_counted(path)
+    frames, problem = got.frames, got.problem
     if problem:
         print(incomplete_warning(path, problem, len(frames)), file=sys.stderr)
+    if got.lines_skipped:
+        print(skipped_warning(path, got.lines_skipped), file=sys.stderr)
     plan = plan_replay(
         frames,
         default=default_bus,

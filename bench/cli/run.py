@@ -19,6 +19,7 @@ from bench.cli._common import (
     bus_spec,
     plant_engine,
     scenario_from_args,
+    writable_dir,
 )
 from bench.scenarios._setup import check_estimator_fits, check_estimator_name
 
@@ -80,7 +81,8 @@ def cmd_run(args: argparse.Namespace) -> int:
     else:
         est = args.estimator or scn.estimator
         check_estimator_name(est)
-        check_estimator_fits(scn, est)
+        if note := check_estimator_fits(scn, est):
+            print(note, file=sys.stderr)
     plant_engine(args)
     if args.monitor and not (sys.stdin.isatty() and sys.stdout.isatty() and sys.stderr.isatty()):
         raise BenchError("--monitor: needs a terminal (run bench monitor beside it instead)")
@@ -89,8 +91,10 @@ def cmd_run(args: argparse.Namespace) -> int:
         from bench.wire._bus import UDP_DEFAULT_PORT
 
         args.port = UDP_DEFAULT_PORT
+    out = writable_dir(
+        Path(args.out) if args.out else Path("runs") / f"{scn.name}-{est.replace(':', '-')}"
+    )
     spec = bus_spec(args, announce=True)
-    out = Path(args.out) if args.out else Path("runs") / f"{scn.name}-{est.replace(':', '-')}"
     who = f"external controller {args.dut_name}" if external and args.dut_name else est
     if external and not args.dut_name:
         who = "an external controller"

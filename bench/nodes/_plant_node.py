@@ -117,7 +117,7 @@ class PlantNode:
         arrived for this many PWM periods of the plant's clock (0: off).
     watchdog_rounds : int
         Lockstep: trip when this many retransmission rounds in a row brought
-        no valid duty frame (0: off).
+        no valid duty frame, once a first one has come (0: off).
     status_every : int
         Send ``PlantStatus`` every this many periods from the start command
         (the DBC's ``GenMsgCycleTime`` in periods; 0: only on a change of
@@ -167,7 +167,8 @@ class PlantNode:
         self.jitter: dict[str, float] | None = None
         #: Wall seconds of the stepping loop (start command to the last period).
         self.loop_s: float | None = None
-        #: age (PWM periods) of the duty applied in the last period; 255: none.
+        #: age (PWM periods) of the duty applied in the last period, at most 254;
+        #: 255: none (before the first duty, and in the safe state after a trip).
         #: Sent in PlantTruth so the recorder measures the loop latency exactly.
         self.duty_age = 255
         self.sent: deque[list[can.Message]] = deque(maxlen=lockstep_delay + 3)
@@ -316,6 +317,20 @@ class PlantNode:
         """Lockstep: one retransmission round passed without the needed duty.
 
         Returns the frames to send (the fault status when the watchdog trips).
+
+        The watchdog is armed by the first valid duty frame, as in real time.
+        A lockstep plant's periods do not pass while it waits, so the rounds
+        are wall-clock time of the bench's processes, and the wait for the
+        first duty is the longest of a run: the link forwards the command
+        burst, then the controller takes its first step (imports, first
+        allocations), which on a loaded host (User-Mode Linux beside other
+        jobs) took more than the 100 rounds; the trip then ran every later
+        period in the safe state and the trace left the in-process one (at
+        step 43 of the link test, where the ramp makes it visible).  Armed by
+        the first duty, a controller that never answers is reported by the
+        loop's stall error instead, and a trip needs a controller that went
+        silent mid-run; it is reported (``plant_fault``, exit 3), never a
+        silently different trace.
         """
         if self.external and not self.dut_answered:
             return self._flush_outbox([])  # waiting for the controller under test
@@ -323,6 +338,7 @@ class PlantNode:
         if (
             self.watchdog_rounds
             and self.started
+            and self.latest_duty_step >= 0  # armed by the first valid duty
             and self.fault == FAULT_NONE
             and self.rounds_waiting >= self.watchdog_rounds
         ):
@@ -405,6 +421,7 @@ class PlantNode:
                 del self.duties[old]
         if self.fault != FAULT_NONE:
             en = False
+            self.duty_age = 255  # the safe state applies no duty (the DBC's 255)
         self.rounds_waiting = 0
         self.plant.step(d_a, d_b, d_c, en)
         self._check_protection()
@@ -452,6 +469,7 @@ class PlantNode:
             self.trip(FAULT_WATCHDOG)
         if self.fault != FAULT_NONE:
             en = False
+            self.duty_age = 255  # the safe state applies no duty (the DBC's 255)
         self.plant.step(d_a, d_b, d_c, en)
         self._check_protection()
         self.apply_commands()

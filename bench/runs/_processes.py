@@ -57,23 +57,44 @@ def _wait_ready(
         if line.strip() == "READY":
             return
         if line == "" and proc.poll() is not None:
-            tail = log.read_text(errors="replace").strip().splitlines()[-1:] if log.exists() else []
-            raise BenchError(f"{role} process exited before it was ready: {' '.join(tail)}")
+            how = how_ended(log.parent, role, proc.returncode)
+            raise BenchError(f"{role} process exited before it was ready ({how})")
     raise BenchError(f"{role} process not ready after {timeout:.0f} s")
 
 
-def ended_early(procs: list[tuple[str, subprocess.Popen[str]]]) -> str | None:
-    """``"link"`` when the latency link ended while the plant still runs, else ``None``.
+def ended_early(
+    procs: list[tuple[str, subprocess.Popen[str]]], *, lockstep: bool = False
+) -> str | None:
+    """The role whose process ended while the plant still runs, else ``None``.
 
     The link is the bench's own infrastructure and never ends by itself during
-    a run; without it the plant would only wait for its watchdog.  A node that
-    dies (the controller) is left to the plant, as a drive would be: the
-    plant's watchdog and safe state are what such a run tests.
+    a run; without it the plant would only wait for its watchdog.  In real
+    time a node that dies (the controller) is left to the plant, as a drive
+    would be: the plant's watchdog and safe state are what such a run tests.
+    In lockstep the plant cannot take another period without the controller,
+    so its end ends the run at once (rather than after the plant's stall
+    timeout), named with how it ended (:func:`how_ended`).
     """
     for role, p in procs:
-        if role == "link" and p.poll() is not None:
-            return role
+        if role == "plant" or p.poll() is None:
+            continue
+        if role == "link" or (lockstep and p.returncode != 0):
+            return role  # (a controller ends by itself, status 0, at the stop command)
     return None
+
+
+def how_ended(out_dir: Path, role: str, returncode: int | None) -> str:
+    """How a node process ended: the signal that killed it, or its status and last log line."""
+    if returncode is not None and returncode < 0:
+        try:
+            name = signal.Signals(-returncode).name
+        except ValueError:
+            name = f"signal {-returncode}"
+        return f"killed by {name}"
+    line = last_line(out_dir, role)
+    if returncode is None:
+        return line
+    return f"exit status {returncode}: {line}" if returncode else line
 
 
 def last_line(out_dir: Path, role: str) -> str:

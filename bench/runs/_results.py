@@ -111,6 +111,28 @@ def _controller_gains(scn: Scenario, estimator: str) -> dict[str, float]:
         return {}
 
 
+def scoring_scenario(scn: Scenario, t_first: float, t_end: float) -> tuple[Scenario, str | None]:
+    """The scenario to score a capture spanning ``t_first`` .. ``t_end`` (s) with, and what changed.
+
+    A live run shorter than its scenario's scoring start is scored over its
+    second half (:meth:`Scenario.with_overrides` with its ``duration``).  A
+    capture whose span ends at or before ``score_from_s`` is scored the same
+    way, from the middle of its span, with the scenario's duration set to the
+    span's end, so that a capture of a shortened run scores as the live run
+    did and the ``meta.json`` written with it scores the same again.
+    """
+    if scn.score_from_s < t_end:
+        return scn, None
+    t_end = round(t_end, 9)
+    start = round(t_first + (t_end - t_first) / 2, 9)
+    out = scn.with_overrides(duration=max(t_end, 1e-3), score_from_s=start)
+    return out, (
+        f"capture ends at {t_end:g} s, not after the scenario's scoring start "
+        f"({scn.score_from_s:g} s): scoring its second half, from {start:g} s "
+        "(as a run of that duration is scored)"
+    )
+
+
 def finish_run(
     frames: list[can.Message],
     codec: Codec,

@@ -41,6 +41,7 @@ from bench.nodes._counters import RejectionSummary, rejection_text
 from bench.nodes._loops import trip_text
 from bench.runs._processes import (
     ended_early,
+    how_ended,
     last_line,
     node_failures,
     node_roles,
@@ -49,7 +50,7 @@ from bench.runs._processes import (
 )
 from bench.runs._pacing import PACE_EVERY, CommandPacer
 from bench.runs._recorder import Recording
-from bench.runs._results import RunResult, finish_run, run_metadata
+from bench.runs._results import RunResult, finish_run, run_metadata, scoring_scenario
 from bench.scenarios._schema import Scenario, write_effective
 from bench.scenarios._setup import n_steps, sample_period
 from bench.wire._bus import BusSpec
@@ -165,7 +166,21 @@ def run_scenario(
                 pacer = CommandPacer(scn, codec, mode=mode, pace_every=pace)
                 plant = dict(procs).get("plant")
                 if plant is not None and not interrupted():
-                    ended = _drive(rec, pacer, procs, plant, scn, progress, interrupted, dut)
+                    ended = _drive(
+                        rec, pacer, procs, plant, scn, progress, interrupted, dut, mode == "lockstep"
+                    )
+                if progress and (ended or interrupted()):
+                    # said at once: stopping the nodes and scoring take a while on a loaded host
+                    why = "interrupted"
+                    if ended:
+                        code = dict(procs)[ended].returncode
+                        why = f"{ended} process ended ({how_ended(out_dir, ended, code)})"
+                    print(
+                        f"{why} at step {max(0, rec.plant_step):,}: stopping the nodes and "
+                        "scoring what was recorded (Ctrl-C again to stop without scoring)",
+                        file=sys.stderr,
+                        flush=True,
+                    )
                 asked = stop_nodes(
                     procs,
                     rec.plant_bus,
@@ -197,9 +212,10 @@ def run_scenario(
     if interrupted():
         meta["interrupted"] = True
     frames = rec.frames()
+    codes = dict(meta["exit_codes"])
     if not frames and (ended or failures) and not interrupted():
         why = (
-            f"{ended} process ended before the run did ({last_line(out_dir, ended)})"
+            f"{ended} process ended before the run did ({how_ended(out_dir, ended, codes[ended])})"
             if ended
             else "node process failed ("
             + "; ".join(f"{r}: {last_line(out_dir, r)}" for r in failures)
@@ -209,16 +225,10 @@ def run_scenario(
     # a plant that ended before the scenario's last period (a lockstep watchdog
     # trip with a controller under test) leaves a shorter run: scored as far as it went
     short = int((meta["node_reports"].get("plant") or {}).get("steps", n_steps(scn))) < n_steps(scn)
-    result = _score(
-        frames,
-        codec,
-        scn,
-        out_dir,
-        meta,
-        wall,
-        capture,
-        partial=bool(interrupted() or failures or ended or short),
-    )
+    partial = bool(interrupted() or failures or ended or short)
+    # a node that died: the numbers at once, the plots left to bench analyze (seconds of matplotlib)
+    plots = not ended or bool(interrupted())
+    result = _score(frames, codec, scn, out_dir, meta, wall, capture, partial=partial, plots=plots)
     if dut is not None:
         dut.check(rec.plant_step)  # a trip the drive loop ended before printing
         dut.plant_story(out_dir)
@@ -226,11 +236,11 @@ def run_scenario(
         raise BenchError(f"{dut.failure_text()}; files in {out_dir}")
     if ended and not interrupted():
         raise BenchError(
-            f"{ended} process ended before the run did ({last_line(out_dir, ended)}); "
+            f"{ended} process ended before the run did ({how_ended(out_dir, ended, codes[ended])}); "
             f"files in {out_dir}"
         )
     if failures and not interrupted():
-        logs = "; ".join(f"{r}: {last_line(out_dir, r)}" for r in failures)
+        logs = "; ".join(f"{r}: {how_ended(out_dir, r, codes[r])}" for r in failures)
         raise BenchError(f"node process failed ({logs}); files in {out_dir}")
     return result
 
@@ -280,6 +290,7 @@ def _drive(
     progress: bool,
     interrupted: _Interrupt,
     dut: DutWatch | None,
+    lockstep: bool = True,
 ) -> str | None:
     """Send the bench commands ahead of the plant until it is done; what ended the run early.
 
@@ -302,9 +313,13 @@ def _drive(
             # commands (a lossy transport): the last few once more
             pacer.resend_recent(bus)
             t_moved = time.monotonic()
-        if rec.plant_done or plant.poll() is not None or interrupted():
+        if rec.plant_done or interrupted():
             break
-        ended = ended_early(procs)
+        if plant.poll() is not None:
+            # a plant that ends by itself ends well; killed or failed, it is named at once
+            ended = "plant" if plant.returncode != 0 else None
+            break
+        ended = ended_early(procs, lockstep=lockstep)
         if ended:
             break
         if dut is not None:
@@ -460,6 +475,23 @@ def _node_reports(out_dir: Path) -> dict[str, Any]:
     return reports
 
 
+def _partial_scoring(
+    frames: list[can.Message], codec: Codec, scn: Scenario, meta: dict[str, Any]
+) -> Scenario:
+    """The scenario a partial run is scored with: ``bench analyze``'s rule on its span."""
+    from bench.runs._analysis import analyze_frames
+
+    try:
+        steps = analyze_frames(frames, codec, T_s=1.0, n_p=1).table["step"]
+    except ValueError:
+        return scn  # no complete step: nothing to score
+    T_s = sample_period(scn)
+    scored, moved = scoring_scenario(scn, float(steps[0]) * T_s, float(steps[-1]) * T_s)
+    if moved:
+        meta["scoring"] = moved
+    return scored
+
+
 def _score(
     frames: list[can.Message],
     codec: Codec,
@@ -470,31 +502,27 @@ def _score(
     capture: Path,
     *,
     partial: bool,
+    plots: bool = True,
 ) -> RunResult:
     """The run's files from its frames; a ``partial`` run (interrupted, a node died) too.
 
-    A partial run that ended before the scored part is scored from 0 s; one
-    that ended before its first complete step keeps its capture (none without
-    a single frame: no reader takes an empty log) and a ``metrics.json`` that
-    says so.
+    A partial run is scored by the rule ``bench analyze`` applies to its
+    capture (:func:`bench.runs._results.scoring_scenario`): one that ended
+    before the scenario's scoring start is scored over the second half of
+    the steps it recorded, so the run and a later analysis of its capture
+    give the same numbers.  One that ended before its first complete step
+    keeps its capture (none without a single frame: no reader takes an
+    empty log) and a ``metrics.json`` that says so.
     """
+    if partial:
+        scn = _partial_scoring(frames, codec, scn, meta)
     try:
-        return finish_run(frames, codec, scn, out_dir, meta=meta, wall_s=wall, capture=capture)
+        return finish_run(
+            frames, codec, scn, out_dir, meta=meta, wall_s=wall, capture=capture, plots=plots
+        )
     except ValueError:
         if not partial:
             raise
-    try:
-        return finish_run(
-            frames,
-            codec,
-            scn.with_overrides(score_from_s=0.0),
-            out_dir,
-            meta=meta,
-            wall_s=wall,
-            capture=capture,
-        )
-    except ValueError:
-        pass
     meta["capture"] = capture.name if frames else None
     if not frames:
         capture.unlink(missing_ok=True)

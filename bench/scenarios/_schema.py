@@ -6,6 +6,16 @@ load-torque profiles, the injected latency, the sensing noise and the seed.
 The ten scenarios of the papers ship in ``bench/scenarios/``; a user's own file
 path works wherever a name does.
 
+Units are SI unless a key's name carries its own (``_rpm``, ``_deg``, ``_us``,
+``_hz``, ``_s``, ``_a``, ``_nm``): currents are **peak** phase values in A
+(the amplitude-invariant Park transform, as on the wire; an rms rating is
+multiplied by sqrt(2)), flux linkages peak per phase in Wb, inductances in H
+(not mH), the ``[motor]`` speeds mechanical rad/s (not rpm), speed
+references in rpm, angles electrical degrees, voltages V, times s.  A motor
+is checked against physics on load (``bench/scenarios/_plausible.py``): a
+value off by a factor of 1000 is an error that names the field and the unit
+it looks like.
+
 Schema (all keys optional unless marked *required*; every key with its unit,
 default, range and meaning: docs/SCENARIOS.md, written by ``bench schema`` from
 this module and :mod:`bench.scenarios._reference`)::
@@ -20,7 +30,7 @@ this module and :mod:`bench.scenarios._reference`)::
     duration = 3.0                   # simulated seconds, *required*
     seed = 1                         # seeds the sensor noise and the latency jitter
     saturation = true                # d-axis saturation in the plant (needed by the polarity test)
-    theta_e0_deg = 0.0               # initial electrical rotor angle
+    theta_e0_deg = 0.0               # initial electrical rotor angle, electrical degrees
     known_initial_angle = true       # false: the controller runs its start-up (HF + polarity)
     speed_rpm = [[0.0, 100.0]]       # (t s, rpm) breakpoints, linear between, held after the last;
                                      # a step is two points at the same time; values within the
@@ -31,12 +41,18 @@ this module and :mod:`bench.scenarios._reference`)::
     thd_window_s = [3.0, 11.0]       # window for the THD of phase-A current (optional)
 
     [estimator_options]              # passed to the estimator, checked on load by key name
-    V_h = 50.0                       # rotating (sfhf, tt-ab, tt-dq): injection amplitude, V,
-    f_h = 500.0                      # frequency, Hz; also w_o, normalise, bpf, hpf, lpf
-    U_h = 20.0                       # square-wave: injection amplitude, V; also a, M, delay_comp
+    V_h = 50.0                       # rotating (sfhf, tt-ab, tt-dq): injection amplitude, V peak,
+    f_h = 500.0                      # frequency, Hz; also w_o (PLL bandwidth, rad/s), normalise,
+                                     # bpf, hpf, lpf (continuous prototypes, s-domain, rad/s)
+    U_h = 20.0                       # square-wave: injection amplitude, V peak; also a (observer
+                                     # pole, rad/s), M (CIC delay, periods), delay_comp (periods)
                                      # (amplitudes <= u_dc/sqrt(3) of the preset, f_h below
-                                     # Nyquist; the keys of both families are accepted, since
-                                     # the estimator may be chosen on the command line)
+                                     # Nyquist; the keys of both families load, since the
+                                     # estimator may be chosen on the command line; a run then
+                                     # refuses a key of the other family in one line, and
+                                     # sensored runs without them, saying so).  Needs [motor]
+                                     # in a file that does not extend a scenario (the settings
+                                     # are for a motor; an empty [motor] keeps the preset's)
     extends = "wen-5.1"              # start from a shipped scenario (or a path): this file's
                                      # keys replace the base's, table by table, key by key
     plant_profile = "ideal"          # "ideal" (the papers' plant) | "drive" (switching inverter,
@@ -95,8 +111,18 @@ this module and :mod:`bench.scenarios._reference`)::
     sample_drop_prob = 0.0           # (the seed gives each direction a random stream of its own:
                                      # one direction's settings never change the other's draws)
     [motor]                          # explicit motor parameters (SI) replacing the preset's,
-    R_s = 2.8                        # for plant and controller alike; any of n_p, R_s, L_d,
-    L_q = 0.082                      # L_q, psi_f, J, b, i_rated, i_max, tau_rated, w_m_rated
+                                     # for plant and controller alike; any of these keys:
+    n_p = 4                          # pole pairs
+    R_s = 2.8                        # stator resistance, Ohm
+    L_d = 0.057                      # d-axis inductance at zero current, H (not mH)
+    L_q = 0.082                      # q-axis inductance at zero current, H
+    psi_f = 0.3                      # permanent-magnet flux linkage, peak per phase, Wb
+    J = 0.003                        # inertia of rotor and load, kg m^2
+    b = 0.00048                      # viscous friction, N m s/rad
+    i_rated = 4.0                    # rated current, peak phase, A (rms times sqrt(2))
+    i_max = 8.0                      # current limit, peak phase, A
+    tau_rated = 7.5                  # rated torque, N m
+    w_m_rated = 157.08               # rated speed, mechanical rad/s (rpm times pi/30)
     [controller_model]               # the controller's parameter errors: factors on the
     R_s = 1.0                        # plant's values (1.0 exact, 1.2 = believes 20 % more);
     L_d = 1.0                        # the plant keeps the preset's values
@@ -510,6 +536,47 @@ def estimator_option_keys() -> dict[str, Any]:
     return keys
 
 
+@functools.cache
+def estimator_keys(estimator: str) -> frozenset[str]:
+    """The ``[estimator_options]`` keys one estimator takes (``sensored``: none).
+
+    Rotating injection: the fields of :class:`controller._rotating.RotatingInjectionPars`;
+    square-wave: the keyword parameters of :class:`controller._square_wave.SquareWaveEstimator`;
+    a hybrid: its injection estimator's and the hand-over's own.
+    """
+    from controller._hybrid import _OWN_OPTIONS
+    from controller._registry import injection_family
+    from controller._rotating import RotatingInjectionPars
+    from controller._square_wave import SquareWaveEstimator
+
+    family = injection_family(estimator)
+    keys: set[str] = set()
+    if family == "rotating":
+        keys = {f.name for f in dataclasses.fields(RotatingInjectionPars)}
+    elif family == "square":
+        keys = {
+            k
+            for k in inspect.signature(SquareWaveEstimator.__init__).parameters
+            if k not in _SQUARE_WAVE_FIXED
+        }
+    if estimator.startswith("hybrid-"):
+        keys |= set(_OWN_OPTIONS)
+    return frozenset(keys)
+
+
+def split_options(options: dict[str, Any], estimator: str) -> tuple[dict[str, Any], list[str]]:
+    """A scenario's estimator options: (those ``estimator`` takes, the keys it does not)."""
+    keys = estimator_keys(estimator)
+    return {k: v for k, v in options.items() if k in keys}, [k for k in options if k not in keys]
+
+
+def option_owners(key: str) -> list[str]:
+    """The estimators that take ``[estimator_options]`` key ``key``."""
+    from controller._registry import ESTIMATOR_NAMES
+
+    return [e for e in ESTIMATOR_NAMES if key in estimator_keys(e)]
+
+
 def _signal_range(message: Any, signal: str) -> tuple[float, float]:
     """``[min|max]`` of a DBC signal (its raw range when the DBC gives none), as encoded."""
     s = message.get_signal_by_name(signal)
@@ -619,6 +686,30 @@ def saliency_error(
         "L_q > L_d; only 'sensored' runs without saliency "
         '(estimator = "sensored", estimators = ["sensored"])'
     )
+
+
+def _check_plausible(
+    src: str, preset: str, motor: dict[str, float], inverter: dict[str, Any]
+) -> None:
+    """The scenario's motor against physics (:mod:`bench.scenarios._plausible`).
+
+    Only a motor the scenario changes is checked (the presets' are the papers'
+    and checked by the tests); a unit mistake names its field and unit.
+    """
+    if not motor and "u_dc" not in inverter:
+        return
+    from bench.scenarios._plausible import motor_plausibility_error
+    from plant_rt import PRESETS
+
+    p = PRESETS[preset]
+    keys = ("n_p", "R_s", "L_d", "L_q", "psi_f", "i_rated", "i_max", "tau_rated", "w_m_rated")
+    values = {k: float(motor.get(k, getattr(p.motor, k))) for k in keys}
+    values["u_dc"] = float(inverter.get("u_dc", p.inverter.u_dc))
+    given = {k: f"motor.{k}" for k in motor}
+    if "u_dc" in inverter:
+        given["u_dc"] = "inverter.u_dc"
+    if err := motor_plausibility_error(values, given):
+        raise ScenarioError(f"{src}: field '{err[0]}': {err[1]}")
 
 
 def scenario_path(name_or_path: str) -> Path:
@@ -936,6 +1027,7 @@ def parse_scenario(data: dict[str, Any], src: str) -> Scenario:
         raise err
     f_eff = PRESETS[preset].f_sw if f_sw == -1.0 else f_sw
     profile, inverter, sensors, magnetics = _parse_plant(r, 1.0 / f_eff)
+    _check_plausible(r.src, preset, motor, inverter)
     controller = _parse_controller(r, 1.0 / f_eff)
     _check_delay_us(r.src, latency, f_eff)
     opts = _parse_estimator_options(r, preset, f_eff)
@@ -1124,7 +1216,11 @@ def load_scenario(name_or_path: str) -> Scenario:
             raise ScenarioError(f"{path}: not a scenario file")
         return scenario_from_dict(d, str(d.get("source", path)))
     src = name_or_path if not Path(name_or_path).exists() else str(path)
-    return parse_scenario(_resolved_toml(path, src, ()), src)
+    scn = parse_scenario(_resolved_toml(path, src, ()), src)
+    own = _read_toml(path)
+    if "extends" not in own:  # every value checked first: a wrong one is named before this
+        _check_options_have_a_motor(src, own)
+    return scn
 
 
 def _read_toml(path: Path) -> dict[str, Any]:
@@ -1134,6 +1230,26 @@ def _read_toml(path: Path) -> dict[str, Any]:
         raise ScenarioError(f"{path}: not valid TOML: {e}") from None
     except OSError as e:
         raise ScenarioError(f"{path}: cannot read: {e.strerror}") from None
+
+
+def _check_options_have_a_motor(src: str, data: dict[str, Any]) -> None:
+    """Injection settings belong to a motor: a file that sets them names it in ``[motor]``.
+
+    A file of its own (not ``extends``: a shipped scenario is a motor and its
+    settings together) whose ``[estimator_options]`` came without ``[motor]``
+    would run the preset's motor with settings tuned for another: amplitude,
+    frequency and filters are designed from ``L_d``, ``L_q`` and the rate.
+    An empty ``[motor]`` table says that the preset's motor is meant.
+    """
+    opts = data.get("estimator_options")
+    if isinstance(opts, dict) and opts and "motor" not in data:
+        preset = data.get("preset", "?")
+        raise ScenarioError(
+            f"{src}: field 'estimator_options': injection settings "
+            f"({', '.join(sorted(opts))}) without a [motor] table would run preset "
+            f"{preset}'s motor with them; give the motor they are for in [motor] "
+            "(an empty [motor] table keeps the preset's)"
+        )
 
 
 def _resolved_toml(path: Path, src: str, seen: tuple[Path, ...]) -> dict[str, Any]:

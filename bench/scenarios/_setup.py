@@ -12,7 +12,14 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 from bench._errors import ScenarioError
-from bench.scenarios._schema import ModelErrors, Scenario, saliency_error
+from bench.scenarios._schema import (
+    ModelErrors,
+    Scenario,
+    estimator_keys,
+    option_owners,
+    saliency_error,
+    split_options,
+)
 from bench.wire._protocol import CMD_START, CMD_STOP, RPM_PER_RAD_S
 from controller import CompensationPars, Controller, ControllerPars, MotorModel
 from controller._registry import UnknownEstimatorError, check_estimator, injection_family
@@ -199,12 +206,22 @@ def build_controller(scn: Scenario, estimator: str, engine: str | None = None) -
             f"and L_q = {scn.controller_model.L_q} leave the controller's model without "
             f"saliency (L_q {model.L_q:.4g} H <= L_d {model.L_d:.4g} H), which {estimator} needs"
         )
+    options, foreign = split_options(scn.estimator_options, estimator)
+    if foreign and injection_family(estimator) != "none":
+        k = foreign[0]
+        owners = option_owners(k)
+        raise ScenarioError(
+            f"{scn.source}: field 'estimator_options.{k}': an option of "
+            f"{', '.join(owners) or 'no estimator'}, not of {estimator} (which takes "
+            f"{', '.join(sorted(estimator_keys(estimator)))})"
+        )
+    # sensored takes none: the scenario's injection settings are for its other estimators
     try:
         pars = ControllerPars(
             motor=model,
             T_s=sample_period(scn),
             estimator=estimator,
-            estimator_options=dict(scn.estimator_options),
+            estimator_options=options,
             compensation=comp,
             **kw,
         )
@@ -291,8 +308,12 @@ def check_estimator_name(est: str, option: str = "--estimator") -> str:
         raise BenchError(f"{option}: {e}") from None
 
 
-def check_estimator_fits(scn: Scenario, est: str) -> None:
-    """Build the controller once, so a misfit is one line before any process starts."""
+def check_estimator_fits(scn: Scenario, est: str) -> str | None:
+    """Build the controller once, so a misfit is one line before any process starts.
+
+    Returns the line to tell the user when the scenario's estimator options
+    are left out (``sensored`` takes none; it runs from any scenario).
+    """
     check_estimator_name(est)
     try:
         build_controller(scn, est)
@@ -301,3 +322,10 @@ def check_estimator_fits(scn: Scenario, est: str) -> None:
             f"--estimator {est}: cannot run scenario {scn.name} ({e}); "
             f"the scenario's estimators: {', '.join(scn.estimators)}"
         ) from None
+    _, foreign = split_options(scn.estimator_options, est)
+    if not foreign:
+        return None
+    return (
+        f"note: {est} takes no estimator options; the scenario's [estimator_options] "
+        f"({', '.join(foreign)}) are for its other estimators and are left out of this run"
+    )

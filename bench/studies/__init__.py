@@ -7,5 +7,7 @@
   random, resumable); ``_executors``: where its points run (local processes
   or Dask); ``_scale``: their throughput; ``_robustness``: ``bench suite
   robustness``.
-- ``_perf``: ``bench perf``; ``_soak``: ``bench soak`` (fuzzing and faults).
+- ``_perf``: ``bench perf``; ``_soak``: ``bench soak`` (fuzzing and faults);
+  ``_reliability``: ``bench soak --processes`` (kills, signals, load, parallel
+  runs) and ``docs/RELIABILITY.md``.
 """

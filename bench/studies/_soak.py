@@ -267,6 +267,8 @@ class FuzzResult:
     steps: int = 0
     enabled_steps: int = 0
     out_of_range_outputs: int = 0
+    #: Frames given as CAN FD (the rest classic).
+    fd_frames: int = 0
 
 
 def _counters(node: PlantNode | ControllerNode) -> dict[str, Any]:
@@ -317,6 +319,7 @@ def fuzz_node(
     res = FuzzResult(frames=frames, kinds=fz.counts, counters={}, expected=expected)
     for i in range(frames):
         msg, _ = fz.one()
+        res.fd_frames += msg.is_fd
         fid = msg.arbitration_id
         if fid in consumed and not msg.is_extended_id:
             name = codec.name_of(fid) or ""
@@ -371,6 +374,8 @@ class SoakReport:
     frames_fuzzed_plant: int = 0
     frames_fuzzed_controller: int = 0
     frames_fuzzed_loop: int = 0
+    #: Of the frames fuzzed, those given as CAN FD, per part (``plant``, ``controller``, ``loop``).
+    frames_fd: dict[str, int] = field(default_factory=dict)
     rejected: dict[str, int] = field(default_factory=dict)
     exceptions: int = 0
     violations: int = 0
@@ -477,6 +482,7 @@ def run_soak(
         say(f"fuzz {who} ({'real time' if rt else 'lockstep'}): {n} frames")
         res = fuzz_node(node, n, seed=seed + k, realtime=rt)
         _check_fuzz(rep, res, who)
+        _merge(rep.frames_fd, {who: res.fd_frames})
         if isinstance(node, PlantNode):
             rep.frames_fuzzed_plant += n
             _merge(rep.trips, node.trips)
@@ -542,6 +548,7 @@ def run_soak(
             for _ in range(fz.rng.randint(1, 6)):
                 junk, _ = fz.one()
                 rep.frames_fuzzed_loop += 1
+                _merge(rep.frames_fd, {"loop": int(junk.is_fd)})
                 replies.extend(cn.on_message(junk))
                 to_plant(junk)
         except Exception as e:

@@ -1,0 +1,613 @@
+"""Reliability of whole runs: kills, signals, parallel runs and determinism under load.
+
+What :mod:`bench.studies._soak` checks frame by frame on the nodes, this
+checks on ``bench run`` and its processes, as a user meets them:
+
+- **determinism under load**: lockstep runs through the latency link (and
+  without it) with busy processes beside them on every CPU; each trace is
+  compared with the in-process one, bit for bit;
+- **kills**: ``kill -9`` of the controller in lockstep (the run ends at once,
+  naming the signal) and in real time (the plant's watchdog puts it in the
+  safe state; the run reports the node);
+- **signals**: SIGINT and SIGTERM to ``bench run`` mid-run: exit 130, every
+  node gone, the files written;
+- **parallel runs**: two runs started together, each on a bus of its own;
+  runs that share one bus are not isolated yet (issue 17, run isolation),
+  which the report says instead of testing.
+
+:func:`run_process_checks` returns the figures as a dict (``bench soak
+--processes`` puts them in its JSON), and :func:`render_reliability` writes
+``docs/RELIABILITY.md`` from that JSON alone.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import random
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+import can
+import numpy as np
+
+#: The multicast group of the study's udp_multicast buses (each run a port of its own).
+GROUP = "239.74.163.2"
+#: The columns of a trace compared bit for bit (to 1e-9, as the transport tests do).
+TRACE_COLUMNS = ("theta_err_deg", "theta_hat", "w_m_rpm", "i_a", "d_a")
+
+
+def free_port(span: int = 2) -> int:
+    """A UDP port ``p`` with ``p .. p + span - 1`` unused on this host (a link uses ``p + 1``)."""
+    rng = random.SystemRandom()
+    for _ in range(200):
+        p = rng.randrange(46000, 60000, 2)
+        ok = True
+        for q in range(p, p + span):
+            with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+                try:
+                    s.bind(("", q))
+                except OSError:
+                    ok = False
+                    break
+        if ok:
+            return p
+    raise RuntimeError("no free UDP port pair")
+
+
+@contextmanager
+def busy_processes(n: int) -> Iterator[None]:
+    """``n`` processes spinning on the CPUs while the block runs."""
+    procs = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(n)]
+    try:
+        yield
+    finally:
+        for p in procs:
+            p.kill()
+            p.wait()
+
+
+def _loadavg() -> float:
+    try:
+        return os.getloadavg()[0]
+    except OSError:
+        return float("nan")
+
+
+def _trace(frames: list[can.Message], scn: Any) -> dict[str, np.ndarray]:
+    from bench.runs._analysis import analyze_frames
+    from bench.scenarios._setup import get_preset, sample_period
+    from bench.wire._codec import default_codec
+
+    n_p = get_preset(scn).motor.n_p
+    return analyze_frames(frames, default_codec(), T_s=sample_period(scn), n_p=n_p).table
+
+
+def first_divergence(ref: dict[str, np.ndarray], got: dict[str, np.ndarray]) -> str | None:
+    """Where ``got`` leaves the reference trace (None: the same trace)."""
+    if len(ref["step"]) != len(got["step"]) or not np.array_equal(ref["step"], got["step"]):
+        return f"steps differ ({len(got['step'])} rows, reference {len(ref['step'])})"
+    for col in TRACE_COLUMNS:
+        same = np.isclose(ref[col], got[col], rtol=0.0, atol=1e-9, equal_nan=True)
+        if not same.all():
+            return f"{col} at step {int(ref['step'][int(np.argmin(same))])}"
+    return None
+
+
+def _short(name: str, duration: float, **latency: Any) -> Any:
+    from dataclasses import replace
+
+    from bench.scenarios._schema import Profile, load_scenario
+
+    s = load_scenario(name).with_overrides(
+        duration=duration,
+        score_from_s=duration / 2,
+        speed_rpm=Profile(((0.0, 0.0), (0.05, 100.0))),
+    )
+    return replace(s, latency=replace(s.latency, **latency)) if latency else s
+
+
+def determinism_under_load(runs: int, say: Callable[[str], None]) -> dict[str, Any]:
+    """Lockstep runs with busy processes beside them, each trace against the in-process one."""
+    from bench.nodes._loops import run_inprocess
+    from bench.runs._run import run_scenario
+    from bench.wire._bus import BusSpec
+    from bench.wire._codec import default_codec
+
+    busy = (os.cpu_count() or 1) + 1
+    cases: tuple[tuple[str, dict[str, int]], ...] = (
+        ("through the latency link (duty 2, sample 1 periods)", {"duty_delay_steps": 2,
+                                                                  "sample_delay_steps": 1}),
+        ("plant and controller on one bus", {}),
+    )  # fmt: skip
+    out: dict[str, Any] = {"busy_processes": busy, "cases": []}
+    with tempfile.TemporaryDirectory() as tmp, busy_processes(busy):
+        time.sleep(1.0)  # the load is on before the first run
+        for label, lat in cases:
+            scn = _short("wen-5.1", 0.06, **lat)
+            ref = _trace(run_inprocess(scn, "sensored", default_codec()), scn)
+            case: dict[str, Any] = {"case": label, "runs": runs, "identical": 0, "diverged": []}
+            load = []
+            for i in range(runs):
+                say(f"determinism under load: {label}, run {i + 1}/{runs}")
+                spec = BusSpec("udp_multicast", GROUP, free_port())
+                d = Path(tmp) / f"{len(out['cases'])}-{i}"
+                res = run_scenario(scn, "sensored", spec=spec, out_dir=d, progress=False)
+                load.append(_loadavg())
+                why = first_divergence(ref, _trace(list(can.LogReader(str(res.capture))), scn))
+                if why is None:
+                    case["identical"] += 1
+                else:
+                    case["diverged"].append(why)
+            case["loadavg_1min"] = max(load)
+            out["cases"].append(case)
+    return out
+
+
+def _run_cmd(out: Path, port: int, *extra: str, scenario: str = "wen-5.1") -> list[str]:
+    return [sys.executable, "-m", "bench", "run", scenario, "-e", "sensored", "-i",
+            "udp_multicast", "--channel", GROUP, "--port", str(port), "--out", str(out),
+            *extra]  # fmt: skip
+
+
+def _children(out: Path) -> dict[str, int]:
+    """Node processes of the run writing into ``out`` (found by their ``--report`` path)."""
+    found: dict[str, int] = {}
+    for pid in os.listdir("/proc"):
+        if not pid.isdigit():
+            continue
+        try:
+            args = Path(f"/proc/{pid}/cmdline").read_bytes().decode(errors="replace").split("\0")
+        except OSError:
+            continue
+        for role in ("plant", "controller"):
+            if role in args and str(out / f"{role}.json") in args:
+                found[role] = int(pid)
+    return found
+
+
+def _alive(pid: int) -> bool:
+    st = Path(f"/proc/{pid}/stat")
+    try:
+        return st.read_text().split()[2] != "Z"
+    except (OSError, IndexError):
+        return False
+
+
+def _started(out: Path, proc: subprocess.Popen[str], settle_s: float) -> dict[str, int]:
+    """Wait until both nodes run and the plant has stepped for ``settle_s``; their pids."""
+    t0 = time.monotonic()
+    while time.monotonic() - t0 < 120.0:
+        kids = _children(out)
+        if len(kids) == 2 and (out / "plant.log").exists() and proc.poll() is None:
+            time.sleep(settle_s)
+            return kids
+        if proc.poll() is not None:
+            break
+        time.sleep(0.1)
+    raise RuntimeError(f"the run in {out} did not start")
+
+
+def _finish(proc: subprocess.Popen[str], t0: float) -> tuple[int, float, str]:
+    _, err = proc.communicate(timeout=120)
+    return proc.returncode, time.monotonic() - t0, err.strip().splitlines()[-1] if err else ""
+
+
+def kill_checks(say: Callable[[str], None]) -> list[dict[str, Any]]:
+    """``kill -9`` of a node during a run: how the run ends."""
+    out: list[dict[str, Any]] = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for mode, role in (("lockstep", "controller"), ("lockstep", "plant"),
+                           ("realtime", "controller")):  # fmt: skip
+            say(f"kill -9 of the {role} ({mode})")
+            d = Path(tmp) / f"{mode}-{role}"
+            extra = ["--mode", mode, "--duration", "30", "-q"]
+            scenario = "wen-5.1"
+            if mode == "realtime":
+                # Xue's motor held at standstill: a held duty on a turning rotor would
+                # trip over-current before the watchdog
+                f = Path(tmp) / "standstill.toml"
+                f.write_text('extends = "xue-fig13"\nspeed_rpm = [[0.0, 0.0]]\n')
+                scenario, extra = str(f), ["--mode", mode, "--duration", "3", "-q",
+                                           "--watchdog-ms", "200"]  # fmt: skip
+            proc = subprocess.Popen(
+                _run_cmd(d, free_port(), *extra, scenario=scenario),
+                stdout=subprocess.DEVNULL,
+                stderr=subprocess.PIPE,
+                text=True,
+            )
+            kids = _started(d, proc, 1.5)
+            t0 = time.monotonic()
+            os.kill(kids[role], signal.SIGKILL)
+            rc, took, last = _finish(proc, t0)
+            plant = {}
+            if (d / "plant.json").exists():
+                plant = json.loads((d / "plant.json").read_text())
+            metrics = json.loads((d / "metrics.json").read_text())
+            out.append(
+                {
+                    "mode": mode,
+                    "killed": role,
+                    "exit_code": rc,
+                    "s_to_exit": round(took, 2),
+                    "names_signal": "SIGKILL" in last,
+                    "message": last.split("; files in ")[0],
+                    "steps_scored": int(metrics.get("steps", 0)),
+                    "plant_fault": plant.get("fault"),
+                    "nodes_left": sum(_alive(p) for p in kids.values()),
+                }
+            )
+    return out
+
+
+def signal_checks(say: Callable[[str], None]) -> list[dict[str, Any]]:
+    """SIGINT and SIGTERM to ``bench run`` mid-run (lockstep)."""
+    out: list[dict[str, Any]] = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            say(f"{sig.name} to bench run")
+            d = Path(tmp) / sig.name
+            proc = subprocess.Popen(
+                _run_cmd(d, free_port(), "--duration", "30", "-q"),
+                stdout=subprocess.DEVNULL,
+                stderr=subprocess.PIPE,
+                text=True,
+            )
+            kids = _started(d, proc, 1.5)
+            t0 = time.monotonic()
+            proc.send_signal(sig)
+            rc, took, _ = _finish(proc, t0)
+            meta = json.loads((d / "meta.json").read_text())
+            metrics = json.loads((d / "metrics.json").read_text())
+            files = all((d / f).is_file() for f in ("capture.blf", "signals.csv", "meta.json"))
+            out.append(
+                {
+                    "signal": sig.name,
+                    "exit_code": rc,
+                    "s_to_exit": round(took, 2),
+                    "interrupted_in_meta": bool(meta.get("interrupted")),
+                    "files_written": files,
+                    "steps_scored": int(metrics.get("steps", 0)),
+                    "nodes_left": sum(_alive(p) for p in kids.values()),
+                }
+            )
+    return out
+
+
+def parallel_check(say: Callable[[str], None]) -> dict[str, Any]:
+    """Two lockstep runs started together, each on a bus (port) of its own."""
+    from bench.nodes._loops import run_inprocess
+    from bench.scenarios._schema import write_effective
+    from bench.wire._codec import default_codec
+
+    say("two runs in parallel, a bus each")
+    scn = _short("wen-5.1", 0.1)
+    ref = _trace(run_inprocess(scn, "sensored", default_codec()), scn)
+    results = []
+    with tempfile.TemporaryDirectory() as tmp:
+        f = write_effective(scn, Path(tmp) / "scenario.json")
+        procs = []
+        for i in range(2):
+            d = Path(tmp) / f"run{i}"
+            cmd = _run_cmd(d, free_port(), "-q", scenario=str(f))
+            procs.append(
+                (d, subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE))
+            )
+        for d, p in procs:
+            p.communicate(timeout=300)
+            why = (
+                first_divergence(ref, _trace(list(can.LogReader(str(d / "capture.blf"))), scn))
+                if p.returncode == 0
+                else f"exit {p.returncode}"
+            )
+            results.append(why)
+    return {
+        "runs": 2,
+        "own_bus_identical": sum(w is None for w in results),
+        "diverged": [w for w in results if w is not None],
+        "shared_bus": "not isolated yet: two runs on one bus hear each other's frames "
+        "(run isolation, issue 17 item 1, pending)",
+    }
+
+
+def run_process_checks(
+    *, loaded_runs: int = 3, progress: Callable[[str], None] | None = None
+) -> dict[str, Any]:
+    """Every process-level check; the figures as a JSON-ready dict."""
+    say = progress or (lambda s: None)
+    t0 = time.perf_counter()
+    out: dict[str, Any] = {
+        "cpus": os.cpu_count(),
+        "loadavg_1min_start": _loadavg(),
+        "determinism_under_load": determinism_under_load(loaded_runs, say),
+        "kills": kill_checks(say),
+        "signals": signal_checks(say),
+        "parallel": parallel_check(say),
+    }
+    out["wall_s"] = round(time.perf_counter() - t0, 1)
+    return out
+
+
+def process_checks_ok(p: dict[str, Any]) -> bool:
+    """Every process-level check as it must be."""
+    det = all(c["identical"] == c["runs"] for c in p["determinism_under_load"]["cases"])
+    kills = all(
+        k["exit_code"] == 2 and k["names_signal"] and k["nodes_left"] == 0 for k in p["kills"]
+    )
+    sigs = all(
+        s["exit_code"] == 130 and s["files_written"] and s["nodes_left"] == 0 for s in p["signals"]
+    )
+    par = p["parallel"]["own_bus_identical"] == p["parallel"]["runs"]
+    return det and kills and sigs and par
+
+
+# -- docs/RELIABILITY.md ---------------------------------------------------------------------
+
+#: Text of docs/RELIABILITY.md that is not a figure of the run (mechanisms and tests).
+_DOC_HEAD = """\
+# Reliability: what fails safe, and what is tested
+
+<!-- Written by `bench soak --processes --doc` from docs/reliability/soak.json: do not edit;
+     rerun `make reliability`.  tests/test_reliability_doc.py checks that this page is the
+     rendering of that file. -->
+
+A bench that drives real hardware must fail safe and lose nothing. This page
+lists the mechanisms, the tests that check them, and the figures of the last
+soak run, produced by
+
+```sh
+make reliability   # = .venv/bin/bench soak --processes --out docs/reliability/soak.json --doc docs/RELIABILITY.md
+```
+
+which fuzzes both nodes, runs a closed loop with injected faults, then kills,
+signals, loads and doubles real `bench run` processes, writes
+[`docs/reliability/soak.json`](reliability/soak.json) and renders this page from it
+(`bench soak --from-json docs/reliability/soak.json --doc docs/RELIABILITY.md`
+renders it again without measuring).
+
+## Mechanisms
+
+**End-to-end protection.** Every control frame (`PwmDuty`, `PhaseSamples`,
+`BenchCommand`, `PlantStatus`) carries a CRC-8 SAE J1850 over its E2E data ID
+and payload, and an alive counter (the `step` counters; `BenchCommand.seq`).
+A node puts every frame it receives into exactly one counter:
+
+| counter | meaning |
+|---|---|
+| accepted | passed every check, used |
+| rejected, `bad_crc` | CRC mismatch |
+| rejected, `bad_length` | DLC differs from the DBC |
+| rejected, `decode_error` | remote/error frame, or cantools could not unpack it |
+| rejected, `out_of_range` | a value outside its `[min|max]` (e.g. an undefined `cmd` enum), or a duty outside [0, 1] |
+| rejected, `stale_counter` | counter older than the receiver accepts (replayed or very late frame) |
+| rejected, `future_counter` | counter ahead of anything the sender can have produced (a duty for a period whose sample was not sent yet) |
+| rejected, `queue_full` | more than 4096 pending bench commands (a flood) |
+| repeated, `repeated_counter` | exact repeat of an accepted counter |
+| ignored / unknown | a DBC message the node does not consume / an ID not in the DBC |
+
+`repeated_counter` is counted (node reports; in `metrics.json` as
+`frames_repeated_ignored`, apart from `frames_rejected` and its per-reason
+counts, which add up): the bench produces repeats itself (every bench
+command is sent twice; in lockstep the plant retransmits after a lost frame
+and the controller answers from its cache), and recovery depends on them.
+The DBC has no multiplexed messages; the codec refuses a DBC with any, so an
+unknown multiplexer value cannot reach a node. Only an accepted duty frame
+with every duty in [0, 1] is ever applied.  The recorder frames (`PlantTruth`,
+`CtrlTelemetry`) carry no CRC yet (issue 17, pending).
+
+**Watchdogs.** The plant trips to its safe state (all switches open,
+`enable=False`: the currents freewheel through the diodes and die out, the
+motor coasts, the bridge rectifies if the back-EMF exceeds the DC link) and
+sends `PlantStatus` with `state = fault`, `fault_code = watchdog` when
+
+- real time: no valid duty frame has arrived for `watchdog_periods` PWM
+  periods of its clock (default 10 periods but at least 20 ms; `bench plant
+  --watchdog-ms`, `bench run --watchdog-ms`); armed by the first valid duty;
+- lockstep: `watchdog_rounds` retransmission rounds (50 ms each) in a row
+  brought no duty (default 100 = 5 s; `bench plant --watchdog-rounds`); also
+  armed by the first valid duty.  A lockstep plant's periods do not pass
+  while it waits, so these rounds are wall-clock time of the bench's own
+  processes: armed from the start command, the wait for the first duty (the
+  command burst through the link, the controller's first step) passed them on
+  a loaded host, and the run went on in the safe state with a trace that left
+  the in-process one.  A controller that never answers is reported by the
+  plant's stall error (20 s) instead.
+
+`PlantTruth.duty_age` reads 255 in every period the safe state applies no duty.
+The controller disables its PWM (duties with `enable = 0`) when no valid
+sample has come for `--sample-timeout-ms` (default 50 ms, real time).
+
+**Protection** (`plant_rt.Protection`, a pure class; `ProtectionPars.from_preset`):
+over-current `|i_x| > 1.5 i_max`, DC-link over-voltage `u_dc > 1.2 u_dc,nom`,
+over-speed `|w_m| > 1.5 w_m,rated`, checked every period on the plant's true
+values; NaN trips. Fault codes are the DBC's `PlantStatus.fault_code` table.
+
+Every fault is latched: the plant stays in the safe state until a
+`BenchCommand` `reset` or `enable`; if the condition persists, the next
+period trips again. `PhaseSamples.status` reads `fault` meanwhile. The plant's
+last frame at the end of a run is `PlantStatus` with `state = idle` (and the
+latched fault code).
+
+**Send errors.** A refused send (`can.CanError`, `OSError`: buffer full,
+bus-off) is counted (`send_errors`), retried 5 times with a short back-off,
+then counted as lost (`frames_lost_on_send`); never fatal (lockstep recovers
+the frame by retransmission).
+
+**Signals and dead nodes.** SIGINT/SIGTERM to `bench run`, also while the
+nodes are still starting, sends SIGTERM to every node at once (the nodes end
+their loops and write their reports), says that it is scoring what was
+recorded (unless `-q`), closes the capture and writes `signals.csv`,
+`metrics.json` and `meta.json` with `"interrupted": true`; exit status 130.
+A run cut short is scored by the rule `bench analyze` applies to its capture:
+one that ended before `score_from_s` over the second half of the steps it
+recorded, so the run and a later analysis give the same numbers.  A node
+that dies in lockstep (the plant cannot take another period without it)
+ends the run at once: one line naming the node and how it ended (`killed by
+SIGKILL`), exit status 2, the files written without the plot.  In real time
+a dead controller is left to the plant's watchdog, as in a drive, and the
+run reports it at its end.
+
+**User mistakes** are one line and exit status 2: an `--out` that cannot be
+written (`bench run`, `bench analyze`), a scenario whose motor fails the
+physics checks (a value off by 1000 names its field and the unit it looks
+like), injection settings without a `[motor]` table, an option of the other
+injection family.  A text capture's unparsable lines are skipped and counted
+(`capture_lines_skipped`), never the rest of the file.
+
+**Run isolation** is pending (issue 17): two runs on one bus (one
+udp_multicast port, one vcan) hear each other's frames.  `bench run` without
+`--interface` on a host without vcan0 takes a udp_multicast port of its own
+per process; where vcan0 exists it is the default bus, shared by every run,
+so parallel runs must name a bus each (a vcan or a `--port` of their own).
+
+## Tests
+
+| file | what |
+|---|---|
+| `tests/test_fuzz_nodes.py` | random frames at `PlantNode.on_message` (real time and lockstep) and `ControllerNode.on_message`: valid frames with random values under the bench's own IDs, corrupted copies, wrong lengths, unknown IDs, random payloads, duplicates, replays, reordered bursts; no exception, every frame in exactly one counter, `bad_crc`/`bad_length` counts equal to an independent oracle, no applied duty outside [0, 1] or not from a valid frame; a hypothesis test of the same |
+| `tests/test_soak_cli.py` | `bench soak` end to end: every fuzzed frame accounted for, rejections by reason, every injected fault tripped and recovered, no period lost |
+| `tests/test_protection.py` | each comparator trips with its code, latch and reset, NaN; over-current and over-speed trips in the plant node |
+| `tests/test_reliability_watchdog.py` | real time: trip in exactly the configured period after the last duty; lockstep: armed by the first duty, trip after exactly the configured rounds; the controller disables its PWM when samples stop |
+| `tests/test_lockstep_under_load.py` | the link logic under random schedules with retransmissions and a start longer than the watchdog gives the in-process trace; lockstep through `bench link` with busy processes beside it, over udp_multicast and on vcan |
+| `tests/test_signals_process.py` | real processes: kill -9 of the controller in real time (watchdog fault frame, capture complete); SIGINT, SIGTERM mid-run and during start-up |
+| `tests/test_reliability_errors.py` | unwritable `--out`, unparsable capture lines, the scoring of a run cut short and the line that announces it, kill -9 of the controller in lockstep (named, prompt), the transport line from python-can's configuration, `duty_age` in the safe state |
+| `tests/test_scenario_plausible.py` | the physics checks of a scenario's motor, injection settings without `[motor]`, `sensored` from any scenario |
+| `tests/test_reliability_doc.py` | this page is the rendering of `docs/reliability/soak.json` |
+"""
+
+
+def _n(x: Any) -> str:
+    return f"{int(x):,}"
+
+
+def render_reliability(rep: dict[str, Any]) -> str:
+    """``docs/RELIABILITY.md`` from the JSON of ``bench soak --processes``."""
+    rej = {k: v for k, v in rep["rejected"].items() if k != "repeated_counter"}
+    fd = rep.get("frames_fd", {})
+    plant, ctrl, loop = (
+        rep["frames_fuzzed_plant"],
+        rep["frames_fuzzed_controller"],
+        rep["frames_fuzzed_loop"],
+    )
+    by_reason = ", ".join(f"`{k}` {_n(v)}" for k, v in sorted(rej.items(), key=lambda x: -x[1]))
+    faults = rep["faults_injected"]
+    trips = ", ".join(f"{k} {_n(v)}" for k, v in sorted(rep["trips"].items()))
+    lines = [
+        _DOC_HEAD,
+        "## Last soak run",
+        "",
+        f"`bench soak{' --processes' if 'processes' in rep else ''} --frames "
+        f"{_n(rep['frames_per_node'])} --loop-periods "
+        f"{_n(rep['loop_periods'])} --seed {rep['seed']}` ({rep['scenario']} nodes); "
+        f"{'every check passed' if rep['ok'] else 'NOT every check passed'}.",
+        "",
+        "### Frames fuzzed",
+        "",
+        "| part | frames | of them CAN FD | classic |",
+        "|---|---|---|---|",
+    ]
+    for label, key, n in (
+        ("plant node (half real time, half lockstep)", "plant", plant),
+        ("controller node", "controller", ctrl),
+        ("closed loop (both nodes, 1 to 6 a period)", "loop", loop),
+    ):
+        lines.append(f"| {label} | {_n(n)} | {_n(fd.get(key, 0))} | {_n(n - fd.get(key, 0))} |")
+    lines += [
+        f"| all | {_n(rep['frames_fuzzed'])} | {_n(sum(fd.values()))} | "
+        f"{_n(rep['frames_fuzzed'] - sum(fd.values()))} |",
+        "",
+        "| figure | value |",
+        "|---|---|",
+        f"| rejected, by reason | {_n(sum(rej.values()))}: {by_reason} |",
+        f"| repeated (not rejections) | {_n(rep['rejected'].get('repeated_counter', 0))} |",
+        f"| crashes (exceptions escaped) | {_n(rep['exceptions'])} |",
+        f"| applied bad duties / uncounted frames | {_n(rep['violations'])} / "
+        f"{_n(rep['unchecked_rejections'])} |",
+        f"| faults injected in the closed loop | {_n(sum(faults.values()))} ("
+        + ", ".join(f"{k} {_n(v)}" for k, v in sorted(faults.items()))
+        + ") |",
+        f"| recoveries (reset, then duties applied again) | {_n(rep['recoveries'])} |",
+        f"| trips in total | {trips} (the fuzzed plant node accepts valid forged commands "
+        "with large load torques; the closed loop re-trips when reset too early) |",
+        f"| data lost | {_n(rep['data_lost_periods'])} of {_n(rep['loop_periods'])} "
+        "closed-loop periods |",
+        f"| wall time of the fuzzing | {rep['wall_s']:.1f} s |",
+        "",
+        "A valid frame with a correct CRC and a fresh counter is indistinguishable",
+        "from a genuine one: E2E protection detects corruption, loss, repetition and",
+        "delay, not forgery. The fuzzers' valid frames are accepted by design, and",
+        "what they do (over-speed trips, commands) is still bounded by the",
+        "protection and checked by the oracle.",
+        "",
+    ]
+    p = rep.get("processes")
+    if p is None:
+        lines += ["(No process-level checks in this run: `bench soak` without `--processes`.)"]
+        return "\n".join(lines).rstrip() + "\n"
+    det = p["determinism_under_load"]
+    lines += [
+        "### Determinism under load",
+        "",
+        f"Lockstep `bench run` of wen-5.1 (0.06 s, sensored) with {det['busy_processes']} "
+        f"busy processes beside it on {p['cpus']} CPUs; each trace compared with the "
+        "in-process one (angle, estimate, speed, current, duty to 1e-9).",
+        "",
+        "| case | runs | identical | highest 1-min load average | diverged |",
+        "|---|---|---|---|---|",
+    ]
+    for c in det["cases"]:
+        lines.append(
+            f"| {c['case']} | {c['runs']} | {c['identical']} | {c['loadavg_1min']:.1f} | "
+            f"{'; '.join(c['diverged']) or 'none'} |"
+        )
+    lines += [
+        "",
+        "### Kills and signals",
+        "",
+        "| what | mode | exit status | seconds to exit | signal named | nodes left | "
+        "steps scored | plant fault |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for k in p["kills"]:
+        lines.append(
+            f"| kill -9 of the {k['killed']} | {k['mode']} | {k['exit_code']} | "
+            f"{k['s_to_exit']:.1f} | {'yes' if k['names_signal'] else 'no'} | "
+            f"{k['nodes_left']} | {_n(k['steps_scored'])} | {k['plant_fault'] or '-'} |"
+        )
+    for s in p["signals"]:
+        lines.append(
+            f"| {s['signal']} to bench run | lockstep | {s['exit_code']} | "
+            f"{s['s_to_exit']:.1f} | - | {s['nodes_left']} | {_n(s['steps_scored'])} | - |"
+        )
+    lines += [
+        "",
+        "In lockstep the run ends as soon as a node is gone; in real time the plant's "
+        "watchdog puts it in the safe state and the run goes on to its end (3 s here) "
+        "before it reports the node.  The last line of each kill: "
+        + "; ".join(f"{k['mode']} {k['killed']}: `{k['message']}`" for k in p["kills"])
+        + ".",
+        "",
+        "### Parallel runs",
+        "",
+        f"{p['parallel']['runs']} lockstep runs started together, each on a udp_multicast "
+        f"port of its own: {p['parallel']['own_bus_identical']} of them gave the in-process "
+        "trace"
+        + (
+            f" (diverged: {'; '.join(p['parallel']['diverged'])})"
+            if p["parallel"]["diverged"]
+            else ""
+        )
+        + f".  Runs sharing one bus: {p['parallel']['shared_bus']}.",
+        "",
+        f"The process-level checks took {p['wall_s']:.0f} s; the one-minute load average was "
+        f"{p['loadavg_1min_start']:.1f} at their start.",
+    ]
+    return "\n".join(lines).rstrip() + "\n"
