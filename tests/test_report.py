@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import copy
 import re
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -297,3 +298,27 @@ def test_report_shows_the_per_band_table_of_hybrid_runs() -> None:
     rows = table_rows(render_markdown(build_summary([r], {}, base["suite"])))
     above = next(row for row in rows if row[2].startswith("above"))
     assert above[3] == "0" and above[4:] == ["n/a"] * 5
+
+
+def test_refresh_extras_reads_only_the_run_the_summary_recorded(tmp_path: Path) -> None:
+    """A runs folder that holds another run (an older suite) leaves the summary's extras
+    as they are; the same run refreshes them."""
+    import json as _json
+
+    from bench.studies._extras import refresh_extras
+
+    run = tmp_path / "wen-5.1" / "tt-dq"
+    run.mkdir(parents=True)
+    (run / "signals.csv").write_text("t\n0\n")
+    (run / "meta.json").write_text(_json.dumps({"scenario": {"name": "x"}}))
+    (run / "metrics.json").write_text(_json.dumps({"theta_err_abs_max_deg": 9.14}))
+    rec = {
+        "scenario": "wen-5.1",
+        "estimator": "tt-dq",
+        "files": "runs/wen-5.1/tt-dq",
+        "metrics": {"theta_err_abs_max_deg": 9.18},
+        "where_max": {"t_s": 6.04, "theta_err_deg": 9.18, "context": "kept"},
+    }
+    summary = {"suite": {"runs_dir": str(tmp_path)}, "runs": [rec]}
+    refresh_extras(summary)  # another run: not read (reading it would fail on this folder)
+    assert rec["where_max"]["theta_err_deg"] == 9.18

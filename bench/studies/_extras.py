@@ -55,8 +55,19 @@ def run_extras(signals: Path, scn: Scenario) -> dict[str, Any]:
     return out
 
 
+def _same_run(metrics_path: Path, recorded: dict[str, Any]) -> bool:
+    """Whether the run folder's ``metrics.json`` is the run a summary recorded: every
+    number the summary kept of it is the folder's."""
+    try:
+        have = json.loads(metrics_path.read_text())
+    except (OSError, ValueError):
+        return False
+    return bool(recorded) and all(have.get(k) == v for k, v in recorded.items())
+
+
 def refresh_extras(summary: dict[str, Any]) -> None:
-    """Recompute :func:`run_extras` of every run whose folder is still in ``runs_dir``."""
+    """Recompute :func:`run_extras` of every run whose folder is still in ``runs_dir``
+    and still holds that run (its metrics are the summary's)."""
     runs_dir = Path(summary.get("suite", {}).get("runs_dir", ""))
     for rec in summary.get("runs", []):
         if "error" in rec:
@@ -68,6 +79,8 @@ def refresh_extras(summary: dict[str, Any]) -> None:
         meta = sig.parent / "meta.json"
         if not (sig.exists() and meta.exists()):
             continue
+        if not _same_run(sig.parent / "metrics.json", rec.get("metrics") or {}):
+            continue  # another run in that folder (a later suite, or an older one)
         from bench.scenarios._schema import parse_scenario
 
         d = json.loads(meta.read_text())["scenario"]
