@@ -312,13 +312,13 @@ def test_refresh_extras_reads_only_the_run_the_summary_recorded(tmp_path: Path) 
     (run / "signals.csv").write_text("t\n0\n")
     (run / "meta.json").write_text(_json.dumps({"scenario": {"name": "x"}}))
     (run / "metrics.json").write_text(_json.dumps({"theta_err_abs_max_deg": 9.14}))
-    rec = {
+    rec: dict[str, Any] = {
         "scenario": "wen-5.1",
         "estimator": "tt-dq",
         "files": "runs/wen-5.1/tt-dq",
         "metrics": {"theta_err_abs_max_deg": 9.18},
         "where_max": {"t_s": 6.04, "theta_err_deg": 9.18, "context": "kept"},
     }
-    summary = {"suite": {"runs_dir": str(tmp_path)}, "runs": [rec]}
+    summary: dict[str, Any] = {"suite": {"runs_dir": str(tmp_path)}, "runs": [rec]}
     refresh_extras(summary)  # another run: not read (reading it would fail on this folder)
     assert rec["where_max"]["theta_err_deg"] == 9.18
