@@ -31,6 +31,7 @@ class Recorder(can.Listener):
         self.channel = channel
         self.frames: list[can.Message] = []
         self.samples_id = codec.frame_id("PhaseSamples")
+        self.codec_ids = frozenset(codec.frame_id(n) for n in codec.names)
         self.status_id = codec.frame_id("PlantStatus")
         self.last_raw_step = -1
         #: The plant's step from the sample counter, unwrapped here where every
@@ -46,13 +47,28 @@ class Recorder(can.Listener):
         self.duty_rejected: dict[str, int] = {}
         #: The newest ``PlantStatus``: fault code, step (raw), late_frames, overruns.
         self.status: dict[str, int] = {}
+        #: This run's nonce; valid ``PlantTruth`` frames of another run_id are
+        #: counted in ``foreign`` (by run_id): another run shares the bus.
+        self.truth_id = codec.frame_id("PlantTruth")
+        self.run_id: int | None = None
+        self.foreign: dict[int, int] = {}
+        #: Frames of the DBC's messages seen (before the nodes start: another run's).
+        self.known = 0
 
     def on_message_received(self, msg: can.Message) -> None:
         msg.channel = self.channel
         with self.lock:
             self.frames.append(msg)
             self.writer.on_message_received(msg)
-        if msg.arbitration_id == self.samples_id:
+        if not msg.is_extended_id and msg.arbitration_id in self.codec_ids:
+            self.known += 1
+        if msg.arbitration_id == self.truth_id and self.run_id is not None:
+            d = self.codec.decode(msg)
+            if d is not None and d.reason is None:
+                rid = int(d.signals["run_id"])
+                if rid != self.run_id:
+                    self.foreign[rid] = self.foreign.get(rid, 0) + 1
+        elif msg.arbitration_id == self.samples_id:
             d = self.codec.decode(msg)
             if d is not None and d.reason is None:
                 raw = int(d.signals["step"])
@@ -142,6 +158,25 @@ class Recording:
     def plant_done(self) -> bool:
         """Whether the plant has said that the run is over (``PlantStatus``)."""
         return self.recorders[0].done.is_set()
+
+    @property
+    def bench_frames(self) -> int:
+        """Frames with the DBC's identifiers seen so far, on every bus."""
+        return sum(r.known for r in self.recorders)
+
+    def expect_run(self, run_id: int) -> None:
+        """From now on, count ``PlantTruth`` of any other run_id as another run's."""
+        for r in self.recorders:
+            r.run_id = run_id
+
+    @property
+    def foreign(self) -> dict[int, int]:
+        """Valid ``PlantTruth`` frames of other runs seen, by run_id."""
+        out: dict[int, int] = {}
+        for r in self.recorders:
+            for k, v in r.foreign.items():
+                out[k] = out.get(k, 0) + v
+        return out
 
     @property
     def duty_watch(self) -> Recorder:

@@ -29,6 +29,13 @@ REJECT_WRONG_STEP = "wrong_step"
 RPM_PER_RAD_S = 60.0 / (2.0 * math.pi)
 
 
+def new_run_id() -> int:
+    """A random run nonce, 1..65535 (``PlantTruth.run_id``; 0 means unknown)."""
+    import secrets
+
+    return secrets.randbelow(0xFFFF) + 1
+
+
 def unwrap(raw: int, expected: int, modulus: int) -> int:
     """The step nearest ``expected`` whose value mod ``modulus`` is ``raw``."""
     half = modulus // 2
