@@ -73,6 +73,7 @@ from bench.wire._protocol import (
     FAULT_WRONG_STEP,
     NODE_FAULT_NAMES,
     REJECT_WRONG_STEP,
+    SHARED_RUN_FRAMES,
     STATE_FAULT,
     STATE_IDLE,
     STATE_RUNNING,
@@ -147,6 +148,7 @@ class PlantNode:
         self.run_id = 0
         #: ``PlantTruth`` frames of another plant (another run_id) received, by run_id.
         self.other_plants: dict[int, int] = {}
+        self.said_other_plant = False
         self.m_step = 1 << codec.step_bits("PwmDuty")
         self.m_cmd = 1 << codec.step_bits("BenchCommand")
         self.m_truth = 1 << codec.step_bits("PlantTruth")
@@ -226,7 +228,10 @@ class PlantNode:
             if d.name == "PlantTruth" and d.reason is None:
                 rid = int(d.signals.get("run_id", 0))
                 if rid != self.run_id:  # another plant (a second run) on this bus
-                    if not self.other_plants:
+                    seen = self.other_plants.get(rid, 0) + 1
+                    self.other_plants[rid] = seen
+                    if seen == SHARED_RUN_FRAMES and not self.said_other_plant:
+                        self.said_other_plant = True
                         print(
                             f"plant: a second plant is on this bus: PlantTruth of run "
                             f"{rid:#06x} (this plant is run {self.run_id:#06x}); its samples "
@@ -234,7 +239,6 @@ class PlantNode:
                             file=sys.stderr,
                             flush=True,
                         )
-                    self.other_plants[rid] = self.other_plants.get(rid, 0) + 1
             c.frames_ignored += 1
 
     def _reject_duty(self, reason: str) -> None:
@@ -536,7 +540,9 @@ class PlantNode:
             trips=dict(self.trips),
             resets=self.resets,
             run_id=self.run_id,
-            other_plants={f"{k:#06x}": v for k, v in self.other_plants.items()},
+            other_plants={
+                f"{k:#06x}": v for k, v in self.other_plants.items() if v >= SHARED_RUN_FRAMES
+            },
         )
         return out
 

@@ -18,6 +18,7 @@ import can
 from bench.nodes._loops import STATE_DONE
 from bench.wire._bus import BusSpec
 from bench.wire._codec import Codec
+from bench.wire._protocol import SHARED_RUN_FRAMES
 
 
 class Recorder(can.Listener):
@@ -47,9 +48,9 @@ class Recorder(can.Listener):
         self.duty_rejected: dict[str, int] = {}
         #: The newest ``PlantStatus``: fault code, step (raw), late_frames, overruns.
         self.status: dict[str, int] = {}
-        #: This run's nonce; valid ``PlantTruth`` frames of another run_id are
-        #: counted in ``foreign`` (by run_id): another run shares the bus.
-        self.truth_id = codec.frame_id("PlantTruth")
+        #: This run's nonce; valid ``PlantTruth`` and ``CtrlTelemetry`` frames of
+        #: another (nonzero) run_id are counted in ``foreign``, by run_id.
+        self.recorder_ids = (codec.frame_id("PlantTruth"), codec.frame_id("CtrlTelemetry"))
         self.run_id: int | None = None
         self.foreign: dict[int, int] = {}
         #: Frames of the DBC's messages seen (before the nodes start: another run's).
@@ -62,11 +63,11 @@ class Recorder(can.Listener):
             self.writer.on_message_received(msg)
         if not msg.is_extended_id and msg.arbitration_id in self.codec_ids:
             self.known += 1
-        if msg.arbitration_id == self.truth_id and self.run_id is not None:
+        if msg.arbitration_id in self.recorder_ids and self.run_id is not None:
             d = self.codec.decode(msg)
             if d is not None and d.reason is None:
                 rid = int(d.signals["run_id"])
-                if rid != self.run_id:
+                if rid not in (self.run_id, 0):  # 0: a controller that copies no nonce
                     self.foreign[rid] = self.foreign.get(rid, 0) + 1
         elif msg.arbitration_id == self.samples_id:
             d = self.codec.decode(msg)
@@ -171,12 +172,16 @@ class Recording:
 
     @property
     def foreign(self) -> dict[int, int]:
-        """Valid ``PlantTruth`` frames of other runs seen, by run_id."""
+        """Other runs on the bus: their run_id and recorder frames seen, by run_id.
+
+        Only a run_id seen in at least ``SHARED_RUN_FRAMES`` valid frames
+        counts (:mod:`bench.wire._protocol`).
+        """
         out: dict[int, int] = {}
         for r in self.recorders:
             for k, v in r.foreign.items():
                 out[k] = out.get(k, 0) + v
-        return out
+        return {k: v for k, v in out.items() if v >= SHARED_RUN_FRAMES}
 
     @property
     def duty_watch(self) -> Recorder:

@@ -306,10 +306,10 @@ def _bus_in_use(rec: Recording, spec: BusSpec, interrupted: _Interrupt) -> str |
 
 
 def shared_bus_line(foreign: dict[int, int], where: str, step: int, out_dir: Path) -> str:
-    """One line for a run that saw another run's ``PlantTruth`` on its bus."""
+    """One line for a run that saw another run's recorder frames on its bus."""
     runs = ", ".join(f"{rid:#06x} ({n:,} frames)" for rid, n in sorted(foreign.items()))
     return (
-        f"another run shares this bus ({where}): PlantTruth of run {runs}; this run "
+        f"another run shares this bus ({where}): PlantTruth/CtrlTelemetry of run {runs}; this run "
         f"stopped at step {max(0, step):,} and is not a result (both runs' controllers "
         f"saw both plants' samples; give each run its own --port or --channel); files in {out_dir}"
     )
