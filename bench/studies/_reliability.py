@@ -414,7 +414,12 @@ and the controller answers from its cache), and recovery depends on them.
 The DBC has no multiplexed messages; the codec refuses a DBC with any, so an
 unknown multiplexer value cannot reach a node. Only an accepted duty frame
 with every duty in [0, 1] is ever applied.  The recorder frames (`PlantTruth`,
-`CtrlTelemetry`) carry no CRC yet (issue 17, pending).
+`CtrlTelemetry`) carry a CRC too (DBC 2.1): the analysis drops a frame that
+fails it before placing any step and counts it (`frames_rejected_recorded`,
+a warning line), so a crafted or corrupted frame cannot move the step
+unwrapping (`tests/test_run_isolation.py`: one crafted `PlantTruth` leaves
+`steps_missing` unchanged; random FD frames with the DBC's identifiers
+poured at a running bench leave its scored rows unchanged).
 
 **Watchdogs.** The plant trips to its safe state (all switches open,
 `enable=False`: the currents freewheel through the diodes and die out, the
@@ -504,6 +509,7 @@ default bus, shared by every run, so parallel runs must name a bus each.
 | `tests/test_signals_process.py` | real processes: kill -9 of the controller in real time (watchdog fault frame, capture complete); SIGINT, SIGTERM mid-run and during start-up |
 | `tests/test_reliability_errors.py` | unwritable `--out`, unparsable capture lines, the scoring of a run cut short and the line that announces it, kill -9 of the controller in lockstep (named, prompt), the transport line from python-can's configuration, `duty_age` in the safe state |
 | `tests/test_scenario_plausible.py` | the physics checks of a scenario's motor, injection settings without `[motor]`, `sensored` from any scenario |
+| `tests/test_run_isolation.py` | a crafted `PlantTruth` (bad CRC) in a clean capture: rejected, counted, `steps_missing` unchanged; one of another `run_id`: counted foreign, not scored; a plant seeing another plant says so once; two runs started together on one udp_multicast port: each gives its solo rows or refuses with one line; a run refuses a bus that already carries another run; random FD frames with the DBC's identifiers poured at a running bench leave its scored rows unchanged |
 | `tests/test_reliability_doc.py` | this page is the rendering of `docs/reliability/soak.json` |
 """
 
@@ -534,7 +540,9 @@ def render_reliability(rep: dict[str, Any]) -> str:
         rep["frames_fuzzed_controller"],
         rep["frames_fuzzed_loop"],
     )
-    by_reason = ", ".join(f"`{k}` {_n(v)}" for k, v in sorted(rej.items(), key=lambda x: -x[1]))
+    by_reason = ", ".join(
+        f"`{k}` {_n(v)}" for k, v in sorted(rej.items(), key=lambda x: (-x[1], x[0]))
+    )
     faults = rep["faults_injected"]
     trips = ", ".join(f"{k} {_n(v)}" for k, v in sorted(rep["trips"].items()))
     lines = [
