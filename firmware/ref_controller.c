@@ -12,12 +12,14 @@
  * Frames (DBC names; one of each per PWM period k unless noted):
  *   in   PhaseSamples  0x011  i_a, i_b, u_dc sampled at k T_s; step = k mod 1024
  *   in   PlantTruth    0x100  CAN FD: true electrical angle and mechanical speed
- *                             at k T_s (the "sensor" of this sensored controller)
+ *                             at k T_s (the "sensor" of this sensored controller),
+ *                             run_id (the run's nonce), E2E CRC (DBC 2.1)
  *   in   BenchCommand  0x020  start/stop/enable/disable, speed_ref; step = the
  *                             period the command applies in (mod 65536), sent ahead
  *   out  PwmDuty       0x010  duties for period k + 1; step = (k + 1) mod 1024, E2E CRC
  *   out  CtrlTelemetry 0x101  CAN FD: theta_hat = the angle used (the true one),
- *                             w_hat (electrical), mode; step = k
+ *                             w_hat (electrical), mode; step = k; run_id copied
+ *                             from the truth (docs/PROTOCOL.md), E2E CRC
  *
  * Period k is computed when PhaseSamples(k) and a PlantTruth not older than
  * the truth decimation (-e) are both in; the angle is extrapolated from the
