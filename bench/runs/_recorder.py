@@ -32,7 +32,11 @@ class Recorder(can.Listener):
         self.channel = channel
         self.frames: list[can.Message] = []
         self.samples_id = codec.frame_id("PhaseSamples")
-        self.codec_ids = frozenset(codec.frame_id(n) for n in codec.names)
+        #: What another run sends and a controller under test waiting for its
+        #: first sample does not: the plant's frames and the bench's commands.
+        self.run_ids_frames = frozenset(
+            codec.frame_id(n) for n in ("PhaseSamples", "PlantTruth", "PlantStatus", "BenchCommand")
+        )
         self.status_id = codec.frame_id("PlantStatus")
         self.last_raw_step = -1
         #: The plant's step from the sample counter, unwrapped here where every
@@ -53,7 +57,7 @@ class Recorder(can.Listener):
         self.recorder_ids = (codec.frame_id("PlantTruth"), codec.frame_id("CtrlTelemetry"))
         self.run_id: int | None = None
         self.foreign: dict[int, int] = {}
-        #: Frames of the DBC's messages seen (before the nodes start: another run's).
+        #: Plant and bench frames seen (before the nodes start: another run's).
         self.known = 0
 
     def on_message_received(self, msg: can.Message) -> None:
@@ -61,7 +65,7 @@ class Recorder(can.Listener):
         with self.lock:
             self.frames.append(msg)
             self.writer.on_message_received(msg)
-        if not msg.is_extended_id and msg.arbitration_id in self.codec_ids:
+        if not msg.is_extended_id and msg.arbitration_id in self.run_ids_frames:
             self.known += 1
         if msg.arbitration_id in self.recorder_ids and self.run_id is not None:
             d = self.codec.decode(msg)
@@ -162,7 +166,7 @@ class Recording:
 
     @property
     def bench_frames(self) -> int:
-        """Frames with the DBC's identifiers seen so far, on every bus."""
+        """Plant and bench frames (another run's, before this one starts) seen, every bus."""
         return sum(r.known for r in self.recorders)
 
     def expect_run(self, run_id: int) -> None:

@@ -284,8 +284,9 @@ def clear_run_files(out_dir: Path, keep: tuple[str, ...] = ()) -> None:
             (out_dir / name).unlink(missing_ok=True)
 
 
-#: Listening before a run starts its nodes: a bus that carries frames of the
-#: DBC then is another run's (an active plant sends every period, a stalled
+#: Listening before a run starts its nodes: a bus that carries a plant's or a
+#: bench's frames then is another run's (a controller under test waiting
+#: for its first sample may already send, and is no other run) (an active plant sends every period, a stalled
 #: lockstep plant every 50 ms, PlantStatus every 100 ms of plant time).
 LISTEN_S = 0.3
 
@@ -299,8 +300,8 @@ def _bus_in_use(rec: Recording, spec: BusSpec, interrupted: _Interrupt) -> str |
     if n == 0:
         return None
     return (
-        f"another run is on this bus ({spec.describe()}): {n} frames with the DBC's "
-        f"identifiers in the {LISTEN_S:g} s before this run; refusing to share it "
+        f"another run is on this bus ({spec.describe()}): {n} plant or bench frames "
+        f"in the {LISTEN_S:g} s before this run; refusing to share it "
         "(give this run its own --port or --channel)"
     )
 
