@@ -12,12 +12,14 @@
  * Frames (DBC names; one of each per PWM period k unless noted):
  *   in   PhaseSamples  0x011  i_a, i_b, u_dc sampled at k T_s; step = k mod 1024
  *   in   PlantTruth    0x100  CAN FD: true electrical angle and mechanical speed
- *                             at k T_s (the "sensor" of this sensored controller)
+ *                             at k T_s (the "sensor" of this sensored controller),
+ *                             run_id (the run's nonce), E2E CRC (DBC 2.1)
  *   in   BenchCommand  0x020  start/stop/enable/disable, speed_ref; step = the
  *                             period the command applies in (mod 65536), sent ahead
  *   out  PwmDuty       0x010  duties for period k + 1; step = (k + 1) mod 1024, E2E CRC
  *   out  CtrlTelemetry 0x101  CAN FD: theta_hat = the angle used (the true one),
- *                             w_hat (electrical), mode; step = k
+ *                             w_hat (electrical), mode; step = k; run_id copied
+ *                             from the truth (docs/PROTOCOL.md), E2E CRC
  *
  * Period k is computed when PhaseSamples(k) and a PlantTruth not older than
  * the truth decimation (-e) are both in; the angle is extrapolated from the
@@ -86,6 +88,7 @@ typedef struct {
     double i_a, i_b, u_dc;
     bool have_truth;
     int64_t truth_k;
+    uint16_t run_id; /* PlantTruth.run_id, copied into CtrlTelemetry (DBC 2.1) */
     double theta_e, w_m;
     /* the next period to compute, and the last answer (for repeats) */
     int64_t next_k;
@@ -194,7 +197,10 @@ static void send_outputs(int sock, node_t *n, int64_t k, const foc_output_t *o, 
     tel.err = 0;
     tel.mode = enabled ? MODE_RUN : MODE_DISABLED;
     tel.step = (uint32_t)k;
+    tel.run_id = n->run_id;
     len = bench_dbc_ctrl_telemetry_pack(buf, &tel, sizeof buf);
+    bench_e2e_protect(BENCH_E2E_CTRL_TELEMETRY_DATA_ID, buf, (size_t)len,
+                      BENCH_E2E_CTRL_TELEMETRY_CRC_INDEX);
     make_frame(&fr, BENCH_DBC_CTRL_TELEMETRY_FRAME_ID, buf, (size_t)len);
     send_frame(sock, &fr, n);
 }
@@ -286,8 +292,9 @@ static void on_frame(int sock, node_t *n, foc_t *foc, const struct canfd_frame *
     }
     case BENCH_DBC_PLANT_TRUTH_FRAME_ID: {
         struct bench_dbc_plant_truth_t t;
-        /* no CRC in the DBC: the truth is recorder data on a real bench */
         if (fr->len != BENCH_DBC_PLANT_TRUTH_LENGTH ||
+            !bench_e2e_check(BENCH_E2E_PLANT_TRUTH_DATA_ID, fr->data, fr->len,
+                             BENCH_E2E_PLANT_TRUTH_CRC_INDEX) ||
             bench_dbc_plant_truth_unpack(&t, fr->data, fr->len) != 0) {
             n->rejected++;
             return;
@@ -298,6 +305,7 @@ static void on_frame(int sock, node_t *n, foc_t *foc, const struct canfd_frame *
         }
         n->have_truth = true;
         n->truth_k = k;
+        n->run_id = t.run_id;
         n->theta_e = bench_dbc_plant_truth_theta_e_decode(t.theta_e);
         n->w_m = bench_dbc_plant_truth_w_m_decode(t.w_m);
         break;

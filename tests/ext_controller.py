@@ -61,6 +61,9 @@ class Wire:
     def data_id(self, name: str) -> int:
         return int(self.db.get_message_by_name(name).dbc.attributes["E2EDataId"].value)
 
+    def has_crc(self, name: str) -> bool:
+        return any(s.name == "crc" for s in self.db.get_message_by_name(name).signals)
+
     def crc(self, name: str, payload: bytes) -> int:
         did = self.data_id(name)
         head = b"" if self.mistake == "crc-no-id" else bytes((did & 0xFF, did >> 8))
@@ -68,10 +71,8 @@ class Wire:
 
     def encode(self, name: str, sig: dict[str, float], strict: bool = True) -> can.Message:
         m = self.db.get_message_by_name(name)
-        data = bytearray(
-            m.encode({"crc": 0, **sig} if name != "CtrlTelemetry" else sig, strict=strict)
-        )
-        if name != "CtrlTelemetry":
+        data = bytearray(m.encode({"crc": 0, **sig} if self.has_crc(name) else sig, strict=strict))
+        if self.has_crc(name):  # every frame since DBC 2.1: crc in byte 0
             data[0] = self.crc(name, bytes(data))
         return can.Message(
             arbitration_id=m.frame_id, data=bytes(data), is_extended_id=False, is_fd=m.length > 8
@@ -235,6 +236,8 @@ def main() -> int:
                             "err": 0.0,
                             "mode": 3 if foc.enabled else 0,
                             "step": k,
+                            # DBC 2.1: the run's nonce, copied from the truth it answers
+                            "run_id": int(tr["run_id"]),
                         },
                     ),
                 ]

@@ -266,7 +266,7 @@ def test_lookup(codec):
     assert codec.step_bits("PwmDuty") == 10 and codec.step_bits("PlantTruth") == 32
     assert codec.step_bits("BenchCommand") == 16 and codec.step_bits("CtrlTelemetry") == 32
     assert codec.signal_names("PwmDuty") == ("duty_a", "duty_b", "duty_c", "enable", "step")
-    assert codec.length("CtrlTelemetry") == 12 and codec.is_fd("CtrlTelemetry")
+    assert codec.length("CtrlTelemetry") == 16 and codec.is_fd("CtrlTelemetry")
     assert Codec(DBC_PATH).names == codec.names
 
 

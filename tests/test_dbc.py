@@ -14,8 +14,8 @@ from dbc import DBC_PATH
 EXPECTED = {
     "PwmDuty": {"duty_a", "duty_b", "duty_c", "enable", "step", "crc"},
     "PhaseSamples": {"i_a", "i_b", "u_dc", "step", "status", "crc"},
-    "PlantTruth": {"theta_e", "w_m", "tau_e", "tau_L", "step", "duty_age"},
-    "CtrlTelemetry": {"theta_hat", "w_hat", "err", "mode", "step"},
+    "PlantTruth": {"theta_e", "w_m", "tau_e", "tau_L", "step", "duty_age", "run_id", "crc"},
+    "CtrlTelemetry": {"theta_hat", "w_hat", "err", "mode", "step", "run_id", "crc"},
     "BenchCommand": {"cmd", "speed_ref", "load_torque", "seq", "step", "crc"},
     "PlantStatus": {"state", "fault_code", "overruns", "late_frames", "step", "crc"},
 }
@@ -73,14 +73,14 @@ def test_every_signal_commented(db):
 
 
 def test_crc_and_e2e_data_ids(db):
+    """Every frame, the recorder's included (2.1, issue 17), carries a crc in byte 0."""
     ids = []
     for m in db.messages:
         crc = [s for s in m.signals if s.name == "crc"]
-        if not crc:
-            continue
+        assert crc, m.name
         assert crc[0].length == 8 and crc[0].start == 0
         ids.append(m.dbc.attributes["E2EDataId"].value)
-    assert len(ids) == 4 and len(set(ids)) == 4
+    assert len(ids) == 6 and len(set(ids)) == 6
     # a data ID fed in the wrong byte order must fail the check: its two bytes
     # differ, and swapped it is no other message's data ID
     swapped = {(i >> 8) | ((i & 0xFF) << 8) for i in ids}
@@ -94,6 +94,7 @@ def test_protocol_version_attribute(db):
 
     assert db.version == str(db.dbc.attributes["ProtocolVersion"].value) == Codec().version
     assert int(db.version.split(".")[0]) >= 2  # 2.0: duty scale and PwmDuty data ID changed
+    assert db.version != "2.0"  # 2.1: crc and run_id in PlantTruth and CtrlTelemetry
 
 
 def test_duty_one_encodes_strictly_and_above_one_is_out_of_range(db):

@@ -65,8 +65,12 @@ def test_codegen_writes_dbc_code_and_e2e_helper(tmp_path: Path, capsys) -> None:
         data_id = int(dbc.attributes["E2EDataId"].value)
         assert f"#define BENCH_E2E_{ident}_DATA_ID ({data_id}u)" in header
         assert f"#define BENCH_E2E_{ident}_CRC_INDEX (0u)" in header
-    # recorder frames carry no CRC, so no E2E macros for them
-    assert "PLANT_TRUTH" not in header
+    # DBC 2.1: the recorder frames carry a CRC too (the analysis trusts them)
+    for name, ident in [("PlantTruth", "PLANT_TRUTH"), ("CtrlTelemetry", "CTRL_TELEMETRY")]:
+        dbc = codec.message(name).dbc
+        assert dbc is not None
+        data_id = int(dbc.attributes["E2EDataId"].value)
+        assert f"#define BENCH_E2E_{ident}_DATA_ID ({data_id}u)" in header
     assert "BENCH_DBC_PWM_DUTY_FRAME_ID (0x10u)" in (out / "bench_dbc.h").read_text()
 
 

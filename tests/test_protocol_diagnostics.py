@@ -161,7 +161,7 @@ def test_show_gives_transport_port_and_dbc_version() -> None:
     )  # fmt: skip
     d = json.loads(out.stdout)
     assert d["transport"]["port"] == 43113 and d["transport"]["channel"]
-    assert d["dbc_version"] == CODEC.version == "2.0"
+    assert d["dbc_version"] == CODEC.version == "2.1"
 
 
 @pytest.mark.skipif(shutil.which("cc") is None, reason="needs a C compiler")

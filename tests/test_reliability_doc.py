@@ -69,7 +69,10 @@ def test_the_committed_run_passed_every_process_check(committed: dict[str, Any])
     lock = [k for k in p["kills"] if k["mode"] == "lockstep"]
     assert all(k["names_signal"] and "killed by SIGKILL" in k["message"] for k in lock)
     assert {s["signal"] for s in p["signals"]} == {"SIGINT", "SIGTERM"}
-    assert "pending" in p["parallel"]["shared_bus"]  # said, not hidden
+    # two runs on one bus: each gives the in-process trace or refuses with one line
+    shared = p["parallel"]["shared_bus_runs"]
+    assert len(shared) == 2 and all(r["outcome"] in ("identical", "refused") for r in shared)
+    assert all("another run" in r["detail"] for r in shared if r["outcome"] == "refused")
 
 
 def test_a_soak_without_processes_renders_and_says_so(tmp_path: Path) -> None:

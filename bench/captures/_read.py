@@ -24,7 +24,7 @@ import can
 
 from bench import _jsonio as jsonio
 from bench._errors import CaptureError, ScenarioError
-from bench.runs._results import RunResult, finish_run, scoring_scenario
+from bench.runs._results import RunResult, finish_run, frames_warning, scoring_scenario
 from bench.scenarios._schema import Scenario, load_scenario, scenario_from_dict
 from bench.wire._codec import Codec
 
@@ -478,6 +478,8 @@ def analyze_capture(
         )
     except ValueError as e:
         raise CaptureError(f"{capture}: {e}") from None
+    if warn := frames_warning(res.metrics):
+        say(warn)
     if got.lines_skipped:
         res.metrics["capture_lines_skipped"] = len(got.lines_skipped)
     if problem:

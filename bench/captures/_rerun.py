@@ -228,6 +228,7 @@ def rerun_capture(
     present_sorted = sorted(present)
 
     node = make_controller_node(scn, estimator, codec)
+    node.run_id = _recorded_run_id(frames, codec)  # its telemetry as the recorded run's
     node.realtime = mode == "realtime"
     k_first = present_sorted[0]
     node.next_k = k_first
@@ -414,3 +415,16 @@ def rerun_capture(
         paper_result=dict(scn.paper_result),
         paper_method=scn.estimator,
     )
+
+
+def _recorded_run_id(frames: list[can.Message], codec: Codec) -> int:
+    """The run_id of most of the capture's valid ``PlantTruth`` frames (0 without any)."""
+    truth_id = codec.frame_id("PlantTruth")
+    counts: dict[int, int] = {}
+    for m in frames:
+        if m.arbitration_id == truth_id and not m.is_extended_id:
+            d = codec.decode(m)
+            if d is not None and d.reason is None:
+                rid = int(d.signals.get("run_id", 0))
+                counts[rid] = counts.get(rid, 0) + 1
+    return max(counts, key=lambda r: counts[r]) if counts else 0

@@ -82,6 +82,19 @@ def number(kind: type, lo: float, strict: bool) -> Any:
 POS_INT = number(int, 0, True)
 NONNEG_INT = number(int, 0, False)
 POS_FLOAT = number(float, 0.0, True)
+
+
+def run_id_arg(text: str) -> int:
+    """An argparse type: a run nonce, 1..65535 (decimal or 0x hex)."""
+    try:
+        v = int(text, 0)
+    except ValueError:
+        v = 0
+    if not 1 <= v <= 0xFFFF:
+        raise argparse.ArgumentTypeError(f"expected a run id 1..65535, got {text!r}")
+    return v
+
+
 NONNEG_FLOAT = number(float, 0.0, False)
 
 

@@ -13,6 +13,7 @@ from bench.cli._common import (
     add_scenario_overrides,
     bus_spec,
     ready,
+    run_id_arg,
     scenario_from_args,
     serve_node,
 )
@@ -27,6 +28,7 @@ def cmd_controller(args: argparse.Namespace) -> int:
     spec = bus_spec(args, announce=False)
     codec = Codec()
     node = make_controller_node(scn, est, codec)
+    node.run_id = args.run_id
     return serve_node(
         args,
         spec,
@@ -50,6 +52,13 @@ def register(sub: Any) -> None:
     add_scenario_overrides(p)
     add_bus(p)
     p.add_argument("--report", help="write the node's counters to this JSON file at exit")
+    p.add_argument(
+        "--run-id",
+        type=run_id_arg,
+        default=0,
+        metavar="N",
+        help="the run's nonce sent in CtrlTelemetry.run_id (bench run gives it; default 0: unknown)",
+    )
     p.add_argument(
         "--sample-timeout-ms",
         type=POS_FLOAT,

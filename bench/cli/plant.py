@@ -18,6 +18,7 @@ from bench.cli._common import (
     bus_spec,
     plant_engine,
     ready,
+    run_id_arg,
     scenario_from_args,
     serve_node,
 )
@@ -28,11 +29,17 @@ def cmd_plant(args: argparse.Namespace) -> int:
 
     from bench.nodes._loops import make_plant_node, plant_loop
     from bench.wire._codec import Codec
+    from bench.wire._protocol import new_run_id
 
     scn = scenario_from_args(args)
     spec = bus_spec(args, announce=False)
+    run_id = args.run_id or new_run_id()
     # a controller author needs to know where to listen (bench show SCENARIO says it too)
-    print(f"plant: {scn.name}, {args.mode}, on {spec.describe()}", file=sys.stderr, flush=True)
+    print(
+        f"plant: {scn.name}, {args.mode}, on {spec.describe()}, run {run_id:#06x}",
+        file=sys.stderr,
+        flush=True,
+    )
     codec = Codec()
     node = make_plant_node(
         scn,
@@ -42,6 +49,7 @@ def cmd_plant(args: argparse.Namespace) -> int:
         watchdog_rounds=args.watchdog_rounds,
         engine=plant_engine(args),
     )
+    node.run_id = run_id
     if args.mode == "lockstep":
         node.pace_every = args.pace_every
     return serve_node(
@@ -79,6 +87,13 @@ def register(sub: Any) -> None:
         help="lockstep: safe state after this many 50 ms retransmission rounds without a duty",
     )
     p.add_argument("--report", help="write the node's counters to this JSON file at exit")
+    p.add_argument(
+        "--run-id",
+        type=run_id_arg,
+        metavar="N",
+        help="the run's nonce sent in PlantTruth.run_id (1..65535; default: random; "
+        "bench run gives its own)",
+    )
     p.add_argument(
         "--pace-every",
         type=NONNEG_INT,

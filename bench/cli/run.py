@@ -66,7 +66,7 @@ def _start_monitor(spec: Any, scn: Any, est: str, mode: str, out: Path) -> _View
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    from bench.runs._results import format_metrics, outcome, realtime_warning
+    from bench.runs._results import format_metrics, frames_warning, outcome, realtime_warning
     from bench.runs._run import run_scenario
     from bench.scenarios._setup import sample_period
 
@@ -129,6 +129,8 @@ def cmd_run(args: argparse.Namespace) -> int:
             print(f"{role}: real-time setting refused: {why}", file=sys.stderr)
     print(format_metrics(res.metrics, scn.paper_result, scn.estimator, est))
     if args.mode == "realtime" and (warn := realtime_warning(res.metrics)):
+        print(warn, file=sys.stderr)
+    if warn := frames_warning(res.metrics):
         print(warn, file=sys.stderr)
     status, warnings = outcome(res.metrics, sample_period(scn))
     for line in warnings:

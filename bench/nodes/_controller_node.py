@@ -49,6 +49,8 @@ class ControllerNode:
         self.m_step = 1 << codec.step_bits("PhaseSamples")
         self.m_cmd = 1 << codec.step_bits("BenchCommand")
         self.m_tel = 1 << codec.step_bits("CtrlTelemetry")
+        #: The run's nonce, sent in every CtrlTelemetry (``run_id``, DBC 2.1).
+        self.run_id = 0
         self.m_truth = 1 << codec.step_bits("PlantTruth")
         self.next_k = 0
         self.samples: dict[int, dict[str, float]] = {}
@@ -193,6 +195,7 @@ class ControllerNode:
                     "err": o.err,
                     "mode": o.mode,
                     "step": o.k % self.m_tel,
+                    "run_id": self.run_id,
                 },
             ),
         ]

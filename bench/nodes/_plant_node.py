@@ -51,6 +51,7 @@ rejected. docs/PROTOCOL.md is the same contract for a controller's author.
 
 from __future__ import annotations
 
+import sys
 from collections import deque
 
 import can
@@ -72,6 +73,7 @@ from bench.wire._protocol import (
     FAULT_WRONG_STEP,
     NODE_FAULT_NAMES,
     REJECT_WRONG_STEP,
+    SHARED_RUN_FRAMES,
     STATE_FAULT,
     STATE_IDLE,
     STATE_RUNNING,
@@ -142,6 +144,11 @@ class PlantNode:
         self.n_steps = n_steps
         self.delay = lockstep_delay
         self.truth_every = max(1, truth_every)
+        #: The run's nonce, echoed in every PlantTruth (``run_id``, DBC 2.1).
+        self.run_id = 0
+        #: ``PlantTruth`` frames of another plant (another run_id) received, by run_id.
+        self.other_plants: dict[int, int] = {}
+        self.said_other_plant = False
         self.m_step = 1 << codec.step_bits("PwmDuty")
         self.m_cmd = 1 << codec.step_bits("BenchCommand")
         self.m_truth = 1 << codec.step_bits("PlantTruth")
@@ -218,6 +225,20 @@ class PlantNode:
             if known is not None and known > self.cmd_horizon:
                 self.cmd_horizon = known
         else:
+            if d.name == "PlantTruth" and d.reason is None:
+                rid = int(d.signals.get("run_id", 0))
+                if rid != self.run_id:  # another plant (a second run) on this bus
+                    seen = self.other_plants.get(rid, 0) + 1
+                    self.other_plants[rid] = seen
+                    if seen == SHARED_RUN_FRAMES and not self.said_other_plant:
+                        self.said_other_plant = True
+                        print(
+                            f"plant: a second plant is on this bus: PlantTruth of run "
+                            f"{rid:#06x} (this plant is run {self.run_id:#06x}); its samples "
+                            "reach this run's controller",
+                            file=sys.stderr,
+                            flush=True,
+                        )
             c.frames_ignored += 1
 
     def _reject_duty(self, reason: str) -> None:
@@ -391,6 +412,7 @@ class PlantNode:
                         "tau_L": tr.tau_L,
                         "duty_age": self.duty_age,
                         "step": s.k % self.m_truth,
+                        "run_id": self.run_id,
                     },
                 )
             )
@@ -517,6 +539,10 @@ class PlantNode:
             last_duty_arrival=self.last_duty_k,
             trips=dict(self.trips),
             resets=self.resets,
+            run_id=self.run_id,
+            other_plants={
+                f"{k:#06x}": v for k, v in self.other_plants.items() if v >= SHARED_RUN_FRAMES
+            },
         )
         return out
 

@@ -67,6 +67,14 @@ class Capture:
     out_of_order: int = 0
     incomplete_steps: int = 0
     first_step: int = 0
+    #: Recorder frames (``PlantTruth``, ``CtrlTelemetry``) of another run: never scored.
+    foreign: dict[str, int] = field(default_factory=dict)
+    #: The run's nonce the table was built from (``PlantTruth.run_id``; None: no truth).
+    run_id: int | None = None
+
+    @property
+    def frames_foreign(self) -> int:
+        return sum(self.foreign.values())
 
     @property
     def frames_rejected(self) -> int:
@@ -142,12 +150,43 @@ def _full_steps(
     return full
 
 
+def _own_run(dec: Any, run_id: int | None, cap: Capture) -> None:
+    """Drop the recorder frames of other runs from ``dec``, counting them in ``cap``.
+
+    ``PlantTruth.run_id`` is the nonce of the run whose plant sent it; without
+    ``run_id`` given, the capture's run is the nonce of most truth frames.
+    ``CtrlTelemetry`` with run_id 0 (a controller that reads no truth) is kept.
+    """
+    truth = dec.messages.get("PlantTruth")
+    if truth is None or len(truth.index) == 0 or "run_id" not in truth.signals:
+        cap.run_id = run_id
+        return
+    if run_id is None:
+        ids, counts = np.unique(truth.signals["run_id"].astype(np.int64), return_counts=True)
+        run_id = int(ids[np.argmax(counts)])
+    cap.run_id = run_id
+    for name, allow_zero in (("PlantTruth", False), ("CtrlTelemetry", True)):
+        b = dec.messages.get(name)
+        if b is None or "run_id" not in b.signals:
+            continue
+        rid = b.signals["run_id"].astype(np.int64)
+        keep = rid == run_id
+        if allow_zero:
+            keep |= rid == 0
+        n_bad = int(len(keep) - np.count_nonzero(keep))
+        if n_bad:
+            cap.foreign[name] = n_bad
+            b.index = b.index[keep]
+            b.signals = {k: v[keep] for k, v in b.signals.items()}
+
+
 def analyze_frames(
     frames: Iterable[can.Message],
     codec: Codec,
     *,
     T_s: float,
     n_p: int,
+    run_id: int | None = None,
 ) -> Capture:
     """Decode frames into the per-step table (steps with samples, truth and telemetry).
 
@@ -159,6 +198,12 @@ def analyze_frames(
     truth and telemetry; when the capture has no telemetry at all (a drive
     that does not send it), one row per step with samples and truth, the
     estimate columns NaN.
+
+    Frames that fail their E2E check (every message has one since DBC 2.1,
+    the recorder's ``PlantTruth`` and ``CtrlTelemetry`` included) are counted
+    in ``rejected`` and take no part, not even in the step unwrapping. The
+    recorder frames of another run (``run_id`` not the run's, see
+    :func:`_own_run`) are counted in ``foreign`` and take no part either.
 
     Raises
     ------
@@ -175,6 +220,7 @@ def analyze_frames(
         unknown_ids=dec.unknown_ids,
         rejected=dict(dec.rejected),
     )
+    _own_run(dec, run_id, cap)
     bits = {name: codec.step_bits(name) for name, _ in _TABLE_MESSAGES}
     wide = max(bits.values())
     # anchor of the narrow counters: every valid frame with a wide counter

@@ -18,6 +18,7 @@ import can
 from bench.nodes._loops import STATE_DONE
 from bench.wire._bus import BusSpec
 from bench.wire._codec import Codec
+from bench.wire._protocol import SHARED_RUN_FRAMES
 
 
 class Recorder(can.Listener):
@@ -31,6 +32,11 @@ class Recorder(can.Listener):
         self.channel = channel
         self.frames: list[can.Message] = []
         self.samples_id = codec.frame_id("PhaseSamples")
+        #: What another run sends and a controller under test waiting for its
+        #: first sample does not: the plant's frames and the bench's commands.
+        self.run_ids_frames = frozenset(
+            codec.frame_id(n) for n in ("PhaseSamples", "PlantTruth", "PlantStatus", "BenchCommand")
+        )
         self.status_id = codec.frame_id("PlantStatus")
         self.last_raw_step = -1
         #: The plant's step from the sample counter, unwrapped here where every
@@ -46,13 +52,28 @@ class Recorder(can.Listener):
         self.duty_rejected: dict[str, int] = {}
         #: The newest ``PlantStatus``: fault code, step (raw), late_frames, overruns.
         self.status: dict[str, int] = {}
+        #: This run's nonce; valid ``PlantTruth`` and ``CtrlTelemetry`` frames of
+        #: another (nonzero) run_id are counted in ``foreign``, by run_id.
+        self.recorder_ids = (codec.frame_id("PlantTruth"), codec.frame_id("CtrlTelemetry"))
+        self.run_id: int | None = None
+        self.foreign: dict[int, int] = {}
+        #: Plant and bench frames seen (before the nodes start: another run's).
+        self.known = 0
 
     def on_message_received(self, msg: can.Message) -> None:
         msg.channel = self.channel
         with self.lock:
             self.frames.append(msg)
             self.writer.on_message_received(msg)
-        if msg.arbitration_id == self.samples_id:
+        if not msg.is_extended_id and msg.arbitration_id in self.run_ids_frames:
+            self.known += 1
+        if msg.arbitration_id in self.recorder_ids and self.run_id is not None:
+            d = self.codec.decode(msg)
+            if d is not None and d.reason is None:
+                rid = int(d.signals["run_id"])
+                if rid not in (self.run_id, 0):  # 0: a controller that copies no nonce
+                    self.foreign[rid] = self.foreign.get(rid, 0) + 1
+        elif msg.arbitration_id == self.samples_id:
             d = self.codec.decode(msg)
             if d is not None and d.reason is None:
                 raw = int(d.signals["step"])
@@ -142,6 +163,29 @@ class Recording:
     def plant_done(self) -> bool:
         """Whether the plant has said that the run is over (``PlantStatus``)."""
         return self.recorders[0].done.is_set()
+
+    @property
+    def bench_frames(self) -> int:
+        """Plant and bench frames (another run's, before this one starts) seen, every bus."""
+        return sum(r.known for r in self.recorders)
+
+    def expect_run(self, run_id: int) -> None:
+        """From now on, count ``PlantTruth`` of any other run_id as another run's."""
+        for r in self.recorders:
+            r.run_id = run_id
+
+    @property
+    def foreign(self) -> dict[int, int]:
+        """Other runs on the bus: their run_id and recorder frames seen, by run_id.
+
+        Only a run_id seen in at least ``SHARED_RUN_FRAMES`` valid frames
+        counts (:mod:`bench.wire._protocol`).
+        """
+        out: dict[int, int] = {}
+        for r in self.recorders:
+            for k, v in r.foreign.items():
+                out[k] = out.get(k, 0) + v
+        return {k: v for k, v in out.items() if v >= SHARED_RUN_FRAMES}
 
     @property
     def duty_watch(self) -> Recorder:

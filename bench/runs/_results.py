@@ -147,7 +147,8 @@ def finish_run(
     """Table, metrics, metadata and plots from a run's frames."""
     T_s = sample_period(scn)
     n_p = get_preset(scn).motor.n_p
-    cap = analyze_frames(frames, codec, T_s=T_s, n_p=n_p)
+    run_id = meta.get("run_id")
+    cap = analyze_frames(frames, codec, T_s=T_s, n_p=n_p, run_id=run_id)
     write_csv(str(out_dir / "signals.csv"), cap.table)
     (out_dir / "signals.md").write_text(signals_doc(codec))
     m: dict[str, Any] = compute_metrics(
@@ -185,6 +186,12 @@ def finish_run(
     m["frames_rejected_by_reason"] = reasons
     m["frames_repeated_ignored"] = repeated
     m["frames_recorded"] = cap.frames
+    # recorder frames failing their E2E check or range: never scored (DBC 2.1)
+    m["frames_rejected_recorded"] = cap.frames_rejected
+    m["run_id"] = cap.run_id
+    # recorder frames of another run (another PlantTruth/CtrlTelemetry run_id): never scored
+    m["frames_foreign"] = cap.frames_foreign
+    m["frames_foreign_by_message"] = dict(cap.foreign)
     m["frames_unknown_id"] = cap.unknown_ids
     m["incomplete_steps"] = cap.incomplete_steps
     # periods 0 .. n - 1 of the scenario without a row: frames the recording lost
@@ -421,6 +428,21 @@ def lock_warning(m: dict[str, Any]) -> str | None:
         "(|dtheta| above 90 deg electrical for more than 50 ms after the scoring start); "
         "the metrics are not a scenario result"
     )
+
+
+def frames_warning(m: dict[str, Any]) -> str | None:
+    """One line for recorded frames that were not scored: bad ones and another run's."""
+    parts = []
+    bad = int(m.get("frames_rejected_recorded", 0))
+    if bad:
+        parts.append(f"{bad:,} recorded frames failed their check (E2E CRC, length or range)")
+    foreign = int(m.get("frames_foreign", 0))
+    if foreign:
+        by = ", ".join(f"{k} {v:,}" for k, v in (m.get("frames_foreign_by_message") or {}).items())
+        parts.append(f"{foreign:,} recorder frames of another run ({by})")
+    if not parts:
+        return None
+    return f"warning: {'; '.join(parts)}: not scored"
 
 
 def outcome(m: dict[str, Any], T_s: float) -> tuple[int, list[str]]:

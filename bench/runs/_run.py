@@ -55,7 +55,7 @@ from bench.scenarios._schema import Scenario, write_effective
 from bench.scenarios._setup import n_steps, sample_period
 from bench.wire._bus import BusSpec
 from bench.wire._codec import Codec
-from bench.wire._protocol import unwrap
+from bench.wire._protocol import new_run_id, unwrap
 
 LOG_SUFFIX = {"blf": ".blf", "asc": ".asc", "log": ".log"}
 
@@ -145,6 +145,10 @@ def run_scenario(
             "--dut-timeout",
             repr(dut_timeout + 10.0),
         ]
+    # the run's nonce (PlantTruth.run_id, CtrlTelemetry.run_id): another run's frames are told apart
+    run_id = new_run_id()
+    node_args["plant"] = [*node_args.get("plant", []), "--run-id", str(run_id)]
+    node_args["controller"] = [*node_args.get("controller", []), "--run-id", str(run_id)]
     roles = node_roles(scn, estimator, spec, spec_b, mode=mode, pace=pace, node_args=node_args)
     if external:
         roles = [r for r in roles if r[0] != "controller"]
@@ -158,8 +162,11 @@ def run_scenario(
     start_error: str | None = None
     with _catch_signals() as interrupted:
         try:
+            start_error = _bus_in_use(rec, spec, interrupted)
+            rec.expect_run(run_id)
             try:
-                start_nodes(roles, scn_file, out_dir, env, procs, stop=interrupted)
+                if start_error is None:
+                    start_nodes(roles, scn_file, out_dir, env, procs, stop=interrupted)
             except BenchError as e:  # a node that never became ready: nothing to record
                 start_error = str(e)
             if start_error is None:
@@ -169,10 +176,13 @@ def run_scenario(
                     ended = _drive(
                         rec, pacer, procs, plant, scn, progress, interrupted, dut, mode == "lockstep"
                     )
-                if progress and (ended or interrupted()):
+                shared = rec.foreign
+                if progress and (ended or interrupted() or shared):
                     # said at once: stopping the nodes and scoring take a while on a loaded host
                     why = "interrupted"
-                    if ended:
+                    if shared and not interrupted():
+                        why = "another run's frames on this bus"
+                    elif ended:
                         code = dict(procs)[ended].returncode
                         why = f"{ended} process ended ({how_ended(out_dir, ended, code)})"
                     print(
@@ -186,7 +196,7 @@ def run_scenario(
                     rec.plant_bus,
                     pacer.frames,
                     link=link,
-                    interrupted=interrupted(),
+                    interrupted=interrupted() or bool(shared),
                     ended=ended,
                 )
         finally:
@@ -206,6 +216,7 @@ def run_scenario(
         meta["dut_timeout_s"] = dut_timeout
         if dut is not None:
             meta["dut_first_duty_s"] = dut.first_duty_s
+    meta["run_id"] = run_id
     meta["node_reports"] = _node_reports(out_dir)
     meta["engine"] = (meta["node_reports"].get("plant") or {}).get("engine")  # the plant's
     meta["exit_codes"] = {role: p.returncode for role, p in procs}
@@ -225,13 +236,16 @@ def run_scenario(
     # a plant that ended before the scenario's last period (a lockstep watchdog
     # trip with a controller under test) leaves a shorter run: scored as far as it went
     short = int((meta["node_reports"].get("plant") or {}).get("steps", n_steps(scn))) < n_steps(scn)
-    partial = bool(interrupted() or failures or ended or short)
+    shared = rec.foreign
+    partial = bool(interrupted() or failures or ended or short or shared)
     # a node that died: the numbers at once, the plots left to bench analyze (seconds of matplotlib)
     plots = not ended or bool(interrupted())
     result = _score(frames, codec, scn, out_dir, meta, wall, capture, partial=partial, plots=plots)
     if dut is not None:
         dut.check(rec.plant_step)  # a trip the drive loop ended before printing
         dut.plant_story(out_dir)
+    if shared and not interrupted():
+        raise BenchError(shared_bus_line(shared, spec.describe(), rec.plant_step, out_dir))
     if ended == "dut" and dut is not None and not interrupted():
         raise BenchError(f"{dut.failure_text()}; files in {out_dir}")
     if ended and not interrupted():
@@ -268,6 +282,38 @@ def clear_run_files(out_dir: Path, keep: tuple[str, ...] = ()) -> None:
     for name in RUN_FILES:
         if name not in keep:
             (out_dir / name).unlink(missing_ok=True)
+
+
+#: Listening before a run starts its nodes: a bus that carries a plant's or a
+#: bench's frames then is another run's (a controller under test waiting
+#: for its first sample may already send, and is no other run) (an active plant sends every period, a stalled
+#: lockstep plant every 50 ms, PlantStatus every 100 ms of plant time).
+LISTEN_S = 0.3
+
+
+def _bus_in_use(rec: Recording, spec: BusSpec, interrupted: _Interrupt) -> str | None:
+    """The refusal line when the bus carries another run's frames before this one starts."""
+    t_end = time.monotonic() + LISTEN_S
+    while time.monotonic() < t_end and not interrupted():
+        time.sleep(0.02)
+    n = rec.bench_frames
+    if n == 0:
+        return None
+    return (
+        f"another run is on this bus ({spec.describe()}): {n} plant or bench frames "
+        f"in the {LISTEN_S:g} s before this run; refusing to share it "
+        "(give this run its own --port or --channel)"
+    )
+
+
+def shared_bus_line(foreign: dict[int, int], where: str, step: int, out_dir: Path) -> str:
+    """One line for a run that saw another run's recorder frames on its bus."""
+    runs = ", ".join(f"{rid:#06x} ({n:,} frames)" for rid, n in sorted(foreign.items()))
+    return (
+        f"another run shares this bus ({where}): PlantTruth/CtrlTelemetry of run {runs}; this run "
+        f"stopped at step {max(0, step):,} and is not a result (both runs' controllers "
+        f"saw both plants' samples; give each run its own --port or --channel); files in {out_dir}"
+    )
 
 
 def failed_before_recording(out_dir: Path, why: str) -> BenchError:
@@ -313,7 +359,7 @@ def _drive(
             # commands (a lossy transport): the last few once more
             pacer.resend_recent(bus)
             t_moved = time.monotonic()
-        if rec.plant_done or interrupted():
+        if rec.plant_done or interrupted() or rec.foreign:  # another run shares the bus
             break
         if plant.poll() is not None:
             # a plant that ends by itself ends well; killed or failed, it is named at once

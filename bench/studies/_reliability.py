@@ -11,9 +11,9 @@ checks on ``bench run`` and its processes, as a user meets them:
   safe state; the run reports the node);
 - **signals**: SIGINT and SIGTERM to ``bench run`` mid-run: exit 130, every
   node gone, the files written;
-- **parallel runs**: two runs started together, each on a bus of its own;
-  runs that share one bus are not isolated yet (issue 17, run isolation),
-  which the report says instead of testing.
+- **parallel runs**: two runs started together, each on a bus of its own
+  (both give the in-process trace), then two on one bus (each gives that
+  trace or refuses with one line; none gives a wrong result).
 
 :func:`run_process_checks` returns the figures as a dict (``bench soak
 --processes`` puts them in its JSON), and :func:`render_reliability` writes
@@ -282,39 +282,50 @@ def signal_checks(say: Callable[[str], None]) -> list[dict[str, Any]]:
     return out
 
 
+def _two_runs(
+    tmp: Path, f: Path, ref: dict[str, np.ndarray], scn: Any, ports: list[int], tag: str
+) -> list[dict[str, Any]]:
+    """Two runs started together on ``ports``: each one's outcome against ``ref``."""
+    procs = []
+    for i, port in enumerate(ports):
+        d = tmp / f"{tag}{i}"
+        cmd = _run_cmd(d, port, "-q", scenario=str(f))
+        procs.append((d, subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)))
+    out = []
+    for d, p in procs:
+        _, err = p.communicate(timeout=300)
+        lines = err.decode(errors="replace").strip().splitlines()
+        last = lines[-1] if lines else ""
+        if p.returncode == 0:
+            why = first_divergence(ref, _trace(list(can.LogReader(str(d / "capture.blf"))), scn))
+            out.append({"outcome": "identical" if why is None else "wrong", "detail": why or ""})
+        elif p.returncode == 2 and last.startswith("bench: error: another run"):
+            said = last.removeprefix("bench: error: ").split("; files in ")[0]
+            out.append({"outcome": "refused", "detail": said})
+        else:
+            out.append({"outcome": "wrong", "detail": f"exit {p.returncode}: {last}"})
+    return out
+
+
 def parallel_check(say: Callable[[str], None]) -> dict[str, Any]:
-    """Two lockstep runs started together, each on a bus (port) of its own."""
+    """Two lockstep runs started together, on a port each, then on one port."""
     from bench.nodes._loops import run_inprocess
     from bench.scenarios._schema import write_effective
     from bench.wire._codec import default_codec
 
-    say("two runs in parallel, a bus each")
+    say("two runs in parallel, a bus each; then two on one bus")
     scn = _short("wen-5.1", 0.1)
     ref = _trace(run_inprocess(scn, "sensored", default_codec()), scn)
-    results = []
     with tempfile.TemporaryDirectory() as tmp:
         f = write_effective(scn, Path(tmp) / "scenario.json")
-        procs = []
-        for i in range(2):
-            d = Path(tmp) / f"run{i}"
-            cmd = _run_cmd(d, free_port(), "-q", scenario=str(f))
-            procs.append(
-                (d, subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE))
-            )
-        for d, p in procs:
-            p.communicate(timeout=300)
-            why = (
-                first_divergence(ref, _trace(list(can.LogReader(str(d / "capture.blf"))), scn))
-                if p.returncode == 0
-                else f"exit {p.returncode}"
-            )
-            results.append(why)
+        own = _two_runs(Path(tmp), f, ref, scn, [free_port(), free_port()], "own")
+        port = free_port()
+        shared = _two_runs(Path(tmp), f, ref, scn, [port, port], "shared")
     return {
         "runs": 2,
-        "own_bus_identical": sum(w is None for w in results),
-        "diverged": [w for w in results if w is not None],
-        "shared_bus": "not isolated yet: two runs on one bus hear each other's frames "
-        "(run isolation, issue 17 item 1, pending)",
+        "own_bus_identical": sum(r["outcome"] == "identical" for r in own),
+        "diverged": [r["detail"] for r in own if r["outcome"] != "identical"],
+        "shared_bus_runs": shared,
     }
 
 
@@ -345,7 +356,9 @@ def process_checks_ok(p: dict[str, Any]) -> bool:
     sigs = all(
         s["exit_code"] == 130 and s["files_written"] and s["nodes_left"] == 0 for s in p["signals"]
     )
-    par = p["parallel"]["own_bus_identical"] == p["parallel"]["runs"]
+    par = p["parallel"]["own_bus_identical"] == p["parallel"]["runs"] and all(
+        r["outcome"] != "wrong" for r in p["parallel"].get("shared_bus_runs", [])
+    )
     return det and kills and sigs and par
 
 
@@ -401,7 +414,12 @@ and the controller answers from its cache), and recovery depends on them.
 The DBC has no multiplexed messages; the codec refuses a DBC with any, so an
 unknown multiplexer value cannot reach a node. Only an accepted duty frame
 with every duty in [0, 1] is ever applied.  The recorder frames (`PlantTruth`,
-`CtrlTelemetry`) carry no CRC yet (issue 17, pending).
+`CtrlTelemetry`) carry a CRC too (DBC 2.1): the analysis drops a frame that
+fails it before placing any step and counts it (`frames_rejected_recorded`,
+a warning line), so a crafted or corrupted frame cannot move the step
+unwrapping (`tests/test_run_isolation.py`: one crafted `PlantTruth` leaves
+`steps_missing` unchanged; random FD frames with the DBC's identifiers
+poured at a running bench leave its scored rows unchanged).
 
 **Watchdogs.** The plant trips to its safe state (all switches open,
 `enable=False`: the currents freewheel through the diodes and die out, the
@@ -462,11 +480,22 @@ like), injection settings without a `[motor]` table, an option of the other
 injection family.  A text capture's unparsable lines are skipped and counted
 (`capture_lines_skipped`), never the rest of the file.
 
-**Run isolation** is pending (issue 17): two runs on one bus (one
-udp_multicast port, one vcan) hear each other's frames.  `bench run` without
-`--interface` on a host without vcan0 takes a udp_multicast port of its own
-per process; where vcan0 exists it is the default bus, shared by every run,
-so parallel runs must name a bus each (a vcan or a `--port` of their own).
+**Run isolation** (DBC 2.1, docs/PROTOCOL.md "Runs on one bus"): every run
+has a 16-bit nonce, `run_id`, that its plant echoes in `PlantTruth` and its
+controller in `CtrlTelemetry`.  The recorder frames carry an E2E CRC; the
+analysis drops a frame that fails it before the step unwrapping and counts it
+(`frames_rejected_recorded`, a warning line), and counts the recorder frames
+of another run (`frames_foreign`), never scored.  Two runs on one bus cannot
+both be right (the 8-byte control frames have no room for the nonce, and
+their layout is what the reference results were recorded with), so the
+second refuses: `bench run` listens 0.3 s before starting its nodes and
+refuses a bus that carries the DBC's frames, with one line and exit 2; runs
+started within that window of each other see each other's `PlantTruth` and
+stop with one line (exit 2), their files kept and marked as no result.  A
+`bench plant` that sees another plant's truth says so once, naming its run.
+`bench run` without `--interface` on a host without vcan0 takes a
+udp_multicast port of its own per process; where vcan0 exists it is the
+default bus, shared by every run, so parallel runs must name a bus each.
 
 ## Tests
 
@@ -480,12 +509,26 @@ so parallel runs must name a bus each (a vcan or a `--port` of their own).
 | `tests/test_signals_process.py` | real processes: kill -9 of the controller in real time (watchdog fault frame, capture complete); SIGINT, SIGTERM mid-run and during start-up |
 | `tests/test_reliability_errors.py` | unwritable `--out`, unparsable capture lines, the scoring of a run cut short and the line that announces it, kill -9 of the controller in lockstep (named, prompt), the transport line from python-can's configuration, `duty_age` in the safe state |
 | `tests/test_scenario_plausible.py` | the physics checks of a scenario's motor, injection settings without `[motor]`, `sensored` from any scenario |
+| `tests/test_run_isolation.py` | a crafted `PlantTruth` (bad CRC) in a clean capture: rejected, counted, `steps_missing` unchanged; one of another `run_id`: counted foreign, not scored; a plant seeing another plant says so once; two runs started together on one udp_multicast port: each gives its solo rows or refuses with one line; a run refuses a bus that already carries another run; random FD frames with the DBC's identifiers poured at a running bench leave its scored rows unchanged |
 | `tests/test_reliability_doc.py` | this page is the rendering of `docs/reliability/soak.json` |
 """
 
 
 def _n(x: Any) -> str:
     return f"{int(x):,}"
+
+
+def _shared_text(par: dict[str, Any]) -> str:
+    runs = par.get("shared_bus_runs")
+    if runs is None:  # a JSON from before run isolation
+        return f"Runs sharing one bus: {par.get('shared_bus', 'not measured')}."
+    n = {k: sum(r["outcome"] == k for r in runs) for k in ("identical", "refused", "wrong")}
+    said = "; ".join(sorted({f"`{r['detail']}`" for r in runs if r["outcome"] == "refused"}))
+    return (
+        f"Then {len(runs)} runs started together on one udp_multicast port: "
+        f"{n['identical']} gave the in-process trace, {n['refused']} refused with one line, "
+        f"{n['wrong']} gave a wrong result" + (f" (the refusals: {said})" if said else "") + "."
+    )
 
 
 def render_reliability(rep: dict[str, Any]) -> str:
@@ -497,7 +540,9 @@ def render_reliability(rep: dict[str, Any]) -> str:
         rep["frames_fuzzed_controller"],
         rep["frames_fuzzed_loop"],
     )
-    by_reason = ", ".join(f"`{k}` {_n(v)}" for k, v in sorted(rej.items(), key=lambda x: -x[1]))
+    by_reason = ", ".join(
+        f"`{k}` {_n(v)}" for k, v in sorted(rej.items(), key=lambda x: (-x[1], x[0]))
+    )
     faults = rep["faults_injected"]
     trips = ", ".join(f"{k} {_n(v)}" for k, v in sorted(rep["trips"].items()))
     lines = [
@@ -605,7 +650,8 @@ def render_reliability(rep: dict[str, Any]) -> str:
             if p["parallel"]["diverged"]
             else ""
         )
-        + f".  Runs sharing one bus: {p['parallel']['shared_bus']}.",
+        + ".  "
+        + _shared_text(p["parallel"]),
         "",
         f"The process-level checks took {p['wall_s']:.0f} s; the one-minute load average was "
         f"{p['loadavg_1min_start']:.1f} at their start.",

@@ -124,10 +124,20 @@ def unwrap_step(raw: int, expected: int, bits: int) -> int:
 class _Sig:
     """Encode-side description of one signal (precomputed once)."""
 
-    __slots__ = ("hi", "lo", "modulus", "name", "offset", "scale")
+    __slots__ = ("hi", "initial", "lo", "modulus", "name", "offset", "scale")
 
-    def __init__(self, name: str, lo: float, hi: float, scale: float, offset: float, mod: int):
+    def __init__(
+        self,
+        name: str,
+        lo: float,
+        hi: float,
+        scale: float,
+        offset: float,
+        mod: int,
+        initial: float | None = None,
+    ):
         self.name = name
+        self.initial = initial  # GenSigStartValue (physical): used when the caller omits it
         self.lo = lo
         self.hi = hi
         self.scale = scale
@@ -197,7 +207,9 @@ class _Spec:
             modular = _attribute(s, "SigModular", 0) == 1
             if modular and (s.is_signed or offset != 0):
                 raise DbcError(f"{where}: signal {s.name}: SigModular needs unsigned, offset 0")
-            sigs.append(_Sig(s.name, lo, hi, scale, offset, (1 << s.length) if modular else 0))
+            initial = float(s.initial) if isinstance(s.initial, int | float) else None
+            mod = (1 << s.length) if modular else 0
+            sigs.append(_Sig(s.name, lo, hi, scale, offset, mod, initial))
             # Only signals whose raw range exceeds [min|max] can decode out of range.
             tol = 1e-9 * abs(scale)
             if phys[0] < lo - tol or phys[1] > hi + tol:
@@ -368,7 +380,8 @@ class Codec:
     def encode(self, name: str, signals: Mapping[str, float]) -> can.Message:
         """Frame of message ``name`` carrying ``signals`` (physical values).
 
-        Every signal of the message except ``crc`` must be given (extra keys,
+        Every signal of the message except ``crc`` and those with a
+        ``GenSigStartValue`` (``run_id``: that value) must be given (extra keys,
         e.g. ``i_c``, are ignored). Values are clipped to the signal's range,
         or wrapped for ``SigModular`` signals; ``crc`` is computed.
 
@@ -383,6 +396,9 @@ class Codec:
             try:
                 v = float(signals[sig.name])
             except KeyError:
+                if sig.initial is not None:  # GenSigStartValue: may be omitted (run_id)
+                    values[sig.name] = sig.initial
+                    continue
                 raise DbcError(
                     f"DBC {self.path}: message {name}: signal {sig.name} missing"
                 ) from None

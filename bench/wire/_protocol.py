@@ -29,6 +29,19 @@ REJECT_WRONG_STEP = "wrong_step"
 RPM_PER_RAD_S = 60.0 / (2.0 * math.pi)
 
 
+#: Valid recorder frames of one foreign ``run_id`` that make it another run on
+#: the bus: a random frame passes the 8-bit CRC once in 256 with a random
+#: run_id, while another run sends its truth every period.
+SHARED_RUN_FRAMES = 8
+
+
+def new_run_id() -> int:
+    """A random run nonce, 1..65535 (``PlantTruth.run_id``; 0 means unknown)."""
+    import secrets
+
+    return secrets.randbelow(0xFFFF) + 1
+
+
 def unwrap(raw: int, expected: int, modulus: int) -> int:
     """The step nearest ``expected`` whose value mod ``modulus`` is ``raw``."""
     half = modulus // 2
