@@ -122,8 +122,8 @@ class RotatingInjectionPars:
         learned the load (``1 / b``); on wen2023's full-load ramps (7.5 N m
         on 0.003 kg m^2 in 0.3 s, wen-5.3 and wen-5.4) that loses the rotor,
         where the PLL keeps it. It suits speed steps and ramps under a known
-        or slowly changing load (wen-5.2: ``bench suite robustness`` and
-        ``bench sweep`` compare the two with ``estimator_options.observer``).
+        or slowly changing load (wen-5.2); ``bench sweep SCENARIO --grid
+        estimator_options.observer=pll,mechanical`` compares the two.
     a : float or None
         Angle poles of the mechanical observer (rad/s); None derives them
         from ``pm_deg`` with the in-loop filters
