@@ -119,3 +119,34 @@ def solve_largest(
             return float(brentq(g, prev, float(p), xtol=1e-12 * hi, rtol=1e-10))
         prev = float(p)
     return hi
+
+
+def largest_with_margin(
+    loop_of: Callable[[float], LoopResponse],
+    lo: float,
+    hi: float,
+    w_hi: float,
+    n_int: int,
+    pm_deg: float,
+    w_c_max: float,
+) -> tuple[float, float, float]:
+    """The largest gain parameter ``p`` in ``[lo, hi]`` whose loop ``loop_of(p)`` keeps the
+    phase margin at ``pm_deg`` or more and the gain crossover at or below ``w_c_max``.
+
+    The margins are taken from ``1e-3 p`` to ``w_hi`` with ``n_int``
+    integrators (:func:`margins`); each bound is solved by :func:`solve_largest`
+    and the smaller parameter kept. Returns ``(p, pm, w_c)``: the parameter,
+    its phase margin (deg) and crossover (rad/s).
+    """
+
+    def pm_of(x: float) -> float:
+        return margins(loop_of(x), 1e-3 * x, w_hi, n_int)[0]
+
+    def wc_of(x: float) -> float:
+        return margins(loop_of(x), 1e-3 * x, w_hi, n_int)[1]
+
+    p_pm = solve_largest(pm_of, pm_deg, lo, hi, rising=False)
+    p_bw = solve_largest(wc_of, w_c_max, lo, hi, rising=True)
+    p = min(p_pm, p_bw)
+    pm, w_c = margins(loop_of(p), 1e-3 * p, w_hi, n_int)
+    return p, pm, w_c

@@ -48,7 +48,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from controller._design import margins, solve_largest
+from controller._design import largest_with_margin
 
 _TWO_PI = 2.0 * math.pi
 
@@ -206,7 +206,6 @@ def design_pole(
     a, pm, w_c : float
         Pole (rad/s), achieved phase margin (deg) and crossover (rad/s).
     """
-    w_hi = 0.999 * math.pi / T_s
 
     def loop(a: float) -> Callable[[np.ndarray], np.ndarray]:
         def f(w: np.ndarray) -> np.ndarray:
@@ -216,16 +215,6 @@ def design_pole(
 
         return f
 
-    def pm_of(a: float) -> float:
-        return margins(loop(a), 1e-3 * a, w_hi, 3)[0]
-
-    def wc_of(a: float) -> float:
-        return margins(loop(a), 1e-3 * a, w_hi, 3)[1]
-
-    lo = 1e-5 / T_s
-    hi = 0.1 / T_s
-    a_pm = solve_largest(pm_of, pm_deg, lo, hi, rising=False)
-    a_bw = solve_largest(wc_of, w_c_max, lo, hi, rising=True)
-    a = min(a_pm, a_bw)
-    pm, w_c = margins(loop(a), 1e-3 * a, w_hi, 3)
-    return a, pm, w_c
+    return largest_with_margin(
+        loop, 1e-5 / T_s, 0.1 / T_s, 0.999 * math.pi / T_s, 3, pm_deg, w_c_max
+    )

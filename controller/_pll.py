@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from controller._design import LoopResponse, margins, solve_largest
+from controller._design import LoopResponse, largest_with_margin
 
 _TWO_PI = 2.0 * math.pi
 
@@ -100,18 +100,12 @@ def design_bandwidth(
     w_o, pm, w_c : float
         Bandwidth (rad/s), achieved phase margin (deg) and crossover (rad/s).
     """
-    w_hi = 0.999 * math.pi / T_s
-
-    def pm_of(w_o: float) -> float:
-        return margins(lambda w: open_loop(w_o, T_s, w) * chain(w), 1e-3 * w_o, w_hi, 2)[0]
-
-    def wc_of(w_o: float) -> float:
-        return margins(lambda w: open_loop(w_o, T_s, w) * chain(w), 1e-3 * w_o, w_hi, 2)[1]
-
-    lo = 1e-3 / T_s * 1e-2
-    hi = 0.3 / T_s
-    w_pm = solve_largest(pm_of, pm_deg, lo, hi, rising=False)
-    w_bw = solve_largest(wc_of, w_c_max, lo, hi, rising=True)
-    w_o = min(w_pm, w_bw)
-    pm, w_c = margins(lambda w: open_loop(w_o, T_s, w) * chain(w), 1e-3 * w_o, w_hi, 2)
-    return w_o, pm, w_c
+    return largest_with_margin(
+        lambda w_o: lambda w: open_loop(w_o, T_s, w) * chain(w),
+        1e-3 / T_s * 1e-2,
+        0.3 / T_s,
+        0.999 * math.pi / T_s,
+        2,
+        pm_deg,
+        w_c_max,
+    )
