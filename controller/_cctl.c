@@ -243,6 +243,15 @@ static int store_bq2(const BQ2 *f, PyObject *o)
     return 0;
 }
 
+/* a retuned BPF (tt-dq's bpf_tracking): its coefficients as well */
+static int store_bq2_tuned(const BQ2 *f, PyObject *o)
+{
+    TRY(store_bq2(f, o));
+    TRY(set_d(o, "b0", f->b0)); TRY(set_d(o, "b2", f->b2));
+    TRY(set_d(o, "a1", f->a1)); TRY(set_d(o, "a2", f->a2));
+    return 0;
+}
+
 /* ------------------------------------------ PositionObserver (_pll.py) */
 typedef struct { double k_p, k_i, T_s, theta_hat, w_hat, w_i; } PLL;
 
@@ -452,6 +461,8 @@ typedef struct {
 typedef struct {
     double V_h, wT, inv_norm, f;
     long long k;
+    int track;                 /* tt-dq's bpf_tracking */
+    double w_h, T_s, B, w0_min; /* its centre, period, bandwidth, lowest centre */
     PLL pll;
     BQ2 bpf;
     FO lpf;      /* tt-dq, sfhf */
@@ -471,6 +482,19 @@ static void rot_publish(EST *e, ROT *r, double th, double f, double err, double 
     e->w_hat = r->pll.w_hat;
 }
 
+/* controller._filters.bandpass_coefficients */
+static void bp_coef(double w_0, double B, double T_s, double *b0, double *a1, double *a2)
+{
+    double c = w_0 / tan(0.5 * w_0 * T_s);
+    double cc = c * c;
+    double ww = w_0 * w_0;
+    double bc = B * c;
+    double inv = 1.0 / (cc + bc + ww);
+    *b0 = bc * inv;
+    *a1 = 2.0 * (ww - cc) * inv;
+    *a2 = (cc - bc + ww) * inv;
+}
+
 static void ttdq_update(EST *e, ROT *r, long long k, double i_a, double i_b)
 {
     r->k = k;
@@ -480,6 +504,17 @@ static void ttdq_update(EST *e, ROT *r, long long k, double i_a, double i_b)
     double i_d = c * i_a + s * i_b;
     double i_q = c * i_b - s * i_a;
     double i_dh, i_qh;
+    if (r->track) {
+        double w_0 = r->w_h - r->pll.w_i;
+        if (w_0 < 0.0)
+            w_0 = -w_0;
+        if (w_0 < r->w0_min)
+            w_0 = r->w0_min;
+        double b0;
+        bp_coef(w_0, r->B, r->T_s, &b0, &r->bpf.a1, &r->bpf.a2);
+        r->bpf.b0 = b0;
+        r->bpf.b2 = -b0;
+    }
     bq2_update(&r->bpf, i_d, i_q, &i_dh, &i_qh);
     double f = fo_update(&r->lpf, i_dh * i_qh);
     double err = f * r->inv_norm;
@@ -1135,6 +1170,12 @@ static int load_est(Core *self, int kind, EST *e, PyObject *o)
     TRY(get_d(o, "V_h", &r->V_h)); TRY(get_d(o, "wT", &r->wT));
     TRY(get_d(o, "_inv_norm", &r->inv_norm)); TRY(get_d(o, "f", &r->f));
     TRY(get_ll(o, "_k", &r->k));
+    r->track = 0;
+    if (kind == KIND_TTDQ) {
+        TRY(get_bool(o, "bpf_tracking", &r->track));
+        TRY(get_d(o, "w_h", &r->w_h)); TRY(get_d(o, "T_s", &r->T_s));
+        TRY(get_d(o, "bpf_B", &r->B)); TRY(get_d(o, "_w0_min", &r->w0_min));
+    }
     PyObject *x;
     int rc;
 #define LOAD_SUB(name, fn, dst) \
@@ -1171,7 +1212,11 @@ static int store_est(Core *self, int kind, const EST *e, PyObject *o)
 #define STORE_SUB(name, fn, src) \
     x = sub(o, name); if (x == NULL) return -1; rc = fn(src, x); Py_DECREF(x); TRY(rc);
     STORE_SUB("pll", store_pll, &r->pll);
-    STORE_SUB("_bpf", store_bq2, &r->bpf);
+    if (r->track) {
+        STORE_SUB("_bpf", store_bq2_tuned, &r->bpf);
+    } else {
+        STORE_SUB("_bpf", store_bq2, &r->bpf);
+    }
     if (kind == KIND_TTAB) {
         STORE_SUB("_lpf", store_fo2, &r->lpf_ab);
     } else {

@@ -338,6 +338,9 @@ class Controller:
                 band = cp.i_band
             self.dead_time = DeadTimeCompensator(T_s, cp.t_dead, cp.v_ce, cp.v_f, band, sine)
         self.cross_sat = cp.cross_saturation and self.family != "none"
+        # An estimator with a ``saliency_offset`` attribute (the hybrids) takes the
+        # correction itself: it belongs to the saliency-based part of its estimate.
+        self._sal_own = self.cross_sat and hasattr(self.estimator, "saliency_offset")
         self.calibration: OffsetCalibration | None = None
         if cp.offset_calibration:
             n_cal = cp.offset_periods
@@ -429,6 +432,11 @@ class Controller:
         m = self.motor
         if mode == MODE_POLARITY:
             return self._polarity_step(k, i_alpha, i_beta, u_dc)
+        if self._sal_own:
+            # the hybrid corrects its injection estimate only (controller._hybrid)
+            est.saliency_offset = cross_saturation_offset(  # type: ignore[attr-defined]
+                m.k_dq, self.i_q_ref, m.L_d, m.L_q
+            )
         est.update(
             EstimatorInput(
                 k,
@@ -443,7 +451,7 @@ class Controller:
             )
         )
         th = est.theta_hat
-        if self.cross_sat:
+        if self.cross_sat and not self._sal_own:
             th -= cross_saturation_offset(m.k_dq, self.i_q_ref, m.L_d, m.L_q)
         w = est.w_hat
         c = math.cos(th)

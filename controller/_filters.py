@@ -138,6 +138,26 @@ class Biquad2:
         self._p1 = self._p2 = self._q1 = self._q2 = 0.0
 
 
+def bandpass_coefficients(w_0: float, B: float, T_s: float) -> tuple[float, float, float]:
+    """``(b_0, a_1, a_2)`` of ``B s / (s^2 + B s + w_0^2)``, bilinear, pre-warped at ``w_0``.
+
+    The centre ``w_0`` (rad/s) and bandwidth ``B`` (rad/s) of Wen's eq. (11)
+    form; ``b_1 = 0`` and ``b_2 = -b_0``. With ``c = w_0 / tan(w_0 T_s / 2)``
+    the substitution ``s = c (1 - z^-1) / (1 + z^-1)`` gives the numerator
+    ``B c (1 - z^-2)`` and the denominator ``(c^2 + B c + w_0^2) + 2 (w_0^2 -
+    c^2) z^-1 + (c^2 - B c + w_0^2) z^-2``, normalised. The same as
+    :func:`discretize` of that prototype at ``w_p = w_0`` (to rounding),
+    without scipy, cheap enough to run every period
+    (:class:`controller._tt_dq.TTDQEstimator` with ``bpf_tracking``).
+    """
+    c = w_0 / math.tan(0.5 * w_0 * T_s)
+    cc = c * c
+    ww = w_0 * w_0
+    bc = B * c
+    inv = 1.0 / (cc + bc + ww)
+    return bc * inv, 2.0 * (ww - cc) * inv, (cc - bc + ww) * inv
+
+
 def lpf_first_order(w_c: float, T_s: float) -> FirstOrder:
     """First-order low-pass ``w_c/(s + w_c)`` (unity DC gain), bilinear, pre-warped at ``w_c``."""
     b, a = discretize((w_c,), (1.0, w_c), T_s, min(w_c, 0.9 * math.pi / T_s))

@@ -62,8 +62,29 @@ wherever the observer carries weight, and the lower edge is::
 the speed where the back-EMF ``w psi_f`` is ``1.077/theta_max`` (12.3) times
 the voltage uncertainty. ``w_mid = 1.5 w_lo`` and ``w_hi = 2 w_lo``: the
 observer's bound is ``2/3`` of the budget when it carries the full weight
-and half of it where the injection ends. On the presets: wen2023 440, 660,
-880 rpm (w_lo = 184 rad/s electrical), xue2022 56, 84, 112 rpm (23.4 rad/s).
+and half of it where the injection ends. On the presets with ``u_err = 0``:
+wen2023 440, 660, 880 rpm (w_lo = 184 rad/s electrical), xue2022 56, 84,
+112 rpm (23.4 rad/s).
+
+Choosing ``u_err`` for an inverter with dead time and device drops. The
+dead-time feed-forward (:mod:`controller._compensation`) removes the error
+wherever it knows the sign of each phase current at the switching edges. It
+cannot near zero current when the PWM ripple within a period is larger than
+the fundamental current: the sign at the edges is then the ripple's, and
+the whole error, ``(4/pi) (t_dead u_dc / T_s + v_drop)`` in the fundamental
+of its six-step pattern, stays in the voltage the observer integrates,
+which is what a drive running light at the band's speeds sees. The ripple
+is of the order ``|u| T_s / (3 L)`` with ``|u| ~ w psi_f``. wen2023 at 10 kHz:
+0.03 A at 440 rpm, below the 0.13 A its ramps need, so the sign is known and
+``u_err = 0`` (measured on the drive profile: 4 degrees at most above the
+band). xue2022 at 1 kHz: about 3 A at 300 rpm against 0.26 A, so the sign
+is not known and ``u_err`` = (4/pi)(2 us 540 V 1 kHz + 1.5 V) = 3.3 V for
+the drive profile's 2 us and 1.5 V. With ``u_err = 0`` there the observer,
+which then serves down to 84 rpm, takes a relay-like voltage error from the
+current's sign flipping with the ripple, and the stop from 1200 rpm without
+load rings at 12 Hz with +-4 degrees and a 22 % speed dip at the hand-over
+(measured); with 3.3 V the band moves to 299-598 rpm, where that error is
+within the budget. ``wide-speed-xue`` states it.
 
 The play ``h = 0.1 w_lo`` (18.4 rad/s on wen2023, 2.3 rad/s on xue2022): a
 speed held in or near the band does not move the schedule while the ripple
@@ -342,6 +363,17 @@ class HybridEstimator:
         Injection amplitude factor ``g`` for the next period.
     y : float
         Schedule speed after the play (rad/s).
+    saliency_offset : float
+        Angle (rad) by which the injection estimator's saliency axis leads the
+        rotor's, set by the controller before each :meth:`update` when it
+        corrects cross-saturation (:func:`controller._compensation.cross_saturation_offset`).
+        It is a property of the saliency the injection sees, not of the flux
+        the observer models, so it is subtracted from the injection estimate
+        alone, before the blend: the controller applying it to the blended
+        angle would turn it into an error of that size above the band (5
+        degrees at rated current on the drive profile). The observer, slaved,
+        follows the corrected angle, and the injection tracker, slaved, is set
+        to the output plus the offset, where it will lock.
     """
 
     def __init__(
@@ -359,6 +391,7 @@ class HybridEstimator:
         self.weight = 0.0
         self.gain = 1.0
         self.y = 0.0
+        self.saliency_offset = 0.0
         # The controller designs its speed loop with the estimator's speed
         # response: below the band, the slowest regime, the hybrid is its
         # injection estimator, so that estimator's response is the design case.
@@ -433,9 +466,10 @@ class HybridEstimator:
         tr = self.tracker
         hf.update(x)
         lam = self.weight
+        off = self.saliency_offset
         if lam == 0.0:
             w_s = tr.w_smooth
-            th = hf.theta_hat
+            th = hf.theta_hat - off if off else hf.theta_hat
             obs.update_slaved(x.i_alpha, x.i_beta, x.u_alpha, x.u_beta, th, w_s)
             w = hf.w_hat
             err = hf.err
@@ -447,9 +481,9 @@ class HybridEstimator:
                 w = w_o
                 w_s = w_o
                 err = obs.eps
-                tr.sync(th, w_o, obs.accel, x.torque)
+                tr.sync(th + off, w_o, obs.accel, x.torque)
             else:
-                th_h = hf.theta_hat
+                th_h = hf.theta_hat - off
                 d = (obs.theta_hat - th_h + math.pi) % _TWO_PI - math.pi
                 th = (th_h + lam * d) % _TWO_PI
                 w_h = hf.w_hat
@@ -502,7 +536,8 @@ def create(motor: MotorModel, T_s: float, hf: str = "tt-dq", **options: Any) -> 
         from controller._rotating import RotatingInjectionPars
         from controller._tt_dq import TTDQEstimator
 
-        tt = TTDQEstimator(motor, T_s, RotatingInjectionPars(**options))
+        # the BPF follows the sequences to the band's speeds (RotatingInjectionPars)
+        tt = TTDQEstimator(motor, T_s, RotatingInjectionPars(**{"bpf_tracking": True, **options}))
         pll = tt.pll
         tracker = (
             _PllTracker(pll, T_s)

@@ -18,6 +18,11 @@ drives the PI position observer (Fig. 4). The fundamental current for the
 current loop is the estimated-frame current minus the BPF output, rotated
 back to alpha-beta.
 
+At speed the two sequences sit ``w_e`` away from the BPF's centre: with
+``bpf_tracking`` (:class:`controller.RotatingInjectionPars`) the centre
+follows them, at ``|w_h - w_i|`` with the PLL's integral speed ``w_i``
+(:func:`controller._filters.bandpass_coefficients` every period).
+
 Time stamps: the sample ``k`` is rotated with ``theta_hat`` at ``k T_s``;
 ``err`` and ``theta_hat`` refer to ``k T_s``.
 """
@@ -28,8 +33,9 @@ import math
 from typing import Any
 
 from controller._api import EstimatorInput
-from controller._filters import Biquad2, FirstOrder, FirstOrder2
+from controller._filters import Biquad2, FirstOrder, FirstOrder2, bandpass_coefficients
 from controller._params import MotorModel
+from controller._pll import PositionObserver
 from controller._rotating import RotatingHFEstimator, RotatingInjectionPars
 
 
@@ -45,6 +51,9 @@ class TTDQEstimator(RotatingHFEstimator):
         self._lpf2 = FirstOrder2(*self.lpf_z)
         self._inv_norm = 1.0 / (2.0 * self.I_p * self.I_n)
         self._floor = 0.1 * self.I_p * self.I_n
+        # the tracking BPF's lowest centre: a speed of 3/4 of the injection frequency is
+        # outside any use of an injection estimator, and the bilinear map needs w_0 > 0
+        self._w0_min = 0.25 * self.w_h
 
     def _reset_filters(self) -> None:
         self._bpf.reset()
@@ -61,7 +70,19 @@ class TTDQEstimator(RotatingHFEstimator):
         i_b = x.i_beta
         i_d = c * i_a + s * i_b
         i_q = c * i_b - s * i_a
-        i_dh, i_qh = self._bpf.update(i_d, i_q)
+        bpf = self._bpf
+        if self.bpf_tracking:
+            pll = self.pll
+            w_t = pll.w_i if isinstance(pll, PositionObserver) else pll.w_hat
+            w_0 = self.w_h - w_t
+            if w_0 < 0.0:
+                w_0 = -w_0
+            if w_0 < self._w0_min:
+                w_0 = self._w0_min
+            b0, bpf.a1, bpf.a2 = bandpass_coefficients(w_0, self.bpf_B, self.T_s)
+            bpf.b0 = b0
+            bpf.b2 = -b0
+        i_dh, i_qh = bpf.update(i_d, i_q)
         if self.measured:
             # quadrature: LPF((i_dh^2 - i_qh^2)/2) = I_p I_n cos(2 dtheta)
             f, g = self._lpf2.update(i_dh * i_qh, 0.5 * (i_dh * i_dh - i_qh * i_qh))

@@ -242,22 +242,22 @@ def test_band_metrics_split_the_scored_rows_by_true_speed() -> None:
 
 
 def _short_xue() -> Scenario:
-    """``wide-speed-xue`` shortened to 5.5 s: start from an unknown angle, a 6 N m load ramped
-    in at 30 rpm (the shipped scenario's rate), up through the band to 600 rpm and back down
-    to 30 rpm, the load carried throughout; ramps of 570 rpm/s, as the shipped ones."""
+    """``wide-speed-xue`` shortened to 6.7 s: start from an unknown angle, a 6 N m load ramped
+    in at 30 rpm (the shipped scenario's rate), up through the band to 1000 rpm and back
+    down to 30 rpm, the load carried throughout; ramps of 570 rpm/s, as the shipped ones."""
     scn = load_scenario("wide-speed-xue")
     return replace(
         scn,
-        duration=5.5,
+        duration=6.7,
         speed_rpm=Profile(
             (
                 (0.0, 0.0),
                 (0.3, 0.0),
                 (0.6, 30.0),
                 (2.0, 30.0),
-                (3.0, 600.0),
-                (4.0, 600.0),
-                (5.0, 30.0),
+                (3.7, 1000.0),
+                (4.5, 1000.0),
+                (6.2, 30.0),
             )
         ),
         load_nm=Profile(((0.0, 0.0), (0.6, 0.0), (1.5, 6.0))),
@@ -325,7 +325,10 @@ def test_inprocess_hybrid_run_has_consistent_band_metrics(
     assert m["band_above_injection_loss_w"] < 1e-5 * below
     assert m["band_above_torque_ripple_rms_nm"] < 0.05 * m["band_below_torque_ripple_rms_nm"]
     assert len(m["handover_dips_pct"]) == 2 == len(m["handover_at_s"])
-    assert 2.0 < m["handover_at_s"][0] < 2.2 and 4.7 < m["handover_at_s"][1] < 5.0
+    # each begins where the ramp (570 rpm/s) brings the speed into the band
+    lo_rpm, hi_rpm = m["band_lo_rpm"], m["band_hi_rpm"]
+    assert m["handover_at_s"][0] == pytest.approx(2.0 + (lo_rpm - 30.0) / 570.0, abs=0.1)
+    assert m["handover_at_s"][1] == pytest.approx(4.5 + (1000.0 - hi_rpm) / 570.0, abs=0.1)
     assert 0.0 <= m["handover_dip_max_pct"] < 5.0
     assert m["handover_dip_max_pct"] == max(m["handover_dips_pct"])
 

@@ -260,6 +260,41 @@ def test_controller_corrects_the_angle_by_the_offset() -> None:
     assert out.mode == MODE_RUN
 
 
+@pytest.mark.parametrize("weight", [0.0, 0.5, 1.0])
+def test_the_hybrid_corrects_its_injection_estimate_only(weight: float) -> None:
+    """The offset is the saliency's, so a hybrid (``hybrid-tt-dq``) takes it from the
+    controller (``saliency_offset``) and subtracts it from its injection estimate before
+    the blend: the controller reports the hybrid's angle as it is, which is the
+    injection's corrected angle below the band, the observer's alone above it (no
+    offset), and the blend of the two in between; the observer, slaved below the band,
+    follows the corrected angle."""
+    model = dataclasses.replace(motor_model(WEN), k_dq=-2e-3)
+    cp = CompensationPars(cross_saturation=True)
+    ctrl = Controller(
+        ControllerPars(
+            motor=model, T_s=T_WEN, estimator="hybrid-tt-dq", startup=False, compensation=cp
+        )
+    )
+    est = ctrl.estimator
+    ctrl.set_enable(True)
+    ctrl.set_current_ref((0.0, 4.0))
+    ctrl.step(Measurement(0, 0.1, -0.05, -0.05, 540.0))
+    est.weight = weight  # type: ignore[attr-defined]
+    out = ctrl.step(Measurement(1, 0.2, -0.1, -0.1, 540.0))
+    delta = cross_saturation_offset(-2e-3, 4.0, model.L_d, model.L_q)
+    assert est.saliency_offset == delta  # type: ignore[attr-defined]
+    assert out.theta_hat == pytest.approx(est.theta_hat % (2 * math.pi), abs=1e-12)
+    th_hf = est.hf.theta_hat - delta  # type: ignore[attr-defined]
+    th_obs = est.observer.theta_hat  # type: ignore[attr-defined]
+    d = (th_obs - th_hf + math.pi) % (2 * math.pi) - math.pi
+    want = th_hf + weight * d
+    assert (out.theta_hat - want + math.pi) % (2 * math.pi) - math.pi == pytest.approx(
+        0.0, abs=1e-12
+    )
+    if weight == 0.0:
+        assert th_obs == pytest.approx(th_hf % (2 * math.pi), abs=1e-12)
+
+
 # ---------------------------------------------------------------------- offset calibration
 
 

@@ -180,3 +180,84 @@ def test_measured_normalisation_is_independent_of_amplitude(name: str) -> None:
         ratio = scale**2 * abs(_h(est.bpf_z, W_H)) ** 2  # type: ignore[attr-defined]
     assert errs["measured"] == pytest.approx(want, rel=0.02)
     assert errs["model"] == pytest.approx(ratio * want, rel=0.02)
+
+
+def _ttdq_gain_at_speed(rpm: float, tracking: bool) -> tuple[float, float, float]:
+    """tt-dq's demodulated error gain ``K``, bias (rad) and the largest HF residual left in
+    the fundamental current (A), with the observer frozen at ``theta_e - dtheta`` on the
+    synthetic currents of eq. (4) at the electrical speed of ``rpm``."""
+    from controller import RotatingInjectionPars
+    from controller._tt_dq import TTDQEstimator
+
+    w = rpm * P.motor.n_p * 2.0 * math.pi / 60.0
+    d = math.radians(3.0)
+    out = []
+    resid = 0.0
+    for dth in (-d, d):
+        est = TTDQEstimator(MODEL, T_S, RotatingInjectionPars(w_o=0.0, bpf_tracking=tracking))
+        I_p, I_n = est.I_p, est.I_n
+        acc = []
+        for k in range(6000):
+            t = k * T_S
+            th = w * t
+            i_f = 2.0 * np.exp(1j * (th + math.pi / 2))  # 2 A on q
+            i = (
+                I_p * np.exp(1j * (W_H * t - math.pi / 2))
+                + I_n * np.exp(1j * (2 * th - W_H * t + math.pi / 2))
+                + i_f
+            )
+            est.pll.reset(th - dth, w)
+            est.update(EstimatorInput(k, i.real, i.imag, 0.0))
+            if k > 3000:
+                acc.append(est.err)
+                resid = max(resid, abs(complex(est.i_alpha_f, est.i_beta_f) - i_f))
+        out.append(float(np.mean(acc)))
+    g = math.sin(2.0 * d) / 2.0  # err = sin(2 dtheta) / 2 for the exact sequences
+    return (out[1] - out[0]) / (2.0 * g), 0.5 * (out[0] + out[1]), resid
+
+
+@pytest.mark.parametrize("rpm", [-600.0, -300.0, 300.0, 600.0])
+def test_tracking_bpf_keeps_the_error_gain_at_speed(rpm: float) -> None:
+    """At speed both sequences sit at ``+-(w_h - w_e)`` in the estimated frame (Wen Table
+    2). A fixed BPF sees them off centre: the error's gain is ``|H(w_h - w_e)|^2``
+    (closed form, the discrete filter) and a residual ``|1 - H|`` of each sequence stays
+    in the fundamental current. The tracking BPF (``bpf_tracking``), centred on ``|w_h -
+    w_i|``, keeps the gain 1, no bias and no residual."""
+    from controller import RotatingInjectionPars
+    from controller._tt_dq import TTDQEstimator
+
+    fixed = TTDQEstimator(MODEL, T_S, RotatingInjectionPars())
+    w = rpm * P.motor.n_p * 2.0 * math.pi / 60.0
+    h = _h(fixed.bpf_z, W_H - w)
+    k_fixed, _, r_fixed = _ttdq_gain_at_speed(rpm, False)
+    assert k_fixed == pytest.approx(abs(h) ** 2, rel=0.01)
+    assert r_fixed > 0.3 * abs(1.0 - h) * fixed.I_p
+    k, bias, resid = _ttdq_gain_at_speed(rpm, True)
+    assert k == pytest.approx(1.0, abs=2e-3)
+    assert abs(bias) < 1e-3
+    assert resid < 0.02 * fixed.I_n
+
+
+def test_tracking_bpf_at_standstill_is_eq11_and_only_for_tt_dq() -> None:
+    """At standstill the tracking BPF is eq. (11)'s shape centred on ``w_h`` (the PLL is
+    designed with it, within 0.1 % of the fixed filter's bandwidth); the stationary-frame
+    demodulators and a BPF of another form refuse the option."""
+    from controller import RotatingInjectionPars
+    from controller._filters import BPF_WEN, discretize
+    from controller._tt_dq import TTDQEstimator
+
+    est = TTDQEstimator(MODEL, T_S, RotatingInjectionPars(bpf_tracking=True))
+    ref = discretize(BPF_WEN[0], (1.0, 628.0, W_H * W_H), T_S, W_H)
+    assert np.allclose(est.bpf_z[0], ref[0], rtol=1e-9, atol=1e-15)
+    assert np.allclose(est.bpf_z[1], ref[1], rtol=1e-9)
+    fixed = TTDQEstimator(MODEL, T_S, RotatingInjectionPars())
+    assert est.w_o == pytest.approx(fixed.w_o, rel=1e-3)
+    for name in ("tt-ab", "sfhf"):
+        with pytest.raises(ValueError, match="tt-dq"):
+            make_estimator(name, MODEL, T_S, bpf_tracking=True)
+    with pytest.raises(ValueError, match=r"eq\. \(11\)"):
+        TTDQEstimator(
+            MODEL,
+            T_S,
+            RotatingInjectionPars(bpf_tracking=True, bpf=((600.0, 0.0), (1.0, 628.0, W_H**2))),
+        )

@@ -16,13 +16,20 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from bench.scenarios._schema import load_scenario
+from bench.runs._metrics import (
+    GOAL_DIP_PCT,
+    GOAL_STEADY_DEG,
+    GOAL_TRANSIENT_DEG,
+    STEADY_SETTLE,
+    steady_rows,
+)
+from bench.scenarios._schema import load_scenario, split_options
 from bench.scenarios._setup import motor_model
-from controller import HybridEstimator, TransitionBand, design, make_estimator
+from controller import Controller, HybridEstimator, TransitionBand, design, make_estimator
 from controller._hybrid import ABOVE, BELOW, INSIDE
 from controller._registry import injection_family
-from plant_rt import preset
-from tests.hybrid_helpers import HybridTrace, run_profiles
+from plant_rt import Plant, preset
+from tests.hybrid_helpers import HybridTrace, profile, run_profiles
 from tests.loop_helpers import RPM, make_loop
 from tests.test_closed_form_flux_observer import WEN, XUE, ZETA, run_ideal
 
@@ -146,11 +153,13 @@ def test_below_the_band_the_hybrid_is_its_injection_estimator(
 ) -> None:
     """From an unknown angle (start-up with polarity test) to a speed below the band,
     ``hybrid-*`` and its injection estimator give bit-identical duties and estimates:
-    the observer runs beside it (slaved) and changes nothing."""
+    the observer runs beside it (slaved) and changes nothing (tt-dq with the tracking
+    BPF the hybrid turns on)."""
     P = preset(name)
     traces = []
     for est in (hf, f"hybrid-{hf}"):
-        plant, ctrl = make_loop(P, est, theta_e0=2.2)
+        opts = {"bpf_tracking": True} if est == "tt-dq" else {}
+        plant, ctrl = make_loop(P, est, theta_e0=2.2, estimator_options=opts)
         tr = run_profiles(plant, ctrl, seconds, [(0.0, 0.0), (0.3, 0.0), (0.5, rpm)])
         traces.append((tr, plant.truth()))
     (a, ta), (b, tb) = traces
@@ -162,43 +171,72 @@ def test_below_the_band_the_hybrid_is_its_injection_estimator(
     assert (b.weight == 0.0).all()
 
 
-@functools.cache
-def _wide(case: str, estimator: str | None = None) -> HybridTrace:
+def _options(case: str, estimator: str) -> dict[str, object]:
+    """The scenario's estimator options that ``estimator`` takes (``u_err`` on xue)."""
+    scn = load_scenario(CASES[case][0])
+    return split_options(dict(scn.estimator_options), estimator)[0]
+
+
+def _loop(case: str, estimator: str | None = None) -> tuple[Plant, Controller]:
     scn_name, name, est = CASES[case]
     scn = load_scenario(scn_name)
-    P = preset(name)
     est = estimator or est
-    plant, ctrl = make_loop(P, est, theta_e0=math.radians(scn.theta_e0_deg))
+    return make_loop(
+        preset(name),
+        est,
+        theta_e0=math.radians(scn.theta_e0_deg),
+        estimator_options=_options(case, est),
+    )
+
+
+@functools.cache
+def _wide(case: str, estimator: str | None = None) -> HybridTrace:
+    scn = load_scenario(CASES[case][0])
+    plant, ctrl = _loop(case, estimator)
     return run_profiles(plant, ctrl, scn.duration, scn.speed_rpm.points, scn.load_nm.points)
 
 
 def _band(case: str) -> TransitionBand:
-    return design(motor_model(preset(CASES[case][1]))).band
+    u_err = float(_options(case, CASES[case][2]).get("u_err", 0.0))  # type: ignore[arg-type]
+    return design(motor_model(preset(CASES[case][1])), u_err=u_err).band
 
 
-#: The Wen motor's tt-dq PLL designed for a 45-degree phase margin with its BPF
-#: and LPF in the loop (58.5 rad/s, controller/_rotating.py) lags a rated-load
-#: reversal (about 750 rpm/s through zero): 17.8 degrees before the hand-over
-#: at -540 rpm, against the 10-degree transient goal of the full speed range.
-#: Measured and reported, not hidden: strict, so that the test says when the
-#: goal is met.
-WEN_REVERSAL_LAG = pytest.mark.xfail(
-    strict=True, reason="tt-dq PLL at 45 deg margin lags the rated-load reversal (17.8 deg)"
-)
-_CASES_TRANSIENT = ["xue", pytest.param("wen", marks=WEN_REVERSAL_LAG)]
+def _steady(case: str) -> np.ndarray:
+    """The steady-speed rows of the ``wide-speed`` trace (bench.runs._metrics.steady_rows:
+    reference and load unchanged for 6 / alpha_s), from the staircase the bench sends."""
+    tr = _wide(case)
+    scn = load_scenario(CASES[case][0])
+    alpha_s = _loop(case)[1].alpha_s
+    step = 1.0 / scn.reference_rate_hz
+    held = np.floor(tr.t / step) * step  # the reference as the nodes' staircase holds it
+    ts, vs = profile(scn.speed_rpm.points)
+    tl, vl = profile(scn.load_nm.points)
+    return steady_rows(
+        tr.t, np.interp(held, ts, vs), np.interp(held, tl, vl), STEADY_SETTLE / alpha_s
+    )
 
 
-@pytest.mark.parametrize("case", _CASES_TRANSIENT)
+@pytest.mark.parametrize("case", ["xue", "wen"])
 def test_wide_speed_keeps_the_angle_through_start_reversal_and_stop(case: str) -> None:
     """The whole ``wide-speed`` profile: start from an unknown angle, rated load at low
     and rated speed, reversal through zero under rated load, standstill. No lock lost:
-    |dtheta| <= 10 degrees (the transient goal) everywhere after the start-up, and the
-    drive really went to +/- rated speed and back to standstill."""
+    |dtheta| <= 10 degrees (the transient goal) everywhere after the start-up and <= 5
+    degrees (the steady goal) at steady speeds, and the drive really went to +/- rated
+    speed and back to standstill."""
     tr = _wide(case)
     scn = load_scenario(CASES[case][0])
     sel = tr.t >= scn.score_from_s
     e = np.degrees(np.abs(tr.err[sel]))
-    assert e.max() <= 10.0
+    assert e.max() <= GOAL_TRANSIENT_DEG
+    steady = _steady(case)[sel]
+    # steady rows below the band and at rated speed (each flat of the profile)
+    w_ref = np.abs(tr.w_m_ref[sel]) / RPM
+    rated_rpm = max(v for _, v in scn.speed_rpm.points)
+    lo_rpm = _band(case).edges[0] / (preset(CASES[case][1]).motor.n_p * RPM)
+    n_03 = 0.3 / float(tr.t[1] - tr.t[0])  # rows in 0.3 s
+    assert (steady & (w_ref > 0.0) & (w_ref < lo_rpm)).sum() > n_03
+    assert (steady & (w_ref >= rated_rpm)).sum() > n_03
+    assert e[steady].max() <= GOAL_STEADY_DEG
     rated = max(v for _, v in scn.speed_rpm.points)
     w = tr.w_m / RPM
     assert w.max() > 0.98 * rated and w.min() < -0.98 * rated
@@ -236,7 +274,7 @@ def _windows(mask: np.ndarray) -> list[tuple[int, int]]:
     return list(zip(edges[::2], edges[1::2], strict=True))
 
 
-@pytest.mark.parametrize("case", _CASES_TRANSIENT)
+@pytest.mark.parametrize("case", ["xue", "wen"])
 def test_hand_over_is_continuous(case: str) -> None:
     """Across every hand-over (``0 < lam < 1``, both directions) the output moves, beyond
     the estimators' own step-to-step motion, by ``|dlam| |d|`` at most (``d =
@@ -306,3 +344,39 @@ def test_no_speed_dip_at_the_hand_over(case: str) -> None:
         handed = SPEED_LOOP_PEAK * abs(tr.w_m_hat[i0] - tr.w_m[i0])
         excess = np.abs(diff - diff[0]) - 0.05 * np.abs(ref.w_m[i0:i1]) - handed
         assert excess.max() <= 0.0, (tr.t[i0], excess.max() / RPM)
+
+
+@functools.cache
+def _drive_metrics(case: str) -> dict[str, object]:
+    """The hybrid's ``wide-speed`` run on the drive plant with its countermeasures
+    (bench.studies._plants: switching inverter with 2 us dead time and 1.5 V drops, ADC,
+    offsets, cross-saturation), in-process, as the suite runs it."""
+    import tempfile
+    from pathlib import Path
+
+    from bench.studies._plants import plant_variant
+    from bench.studies._suite import RunJob
+
+    scn_name, _, est = CASES[case]
+    scn = plant_variant(load_scenario(scn_name), "drive")
+    with tempfile.TemporaryDirectory() as d:
+        res = RunJob(scn, est, Path(d) / "run", None, "drive")()
+    assert not res.get("error"), res.get("error")
+    return dict(res["metrics"])
+
+
+@pytest.mark.parametrize("case", ["wen", "xue"])
+def test_the_full_speed_range_goals_on_the_drive_plant(case: str) -> None:
+    """The goals on the drive plant: no lost lock, |dtheta| <= 5 degrees at steady speeds
+    and <= 10 through the transients, every hand-over's dip within 5 %. Above the band
+    the injection is off (the commanded HF voltage is exactly zero, tested on the ideal
+    plant above); what the loss metric still finds there on a switching inverter is the
+    PWM ripple above the separation's corner (0.14 % of the injection's loss below the
+    band at 1 kHz), so it is bounded at 1 % of it."""
+    m = _drive_metrics(case)
+    assert m["lock_lost"] is False and not m.get("tripped")
+    assert m["theta_err_steady_max_deg"] <= GOAL_STEADY_DEG  # type: ignore[operator]
+    assert m["theta_err_transient_max_deg"] <= GOAL_TRANSIENT_DEG  # type: ignore[operator]
+    assert len(m["handover_dips_pct"]) >= 4  # type: ignore[arg-type]
+    assert m["handover_dip_max_pct"] <= GOAL_DIP_PCT  # type: ignore[operator]
+    assert m["band_above_injection_loss_w"] < 1e-2 * m["band_below_injection_loss_w"]  # type: ignore[operator]

@@ -59,12 +59,12 @@ def _common(p: argparse.ArgumentParser) -> None:
 
 
 def cmd_paper(args: argparse.Namespace) -> int:
-    from bench.scenarios._schema import PAPER, SHIPPED
+    from bench.scenarios._schema import SHIPPED
     from bench.scenarios._setup import check_estimator_name
     from bench.studies._suite import PLANTS, SuiteOptions, run_suite
     from bench.studies._sweep import SWEEPS
 
-    scenarios = _csv(args.scenarios) or PAPER
+    scenarios = _csv(args.scenarios) or SHIPPED
     for s in scenarios:
         if s not in SHIPPED and not Path(s).is_file():
             raise BenchError(

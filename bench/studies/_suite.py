@@ -1,4 +1,8 @@
-"""``bench suite``: every paper scenario with every estimator that applies, and the sweeps.
+"""``bench suite``: every shipped scenario with every estimator that applies, and the sweeps.
+
+The shipped scenarios are the papers' (Wen Tables 5-8, Xue Figs. 13-18) and
+the full speed range's (``wide-speed-wen``, ``wide-speed-xue``: the hybrid
+estimators, whose goals the report checks beside the papers' claims).
 
 Each shipped scenario lists the estimators it is run with (``estimators`` in
 its TOML: the three rotating-injection demodulators and the sensored zero
@@ -47,7 +51,7 @@ from pathlib import Path
 from typing import Any, Protocol
 
 from bench._errors import BenchError
-from bench.scenarios._schema import PAPER, Scenario, load_scenario
+from bench.scenarios._schema import SHIPPED, Scenario, load_scenario
 from bench.studies._extras import path_name, run_extras
 from bench.studies._plants import PLANTS, plant_variant
 from controller._registry import ESTIMATOR_NAMES
@@ -307,7 +311,7 @@ def suite_transport(interface: str | None = None, channel: str | None = None) ->
 def paper_jobs(
     runs_dir: Path,
     *,
-    scenarios: Sequence[str] = PAPER,
+    scenarios: Sequence[str] = SHIPPED,
     estimators: Sequence[str] | None = None,
     quick: bool = False,
     transport: tuple[str, str] | None = None,
@@ -412,7 +416,7 @@ class SuiteOptions:
 
     out_dir: Path
     runs_dir: Path
-    scenarios: tuple[str, ...] = PAPER
+    scenarios: tuple[str, ...] = SHIPPED
     estimators: tuple[str, ...] | None = None
     plants: tuple[str, ...] = PLANTS
     quick: bool = False
