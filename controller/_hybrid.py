@@ -96,9 +96,10 @@ injection's fade region ``[w_mid, w_hi]`` must take longer than the
 injection chain needs to settle when it returns (tt-dq: BPF envelope 3 ms
 and PLL 8 ms; square-wave: observer 35 ms), so the drive must not
 decelerate through it faster than ``0.5 w_lo / t_settle``: about 8400
-rad/s^2 electrical on wen2023 and 335 rad/s^2 on xue2022. The scenarios'
-ramps stay below that (314 and 251 rad/s^2); a torque-limited stop
-(15000 rad/s^2) does not.
+rad/s^2 electrical on wen2023 and 335 rad/s^2 on xue2022 with ``u_err = 0``
+(1790 rad/s^2 with ``wide-speed-xue``'s 3.3 V). The scenarios' ramps stay
+below that (314 and 251 rad/s^2); a torque-limited stop (15000 rad/s^2)
+does not.
 
 Observer bandwidth: the PLL's steady error under a constant angular
 acceleration ``a`` is ``a / alpha_o^2``; the largest the controller can

@@ -258,6 +258,7 @@ def _hybrid_run(dips: list[float]) -> dict[str, Any]:
     m["handover_at_s"] = [10.06 + i for i in range(len(dips))]
     m["handover_dips_pct"] = dips
     m["handover_dip_max_pct"] = max(dips, default=0.0)
+    m.update(theta_err_steady_max_deg=0.6, theta_err_transient_max_deg=0.88, lock_lost=False)
     return r
 
 
@@ -269,7 +270,10 @@ def test_report_shows_the_per_band_table_of_hybrid_runs() -> None:
     assert "per speed band" not in render_markdown(build_summary(base["runs"], {}, base["suite"]))
     runs = [*copy.deepcopy(base["runs"]), _hybrid_run([3.53, 4.36])]
     s = build_summary(runs, {}, base["suite"])
-    assert verdicts(s) == verdicts(build_summary(base["runs"], {}, base["suite"]))
+    # the papers' claims do not change; the run adds its goals' row
+    got = verdicts(s)
+    assert got.pop("wide-speed-xue-goals") == "met"
+    assert got == verdicts(build_summary(base["runs"], {}, base["suite"]))
     md = render_markdown(s)
     assert "## Full speed range: metrics per speed band" in md
     rows = [r for r in table_rows(md) if r[:2] == ["wide-speed-xue", "hybrid-square-wave"]]
@@ -322,3 +326,31 @@ def test_refresh_extras_reads_only_the_run_the_summary_recorded(tmp_path: Path) 
     summary: dict[str, Any] = {"suite": {"runs_dir": str(tmp_path)}, "runs": [rec]}
     refresh_extras(summary)  # another run: not read (reading it would fail on this folder)
     assert rec["where_max"]["theta_err_deg"] == 9.18
+
+
+def test_the_full_speed_range_goals_are_claims_per_plant() -> None:
+    """A hybrid run's goals (lock kept, steady and transient |dtheta|, hand-over dips) give
+    one claim per run and plant: met within every bound, missed with the bounds it is over
+    named, or with the time the rotor angle was lost."""
+    from bench.studies._report import MET, MISSED
+
+    base = good_summary()
+
+    def one(**changes: Any) -> dict[str, str]:
+        r = _hybrid_run([1.0, 2.0])
+        r["metrics"].update(changes)
+        s = build_summary([*copy.deepcopy(base["runs"]), r], {}, base["suite"])
+        (c,) = [c for c in s["claims"] if c["id"] == "wide-speed-xue-goals"]
+        return c
+
+    c = one()
+    assert c["verdict"] == MET
+    assert c["detail"] == "steady 0.60 deg, transient 0.88 deg, dip 2.00 %"
+    c = one(theta_err_steady_max_deg=5.5, handover_dip_max_pct=6.0)
+    assert c["verdict"] == MISSED and "; over: steady, dip" in c["detail"]
+    c = one(lock_lost=True, lock_lost_at_s=3.25)
+    assert (c["verdict"], c["detail"]) == (MISSED, "rotor angle lost at t = 3.25 s")
+    r = _hybrid_run([1.0])
+    r["plant"] = "drive"
+    s = build_summary([*copy.deepcopy(base["runs"]), r], {}, base["suite"])
+    assert {c["id"] for c in s["claims"] if "goals" in c["id"]} == {"wide-speed-xue-goals@drive"}

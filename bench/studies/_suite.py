@@ -88,7 +88,13 @@ SUMMARY_METRICS = (
 )
 
 #: ... and those of a hybrid estimator's run: every metric whose name starts so.
-BAND_METRIC_PREFIXES = ("band_", "handover_")
+BAND_METRIC_PREFIXES = (
+    "band_",
+    "handover_",
+    "theta_err_steady_",
+    "theta_err_transient_",
+    "steady_settle_",
+)
 
 
 def run_subdir(plant: str, scenario: str, estimator: str) -> str:
