@@ -202,7 +202,7 @@ def test_commands_and_reads_between_engines_keep_the_trace(
     ("scn_name", "estimator", "top_rpm", "t_ramp"),
     [
         ("wide-speed-wen", "hybrid-tt-dq", 1300.0, 1.0),
-        ("wide-speed-xue", "hybrid-square-wave", 300.0, 1.5),
+        ("wide-speed-xue", "hybrid-square-wave", 800.0, 1.5),
     ],
 )
 def test_hybrids_through_their_band_and_back_same_on_both_engines(

@@ -600,7 +600,9 @@ def _band_section(summary: dict[str, Any]) -> list[str]:
         "injection estimator alone; above: the observer alone, no injection). Injection loss: "
         "the mean copper loss 1.5 R_s |i_h|^2 of the current's HF part in the rotor frame "
         "(above the corner `band_split_hz`, half the injection's lowest frequency), with the "
-        "plant's R_s; above the band it reads the floor of noise and quantisation. Torque "
+        "plant's R_s; above the band, where the injection is exactly zero, it reads the floor "
+        "of noise and quantisation (average inverter) or the PWM ripple above the corner "
+        "(switching inverter). Torque "
         "ripple: rms of the torque around its low-pass at the same corner.",
         "",
     ]
