@@ -45,7 +45,15 @@ class InverterPars:
     model : {"average", "switching"}
         ``"average"``: one mean voltage per period (the fast reference,
         :func:`dead_time_error` and :func:`device_drop_error` as period
-        means). ``"switching"``: centre-aligned carrier, each edge, dead
+        means, each phase current's direction taken at the start of the
+        period). That direction is the period's only while the current
+        does not reverse within it: where a ripple larger than the current
+        does (the 1 kHz square-wave injection's +-2.8 A at light load), the
+        error it gives alternates with the ripple instead, and with dead time
+        the square wave loses the rotor at start-up on this model
+        (``wide-speed-xue``) where it keeps it on the switching one; use
+        ``"switching"`` to study dead time with such a ripple.
+        ``"switching"``: centre-aligned carrier, each edge, dead
         interval and diode clamp resolved in time (:mod:`plant_rt._pwm`).
     v_ce : float
         On-state voltage of a conducting transistor (IGBT ``V_CE(sat)`` or
