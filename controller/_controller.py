@@ -78,7 +78,9 @@ Drive countermeasures (``compensation``, :mod:`controller._compensation`),
 each off by default: dead-time feed-forward on the duties, the
 cross-saturation angle correction (the angle used for the transforms and
 reported is ``theta_hat`` of the estimator minus its cross-saturation
-offset), and a current-offset calibration with the PWM disabled before
+offset; an estimator with a ``saliency_offset`` attribute, the hybrids, is
+given the offset and subtracts it from its injection estimate alone), and a
+current-offset calibration with the PWM disabled before
 each start (the controller reports ``MODE_ALIGN`` with the PWM disabled
 meanwhile).
 

@@ -146,7 +146,8 @@ def bandpass_coefficients(w_0: float, B: float, T_s: float) -> tuple[float, floa
     the substitution ``s = c (1 - z^-1) / (1 + z^-1)`` gives the numerator
     ``B c (1 - z^-2)`` and the denominator ``(c^2 + B c + w_0^2) + 2 (w_0^2 -
     c^2) z^-1 + (c^2 - B c + w_0^2) z^-2``, normalised. The same as
-    :func:`discretize` of that prototype at ``w_p = w_0`` (to rounding),
+    :func:`discretize` of the prototype centred on ``w_0`` at ``w_p = w_0``
+    (to rounding),
     without scipy, cheap enough to run every period
     (:class:`controller._tt_dq.TTDQEstimator` with ``bpf_tracking``).
     """

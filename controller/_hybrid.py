@@ -470,7 +470,7 @@ class HybridEstimator:
         off = self.saliency_offset
         if lam == 0.0:
             w_s = tr.w_smooth
-            th = hf.theta_hat - off if off else hf.theta_hat
+            th = (hf.theta_hat - off) % _TWO_PI if off else hf.theta_hat
             obs.update_slaved(x.i_alpha, x.i_beta, x.u_alpha, x.u_beta, th, w_s)
             w = hf.w_hat
             err = hf.err

@@ -138,24 +138,24 @@ class RotatingInjectionPars:
     bpf_tracking : bool
         tt-dq only (the other demodulators raise ``ValueError``). False (the
         paper's): the BPF stays centred on ``w_h``. True: every period its
-        centre moves to ``|w_h - w_i|`` (``w_i``: the PLL's integral speed
-        state, free of the demodulation ripple), with the same bandwidth,
-        because that is where both sequences sit in the estimated frame at the
-        electrical speed ``w_e`` (:mod:`controller._tt_dq`). Why it matters
-        outside the papers' speeds: with a fixed centre each sequence is off
-        by ``w_e``, the demodulated error's gain falls to ``|H(w_h - w_e)|^2``
-        (0.72 at 450 rpm on wen2023: a slower PLL, and a larger lag under
-        acceleration), and the BPF's residual at that offset (``1 - H``, 0.45
-        of the HF current there) reaches the current loop as fundamental,
-        whose PI answers it with HF voltage that biases the demodulation:
-        measured in a rated-load reversal on wen2023, the error's gain rose
-        to 1.45 at +450 rpm and fell to 0.36 at -450 rpm, and the PLL's
-        acceleration lag rose from 5.3 to 18 degrees. Tracking keeps the gain
-        1 and the residual 0 at every speed (tested against the synthetic
-        currents of eq. 4 at +-600 rpm). The hybrid ``hybrid-tt-dq``, which
-        uses tt-dq up to 880 rpm, turns it on by default. The BPF must have
-        the form of eq. (11), ``B s / (s^2 + B s + w_0^2)``; at standstill it
-        is that prototype centred on ``w_h``, and the PLL is designed with it.
+        centre moves to ``|w_h - w_t|``, with the same bandwidth, because that
+        is where both sequences sit in the estimated frame at the electrical
+        speed (:mod:`controller._tt_dq`); ``w_t`` is the tracker's speed state,
+        free of the demodulation ripple: the PLL's integral ``w_i``, or the
+        mechanical observer's ``w_hat``. Why it matters outside the papers'
+        speeds: with a fixed centre each sequence is ``w_e`` off it, the
+        demodulated error's gain falls to ``|H(w_h - w_e)|^2`` (a slower PLL,
+        which lags an acceleration ``alpha`` by ``alpha / (K w_o^2)`` with
+        that gain ``K``), and the BPF leaves ``|1 - H(w_h - w_e)|`` of each
+        sequence in the fundamental current, which the current PI answers
+        with HF voltage that biases the demodulation, unequally for the two
+        directions of rotation. Tracking keeps the gain 1 and the residual 0
+        at every speed (tests/test_controller_rotating.py, on the synthetic
+        currents of eq. 4). The hybrid ``hybrid-tt-dq``, which uses tt-dq
+        through its band, turns it on by default. The BPF must have the form
+        of eq. (11), ``B s / (s^2 + B s + w_0^2)``; its centre is replaced by
+        ``w_h`` at standstill (Wen's eq. 11 has 3140 rad/s for the 3141.6 of
+        500 Hz), and the PLL is designed with that filter.
     bpf, hpf, lpf : tuple
         Continuous prototypes ``(b, a)``; defaults Wen eqs. (11)-(13). If
         ``f_h`` is not 500 Hz and ``bpf`` is the default, the BPF centre

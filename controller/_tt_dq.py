@@ -20,8 +20,9 @@ back to alpha-beta.
 
 At speed the two sequences sit ``w_e`` away from the BPF's centre: with
 ``bpf_tracking`` (:class:`controller.RotatingInjectionPars`) the centre
-follows them, at ``|w_h - w_i|`` with the PLL's integral speed ``w_i``
-(:func:`controller._filters.bandpass_coefficients` every period).
+follows them, at ``|w_h - w_t|`` with the tracker's speed state ``w_t``
+(the PLL's integral ``w_i``, or the mechanical observer's ``w_hat``),
+recomputed every period (:func:`controller._filters.bandpass_coefficients`).
 
 Time stamps: the sample ``k`` is rotated with ``theta_hat`` at ``k T_s``;
 ``err`` and ``theta_hat`` refer to ``k T_s``.

@@ -293,6 +293,14 @@ def test_the_hybrid_corrects_its_injection_estimate_only(weight: float) -> None:
     )
     if weight == 0.0:
         assert th_obs == pytest.approx(th_hf % (2 * math.pi), abs=1e-12)
+    if weight == 1.0:
+        # the injection tracker, slaved, waits where it will lock: the output plus the
+        # offset, one period ahead
+        pll = est.hf.pll  # type: ignore[attr-defined]
+        ahead = est.theta_hat + delta + T_WEN * est.observer.w_hat  # type: ignore[attr-defined]
+        assert (pll.theta_hat - ahead + math.pi) % (2 * math.pi) - math.pi == pytest.approx(
+            0.0, abs=1e-12
+        )
 
 
 # ---------------------------------------------------------------------- offset calibration

@@ -244,6 +244,7 @@ def test_tracking_bpf_at_standstill_is_eq11_and_only_for_tt_dq() -> None:
     demodulators and a BPF of another form refuse the option."""
     from controller import RotatingInjectionPars
     from controller._filters import BPF_WEN, discretize
+    from controller._rotating import pll_design
     from controller._tt_dq import TTDQEstimator
 
     est = TTDQEstimator(MODEL, T_S, RotatingInjectionPars(bpf_tracking=True))
@@ -251,6 +252,8 @@ def test_tracking_bpf_at_standstill_is_eq11_and_only_for_tt_dq() -> None:
     assert np.allclose(est.bpf_z[0], ref[0], rtol=1e-9, atol=1e-15)
     assert np.allclose(est.bpf_z[1], ref[1], rtol=1e-9)
     fixed = TTDQEstimator(MODEL, T_S, RotatingInjectionPars())
+    assert est.w_o == pll_design("bpf+lpf", T_S, W_H, est.filters_z, est.pars.pm_deg)[0]
+    assert est.filters_z[0] == est.bpf_z != fixed.bpf_z
     assert est.w_o == pytest.approx(fixed.w_o, rel=1e-3)
     for name in ("tt-ab", "sfhf"):
         with pytest.raises(ValueError, match="tt-dq"):

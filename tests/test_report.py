@@ -272,7 +272,7 @@ def test_report_shows_the_per_band_table_of_hybrid_runs() -> None:
     s = build_summary(runs, {}, base["suite"])
     # the papers' claims do not change; the run adds its goals' row
     got = verdicts(s)
-    assert got.pop("wide-speed-xue-goals") == "met"
+    assert got.pop("wide-speed-xue-hybrid-square-wave-goals") == "met"
     assert got == verdicts(build_summary(base["runs"], {}, base["suite"]))
     md = render_markdown(s)
     assert "## Full speed range: metrics per speed band" in md
@@ -332,7 +332,7 @@ def test_the_full_speed_range_goals_are_claims_per_plant() -> None:
     """A hybrid run's goals (lock kept, steady and transient |dtheta|, hand-over dips) give
     one claim per run and plant: met within every bound, missed with the bounds it is over
     named, or with the time the rotor angle was lost."""
-    from bench.studies._report import MET, MISSED
+    from bench.studies._report import MET, MISSED, NOT_RUN
 
     base = good_summary()
 
@@ -340,7 +340,7 @@ def test_the_full_speed_range_goals_are_claims_per_plant() -> None:
         r = _hybrid_run([1.0, 2.0])
         r["metrics"].update(changes)
         s = build_summary([*copy.deepcopy(base["runs"]), r], {}, base["suite"])
-        (c,) = [c for c in s["claims"] if c["id"] == "wide-speed-xue-goals"]
+        (c,) = [c for c in s["claims"] if c["id"] == "wide-speed-xue-hybrid-square-wave-goals"]
         return c
 
     c = one()
@@ -350,7 +350,11 @@ def test_the_full_speed_range_goals_are_claims_per_plant() -> None:
     assert c["verdict"] == MISSED and "; over: steady, dip" in c["detail"]
     c = one(lock_lost=True, lock_lost_at_s=3.25)
     assert (c["verdict"], c["detail"]) == (MISSED, "rotor angle lost at t = 3.25 s")
+    c = one(handover_dips_pct=[], handover_at_s=[], handover_dip_max_pct=0.0)
+    assert c["verdict"] == NOT_RUN and "no hand-over" in c["detail"]
     r = _hybrid_run([1.0])
     r["plant"] = "drive"
     s = build_summary([*copy.deepcopy(base["runs"]), r], {}, base["suite"])
-    assert {c["id"] for c in s["claims"] if "goals" in c["id"]} == {"wide-speed-xue-goals@drive"}
+    assert {c["id"] for c in s["claims"] if "goals" in c["id"]} == {
+        "wide-speed-xue-hybrid-square-wave-goals@drive"
+    }

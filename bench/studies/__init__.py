@@ -1,6 +1,7 @@
 """Many runs: the paper suite, sweeps, reports, benchmarks and soak.
 
-- ``_suite``: ``bench suite paper`` (every paper scenario and estimator);
+- ``_suite``: ``bench suite paper`` (every shipped scenario and estimator:
+  the papers' and the full speed range's);
   ``_sweep``: the sweeps behind the papers' claims; ``_report``: the report
   and its claims; ``_extras``: what the report adds to a run's metrics.
 - ``_grid``: ``bench sweep`` (a scenario's dotted keys on a grid or at

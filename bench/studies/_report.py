@@ -318,7 +318,7 @@ def _goal_claims(summary: dict[str, Any], plant: str) -> list[dict[str, str]]:
     for r in summary.get("runs", []):
         if _plant(r) != plant or "band_below_steps" not in (r.get("metrics") or {}):
             continue
-        cid = f"{r['scenario']}-goals"
+        cid = f"{r['scenario']}-{r['estimator']}-goals"
         text = (
             f"{r['estimator']} over the full speed range ({r['scenario']}): lock kept, "
             f"|dtheta| <= {GOAL_STEADY_DEG:g} deg at steady speeds and <= "
@@ -330,6 +330,12 @@ def _goal_claims(summary: dict[str, Any], plant: str) -> list[dict[str, str]]:
             out.append(_claim(cid, text, src, NOT_RUN, r.get("error", "no metrics")))
             continue
         m = r["metrics"]
+        if not m.get("lock_lost") and not m.get("handover_dips_pct"):
+            # a run that never reached the band (a --quick one) says nothing of the goals
+            out.append(
+                _claim(cid, text, src, NOT_RUN, "no hand-over: the run stayed below the band")
+            )
+            continue
         steady = m.get("theta_err_steady_max_deg")
         trans = m.get("theta_err_transient_max_deg")
         dip = m.get("handover_dip_max_pct")
