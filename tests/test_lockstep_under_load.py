@@ -22,13 +22,8 @@ first valid duty (:meth:`bench.nodes._plant_node.PlantNode.on_duty_timeout`).
 
 from __future__ import annotations
 
-import os
 import random
-import subprocess
-import sys
 from collections import deque
-from collections.abc import Iterator
-from contextlib import contextmanager
 from pathlib import Path
 
 import can
@@ -45,6 +40,7 @@ from bench.nodes._loops import (
 )
 from bench.runs._run import PACE_EVERY, run_scenario
 from bench.scenarios._schema import Scenario
+from bench.studies._reliability import busy_processes
 from bench.wire._bus import BusSpec
 from tests.conftest import require_vcan
 from tests.ports import free_port
@@ -167,19 +163,6 @@ def test_a_silent_controller_still_trips_the_armed_watchdog() -> None:
     for _ in range(3):  # the controller goes silent
         pn.on_duty_timeout()
     assert pn.trips == {"watchdog": 1} and pn.fault_step == 20
-
-
-@contextmanager
-def busy_processes(n: int | None = None) -> Iterator[None]:
-    """``n`` (default: one per CPU, and one more) processes that spin beside the test."""
-    count = n if n is not None else (os.cpu_count() or 1) + 1
-    procs = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(count)]
-    try:
-        yield
-    finally:
-        for p in procs:
-            p.kill()
-            p.wait()
 
 
 def loaded_link_run(spec: BusSpec, out: Path) -> None:

@@ -64,9 +64,11 @@ def free_port(span: int = 2) -> int:
 
 
 @contextmanager
-def busy_processes(n: int) -> Iterator[None]:
-    """``n`` processes spinning on the CPUs while the block runs."""
-    procs = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(n)]
+def busy_processes(n: int | None = None) -> Iterator[None]:
+    """``n`` (default: one per CPU, and one more) processes spinning on the CPUs while the
+    block runs."""
+    count = n if n is not None else (os.cpu_count() or 1) + 1
+    procs = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(count)]
     try:
         yield
     finally:
@@ -82,7 +84,8 @@ def _loadavg() -> float:
         return float("nan")
 
 
-def _trace(frames: list[can.Message], scn: Any) -> dict[str, np.ndarray]:
+def run_trace(frames: list[can.Message], scn: Any) -> dict[str, np.ndarray]:
+    """The per-step table of a run's frames (the preset's pole pairs)."""
     from bench.runs._analysis import analyze_frames
     from bench.scenarios._setup import get_preset, sample_period
     from bench.wire._codec import default_codec
@@ -102,7 +105,9 @@ def first_divergence(ref: dict[str, np.ndarray], got: dict[str, np.ndarray]) -> 
     return None
 
 
-def _short(name: str, duration: float, **latency: Any) -> Any:
+def short_scenario(name: str, duration: float, **latency: Any) -> Any:
+    """``name`` shortened to ``duration`` (s), its speed reference ramping to 100 rpm in
+    50 ms, scored from half way, with ``latency`` fields replaced."""
     from dataclasses import replace
 
     from bench.scenarios._schema import Profile, load_scenario
@@ -132,8 +137,8 @@ def determinism_under_load(runs: int, say: Callable[[str], None]) -> dict[str, A
     with tempfile.TemporaryDirectory() as tmp, busy_processes(busy):
         time.sleep(1.0)  # the load is on before the first run
         for label, lat in cases:
-            scn = _short("wen-5.1", 0.06, **lat)
-            ref = _trace(run_inprocess(scn, "sensored", default_codec()), scn)
+            scn = short_scenario("wen-5.1", 0.06, **lat)
+            ref = run_trace(run_inprocess(scn, "sensored", default_codec()), scn)
             case: dict[str, Any] = {"case": label, "runs": runs, "identical": 0, "diverged": []}
             load = []
             for i in range(runs):
@@ -142,7 +147,7 @@ def determinism_under_load(runs: int, say: Callable[[str], None]) -> dict[str, A
                 d = Path(tmp) / f"{len(out['cases'])}-{i}"
                 res = run_scenario(scn, "sensored", spec=spec, out_dir=d, progress=False)
                 load.append(_loadavg())
-                why = first_divergence(ref, _trace(list(can.LogReader(str(res.capture))), scn))
+                why = first_divergence(ref, run_trace(list(can.LogReader(str(res.capture))), scn))
                 if why is None:
                     case["identical"] += 1
                 else:
@@ -297,7 +302,7 @@ def _two_runs(
         lines = err.decode(errors="replace").strip().splitlines()
         last = lines[-1] if lines else ""
         if p.returncode == 0:
-            why = first_divergence(ref, _trace(list(can.LogReader(str(d / "capture.blf"))), scn))
+            why = first_divergence(ref, run_trace(list(can.LogReader(str(d / "capture.blf"))), scn))
             out.append({"outcome": "identical" if why is None else "wrong", "detail": why or ""})
         elif p.returncode == 2 and last.startswith("bench: error: another run"):
             said = last.removeprefix("bench: error: ").split("; files in ")[0]
@@ -314,8 +319,8 @@ def parallel_check(say: Callable[[str], None]) -> dict[str, Any]:
     from bench.wire._codec import default_codec
 
     say("two runs in parallel, a bus each; then two on one bus")
-    scn = _short("wen-5.1", 0.1)
-    ref = _trace(run_inprocess(scn, "sensored", default_codec()), scn)
+    scn = short_scenario("wen-5.1", 0.1)
+    ref = run_trace(run_inprocess(scn, "sensored", default_codec()), scn)
     with tempfile.TemporaryDirectory() as tmp:
         f = write_effective(scn, Path(tmp) / "scenario.json")
         own = _two_runs(Path(tmp), f, ref, scn, [free_port(), free_port()], "own")
