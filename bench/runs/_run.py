@@ -23,6 +23,7 @@ other run.
 from __future__ import annotations
 
 import json
+import math
 import os
 import signal
 import subprocess
@@ -403,8 +404,7 @@ class DutWatch:
         self.transport = transport
         self.name = name or "the controller under test"
         self.t0 = time.monotonic()
-        self.t_line = 0.0
-        self.tty = sys.stderr.isatty()
+        self.line = _StatusLine()
         #: Seconds from the start to its first valid duty (None: none yet).
         self.first_duty_s: float | None = None
         self.rejects = RejectionSummary("PwmDuty")
@@ -430,17 +430,12 @@ class DutWatch:
                 self._say(f"{self.name}: first valid PwmDuty after {self.first_duty_s:.1f} s")
             elif now - self.t0 > self.timeout_s:
                 return True
-            elif now - self.t_line >= (0.5 if self.tty else 5.0):
-                self.t_line = now
+            elif self.line.due(now):
                 rej = watch.duty_rejected
                 so_far = f"; PwmDuty: {rejection_text(rej)} so far" if rej else ""
-                lead = "\r" if self.tty else ""
-                print(
-                    f"{lead}waiting for {self.name} on {self.transport}: no valid PwmDuty "
-                    f"yet ({now - self.t0:.0f} s of {self.timeout_s:.0f} s){so_far} ",
-                    end="" if self.tty else "\n",
-                    file=sys.stderr,
-                    flush=True,
+                self.line.show(
+                    f"waiting for {self.name} on {self.transport}: no valid PwmDuty "
+                    f"yet ({now - self.t0:.0f} s of {self.timeout_s:.0f} s){so_far}"
                 )
         line = self.rejects.poll(watch.duty_rejected, now)
         if line:
@@ -480,35 +475,56 @@ class DutWatch:
         return f"no valid PwmDuty from {self.name} in {self.timeout_s:.0f} s; {why}"
 
 
-class _Progress:
-    """The progress line on stderr: rewritten in place on a terminal, every 5 s in a log."""
+class _StatusLine:
+    """A status line on stderr: rewritten in place on a terminal (at most every 0.5 s),
+    a new line every 5 s in a log."""
 
-    def __init__(self, n: int) -> None:
-        self.n = n
+    def __init__(self) -> None:
         self.tty = sys.stderr.isatty()
-        self.t0 = time.perf_counter()
-        self.t_last = 0.0
+        self.t_last = -math.inf
 
-    def show(self, step: int) -> None:
-        now = time.perf_counter()
-        if now - self.t_last <= (0.5 if self.tty else 5.0):
-            return
+    def due(self, now: float) -> bool:
+        """True (and the clock restarted) when a line is due at ``now`` (s, any clock)."""
+        if now - self.t_last < (0.5 if self.tty else 5.0):
+            return False
         self.t_last = now
-        frac = min(1.0, step / max(1, self.n))
-        el = now - self.t0
-        left = f"~{el / frac - el:4.0f} s left" if frac > 0.01 else "starting"
-        lead_in = "\r" if self.tty else ""
+        return True
+
+    def show(self, text: str) -> None:
         print(
-            f"{lead_in}  step {min(step, self.n)}/{self.n} ({100 * frac:5.1f} %), "
-            f"{el:5.1f} s, {left} ",
+            ("\r" if self.tty else "") + text + " ",
             end="" if self.tty else "\n",
             file=sys.stderr,
             flush=True,
         )
 
     def close(self) -> None:
+        """End a line left open on a terminal."""
         if self.tty:
             print(file=sys.stderr)
+
+
+class _Progress:
+    """The progress line of a run (:class:`_StatusLine`)."""
+
+    def __init__(self, n: int) -> None:
+        self.n = n
+        self.t0 = time.perf_counter()
+        self.line = _StatusLine()
+
+    def show(self, step: int) -> None:
+        now = time.perf_counter()
+        if not self.line.due(now):
+            return
+        frac = min(1.0, step / max(1, self.n))
+        el = now - self.t0
+        left = f"~{el / frac - el:4.0f} s left" if frac > 0.01 else "starting"
+        self.line.show(
+            f"  step {min(step, self.n)}/{self.n} ({100 * frac:5.1f} %), {el:5.1f} s, {left}"
+        )
+
+    def close(self) -> None:
+        self.line.close()
 
 
 def _node_reports(out_dir: Path) -> dict[str, Any]:
