@@ -246,8 +246,10 @@ def test_garbage_other_traffic_and_truncated_end_are_counted(run: Path, tmp_path
     assert mx["frames_rejected_by_reason"]["bad_length"] == kinds[:n].count("bad_length")
     assert mx["frames_unknown_id"] == kinds[:n].count("unknown")
     base = analyze_frames(frames[: 2 * len(frames) // 3], CODEC, T_s=1e-4, n_p=4)
-    assert mx["frames_duplicate"] >= kinds[:n].count("dup")
-    assert mx["frames_duplicate"] <= kinds[:n].count("dup") + base.duplicates
+    # the injected frames are identical repeats: copies, not duplicates
+    assert mx["frames_duplicate"] == 0
+    assert mx["frames_copies"] >= kinds[:n].count("dup")
+    assert mx["frames_copies"] <= kinds[:n].count("dup") + base.copies
     assert "rejected (bad_crc" in lines[0]
     # and the steps that survived carry exactly the live values
     live = read_csv(str(run / "signals.csv"))
@@ -270,7 +272,7 @@ def test_exact_counts_on_an_untruncated_garbage_capture(run: Path) -> None:
     assert cap.unknown_ids == kinds.count("unknown")
     assert cap.frames == len(bad)
     base = analyze_frames(frames[: 2 * len(frames) // 3], CODEC, T_s=1e-4, n_p=4)
-    assert cap.duplicates == base.duplicates + kinds.count("dup")
+    assert cap.copies == base.copies + kinds.count("dup") and cap.duplicates == 0
     np.testing.assert_array_equal(cap.table["theta_hat"], base.table["theta_hat"])
     np.testing.assert_array_equal(cap.table["d_a"], base.table["d_a"])
 
@@ -348,3 +350,43 @@ def test_cli_analyze_of_a_run_folder(
     assert "theta_err_rms_deg" in out.out
     assert "0 with IDs not in the DBC" in out.err
     assert metrics(tmp_path)["theta_err_rms_deg"] == metrics(run)["theta_err_rms_deg"]
+
+
+def test_a_clean_run_has_no_duplicates_and_names_the_command_copies(
+    run: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Every command is sent twice on purpose (and the stop once more): identical
+    copies, counted apart; a clean run has no duplicate."""
+    frames, _ = read_capture(run / "capture.blf")
+    cap = analyze_frames(frames, CODEC, T_s=1e-4, n_p=4)
+    cid = CODEC.frame_id("BenchCommand")
+    commands = [bytes(m.data) for m in frames if m.arbitration_id == cid]
+    assert len(commands) >= 2 * len(set(commands))  # each one at least twice
+    # the copies, counted independently: a frame whose ID and bytes came before
+    # (the step is in the bytes): the commands' and any lockstep retransmission's
+    everything = [(m.arbitration_id, bytes(m.data)) for m in frames]
+    assert cap.duplicates == 0
+    assert cap.copies == len(everything) - len(set(everything))
+    assert cap.copies >= len(commands) - len(set(commands)) > 0
+    assert metrics(run)["frames_duplicate"] == 0
+    assert metrics(run)["frames_copies"] == cap.copies
+    assert (
+        main(["analyze", str(run), "--out", str(run.parent / "clean-analyzed"), "--no-plots"]) == 0
+    )
+    line = capsys.readouterr().err.splitlines()[0]
+    assert " 0 duplicates" in line and f"{cap.copies} identical copies" in line
+
+
+def test_a_different_frame_for_a_step_already_seen_is_a_duplicate(run: Path) -> None:
+    frames, _ = read_capture(run / "capture.blf")
+    sid = CODEC.frame_id("PhaseSamples")
+    i = [j for j, m in enumerate(frames) if m.arbitration_id == sid][200]
+    d = CODEC.decode(frames[i])
+    assert d is not None and d.reason is None
+    other = CODEC.encode("PhaseSamples", dict(d.signals, i_a=d.signals["i_a"] + 1.0))
+    other.timestamp = frames[i].timestamp + 1e-6
+    base = analyze_frames(frames, CODEC, T_s=1e-4, n_p=4)
+    twice = analyze_frames([*frames[: i + 1], other, *frames[i + 1 :]], CODEC, T_s=1e-4, n_p=4)
+    assert twice.duplicates == base.duplicates + 1 and twice.copies == base.copies
+    # the first frame of the step wins
+    np.testing.assert_array_equal(twice.table["i_a"], base.table["i_a"])

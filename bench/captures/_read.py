@@ -382,7 +382,9 @@ def _summarize(
     s = (
         f"capture: {cap.frames} frames, {cap.unknown_ids} with IDs not in the DBC, "
         f"{cap.frames_rejected} rejected{f' ({rej})' if rej else ''}, "
-        f"{cap.duplicates} duplicates, {cap.out_of_order} out of order, "
+        f"{cap.duplicates} duplicates (a second, different frame for a step), "
+        f"{cap.copies} identical copies (commands are sent twice; resends), "
+        f"{cap.out_of_order} out of order, "
         f"{cap.incomplete_steps} incomplete steps, first step {cap.first_step}"
     )
     if problem:

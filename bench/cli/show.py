@@ -11,7 +11,7 @@ from bench.cli._common import add_bus, add_plant_profile, add_scenario_overrides
 
 def cmd_show(args: argparse.Namespace) -> int:
     from bench.cli._common import bus_spec, scenario_from_args
-    from bench.scenarios._describe import describe
+    from bench.scenarios._describe import describe, schedule_lines
 
     scn = scenario_from_args(args)
     d = describe(scn)
@@ -61,24 +61,55 @@ def cmd_show(args: argparse.Namespace) -> int:
         + (f" port {tr['port']}" if tr["port"] is not None else "")
         + (f" ({tr['note']})" if tr["note"] else "")
     )
-    print(f"commands ({len(d['commands'])} BenchCommand frames; step = the period they apply in):")
-    print(f"  {'step':>8} {'cmd':>6} {'speed_ref rpm':>14} {'load N m':>9}")
-    for c in d["commands"]:
-        print(
-            f"  {c['step']:>8} {c['cmd_name']:>6} {c['speed_ref_rpm']:>14.1f} {c['load_nm']:>9.3f}"
+    st = d["start"]
+    print(
+        f"start: rotor at {st['theta_e0_deg']:g} deg electrical (theta_e0_deg), "
+        + (
+            "known to the controller (known_initial_angle = true)"
+            if st["known_initial_angle"]
+            else "found by the controller's start-up (known_initial_angle = false)"
         )
+    )
+    print(f"scoring from {st['score_from_s']:g} s (score_from_s)")
+    sc = d["schedule"]
+    print(
+        f"schedule ({sc['frames']} BenchCommand frames: start at step {sc['start_step']}, "
+        f"stop at step {sc['stop_step']}; a ramp is sent as steps at "
+        f"{sc['reference_rate_hz']:g} Hz; --commands lists every frame):"
+    )
+    for line in schedule_lines(sc):
+        print(f"  {line}")
+    if args.commands:
+        print(
+            f"commands ({len(d['commands'])} BenchCommand frames; step = the period they apply in):"
+        )
+        print(f"  {'step':>8} {'cmd':>6} {'speed_ref rpm':>14} {'load N m':>9}")
+        for c in d["commands"]:
+            print(
+                f"  {c['step']:>8} {c['cmd_name']:>6} {c['speed_ref_rpm']:>14.1f} "
+                f"{c['load_nm']:>9.3f}"
+            )
     return 0
 
 
 def register(sub: Any) -> None:
     p = sub.add_parser(
         "show",
-        help="the effective scenario: motor parameters, PWM rate, plant, the command schedule "
-        "as BenchCommand frames and the transport",
+        help="the effective scenario: motor parameters, PWM rate, plant, start-up and scoring, "
+        "the command schedule (segments; --commands: every BenchCommand frame) and the transport",
     )
     p.add_argument("scenario", help="shipped scenario name or a .toml path")
     add_scenario_overrides(p)
     add_plant_profile(p)
     add_bus(p)
-    p.add_argument("--json", action="store_true", help="everything as JSON")
+    p.add_argument(
+        "--commands",
+        action="store_true",
+        help="also list every BenchCommand frame (a ramp is one frame per reference period)",
+    )
+    p.add_argument(
+        "--json",
+        action="store_true",
+        help="everything as JSON: the compact schedule (schedule) and every frame (commands)",
+    )
     p.set_defaults(func=cmd_show)

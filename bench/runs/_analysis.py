@@ -6,8 +6,9 @@ capture analysed later gives exactly what the live run wrote.
 
 Tolerated: captures that start mid-run (steps are counted from the first one
 seen), gaps, other traffic (IDs not in the DBC are counted and skipped),
-frames that fail their CRC or length (counted per reason), duplicated frames
-(first copy wins) and out-of-order counters (counted).
+frames that fail their CRC or length (counted per reason), frames repeated
+for a step (first one wins; identical copies counted apart from duplicates
+whose content differs) and out-of-order counters (counted).
 """
 
 from __future__ import annotations
@@ -63,7 +64,12 @@ class Capture:
     frames: int = 0
     unknown_ids: int = 0
     rejected: dict[str, int] = field(default_factory=dict)
+    #: Later frames of a message's step whose content differs from the first one's.
     duplicates: int = 0
+    #: Later frames of a message's step identical to the first one: the designed
+    #: copies (every command is sent twice), resends and retransmissions, and a
+    #: latency link's copy on the other bus.
+    copies: int = 0
     out_of_order: int = 0
     incomplete_steps: int = 0
     first_step: int = 0
@@ -192,9 +198,11 @@ def analyze_frames(
 
     The whole capture is decoded at once (:func:`bench.wire._batch_decode.decode_batch`,
     the same values and rejections as :meth:`Codec.decode` frame by frame).
-    Per message, in capture order: the first frame of a step wins (later
-    copies count as duplicates) and a step below the highest seen so far
-    counts as out of order.  The table has one row per step that has samples,
+    Per message, in capture order: the first frame of a step wins; a later
+    frame of that step counts as a copy when its content is the first one's
+    (a command sent twice, a resend, a retransmission, a latency link's
+    other bus) and as a duplicate when it differs; and a step below the
+    highest seen so far counts as out of order.  The table has one row per step that has samples,
     truth and telemetry; when the capture has no telemetry at all (a drive
     that does not send it), one row per step with samples and truth, the
     estimate columns NaN.
@@ -245,8 +253,18 @@ def analyze_frames(
         full = _full_steps(name, raw, b.index, bits[name], anchor if bits[name] < wide else None)
         if name == "PwmDuty":
             full = full - 1  # the duty tagged k+1 answers sample k
-        steps_u, first = np.unique(full, return_index=True)
-        cap.duplicates += len(full) - len(steps_u)
+        steps_u, first, inv = np.unique(full, return_index=True, return_inverse=True)
+        later = np.ones(len(full), dtype=bool)
+        later[first] = False
+        if later.any():
+            # a later frame of a step is a copy when every signal equals the first frame's
+            same = np.ones(int(np.count_nonzero(later)), dtype=bool)
+            ref = first[inv[later]]
+            for v in b.signals.values():
+                same &= (v[later] == v[ref]) | (np.isnan(v[later]) & np.isnan(v[ref]))
+            n_same = int(np.count_nonzero(same))
+            cap.copies += n_same
+            cap.duplicates += len(same) - n_same
         if len(full) > 1:
             prev_max = np.maximum.accumulate(full)[:-1]
             back = np.zeros(len(full), dtype=bool)

@@ -89,6 +89,22 @@ def overshoot_rpm(t: Array, w_ref: Array, w: Array, *, min_step_rpm: float = 1.0
     return worst
 
 
+#: What the position and speed error keys measure, in words: the one label of
+#: each, for the printed table (:func:`bench.runs._results.format_metrics`) and
+#: the plot's metrics box (:func:`bench.runs._plots.metrics_text`).  dtheta is
+#: ``wrap(theta_e - theta_hat)``; "signed" marks a key that keeps its sign.
+METRIC_LABELS = {
+    "theta_err_max_deg": "largest dtheta (signed)",
+    "theta_err_min_deg": "smallest dtheta (signed)",
+    "theta_err_mean_deg": "mean dtheta (signed)",
+    "theta_err_abs_mean_deg": "mean |dtheta|",
+    "theta_err_rms_deg": "rms dtheta",
+    "theta_err_abs_max_deg": "|dtheta| max",
+    "theta_err_abs_max_rad": "|dtheta| max",
+    "speed_err_max_rpm": "|w_hat - w| max",
+    "speed_track_err_max_rpm": "|w_ref - w| max",
+}
+
 #: Lost rotor angle (DESIGN.md, exit status 4): |dtheta| above this (deg electrical) ...
 LOCK_LOST_DEG = 90.0
 #: ... for longer than this (s), after the scoring start ...

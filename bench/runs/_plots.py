@@ -34,6 +34,8 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from bench.runs._metrics import METRIC_LABELS
+
 Array = npt.NDArray[np.float64]
 
 #: Controller modes (``CtrlTelemetry.mode`` in ``dbc/bench.dbc``) shaded on the
@@ -110,7 +112,8 @@ def _fmt(v: Any, spec: str) -> str:
 def metrics_text(m: dict[str, Any]) -> str:
     """The key metrics of a run, one per line (the figure's text box)."""
     lines = [
-        f"|dtheta| max {_fmt(m.get('theta_err_abs_max_deg'), '.2f')} deg "
+        f"{METRIC_LABELS['theta_err_abs_max_deg']} "
+        f"{_fmt(m.get('theta_err_abs_max_deg'), '.2f')} deg "
         f"({_fmt(m.get('theta_err_abs_max_rad'), '.3f')} rad)",
         f"dtheta {_fmt(m.get('theta_err_min_deg'), '+.2f')} .. "
         f"{_fmt(m.get('theta_err_max_deg'), '+.2f')} deg",

@@ -68,6 +68,9 @@ def run_metadata(
     from dataclasses import asdict
 
     p, prof = plant_setup(scn)
+    motor = asdict(p.motor)  # as built: the preset's with [motor] and [magnetics] in place
+    inverter = asdict(prof.inverter)  # as built: the profile's with [inverter] in place
+    f_sw = 1.0 / sample_period(scn)
     return {
         "scenario": scn.to_dict(),
         "estimator": estimator,
@@ -76,13 +79,20 @@ def run_metadata(
         "latency_link": link,
         "lockstep_delay_steps": lockstep_delay(scn),
         "T_s": sample_period(scn),
-        "f_sw": 1.0 / sample_period(scn),
+        "f_sw": f_sw,
+        "u_dc": prof.inverter.u_dc,
+        "motor": motor,
+        # the preset with the run's values in place; its own values the run replaced
+        # (with the reasoning in doc) under "replaced"
         "preset": {
             "name": p.name,
-            "motor": asdict(p.motor),
-            "inverter": asdict(p.inverter),
-            "f_sw": p.f_sw,
+            "motor": motor,
+            "inverter": inverter,
+            "f_sw": f_sw,
             "doc": p.doc,
+            "replaced": _replaced_preset_values(
+                p.name, {"motor": motor, "inverter": inverter, "f_sw": f_sw}
+            ),
         },
         # the plant as built: the profile with the scenario's own values in place
         "plant": {
@@ -100,6 +110,28 @@ def run_metadata(
         "controller_gains": {} if estimator == "external" else _controller_gains(scn, estimator),
         "versions": _versions(),
     }
+
+
+def _replaced_preset_values(name: str, run: dict[str, Any]) -> dict[str, Any]:
+    """The shipped preset's own values that differ from the run's, by dotted key
+    (``motor.R_s``, ``inverter.u_dc``, ``f_sw``)."""
+    from dataclasses import asdict
+
+    from plant_rt import PRESETS
+
+    shipped = PRESETS[name]
+    own = {"motor": asdict(shipped.motor), "inverter": asdict(shipped.inverter), "f_sw": shipped.f_sw}
+
+    def flat(d: Any, prefix: str = "") -> dict[str, Any]:
+        if not isinstance(d, dict):
+            return {prefix: d}
+        out: dict[str, Any] = {}
+        for k, v in d.items():
+            out.update(flat(v, f"{prefix}.{k}" if prefix else str(k)))
+        return out
+
+    mine, theirs = flat(run), flat(own)
+    return {k: v for k, v in theirs.items() if mine.get(k, v) != v}
 
 
 def _controller_gains(scn: Scenario, estimator: str) -> dict[str, float]:
@@ -200,6 +232,7 @@ def finish_run(
     present = np.unique(cap.table["step"][cap.table["step"] < n_run]).size
     m["steps_missing"] = int(n_run - present)
     m["frames_duplicate"] = cap.duplicates
+    m["frames_copies"] = cap.copies
     m["frames_out_of_order"] = cap.out_of_order
     m["retransmits"] = int(plant_r.get("retransmits", 0))
     m["late_commands"] = int(plant_r.get("late_commands", 0) + ctrl_r.get("late_commands", 0))
@@ -492,6 +525,7 @@ METRIC_ROWS = (
     ("theta_err_mean_deg", "deg"),
     ("theta_err_abs_mean_deg", "deg"),
     ("theta_err_rms_deg", "deg"),
+    ("theta_err_abs_max_deg", "deg"),
     ("theta_err_abs_max_rad", "rad"),
     ("speed_err_max_rpm", "rpm"),
     ("speed_track_err_max_rpm", "rpm"),
@@ -536,21 +570,25 @@ def format_metrics(
     scenario's own estimator), named in the column's heading.  ``estimator``:
     the run's; when it is another, the paper's column is left out (its
     numbers are not this method's) and a last line says where they apply.
+    A scenario without the paper's numbers (a user's own) has no paper
+    column.  The last column says what an error row measures
+    (:data:`bench.runs._metrics.METRIC_LABELS`: which ones keep their sign).
     """
+    from bench.runs._metrics import METRIC_LABELS
+
     paper = paper or {}
     note = ""
     if paper and paper_method and estimator and estimator != paper_method:
         note = f"\n(the paper's numbers are for {paper_method}; this run is {estimator})"
         paper = {}
-    head = f"paper ({paper_method})" if paper and paper_method else "paper"
-    if note:
-        head = ""
+    head = f"paper ({paper_method})" if paper_method else "paper"
     rows = [(k, u) for k, u in (*METRIC_ROWS, *BAND_ROWS) if k in m]
     wk = max([26, *(len(k) + 1 for k, _ in rows)])
-    lines = [f"{'metric':<{wk}}{'bench':>12}  {head}"]
+    lines = [f"{'metric':<{wk}}{'bench':>12}" + (f"  {head}" if paper else "")]
     for key, unit in rows:
         v = m[key]
         vs = f"{v:12.3f}" if isinstance(v, float) else f"{'-' if v is None else v:>12}"
-        ps = f"{paper[key]:>8}" if key in paper else f"{'':>8}"
-        lines.append(f"{key:<{wk}}{vs}  {ps} {unit}")
+        ps = (f"  {paper[key]:>8}" if key in paper else f"  {'':>8}") if paper else ""
+        label = METRIC_LABELS.get(key, "")
+        lines.append(f"{key:<{wk}}{vs}{ps} {unit:<4}{f' {label}' if label else ''}".rstrip())
     return "\n".join(lines) + note
