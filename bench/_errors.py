@@ -21,6 +21,7 @@ __all__ = [
     "DbcError",
     "InterfaceError",
     "ScenarioError",
+    "error_line",
 ]
 
 #: Exit status of a user's mistake or a failure (one line on stderr).
@@ -34,6 +35,20 @@ EXIT_PLANT_TRIPPED = 3
 EXIT_LOCK_LOST = 4
 #: Exit status of an interrupted command (Ctrl-C), with the files of the part that ran.
 EXIT_INTERRUPTED = 130
+
+
+#: The start of every one-line error of every command (``bench: error: ...``).
+ERROR_PREFIX = "bench: error: "
+
+
+def error_line(message: object) -> str:
+    """The one line a command prints on stderr for a mistake (exit status 2).
+
+    Every command's errors start alike, whether argparse found the mistake
+    (``... (see bench run --help)``) or the command did (a :class:`BenchError`),
+    so a script matches one prefix.
+    """
+    return f"{ERROR_PREFIX}{message}"
 
 
 class BenchError(Exception):

@@ -167,7 +167,8 @@ def test_show_gives_transport_port_and_dbc_version() -> None:
 @pytest.mark.skipif(shutil.which("cc") is None, reason="needs a C compiler")
 def test_codegen_scenario_header_compiles_with_the_scenarios_values(tmp_path: Path) -> None:
     subprocess.run(
-        [sys.executable, "-m", "bench", "codegen", str(tmp_path), "--scenario", "xue-fig17"],
+        [sys.executable, "-m", "bench", "codegen", str(tmp_path), "--scenario", "xue-fig17",
+         "--commands"],
         cwd=ROOT, capture_output=True, text=True, check=True,
     )  # fmt: skip
     main = tmp_path / "main.c"

@@ -111,7 +111,7 @@ def test_clock_reports_the_callers_compute_time() -> None:
 def test_rt_priority_out_of_range_is_one_line(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["run", "wen-5.1", "--mode", "realtime", "--rt-priority", "0"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and err[0].startswith("bench run: error: "), err
+    assert len(err) == 1 and err[0].startswith("bench: error: "), err
     assert "--rt-priority" in err[0] and "1-99" in err[0]
 
 

@@ -13,6 +13,17 @@ for every frame and reported as median and worst; a median or p99 lateness
 above ``max(1 ms, 10 % of the mean frame gap)`` is reported as a replay that
 could not keep up (:meth:`ReplayResult.lag_warning`).
 
+``--time sim`` replays a capture in simulated time instead (:func:`sim_timestamps`):
+a lockstep run's capture carries the slowed pace at which the two processes
+stepped (e.g. 27.8 s of capture for 4 s simulated), while its frames carry
+the plant's step.  Each ``PlantTruth`` (32-bit step; ``PhaseSamples``,
+unwrapped, in a capture without truth) of a new step is an anchor at
+``step * T_s``, and the frames between two anchors are spread between their
+instants in the order and proportion of their capture times; frames before
+the first anchor and after the last keep their capture gaps to it.  The
+default stays ``--time wall``, the capture's own timestamps: what a capture
+of a real bus, or a real-time run, holds, and what ``replay`` has always sent.
+
 Bench captures tag each frame with the bus it was recorded on: channel 1 is
 the plant-side bus, 2 the controller-side bus (only with a latency link).
 python-can's ``.log`` writer turns these into ``can1``/``can2``; both forms
@@ -25,6 +36,7 @@ mapped go to the default bus.
 from __future__ import annotations
 
 import contextlib
+import copy
 import ipaddress
 import math
 import time
@@ -37,9 +49,14 @@ import numpy.typing as npt
 
 from bench._errors import BenchError, CaptureError
 from bench.wire._bus import BusSpec
+from bench.wire._codec import Codec
 
 #: Replay clocks: own absolute-deadline loop, or python-can's ``MessageSync``.
 CLOCKS = ("deadline", "messagesync")
+#: Replay time lines: the capture's timestamps, or the simulated time of its steps.
+TIMES = ("wall", "sim")
+#: Messages whose step anchors the simulated time line, in order of preference.
+_ANCHORS = ("PlantTruth", "PhaseSamples")
 
 
 def channel_tag(channel: object) -> int | None:
@@ -54,6 +71,73 @@ def channel_tag(channel: object) -> int | None:
             digits = ch + digits
         return int(digits) if digits else None
     return None
+
+
+def sim_timestamps(frames: Sequence[can.Message], codec: Codec, T_s: float) -> list[float]:
+    """Each frame's instant in simulated time (s), for ``bench replay --time sim``.
+
+    Anchors are the frames of ``PlantTruth`` (else ``PhaseSamples``) that
+    carry a step above every step before them (copies, resends and a latency
+    link's other bus are no anchors), at ``step * T_s``.  A frame between two
+    anchors is placed between their instants in proportion of its capture
+    time; before the first anchor and after the last, a frame keeps its
+    capture gap to that anchor.  The first frame is at its own simulated
+    instant (not shifted to 0), so a capture that starts mid-run keeps its
+    place.
+
+    Raises
+    ------
+    CaptureError
+        No frame of the anchor messages passed the DBC's checks.
+    """
+    from bench.wire._batch_decode import decode_batch
+    from bench.wire._protocol import unwrap
+
+    dec = decode_batch(frames, codec)  # E2E-checked: a rejected frame is no anchor
+    wall = np.array([m.timestamp for m in frames], dtype=float)
+    anchors_t: list[float] = []
+    anchors_s: list[float] = []
+    for name in _ANCHORS:
+        b = dec.messages.get(name)
+        if b is None:
+            continue
+        modulus = 1 << codec.step_bits(name)
+        last: int | None = None
+        for i, raw in zip(
+            b.index.tolist(), b.signals["step"].astype(np.int64).tolist(), strict=True
+        ):
+            step = raw if last is None else unwrap(raw, last, modulus)
+            if last is not None and step <= last:
+                continue
+            if anchors_t and wall[i] <= anchors_t[-1]:
+                continue  # a capture time that goes back: the earlier anchor holds
+            last = step
+            anchors_t.append(float(wall[i]))
+            anchors_s.append(step * T_s)
+        if len(anchors_t) >= 2:
+            break
+        anchors_t, anchors_s = [], []
+    if not anchors_t:
+        raise CaptureError(
+            "--time sim: no valid PlantTruth or PhaseSamples frames (two steps at least) "
+            "to place the frames in simulated time"
+        )
+    at, sim = np.asarray(anchors_t), np.asarray(anchors_s)
+    out = np.interp(wall, at, sim)
+    before, after = wall < at[0], wall > at[-1]
+    out[before] = sim[0] - (at[0] - wall[before])
+    out[after] = sim[-1] + (wall[after] - at[-1])
+    return [float(v) for v in out]
+
+
+def with_timestamps(frames: Sequence[can.Message], stamps: Sequence[float]) -> list[can.Message]:
+    """Copies of ``frames`` with ``stamps`` as their timestamps (channel and all else kept)."""
+    out = []
+    for m, t in zip(frames, stamps, strict=True):
+        c = copy.copy(m)
+        c.timestamp = t
+        out.append(c)
+    return out
 
 
 def parse_id(text: str, option: str | None = None) -> int:

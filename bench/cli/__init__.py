@@ -9,7 +9,10 @@ modules share (bus, real-time and scenario options; signals) is in
 
 A user's mistake (bad scenario, unknown estimator, unreadable capture,
 missing interface) is a :class:`~bench._errors.BenchError`: one line on
-stderr, exit code 2, no traceback.
+stderr, exit code 2, no traceback.  Every such line, and every mistake
+argparse finds on the command line, starts alike
+(:func:`bench._errors.error_line`: ``bench: error: ...``).  ``bench --version``
+prints the package's version and the DBC's.
 """
 
 from __future__ import annotations
@@ -20,7 +23,7 @@ import importlib
 import sys
 from typing import Any, NoReturn
 
-from bench._errors import BenchError
+from bench._errors import BenchError, error_line
 
 #: The subcommand modules, in the order ``bench --help`` lists them.
 SUBCOMMANDS = (
@@ -63,10 +66,18 @@ class _Help(argparse.HelpFormatter):
             and d is not argparse.SUPPRESS
             and "default" not in text
         ):
-            # builtins.list: the subcommand module bench.cli.list shadows the name here
-            shown = ",".join(map(str, d)) if isinstance(d, builtins.list | tuple) else d
-            text += f" (default: {shown})".replace("%", "%%")
+            text += f" (default: {shown_default(d)})".replace("%", "%%")
         return text
+
+
+def shown_default(d: object) -> str:
+    """An option's default as ``--help`` shows it: numbers as ``%g``, a list joined by commas."""
+    # builtins.list: the subcommand module bench.cli.list shadows the name here
+    if isinstance(d, builtins.list | tuple):
+        return ",".join(map(shown_default, d))
+    if isinstance(d, float):
+        return f"{d:g}"
+    return str(d)
 
 
 class _Parser(argparse.ArgumentParser):
@@ -78,13 +89,41 @@ class _Parser(argparse.ArgumentParser):
         super().__init__(*args, **kwargs)
 
     def error(self, message: str) -> NoReturn:
-        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+        self.exit(2, error_line(f"{message} (see {self.prog} --help)") + "\n")
+
+
+def versions() -> str:
+    """``bench --version``: the package's version and the DBC's (the wire protocol)."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    from bench.wire._codec import default_codec
+
+    try:
+        package = version("can-hil-bench")
+    except PackageNotFoundError:  # run from a source tree that is not installed
+        package = "unknown (not installed)"
+    return f"bench (can-hil-bench) {package}, DBC protocol version {default_codec().version}"
+
+
+class _Version(argparse.Action):
+    """``--version``: :func:`versions` (the DBC is read only when it is asked for)."""
+
+    def __init__(self, option_strings: list[str], dest: str, **kwargs: Any) -> None:
+        kwargs.update(nargs=0, default=argparse.SUPPRESS)
+        super().__init__(option_strings, dest, **kwargs)
+
+    def __call__(self, parser: argparse.ArgumentParser, *args: Any, **kwargs: Any) -> None:
+        print(versions())
+        parser.exit(0)
 
 
 def build_parser() -> argparse.ArgumentParser:
     ap = _Parser(
         prog="bench",
         description="CAN hardware-in-the-loop bench for sensorless IPMSM control",
+    )
+    ap.add_argument(
+        "--version", action=_Version, help="the package's version and the DBC protocol version"
     )
     sub = ap.add_subparsers(dest="command", required=True)
     for name in SUBCOMMANDS:
@@ -99,17 +138,27 @@ def build_parser() -> argparse.ArgumentParser:
     return ap
 
 
+def subparsers(ap: argparse.ArgumentParser) -> dict[str, argparse.ArgumentParser]:
+    """The subcommands' parsers of ``ap``, by name."""
+    for action in ap._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            return dict(action.choices)
+    return {}
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = build_parser()
     try:
-        args = ap.parse_args(argv)
-    except SystemExit as e:  # --help, or a mistake already reported on one line
+        args, extra = ap.parse_known_args(argv)
+        if extra:  # named with the subcommand whose --help lists what it takes
+            subparsers(ap)[args.command].error(f"unrecognized arguments: {' '.join(extra)}")
+    except SystemExit as e:  # --help, --version, or a mistake already reported on one line
         return e.code if isinstance(e.code, int) else 2
     try:
         rc: int = args.func(args)
         return rc
     except BenchError as e:
-        print(f"bench: error: {e}", file=sys.stderr)
+        print(error_line(e), file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("bench: interrupted", file=sys.stderr)

@@ -24,6 +24,6 @@ def register(sub: Any) -> None:
         "--rates",
         type=rates_khz,
         default=[1.0, 4.0, 10.0],
-        help="PWM rates in kHz, comma-separated (default 1,4,10)",
+        help="PWM rates in kHz, comma-separated",
     )
     p.set_defaults(func=cmd_busload)

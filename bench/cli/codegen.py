@@ -293,7 +293,7 @@ def cmd_codegen(args: argparse.Namespace) -> int:
 
     out = Path(args.out_dir)
     if out.exists() and not out.is_dir():
-        raise BenchError(f"codegen: {out}: exists and is not a folder")
+        raise BenchError(f"OUT_DIR {out}: exists and is not a folder")
     codec = Codec(args.dbc) if args.dbc else Codec()
     try:
         files = [*generate_c(out, codec), *generate_e2e(out, codec)]
@@ -306,7 +306,7 @@ def cmd_codegen(args: argparse.Namespace) -> int:
                 )
             )
     except OSError as e:
-        raise BenchError(f"codegen: {out}: cannot write ({e.strerror or e})") from None
+        raise BenchError(f"OUT_DIR {out}: cannot write ({e.strerror or e})") from None
     for f in files:
         print(f)
     print(f"codegen: C code of {codec.path.name} in {out}/", file=sys.stderr)

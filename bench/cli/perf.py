@@ -20,7 +20,9 @@ def cmd_perf(args: argparse.Namespace) -> int:
         except (OSError, ValueError) as e:
             raise BenchError(f"--from-json {src}: unreadable ({e})") from None
     else:
-        out = Path(args.out)
+        from bench.cli._common import writable_dir
+
+        out = writable_dir(Path(args.out))  # checked before the minutes of measuring
         res = run_perf(out, quick=args.quick, echo=lambda s: print(s, file=sys.stderr))
     print(format_perf(res))
     if not args.from_json:

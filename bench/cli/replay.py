@@ -1,4 +1,10 @@
-"""``bench replay``: a capture back onto a bus with its recorded timing (absolute deadlines)."""
+"""``bench replay``: a capture back onto a bus with its recorded timing (absolute deadlines).
+
+``--time wall`` (the default) keeps the capture's timestamps; ``--time sim``
+places the frames by their plant step in simulated time
+(:func:`bench.captures._replay.sim_timestamps`), for a lockstep run's
+capture, whose timestamps carry the slowed pace of the lockstep processes.
+"""
 
 from __future__ import annotations
 
@@ -9,6 +15,10 @@ from pathlib import Path
 from typing import Any
 
 from bench.cli._common import LOG_HELP, add_bus, bus_spec
+
+#: ``--time`` choices: :data:`bench.captures._replay.TIMES` (not imported here: the
+#: parser stays light; tests/test_replay_sim_time.py checks they agree).
+TIMES = ("wall", "sim")
 
 
 def _ids(text: str, option: str) -> list[int]:
@@ -28,6 +38,30 @@ def _channels(text: str) -> list[int]:
         raise BenchError(
             f"--channel-filter: expected bus tags like 1 or 1,2, got {text!r}"
         ) from None
+
+
+def _period(path: Path, scenario: str | None) -> float:
+    """The PWM period of a capture (``--scenario``, else its ``meta.json``)."""
+    from bench._errors import BenchError
+    from bench.captures._read import capture_scenario
+    from bench.scenarios._setup import sample_period
+
+    try:
+        scn, _ = capture_scenario(path, scenario)
+    except BenchError as e:
+        raise BenchError(f"--time sim: {e}") from None
+    return sample_period(scn)
+
+
+def _mode_of(path: Path) -> str:
+    """The ``mode`` of the run whose ``meta.json`` is beside the capture ("" without one)."""
+    import json
+
+    meta = (path if path.is_dir() else path.parent) / "meta.json"
+    try:
+        return str(json.loads(meta.read_text()).get("mode", ""))
+    except (OSError, ValueError, AttributeError):
+        return ""
 
 
 def cmd_replay(args: argparse.Namespace) -> int:
@@ -77,12 +111,33 @@ def cmd_replay(args: argparse.Namespace) -> int:
         return spec
 
     path = Path(args.log)
+    if args.scenario is not None and args.time != "sim":
+        raise BenchError("--scenario: only --time sim needs a scenario (for its T_s)")
+    T_s = _period(path, args.scenario) if args.time == "sim" else 0.0
     got = read_capture_counted(path)
     frames, problem = got.frames, got.problem
     if problem:
         print(incomplete_warning(path, problem, len(frames)), file=sys.stderr)
     if got.lines_skipped:
         print(skipped_warning(path, got.lines_skipped), file=sys.stderr)
+    if args.time == "sim" and frames:
+        from bench.captures._replay import sim_timestamps, with_timestamps
+        from bench.wire._codec import default_codec
+
+        stamps = sim_timestamps(frames, default_codec(), T_s)
+        wall = frames[-1].timestamp - frames[0].timestamp
+        frames = with_timestamps(frames, stamps)
+        print(
+            f"replay: --time sim: {max(stamps) - min(stamps):.3f} s of simulated time "
+            f"(T_s {T_s:g} s) for {wall:.3f} s of capture",
+            file=sys.stderr,
+        )
+    elif _mode_of(path) == "lockstep":
+        print(
+            "note: a lockstep run's capture, replayed at the pace it was recorded at "
+            "(--time wall, the default); --time sim replays it in simulated time",
+            file=sys.stderr,
+        )
     plan = plan_replay(
         frames,
         default=default_bus,
@@ -99,7 +154,8 @@ def cmd_replay(args: argparse.Namespace) -> int:
     # a missing interface is reported before anything is sent; every bus is shut down after
     with open_buses(plan.buses) as buses:
         print(
-            f"replay: {len(chosen)} of {len(frames)} frames, {span:.3f} s of capture "
+            f"replay: {len(chosen)} of {len(frames)} frames, {span:.3f} s of "
+            f"{'simulated time' if args.time == 'sim' else 'capture'} "
             f"at x{args.speed:g} -> {plan.describe()}",
             file=sys.stderr,
         )
@@ -156,6 +212,21 @@ def register(sub: Any) -> None:
         choices=("deadline", "messagesync"),
         default="deadline",
         help="deadline: sleep then spin to each absolute deadline; messagesync: python-can's",
+    )
+    p.add_argument(
+        "--time",
+        choices=TIMES,
+        default="wall",
+        help="wall: the capture's own timestamps (a real bus's or a real-time run's pace, "
+        "and what replay has always sent); sim: by the plant step of each frame in simulated "
+        "time (step x T_s), for a lockstep run's capture, recorded at the slower pace of the "
+        "lockstep processes",
+    )
+    p.add_argument(
+        "--scenario",
+        metavar="NAME_OR_FILE",
+        help="with --time sim: the scenario that gives T_s (default: the meta.json beside the "
+        "capture)",
     )
     p.add_argument("--max-gap", type=float, help="shorten silences longer than this (s)")
     add_bus(p)

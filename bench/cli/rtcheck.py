@@ -53,14 +53,12 @@ def register(sub: Any) -> None:
         help="measure this host's wake-up latency and the plant's computation per period; "
         "which PWM rates it sustains, with which settings",
     )
-    p.add_argument(
-        "--seconds", type=POS_FLOAT, default=5.0, help="per rate and setting (default 5)"
-    )
+    p.add_argument("--seconds", type=POS_FLOAT, default=5.0, help="seconds per rate and setting")
     p.add_argument(
         "--rate",
         type=rates_khz,
         default=[1.0, 4.0, 10.0],
-        help="PWM rates in kHz, comma-separated (default 1,4,10)",
+        help="PWM rates in kHz, comma-separated",
     )
     p.add_argument("--out", "-o", help="also write rtcheck.json into this folder")
     p.add_argument(

@@ -185,7 +185,7 @@ def register(sub: Any) -> None:
         type=POS_FLOAT,
         default=30.0,
         metavar="S",
-        help="--controller external: wait this long for its first valid PwmDuty (default 30)",
+        help="--controller external: wait this long (s) for its first valid PwmDuty",
     )
     p.add_argument(
         "--dut-name", help="--controller external: its name in meta.json and the plot titles"

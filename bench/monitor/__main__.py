@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from bench._errors import BenchError
+from bench._errors import BenchError, error_line
 from bench.monitor import add_arguments, main
 
 
@@ -18,7 +18,7 @@ def _main(argv: list[str] | None = None) -> int:
     try:
         return main(args)
     except BenchError as e:
-        print(f"bench: error: {e}", file=sys.stderr)
+        print(error_line(e), file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         return 130
