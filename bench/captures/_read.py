@@ -24,7 +24,13 @@ import can
 
 from bench import _jsonio as jsonio
 from bench._errors import CaptureError, ScenarioError
-from bench.runs._results import RunResult, finish_run, frames_warning, scoring_scenario
+from bench.runs._results import (
+    RunResult,
+    finish_run,
+    frames_warning,
+    plant_record,
+    scoring_scenario,
+)
 from bench.scenarios._schema import Scenario, load_scenario, scenario_from_dict
 from bench.wire._codec import Codec
 
@@ -469,7 +475,8 @@ def analyze_capture(
             say(moved)
     out = out_dir or capture.parent
     out.mkdir(parents=True, exist_ok=True)
-    meta = dict(meta, analyzed_from=str(capture), scenario=scn.to_dict())
+    # the plant of the scenario analysed with (a capture made elsewhere has no meta.json)
+    meta = dict(meta, **plant_record(scn), analyzed_from=str(capture), scenario=scn.to_dict())
     meta.pop("capture_read_error", None)
     if problem:
         meta["capture_read_error"] = problem

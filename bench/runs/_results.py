@@ -65,12 +65,6 @@ def _versions() -> dict[str, str]:
 def run_metadata(
     scn: Scenario, estimator: str, *, mode: str, transport: str, link: bool
 ) -> dict[str, Any]:
-    from dataclasses import asdict
-
-    p, prof = plant_setup(scn)
-    motor = asdict(p.motor)  # as built: the preset's with [motor] and [magnetics] in place
-    inverter = asdict(prof.inverter)  # as built: the profile's with [inverter] in place
-    f_sw = 1.0 / sample_period(scn)
     return {
         "scenario": scn.to_dict(),
         "estimator": estimator,
@@ -78,12 +72,37 @@ def run_metadata(
         "transport": transport,
         "latency_link": link,
         "lockstep_delay_steps": lockstep_delay(scn),
+        **plant_record(scn),
+        "seed": scn.seed,
+        # every gain, bandwidth, filter corner and delay the controller uses
+        # (controller.Controller.gains); none for an external controller
+        "controller": "external" if estimator == "external" else "bench",
+        "controller_gains": {} if estimator == "external" else _controller_gains(scn, estimator),
+        "versions": _versions(),
+    }
+
+
+def plant_record(scn: Scenario) -> dict[str, Any]:
+    """What ``meta.json`` records of the plant a scenario builds (docs/RUNS.md).
+
+    ``T_s``, ``f_sw``, ``u_dc`` and ``motor`` as built (the preset's with the
+    scenario's ``[motor]``, ``[magnetics]``, ``[inverter]`` and ``f_sw`` in
+    place); ``preset``: the same values with the preset's reasoning (``doc``)
+    and, under ``replaced``, the preset's own values the scenario replaced;
+    ``plant``: the profile as built.  ``bench analyze`` records it again for
+    the scenario it analyses with.
+    """
+    from dataclasses import asdict
+
+    p, prof = plant_setup(scn)
+    motor = asdict(p.motor)  # as built: the preset's with [motor] and [magnetics] in place
+    inverter = asdict(prof.inverter)  # as built: the profile's with [inverter] in place
+    f_sw = 1.0 / sample_period(scn)
+    return {
         "T_s": sample_period(scn),
         "f_sw": f_sw,
         "u_dc": prof.inverter.u_dc,
         "motor": motor,
-        # the preset with the run's values in place; its own values the run replaced
-        # (with the reasoning in doc) under "replaced"
         "preset": {
             "name": p.name,
             "motor": motor,
@@ -94,21 +113,14 @@ def run_metadata(
                 p.name, {"motor": motor, "inverter": inverter, "f_sw": f_sw}
             ),
         },
-        # the plant as built: the profile with the scenario's own values in place
         "plant": {
             "profile": prof.name,
-            "inverter": asdict(prof.inverter),
+            "inverter": inverter,
             "sensors": asdict(prof.sensors),
             "saturation": prof.saturation,
             "cross_saturation": prof.cross_saturation,
             "doc": prof.doc,
         },
-        "seed": scn.seed,
-        # every gain, bandwidth, filter corner and delay the controller uses
-        # (controller.Controller.gains); none for an external controller
-        "controller": "external" if estimator == "external" else "bench",
-        "controller_gains": {} if estimator == "external" else _controller_gains(scn, estimator),
-        "versions": _versions(),
     }
 
 
