@@ -88,3 +88,15 @@ def test_every_file_of_a_run_folder_is_described() -> None:
             continue
         assert f"`{name}`" in table, name
     assert "`capture.blf`" in table and "--log-format" in table
+
+
+def test_the_plant_record_of_meta_json_is_documented() -> None:
+    """Every key of the plant record ``meta.json`` carries (and of its ``preset``)."""
+    from bench.runs._results import plant_record
+    from bench.scenarios._schema import load_scenario
+
+    section = DOC.split("## meta.json", 1)[1].split("\n## ", 1)[0]
+    named = set(re.findall(r"`([a-z_A-Z]+)`", section))
+    rec = plant_record(load_scenario("wen-5.1"))
+    missing = sorted(k for k in [*rec, *rec["preset"], *rec["plant"]] if k not in named)
+    assert not missing, f"meta.json keys not in docs/RUNS.md's meta.json section: {missing}"
