@@ -349,7 +349,7 @@ def test_format_metrics_lists_the_band_rows_only_when_present() -> None:
 
     plain = {"theta_err_max_deg": 1.0, "steps": 10}
     text = format_metrics(plain)
-    assert text.splitlines()[0] == f"{'metric':<26}{'bench':>12}  paper"
+    assert text.splitlines()[0] == f"{'metric':<26}{'bench':>12}"  # no paper: no column
     assert "band_" not in text
     m = dict(plain, band_below_steps=5, band_above_injection_loss_w=None, handover_dip_max_pct=2.5)
     lines = format_metrics(m).splitlines()

@@ -389,7 +389,8 @@ def _summarize(
         f"capture: {cap.frames} frames, {cap.unknown_ids} with IDs not in the DBC, "
         f"{cap.frames_rejected} rejected{f' ({rej})' if rej else ''}, "
         f"{cap.duplicates} duplicates (a second, different frame for a step), "
-        f"{cap.copies} identical copies (commands are sent twice; resends), "
+        f"{cap.copies} identical copies (each command is sent twice; resends; "
+        "a latency link's second bus), "
         f"{cap.out_of_order} out of order, "
         f"{cap.incomplete_steps} incomplete steps, first step {cap.first_step}"
     )
