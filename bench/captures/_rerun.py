@@ -334,6 +334,7 @@ def rerun_capture(
     m_new["frames_rejected"] = new.frames_rejected
     m_new["frames_unknown_id"] = new.unknown_ids
     m_new["frames_duplicate"] = new.duplicates
+    m_new["frames_copies"] = new.copies
     m_new["frames_out_of_order"] = new.out_of_order
     if problem:
         m_new["capture_truncated"] = True
