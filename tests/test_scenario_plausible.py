@@ -27,7 +27,7 @@ from bench.scenarios._setup import build_controller, check_estimator_fits
 from plant_rt import PRESETS
 
 ROOT = Path(__file__).resolve().parents[1]
-KEYS = ("n_p", "R_s", "L_d", "L_q", "psi_f", "i_rated", "i_max", "tau_rated", "w_m_rated")
+KEYS = ("n_p", "R_s", "L_d", "L_q", "psi_f", "i_rated", "i_max", "tau_rated", "w_m_rated", "J")
 
 
 def preset_values(name: str) -> dict[str, float]:
@@ -82,6 +82,12 @@ def test_current_for_rated_torque_against_closed_forms() -> None:
         ("[motor]\ni_rated = 4000.0\ni_max = 8000.0", "motor.i_rated", "looks like mA"),
         ("[motor]\npsi_f = 0.0003", "motor.psi_f", "divided by 1000 once too often"),
         ("[inverter]\nu_dc = 540000.0", "inverter.u_dc", "looks like mV; the schema wants V"),
+        (
+            "[motor]\nJ = 40.0",
+            "motor.J",
+            "J = 40 looks like kg cm^2; the schema wants kg m^2 (0.004)",
+        ),
+        ("[motor]\nJ = 30000.0", "motor.J", "looks like g cm^2; the schema wants kg m^2 (0.003)"),
     ],
 )
 def test_a_value_off_by_1000_names_its_field_and_unit(
@@ -104,6 +110,34 @@ def test_the_new_users_mh_motor_is_one_line_from_bench_run(
     assert main(["run", str(f), "--duration", "0.01", "-i", "udp_multicast"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "'motor.L_d'" in err[0] and "looks like mH" in err[0], err
+
+
+def test_the_mechanical_time_constant_bounds_and_message() -> None:
+    """J w_m_rated / tau_rated: the papers' 0.063 s and 0.053 s load; a J no unit explains is
+    named with the time constant and the keys to check."""
+    from bench.scenarios._plausible import TAU_M_MAX_S, TAU_M_MIN_S
+
+    for name, tau_m in (("wen2023", 0.0628), ("xue2022", 0.0526)):
+        v = preset_values(name)
+        assert v["J"] * v["w_m_rated"] / v["tau_rated"] == pytest.approx(tau_m, rel=1e-3)
+    base = preset_values("wen2023")
+    w, tau = base["w_m_rated"], base["tau_rated"]
+    for t_m in (0.6 * TAU_M_MIN_S, 1.5 * TAU_M_MAX_S):
+        err = motor_plausibility_error({**base, "J": t_m * tau / w}, {})
+        assert err is not None and err[0] == "motor.J", err
+        assert "mechanical time constant" in err[1] and "check J (kg m^2)" in err[1], err
+    for t_m in (1.5 * TAU_M_MIN_S, 0.9 * TAU_M_MAX_S):
+        assert motor_plausibility_error({**base, "J": t_m * tau / w}, {"J": "motor.J"}) is None
+
+
+def test_an_inertia_in_kg_cm2_is_one_line_from_bench_run(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    f = tmp_path / "mine.toml"
+    f.write_text('extends = "wen-5.1"\n[motor]\nJ = 40\n')
+    assert main(["run", str(f), "--duration", "0.01", "-i", "udp_multicast"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "'motor.J'" in err[0] and "looks like kg cm^2" in err[0], err
 
 
 def test_plausible_changes_load(tmp_path: Path) -> None:

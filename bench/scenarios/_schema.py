@@ -13,8 +13,8 @@ multiplied by sqrt(2)), flux linkages peak per phase in Wb, inductances in H
 (not mH), the ``[motor]`` speeds mechanical rad/s (not rpm), speed
 references in rpm, angles electrical degrees, voltages V, times s.  A motor
 is checked against physics on load (``bench/scenarios/_plausible.py``): a
-value off by a factor of 1000 is an error that names the field and the unit
-it looks like.
+value off by a factor of 1000 (or an inertia in kg cm^2) is an error that
+names the field and the unit it looks like.
 
 Schema (all keys optional unless marked *required*; every key with its unit,
 default, range and meaning: docs/SCENARIOS.md, written by ``bench schema`` from
@@ -702,7 +702,7 @@ def _check_plausible(
     from plant_rt import PRESETS
 
     p = PRESETS[preset]
-    keys = ("n_p", "R_s", "L_d", "L_q", "psi_f", "i_rated", "i_max", "tau_rated", "w_m_rated")
+    keys = ("n_p", "R_s", "L_d", "L_q", "psi_f", "i_rated", "i_max", "tau_rated", "w_m_rated", "J")
     values = {k: float(motor.get(k, getattr(p.motor, k))) for k in keys}
     values["u_dc"] = float(inverter.get("u_dc", p.inverter.u_dc))
     given = {k: f"motor.{k}" for k in motor}
