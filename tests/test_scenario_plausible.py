@@ -6,7 +6,8 @@
   shipped and example scenario pass.
 - ``[estimator_options]`` in a file of its own without ``[motor]`` is an error.
 - ``sensored`` runs from any scenario, leaving the injection settings out with
-  one line; a key of the other injection family is one line naming it.
+  one line; so does every estimator with the options of the others (one file
+  serves both injection families); a key no estimator declares is an error.
 - The schema states each ``[motor]`` key's unit.
 """
 
@@ -174,16 +175,42 @@ def test_sensored_runs_from_any_scenario_saying_what_it_leaves_out(tmp_path: Pat
     assert check_estimator_fits(scn, "tt-dq") is None
 
 
-def test_an_option_of_the_other_family_is_one_line_naming_it(tmp_path: Path) -> None:
+def test_one_file_serves_both_injection_families(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Issue 27: with V_h and U_h, tt-dq and square-wave both run; each leaves out the other's
+    option with a note naming it and its owners; each gets its own."""
     f = tmp_path / "mine.toml"
-    f.write_text('extends = "xue-fig13"\n[estimator_options]\nV_h = 40.0\n')
+    f.write_text('extends = "wen-5.1"\n[estimator_options]\nV_h = 40.0\nU_h = 25.0\n')
     scn = load_scenario(str(f))
+    sq = build_controller(scn, "square-wave")
+    assert sq.gains()["estimator.U_h"] == 25.0
+    note = check_estimator_fits(scn, "square-wave")
+    assert note is not None and "\n" not in note
+    assert "square-wave leaves out" in note and "V_h: sfhf, tt-ab, tt-dq, hybrid-tt-dq" in note
+    rot = build_controller(scn, "tt-dq")
+    assert rot.gains()["estimator.V_h"] == 40.0
+    note = check_estimator_fits(scn, "tt-dq")
+    assert note is not None and "U_h: square-wave, square-wave-nocic, hybrid-square-wave" in note
+    assert check_estimator_fits(load_scenario("xue-fig13"), "square-wave") is None
+    # bench run prints the note, one line
+    rc = main(["run", str(f), "-e", "tt-dq", "--duration", "0.002", "--out", str(tmp_path / "r")])
+    err = [ln for ln in capsys.readouterr().err.splitlines() if ln.startswith("note:")]
+    assert rc == 0 and len(err) == 1 and "U_h" in err[0], err
+    import json
+
+    meta = json.loads((tmp_path / "r" / "meta.json").read_text())
+    assert meta["estimator_options_left_out"] == ["U_h"]
+
+
+def test_an_option_no_estimator_declares_is_one_line_naming_file_and_key(tmp_path: Path) -> None:
+    f = tmp_path / "mine.toml"
+    f.write_text('extends = "xue-fig13"\n[estimator_options]\nU_h = 25.0\nV_hh = 40.0\n')
     with pytest.raises(ScenarioError) as e:
-        build_controller(scn, "square-wave")
+        load_scenario(str(f))
     msg = str(e.value)
-    assert "field 'estimator_options.V_h': an option of sfhf, tt-ab, tt-dq" in msg, msg
-    assert "not of square-wave (which takes" in msg and "U_h" in msg
-    assert "unexpected keyword" not in msg and "__init__" not in msg
+    assert msg.startswith(f"{f}: field 'estimator_options.V_hh': unknown key"), msg
+    assert "\n" not in msg and "V_h" in msg
 
 
 def test_the_schema_states_each_motor_keys_unit() -> None:

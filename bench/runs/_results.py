@@ -98,8 +98,19 @@ def run_metadata(
         # (controller.Controller.gains); none for an external controller
         "controller": "external" if estimator == "external" else "bench",
         "controller_gains": {} if estimator == "external" else _controller_gains(scn, estimator),
+        # the scenario's [estimator_options] this estimator does not take, and the note on them
+        "estimator_options_left_out": [] if estimator == "external" else _left_out(scn, estimator),
         "versions": _versions(),
     }
+
+
+def _left_out(scn: Scenario, estimator: str) -> list[str]:
+    from bench.scenarios._setup import left_out_options
+
+    try:
+        return left_out_options(scn, estimator)
+    except ValueError:  # an estimator that cannot be loaded: said elsewhere
+        return []
 
 
 def _controller_gains(scn: Scenario, estimator: str) -> dict[str, float]:

@@ -71,6 +71,15 @@ class FluxPLL:
         self.psi_a = self.psi_f * math.cos(theta0)
         self.psi_b = self.psi_f * math.sin(theta0)
 
+    def speed_response(self, w: Any) -> Any:
+        """``w_hat / w_e`` at the angular frequencies ``w`` (rad/s, an array): the speed
+        estimate is the PLL's integral state, ``k_i / (s^2 + k_p s + k_i)``, a double pole
+        at ``alpha_o``.  The controller designs its speed loop with it (docs/ESTIMATORS.md):
+        without it the loop is designed for an exact speed, and this lag takes its phase
+        margin (a growing oscillation at the speed loop's crossover)."""
+        s = 1j * w
+        return self.k_i / (s * s + self.k_p * s + self.k_i)
+
     def gains(self) -> dict[str, float]:
         """Recorded in ``meta.json``."""
         return {"alpha_o": self.alpha_o, "k_p": self.k_p, "k_i": self.k_i, "w_c": self.w_c}
