@@ -914,8 +914,8 @@ def _parse_estimator_options(
                     "estimator or estimators"
                 )
                 raise ScenarioError(
-                    f"{r.src}: field 'estimator_options.{k}': unknown key, an option of no "
-                    f"estimator (known: {', '.join(sorted({*keys, *plugin_opts}))}){hint}"
+                    f"{r.src}: field 'estimator_options.{k}': unknown key (known: "
+                    f"{', '.join(sorted({*keys, *plugin_opts}))}): no estimator declares it{hint}"
                 )
     eo = r.table("estimator_options")
     u_dc = PRESETS[preset].inverter.u_dc
