@@ -289,22 +289,24 @@ class Option:
             )
             if not ok:
                 return None, (
-                    "expected [[b_0, b_1, ...], [a_0, a_1, ...]] (finite numbers, a_0 != 0), "
-                    f"got {value!r}"
+                    "expected [[b_0, b_1, ...], [a_0, a_1, ...]], the numerator and denominator "
+                    f"of a continuous prototype (finite numbers, a_0 != 0), got {value!r}"
                 )
             return tuple(tuple(float(x) for x in c) for c in value), None
         if k == "int":
             if isinstance(value, bool) or not isinstance(value, int):
                 return None, f"expected an integer, got {value!r}"
-        elif not _finite_number(value):
-            return None, f"expected a finite number, got {value!r}"
+        elif isinstance(value, bool) or not isinstance(value, int | float):
+            return None, f"expected a number, got {type(value).__name__} {value!r}"
+        elif not math.isfinite(value):
+            return None, "must be finite"
         v = value if k == "int" else float(value)
         if self.positive and not v > 0:
             return None, f"must be > 0, got {v}"
         if self.minimum is not None and v < self.minimum:
-            return None, f"must be >= {self.minimum:g}, got {v}"
+            return None, f"must be >= {self.minimum}, got {v}"
         if self.maximum is not None and v > self.maximum:
-            return None, f"must be <= {self.maximum:g}, got {v}"
+            return None, f"must be <= {self.maximum}, got {v}"
         return v, None
 
 

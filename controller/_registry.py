@@ -358,7 +358,26 @@ def _shipped_options(name: str) -> dict[str, Option]:
         own = _options_of_signature(design, ("motor",), design.__doc__ or "")
         own.update(_HYBRID_GAINS)
         out.update({k: own[k] for k in _OWN_OPTIONS})
-    return out
+    return {
+        k: dataclasses.replace(
+            o, **_SHIPPED_CHECKS.get(k, {"positive": True} if o.value_kind == "float" else {})
+        )
+        for k, o in out.items()
+    }
+
+
+#: What the shipped estimators' options accept beyond their type, by key; every other
+#: number is > 0.  The scenario also holds an injection amplitude (``V_h``, ``U_h``)
+#: within the inverter's linear range and ``f_h`` below the Nyquist frequency, which
+#: depend on the scenario (``bench/scenarios/_schema.py``).
+_SHIPPED_CHECKS: dict[str, dict[str, Any]] = {
+    "w_o": {"minimum": 0.0},  # 0 freezes the PLL
+    "delay_comp": {"minimum": 0.0},  # periods; 0 disables it
+    "u_err": {"minimum": 0.0},  # V
+    "M": {"kind": "int", "minimum": 1},  # CIC differential delay, PWM periods
+    "normalise": {"choices": ("model", "measured")},
+    "observer": {"choices": ("pll", "mechanical")},
+}
 
 
 #: The hybrids' options that override a designed gain (controller._hybrid.create).

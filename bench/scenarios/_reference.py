@@ -424,26 +424,21 @@ KEYS: dict[str, dict[str, Key]] = {
 
 
 def option_range(key: str) -> tuple[str, Any]:
-    """An ``[estimator_options]`` key's range in words and a value the loader refuses,
-    from the kind the schema checks it as (``_OPTION_*`` of :mod:`bench.scenarios._schema`)."""
+    """An ``[estimator_options]`` key's range in words and a value the loader refuses, from
+    its declaration (:func:`bench.scenarios._schema.shipped_options`) and the scenario's checks
+    of amplitudes and frequencies."""
     from bench.scenarios import _schema as sc
 
-    default = sc.estimator_option_keys().get(key)
-    if key in sc._OPTION_CHOICES:
-        return ", ".join(sc._OPTION_CHOICES[key]), "no-such-choice"
-    if key in sc._OPTION_FILTERS:
-        return "[[b_0, ...], [a_0, ...]], a_0 != 0", [[1.0]]
-    if key in sc._OPTION_INTEGERS:
-        return "integer >= 1", 0
-    if isinstance(default, bool):
-        return "true, false", 1
-    if key in sc._OPTION_NONNEGATIVE:
-        return ">= 0", -1.0
+    opt = sc.shipped_options()[key]
+    kind = opt.value_kind
     if key in sc._OPTION_AMPLITUDES:
-        return "> 0 and <= u_dc / sqrt(3) of the preset", 1000.0
+        return f"{opt.range_text()} and <= u_dc / sqrt(3) of the preset", 1000.0
     if key in sc._OPTION_FREQUENCIES:
-        return "> 0 and below half the PWM rate", 6000.0
-    return "> 0", 0.0
+        return f"{opt.range_text()} and below half the PWM rate", 6000.0
+    bad: Any = {"bool": 1, "str": "no-such-choice", "filter": [[1.0]], "int": 0}.get(kind)
+    if bad is None:
+        bad = -1.0 if opt.minimum is not None else 0.0
+    return opt.range_text(), bad
 
 
 def defaults() -> dict[str, dict[str, Any]]:

@@ -488,21 +488,23 @@ MOTOR_KEYS = (
 )  # fmt: skip
 
 
-#: ``[estimator_options]`` keys checked by kind.  The estimator, and so the family
-#: the options are for, may be chosen only on the command line: the keys of
-#: every family are accepted (:func:`estimator_option_keys`), each value is
-#: checked by its key's name.
+#: ``[estimator_options]`` keys checked against the scenario beyond their declaration
+#: (:func:`controller._registry.declared_options`, which states each key's type and range).
 _OPTION_AMPLITUDES = ("V_h", "U_h")  # injection amplitude (V): (0, u_dc / sqrt(3)]
 _OPTION_FREQUENCIES = ("f_h",)  # injection frequency (Hz): (0, Nyquist)
-_OPTION_NONNEGATIVE = (
-    "w_o",
-    "delay_comp",
-    "u_err",
-)  # PLL bandwidth (0 freezes it), periods (0: off), V
-_OPTION_INTEGERS = ("M",)  # CIC differential delay (PWM periods), >= 1
-_OPTION_FILTERS = ("bpf", "hpf", "lpf")  # continuous prototypes [[b...], [a...]]
-_OPTION_CHOICES = {"normalise": ("model", "measured"), "observer": ("pll", "mechanical")}
-# any other key (``a``, the square-wave observer pole, rad/s): a number > 0
+
+
+@functools.cache
+def shipped_options() -> dict[str, Any]:
+    """Every built-in estimator's ``[estimator_options]`` key with its declaration
+    (:class:`controller.Option`; the first estimator's where several declare one key)."""
+    from controller._registry import ESTIMATOR_NAMES, declared_options
+
+    out: dict[str, Any] = {}
+    for name in ESTIMATOR_NAMES:
+        for k, opt in (declared_options(name) or {}).items():
+            out.setdefault(k, opt)
+    return out
 
 
 @functools.cache
@@ -516,13 +518,7 @@ def estimator_option_keys() -> dict[str, Any]:
     the hybrids add the hand-over's own (``controller._hybrid``).  ``sensored``
     takes none.
     """
-    from controller._registry import ESTIMATOR_NAMES, declared_options
-
-    keys: dict[str, Any] = {}
-    for name in ESTIMATOR_NAMES:
-        for k, opt in (declared_options(name) or {}).items():
-            keys.setdefault(k, opt.default)
-    return keys
+    return {k: opt.default for k, opt in shipped_options().items()}
 
 
 def estimator_keys(estimator: str) -> frozenset[str]:
@@ -845,31 +841,6 @@ def _parse_latency(r: _Reader) -> Latency:
     return out
 
 
-def _parse_filter(r: _Reader, key: str) -> tuple[tuple[float, ...], ...]:
-    """A continuous filter prototype ``[[b_0, ...], [a_0, ...]]`` (an estimator option)."""
-    v = r.t[key]
-    if not (
-        isinstance(v, list)
-        and len(v) == 2
-        and all(
-            isinstance(c, list)
-            and c
-            and all(
-                isinstance(x, int | float) and not isinstance(x, bool) and math.isfinite(x)
-                for x in c
-            )
-            for c in v
-        )
-        and v[1][0] != 0
-    ):
-        raise r.fail(
-            key,
-            "expected [[b_0, b_1, ...], [a_0, a_1, ...]], the numerator and denominator "
-            f"of a continuous prototype (finite numbers, a_0 != 0), got {v!r}",
-        )
-    return tuple(tuple(float(x) for x in c) for c in v)
-
-
 def _parse_estimator_options(
     r: _Reader, preset: str, f_s: float, named: tuple[str, ...] = ()
 ) -> dict[str, Any]:
@@ -931,24 +902,10 @@ def _parse_estimator_options(
             if why is not None:
                 raise eo.fail(k, f"{why} (an option of {owner})")
             out[k] = val
-        elif k in _OPTION_CHOICES:
-            choices = _OPTION_CHOICES[k]
-            s = eo.string(k)
-            if s not in choices:
-                raise eo.fail(k, f"expected {' or '.join(map(repr, choices))}, got {s!r}")
-            out[k] = s
-        elif k in _OPTION_FILTERS:
-            out[k] = _parse_filter(eo, k)
-        elif k in _OPTION_INTEGERS:
-            out[k] = eo.integer(k, 0, lo=1)
-        elif isinstance(keys[k], bool):
-            out[k] = eo.boolean(k, keys[k])
-        elif k in _OPTION_NONNEGATIVE:
-            out[k] = eo.num(k, lo=0.0)
         else:
-            v = eo.num(k)
-            if not v > 0.0:
-                raise eo.fail(k, f"must be > 0, got {v}")
+            v, why = shipped_options()[k].check(eo.t[k])
+            if why is not None:
+                raise eo.fail(k, why)
             if k in _OPTION_AMPLITUDES and v > u_lin:
                 raise eo.fail(
                     k,
