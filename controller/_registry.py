@@ -36,6 +36,11 @@ declares, checked as declared; one without a declaration receives them all
 imported, whose declaration is malformed, or whose estimator lacks a member
 of :class:`controller._api.Estimator`, raises :class:`EstimatorPluginError`
 with one line naming it.
+
+What an estimator is, for the bench, is then four facts: its name, its
+factory, its injection family and its declared options (:class:`Plugin`
+holds them for a plug-in; ``_ESTIMATORS`` and :func:`_shipped_options` for
+a built-in one); one registry entry per estimator can hold the four.
 """
 
 from __future__ import annotations

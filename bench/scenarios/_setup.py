@@ -303,8 +303,9 @@ def check_estimator_name(est: str, option: str = "--estimator") -> str:
 def check_estimator_fits(scn: Scenario, est: str) -> str | None:
     """Build the controller once, so a misfit is one line before any process starts.
 
-    Returns the line to tell the user when the scenario's estimator options
-    are left out (``sensored`` takes none; it runs from any scenario).
+    Returns the line to tell the user when some of the scenario's estimator
+    options are left out (:func:`options_note`: one scenario serves every
+    estimator, each takes the options it declares; ``sensored`` takes none).
     """
     check_estimator_name(est)
     try:
