@@ -384,3 +384,37 @@ def test_a_malformed_declaration_is_one_line(
         injection_family("bad_decl:create")
     with pytest.raises(EstimatorPluginError, match="declares options its factory does not take: b"):
         injection_family("bad_kw:create")
+
+
+def test_a_plugin_without_a_declaration_receives_what_its_signature_takes(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """As docs/ESTIMATORS.md says: ``**options`` receives every option of the scenario (a
+    family-none plug-in used to receive none, a rotating one only the rotating keys); named
+    keywords receive those named."""
+    import importlib
+
+    from bench.scenarios._schema import load_scenario
+    from bench.scenarios._setup import build_controller, check_estimator_fits
+    from controller._registry import hand_over
+
+    _write(
+        tmp_path,
+        "und_all",
+        "from my_estimator import create as flux\nRECEIVED = {}\n"
+        "def create(motor, T_s, **options):\n    RECEIVED.update(options)\n"
+        "    return flux(motor, T_s)\n",
+    )
+    _write(tmp_path, "und_kw", "def create(motor, T_s, alpha_o=1.0):\n    pass\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.syspath_prepend(str(EXAMPLES))
+    assert hand_over("und_kw:create", {"V_h": 1.0, "alpha_o": 2.0}) == ({"alpha_o": 2.0}, ["V_h"])
+    f = tmp_path / "s.toml"
+    f.write_text(
+        'extends = "wen-5.1"\nknown_initial_angle = true\n'
+        "[estimator_options]\nV_h = 40.0\nU_h = 25.0\n"
+    )
+    scn = load_scenario(str(f))
+    build_controller(scn, "und_all:create")
+    assert importlib.import_module("und_all").RECEIVED == {"V_h": 40.0, "U_h": 25.0}
+    assert check_estimator_fits(scn, "und_all:create") is None
