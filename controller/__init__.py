@@ -13,6 +13,7 @@ from controller._api import (
     Estimator,
     EstimatorInput,
     Measurement,
+    Option,
 )
 from controller._compensation import CompensationPars
 from controller._controller import Controller, ControllerPars
@@ -30,6 +31,7 @@ from controller._registry import (
     EstimatorPluginError,
     UnknownEstimatorError,
     check_estimator,
+    declared_options,
     make_estimator,
 )
 from controller._rotating import RotatingInjectionPars, hf_amplitudes
@@ -62,6 +64,7 @@ __all__ = [
     "HybridEstimator",
     "Measurement",
     "MotorModel",
+    "Option",
     "PIController",
     "PolarityTest",
     "PositionObserver",
@@ -71,6 +74,7 @@ __all__ = [
     "check_estimator",
     "clarke",
     "compiled_controller_missing",
+    "declared_options",
     "design",
     "discretize",
     "hf_amplitudes",

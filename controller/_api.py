@@ -16,8 +16,9 @@ plant's truth at the same instant.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
-from typing import Protocol
+from typing import Any, Protocol
 
 
 @dataclass(frozen=True, slots=True)
@@ -181,3 +182,133 @@ class Estimator(Protocol):
         (which records none for an estimator without this method).
         """
         ...
+
+
+#: The kinds of value an :class:`Option` holds.
+OPTION_KINDS = ("float", "int", "bool", "str", "filter")
+
+
+@dataclass(frozen=True, slots=True)
+class Option:
+    """One option an estimator declares: a key of a scenario's ``[estimator_options]``.
+
+    A plug-in declares its options as a mapping of names to :class:`Option`, or
+    as a dataclass whose fields are the options (their defaults, types, and
+    units and meanings from the numpydoc ``Parameters`` section;
+    ``field(metadata={...})`` sets any attribute below); the shipped
+    estimators' options are declared the same way
+    (:func:`controller._registry.declared_options`).  docs/ESTIMATORS.md.
+
+    Parameters
+    ----------
+    default : object
+        The factory's value when the scenario leaves the key out; None: derived
+        by the estimator (meta.json: ``controller_gains``).
+    unit : str
+        Unit (SI), ``-`` for a pure number, empty for text and switches.
+    doc : str
+        What the option does, a sentence or two.
+    kind : str
+        One of :data:`OPTION_KINDS`; empty: from ``choices`` and the default's type
+        (``float`` for None).
+    minimum, maximum : float or None
+        Inclusive bounds of a number.
+    positive : bool
+        A number must be > 0.
+    choices : tuple of str
+        The strings a text option may be.
+    """
+
+    default: Any = None
+    unit: str = ""
+    doc: str = ""
+    kind: str = ""
+    minimum: float | None = None
+    maximum: float | None = None
+    positive: bool = False
+    choices: tuple[str, ...] = ()
+
+    @property
+    def value_kind(self) -> str:
+        """The kind in force: :attr:`kind`, else from ``choices`` and the default."""
+        if self.kind:
+            return self.kind
+        d = self.default
+        if self.choices or isinstance(d, str):
+            return "str"
+        if isinstance(d, bool):
+            return "bool"
+        if isinstance(d, int):
+            return "int"
+        if isinstance(d, tuple | list):
+            return "filter"
+        return "float"
+
+    def range_text(self) -> str:
+        """The values it takes, in words (docs)."""
+        k = self.value_kind
+        if k == "bool":
+            return "true, false"
+        if k == "str":
+            return ", ".join(self.choices) if self.choices else "text"
+        if k == "filter":
+            return "[[b_0, ...], [a_0, ...]], a_0 != 0"
+        parts = ["integer"] if k == "int" else []
+        if self.positive:
+            parts.append("> 0")
+        if self.minimum is not None:
+            parts.append(f">= {self.minimum:g}")
+        if self.maximum is not None:
+            parts.append(f"<= {self.maximum:g}")
+        return " ".join(parts) or "any number"
+
+    def check(self, value: Any) -> tuple[Any, str | None]:
+        """``(value, None)`` with the value in its type, or ``(None, why)`` when it is refused."""
+        k = self.value_kind
+        if k == "bool":
+            return (
+                (value, None)
+                if isinstance(value, bool)
+                else (None, f"expected true or false, got {value!r}")
+            )
+        if k == "str":
+            if not isinstance(value, str):
+                return None, f"expected a string, got {value!r}"
+            if self.choices and value not in self.choices:
+                return None, f"expected {' or '.join(map(repr, self.choices))}, got {value!r}"
+            return value, None
+        if k == "filter":
+            ok = (
+                isinstance(value, list | tuple)
+                and len(value) == 2
+                and all(
+                    isinstance(c, list | tuple) and c and all(_finite_number(x) for x in c)
+                    for c in value
+                )
+                and value[1][0] != 0
+            )
+            if not ok:
+                return None, (
+                    "expected [[b_0, b_1, ...], [a_0, a_1, ...]], the numerator and denominator "
+                    f"of a continuous prototype (finite numbers, a_0 != 0), got {value!r}"
+                )
+            return tuple(tuple(float(x) for x in c) for c in value), None
+        if k == "int":
+            if isinstance(value, bool) or not isinstance(value, int):
+                return None, f"expected an integer, got {value!r}"
+        elif isinstance(value, bool) or not isinstance(value, int | float):
+            return None, f"expected a number, got {type(value).__name__} {value!r}"
+        elif not math.isfinite(value):
+            return None, "must be finite"
+        v = value if k == "int" else float(value)
+        if self.positive and not v > 0:
+            return None, f"must be > 0, got {v}"
+        if self.minimum is not None and v < self.minimum:
+            return None, f"must be >= {self.minimum}, got {v}"
+        if self.maximum is not None and v > self.maximum:
+            return None, f"must be <= {self.maximum}, got {v}"
+        return v, None
+
+
+def _finite_number(x: Any) -> bool:
+    return isinstance(x, int | float) and not isinstance(x, bool) and math.isfinite(x)

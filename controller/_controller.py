@@ -116,7 +116,7 @@ from controller._compensation import (
 from controller._filters import lpf_first_order
 from controller._params import MotorModel
 from controller._pi import PIController
-from controller._registry import injection_family, make_estimator
+from controller._registry import estimator_family, injection_family, make_estimator
 from controller._startup import PolarityTest
 from controller._svpwm import svpwm
 
@@ -309,8 +309,9 @@ class Controller:
         T_s = pars.T_s
         self.T_s = T_s
         self.motor = m
-        self.family = injection_family(pars.estimator)
         self.estimator = make_estimator(pars.estimator, m, T_s, **dict(pars.estimator_options))
+        # a plug-in that returns a shipped estimator runs as it does (controller._registry)
+        self.family = estimator_family(pars.estimator, self.estimator)
         a_c = float(pars.alpha_c or 0.0)
         a_s, w_f = self._speed_loop_design()
         #: Speed-loop bandwidth (rad/s) and speed-estimate filter corner (rad/s) in use.

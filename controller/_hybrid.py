@@ -381,6 +381,8 @@ class HybridEstimator:
         self, hf: Estimator, tracker: _Tracker, observer: FluxObserver, band: TransitionBand
     ) -> None:
         self.hf = hf
+        #: The injection family of its injection estimator (``controller._registry``).
+        self.injection_family: str = getattr(hf, "injection_family", "none")
         self.tracker = tracker
         self.observer = observer
         self.band = band

@@ -16,25 +16,45 @@ user's estimator is named
   finds its interfaces; the entry point's object is the factory.
 
 The factory's attribute ``injection_family`` (``"rotating"``, ``"square"``
-or ``"none"``, the default) tells the controller whether to run the
-HF start-up (alignment and polarity test) before the speed loop.  A
-plug-in never receives the plant's truth (only the built-in ``sensored``
-baseline does).  The scenario's ``[estimator_options]`` are passed as
-keywords; a factory without ``**options`` receives only the keywords it
-names.  A plug-in that cannot be imported, or whose estimator lacks a member
+or ``"none"``) tells the controller whether to run the HF start-up
+(alignment and polarity test) before the speed loop.  An estimator may
+say it itself (attribute ``injection_family``, as every shipped estimator's
+class does): a factory that declares none takes its estimator's
+(:func:`estimator_family`), so a plug-in that returns a shipped estimator
+runs as that estimator does, start-up and designed gains included; a
+factory and an estimator that disagree are an error.  A plug-in never
+receives the plant's truth (only the built-in ``sensored`` baseline does).
+
+Options (:func:`declared_options`, :func:`hand_over`).  Every estimator's
+options are declared as :class:`controller._api.Option` values by name:
+the shipped ones from their parameter dataclass or signature and
+docstrings, a plug-in by its factory's attribute ``options`` (a mapping of
+names to :class:`~controller._api.Option`, or a dataclass whose fields are
+the options).  A declared plug-in receives the scenario's options it
+declares, checked as declared; one without a declaration receives them all
+(``**options``) or the keywords it names.  A plug-in that cannot be
+imported, whose declaration is malformed, or whose estimator lacks a member
 of :class:`controller._api.Estimator`, raises :class:`EstimatorPluginError`
 with one line naming it.
+
+What an estimator is, for the bench, is then four facts: its name, its
+factory, its injection family and its declared options (:class:`Plugin`
+holds them for a plug-in; ``_ESTIMATORS`` and :func:`_shipped_options` for
+a built-in one); one registry entry per estimator can hold the four.
 """
 
 from __future__ import annotations
 
+import dataclasses
+import functools
 import importlib
 import inspect
-from collections.abc import Callable
+import re
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from controller._api import Estimator
+from controller._api import OPTION_KINDS, Estimator, Option
 from controller._params import MotorModel
 
 #: name -> (module, fixed keyword options, injection family)
@@ -86,12 +106,20 @@ class Plugin:
         Injection family (one of :data:`FAMILIES`).
     keywords : tuple of str or None
         The keywords the factory names, None when it takes ``**options``.
+    family_declared : bool
+        The factory sets ``injection_family`` (else ``family`` is ``"none"``
+        until the estimator says otherwise, :func:`estimator_family`).
+    options : dict or None
+        The options it declares (name -> :class:`~controller._api.Option`), None
+        without a declaration.
     """
 
     name: str
     factory: Callable[..., Any]
     family: str
     keywords: tuple[str, ...] | None
+    family_declared: bool = True
+    options: dict[str, Option] | None = None
 
 
 _PLUGINS: dict[str, Plugin] = {}
@@ -167,7 +195,8 @@ def plugin(name: str) -> Plugin | None:
         return None
     if not callable(factory):
         raise _fail(name, f"{type(factory).__name__} object is not callable")
-    family = getattr(factory, "injection_family", "none")
+    declared = getattr(factory, "injection_family", None)
+    family = "none" if declared is None else declared
     if family not in FAMILIES:
         raise _fail(name, f"injection_family {family!r} is not one of {', '.join(FAMILIES)}")
     keywords: tuple[str, ...] | None = None
@@ -181,9 +210,279 @@ def plugin(name: str) -> Plugin | None:
         pos = [p for p in params if p.kind in (p.POSITIONAL_ONLY, p.POSITIONAL_OR_KEYWORD)]
         if len(pos) < 2 and not any(p.kind is p.VAR_POSITIONAL for p in params):
             raise _fail(name, "the factory must take (motor, T_s, **options)")
-    p = Plugin(name, factory, family, keywords)
+    decl = getattr(factory, "options", None)
+    options = None if decl is None else _declaration(name, decl)
+    if options is not None and keywords is not None:
+        unnamed = [k for k in options if k not in keywords]
+        if unnamed:
+            raise _fail(
+                name,
+                f"declares options its factory does not take: {', '.join(unnamed)} "
+                "(name them as keywords, or take **options)",
+            )
+    p = Plugin(name, factory, family, keywords, declared is not None, options)
     _PLUGINS[name] = p
     return p
+
+
+def _declaration(name: str, decl: Any) -> dict[str, Option]:
+    """A plug-in's ``options`` attribute as name -> :class:`Option` (one line when malformed)."""
+    if isinstance(decl, type) and dataclasses.is_dataclass(decl):
+        try:
+            return options_of_dataclass(decl)
+        except (TypeError, ValueError) as e:
+            raise _fail(name, f"options {decl.__name__}: {e}") from None
+    if not isinstance(decl, Mapping):
+        raise _fail(
+            name,
+            "options must be a dataclass or a mapping of names to controller.Option, "
+            f"got {type(decl).__name__}",
+        )
+    out: dict[str, Option] = {}
+    for k, v in decl.items():
+        if not isinstance(k, str) or not k.isidentifier():
+            raise _fail(name, f"option name {k!r} is not an identifier")
+        if not isinstance(v, Option):
+            raise _fail(name, f"option {k!r}: expected a controller.Option, got {type(v).__name__}")
+        if v.kind and v.kind not in OPTION_KINDS:
+            raise _fail(
+                name, f"option {k!r}: kind {v.kind!r} is not one of {', '.join(OPTION_KINDS)}"
+            )
+        out[k] = v
+    return out
+
+
+def numpydoc_parameters(doc: str) -> dict[str, tuple[str, str]]:
+    """``name -> (type, description)`` from the numpydoc ``Parameters`` section of ``doc``."""
+    out: dict[str, tuple[str, str]] = {}
+    m = re.search(r"Parameters\n\s*-+\n(.*?)(\n\s*\n\s*\S+\n\s*-+\n|\Z)", doc, re.S)
+    if not m:
+        return out
+    names: list[str] = []
+    typ = ""
+    text: list[str] = []
+
+    def flush() -> None:
+        for n in names:
+            out[n] = (typ, " ".join(text).strip())
+
+    for line in m.group(1).splitlines():
+        head = re.match(r"^\s{0,4}([A-Za-z_][\w, ]*?)\s*:\s*(.*)$", line)
+        if head and not line.startswith(" " * 8):
+            flush()
+            names = [n.strip() for n in head.group(1).split(",")]
+            typ, text = head.group(2), []
+        elif line.strip():
+            text.append(line.strip())
+    flush()
+    return out
+
+
+def unit_in(text: str) -> str:
+    """The unit a description states in parentheses, ``(rad/s)``; empty without one."""
+    m = re.search(r"\(((?:PWM )?periods|rad/s|rad|deg|Hz|V|A|s|-)\)", text)
+    return m.group(1) if m else ""
+
+
+def _plain(text: str) -> str:
+    """A docstring's reST roles and literals as Markdown code."""
+    return re.sub(r":\w+:`([^`]*)`", r"`\1`", text.replace("``", "`"))
+
+
+def _kind_of(annotation: Any, default: Any) -> str:
+    if default is not None:
+        return ""
+    a = annotation if isinstance(annotation, str) else getattr(annotation, "__name__", "")
+    for kind in ("bool", "int", "str"):
+        if re.search(rf"\b{kind}\b", a):
+            return kind
+    return "float"
+
+
+def options_of_dataclass(cls: type) -> dict[str, Option]:
+    """The options a dataclass declares: one :class:`Option` per field.
+
+    Default and type from the field; meaning and unit from the class's numpydoc
+    ``Parameters`` (the unit in parentheses); ``field(metadata=...)`` sets any
+    :class:`Option` attribute (``unit``, ``positive``, ``minimum``, ``choices``...).
+    """
+    doc = numpydoc_parameters(cls.__doc__ or "")
+    out: dict[str, Option] = {}
+    for f in dataclasses.fields(cls):
+        if f.default is not dataclasses.MISSING:
+            default = f.default
+        elif f.default_factory is not dataclasses.MISSING:
+            default = f.default_factory()
+        else:
+            raise ValueError(f"field {f.name!r} has no default")
+        text = _plain(doc.get(f.name, ("", ""))[1])
+        kw: dict[str, Any] = {"unit": unit_in(text), "doc": text}
+        kw["kind"] = _kind_of(f.type, default)
+        kw.update(f.metadata)
+        out[f.name] = Option(default, **kw)
+    return out
+
+
+def _options_of_signature(
+    func: Callable[..., Any], skip: tuple[str, ...], doc: str
+) -> dict[str, Option]:
+    """The keyword parameters of ``func`` (less ``skip``) as options, described by ``doc``."""
+    text = numpydoc_parameters(doc)
+    out: dict[str, Option] = {}
+    for k, p in inspect.signature(func).parameters.items():
+        if k in skip or p.kind in (p.VAR_KEYWORD, p.VAR_POSITIONAL):
+            continue
+        d = None if p.default is inspect.Parameter.empty else p.default
+        meaning = _plain(text.get(k, ("", ""))[1])
+        out[k] = Option(d, unit_in(meaning), meaning, _kind_of(p.annotation, d))
+    return out
+
+
+@functools.cache
+def _shipped_options(name: str) -> dict[str, Option]:
+    """The declaration of a built-in estimator's options (:func:`declared_options`)."""
+    family = _ESTIMATORS[name][2]
+    out: dict[str, Option] = {}
+    if name == "sensored":
+        return out
+    if family == "rotating":
+        from controller._rotating import RotatingInjectionPars
+
+        out = options_of_dataclass(RotatingInjectionPars)
+    else:
+        from controller._square_wave import SquareWaveEstimator
+
+        out = _options_of_signature(
+            SquareWaveEstimator.__init__,
+            ("self", "motor", "T_s", "cic"),
+            SquareWaveEstimator.__doc__ or "",
+        )
+    if name.startswith("hybrid-"):
+        from controller._hybrid import _OWN_OPTIONS, design
+
+        own = _options_of_signature(design, ("motor",), design.__doc__ or "")
+        own.update(_HYBRID_GAINS)
+        out.update({k: own[k] for k in _OWN_OPTIONS})
+    return {
+        k: dataclasses.replace(
+            o, **_SHIPPED_CHECKS.get(k, {"positive": True} if o.value_kind == "float" else {})
+        )
+        for k, o in out.items()
+    }
+
+
+#: What the shipped estimators' options accept beyond their type, by key; every other
+#: number is > 0.  The scenario also holds an injection amplitude (``V_h``, ``U_h``)
+#: within the inverter's linear range and ``f_h`` below the Nyquist frequency, which
+#: depend on the scenario (``bench/scenarios/_schema.py``).
+_SHIPPED_CHECKS: dict[str, dict[str, Any]] = {
+    "w_o": {"minimum": 0.0},  # 0 freezes the PLL
+    "delay_comp": {"minimum": 0.0},  # periods; 0 disables it
+    "u_err": {"minimum": 0.0},  # V
+    "M": {"kind": "int", "minimum": 1},  # CIC differential delay, PWM periods
+    "normalise": {"choices": ("model", "measured")},
+    "observer": {"choices": ("pll", "mechanical")},
+}
+
+
+#: The hybrids' options that override a designed gain (controller._hybrid.create).
+_HYBRID_GAINS = {
+    "alpha_o": Option(
+        None,
+        "rad/s",
+        "Bandwidth of the hybrids' flux observer's speed tracker; default: designed from theta_acc.",
+        positive=True,
+    ),
+    "zeta_f": Option(
+        None,
+        "-",
+        "Damping of the flux observer's correction; default: the design's.",
+        positive=True,
+    ),
+}
+
+
+def declared_options(name: str) -> dict[str, Option] | None:
+    """The options estimator ``name`` declares, by name; None for a plug-in without a
+    declaration (it takes what its factory's signature names, or everything)."""
+    if name in _ESTIMATORS:
+        return dict(_shipped_options(name))
+    p = plugin(name)
+    if p is None:
+        raise _unknown(name)
+    return None if p.options is None else dict(p.options)
+
+
+def hand_over(name: str, options: Mapping[str, Any]) -> tuple[dict[str, Any], list[str]]:
+    """A scenario's options for estimator ``name``: (those it receives, the keys it does not).
+
+    A declared estimator (every shipped one, a plug-in with ``options``)
+    receives the keys it declares; a plug-in without a declaration the
+    keywords its factory names, or every key when it takes ``**options``.
+    """
+    decl = declared_options(name)
+    if decl is None:
+        p = plugin(name)
+        kw = None if p is None else p.keywords
+        keys: Any = options if kw is None else kw
+    else:
+        keys = decl
+    return {k: v for k, v in options.items() if k in keys}, [k for k in options if k not in keys]
+
+
+def check_options(name: str, options: Mapping[str, Any]) -> dict[str, Any]:
+    """``options`` checked against the plug-in ``name``'s declaration (values in their type).
+
+    Raises :class:`EstimatorPluginError` with one line for a key it does not
+    declare or a value its declaration refuses; a plug-in without a
+    declaration gets ``options`` unchecked.  The built-in estimators' values are
+    checked by the scenario schema (``bench/scenarios/_schema.py``).
+    """
+    p = plugin(name) if name not in _ESTIMATORS else None
+    if p is None or p.options is None:
+        return dict(options)
+    out: dict[str, Any] = {}
+    for k, v in options.items():
+        opt = p.options.get(k)
+        if opt is None:
+            raise _fail(
+                name, f"unknown option {k!r} (it declares: {', '.join(p.options) or 'none'})"
+            )
+        val, why = opt.check(v)
+        if why is not None:
+            raise _fail(name, f"option {k!r}: {why}")
+        out[k] = val
+    return out
+
+
+def estimator_family(name: str, est: object) -> str:
+    """The injection family the controller runs ``est`` (built for ``name``) with.
+
+    A built-in name's; a plug-in's declared one, else the estimator's own
+    ``injection_family`` (every shipped estimator has one), else ``"none"``.
+    A plug-in that declares a family other than its estimator's own is an
+    :class:`EstimatorPluginError`.
+    """
+    entry = _ESTIMATORS.get(name)
+    if entry is not None:
+        return entry[2]
+    own = getattr(est, "injection_family", None)
+    p = plugin(name)
+    if p is None:
+        raise _unknown(name)
+    if own is not None and own not in FAMILIES:
+        raise _fail(
+            name, f"its estimator's injection_family {own!r} is not one of {', '.join(FAMILIES)}"
+        )
+    if not p.family_declared:
+        return own if own is not None else "none"
+    if own is not None and own != p.family:
+        raise _fail(
+            name,
+            f"the factory declares injection_family {p.family!r}, its {type(est).__name__} "
+            f"is a {own!r} estimator (leave the factory's out, or make them agree)",
+        )
+    return p.family
 
 
 def _unknown(name: str) -> UnknownEstimatorError:
@@ -251,7 +550,7 @@ def make_estimator(name: str, motor: MotorModel, T_s: float, **options: Any) -> 
     p = plugin(name)
     if p is None:
         raise _unknown(name)
-    kw = options if p.keywords is None else {k: v for k, v in options.items() if k in p.keywords}
+    kw = check_options(name, options) if p.options is not None else hand_over(name, options)[0]
     try:
         obj = p.factory(motor, T_s, **kw)
     except TypeError as e:

@@ -343,7 +343,16 @@ class RotatingHFEstimator:
         Sampling period (s).
     pars : RotatingInjectionPars
         Injection, filter and observer settings.
+
+    Attributes
+    ----------
+    injection_family : str
+        ``"rotating"``: the controller's start-up and the dead-time band follow
+        from it (``controller._registry.estimator_family``), for this estimator
+        built by name or by a plug-in that wraps it.
     """
+
+    injection_family: ClassVar[str] = "rotating"
 
     #: What of the demodulation lies between ``theta_hat`` and ``err``
     #: (:func:`in_loop_response`): ``"none"``, ``"lpf"`` or ``"bpf+lpf"``.

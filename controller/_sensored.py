@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, ClassVar
 
 from controller._api import EstimatorInput
 from controller._params import MotorModel
@@ -14,6 +14,9 @@ class SensoredEstimator:
     No injection; the current loop gets the measured current unchanged.
     Raises ``ValueError`` if the truth is missing.
     """
+
+    #: No injection (``controller._registry.estimator_family``).
+    injection_family: ClassVar[str] = "none"
 
     def __init__(self, T_s: float) -> None:
         self.T_s = T_s

@@ -103,7 +103,7 @@ from __future__ import annotations
 
 import functools
 import math
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -188,6 +188,9 @@ class SquareWaveEstimator:
     pm_deg : float
         Phase-margin target of the observer loop (deg), used when ``a`` is None.
     """
+
+    #: The injection family (``controller._registry.estimator_family``).
+    injection_family: ClassVar[str] = "square"
 
     def __init__(
         self,

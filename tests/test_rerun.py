@@ -112,3 +112,26 @@ def test_cli_rerun(ttdq: Path, tmp_path: Path, capsys: pytest.CaptureFixture) ->
     rc = main(["rerun", str(tmp_path / "missing.blf"), "-e", "tt-dq"])
     err = capsys.readouterr().err.strip().splitlines()
     assert rc == 2 and len(err) == 1 and "missing.blf" in err[0]
+
+
+def test_cli_rerun_that_loses_the_rotor_exits_4(
+    ttdq: Path, tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
+    """square-wave on a tt-dq capture sees no square-wave response and loses the angle:
+    the status is bench run's for the same metrics (4), with its warning line."""
+    rc = main(
+        [
+            "rerun",
+            str(ttdq / "capture.blf"),
+            "-e",
+            "square-wave",
+            "--out",
+            str(tmp_path),
+            "--no-plots",
+        ]
+    )
+    err = capsys.readouterr().err
+    m = json.loads((tmp_path / "metrics.json").read_text())
+    assert m["lock_lost"] is True
+    assert rc == 4
+    assert "lost the rotor angle" in err

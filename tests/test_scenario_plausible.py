@@ -6,7 +6,8 @@
   shipped and example scenario pass.
 - ``[estimator_options]`` in a file of its own without ``[motor]`` is an error.
 - ``sensored`` runs from any scenario, leaving the injection settings out with
-  one line; a key of the other injection family is one line naming it.
+  one line; so does every estimator with the options of the others (one file
+  serves both injection families); a key no estimator declares is an error.
 - The schema states each ``[motor]`` key's unit.
 """
 
@@ -27,7 +28,7 @@ from bench.scenarios._setup import build_controller, check_estimator_fits
 from plant_rt import PRESETS
 
 ROOT = Path(__file__).resolve().parents[1]
-KEYS = ("n_p", "R_s", "L_d", "L_q", "psi_f", "i_rated", "i_max", "tau_rated", "w_m_rated")
+KEYS = ("n_p", "R_s", "L_d", "L_q", "psi_f", "i_rated", "i_max", "tau_rated", "w_m_rated", "J")
 
 
 def preset_values(name: str) -> dict[str, float]:
@@ -82,6 +83,12 @@ def test_current_for_rated_torque_against_closed_forms() -> None:
         ("[motor]\ni_rated = 4000.0\ni_max = 8000.0", "motor.i_rated", "looks like mA"),
         ("[motor]\npsi_f = 0.0003", "motor.psi_f", "divided by 1000 once too often"),
         ("[inverter]\nu_dc = 540000.0", "inverter.u_dc", "looks like mV; the schema wants V"),
+        (
+            "[motor]\nJ = 40.0",
+            "motor.J",
+            "J = 40 looks like kg cm^2; the schema wants kg m^2 (0.004)",
+        ),
+        ("[motor]\nJ = 30000.0", "motor.J", "looks like g cm^2; the schema wants kg m^2 (0.003)"),
     ],
 )
 def test_a_value_off_by_1000_names_its_field_and_unit(
@@ -104,6 +111,34 @@ def test_the_new_users_mh_motor_is_one_line_from_bench_run(
     assert main(["run", str(f), "--duration", "0.01", "-i", "udp_multicast"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "'motor.L_d'" in err[0] and "looks like mH" in err[0], err
+
+
+def test_the_mechanical_time_constant_bounds_and_message() -> None:
+    """J w_m_rated / tau_rated: the papers' 0.063 s and 0.053 s load; a J no unit explains is
+    named with the time constant and the keys to check."""
+    from bench.scenarios._plausible import TAU_M_MAX_S, TAU_M_MIN_S
+
+    for name, tau_m in (("wen2023", 0.0628), ("xue2022", 0.0526)):
+        v = preset_values(name)
+        assert v["J"] * v["w_m_rated"] / v["tau_rated"] == pytest.approx(tau_m, rel=1e-3)
+    base = preset_values("wen2023")
+    w, tau = base["w_m_rated"], base["tau_rated"]
+    for t_m in (0.6 * TAU_M_MIN_S, 1.5 * TAU_M_MAX_S):
+        err = motor_plausibility_error({**base, "J": t_m * tau / w}, {})
+        assert err is not None and err[0] == "motor.J", err
+        assert "mechanical time constant" in err[1] and "check J (kg m^2)" in err[1], err
+    for t_m in (1.5 * TAU_M_MIN_S, 0.9 * TAU_M_MAX_S):
+        assert motor_plausibility_error({**base, "J": t_m * tau / w}, {"J": "motor.J"}) is None
+
+
+def test_an_inertia_in_kg_cm2_is_one_line_from_bench_run(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    f = tmp_path / "mine.toml"
+    f.write_text('extends = "wen-5.1"\n[motor]\nJ = 40\n')
+    assert main(["run", str(f), "--duration", "0.01", "-i", "udp_multicast"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "'motor.J'" in err[0] and "looks like kg cm^2" in err[0], err
 
 
 def test_plausible_changes_load(tmp_path: Path) -> None:
@@ -140,16 +175,42 @@ def test_sensored_runs_from_any_scenario_saying_what_it_leaves_out(tmp_path: Pat
     assert check_estimator_fits(scn, "tt-dq") is None
 
 
-def test_an_option_of_the_other_family_is_one_line_naming_it(tmp_path: Path) -> None:
+def test_one_file_serves_both_injection_families(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Issue 27: with V_h and U_h, tt-dq and square-wave both run; each leaves out the other's
+    option with a note naming it and its owners; each gets its own."""
     f = tmp_path / "mine.toml"
-    f.write_text('extends = "xue-fig13"\n[estimator_options]\nV_h = 40.0\n')
+    f.write_text('extends = "wen-5.1"\n[estimator_options]\nV_h = 40.0\nU_h = 25.0\n')
     scn = load_scenario(str(f))
+    sq = build_controller(scn, "square-wave")
+    assert sq.gains()["estimator.U_h"] == 25.0
+    note = check_estimator_fits(scn, "square-wave")
+    assert note is not None and "\n" not in note
+    assert "square-wave leaves out" in note and "V_h: sfhf, tt-ab, tt-dq, hybrid-tt-dq" in note
+    rot = build_controller(scn, "tt-dq")
+    assert rot.gains()["estimator.V_h"] == 40.0
+    note = check_estimator_fits(scn, "tt-dq")
+    assert note is not None and "U_h: square-wave, square-wave-nocic, hybrid-square-wave" in note
+    assert check_estimator_fits(load_scenario("xue-fig13"), "square-wave") is None
+    # bench run prints the note, one line
+    rc = main(["run", str(f), "-e", "tt-dq", "--duration", "0.002", "--out", str(tmp_path / "r")])
+    err = [ln for ln in capsys.readouterr().err.splitlines() if ln.startswith("note:")]
+    assert rc == 0 and len(err) == 1 and "U_h" in err[0], err
+    import json
+
+    meta = json.loads((tmp_path / "r" / "meta.json").read_text())
+    assert meta["estimator_options_left_out"] == ["U_h"]
+
+
+def test_an_option_no_estimator_declares_is_one_line_naming_file_and_key(tmp_path: Path) -> None:
+    f = tmp_path / "mine.toml"
+    f.write_text('extends = "xue-fig13"\n[estimator_options]\nU_h = 25.0\nV_hh = 40.0\n')
     with pytest.raises(ScenarioError) as e:
-        build_controller(scn, "square-wave")
+        load_scenario(str(f))
     msg = str(e.value)
-    assert "field 'estimator_options.V_h': an option of sfhf, tt-ab, tt-dq" in msg, msg
-    assert "not of square-wave (which takes" in msg and "U_h" in msg
-    assert "unexpected keyword" not in msg and "__init__" not in msg
+    assert msg.startswith(f"{f}: field 'estimator_options.V_hh': unknown key"), msg
+    assert "\n" not in msg and "V_h" in msg
 
 
 def test_the_schema_states_each_motor_keys_unit() -> None:

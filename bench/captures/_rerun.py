@@ -73,6 +73,8 @@ class RerunResult:
     paper_result: dict[str, Any] = field(default_factory=dict)
     #: The method ``paper_result`` belongs to (the scenario's own estimator).
     paper_method: str | None = None
+    #: The control period of the capture's scenario (s), for the warning lines.
+    T_s: float = 0.0
 
 
 def injection_note(estimator: str, recorded: str | None) -> str:
@@ -415,6 +417,7 @@ def rerun_capture(
         files=files,
         paper_result=dict(scn.paper_result),
         paper_method=scn.estimator,
+        T_s=T_s,
     )
 
 

@@ -10,6 +10,10 @@ from bench.cli._common import LOG_HELP, files_line
 
 
 def cmd_rerun(args: argparse.Namespace) -> int:
+    """Rerun and print the scores; the exit status is ``bench run``'s for the same metrics
+    (:func:`bench.runs._results.outcome`: 3 a plant trip in the capture, 4 a lost rotor angle)."""
+    import sys
+
     from bench.captures._rerun import rerun_capture
 
     res = rerun_capture(
@@ -19,7 +23,7 @@ def cmd_rerun(args: argparse.Namespace) -> int:
         out_dir=Path(args.out) if args.out else None,
         plots=not args.no_plots,
     )
-    from bench.runs._results import format_metrics
+    from bench.runs._results import format_metrics, outcome
 
     r: dict[str, Any] = res.report
     est = r["estimate"]
@@ -36,7 +40,10 @@ def cmd_rerun(args: argparse.Namespace) -> int:
     )
     print(f"note: {r['comparison']}")
     print(files_line(res.out_dir, res.files))
-    return 0
+    status, warnings = outcome(res.metrics, res.T_s)
+    for line in warnings:
+        print(line, file=sys.stderr)
+    return status
 
 
 def register(sub: Any) -> None:

@@ -78,6 +78,8 @@ def run_metadata(
         # (controller.Controller.gains); none for an external controller
         "controller": "external" if estimator == "external" else "bench",
         "controller_gains": {} if estimator == "external" else _controller_gains(scn, estimator),
+        # the scenario's [estimator_options] this estimator does not take, and the note on them
+        "estimator_options_left_out": [] if estimator == "external" else _left_out(scn, estimator),
         "versions": _versions(),
     }
 
@@ -144,6 +146,15 @@ def _replaced_preset_values(name: str, run: dict[str, Any]) -> dict[str, Any]:
 
     mine, theirs = flat(run), flat(own)
     return {k: v for k, v in theirs.items() if mine.get(k, v) != v}
+
+
+def _left_out(scn: Scenario, estimator: str) -> list[str]:
+    from bench.scenarios._setup import left_out_options
+
+    try:
+        return left_out_options(scn, estimator)
+    except ValueError:  # an estimator that cannot be loaded: said elsewhere
+        return []
 
 
 def _controller_gains(scn: Scenario, estimator: str) -> dict[str, float]:

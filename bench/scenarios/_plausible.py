@@ -31,11 +31,26 @@ so that only a mistake leaves them:
    loss of a real machine keeps the drop at a few per cent of its voltage
    (Wen 3.6 %, Xue 0.6 % of ``u_dc / sqrt(3)``); above ``RS_DROP_MAX`` of
    it (half) the machine could not be driven at rated current.
+5. **Mechanical time constant** ``tau_m = J w_m_rated / tau_rated``: the
+   time rated torque takes to bring the inertia (rotor and load) from
+   standstill to rated speed, friction and load aside.  A PM machine's own
+   rotor gives from about 1 ms (low-inertia servo motors: 0.3e-4 kg m^2,
+   314 rad/s, 1.3 N m: 7 ms; the fastest a few ms) to about 0.2 s (the
+   high-inertia variants of the same frames); a drive's load adds its own
+   inertia, up to the tens of times the rotor's that drive catalogues list
+   as the matched range for fans, pumps and conveyors.  The papers' motors
+   with their loads: Wen 0.063 s, Xue 0.053 s.  The band is
+   ``[TAU_M_MIN_S, TAU_M_MAX_S]`` = 0.5 ms (below the fastest servo rotor
+   by a factor of two) to 20 s (a load a hundred times the inertia of the
+   highest-inertia rotor).  Inertia is often given in kg cm^2 (catalogues
+   of servo motors) or g cm^2: ``J = 40`` meant as 40 kg cm^2 is 0.004
+   kg m^2 and gives Wen's motor 840 s, a motor the controller's speed loop
+   (its gains are designed from ``J``) never turns.
 
 When a check fails and one value the scenario's ``[motor]`` (or
 ``[inverter]``) table sets brings every check back in band when read in
 another unit (mH for H, mOhm for Ohm, mWb for Wb, rpm for rad/s, mA for A,
-or 1000 times the other way), the error names that field and that unit:
+kg cm^2 or g cm^2 for kg m^2, or 1000 times the other way), the error names that field and that unit:
 ``L_d = 36 looks like mH; the schema wants H (0.036)``.  Values of the
 preset are not suspected: they are the papers'.
 """
@@ -53,6 +68,9 @@ EMF_MAX_RATIO = 3.0
 EMF_MIN_RATIO = 0.01
 #: Resistive drop R_s i_rated at most this fraction of u_dc / sqrt(3).
 RS_DROP_MAX = 0.5
+#: Mechanical time constant band J w_m_rated / tau_rated, s (module docstring, check 5).
+TAU_M_MIN_S = 5e-4
+TAU_M_MAX_S = 20.0
 #: Current for rated torque: at most this many times i_max ...
 CURRENT_MAX_RATIO = 3.0
 #: ... and at least i_rated over this.
@@ -70,6 +88,7 @@ UNITS: dict[str, str] = {
     "tau_rated": "N m",
     "w_m_rated": "rad/s (mechanical)",
     "u_dc": "V",
+    "J": "kg m^2",
 }
 _PREFIXED = {"Ohm": "mOhm", "H": "mH", "Wb": "mWb", "A": "mA", "N m": "mN m", "V": "mV"}
 
@@ -79,6 +98,8 @@ def _alternatives(key: str) -> list[tuple[float, str]]:
     unit = UNITS[key]
     if key == "w_m_rated":
         return [(math.pi / 30.0, "rpm")]
+    if key == "J":  # catalogues give inertia in kg cm^2 (servo motors) or g cm^2
+        return [(1e-4, "kg cm^2"), (1e-7, "g cm^2")]
     # typed in the milli unit, or in the schema's unit but scaled twice (mH -> H once too often)
     return [(1e-3, _PREFIXED[unit]), (1e3, f"a value in {unit} divided by 1000 once too often")]
 
@@ -95,6 +116,7 @@ class _Motor:
     tau_rated: float
     w_m_rated: float
     u_dc: float
+    J: float
 
 
 def current_for_torque(m: _Motor, tau: float) -> float:
@@ -164,6 +186,17 @@ def _checks(m: _Motor) -> list[tuple[str, tuple[str, ...], str]]:
                 f"the resistive drop at rated current R_s i_rated = {drop:.4g} V is "
                 f"{drop / u_lin:.3g} times the inverter's u_dc/sqrt(3) = {u_lin:.4g} V "
                 f"(plausible: at most {RS_DROP_MAX:g})",
+            )
+        )
+    tau_m = m.J * m.w_m_rated / m.tau_rated
+    if not TAU_M_MIN_S <= tau_m <= TAU_M_MAX_S:
+        bad.append(
+            (
+                "tau_m",
+                ("J", "w_m_rated", "tau_rated"),
+                f"the mechanical time constant J w_m_rated / tau_rated = {tau_m:.3g} s (rated "
+                f"torque from standstill to rated speed) is outside {TAU_M_MIN_S * 1e3:g} ms "
+                f"to {TAU_M_MAX_S:g} s, the band of a PM machine with its load",
             )
         )
     i_need = current_for_torque(m, m.tau_rated)

@@ -18,8 +18,6 @@ docs/SCENARIOS.md`` rewrites it).
 from __future__ import annotations
 
 import dataclasses
-import inspect
-import re
 from dataclasses import dataclass
 from typing import Any
 
@@ -426,34 +424,21 @@ KEYS: dict[str, dict[str, Key]] = {
 
 
 def option_range(key: str) -> tuple[str, Any]:
-    """An ``[estimator_options]`` key's range in words and a value the loader refuses,
-    from the kind the schema checks it as (``_OPTION_*`` of :mod:`bench.scenarios._schema`)."""
+    """An ``[estimator_options]`` key's range in words and a value the loader refuses, from
+    its declaration (:func:`bench.scenarios._schema.shipped_options`) and the scenario's checks
+    of amplitudes and frequencies."""
     from bench.scenarios import _schema as sc
 
-    default = sc.estimator_option_keys().get(key)
-    if key in sc._OPTION_CHOICES:
-        return ", ".join(sc._OPTION_CHOICES[key]), "no-such-choice"
-    if key in sc._OPTION_FILTERS:
-        return "[[b_0, ...], [a_0, ...]], a_0 != 0", [[1.0]]
-    if key in sc._OPTION_INTEGERS:
-        return "integer >= 1", 0
-    if isinstance(default, bool):
-        return "true, false", 1
-    if key in sc._OPTION_NONNEGATIVE:
-        return ">= 0", -1.0
+    opt = sc.shipped_options()[key]
+    kind = opt.value_kind
     if key in sc._OPTION_AMPLITUDES:
-        return "> 0 and <= u_dc / sqrt(3) of the preset", 1000.0
+        return f"{opt.range_text()} and <= u_dc / sqrt(3) of the preset", 1000.0
     if key in sc._OPTION_FREQUENCIES:
-        return "> 0 and below half the PWM rate", 6000.0
-    return "> 0", 0.0
-
-
-#: Meanings of the options no estimator docstring describes.
-OPTION_MEANINGS = {
-    "alpha_o": ("rad/s", "Bandwidth of the hybrids' flux observer's speed tracker; "
-                "default: designed from theta_acc."),
-    "zeta_f": ("-", "Damping of the flux observer's correction; default: the design's."),
-}  # fmt: skip
+        return f"{opt.range_text()} and below half the PWM rate", 6000.0
+    bad: Any = {"bool": 1, "str": "no-such-choice", "filter": [[1.0]], "int": 0}.get(kind)
+    if bad is None:
+        bad = -1.0 if opt.minimum is not None else 0.0
+    return opt.range_text(), bad
 
 
 def defaults() -> dict[str, dict[str, Any]]:
@@ -550,80 +535,51 @@ def _show(v: Any) -> str:
     return str(v)
 
 
-def _numpydoc(doc: str) -> dict[str, tuple[str, str]]:
-    """``name -> (type, description)`` from a numpydoc Parameters section."""
-    out: dict[str, tuple[str, str]] = {}
-    m = re.search(r"Parameters\n\s*-+\n(.*?)(\n\s*\n\s*\S+\n\s*-+\n|\Z)", doc, re.S)
-    if not m:
-        return out
-    names: list[str] = []
-    typ = ""
-    text: list[str] = []
+def estimator_options() -> dict[str, dict[str, tuple[str, str, str, str]]]:
+    """Per estimator: option -> (unit, default, range, meaning), from the estimators'
+    declarations (:func:`controller._registry.declared_options`)."""
+    from controller._registry import ESTIMATOR_NAMES, declared_options
 
-    def flush() -> None:
-        for n in names:
-            out[n] = (typ, " ".join(text).strip())
-
-    for line in m.group(1).splitlines():
-        head = re.match(r"^\s{0,4}([A-Za-z_][\w, ]*?)\s*:\s*(.*)$", line)
-        if head and not line.startswith(" " * 8):
-            flush()
-            names = [n.strip() for n in head.group(1).split(",")]
-            typ, text = head.group(2), []
-        elif line.strip():
-            text.append(line.strip())
-    flush()
+    out: dict[str, dict[str, tuple[str, str, str, str]]] = {}
+    for name in ESTIMATOR_NAMES:
+        rows: dict[str, tuple[str, str, str, str]] = {}
+        for k, opt in (declared_options(name) or {}).items():
+            shown = (
+                "derived (meta.json: controller_gains)"
+                if opt.default is None
+                else _show(opt.default)
+            )
+            if k in ("bpf", "hpf", "lpf"):
+                shown = "Wen eqs. (11)-(13)"
+            rows[k] = (opt.unit, shown, option_range(k)[0], opt.doc)
+        out[name] = rows
     return out
 
 
-def _unit_of(text: str) -> str:
-    m = re.search(r"\(([^()]*(?:V|Hz|rad/s|rad|deg|periods|PWM periods|-))\)", text)
-    return m.group(1) if m else ""
+def option_groups() -> list[
+    tuple[tuple[str, ...], list[tuple[tuple[str, ...], tuple[str, str, str, str]]]]
+]:
+    """The options of :func:`estimator_options` said once: grouped by the estimators that share
+    a row, and within a group the keys with one row merged (``bpf``, ``hpf``, ``lpf``).
 
-
-def estimator_options() -> dict[str, dict[str, tuple[str, str, str, str]]]:
-    """Per estimator: option -> (unit, default, range, meaning), from the estimators' code."""
-    from bench.scenarios._schema import estimator_option_keys
-    from controller._hybrid import _OWN_OPTIONS, design
-    from controller._registry import ESTIMATOR_NAMES, injection_family
-    from controller._rotating import RotatingInjectionPars
-    from controller._square_wave import SquareWaveEstimator
-
-    every = estimator_option_keys()
-    rot = _numpydoc(RotatingInjectionPars.__doc__ or "")
-    sq = _numpydoc(SquareWaveEstimator.__doc__ or "")
-    hyb = _numpydoc(design.__doc__ or "")
-    hyb_defaults = {
-        k: p.default for k, p in inspect.signature(design).parameters.items() if k != "motor"
-    }
-
-    def row(k: str, doc: dict[str, tuple[str, str]], default: Any) -> tuple[str, str, str, str]:
-        rng = option_range(k)[0]
-        if k in doc:
-            meaning = re.sub(r":\w+:`([^`]*)`", r"`\1`", doc[k][1].replace("``", "`"))
-            unit = _unit_of(meaning)
-        else:
-            unit, meaning = OPTION_MEANINGS.get(k, ("", ""))
-        shown = "derived (meta.json: controller_gains)" if default is None else _show(default)
-        if k in ("bpf", "hpf", "lpf"):
-            shown = "Wen eqs. (11)-(13)"
-        return unit, shown, rng, meaning
-
-    out: dict[str, dict[str, tuple[str, str, str, str]]] = {}
-    rot_keys = [f.name for f in dataclasses.fields(RotatingInjectionPars)]
-    sq_keys = [k for k in inspect.signature(SquareWaveEstimator.__init__).parameters
-               if k not in ("self", "motor", "T_s", "cic")]  # fmt: skip
-    for name in ESTIMATOR_NAMES:
-        fam = injection_family(name)
-        rows: dict[str, tuple[str, str, str, str]] = {}
-        if fam == "rotating":
-            rows = {k: row(k, rot, every[k]) for k in rot_keys}
-        elif fam == "square":
-            rows = {k: row(k, sq, every[k]) for k in sq_keys}
-        if name.startswith("hybrid"):
-            for k in _OWN_OPTIONS:
-                rows[k] = row(k, hyb, hyb_defaults.get(k))
-        out[name] = rows
+    Returns ``[(estimators, [(keys, (unit, default, range, meaning)), ...]), ...]`` in the
+    order of the estimators and their options.
+    """
+    Row = tuple[str, str, str, str]
+    per = estimator_options()
+    owners: dict[tuple[str, Row], list[str]] = {}
+    for name, rows in per.items():
+        for k, row in rows.items():
+            owners.setdefault((k, row), []).append(name)
+    groups: dict[tuple[str, ...], list[tuple[str, Row]]] = {}
+    for (k, row), names in owners.items():
+        groups.setdefault(tuple(names), []).append((k, row))
+    out: list[tuple[tuple[str, ...], list[tuple[tuple[str, ...], Row]]]] = []
+    for group, members in groups.items():
+        merged: dict[Row, list[str]] = {}
+        for k, row in members:
+            merged.setdefault(row, []).append(k)
+        out.append((group, [(tuple(ks), row) for row, ks in merged.items()]))
     return out
 
 
@@ -699,19 +655,25 @@ def render() -> str:
     lines += [
         "## [estimator_options]",
         "",
-        "Passed to the estimator; the keys of every estimator are accepted (the estimator "
-        "may be chosen on the command line), each checked by its name. `meta.json` "
-        "(`controller_gains`) records the values a run used, derived ones included.",
+        "One scenario serves every estimator: each estimator takes the options it declares "
+        "(below) and leaves out the others, which a run names in a note (one line on stderr, "
+        "and `estimator_options_left_out` in `meta.json`). A key no estimator declares is an "
+        "error naming the file and the key; a plug-in's own options are accepted in a file "
+        "that names the plug-in in `estimator` or `estimators` (docs/ESTIMATORS.md). Each "
+        "value is checked by its key. `meta.json` (`controller_gains`) records the values a "
+        "run used, derived ones included.",
         "",
     ]
-    for name, rows in estimator_options().items():
-        lines.append(f"### {name}")
-        lines.append("")
-        if not rows:
-            lines += ["No options.", ""]
-            continue
+    for group, members in option_groups():
+        lines += [f"### {', '.join(group)}", ""]
         lines += ["| key | unit | default | range | meaning |", "|---|---|---|---|---|"]
-        for k, (unit, d, rng, meaning) in rows.items():
-            lines.append(f"| `{k}` | {unit} | {d} | {rng} | {meaning} |")
+        for opt_keys, (unit, d, rng, meaning) in members:
+            shown = ", ".join(f"`{k}`" for k in opt_keys)
+            lines.append(f"| {shown} | {unit} | {d} | {rng} | {meaning} |")
         lines.append("")
+    from controller._registry import ESTIMATOR_NAMES
+
+    bare = [n for n, rows in estimator_options().items() if not rows and n in ESTIMATOR_NAMES]
+    if bare:
+        lines += [f"{', '.join(f'`{n}`' for n in bare)}: no options.", ""]
     return "\n".join(lines).rstrip("\n") + "\n"

@@ -13,8 +13,8 @@ multiplied by sqrt(2)), flux linkages peak per phase in Wb, inductances in H
 (not mH), the ``[motor]`` speeds mechanical rad/s (not rpm), speed
 references in rpm, angles electrical degrees, voltages V, times s.  A motor
 is checked against physics on load (``bench/scenarios/_plausible.py``): a
-value off by a factor of 1000 is an error that names the field and the unit
-it looks like.
+value off by a factor of 1000 (or an inertia in kg cm^2) is an error that
+names the field and the unit it looks like.
 
 Schema (all keys optional unless marked *required*; every key with its unit,
 default, range and meaning: docs/SCENARIOS.md, written by ``bench schema`` from
@@ -47,10 +47,10 @@ this module and :mod:`bench.scenarios._reference`)::
     U_h = 20.0                       # square-wave: injection amplitude, V peak; also a (observer
                                      # pole, rad/s), M (CIC delay, periods), delay_comp (periods)
                                      # (amplitudes <= u_dc/sqrt(3) of the preset, f_h below
-                                     # Nyquist; the keys of both families load, since the
-                                     # estimator may be chosen on the command line; a run then
-                                     # refuses a key of the other family in one line, and
-                                     # sensored runs without them, saying so).  Needs [motor]
+                                     # Nyquist; the keys of every estimator load, since the
+                                     # estimator may be chosen on the command line; a run
+                                     # leaves out the keys of the others with a note, and a
+                                     # key no estimator declares is an error).  Needs [motor]
                                      # in a file that does not extend a scenario (the settings
                                      # are for a motor; an empty [motor] keeps the preset's)
     extends = "wen-5.1"              # start from a shipped scenario (or a path): this file's
@@ -135,9 +135,7 @@ this module and :mod:`bench.scenarios._reference`)::
 
 from __future__ import annotations
 
-import dataclasses
 import functools
-import inspect
 import itertools
 import json
 import math
@@ -490,91 +488,65 @@ MOTOR_KEYS = (
 )  # fmt: skip
 
 
-#: ``[estimator_options]`` keys checked by kind.  The estimator, and so the family
-#: the options are for, may be chosen only on the command line: the keys of
-#: every family are accepted (:func:`estimator_option_keys`), each value is
-#: checked by its key's name.
+#: ``[estimator_options]`` keys checked against the scenario beyond their declaration
+#: (:func:`controller._registry.declared_options`, which states each key's type and range).
 _OPTION_AMPLITUDES = ("V_h", "U_h")  # injection amplitude (V): (0, u_dc / sqrt(3)]
 _OPTION_FREQUENCIES = ("f_h",)  # injection frequency (Hz): (0, Nyquist)
-_OPTION_NONNEGATIVE = (
-    "w_o",
-    "delay_comp",
-    "u_err",
-)  # PLL bandwidth (0 freezes it), periods (0: off), V
-_OPTION_INTEGERS = ("M",)  # CIC differential delay (PWM periods), >= 1
-_OPTION_FILTERS = ("bpf", "hpf", "lpf")  # continuous prototypes [[b...], [a...]]
-_OPTION_CHOICES = {"normalise": ("model", "measured"), "observer": ("pll", "mechanical")}
-# any other key (``a``, the square-wave observer pole, rad/s): a number > 0
-#: Parameters of the square-wave estimator that are not options: the
-#: controller's (``motor``, ``T_s``) and the estimator name's (``cic``:
-#: ``square-wave`` or ``square-wave-nocic``).
-_SQUARE_WAVE_FIXED = ("self", "motor", "T_s", "cic")
+
+
+@functools.cache
+def shipped_options() -> dict[str, Any]:
+    """Every built-in estimator's ``[estimator_options]`` key with its declaration
+    (:class:`controller.Option`; the first estimator's where several declare one key)."""
+    from controller._registry import ESTIMATOR_NAMES, declared_options
+
+    out: dict[str, Any] = {}
+    for name in ESTIMATOR_NAMES:
+        for k, opt in (declared_options(name) or {}).items():
+            out.setdefault(k, opt)
+    return out
 
 
 @functools.cache
 def estimator_option_keys() -> dict[str, Any]:
-    """Every ``[estimator_options]`` key with its default, over all estimator families.
+    """Every ``[estimator_options]`` key of the built-in estimators with its default.
 
-    Rotating injection (``sfhf``, ``tt-ab``, ``tt-dq``): the fields of
-    :class:`controller._rotating.RotatingInjectionPars`; square-wave: the
+    The estimators' declarations (:func:`controller._registry.declared_options`):
+    rotating injection (``sfhf``, ``tt-ab``, ``tt-dq``) the fields of
+    :class:`controller._rotating.RotatingInjectionPars`; square-wave the
     keyword parameters of :class:`controller._square_wave.SquareWaveEstimator`;
     the hybrids add the hand-over's own (``controller._hybrid``).  ``sensored``
     takes none.
     """
-    from controller._rotating import RotatingInjectionPars
-    from controller._square_wave import SquareWaveEstimator
-
-    keys: dict[str, Any] = {f.name: f.default for f in dataclasses.fields(RotatingInjectionPars)}
-    for k, p in inspect.signature(SquareWaveEstimator.__init__).parameters.items():
-        if k not in _SQUARE_WAVE_FIXED:
-            keys[k] = p.default
-    # the hybrids' own (controller._hybrid): the hand-over design and the observer's gains
-    from controller._hybrid import _OWN_OPTIONS
-
-    for k in _OWN_OPTIONS:
-        keys.setdefault(k, None)
-    return keys
+    return {k: opt.default for k, opt in shipped_options().items()}
 
 
-@functools.cache
 def estimator_keys(estimator: str) -> frozenset[str]:
-    """The ``[estimator_options]`` keys one estimator takes (``sensored``: none).
+    """The ``[estimator_options]`` keys one estimator declares (``sensored``: none; a plug-in
+    without a declaration: the keywords its factory names, none for ``**options``)."""
+    from controller._registry import declared_options, plugin
 
-    Rotating injection: the fields of :class:`controller._rotating.RotatingInjectionPars`;
-    square-wave: the keyword parameters of :class:`controller._square_wave.SquareWaveEstimator`;
-    a hybrid: its injection estimator's and the hand-over's own.
-    """
-    from controller._hybrid import _OWN_OPTIONS
-    from controller._registry import injection_family
-    from controller._rotating import RotatingInjectionPars
-    from controller._square_wave import SquareWaveEstimator
-
-    family = injection_family(estimator)
-    keys: set[str] = set()
-    if family == "rotating":
-        keys = {f.name for f in dataclasses.fields(RotatingInjectionPars)}
-    elif family == "square":
-        keys = {
-            k
-            for k in inspect.signature(SquareWaveEstimator.__init__).parameters
-            if k not in _SQUARE_WAVE_FIXED
-        }
-    if estimator.startswith("hybrid-"):
-        keys |= set(_OWN_OPTIONS)
-    return frozenset(keys)
+    decl = declared_options(estimator)
+    if decl is not None:
+        return frozenset(decl)
+    p = plugin(estimator)
+    return frozenset(p.keywords or ()) if p is not None else frozenset()
 
 
 def split_options(options: dict[str, Any], estimator: str) -> tuple[dict[str, Any], list[str]]:
-    """A scenario's estimator options: (those ``estimator`` takes, the keys it does not)."""
-    keys = estimator_keys(estimator)
-    return {k: v for k, v in options.items() if k in keys}, [k for k in options if k not in keys]
+    """A scenario's estimator options: (those ``estimator`` receives, the keys it does not)
+    (:func:`controller._registry.hand_over`)."""
+    from controller._registry import hand_over
+
+    return hand_over(estimator, options)
 
 
-def option_owners(key: str) -> list[str]:
-    """The estimators that take ``[estimator_options]`` key ``key``."""
+def option_owners(key: str, also: tuple[str, ...] = ()) -> list[str]:
+    """The estimators that declare ``[estimator_options]`` key ``key``: the built-in ones and
+    the plug-ins ``also``."""
     from controller._registry import ESTIMATOR_NAMES
 
-    return [e for e in ESTIMATOR_NAMES if key in estimator_keys(e)]
+    return [e for e in dict.fromkeys((*ESTIMATOR_NAMES, *also)) if key in estimator_keys(e)]
 
 
 def _signal_range(message: Any, signal: str) -> tuple[float, float]:
@@ -702,7 +674,7 @@ def _check_plausible(
     from plant_rt import PRESETS
 
     p = PRESETS[preset]
-    keys = ("n_p", "R_s", "L_d", "L_q", "psi_f", "i_rated", "i_max", "tau_rated", "w_m_rated")
+    keys = ("n_p", "R_s", "L_d", "L_q", "psi_f", "i_rated", "i_max", "tau_rated", "w_m_rated", "J")
     values = {k: float(motor.get(k, getattr(p.motor, k))) for k in keys}
     values["u_dc"] = float(inverter.get("u_dc", p.inverter.u_dc))
     given = {k: f"motor.{k}" for k in motor}
@@ -869,64 +841,71 @@ def _parse_latency(r: _Reader) -> Latency:
     return out
 
 
-def _parse_filter(r: _Reader, key: str) -> tuple[tuple[float, ...], ...]:
-    """A continuous filter prototype ``[[b_0, ...], [a_0, ...]]`` (an estimator option)."""
-    v = r.t[key]
-    if not (
-        isinstance(v, list)
-        and len(v) == 2
-        and all(
-            isinstance(c, list)
-            and c
-            and all(
-                isinstance(x, int | float) and not isinstance(x, bool) and math.isfinite(x)
-                for x in c
-            )
-            for c in v
-        )
-        and v[1][0] != 0
-    ):
-        raise r.fail(
-            key,
-            "expected [[b_0, b_1, ...], [a_0, a_1, ...]], the numerator and denominator "
-            f"of a continuous prototype (finite numbers, a_0 != 0), got {v!r}",
-        )
-    return tuple(tuple(float(x) for x in c) for c in v)
-
-
-def _parse_estimator_options(r: _Reader, preset: str, f_s: float) -> dict[str, Any]:
+def _parse_estimator_options(
+    r: _Reader, preset: str, f_s: float, named: tuple[str, ...] = ()
+) -> dict[str, Any]:
     """The ``[estimator_options]`` table, each value checked by its key's name.
 
-    Amplitudes must be > 0 and within the inverter's linear range
-    ``u_dc / sqrt(3)`` (space-vector modulation) of the preset; frequencies
-    > 0 and below the Nyquist frequency of the sample rate ``f_s``.
+    The keys of every built-in estimator are accepted (the estimator may be
+    chosen on the command line; a run leaves out, with a note, the keys of the
+    others), and those of the plug-ins the file names (``named``: its
+    ``estimator`` and ``estimators``), checked as they declare them; a key no
+    estimator declares is an error.  Amplitudes must be > 0 and within the
+    inverter's linear range ``u_dc / sqrt(3)`` (space-vector modulation) of the
+    preset; frequencies > 0 and below the Nyquist frequency of the sample rate
+    ``f_s``.
     """
+    from controller._registry import declared_options, is_plugin_name, plugin
     from plant_rt import PRESETS
 
     keys = estimator_option_keys()
-    eo = r.table("estimator_options", set(keys))
+    plugin_opts: dict[str, Any] = {}  # key -> (plug-in, Option) of the named plug-ins
+    takes_any = []  # named plug-ins without a declaration that take **options
+    for name in dict.fromkeys(named):
+        if name in _shipped_names():
+            continue
+        decl = declared_options(name)
+        if decl is None:
+            p = plugin(name)
+            if p is not None and p.keywords is None:
+                takes_any.append(name)
+            for k in (p.keywords or ()) if p is not None else ():
+                plugin_opts.setdefault(k, (name, None))
+            continue
+        for k, opt in decl.items():
+            plugin_opts.setdefault(k, (name, opt))
+    table = r.t.get("estimator_options", {})
+    if isinstance(table, dict) and not takes_any:
+        for k in table:
+            if k not in keys and k not in plugin_opts:
+                hint = (
+                    ""
+                    if any(is_plugin_name(n) for n in named)
+                    else "; a plug-in's options are accepted in a file that names the plug-in in "
+                    "estimator or estimators"
+                )
+                raise ScenarioError(
+                    f"{r.src}: field 'estimator_options.{k}': unknown key (known: "
+                    f"{', '.join(sorted({*keys, *plugin_opts}))}): no estimator declares it{hint}"
+                )
+    eo = r.table("estimator_options")
     u_dc = PRESETS[preset].inverter.u_dc
     u_lin = u_dc / math.sqrt(3.0)
     out: dict[str, Any] = {}
     for k in eo.t:
-        if k in _OPTION_CHOICES:
-            choices = _OPTION_CHOICES[k]
-            s = eo.string(k)
-            if s not in choices:
-                raise eo.fail(k, f"expected {' or '.join(map(repr, choices))}, got {s!r}")
-            out[k] = s
-        elif k in _OPTION_FILTERS:
-            out[k] = _parse_filter(eo, k)
-        elif k in _OPTION_INTEGERS:
-            out[k] = eo.integer(k, 0, lo=1)
-        elif isinstance(keys[k], bool):
-            out[k] = eo.boolean(k, keys[k])
-        elif k in _OPTION_NONNEGATIVE:
-            out[k] = eo.num(k, lo=0.0)
+        if k not in keys:
+            owner, opt = plugin_opts.get(k, (None, None))
+            if opt is None:  # a plug-in without a declaration: its factory's own check
+                out[k] = eo.t[k]
+                continue
+            val, why = opt.check(eo.t[k])
+            if why is not None:
+                raise eo.fail(k, f"{why} (an option of {owner})")
+            out[k] = val
         else:
-            v = eo.num(k)
-            if not v > 0.0:
-                raise eo.fail(k, f"must be > 0, got {v}")
+            v, why = shipped_options()[k].check(eo.t[k])
+            if why is not None:
+                raise eo.fail(k, why)
             if k in _OPTION_AMPLITUDES and v > u_lin:
                 raise eo.fail(
                     k,
@@ -941,6 +920,12 @@ def _parse_estimator_options(r: _Reader, preset: str, f_s: float) -> dict[str, A
                 )
             out[k] = v
     return out
+
+
+def _shipped_names() -> tuple[str, ...]:
+    from controller._registry import ESTIMATOR_NAMES
+
+    return ESTIMATOR_NAMES
 
 
 def _estimator_error(name: str) -> str | None:
@@ -1030,7 +1015,7 @@ def parse_scenario(data: dict[str, Any], src: str) -> Scenario:
     _check_plausible(r.src, preset, motor, inverter)
     controller = _parse_controller(r, 1.0 / f_eff)
     _check_delay_us(r.src, latency, f_eff)
-    opts = _parse_estimator_options(r, preset, f_eff)
+    opts = _parse_estimator_options(r, preset, f_eff, (estimator, *ests))
     paper = r.table("paper_result").t
     duration = r.num("duration", lo=1e-3)
     # default: past the start-up transient (0.5 s), or the second half of a shorter run

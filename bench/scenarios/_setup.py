@@ -15,7 +15,6 @@ from bench._errors import ScenarioError
 from bench.scenarios._schema import (
     ModelErrors,
     Scenario,
-    estimator_keys,
     option_owners,
     saliency_error,
     split_options,
@@ -206,16 +205,9 @@ def build_controller(scn: Scenario, estimator: str, engine: str | None = None) -
             f"and L_q = {scn.controller_model.L_q} leave the controller's model without "
             f"saliency (L_q {model.L_q:.4g} H <= L_d {model.L_d:.4g} H), which {estimator} needs"
         )
-    options, foreign = split_options(scn.estimator_options, estimator)
-    if foreign and injection_family(estimator) != "none":
-        k = foreign[0]
-        owners = option_owners(k)
-        raise ScenarioError(
-            f"{scn.source}: field 'estimator_options.{k}': an option of "
-            f"{', '.join(owners) or 'no estimator'}, not of {estimator} (which takes "
-            f"{', '.join(sorted(estimator_keys(estimator)))})"
-        )
-    # sensored takes none: the scenario's injection settings are for its other estimators
+    # the options the estimator declares; the others are for the scenario's other
+    # estimators (options_note says so)
+    options, _ = split_options(scn.estimator_options, estimator)
     try:
         pars = ControllerPars(
             motor=model,
@@ -311,8 +303,9 @@ def check_estimator_name(est: str, option: str = "--estimator") -> str:
 def check_estimator_fits(scn: Scenario, est: str) -> str | None:
     """Build the controller once, so a misfit is one line before any process starts.
 
-    Returns the line to tell the user when the scenario's estimator options
-    are left out (``sensored`` takes none; it runs from any scenario).
+    Returns the line to tell the user when some of the scenario's estimator
+    options are left out (:func:`options_note`: one scenario serves every
+    estimator, each takes the options it declares; ``sensored`` takes none).
     """
     check_estimator_name(est)
     try:
@@ -322,10 +315,23 @@ def check_estimator_fits(scn: Scenario, est: str) -> str | None:
             f"--estimator {est}: cannot run scenario {scn.name} ({e}); "
             f"the scenario's estimators: {', '.join(scn.estimators)}"
         ) from None
-    _, foreign = split_options(scn.estimator_options, est)
+    return options_note(scn, est)
+
+
+def options_note(scn: Scenario, est: str) -> str | None:
+    """The line that says which of the scenario's ``[estimator_options]`` ``est`` leaves out
+    (a scenario serves every estimator; each takes the options it declares), or None."""
+    foreign = left_out_options(scn, est)
     if not foreign:
         return None
+    owners = {k: option_owners(k, scn.estimators) for k in foreign}
+    of = "; ".join(f"{k}: {', '.join(o) or '?'}" for k, o in owners.items())
     return (
-        f"note: {est} takes no estimator options; the scenario's [estimator_options] "
-        f"({', '.join(foreign)}) are for its other estimators and are left out of this run"
+        f"note: {est} leaves out the scenario's estimator options {', '.join(foreign)} "
+        f"(options of other estimators: {of})"
     )
+
+
+def left_out_options(scn: Scenario, est: str) -> list[str]:
+    """The keys of the scenario's ``[estimator_options]`` estimator ``est`` does not take."""
+    return split_options(scn.estimator_options, est)[1]
