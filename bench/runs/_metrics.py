@@ -129,6 +129,19 @@ def lock_lost(t: Array, err_deg: Array, T_s: float) -> tuple[bool, float | None]
     return True, float(t[first])
 
 
+#: The metrics ``compute_metrics`` leaves ``None`` (``null``) where no row scores them.
+ANGLE_METRICS = (
+    "theta_err_max_deg",
+    "theta_err_min_deg",
+    "theta_err_mean_deg",
+    "theta_err_abs_mean_deg",
+    "theta_err_rms_deg",
+    "theta_err_abs_max_deg",
+    "theta_err_abs_max_rad",
+    "speed_err_max_rpm",
+)
+
+
 def compute_metrics(
     table: Mapping[str, Array],
     *,
@@ -143,34 +156,74 @@ def compute_metrics(
     ``table`` needs the columns ``t``, ``theta_e``, ``theta_hat``,
     ``w_m_rpm``, ``w_hat_rpm``, ``w_ref_rpm`` and ``i_a``; rows whose
     optional ``mode`` column is 0 (controller disabled) are not scored.
+
+    The scored rows are those from ``score_from_s`` on.  A row without the
+    controller's telemetry (``theta_hat`` NaN: the controller sent nothing for
+    that period, e.g. it died and the plant went on in its safe state) is a
+    plant period like any other for what the plant's truth alone gives (the
+    speed tracking error, the overshoot, the THD), while the position error
+    and the speed-estimation error there are unknown: those
+    (:data:`ANGLE_METRICS`, and the lost lock) are scored over the scored rows
+    with an estimate.  ``scored_steps`` counts the scored rows,
+    ``steps_without_telemetry`` the rows of the whole table without an
+    estimate.  A metric with no row to score it is ``None``, and
+    ``unscored_reason`` says why (absent when every metric was scored).
     """
     t = table["t"]
     sel = t >= score_from_s
     if "mode" in table:
         # a disabled controller (mode 0, e.g. the stop step at the end) makes no estimate
         sel &= table["mode"] != 0
+    has_est = np.isfinite(table["theta_hat"])
+    est = sel & has_est
+    m: dict[str, Any] = dict.fromkeys(ANGLE_METRICS)
+    m["speed_track_err_max_rpm"] = None
+    m.update(
+        steps=len(t),
+        scored_steps=int(np.count_nonzero(sel)),
+        steps_without_telemetry=int(len(t) - np.count_nonzero(has_est)),
+        sim_s=float(len(t) * T_s),
+        lock_lost=False,
+        lock_lost_at_s=None,
+    )
     if not np.any(sel):
-        raise ValueError(f"no samples after score_from_s = {score_from_s} s")
-    err = wrap_pi(table["theta_e"][sel] - table["theta_hat"][sel])
-    err_deg = np.degrees(err)
+        m["unscored_reason"] = (
+            f"no row to score: none from score_from_s = {score_from_s:g} s on"
+            if not np.any(t >= score_from_s)
+            else f"no row to score: the controller was disabled (mode 0) from {score_from_s:g} s on"
+        )
+        if overshoot:
+            m["speed_overshoot_rpm"] = None
+        return m
     w = table["w_m_rpm"][sel]
-    m: dict[str, Any] = {
-        "theta_err_max_deg": float(np.max(err_deg)),
-        "theta_err_min_deg": float(np.min(err_deg)),
-        "theta_err_mean_deg": float(np.mean(err_deg)),
-        "theta_err_abs_mean_deg": float(np.mean(np.abs(err_deg))),
-        "theta_err_rms_deg": float(np.sqrt(np.mean(err_deg**2))),
-        "theta_err_abs_max_deg": float(np.max(np.abs(err_deg))),
-        "theta_err_abs_max_rad": float(np.max(np.abs(err))),
-        "speed_err_max_rpm": float(np.max(np.abs(table["w_hat_rpm"][sel] - w))),
-        "speed_track_err_max_rpm": float(np.max(np.abs(table["w_ref_rpm"][sel] - w))),
-        "steps": len(t),
-        "scored_steps": int(np.count_nonzero(sel)),
-        "sim_s": float(len(t) * T_s),
-    }
-    lost, lost_at = lock_lost(t[sel], err_deg, T_s)
-    m["lock_lost"] = lost
-    m["lock_lost_at_s"] = lost_at
+    track = np.abs(table["w_ref_rpm"][sel] - w)
+    # NaN without a reference (a capture without the bench's commands)
+    m["speed_track_err_max_rpm"] = (
+        float(np.nanmax(track)) if np.any(np.isfinite(track)) else math.nan
+    )
+    if np.any(est):
+        err = wrap_pi(table["theta_e"][est] - table["theta_hat"][est])
+        err_deg = np.degrees(err)
+        m.update(
+            theta_err_max_deg=float(np.max(err_deg)),
+            theta_err_min_deg=float(np.min(err_deg)),
+            theta_err_mean_deg=float(np.mean(err_deg)),
+            theta_err_abs_mean_deg=float(np.mean(np.abs(err_deg))),
+            theta_err_rms_deg=float(np.sqrt(np.mean(err_deg**2))),
+            theta_err_abs_max_deg=float(np.max(np.abs(err_deg))),
+            theta_err_abs_max_rad=float(np.max(np.abs(err))),
+        )
+        w_err = np.abs(table["w_hat_rpm"][est] - table["w_m_rpm"][est])
+        if np.any(np.isfinite(w_err)):
+            m["speed_err_max_rpm"] = float(np.nanmax(w_err))
+        lost, lost_at = lock_lost(t[est], err_deg, T_s)
+        m["lock_lost"] = lost
+        m["lock_lost_at_s"] = lost_at
+    else:
+        m["unscored_reason"] = (
+            f"no CtrlTelemetry in the {int(np.count_nonzero(sel)):,} scored rows: "
+            "the position and speed-estimation errors are unknown"
+        )
     if overshoot:
         m["speed_overshoot_rpm"] = overshoot_rpm(t[sel], table["w_ref_rpm"][sel], w)
     if thd_window_s is not None:

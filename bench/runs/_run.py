@@ -49,6 +49,7 @@ from bench.runs._processes import (
     start_nodes,
     stop_nodes,
 )
+from bench.runs._analysis import NoRowsError
 from bench.runs._pacing import PACE_EVERY, CommandPacer
 from bench.runs._recorder import Recording
 from bench.runs._results import RunResult, finish_run, run_metadata, scoring_scenario
@@ -183,6 +184,8 @@ def run_scenario(
                     why = "interrupted"
                     if shared and not interrupted():
                         why = "another run's frames on this bus"
+                    elif ended == "dut" and dut is not None:
+                        why = dut.failure_text()
                     elif ended:
                         code = dict(procs)[ended].returncode
                         why = f"{ended} process ended ({how_ended(out_dir, ended, code)})"
@@ -226,13 +229,16 @@ def run_scenario(
     frames = rec.frames()
     codes = dict(meta["exit_codes"])
     if not frames and (ended or failures) and not interrupted():
-        why = (
-            f"{ended} process ended before the run did ({how_ended(out_dir, ended, codes[ended])})"
-            if ended
-            else "node process failed ("
-            + "; ".join(f"{r}: {last_line(out_dir, r)}" for r in failures)
-            + ")"
-        )
+        if ended == "dut" and dut is not None:
+            why = dut.failure_text()
+        elif ended:
+            why = f"{ended} process ended before the run did ({how_ended(out_dir, ended, codes[ended])})"
+        else:
+            why = (
+                "node process failed ("
+                + "; ".join(f"{r}: {last_line(out_dir, r)}" for r in failures)
+                + ")"
+            )
         raise failed_before_recording(out_dir, why)
     # a plant that ended before the scenario's last period (a lockstep watchdog
     # trip with a controller under test) leaves a shorter run: scored as far as it went
@@ -245,18 +251,25 @@ def run_scenario(
     if dut is not None:
         dut.check(rec.plant_step)  # a trip the drive loop ended before printing
         dut.plant_story(out_dir)
-    if shared and not interrupted():
-        raise BenchError(shared_bus_line(shared, spec.describe(), rec.plant_step, out_dir))
-    if ended == "dut" and dut is not None and not interrupted():
-        raise BenchError(f"{dut.failure_text()}; files in {out_dir}")
-    if ended and not interrupted():
-        raise BenchError(
+    if interrupted():
+        return result
+    line: str | None = None
+    if shared:
+        line = shared_bus_line(shared, spec.describe(), rec.plant_step, out_dir)
+    elif ended == "dut" and dut is not None:
+        line = f"{dut.failure_text()}; files in {out_dir}"
+    elif ended:
+        line = (
             f"{ended} process ended before the run did ({how_ended(out_dir, ended, codes[ended])}); "
             f"files in {out_dir}"
         )
-    if failures and not interrupted():
+    elif failures:
         logs = "; ".join(f"{r}: {how_ended(out_dir, r, codes[r])}" for r in failures)
-        raise BenchError(f"node process failed ({logs}); files in {out_dir}")
+        line = f"node process failed ({logs}); files in {out_dir}"
+    if line is not None:
+        # the line of a run that ends with status 2, kept beside what it recorded
+        (out_dir / "error.txt").write_text(line + "\n")
+        raise BenchError(line)
     return result
 
 
@@ -582,13 +595,17 @@ def _score(
         return finish_run(
             frames, codec, scn, out_dir, meta=meta, wall_s=wall, capture=capture, plots=plots
         )
-    except ValueError:
-        if not partial:
-            raise
+    except NoRowsError as e:  # not a single plant period recorded: no table to score
+        why = str(e)
     meta["capture"] = capture.name if frames else None
     if not frames:
         capture.unlink(missing_ok=True)
-    metrics: dict[str, Any] = {"steps": 0, "frames_recorded": len(frames), "wall_s": wall}
+    metrics: dict[str, Any] = {
+        "steps": 0,
+        "frames_recorded": len(frames),
+        "wall_s": wall,
+        "unscored_reason": why,
+    }
     (out_dir / "metrics.json").write_text(jsonio.dumps(metrics, indent=2) + "\n")
     (out_dir / "meta.json").write_text(json.dumps(meta, indent=2, default=str) + "\n")
     return RunResult(out_dir=out_dir, metrics=metrics, capture=capture, meta=meta)
