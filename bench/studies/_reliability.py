@@ -334,6 +334,180 @@ def parallel_check(say: Callable[[str], None]) -> dict[str, Any]:
     }
 
 
+#: What :func:`pour_fuzz` sends besides random FD frames with the DBC's identifiers
+#: (:data:`RANDOM_FD_SHARE` of them): the kinds of
+#: :class:`bench.studies._soak.FrameFuzzer`.  ``garbage``: frames no E2E check
+#: passes (corrupted copies, wrong lengths, unknown identifiers; the random FD
+#: frames of the classic messages have lengths above 8, those of the FD recorder
+#: frames pass the 8-bit CRC once in 256 and then differ in their run_id) and
+#: copies of the run's own frames (duplicates, replays, reordered bursts);
+#: ``forged`` adds frames that a receiver cannot tell from genuine ones: valid
+#: frames with random values, and random payloads of the right length (which
+#: pass the CRC once in 256).
+FLOOD_WEIGHTS: dict[str, dict[str, float]] = {
+    "garbage": {"valid": 0.0, "random_payload": 0.0, "duplicate": 2.0, "replay": 2.0},
+    "forged": {"valid": 1.0, "random_payload": 3.0, "duplicate": 2.0, "replay": 2.0},
+}
+#: The share of random CAN FD frames with the DBC's identifiers in a flood.
+RANDOM_FD_SHARE = 0.4
+
+
+def pour_fuzz(
+    bus: can.BusABC,
+    stop: Callable[[], bool],
+    *,
+    seed: int,
+    kinds: str = "garbage",
+    old_commands: int = 0,
+    rate_hz: float = 1000.0,
+) -> dict[str, int]:
+    """Pour fuzzed CAN FD and classic frames at ``bus`` until ``stop()``; the frames sent, by kind.
+
+    Random FD frames with the DBC's identifiers (:data:`RANDOM_FD_SHARE`), and
+    :class:`bench.studies._soak.FrameFuzzer`'s kinds (weights
+    :data:`FLOOD_WEIGHTS` ``[kinds]``), its replays and duplicates drawn from the
+    frames seen on the bus (the run's own, a moment old) and the flood's own.  ``old_commands``:
+    first that many valid ``BenchCommand`` frames of a longer run (steps that
+    unwrap to before this run's start), one every few milliseconds, the replay
+    that once kept a plant from ever starting.  At most ``rate_hz`` frames a
+    second (on average): a flood that takes every CPU measures the host, not
+    the run.
+    """
+    from bench.studies._soak import FrameFuzzer
+    from bench.wire._codec import default_codec
+
+    codec = default_codec()
+    fz = FrameFuzzer(codec, seed, weights=FLOOD_WEIGHTS[kinds])
+    rng = random.Random(seed)
+    sent: dict[str, int] = {}
+    n = 0
+    t0 = time.monotonic()
+    while not stop():
+        while (seen := bus.recv(0.0)) is not None:
+            fz.history.append(seen)
+        if n < old_commands:
+            sig = {"cmd": 0, "speed_ref": 0.0, "load_torque": 0.0, "seq": rng.randrange(16),
+                   "step": rng.randrange(1 << 15, 1 << 16)}  # fmt: skip
+            msg, kind = codec.encode("BenchCommand", sig), "old_command"
+            time.sleep(0.005)
+        elif rng.random() < RANDOM_FD_SHARE:
+            name = rng.choice(codec.names)
+            size = codec.length(name)
+            if size <= 8 or rng.random() < 0.5:
+                size = rng.choice([x for x in (12, 16, 20, 24, 32, 48, 64) if x != size])
+            msg = can.Message(arbitration_id=codec.frame_id(name), data=rng.randbytes(size),
+                              is_fd=True, is_extended_id=False)  # fmt: skip
+            kind = "random_fd"
+            fz.history.append(msg)
+        else:
+            msg, kind = fz.one()
+        try:
+            bus.send(msg)
+        except (can.CanError, OSError):
+            kind = "send_failed"
+        sent[kind] = sent.get(kind, 0) + 1
+        n += 1
+        ahead = t0 + n / rate_hz - time.monotonic()
+        if ahead > 0:
+            time.sleep(ahead)
+    return sent
+
+
+def flood_check(
+    say: Callable[[str], None],
+    *,
+    seed: int = 0,
+    kinds: str = "garbage",
+    keep: Path | None = None,
+) -> dict[str, Any]:
+    """A 0.3 s lockstep run of wen-5.1 (sensored) beside a flood of fuzzed frames.
+
+    The flood starts as the run's nodes start (after the run's listening
+    window: a bus that carries valid plant or bench frames then is rightly
+    refused) with replays of another run's commands, then the frames of
+    ``kinds`` (:data:`FLOOD_WEIGHTS`) until the run ends.  ``keep``: the run's
+    folder (default: a temporary one).  The run must end within its timeouts
+    with the in-process trace and the rejections counted, or with a named
+    stop (exit 2, 3 or 4 and its line); a run that hangs is killed after
+    :data:`FLOOD_LIMIT_S` and recorded as ``stalled``.
+    """
+    import threading
+
+    from bench.nodes._loops import run_inprocess
+    from bench.scenarios._schema import write_effective
+    from bench.wire._codec import default_codec
+
+    scn = short_scenario("wen-5.1", 0.3)
+    ref = run_trace(run_inprocess(scn, "sensored", default_codec()), scn)
+    with tempfile.TemporaryDirectory() as tmp:
+        scn_file = Path(tmp) / "flood.json"
+        write_effective(scn, scn_file)
+        out = keep or Path(tmp) / "run"
+        port = free_port()
+        t0 = time.monotonic()
+        proc = subprocess.Popen(_run_cmd(out, port, "-q", scenario=str(scn_file)),
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)  # fmt: skip
+        bus = can.Bus(interface="udp_multicast", channel=GROUP, port=port, fd=True)
+        done = threading.Event()
+        sent: dict[str, int] = {}
+
+        def flood() -> None:
+            while not (out / "plant.log").exists() and not done.is_set():
+                time.sleep(0.01)
+            sent.update(pour_fuzz(bus, done.is_set, seed=seed, kinds=kinds, old_commands=50))
+
+        th = threading.Thread(target=flood, daemon=True)
+        th.start()
+        try:
+            _, err = proc.communicate(timeout=FLOOD_LIMIT_S)
+            stalled = False
+        except subprocess.TimeoutExpired:
+            proc.send_signal(signal.SIGINT)
+            _, err = proc.communicate(timeout=60)
+            stalled = True
+        finally:
+            done.set()
+            th.join()
+            bus.shutdown()
+        wall = time.monotonic() - t0
+        last = err.strip().splitlines()[-1] if err.strip() else ""
+        code = proc.returncode
+        m = (
+            json.loads((out / "metrics.json").read_text())
+            if (out / "metrics.json").exists()
+            else {}
+        )
+        if stalled:
+            outcome = "stalled"
+        elif code == 0:
+            div = first_divergence(
+                ref, run_trace(list(can.LogReader(str(out / "capture.blf"))), scn)
+            )
+            outcome = "identical" if div is None else f"diverged: {div}"
+        elif code in (2, 3, 4) and last.startswith(("bench: error:", "warning:")):
+            outcome = "named stop"
+        else:
+            outcome = f"exit {code} without a line"
+    say(f"flood beside a lockstep run: {outcome} ({sum(sent.values()):,} frames, {wall:.0f} s)")
+    return {
+        "outcome": outcome,
+        "exit_code": code,
+        "last_line": last,
+        "seconds": round(wall, 1),
+        "frames_poured": sent,
+        "steps": m.get("steps"),
+        "frames_rejected": m.get("frames_rejected"),
+        "frames_rejected_by_reason": m.get("frames_rejected_by_reason"),
+        "frames_repeated_ignored": m.get("frames_repeated_ignored"),
+    }
+
+
+#: A flooded 0.3 s run that has not ended after this long is stalled (s): the
+#: run's own timeouts (the plant's start 20 s, no progress 40 s) and a loaded
+#: host's start-up of the node processes, twice over.
+FLOOD_LIMIT_S = 150.0
+
+
 def run_process_checks(
     *, loaded_runs: int = 3, progress: Callable[[str], None] | None = None
 ) -> dict[str, Any]:
