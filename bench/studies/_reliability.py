@@ -521,6 +521,7 @@ def run_process_checks(
         "kills": kill_checks(say),
         "signals": signal_checks(say),
         "parallel": parallel_check(say),
+        "flood": flood_check(say),
     }
     out["wall_s"] = round(time.perf_counter() - t0, 1)
     return out
@@ -538,7 +539,9 @@ def process_checks_ok(p: dict[str, Any]) -> bool:
     par = p["parallel"]["own_bus_identical"] == p["parallel"]["runs"] and all(
         r["outcome"] != "wrong" for r in p["parallel"].get("shared_bus_runs", [])
     )
-    return det and kills and sigs and par
+    # a flood leaves the run's trace as it was, or stops it with a line (never a stall)
+    flood = p.get("flood", {}).get("outcome", "identical") in ("identical", "named stop")
+    return det and kills and sigs and par and flood
 
 
 # -- docs/RELIABILITY.md ---------------------------------------------------------------------
@@ -560,7 +563,7 @@ make reliability   # = .venv/bin/bench soak --processes --out docs/reliability/s
 ```
 
 which fuzzes both nodes, runs a closed loop with injected faults, then kills,
-signals, loads and doubles real `bench run` processes, writes
+signals, loads, doubles and floods real `bench run` processes, writes
 [`docs/reliability/soak.json`](reliability/soak.json) and renders this page from it
 (`bench soak --from-json docs/reliability/soak.json --doc docs/RELIABILITY.md`
 renders it again without measuring).
@@ -650,7 +653,22 @@ that dies in lockstep (the plant cannot take another period without it)
 ends the run at once: one line naming the node and how it ended (`killed by
 SIGKILL`), exit status 2, the files written without the plot.  In real time
 a dead controller is left to the plant's watchdog, as in a drive, and the
-run reports it at its end.
+run reports it at its end: every period the plant ran is a row of
+`signals.csv` (the estimate empty after the death, `steps_without_telemetry`),
+so the safe state and the coasting rotor are in the speed tracking error;
+exit status 3.
+
+**No silent stall.** A plant that sends no sample 20 s after its start
+command went out (the plant's own lockstep stall time; it cannot say so
+itself), or whose step the recorder has not seen move for 40 s, ends the run
+with one line naming it and what the plant rejected (`bench: error: the
+plant sent no sample 20 s after its start command ...; the plant's frames:
+675 rejected (repeated_counter)`), exit status 2, the files and `error.txt`
+kept.  A bench command whose step unwraps to before 0 (a replay of a longer
+run's) is rejected as `stale_counter`, and a late command comes due at the
+next period the node handles, also for a plant that waits for its start
+(one that arrived before the start once moved the start to a step the
+waiting plant never reached).
 
 **User mistakes** are one line and exit status 2: an `--out` that cannot be
 written (`bench run`, `bench analyze`), a scenario whose motor fails the
@@ -668,9 +686,13 @@ of another run (`frames_foreign`), never scored.  Two runs on one bus cannot
 both be right (the 8-byte control frames have no room for the nonce, and
 their layout is what the reference results were recorded with), so the
 second refuses: `bench run` listens 0.3 s before starting its nodes and
-refuses a bus that carries the DBC's frames, with one line and exit 2; runs
+refuses a bus that carries at least 8 distinct plant or bench frames that
+pass their E2E check (garbage with those identifiers is no run), with one
+line and exit 2; runs
 started within that window of each other see each other's `PlantTruth` and
-stop with one line (exit 2), their files kept and marked as no result.  A
+stop with one line (exit 2) after 8 frames of distinct steps of one other
+`run_id` (copies of one frame count once), their files kept and marked as no
+result.  A
 `bench plant` that sees another plant's truth says so once, naming its run.
 `bench run` without `--interface` on a host without vcan0 takes a
 udp_multicast port of its own per process; where vcan0 exists it is the
@@ -689,6 +711,8 @@ default bus, shared by every run, so parallel runs must name a bus each.
 | `tests/test_reliability_errors.py` | unwritable `--out`, unparsable capture lines, the scoring of a run cut short and the line that announces it, kill -9 of the controller in lockstep (named, prompt), the transport line from python-can's configuration, `duty_age` in the safe state |
 | `tests/test_scenario_plausible.py` | the physics checks of a scenario's motor, injection settings without `[motor]`, `sensored` from any scenario |
 | `tests/test_run_isolation.py` | a crafted `PlantTruth` (bad CRC) in a clean capture: rejected, counted, `steps_missing` unchanged; one of another `run_id`: counted foreign, not scored; a plant seeing another plant says so once; two runs started together on one udp_multicast port: each gives its solo rows or refuses with one line; a run refuses a bus that already carries another run; random FD frames with the DBC's identifiers poured at a running bench leave its scored rows unchanged |
+| `tests/test_fuzz_flood.py` | a flood of random FD frames with the DBC's identifiers, corrupted copies, wrong lengths, unknown identifiers, duplicates, replays and bursts beside a lockstep `bench run`, after replays of a longer run's commands: the in-process trace, the rejections counted; a command forged with the start's step and counter: the run stops after the start timeout with one line; the command queue of a plant waiting for its start |
+| `tests/test_external_controller.py` | a controller under test from docs/PROTOCOL.md: each mistake named with its status; no valid duty within `--dut-timeout` (bad CRC, or none) in both modes: one line, exit 2, `error.txt`; kill -9 in real time before the scoring start: exit 3, the plant's rows go on without telemetry |
 | `tests/test_reliability_doc.py` | this page is the rendering of `docs/reliability/soak.json` |
 """
 
@@ -832,7 +856,27 @@ def render_reliability(rep: dict[str, Any]) -> str:
         + ".  "
         + _shared_text(p["parallel"]),
         "",
+        *_flood_text(p.get("flood")),
         f"The process-level checks took {p['wall_s']:.0f} s; the one-minute load average was "
         f"{p['loadavg_1min_start']:.1f} at their start.",
     ]
     return "\n".join(lines).rstrip() + "\n"
+
+
+def _flood_text(fl: dict[str, Any] | None) -> list[str]:
+    """The flood check's section (none for a soak JSON written before it existed)."""
+    if not fl:
+        return []
+    poured = ", ".join(f"{k} {_n(v)}" for k, v in sorted(fl["frames_poured"].items()))
+    by = ", ".join(
+        f"`{k}` {_n(v)}" for k, v in sorted((fl["frames_rejected_by_reason"] or {}).items())
+    )
+    return [
+        "### A flood beside a run",
+        "",
+        f"A 0.3 s lockstep `bench run` of wen-5.1 (sensored) with {_n(sum(fl['frames_poured'].values()))} "
+        f"fuzzed frames poured at its bus ({poured}): {fl['outcome']}, exit status "
+        f"{fl['exit_code']} after {fl['seconds']:.0f} s; {_n(fl['frames_rejected'] or 0)} frames "
+        f"rejected ({by or 'none'}), {_n(fl['frames_repeated_ignored'] or 0)} repeats ignored.",
+        "",
+    ]
