@@ -508,7 +508,8 @@ def band_metrics(
     (``steps``); max and mean |dtheta| (deg, electrical); max |w_hat - w| (rpm);
     the mean injection loss (W, :func:`injection_loss_w`, with the plant's
     ``R_s``); the rms of the torque ripple (N m, :func:`torque_ripple_nm`);
-    ``None`` for a band with no rows. ``f_c`` (Hz) is the separation's corner
+    ``None`` for a band with no rows (the angle and speed errors: with no row with
+    the controller's telemetry). ``f_c`` (Hz) is the separation's corner
     (:func:`split_corner_hz`). The hand-overs' dips (:func:`handover_dips`,
     against :func:`expected_speed` of the run's speed ``loop``) go in
     ``handover_dips_pct``, with their starts in ``handover_at_s`` and the
@@ -535,19 +536,19 @@ def band_metrics(
     ripple = torque_ripple_nm(table["tau_e"], T_s=T_s, f_c=f_c)
     lo_rpm, hi_rpm = edges[0] / rpm_to_e, edges[1] / rpm_to_e
     m: dict[str, Any] = {"band_lo_rpm": lo_rpm, "band_hi_rpm": hi_rpm, "band_split_hz": f_c}
+    known = np.isfinite(err_deg)  # rows with the controller's telemetry
     for j, name in enumerate(BANDS):
         rows = sel & (band == j)
         k = int(np.count_nonzero(rows))
         m[f"band_{name}_steps"] = k
         vals: dict[str, float | None] = dict.fromkeys(BAND_QUANTITIES[1:])
         if k:
-            vals = {
-                "theta_err_abs_max_deg": float(np.max(err_deg[rows])),
-                "theta_err_abs_mean_deg": float(np.mean(err_deg[rows])),
-                "speed_err_max_rpm": float(np.max(speed_err[rows])),
-                "injection_loss_w": float(np.mean(loss[rows])),
-                "torque_ripple_rms_nm": float(np.sqrt(np.mean(ripple[rows] ** 2))),
-            }
+            vals["injection_loss_w"] = float(np.mean(loss[rows]))
+            vals["torque_ripple_rms_nm"] = float(np.sqrt(np.mean(ripple[rows] ** 2)))
+        if np.any(rows & known):
+            vals["theta_err_abs_max_deg"] = float(np.max(err_deg[rows & known]))
+            vals["theta_err_abs_mean_deg"] = float(np.mean(err_deg[rows & known]))
+            vals["speed_err_max_rpm"] = float(np.nanmax(speed_err[rows & known]))
         for q, v in vals.items():
             m[f"band_{name}_{q}"] = v
     w_exp = expected_speed(table["w_ref_rpm"], table["tau_L"], float(w[0]), loop, T_s)
@@ -558,7 +559,7 @@ def band_metrics(
     m["handover_dip_max_pct"] = max((d for _, d in dips), default=0.0)
     load_ref = table["load_ref_nm"] if "load_ref_nm" in table else table["tau_L"]
     steady = steady_rows(t, table["w_ref_rpm"], load_ref, STEADY_SETTLE / loop.alpha_s)
-    for name, rows in (("steady", sel & steady), ("transient", sel & ~steady)):
+    for name, rows in (("steady", sel & steady & known), ("transient", sel & ~steady & known)):
         m[f"theta_err_{name}_max_deg"] = float(np.max(err_deg[rows])) if rows.any() else None
     m["steady_settle_s"] = STEADY_SETTLE / loop.alpha_s
     return m
