@@ -256,7 +256,10 @@ def test_garbage_other_traffic_and_truncated_end_are_counted(run: Path, tmp_path
     got = read_csv(str(tmp_path / "out" / "signals.csv"))
     idx = np.searchsorted(live["step"], got["step"])
     np.testing.assert_array_equal(live["step"][idx], got["step"])
-    np.testing.assert_array_equal(live["theta_hat"][idx], got["theta_hat"])
+    # a row per plant period: the last one's telemetry lies past the cut (its estimate NaN)
+    tel = np.isfinite(got["theta_hat"])
+    assert np.count_nonzero(~tel) == mx["steps_without_telemetry"] <= 1
+    np.testing.assert_array_equal(live["theta_hat"][idx][tel], got["theta_hat"][tel])
     np.testing.assert_array_equal(live["i_a"][idx], got["i_a"])
     assert 1100 < len(got["step"]) < 1334
 

@@ -137,7 +137,7 @@ def test_analyze_of_a_trc_without_fd_frames_reports_clearly(
         analyze_capture(path, out_dir=tmp_path / "api", echo=quiet, plots=False)
     msg = str(exc.value)
     assert str(path) in msg
-    assert "no step has samples, truth and telemetry together" in msg
+    assert "no step has samples and truth together" in msg
     # the counts show what is missing: every sample and duty, no truth, no telemetry
     for part in ("PhaseSamples 2001", "PlantTruth 0", "CtrlTelemetry 0", "PwmDuty 2001"):
         assert part in msg, part

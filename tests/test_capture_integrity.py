@@ -148,9 +148,13 @@ def test_cli_analyze_of_a_truncated_log_warns_and_exits_0(
     err = capsys.readouterr().err.splitlines()
     assert rc == 0
     warn = [s for s in err if s.startswith("warning:")]
-    assert len(warn) == 1 and "capture.log" in warn[0] and "cut short" in warn[0]
+    cut_short = [s for s in warn if "cut short" in s]
+    assert len(cut_short) == 1 and "capture.log" in cut_short[0]
+    # besides: the last periods before the cut have their samples and truth, not their
+    # telemetry (the plant's next sample goes out before the controller's answer comes)
+    assert all(s in cut_short or "have no CtrlTelemetry" in s for s in warn), warn
     saved = json.loads((tmp_path / "o" / "metrics.json").read_text())
-    assert saved["capture_truncated"] is True
+    assert saved["capture_truncated"] is True and saved["steps_without_telemetry"] <= 2
 
 
 def test_garbage_blf_is_named_as_not_a_blf(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:

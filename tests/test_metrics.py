@@ -75,3 +75,43 @@ def test_position_error_metrics_wrap_and_sign() -> None:
     assert m["speed_err_max_rpm"] == pytest.approx(3.0)
     assert m["scored_steps"] == 1500
     assert wrap_pi(np.array([3.5 * np.pi]))[0] == pytest.approx(-0.5 * np.pi)
+
+
+def _dead_controller_table(n: int = 2000, dies_at: int = 800) -> dict[str, np.ndarray]:
+    """A 1 kHz run whose controller stops sending telemetry at row ``dies_at``: the plant's
+    rows go on, the rotor coasts down from 100 rpm, the estimate is NaN."""
+    t = np.arange(n) * 1e-3
+    w = np.full(n, 100.0)
+    w[dies_at:] = 100.0 * np.exp(-(t[dies_at:] - t[dies_at]) / 0.5)
+    theta = np.cumsum(w) * 1e-3
+    theta_hat = theta - np.radians(2.0)
+    theta_hat[dies_at:] = np.nan
+    w_hat = w + 1.0
+    w_hat[dies_at:] = np.nan
+    mode = np.full(n, 3.0)
+    mode[dies_at:] = np.nan
+    return {"t": t, "theta_e": theta, "theta_hat": theta_hat, "w_m_rpm": w, "w_hat_rpm": w_hat,
+            "w_ref_rpm": np.full(n, 100.0), "i_a": np.zeros(n), "mode": mode}  # fmt: skip
+
+
+def test_rows_without_telemetry_count_for_the_speed_tracking_not_the_angle() -> None:
+    tab = _dead_controller_table()
+    m = compute_metrics(tab, T_s=1e-3, n_p=4, score_from_s=0.5)
+    # the safe state's coasting rotor is in the tracking error: 100 (1 - exp(-1.199 / 0.5)) rpm
+    assert m["speed_track_err_max_rpm"] == pytest.approx(100.0 * (1 - math.exp(-1.199 / 0.5)))
+    # the angle and the speed estimate only where an estimate came (rows 500 .. 799)
+    assert m["theta_err_max_deg"] == pytest.approx(2.0) and m["speed_err_max_rpm"] == 1.0
+    assert m["scored_steps"] == 1500 and m["steps_without_telemetry"] == 1200
+    assert m["lock_lost"] is False and "unscored_reason" not in m
+
+
+def test_no_scored_row_gives_null_metrics_and_the_reason() -> None:
+    tab = _dead_controller_table(dies_at=300)
+    m = compute_metrics(tab, T_s=1e-3, n_p=4, score_from_s=0.5)
+    assert m["theta_err_max_deg"] is None and m["speed_err_max_rpm"] is None
+    assert m["speed_track_err_max_rpm"] > 60.0
+    assert "no CtrlTelemetry in the 1,500 scored rows" in m["unscored_reason"]
+    m = compute_metrics(tab, T_s=1e-3, n_p=4, score_from_s=3.0, overshoot=True)
+    assert m["speed_track_err_max_rpm"] is None and m["speed_overshoot_rpm"] is None
+    assert m["scored_steps"] == 0 and m["steps"] == 2000
+    assert m["unscored_reason"] == "no row to score: none from score_from_s = 3 s on"

@@ -109,6 +109,11 @@ class CommandQueue:
     def add(self, sig: dict[str, float], now: int, counters: NodeCounters) -> int | None:
         """Queue a command; its unwrapped apply step if it is known now (new or a repeat)."""
         s = unwrap(int(sig["step"]), now, self.modulus)
+        if s < 0:
+            # no command of a run applies before its start (step 0): a replay of
+            # another (longer) run's, whose set-points would apply here as late
+            counters.reject(REJECT_STALE_COUNTER)
+            return None
         key = (s, int(sig["seq"]))
         if key in self.recent:
             counters.reject(REPEATED_COUNTER)
@@ -117,13 +122,12 @@ class CommandQueue:
             if s < self.applied_upto - self.modulus // 4:
                 counters.reject(REJECT_STALE_COUNTER)
                 return None
-            if s in self.pending:
-                counters.reject(REPEATED_COUNTER)
-                return s
             counters.late_commands += 1
-            # late: in the next period, after any other late command already
-            # waiting there (arrival order, so a newer set-point wins)
-            s = self.applied_upto + 1
+            # late: at the next call of due() (the next period the node handles;
+            # a plant waiting for its start asks for step 0 again and again, and
+            # a start moved to step 1 never came due), after any other late
+            # command already waiting (arrival order, so a newer set-point wins)
+            s = self.applied_upto
             while s in self.pending:
                 s += 1
         if s in self.pending:

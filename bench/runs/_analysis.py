@@ -27,6 +27,10 @@ from bench.wire._codec import Codec
 
 Array = npt.NDArray[np.float64]
 
+
+class NoRowsError(ValueError):
+    """A capture without a single plant period (samples and truth of one step)."""
+
 #: Columns of the per-step table, in CSV order, with units.
 COLUMNS: tuple[tuple[str, str], ...] = (
     ("step", "PWM period index k (sample instant t = k T_s)"),
@@ -77,6 +81,8 @@ class Capture:
     foreign: dict[str, int] = field(default_factory=dict)
     #: The run's nonce the table was built from (``PlantTruth.run_id``; None: no truth).
     run_id: int | None = None
+    #: Rows (plant periods) without the controller's telemetry: the estimate columns NaN.
+    steps_without_telemetry: int = 0
 
     @property
     def frames_foreign(self) -> int:
@@ -194,7 +200,7 @@ def analyze_frames(
     n_p: int,
     run_id: int | None = None,
 ) -> Capture:
-    """Decode frames into the per-step table (steps with samples, truth and telemetry).
+    """Decode frames into the per-step table (one row per plant period).
 
     The whole capture is decoded at once (:func:`bench.wire._batch_decode.decode_batch`,
     the same values and rejections as :meth:`Codec.decode` frame by frame).
@@ -202,10 +208,12 @@ def analyze_frames(
     frame of that step counts as a copy when its content is the first one's
     (a command sent twice, a resend, a retransmission, a latency link's
     other bus) and as a duplicate when it differs; and a step below the
-    highest seen so far counts as out of order.  The table has one row per step that has samples,
-    truth and telemetry; when the capture has no telemetry at all (a drive
-    that does not send it), one row per step with samples and truth, the
-    estimate columns NaN.
+    highest seen so far counts as out of order.  The table has one row per
+    step that has samples and truth (the plant's period); the controller's
+    columns (telemetry, duty) are NaN in a row it sent nothing for
+    (``steps_without_telemetry``: a controller that died and left the plant
+    in its safe state, a frame lost, a drive that sends no telemetry), so
+    the plant's side of every period is in the table.
 
     Frames that fail their E2E check (every message has one since DBC 2.1,
     the recorder's ``PlantTruth`` and ``CtrlTelemetry`` included) are counted
@@ -215,7 +223,7 @@ def analyze_frames(
 
     Raises
     ------
-    ValueError
+    NoRowsError
         No step has samples and truth (the message says what the capture holds).
     """
     from bench.wire._batch_decode import decode_batch
@@ -278,21 +286,19 @@ def analyze_frames(
     t_steps = stores["PlantTruth"][0]
     e_steps = stores["CtrlTelemetry"][0]
     # (each store's steps are sorted and unique)
-    steps = np.intersect1d(
-        np.intersect1d(s_steps, t_steps, assume_unique=True), e_steps, assume_unique=True
-    )
-    if len(steps) == 0 and len(e_steps) == 0:
-        steps = np.intersect1d(s_steps, t_steps, assume_unique=True)
+    # a row per plant period (samples and truth); the controller's telemetry where it came
+    steps = np.intersect1d(s_steps, t_steps, assume_unique=True)
     if len(steps) == 0:
         held = ", ".join(f"{name} {len(stores[name][0])}" for name, _ in _TABLE_MESSAGES)
-        raise ValueError(
-            "no step has samples, truth and telemetry together "
+        raise NoRowsError(
+            "no step has samples and truth together "
             f"(valid steps per message: {held}; {cap.unknown_ids} frames with other IDs, "
             f"{cap.frames_rejected} rejected)"
         )
     every = np.sort(np.concatenate([s_steps, t_steps, e_steps]))
     n_union = int(np.count_nonzero(np.diff(every))) + 1
     cap.incomplete_steps = n_union - len(steps)
+    cap.steps_without_telemetry = int(len(steps) - np.count_nonzero(np.isin(steps, e_steps)))
     cap.first_step = int(steps[0])
     n = len(steps)
     cols = {name: np.full(n, math.nan) for name, _ in COLUMNS}
@@ -381,8 +387,11 @@ def signals_doc(codec: Codec | None = None) -> str:
         "|---|---|",
         *(f"| {int(k)} | {v} |" for k, v in sorted(modes.items())),
         "",
-        "A row with `mode` 0 (controller disabled) is not scored. Columns a capture "
-        "does not carry (an external controller without telemetry) are empty (NaN).",
+        "One row per plant period (samples and truth). A row with `mode` 0 (controller "
+        "disabled) is not scored. The controller's columns (`theta_hat`, `theta_err_deg`, "
+        "`w_hat_rpm`, `est_err`, `mode`, duties) are NaN (`nan`) in a period it sent "
+        "nothing for (a controller that died, a lost frame, an external controller "
+        "without telemetry): the plant's columns go on, the position error there is unknown.",
         "",
     ]
     return "\n".join(lines)

@@ -145,6 +145,19 @@ def lock_lost(t: Array, err_deg: Array, T_s: float) -> tuple[bool, float | None]
     return True, float(t[first])
 
 
+#: The metrics ``compute_metrics`` leaves ``None`` (``null``) where no row scores them.
+ANGLE_METRICS = (
+    "theta_err_max_deg",
+    "theta_err_min_deg",
+    "theta_err_mean_deg",
+    "theta_err_abs_mean_deg",
+    "theta_err_rms_deg",
+    "theta_err_abs_max_deg",
+    "theta_err_abs_max_rad",
+    "speed_err_max_rpm",
+)
+
+
 def compute_metrics(
     table: Mapping[str, Array],
     *,
@@ -159,34 +172,74 @@ def compute_metrics(
     ``table`` needs the columns ``t``, ``theta_e``, ``theta_hat``,
     ``w_m_rpm``, ``w_hat_rpm``, ``w_ref_rpm`` and ``i_a``; rows whose
     optional ``mode`` column is 0 (controller disabled) are not scored.
+
+    The scored rows are those from ``score_from_s`` on.  A row without the
+    controller's telemetry (``theta_hat`` NaN: the controller sent nothing for
+    that period, e.g. it died and the plant went on in its safe state) is a
+    plant period like any other for what the plant's truth alone gives (the
+    speed tracking error, the overshoot, the THD), while the position error
+    and the speed-estimation error there are unknown: those
+    (:data:`ANGLE_METRICS`, and the lost lock) are scored over the scored rows
+    with an estimate.  ``scored_steps`` counts the scored rows,
+    ``steps_without_telemetry`` the rows of the whole table without an
+    estimate.  A metric with no row to score it is ``None``, and
+    ``unscored_reason`` says why (absent when every metric was scored).
     """
     t = table["t"]
     sel = t >= score_from_s
     if "mode" in table:
         # a disabled controller (mode 0, e.g. the stop step at the end) makes no estimate
         sel &= table["mode"] != 0
+    has_est = np.isfinite(table["theta_hat"])
+    est = sel & has_est
+    m: dict[str, Any] = dict.fromkeys(ANGLE_METRICS)
+    m["speed_track_err_max_rpm"] = None
+    m.update(
+        steps=len(t),
+        scored_steps=int(np.count_nonzero(sel)),
+        steps_without_telemetry=int(len(t) - np.count_nonzero(has_est)),
+        sim_s=float(len(t) * T_s),
+        lock_lost=False,
+        lock_lost_at_s=None,
+    )
     if not np.any(sel):
-        raise ValueError(f"no samples after score_from_s = {score_from_s} s")
-    err = wrap_pi(table["theta_e"][sel] - table["theta_hat"][sel])
-    err_deg = np.degrees(err)
+        m["unscored_reason"] = (
+            f"no row to score: none from score_from_s = {score_from_s:g} s on"
+            if not np.any(t >= score_from_s)
+            else f"no row to score: the controller was disabled (mode 0) from {score_from_s:g} s on"
+        )
+        if overshoot:
+            m["speed_overshoot_rpm"] = None
+        return m
     w = table["w_m_rpm"][sel]
-    m: dict[str, Any] = {
-        "theta_err_max_deg": float(np.max(err_deg)),
-        "theta_err_min_deg": float(np.min(err_deg)),
-        "theta_err_mean_deg": float(np.mean(err_deg)),
-        "theta_err_abs_mean_deg": float(np.mean(np.abs(err_deg))),
-        "theta_err_rms_deg": float(np.sqrt(np.mean(err_deg**2))),
-        "theta_err_abs_max_deg": float(np.max(np.abs(err_deg))),
-        "theta_err_abs_max_rad": float(np.max(np.abs(err))),
-        "speed_err_max_rpm": float(np.max(np.abs(table["w_hat_rpm"][sel] - w))),
-        "speed_track_err_max_rpm": float(np.max(np.abs(table["w_ref_rpm"][sel] - w))),
-        "steps": len(t),
-        "scored_steps": int(np.count_nonzero(sel)),
-        "sim_s": float(len(t) * T_s),
-    }
-    lost, lost_at = lock_lost(t[sel], err_deg, T_s)
-    m["lock_lost"] = lost
-    m["lock_lost_at_s"] = lost_at
+    track = np.abs(table["w_ref_rpm"][sel] - w)
+    # NaN without a reference (a capture without the bench's commands)
+    m["speed_track_err_max_rpm"] = (
+        float(np.nanmax(track)) if np.any(np.isfinite(track)) else math.nan
+    )
+    if np.any(est):
+        err = wrap_pi(table["theta_e"][est] - table["theta_hat"][est])
+        err_deg = np.degrees(err)
+        m.update(
+            theta_err_max_deg=float(np.max(err_deg)),
+            theta_err_min_deg=float(np.min(err_deg)),
+            theta_err_mean_deg=float(np.mean(err_deg)),
+            theta_err_abs_mean_deg=float(np.mean(np.abs(err_deg))),
+            theta_err_rms_deg=float(np.sqrt(np.mean(err_deg**2))),
+            theta_err_abs_max_deg=float(np.max(np.abs(err_deg))),
+            theta_err_abs_max_rad=float(np.max(np.abs(err))),
+        )
+        w_err = np.abs(table["w_hat_rpm"][est] - table["w_m_rpm"][est])
+        if np.any(np.isfinite(w_err)):
+            m["speed_err_max_rpm"] = float(np.nanmax(w_err))
+        lost, lost_at = lock_lost(t[est], err_deg, T_s)
+        m["lock_lost"] = lost
+        m["lock_lost_at_s"] = lost_at
+    else:
+        m["unscored_reason"] = (
+            f"no CtrlTelemetry in the {int(np.count_nonzero(sel)):,} scored rows: "
+            "the position and speed-estimation errors are unknown"
+        )
     if overshoot:
         m["speed_overshoot_rpm"] = overshoot_rpm(t[sel], table["w_ref_rpm"][sel], w)
     if thd_window_s is not None:
@@ -471,7 +524,8 @@ def band_metrics(
     (``steps``); max and mean |dtheta| (deg, electrical); max |w_hat - w| (rpm);
     the mean injection loss (W, :func:`injection_loss_w`, with the plant's
     ``R_s``); the rms of the torque ripple (N m, :func:`torque_ripple_nm`);
-    ``None`` for a band with no rows. ``f_c`` (Hz) is the separation's corner
+    ``None`` for a band with no rows (the angle and speed errors: with no row with
+    the controller's telemetry). ``f_c`` (Hz) is the separation's corner
     (:func:`split_corner_hz`). The hand-overs' dips (:func:`handover_dips`,
     against :func:`expected_speed` of the run's speed ``loop``) go in
     ``handover_dips_pct``, with their starts in ``handover_at_s`` and the
@@ -498,19 +552,19 @@ def band_metrics(
     ripple = torque_ripple_nm(table["tau_e"], T_s=T_s, f_c=f_c)
     lo_rpm, hi_rpm = edges[0] / rpm_to_e, edges[1] / rpm_to_e
     m: dict[str, Any] = {"band_lo_rpm": lo_rpm, "band_hi_rpm": hi_rpm, "band_split_hz": f_c}
+    known = np.isfinite(err_deg)  # rows with the controller's telemetry
     for j, name in enumerate(BANDS):
         rows = sel & (band == j)
         k = int(np.count_nonzero(rows))
         m[f"band_{name}_steps"] = k
         vals: dict[str, float | None] = dict.fromkeys(BAND_QUANTITIES[1:])
         if k:
-            vals = {
-                "theta_err_abs_max_deg": float(np.max(err_deg[rows])),
-                "theta_err_abs_mean_deg": float(np.mean(err_deg[rows])),
-                "speed_err_max_rpm": float(np.max(speed_err[rows])),
-                "injection_loss_w": float(np.mean(loss[rows])),
-                "torque_ripple_rms_nm": float(np.sqrt(np.mean(ripple[rows] ** 2))),
-            }
+            vals["injection_loss_w"] = float(np.mean(loss[rows]))
+            vals["torque_ripple_rms_nm"] = float(np.sqrt(np.mean(ripple[rows] ** 2)))
+        if np.any(rows & known):
+            vals["theta_err_abs_max_deg"] = float(np.max(err_deg[rows & known]))
+            vals["theta_err_abs_mean_deg"] = float(np.mean(err_deg[rows & known]))
+            vals["speed_err_max_rpm"] = float(np.nanmax(speed_err[rows & known]))
         for q, v in vals.items():
             m[f"band_{name}_{q}"] = v
     w_exp = expected_speed(table["w_ref_rpm"], table["tau_L"], float(w[0]), loop, T_s)
@@ -521,7 +575,7 @@ def band_metrics(
     m["handover_dip_max_pct"] = max((d for _, d in dips), default=0.0)
     load_ref = table["load_ref_nm"] if "load_ref_nm" in table else table["tau_L"]
     steady = steady_rows(t, table["w_ref_rpm"], load_ref, STEADY_SETTLE / loop.alpha_s)
-    for name, rows in (("steady", sel & steady), ("transient", sel & ~steady)):
+    for name, rows in (("steady", sel & steady & known), ("transient", sel & ~steady & known)):
         m[f"theta_err_{name}_max_deg"] = float(np.max(err_deg[rows])) if rows.any() else None
     m["steady_settle_s"] = STEADY_SETTLE / loop.alpha_s
     return m

@@ -183,7 +183,8 @@ def plot_run(
     err = table["theta_err_deg"]
     ax_err.plot(ts, err[scored], lw=0.6, color="tab:red")
     ax_err.axhline(0.0, color="k", lw=0.5)
-    lo, hi = float(np.nanmin(err[scored])), float(np.nanmax(err[scored]))
+    known = err[scored][np.isfinite(err[scored])]  # none where no telemetry came
+    lo, hi = (float(known.min()), float(known.max())) if len(known) else (-1.0, 1.0)
     pad = max(0.1 * (hi - lo), 0.05)
     ax_err.set_ylim(lo - pad, hi + pad + 0.6 * (hi - lo + 2 * pad))  # room for the inset
     ax_err.set_ylabel(r"$\Delta\theta$ (deg, electrical)")

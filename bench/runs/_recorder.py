@@ -53,26 +53,42 @@ class Recorder(can.Listener):
         #: The newest ``PlantStatus``: fault code, step (raw), late_frames, overruns.
         self.status: dict[str, int] = {}
         #: This run's nonce; valid ``PlantTruth`` and ``CtrlTelemetry`` frames of
-        #: another (nonzero) run_id are counted in ``foreign``, by run_id.
+        #: another (nonzero) run_id are counted in ``foreign``, by run_id: frames
+        #: of distinct steps (another run sends one a period; copies of one
+        #: frame, a replay or a random frame that passed the CRC, count once).
         self.recorder_ids = (codec.frame_id("PlantTruth"), codec.frame_id("CtrlTelemetry"))
         self.run_id: int | None = None
         self.foreign: dict[int, int] = {}
-        #: Plant and bench frames seen (before the nodes start: another run's).
+        self._foreign_seen: set[tuple[int, int, int]] = set()
+        #: Valid plant and bench frames seen before :meth:`Recording.expect_run`
+        #: (another run's: the nodes of this one have not started).
         self.known = 0
+        self._known_seen: set[tuple[int, bytes]] = set()
 
     def on_message_received(self, msg: can.Message) -> None:
         msg.channel = self.channel
         with self.lock:
             self.frames.append(msg)
             self.writer.on_message_received(msg)
-        if not msg.is_extended_id and msg.arbitration_id in self.run_ids_frames:
-            self.known += 1
+        known_id = not msg.is_extended_id and msg.arbitration_id in self.run_ids_frames
+        if self.run_id is None and known_id:
+            # listening before the start: only a frame that passes its E2E check
+            # (CRC, length, range) can be another run's; garbage with the same
+            # identifier is counted by the analysis, not taken for a run
+            d = self.codec.decode(msg)
+            key = (msg.arbitration_id, bytes(msg.data))
+            if d is not None and d.reason is None and key not in self._known_seen:
+                self._known_seen.add(key)  # copies of one frame (a replay) count once
+                self.known += 1
         if msg.arbitration_id in self.recorder_ids and self.run_id is not None:
             d = self.codec.decode(msg)
             if d is not None and d.reason is None:
                 rid = int(d.signals["run_id"])
                 if rid not in (self.run_id, 0):  # 0: a controller that copies no nonce
-                    self.foreign[rid] = self.foreign.get(rid, 0) + 1
+                    seen = (msg.arbitration_id, rid, int(d.signals["step"]))
+                    if seen not in self._foreign_seen and len(self._foreign_seen) < 4096:
+                        self._foreign_seen.add(seen)
+                        self.foreign[rid] = self.foreign.get(rid, 0) + 1
         elif msg.arbitration_id == self.samples_id:
             d = self.codec.decode(msg)
             if d is not None and d.reason is None:
@@ -178,8 +194,8 @@ class Recording:
     def foreign(self) -> dict[int, int]:
         """Other runs on the bus: their run_id and recorder frames seen, by run_id.
 
-        Only a run_id seen in at least ``SHARED_RUN_FRAMES`` valid frames
-        counts (:mod:`bench.wire._protocol`).
+        Only a run_id seen in at least ``SHARED_RUN_FRAMES`` valid frames of
+        distinct steps counts (:mod:`bench.wire._protocol`).
         """
         out: dict[int, int] = {}
         for r in self.recorders:

@@ -249,6 +249,7 @@ def finish_run(
     m["frames_foreign_by_message"] = dict(cap.foreign)
     m["frames_unknown_id"] = cap.unknown_ids
     m["incomplete_steps"] = cap.incomplete_steps
+    m["steps_without_telemetry"] = cap.steps_without_telemetry
     # periods 0 .. n - 1 of the scenario without a row: frames the recording lost
     # (or a run stopped early); the metrics above cover only the rows present
     n_run = n_steps(scn)
@@ -486,6 +487,23 @@ def lock_warning(m: dict[str, Any]) -> str | None:
     )
 
 
+def telemetry_warning(m: dict[str, Any]) -> str | None:
+    """One line for rows without the controller's telemetry, and for metrics left null."""
+    parts = []
+    n = int(m.get("steps_without_telemetry") or 0)
+    if n:
+        parts.append(
+            f"{n:,} of {int(m.get('steps', 0)):,} periods have no CtrlTelemetry (the controller "
+            "sent none, died, or the frame was lost): their estimate is empty in signals.csv "
+            "and their position error is not scored"
+        )
+    if m.get("unscored_reason"):
+        parts.append(f"metrics left null: {m['unscored_reason']}")
+    if not parts:
+        return None
+    return f"warning: {'; '.join(parts)}"
+
+
 def frames_warning(m: dict[str, Any]) -> str | None:
     """One line for recorded frames that were not scored: bad ones and another run's."""
     parts = []
@@ -508,7 +526,7 @@ def outcome(m: dict[str, Any], T_s: float) -> tuple[int, list[str]]:
     angle, 0 otherwise (DESIGN.md).  A trip comes first: an estimator whose
     inverter was switched off loses the angle as a consequence.
     """
-    lines = [w for w in (fault_warning(m, T_s), lock_warning(m)) if w]
+    lines = [w for w in (fault_warning(m, T_s), lock_warning(m), telemetry_warning(m)) if w]
     if m.get("plant_fault", "none") not in ("none", None):
         return EXIT_PLANT_TRIPPED, lines
     if m.get("lock_lost"):

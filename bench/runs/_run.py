@@ -39,7 +39,9 @@ import can
 from bench import _jsonio as jsonio
 from bench._errors import BenchError
 from bench.nodes._counters import RejectionSummary, rejection_text
-from bench.nodes._loops import trip_text
+from bench.nodes._loops import STALL_S, trip_text
+from bench.runs._analysis import NoRowsError
+from bench.runs._pacing import PACE_EVERY, CommandPacer
 from bench.runs._processes import (
     ended_early,
     how_ended,
@@ -49,14 +51,13 @@ from bench.runs._processes import (
     start_nodes,
     stop_nodes,
 )
-from bench.runs._pacing import PACE_EVERY, CommandPacer
 from bench.runs._recorder import Recording
 from bench.runs._results import RunResult, finish_run, run_metadata, scoring_scenario
 from bench.scenarios._schema import Scenario, write_effective
 from bench.scenarios._setup import n_steps, sample_period
 from bench.wire._bus import BusSpec
 from bench.wire._codec import Codec
-from bench.wire._protocol import new_run_id, unwrap
+from bench.wire._protocol import SHARED_RUN_FRAMES, new_run_id, unwrap
 
 LOG_SUFFIX = {"blf": ".blf", "asc": ".asc", "log": ".log"}
 
@@ -64,6 +65,18 @@ __all__ = ["DUT_TIMEOUT_S", "EXTERNAL", "PACE_EVERY", "DutWatch", "run_scenario"
 
 #: ``bench run --controller external``: the controller is a node on the bus.
 EXTERNAL = "external"
+#: What ended a run that no process's end explains (:func:`_drive`): the plant
+#: sent no sample after its start command, or its step stopped moving.
+NO_START = "no start"
+NO_PROGRESS = "no progress"
+#: A plant that has sent no sample this long after its start command went out
+#: (the plant's own lockstep stall time, :data:`bench.nodes._loops.STALL_S`; the
+#: start is sent again every second) did not start: it cannot say so itself.
+START_TIMEOUT_S = STALL_S
+#: A plant whose step the recorder has not seen move for this long (after the
+#: controller under test's first answer) is stalled: twice the plant's own stall
+#: time, so that a lockstep plant's line (the duty it waits for) comes first.
+NO_PROGRESS_S = 2.0 * STALL_S
 #: Default wait for the first valid duty of a controller under test (s).
 DUT_TIMEOUT_S = 30.0
 
@@ -175,7 +188,15 @@ def run_scenario(
                 plant = dict(procs).get("plant")
                 if plant is not None and not interrupted():
                     ended = _drive(
-                        rec, pacer, procs, plant, scn, progress, interrupted, dut, mode == "lockstep"
+                        rec,
+                        pacer,
+                        procs,
+                        plant,
+                        scn,
+                        progress,
+                        interrupted,
+                        dut,
+                        mode == "lockstep",
                     )
                 shared = rec.foreign
                 if progress and (ended or interrupted() or shared):
@@ -183,6 +204,10 @@ def run_scenario(
                     why = "interrupted"
                     if shared and not interrupted():
                         why = "another run's frames on this bus"
+                    elif ended == "dut" and dut is not None:
+                        why = dut.failure_text()
+                    elif ended in (NO_START, NO_PROGRESS):
+                        why = _stall_text(ended, rec.plant_step, None)
                     elif ended:
                         code = dict(procs)[ended].returncode
                         why = f"{ended} process ended ({how_ended(out_dir, ended, code)})"
@@ -225,14 +250,20 @@ def run_scenario(
         meta["interrupted"] = True
     frames = rec.frames()
     codes = dict(meta["exit_codes"])
+    plant_rejects = (meta["node_reports"].get("plant") or {}).get("reject_reasons")
     if not frames and (ended or failures) and not interrupted():
-        why = (
-            f"{ended} process ended before the run did ({how_ended(out_dir, ended, codes[ended])})"
-            if ended
-            else "node process failed ("
-            + "; ".join(f"{r}: {last_line(out_dir, r)}" for r in failures)
-            + ")"
-        )
+        if ended == "dut" and dut is not None:
+            why = dut.failure_text()
+        elif ended in (NO_START, NO_PROGRESS):
+            why = _stall_text(ended, rec.plant_step, plant_rejects)
+        elif ended:
+            why = f"{ended} process ended before the run did ({how_ended(out_dir, ended, codes[ended])})"
+        else:
+            why = (
+                "node process failed ("
+                + "; ".join(f"{r}: {last_line(out_dir, r)}" for r in failures)
+                + ")"
+            )
         raise failed_before_recording(out_dir, why)
     # a plant that ended before the scenario's last period (a lockstep watchdog
     # trip with a controller under test) leaves a shorter run: scored as far as it went
@@ -245,18 +276,27 @@ def run_scenario(
     if dut is not None:
         dut.check(rec.plant_step)  # a trip the drive loop ended before printing
         dut.plant_story(out_dir)
-    if shared and not interrupted():
-        raise BenchError(shared_bus_line(shared, spec.describe(), rec.plant_step, out_dir))
-    if ended == "dut" and dut is not None and not interrupted():
-        raise BenchError(f"{dut.failure_text()}; files in {out_dir}")
-    if ended and not interrupted():
-        raise BenchError(
+    if interrupted():
+        return result
+    line: str | None = None
+    if shared:
+        line = shared_bus_line(shared, spec.describe(), rec.plant_step, out_dir)
+    elif ended == "dut" and dut is not None:
+        line = f"{dut.failure_text()}; files in {out_dir}"
+    elif ended in (NO_START, NO_PROGRESS):
+        line = f"{_stall_text(ended, rec.plant_step, plant_rejects)}; files in {out_dir}"
+    elif ended:
+        line = (
             f"{ended} process ended before the run did ({how_ended(out_dir, ended, codes[ended])}); "
             f"files in {out_dir}"
         )
-    if failures and not interrupted():
+    elif failures:
         logs = "; ".join(f"{r}: {how_ended(out_dir, r, codes[r])}" for r in failures)
-        raise BenchError(f"node process failed ({logs}); files in {out_dir}")
+        line = f"node process failed ({logs}); files in {out_dir}"
+    if line is not None:
+        # the line of a run that ends with status 2, kept beside what it recorded
+        (out_dir / "error.txt").write_text(line + "\n")
+        raise BenchError(line)
     return result
 
 
@@ -293,18 +333,44 @@ LISTEN_S = 0.3
 
 
 def _bus_in_use(rec: Recording, spec: BusSpec, interrupted: _Interrupt) -> str | None:
-    """The refusal line when the bus carries another run's frames before this one starts."""
+    """The refusal line when the bus carries another run's frames before this one starts.
+
+    Only frames that pass their E2E check count (:attr:`Recording.bench_frames`),
+    and at least :data:`SHARED_RUN_FRAMES` of them: a random frame with one of
+    the identifiers passes the 8-bit CRC once in 256, while another run's plant
+    sends a sample every period, and a stalled lockstep one its last 3 periods'
+    frames every 50 ms (18 samples in the window).
+    """
     t_end = time.monotonic() + LISTEN_S
     while time.monotonic() < t_end and not interrupted():
         time.sleep(0.02)
     n = rec.bench_frames
-    if n == 0:
+    if n < SHARED_RUN_FRAMES:
         return None
     return (
-        f"another run is on this bus ({spec.describe()}): {n} plant or bench frames "
-        f"in the {LISTEN_S:g} s before this run; refusing to share it "
+        f"another run is on this bus ({spec.describe()}): {n} valid plant or bench frames "
+        f"(E2E-checked) in the {LISTEN_S:g} s before this run; refusing to share it "
         "(give this run its own --port or --channel)"
     )
+
+
+def _stall_text(ended: str, step: int, rejects: dict[str, int] | None) -> str:
+    """The line of a run whose plant did not start or stopped moving (:func:`_drive`),
+    with what the plant rejected (its report; None before the nodes were stopped)."""
+    if ended == NO_START:
+        what = (
+            f"the plant sent no sample {START_TIMEOUT_S:g} s after its start command "
+            "(sent again every second in lockstep): it did not start"
+        )
+    else:
+        what = (
+            f"the plant's step has not moved for {NO_PROGRESS_S:g} s (at step {max(0, step):,}) "
+            "while its process runs"
+        )
+    if rejects is None:
+        return what
+    said = rejection_text(rejects) if rejects else "nothing rejected"
+    return f"{what}; the plant's frames: {said} (plant.json, reject_reasons)"
 
 
 def shared_bus_line(foreign: dict[int, int], where: str, step: int, out_dir: Path) -> str:
@@ -349,12 +415,28 @@ def _drive(
     bus = rec.plant_bus
     bar = _Progress(n_steps(scn)) if progress else None
     t_moved, seen_step = time.monotonic(), -1
+    # when the start command went out, and when the recorder last saw the step move
+    # (or the controller under test answered first: the plant waited for it until then)
+    t_start: float | None = None
+    t_seen, last_step, waiting_dut = t_moved, -1, dut is not None and not dut.answered
     ended: str | None = None
     while not interrupted():
         full_step = max(0, rec.plant_step)
         pacer.send_due(bus, full_step)
+        now = time.monotonic()
+        if t_start is None and pacer.sent:
+            t_start = t_seen = now
+        if rec.plant_step != last_step or (waiting_dut and dut is not None and dut.answered):
+            t_seen, last_step = now, rec.plant_step
+            waiting_dut = dut is not None and not dut.answered
+        if last_step < 0 and t_start is not None and now - t_start > START_TIMEOUT_S:
+            ended = NO_START
+            break
+        if last_step >= 0 and not waiting_dut and now - t_seen > NO_PROGRESS_S:
+            ended = NO_PROGRESS
+            break
         if full_step != seen_step:
-            t_moved, seen_step = time.monotonic(), full_step
+            t_moved, seen_step = now, full_step
         elif pacer.pace_every and pacer.sent and time.monotonic() - t_moved > 1.0:
             # a paced plant that stopped moving may have lost the newest
             # commands (a lossy transport): the last few once more
@@ -582,13 +664,17 @@ def _score(
         return finish_run(
             frames, codec, scn, out_dir, meta=meta, wall_s=wall, capture=capture, plots=plots
         )
-    except ValueError:
-        if not partial:
-            raise
+    except NoRowsError as e:  # not a single plant period recorded: no table to score
+        why = str(e)
     meta["capture"] = capture.name if frames else None
     if not frames:
         capture.unlink(missing_ok=True)
-    metrics: dict[str, Any] = {"steps": 0, "frames_recorded": len(frames), "wall_s": wall}
+    metrics: dict[str, Any] = {
+        "steps": 0,
+        "frames_recorded": len(frames),
+        "wall_s": wall,
+        "unscored_reason": why,
+    }
     (out_dir / "metrics.json").write_text(jsonio.dumps(metrics, indent=2) + "\n")
     (out_dir / "meta.json").write_text(json.dumps(meta, indent=2, default=str) + "\n")
     return RunResult(out_dir=out_dir, metrics=metrics, capture=capture, meta=meta)

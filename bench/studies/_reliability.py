@@ -334,6 +334,180 @@ def parallel_check(say: Callable[[str], None]) -> dict[str, Any]:
     }
 
 
+#: What :func:`pour_fuzz` sends besides random FD frames with the DBC's identifiers
+#: (:data:`RANDOM_FD_SHARE` of them): the kinds of
+#: :class:`bench.studies._soak.FrameFuzzer`.  ``garbage``: frames no E2E check
+#: passes (corrupted copies, wrong lengths, unknown identifiers; the random FD
+#: frames of the classic messages have lengths above 8, those of the FD recorder
+#: frames pass the 8-bit CRC once in 256 and then differ in their run_id) and
+#: copies of the run's own frames (duplicates, replays, reordered bursts);
+#: ``forged`` adds frames that a receiver cannot tell from genuine ones: valid
+#: frames with random values, and random payloads of the right length (which
+#: pass the CRC once in 256).
+FLOOD_WEIGHTS: dict[str, dict[str, float]] = {
+    "garbage": {"valid": 0.0, "random_payload": 0.0, "duplicate": 2.0, "replay": 2.0},
+    "forged": {"valid": 1.0, "random_payload": 3.0, "duplicate": 2.0, "replay": 2.0},
+}
+#: The share of random CAN FD frames with the DBC's identifiers in a flood.
+RANDOM_FD_SHARE = 0.4
+
+
+def pour_fuzz(
+    bus: can.BusABC,
+    stop: Callable[[], bool],
+    *,
+    seed: int,
+    kinds: str = "garbage",
+    old_commands: int = 0,
+    rate_hz: float = 1000.0,
+) -> dict[str, int]:
+    """Pour fuzzed CAN FD and classic frames at ``bus`` until ``stop()``; the frames sent, by kind.
+
+    Random FD frames with the DBC's identifiers (:data:`RANDOM_FD_SHARE`), and
+    :class:`bench.studies._soak.FrameFuzzer`'s kinds (weights
+    :data:`FLOOD_WEIGHTS` ``[kinds]``), its replays and duplicates drawn from the
+    frames seen on the bus (the run's own, a moment old) and the flood's own.  ``old_commands``:
+    first that many valid ``BenchCommand`` frames of a longer run (steps that
+    unwrap to before this run's start), one every few milliseconds, the replay
+    that once kept a plant from ever starting.  At most ``rate_hz`` frames a
+    second (on average): a flood that takes every CPU measures the host, not
+    the run.
+    """
+    from bench.studies._soak import FrameFuzzer
+    from bench.wire._codec import default_codec
+
+    codec = default_codec()
+    fz = FrameFuzzer(codec, seed, weights=FLOOD_WEIGHTS[kinds])
+    rng = random.Random(seed)
+    sent: dict[str, int] = {}
+    n = 0
+    t0 = time.monotonic()
+    while not stop():
+        while (seen := bus.recv(0.0)) is not None:
+            fz.history.append(seen)
+        if n < old_commands:
+            sig = {"cmd": 0, "speed_ref": 0.0, "load_torque": 0.0, "seq": rng.randrange(16),
+                   "step": rng.randrange(1 << 15, 1 << 16)}  # fmt: skip
+            msg, kind = codec.encode("BenchCommand", sig), "old_command"
+            time.sleep(0.005)
+        elif rng.random() < RANDOM_FD_SHARE:
+            name = rng.choice(codec.names)
+            size = codec.length(name)
+            if size <= 8 or rng.random() < 0.5:
+                size = rng.choice([x for x in (12, 16, 20, 24, 32, 48, 64) if x != size])
+            msg = can.Message(arbitration_id=codec.frame_id(name), data=rng.randbytes(size),
+                              is_fd=True, is_extended_id=False)  # fmt: skip
+            kind = "random_fd"
+            fz.history.append(msg)
+        else:
+            msg, kind = fz.one()
+        try:
+            bus.send(msg)
+        except (can.CanError, OSError):
+            kind = "send_failed"
+        sent[kind] = sent.get(kind, 0) + 1
+        n += 1
+        ahead = t0 + n / rate_hz - time.monotonic()
+        if ahead > 0:
+            time.sleep(ahead)
+    return sent
+
+
+def flood_check(
+    say: Callable[[str], None],
+    *,
+    seed: int = 0,
+    kinds: str = "garbage",
+    keep: Path | None = None,
+) -> dict[str, Any]:
+    """A 0.3 s lockstep run of wen-5.1 (sensored) beside a flood of fuzzed frames.
+
+    The flood starts as the run's nodes start (after the run's listening
+    window: a bus that carries valid plant or bench frames then is rightly
+    refused) with replays of another run's commands, then the frames of
+    ``kinds`` (:data:`FLOOD_WEIGHTS`) until the run ends.  ``keep``: the run's
+    folder (default: a temporary one).  The run must end within its timeouts
+    with the in-process trace and the rejections counted, or with a named
+    stop (exit 2, 3 or 4 and its line); a run that hangs is killed after
+    :data:`FLOOD_LIMIT_S` and recorded as ``stalled``.
+    """
+    import threading
+
+    from bench.nodes._loops import run_inprocess
+    from bench.scenarios._schema import write_effective
+    from bench.wire._codec import default_codec
+
+    scn = short_scenario("wen-5.1", 0.3)
+    ref = run_trace(run_inprocess(scn, "sensored", default_codec()), scn)
+    with tempfile.TemporaryDirectory() as tmp:
+        scn_file = Path(tmp) / "flood.json"
+        write_effective(scn, scn_file)
+        out = keep or Path(tmp) / "run"
+        port = free_port()
+        t0 = time.monotonic()
+        proc = subprocess.Popen(_run_cmd(out, port, "-q", scenario=str(scn_file)),
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)  # fmt: skip
+        bus = can.Bus(interface="udp_multicast", channel=GROUP, port=port, fd=True)
+        done = threading.Event()
+        sent: dict[str, int] = {}
+
+        def flood() -> None:
+            while not (out / "plant.log").exists() and not done.is_set():
+                time.sleep(0.01)
+            sent.update(pour_fuzz(bus, done.is_set, seed=seed, kinds=kinds, old_commands=50))
+
+        th = threading.Thread(target=flood, daemon=True)
+        th.start()
+        try:
+            _, err = proc.communicate(timeout=FLOOD_LIMIT_S)
+            stalled = False
+        except subprocess.TimeoutExpired:
+            proc.send_signal(signal.SIGINT)
+            _, err = proc.communicate(timeout=60)
+            stalled = True
+        finally:
+            done.set()
+            th.join()
+            bus.shutdown()
+        wall = time.monotonic() - t0
+        last = err.strip().splitlines()[-1] if err.strip() else ""
+        code = proc.returncode
+        m = (
+            json.loads((out / "metrics.json").read_text())
+            if (out / "metrics.json").exists()
+            else {}
+        )
+        if stalled:
+            outcome = "stalled"
+        elif code == 0:
+            div = first_divergence(
+                ref, run_trace(list(can.LogReader(str(out / "capture.blf"))), scn)
+            )
+            outcome = "identical" if div is None else f"diverged: {div}"
+        elif code in (2, 3, 4) and last.startswith(("bench: error:", "warning:")):
+            outcome = "named stop"
+        else:
+            outcome = f"exit {code} without a line"
+    say(f"flood beside a lockstep run: {outcome} ({sum(sent.values()):,} frames, {wall:.0f} s)")
+    return {
+        "outcome": outcome,
+        "exit_code": code,
+        "last_line": last,
+        "seconds": round(wall, 1),
+        "frames_poured": sent,
+        "steps": m.get("steps"),
+        "frames_rejected": m.get("frames_rejected"),
+        "frames_rejected_by_reason": m.get("frames_rejected_by_reason"),
+        "frames_repeated_ignored": m.get("frames_repeated_ignored"),
+    }
+
+
+#: A flooded 0.3 s run that has not ended after this long is stalled (s): the
+#: run's own timeouts (the plant's start 20 s, no progress 40 s) and a loaded
+#: host's start-up of the node processes, twice over.
+FLOOD_LIMIT_S = 150.0
+
+
 def run_process_checks(
     *, loaded_runs: int = 3, progress: Callable[[str], None] | None = None
 ) -> dict[str, Any]:
@@ -347,6 +521,7 @@ def run_process_checks(
         "kills": kill_checks(say),
         "signals": signal_checks(say),
         "parallel": parallel_check(say),
+        "flood": flood_check(say),
     }
     out["wall_s"] = round(time.perf_counter() - t0, 1)
     return out
@@ -364,7 +539,9 @@ def process_checks_ok(p: dict[str, Any]) -> bool:
     par = p["parallel"]["own_bus_identical"] == p["parallel"]["runs"] and all(
         r["outcome"] != "wrong" for r in p["parallel"].get("shared_bus_runs", [])
     )
-    return det and kills and sigs and par
+    # a flood leaves the run's trace as it was, or stops it with a line (never a stall)
+    flood = p.get("flood", {}).get("outcome", "identical") in ("identical", "named stop")
+    return det and kills and sigs and par and flood
 
 
 # -- docs/RELIABILITY.md ---------------------------------------------------------------------
@@ -386,7 +563,7 @@ make reliability   # = .venv/bin/bench soak --processes --out docs/reliability/s
 ```
 
 which fuzzes both nodes, runs a closed loop with injected faults, then kills,
-signals, loads and doubles real `bench run` processes, writes
+signals, loads, doubles and floods real `bench run` processes, writes
 [`docs/reliability/soak.json`](reliability/soak.json) and renders this page from it
 (`bench soak --from-json docs/reliability/soak.json --doc docs/RELIABILITY.md`
 renders it again without measuring).
@@ -476,7 +653,22 @@ that dies in lockstep (the plant cannot take another period without it)
 ends the run at once: one line naming the node and how it ended (`killed by
 SIGKILL`), exit status 2, the files written without the plot.  In real time
 a dead controller is left to the plant's watchdog, as in a drive, and the
-run reports it at its end.
+run reports it at its end: every period the plant ran is a row of
+`signals.csv` (the estimate empty after the death, `steps_without_telemetry`),
+so the safe state and the coasting rotor are in the speed tracking error;
+exit status 3.
+
+**No silent stall.** A plant that sends no sample 20 s after its start
+command went out (the plant's own lockstep stall time; it cannot say so
+itself), or whose step the recorder has not seen move for 40 s, ends the run
+with one line naming it and what the plant rejected (`bench: error: the
+plant sent no sample 20 s after its start command ...; the plant's frames:
+675 rejected (repeated_counter)`), exit status 2, the files and `error.txt`
+kept.  A bench command whose step unwraps to before 0 (a replay of a longer
+run's) is rejected as `stale_counter`, and a late command comes due at the
+next period the node handles, also for a plant that waits for its start
+(one that arrived before the start once moved the start to a step the
+waiting plant never reached).
 
 **User mistakes** are one line and exit status 2: an `--out` that cannot be
 written (`bench run`, `bench analyze`), a scenario whose motor fails the
@@ -494,9 +686,13 @@ of another run (`frames_foreign`), never scored.  Two runs on one bus cannot
 both be right (the 8-byte control frames have no room for the nonce, and
 their layout is what the reference results were recorded with), so the
 second refuses: `bench run` listens 0.3 s before starting its nodes and
-refuses a bus that carries the DBC's frames, with one line and exit 2; runs
+refuses a bus that carries at least 8 distinct plant or bench frames that
+pass their E2E check (garbage with those identifiers is no run), with one
+line and exit 2; runs
 started within that window of each other see each other's `PlantTruth` and
-stop with one line (exit 2), their files kept and marked as no result.  A
+stop with one line (exit 2) after 8 frames of distinct steps of one other
+`run_id` (copies of one frame count once), their files kept and marked as no
+result.  A
 `bench plant` that sees another plant's truth says so once, naming its run.
 `bench run` without `--interface` on a host without vcan0 takes a
 udp_multicast port of its own per process; where vcan0 exists it is the
@@ -515,6 +711,8 @@ default bus, shared by every run, so parallel runs must name a bus each.
 | `tests/test_reliability_errors.py` | unwritable `--out`, unparsable capture lines, the scoring of a run cut short and the line that announces it, kill -9 of the controller in lockstep (named, prompt), the transport line from python-can's configuration, `duty_age` in the safe state |
 | `tests/test_scenario_plausible.py` | the physics checks of a scenario's motor, injection settings without `[motor]`, `sensored` from any scenario |
 | `tests/test_run_isolation.py` | a crafted `PlantTruth` (bad CRC) in a clean capture: rejected, counted, `steps_missing` unchanged; one of another `run_id`: counted foreign, not scored; a plant seeing another plant says so once; two runs started together on one udp_multicast port: each gives its solo rows or refuses with one line; a run refuses a bus that already carries another run; random FD frames with the DBC's identifiers poured at a running bench leave its scored rows unchanged |
+| `tests/test_fuzz_flood.py` | a flood of random FD frames with the DBC's identifiers, corrupted copies, wrong lengths, unknown identifiers, duplicates, replays and bursts beside a lockstep `bench run`, after replays of a longer run's commands: the in-process trace, the rejections counted; a command forged with the start's step and counter: the run stops after the start timeout with one line; the command queue of a plant waiting for its start |
+| `tests/test_external_controller.py` | a controller under test from docs/PROTOCOL.md: each mistake named with its status; no valid duty within `--dut-timeout` (bad CRC, or none) in both modes: one line, exit 2, `error.txt`; kill -9 in real time before the scoring start: exit 3, the plant's rows go on without telemetry |
 | `tests/test_reliability_doc.py` | this page is the rendering of `docs/reliability/soak.json` |
 """
 
@@ -658,7 +856,27 @@ def render_reliability(rep: dict[str, Any]) -> str:
         + ".  "
         + _shared_text(p["parallel"]),
         "",
+        *_flood_text(p.get("flood")),
         f"The process-level checks took {p['wall_s']:.0f} s; the one-minute load average was "
         f"{p['loadavg_1min_start']:.1f} at their start.",
     ]
     return "\n".join(lines).rstrip() + "\n"
+
+
+def _flood_text(fl: dict[str, Any] | None) -> list[str]:
+    """The flood check's section (none for a soak JSON written before it existed)."""
+    if not fl:
+        return []
+    poured = ", ".join(f"{k} {_n(v)}" for k, v in sorted(fl["frames_poured"].items()))
+    by = ", ".join(
+        f"`{k}` {_n(v)}" for k, v in sorted((fl["frames_rejected_by_reason"] or {}).items())
+    )
+    return [
+        "### A flood beside a run",
+        "",
+        f"A 0.3 s lockstep `bench run` of wen-5.1 (sensored) with {_n(sum(fl['frames_poured'].values()))} "
+        f"fuzzed frames poured at its bus ({poured}): {fl['outcome']}, exit status "
+        f"{fl['exit_code']} after {fl['seconds']:.0f} s; {_n(fl['frames_rejected'] or 0)} frames "
+        f"rejected ({by or 'none'}), {_n(fl['frames_repeated_ignored'] or 0)} repeats ignored.",
+        "",
+    ]
