@@ -256,9 +256,15 @@ def test_garbage_other_traffic_and_truncated_end_are_counted(run: Path, tmp_path
     got = read_csv(str(tmp_path / "out" / "signals.csv"))
     idx = np.searchsorted(live["step"], got["step"])
     np.testing.assert_array_equal(live["step"][idx], got["step"])
-    # a row per plant period: the last one's telemetry lies past the cut (its estimate NaN)
+    # a row per plant period: the telemetry of the last periods lies past the cut
+    # (estimate NaN); how many depends on the order the recorder heard the last
+    # frames in (a controller's telemetry for k can follow the plant's sample k + 1),
+    # but they are the last rows only
     tel = np.isfinite(got["theta_hat"])
-    assert np.count_nonzero(~tel) == mx["steps_without_telemetry"] <= 1
+    missing = np.flatnonzero(~tel)
+    assert len(missing) == mx["steps_without_telemetry"]
+    np.testing.assert_array_equal(missing, np.arange(len(tel) - len(missing), len(tel)))
+    assert len(missing) < 10
     np.testing.assert_array_equal(live["theta_hat"][idx][tel], got["theta_hat"][tel])
     np.testing.assert_array_equal(live["i_a"][idx], got["i_a"])
     assert 1100 < len(got["step"]) < 1334
