@@ -273,7 +273,13 @@ def run_sweep(
     resume: bool = True,
     plots: bool = True,
 ) -> SweepResult:
-    """Run the plan's missing tasks, then write ``results.csv``, plots and ``sweep.json``."""
+    """Run the plan's missing tasks, then write ``results.csv``, plots and ``sweep.json``.
+
+    Stopped by SIGINT/SIGTERM (:func:`bench.studies._executors.catch_signals`):
+    ``results.csv`` and ``sweep.json`` of the finished points (``interrupted``
+    set), no plots; the points under way are not in ``points.jsonl`` and run
+    on the next resume.
+    """
     tasks = build_tasks(plan)
     out.mkdir(parents=True, exist_ok=True)
     log = out / "points.jsonl"
@@ -336,6 +342,9 @@ def run_sweep(
     records = [done[t.id] for t in tasks if t.id in done]
     summary: dict[str, Any] = {"plan": plan.to_dict(), "runs": len(tasks), "finished": len(records)}
     summary["missing"] = len(wanted - set(done))
+    stopped = info is not None and info.interrupted
+    if stopped:
+        summary["interrupted"] = True
     if info is not None and walls:
         n = len(walls)
         compute = float(np.nanmean(walls))
@@ -360,7 +369,7 @@ def run_sweep(
             "cpus": os.cpu_count(),
         }
     files = write_results(records, plan, out)
-    if plots:
+    if plots and not stopped:  # seconds of matplotlib: not within the time a signal allows
         files += plot_sweep(records, plan, out / "plots")
     (out / "sweep.json").write_text(json.dumps(summary, indent=2, default=str) + "\n")
     files.append("sweep.json")
