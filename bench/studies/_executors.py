@@ -84,7 +84,8 @@ def catch_signals() -> Iterator[None]:
 
     Held by the commands that run studies around their whole work, so that a
     signal, a second one included, can never cut short the ending of the
-    workers or the writing of what finished.  Outside the main thread it does
+    workers or the writing of what finished; after a signal, the command's
+    last steps ignore any further one.  Outside the main thread it does
     nothing (signals are delivered there only).
     """
     _STOP.clear()
@@ -105,8 +106,15 @@ def catch_signals() -> Iterator[None]:
     try:
         yield
     finally:
-        for sig, h in prev.items():
-            signal.signal(sig, h)
+        if _STOP.is_set():
+            # the command now ends with status 130: a further signal is ignored, also while
+            # the interpreter shuts down (where Python's own handlers are gone and a
+            # SIGINT would kill the process with no status of its own)
+            for sig in prev:
+                signal.signal(sig, signal.SIG_IGN)
+        else:
+            for sig, h in prev.items():
+                signal.signal(sig, h)
         _STOP.clear()
 
 
