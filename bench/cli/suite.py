@@ -230,9 +230,12 @@ def register(sub: Any) -> None:
     q.add_argument(
         "--plants",
         help="comma-separated plants: ideal (the papers'), drive (drive profile, countermeasures "
-        "on), drive-nocomp (countermeasures off) (default: all three)",
+        "on), drive-nocomp (countermeasures off) (default: all three; with --quick: ideal)",
     )
-    q.add_argument("--sweeps", help=f"comma-separated sweeps ({_sweep_names()}; default: all)")
+    q.add_argument(
+        "--sweeps",
+        help=f"comma-separated sweeps ({_sweep_names()}; default: all; with --quick: speed)",
+    )
     q.add_argument("--no-sweep", action="store_true", help="skip the sweeps")
     q.add_argument(
         "--quick",

@@ -70,8 +70,9 @@ class Smoke:
     the ideal plant, cut to :data:`QUICK_DURATION_S`; and one sweep (speed,
     its quick values, the three rotating demodulators, in-process), so every
     path of the suite (runs over the bus, sweep points, claims, report) runs
-    once.  Measured about a minute on the 2-core development machine
-    (README.md, "Results").
+    once: 3 runs and 9 sweep points, instead of every shipped scenario,
+    estimator, plant and sweep cut short.  Its measured time is in
+    README.md ("Results").
     """
 
     scenarios: tuple[str, ...] = ("wen-5.1", "xue-fig13", "wide-speed-xue")
