@@ -364,6 +364,7 @@ def _dask(
     info = RunInfo("dask", workers, scheduler)
     logging.getLogger("distributed").setLevel(logging.ERROR)
     cluster: Any = None
+    client: Any = None
     try:
         if scheduler:
             try:
@@ -380,36 +381,63 @@ def _dask(
                 silence_logs=logging.ERROR,
             )
             client = Client(cluster)
-        with client:
-            futs = [
-                client.submit(fn, t, pure=False, key=f"point-{i}-{os.getpid()}")
-                for i, t in enumerate(tasks)
-            ]
-            index = {f.key: i for i, f in enumerate(futs)}
-            ac = as_completed(futs)
-            while not ac.is_empty() and not interrupted():
-                batch = ac.next_batch(block=False)
-                if not batch:
-                    time.sleep(STOP_POLL_S)  # the signal flag is looked at between batches
-                    continue
-                for fut in batch:
-                    i = index[fut.key]
-                    if fut.status == "finished":
-                        info.done += 1
-                        on_done(i, fut.result())
-                    else:  # KilledWorker after the scheduler's retries, or a lost connection
-                        exc = fut.exception()
-                        info.lost += 1
-                        why = f"{type(exc).__name__}: {exc}"
-                        on_done(i, {"error": LOST, "why": why, "wall_s": 0.0})
-                    fut.release()
-            if interrupted():
-                info.interrupted = True
-                client.cancel([f for f in futs if not f.done()])
-    finally:
+        futs = [
+            client.submit(fn, t, pure=False, key=f"point-{i}-{os.getpid()}")
+            for i, t in enumerate(tasks)
+        ]
+        index = {f.key: i for i, f in enumerate(futs)}
+        ac = as_completed(futs)
+        while not ac.is_empty() and not interrupted():
+            batch = ac.next_batch(block=False)
+            if not batch:
+                time.sleep(STOP_POLL_S)  # the signal flag is looked at between batches
+                continue
+            for fut in batch:
+                i = index[fut.key]
+                if fut.status == "finished":
+                    info.done += 1
+                    on_done(i, fut.result())
+                else:  # KilledWorker after the scheduler's retries, or a lost connection
+                    exc = fut.exception()
+                    info.lost += 1
+                    why = f"{type(exc).__name__}: {exc}"
+                    on_done(i, {"error": LOST, "why": why, "wall_s": 0.0})
+                fut.release()
+        if interrupted():
+            info.interrupted = True
+            client.cancel([f for f in futs if not f.done()])
+    except BaseException:
+        _end_dask(client, cluster)
+        raise
+    if interrupted():
+        _end_dask(client, cluster)
+    else:
+        client.close()
         if cluster is not None:
-            if interrupted():
-                # the local cluster's worker processes are this process's children
-                end_workers(mp.active_children())
-            cluster.close(timeout=2 if interrupted() else None)
+            cluster.close()
     return info
+
+
+#: How long an interrupted study waits for Dask to close its client and local cluster (s).
+DASK_CLOSE_S = 0.5
+
+
+def _end_dask(client: Any, cluster: Any) -> None:
+    """End a Dask batch at once: the local cluster's worker processes killed, the client
+    and the cluster closed within :data:`DASK_CLOSE_S` each, whatever is left killed.
+
+    A nanny restarts a worker process that dies, until the cluster closes:
+    hence the second kill.  A remote cluster's workers are not this
+    machine's: their futures are cancelled and the client closed.
+    """
+    if cluster is not None:
+        end_workers(mp.active_children())  # the local cluster's processes are this one's
+    for part in (client, cluster):
+        if part is None:
+            continue
+        try:
+            part.close(timeout=DASK_CLOSE_S)
+        except Exception:  # a timeout or a closed comm: what is left is killed below
+            pass
+    if cluster is not None:
+        end_workers(mp.active_children())
