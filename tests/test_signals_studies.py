@@ -291,3 +291,31 @@ def test_run_killed_outright_takes_its_nodes_with_it(tmp_path: Path) -> None:
     _, kids, _ = _signal_and_time(proc, proc.kill)
     assert len(_nodes(kids)) == 2
     assert _left(kids) == {}
+
+
+def test_suite_sweep_ends_on_a_signal_and_keeps_the_finished_points(tmp_path: Path) -> None:
+    """``bench suite sweep``: the points (in-process, in the workers) that finished are in
+    ``summary.json``; the others are not invented."""
+    out = tmp_path / "out"
+    err_file = tmp_path / "stderr.txt"
+    with err_file.open("w") as err_fh:
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "bench", "suite", "sweep", "--quick", "--sweeps", "speed",
+             "-j", "2", "--out", str(out)],
+            cwd=ROOT, stdout=subprocess.PIPE, stderr=err_fh, text=True,
+        )  # fmt: skip
+        _wait_for(lambda: "[2/9]" in err_file.read_text(), 240, proc)
+        took, kids, _ = _signal_and_time(proc, lambda: proc.send_signal(signal.SIGINT))
+    err = err_file.read_text()
+    assert proc.returncode == 130, err
+    assert "Traceback" not in err, err
+    assert took < LIMIT_S + MARGIN_S, f"{took:.2f} s"
+    assert len(kids) >= 2
+    assert _left(kids) == {}
+    summary = json.loads((out / "summary.json").read_text())
+    fin = summary["suite"]["finished"]
+    assert summary["suite"]["interrupted"] is True and fin["sweep_points_planned"] == 9
+    assert 2 <= fin["sweep_points"] < 9
+    methods = summary["sweeps"]["speed"]["methods"]
+    assert sum(len(m["x"]) for m in methods.values()) == fin["sweep_points"]
+    assert not (out / "sweeps").exists()  # no plots of a part
