@@ -18,7 +18,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from bench._errors import BenchError
+from bench._errors import EXIT_INTERRUPTED, BenchError
 
 
 def _csv(s: str | None) -> tuple[str, ...] | None:
@@ -61,50 +61,56 @@ def _common(p: argparse.ArgumentParser) -> None:
 def cmd_paper(args: argparse.Namespace) -> int:
     from bench.scenarios._schema import SHIPPED
     from bench.scenarios._setup import check_estimator_name
-    from bench.studies._suite import PLANTS, SuiteOptions, run_suite
+    from bench.studies._executors import catch_signals
+    from bench.studies._suite import PLANTS, SMOKE, SuiteOptions, run_suite
     from bench.studies._sweep import SWEEPS
 
-    scenarios = _csv(args.scenarios) or SHIPPED
+    smoke = args.quick and args.scenarios is None and args.estimators is None
+    scenarios = _csv(args.scenarios) or (SMOKE.scenarios if smoke else SHIPPED)
     for s in scenarios:
         if s not in SHIPPED and not Path(s).is_file():
             raise BenchError(
                 f"--scenarios: unknown scenario {s!r} (shipped: {', '.join(SHIPPED)}; or a .toml path)"
             )
-    estimators = _csv(args.estimators)
+    estimators = _csv(args.estimators) or (SMOKE.estimators if smoke else None)
     for e in estimators or ():
         check_estimator_name(e, "--estimators")
-    plants = _csv(args.plants) or PLANTS
+    plants = _csv(args.plants) or (SMOKE.plants if args.quick else PLANTS)
     _check_names(plants, PLANTS, "--plants")
-    sweeps = () if args.no_sweep else (_csv(args.sweeps) or tuple(SWEEPS))
+    sweeps = (
+        ()
+        if args.no_sweep
+        else (_csv(args.sweeps) or (SMOKE.sweeps if args.quick else tuple(SWEEPS)))
+    )
     _check_names(sweeps, tuple(SWEEPS), "--sweeps")
     if args.jobs < 1:
         raise BenchError(f"--jobs must be >= 1, got {args.jobs}")
     out = Path(args.out) if args.out else Path("runs") / "suite-paper"
     _check_new(out, args.overwrite)
     runs_dir = Path(args.runs_dir) if args.runs_dir else Path("runs") / "suite-runs"
-    summary = run_suite(
-        SuiteOptions(
-            out_dir=out,
-            runs_dir=runs_dir,
-            scenarios=tuple(scenarios),
-            estimators=estimators,
-            plants=tuple(plants),
-            quick=args.quick,
-            sweeps=tuple(sweeps),
-            sweep_quick=args.quick,
-            inprocess=args.inprocess,
-            workers=args.jobs,
-            interface=args.interface,
-            channel=args.channel,
-            progress=not args.quiet,
+    with catch_signals():
+        summary = run_suite(
+            SuiteOptions(
+                out_dir=out,
+                runs_dir=runs_dir,
+                scenarios=tuple(scenarios),
+                estimators=estimators,
+                plants=tuple(plants),
+                quick=args.quick,
+                sweeps=tuple(sweeps),
+                sweep_quick=args.quick,
+                inprocess=args.inprocess,
+                workers=args.jobs,
+                interface=args.interface,
+                channel=args.channel,
+                progress=not args.quiet,
+            )
         )
-    )
-    _print_claims(summary)
-    print(f"report: {out / 'report.md'}, {out / 'summary.json'}")
-    return 0
+    return _finish(summary, out)
 
 
 def cmd_sweep(args: argparse.Namespace) -> int:
+    from bench.studies._executors import catch_signals
     from bench.studies._suite import SuiteOptions, run_suite
     from bench.studies._sweep import SWEEPS
 
@@ -114,18 +120,34 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         raise BenchError(f"--jobs must be >= 1, got {args.jobs}")
     out = Path(args.out) if args.out else Path("runs") / "suite-sweep"
     _check_new(out, args.overwrite)
-    summary = run_suite(
-        SuiteOptions(
-            out_dir=out,
-            runs_dir=out / "runs",
-            scenarios=(),
-            sweeps=tuple(sweeps),
-            sweep_quick=args.quick,
-            inprocess=True,
-            workers=args.jobs,
-            progress=not args.quiet,
+    with catch_signals():
+        summary = run_suite(
+            SuiteOptions(
+                out_dir=out,
+                runs_dir=out / "runs",
+                scenarios=(),
+                sweeps=tuple(sweeps),
+                sweep_quick=args.quick,
+                inprocess=True,
+                workers=args.jobs,
+                progress=not args.quiet,
+            )
         )
-    )
+    return _finish(summary, out)
+
+
+def _finish(summary: dict[str, Any], out: Path) -> int:
+    """The claims and the files of a suite; status 130 (files of the finished part) when
+    SIGINT/SIGTERM stopped it."""
+    fin = summary["suite"].get("finished")
+    if summary["suite"].get("interrupted") and fin:
+        print(
+            f"bench: interrupted: {fin['runs']} of {fin['runs_planned']} runs and "
+            f"{fin['sweep_points']} of {fin['sweep_points_planned']} sweep points finished, "
+            f"kept in {out} (report.md, summary.json); --overwrite to run the suite there again",
+            file=sys.stderr,
+        )
+        return EXIT_INTERRUPTED
     _print_claims(summary)
     print(f"report: {out / 'report.md'}, {out / 'summary.json'}")
     return 0
@@ -208,14 +230,20 @@ def register(sub: Any) -> None:
     q.add_argument(
         "--plants",
         help="comma-separated plants: ideal (the papers'), drive (drive profile, countermeasures "
-        "on), drive-nocomp (countermeasures off) (default: all three)",
+        "on), drive-nocomp (countermeasures off) (default: all three; with --quick: ideal)",
     )
-    q.add_argument("--sweeps", help=f"comma-separated sweeps ({_sweep_names()}; default: all)")
+    q.add_argument(
+        "--sweeps",
+        help=f"comma-separated sweeps ({_sweep_names()}; default: all; with --quick: speed)",
+    )
     q.add_argument("--no-sweep", action="store_true", help="skip the sweeps")
     q.add_argument(
         "--quick",
         action="store_true",
-        help="smoke test: runs cut to 1.6 s, fewer sweep points (not comparable with the papers)",
+        help="smoke test, about a minute on 2 cores: wen-5.1 tt-dq, xue-fig13 square-wave "
+        "and wide-speed-xue hybrid-square-wave over CAN, cut to 1.6 s, on the ideal plant, and "
+        "the speed sweep's 9 quick points (not comparable with the papers); "
+        "--scenarios/--estimators/--plants/--sweeps choose another part, cut alike",
     )
     q.add_argument(
         "--inprocess", action="store_true", help="run the scenarios in-process instead of over CAN"

@@ -18,7 +18,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from bench._errors import BenchError
+from bench._errors import EXIT_INTERRUPTED, BenchError
 from bench.cli._common import POS_FLOAT
 
 
@@ -26,6 +26,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     from bench.scenarios._dotted import parse_value
     from bench.scenarios._schema import load_scenario
     from bench.scenarios._setup import check_estimator_name
+    from bench.studies._executors import catch_signals
     from bench.studies._grid import Plan, parse_grid, parse_random, run_sweep
 
     if args.scheduler and args.executor != "dask":
@@ -72,16 +73,20 @@ def cmd_sweep(args: argparse.Namespace) -> int:
             doc.write_text(update_doc(doc.read_text(encoding="utf-8"), text), encoding="utf-8")
             print(f"written: {doc}")
         return 0
-    res = run_sweep(
-        plan,
-        out,
-        executor=args.executor,
-        workers=args.workers,
-        scheduler=args.scheduler,
-        progress=not args.quiet,
-        resume=not args.restart,
-    )
+    with catch_signals():
+        res = run_sweep(
+            plan,
+            out,
+            executor=args.executor,
+            workers=args.workers,
+            scheduler=args.scheduler,
+            progress=not args.quiet,
+            resume=not args.restart,
+        )
     _report(res.summary, res.files, out)
+    if res.summary.get("interrupted"):
+        print("bench: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
     return 0 if res.summary["missing"] == 0 else 1
 
 

@@ -4,10 +4,25 @@
 is injected, ``bench link`` as OS processes, each with its stderr in
 ``ROLE.log`` and its counters in ``ROLE.json`` of the run folder.  A node is
 started only once the previous one has printed ``READY``.
+
+Each node runs in a session (process group) of its own, so that a Ctrl-C
+on the terminal reaches ``bench run`` alone, which stops the nodes in order
+and scores what was recorded.  The price is that a signal to the run's
+process group, or the death of the process that started the nodes, no
+longer reaches them.  The process that starts a node is therefore the one
+responsible for ending it: while alive it stops its nodes itself
+(:func:`stop_nodes`; ``bench run`` on SIGINT/SIGTERM), and on Linux each node
+is started with ``PR_SET_PDEATHSIG`` = SIGKILL (:func:`die_with_parent`), so
+the kernel ends it when that process dies by any means (SIGKILL, a crash, a
+suite that ends its worker processes on Ctrl-C) instead of leaving it
+orphaned on the bus.
 """
 
 from __future__ import annotations
 
+import ctypes
+import functools
+import os
 import select
 import signal
 import subprocess
@@ -19,6 +34,41 @@ from typing import Any
 from bench._errors import BenchError
 from bench.scenarios._schema import Scenario
 from bench.wire._bus import BusSpec
+
+#: ``prctl`` option that sets the signal a process gets when its parent dies (linux/prctl.h).
+PR_SET_PDEATHSIG = 1
+
+
+@functools.cache
+def _prctl() -> Any:
+    """libc's ``prctl``, resolved once in the parent (None off Linux or without libc)."""
+    if not sys.platform.startswith("linux"):
+        return None
+    try:
+        return ctypes.CDLL(None, use_errno=True).prctl
+    except (OSError, AttributeError):
+        return None
+
+
+def die_with_parent(parent: int, sig: int = signal.SIGKILL) -> None:
+    """End this process with ``sig`` when the thread that started it ends (Linux only).
+
+    ``PR_SET_PDEATHSIG``: the kernel sends ``sig`` when the parent *thread*
+    that forked this process exits, so it must be called in a child whose
+    parent started it from a thread that lives as long as the child should
+    (the main thread of ``bench run`` and of a suite's worker processes).
+    The signal is SIGKILL: once the parent is gone, nobody reads what the
+    child would still write, and SIGKILL cannot be held up by a busy loop
+    or a blocked handler.  A parent that died before the call (``parent`` is
+    no longer the parent) ends this process at once.  Safe between fork and
+    exec (``preexec_fn``): it calls only the ``prctl`` resolved beforehand.
+    """
+    prctl = _prctl()
+    if prctl is None:
+        return
+    prctl(PR_SET_PDEATHSIG, int(sig), 0, 0, 0)
+    if os.getppid() != parent:
+        os._exit(1)
 
 
 def _node_cmd(role: str, scenario_file: Path, spec: BusSpec, extra: list[str]) -> list[str]:
@@ -176,6 +226,7 @@ def start_nodes(
             if role != "link"
             else [sys.executable, "-m", "bench", "link", *sp.args(), *extra]
         )
+        _prctl()  # resolved here, not between fork and exec
         p = subprocess.Popen(
             cmd,
             stdout=subprocess.PIPE,
@@ -183,6 +234,8 @@ def start_nodes(
             text=True,
             env=env,
             start_new_session=True,
+            # its own session, and ended by the kernel if this process dies (module docstring)
+            preexec_fn=functools.partial(die_with_parent, os.getpid()),
         )
         procs.append((role, p))
         _wait_ready(p, role, log, stop=stop)
@@ -252,6 +305,5 @@ def node_failures(
     return {
         role: p.returncode
         for role, p in procs
-        if p.returncode not in (0, None)
-        and not (role in asked and p.returncode == -signal.SIGTERM)
+        if p.returncode not in (0, None) and not (role in asked and p.returncode == -signal.SIGTERM)
     }

@@ -19,6 +19,20 @@ Both executors are existing engines, not a home-made scheduler:
 Every result is handed to ``on_done`` the moment it arrives, in the parent
 process, which writes it to disk: a point once finished is never lost,
 whatever happens to the workers afterwards.
+
+Signals.  A command that runs a study holds :func:`catch_signals` around
+it: SIGINT or SIGTERM (a second one alike) sets a flag, and :func:`execute`
+then stops at once, within :data:`STOP_POLL_S`: no further point starts, the
+local worker processes are killed (:func:`end_workers`) and the Dask
+futures cancelled, the points under way are dropped (they run again on a
+resume), and :func:`execute` returns with ``interrupted`` set, so the
+command writes what finished and exits with status 130.  The local workers
+ignore SIGINT and SIGTERM themselves (a Ctrl-C on the terminal reaches the
+whole process group): the parent alone decides, so a worker never turns a
+signal into a half-finished result.  Each worker dies with the parent
+(``PR_SET_PDEATHSIG``, :func:`bench.runs._processes.die_with_parent`), and
+the node processes of a run a worker started die with that worker, so no
+process of the tree outlives the command, whatever ends it.
 """
 
 from __future__ import annotations
@@ -26,15 +40,19 @@ from __future__ import annotations
 import math
 import multiprocessing as mp
 import os
+import signal
 import sys
+import threading
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Any
 
 from bench._errors import BenchError
+from bench.runs._processes import die_with_parent
 
 EXECUTORS = ("local", "dask")
 
@@ -43,6 +61,82 @@ MAX_ATTEMPTS = 3
 
 #: What a point whose worker died too often reports (not written: a resume reruns it).
 LOST = "lost"
+
+#: How often the parent looks at the signal flag while it waits for results (s).
+#: The target: a study ends within 3 s of SIGINT/SIGTERM on a loaded 2-core machine;
+#: ending the workers and writing the finished part's files takes most of that,
+#: so the wait for the flag is kept to a tenth of a second.
+STOP_POLL_S = 0.1
+#: How long the parent waits for its killed workers to be reaped (s; SIGKILL cannot be held up).
+REAP_S = 1.0
+
+_STOP = threading.Event()
+
+
+def interrupted() -> bool:
+    """Whether SIGINT or SIGTERM came while :func:`catch_signals` was on."""
+    return _STOP.is_set()
+
+
+@contextmanager
+def catch_signals() -> Iterator[None]:
+    """SIGINT and SIGTERM set the stop flag (:func:`interrupted`) instead of raising.
+
+    Held by the commands that run studies around their whole work, so that a
+    signal, a second one included, can never cut short the ending of the
+    workers or the writing of what finished; after a signal, the command's
+    last steps ignore any further one.  Outside the main thread it does
+    nothing (signals are delivered there only).
+    """
+    _STOP.clear()
+    prev: dict[signal.Signals, Any] = {}
+
+    def on_signal(signum: int, frame: Any) -> None:
+        if not _STOP.is_set():
+            print(
+                f"bench: {signal.Signals(signum).name}: stopping, keeping what finished",
+                file=sys.stderr,
+                flush=True,
+            )
+        _STOP.set()
+
+    if threading.current_thread() is threading.main_thread():
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            prev[sig] = signal.signal(sig, on_signal)
+    try:
+        yield
+    finally:
+        if _STOP.is_set():
+            # the command now ends with status 130: a further signal is ignored, also while
+            # the interpreter shuts down (where Python's own handlers are gone and a
+            # SIGINT would kill the process with no status of its own)
+            for sig in prev:
+                signal.signal(sig, signal.SIG_IGN)
+        else:
+            for sig, h in prev.items():
+                signal.signal(sig, h)
+        _STOP.clear()
+
+
+def _worker_init(parent: int) -> None:
+    """A local worker: the parent alone reacts to signals, and the worker dies with it."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    die_with_parent(parent)
+
+
+def end_workers(procs: Sequence[Any]) -> None:
+    """Kill the given worker processes (``multiprocessing`` processes) and reap them.
+
+    SIGKILL, not SIGTERM: the points under way are dropped anyway, and their
+    node processes die with them (``PR_SET_PDEATHSIG``).
+    """
+    for p in procs:
+        if p.is_alive():
+            p.kill()
+    deadline = time.monotonic() + REAP_S
+    for p in procs:
+        p.join(max(0.0, deadline - time.monotonic()))
 
 
 @dataclass(slots=True)
@@ -57,6 +151,8 @@ class RunInfo:
     lost: int = 0
     restarts: int = 0
     notes: list[str] = field(default_factory=list)
+    #: SIGINT/SIGTERM stopped the batch: the points not handed to ``on_done`` did not run.
+    interrupted: bool = False
 
 
 class Bar:
@@ -183,13 +279,19 @@ def _local(
     info = RunInfo("local", workers)
     todo = list(range(len(tasks)))
     attempts = [0] * len(tasks)
-    while todo:
-        with ProcessPoolExecutor(workers, mp_context=mp.get_context("spawn")) as ex:
-            pending: dict[Future[dict[str, Any]], int] = {}
-            queue = list(todo)
-            todo = []
-            broken = False
-            while queue or pending:
+    while todo and not interrupted():
+        ex = ProcessPoolExecutor(
+            workers,
+            mp_context=mp.get_context("spawn"),
+            initializer=_worker_init,
+            initargs=(os.getpid(),),
+        )
+        pending: dict[Future[dict[str, Any]], int] = {}
+        queue = list(todo)
+        todo = []
+        broken = False
+        try:
+            while (queue or pending) and not interrupted():
                 # keep at most two points per worker queued: a broken pool loses only those
                 while queue and len(pending) < 2 * workers and not broken:
                     i = queue.pop(0)
@@ -197,7 +299,9 @@ def _local(
                     pending[ex.submit(fn, tasks[i])] = i
                 if not pending:
                     break
-                done, _ = wait(pending, return_when=FIRST_COMPLETED)
+                done, _ = wait(pending, timeout=STOP_POLL_S, return_when=FIRST_COMPLETED)
+                if interrupted():
+                    break  # what came with the signal may be a run the signal cut short
                 for f in done:
                     i = pending.pop(f)
                     try:
@@ -208,18 +312,38 @@ def _local(
                         continue
                     info.done += 1
                     on_done(i, res)
-            if broken:
-                info.restarts += 1
-                todo += queue
-                for i in [i for i in todo if attempts[i] >= MAX_ATTEMPTS]:
-                    todo.remove(i)
-                    info.lost += 1
-                    on_done(i, {"error": LOST, "why": "its worker process died", "wall_s": 0.0})
-                if todo:
-                    info.notes.append(
-                        f"a worker process died; {len(todo)} unfinished points resubmitted"
-                    )
+        except BaseException:  # KeyboardInterrupt outside catch_signals, or a bug
+            _end_pool(ex)
+            raise
+        if interrupted():
+            info.interrupted = True
+            _end_pool(ex)
+        else:
+            ex.shutdown(wait=True)
+        if broken and not interrupted():
+            info.restarts += 1
+            todo += queue
+            for i in [i for i in todo if attempts[i] >= MAX_ATTEMPTS]:
+                todo.remove(i)
+                info.lost += 1
+                on_done(i, {"error": LOST, "why": "its worker process died", "wall_s": 0.0})
+            if todo:
+                info.notes.append(
+                    f"a worker process died; {len(todo)} unfinished points resubmitted"
+                )
+    info.interrupted = info.interrupted or interrupted()
     return info
+
+
+def _end_pool(ex: ProcessPoolExecutor) -> None:
+    """Kill a pool's worker processes (the points under way are dropped) and shut it down.
+
+    ``shutdown(wait=True)`` would let the workers finish the points already
+    handed to them first: minutes of runs after a Ctrl-C.
+    """
+    # the pool's own worker processes (``_processes``: pid -> Process, stable since Python 3.8)
+    end_workers(list((getattr(ex, "_processes", None) or {}).values()))
+    ex.shutdown(wait=False, cancel_futures=True)
 
 
 def _dask(
@@ -240,6 +364,7 @@ def _dask(
     info = RunInfo("dask", workers, scheduler)
     logging.getLogger("distributed").setLevel(logging.ERROR)
     cluster: Any = None
+    client: Any = None
     try:
         if scheduler:
             try:
@@ -256,13 +381,18 @@ def _dask(
                 silence_logs=logging.ERROR,
             )
             client = Client(cluster)
-        with client:
-            futs = [
-                client.submit(fn, t, pure=False, key=f"point-{i}-{os.getpid()}")
-                for i, t in enumerate(tasks)
-            ]
-            index = {f.key: i for i, f in enumerate(futs)}
-            for fut in as_completed(futs):
+        futs = [
+            client.submit(fn, t, pure=False, key=f"point-{i}-{os.getpid()}")
+            for i, t in enumerate(tasks)
+        ]
+        index = {f.key: i for i, f in enumerate(futs)}
+        ac = as_completed(futs)
+        while not ac.is_empty() and not interrupted():
+            batch = ac.next_batch(block=False)
+            if not batch:
+                time.sleep(STOP_POLL_S)  # the signal flag is looked at between batches
+                continue
+            for fut in batch:
                 i = index[fut.key]
                 if fut.status == "finished":
                     info.done += 1
@@ -273,7 +403,41 @@ def _dask(
                     why = f"{type(exc).__name__}: {exc}"
                     on_done(i, {"error": LOST, "why": why, "wall_s": 0.0})
                 fut.release()
-    finally:
+        if interrupted():
+            info.interrupted = True
+            client.cancel([f for f in futs if not f.done()])
+    except BaseException:
+        _end_dask(client, cluster)
+        raise
+    if interrupted():
+        _end_dask(client, cluster)
+    else:
+        client.close()
         if cluster is not None:
             cluster.close()
     return info
+
+
+#: How long an interrupted study waits for Dask to close its client and local cluster (s).
+DASK_CLOSE_S = 0.5
+
+
+def _end_dask(client: Any, cluster: Any) -> None:
+    """End a Dask batch at once: the local cluster's worker processes killed, the client
+    and the cluster closed within :data:`DASK_CLOSE_S` each, whatever is left killed.
+
+    A nanny restarts a worker process that dies, until the cluster closes:
+    hence the second kill.  A remote cluster's workers are not this
+    machine's: their futures are cancelled and the client closed.
+    """
+    if cluster is not None:
+        end_workers(mp.active_children())  # the local cluster's processes are this one's
+    for part in (client, cluster):
+        if part is None:
+            continue
+        try:
+            part.close(timeout=DASK_CLOSE_S)
+        except Exception:  # a timeout or a closed comm: what is left is killed below
+            pass
+    if cluster is not None:
+        end_workers(mp.active_children())

@@ -273,7 +273,13 @@ def run_sweep(
     resume: bool = True,
     plots: bool = True,
 ) -> SweepResult:
-    """Run the plan's missing tasks, then write ``results.csv``, plots and ``sweep.json``."""
+    """Run the plan's missing tasks, then write ``results.csv``, plots and ``sweep.json``.
+
+    Stopped by SIGINT/SIGTERM (:func:`bench.studies._executors.catch_signals`):
+    ``results.csv`` and ``sweep.json`` of the finished points (``interrupted``
+    set), no plots; the points under way are not in ``points.jsonl`` and run
+    on the next resume.
+    """
     tasks = build_tasks(plan)
     out.mkdir(parents=True, exist_ok=True)
     log = out / "points.jsonl"
@@ -336,6 +342,9 @@ def run_sweep(
     records = [done[t.id] for t in tasks if t.id in done]
     summary: dict[str, Any] = {"plan": plan.to_dict(), "runs": len(tasks), "finished": len(records)}
     summary["missing"] = len(wanted - set(done))
+    stopped = info is not None and info.interrupted
+    if stopped:
+        summary["interrupted"] = True
     if info is not None and walls:
         n = len(walls)
         compute = float(np.nanmean(walls))
@@ -360,7 +369,7 @@ def run_sweep(
             "cpus": os.cpu_count(),
         }
     files = write_results(records, plan, out)
-    if plots:
+    if plots and not stopped:  # seconds of matplotlib: not within the time a signal allows
         files += plot_sweep(records, plan, out / "plots")
     (out / "sweep.json").write_text(json.dumps(summary, indent=2, default=str) + "\n")
     files.append("sweep.json")
@@ -470,7 +479,7 @@ def plot_sweep(records: Sequence[dict[str, Any]], plan: Plan, out: Path) -> list
 
     out.mkdir(parents=True, exist_ok=True)
     names: list[str] = []
-    title = f"{plan.scenario}"
+    title = scenario_name(plan.scenario)
     if len(keys) == 1:
         name = f"line-{_slug(keys[0])}.png"
         line_plot(records, keys[0], plan.estimators, out / name, f"{title}: vs {keys[0]}")
@@ -488,6 +497,25 @@ def plot_sweep(records: Sequence[dict[str, Any]], plan: Plan, out: Path) -> list
             heatmap(recs, keys[0], keys[1], out / name, f"{title} {est}")
         names.append(f"plots/{name}")
     return names
+
+
+def scenario_name(scenario: str) -> str:
+    """The name a plot shows for a sweep's scenario: its ``name``, not the path of its file."""
+    return str(scenario_table(scenario)[0]["name"])
+
+
+#: A line plot's value axis is logarithmic only where its values span more than this
+#: ratio (largest over smallest positive value).  A log axis is for values that span
+#: orders of magnitude (a point that lost the rotor at 180 deg beside points at 1 deg);
+#: over a narrower range it squeezes the differences a sweep is about into a few
+#: pixels, with no labelled tick between them (0.68-0.88 deg: none).
+LOG_AXIS_RATIO = 10.0
+
+
+def use_log_axis(values: Sequence[float]) -> bool:
+    """Whether a value axis showing ``values`` is logarithmic (:data:`LOG_AXIS_RATIO`)."""
+    pos = [v for v in values if math.isfinite(v) and v > 0]
+    return bool(pos) and max(pos) / min(pos) > LOG_AXIS_RATIO
 
 
 def scatter(recs: Sequence[dict[str, Any]], xkey: str, ykey: str, path: Path, title: str) -> None:
@@ -528,12 +556,29 @@ def line_plot(
 ) -> None:
     """:data:`PLOT_METRIC` over one key, a line per estimator; lost lock or a failed run
     as a red x (a failed one at the bottom of the axis); ``bound`` (deg) as a dashed line."""
+    import matplotlib.pyplot as plt
+
+    fig = line_figure(records, key, estimators, title, bound)
+    fig.savefig(path, dpi=80)
+    plt.close(fig)
+
+
+def line_figure(
+    records: Sequence[dict[str, Any]],
+    key: str,
+    estimators: Sequence[str],
+    title: str,
+    bound: float | None = None,
+) -> Any:
+    """The figure of :func:`line_plot`; its value axis is logarithmic only where the
+    values span more than :data:`LOG_AXIS_RATIO` (:func:`use_log_axis`)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(6.4, 3.6))
+    shown: list[float] = [] if bound is None else [bound]
     lost_drawn = False
     fin = [_num(r["metrics"].get(PLOT_METRIC)) for r in records]
     floor = min((v for v in fin if math.isfinite(v) and v > 0), default=1.0)
@@ -544,6 +589,7 @@ def line_plot(
         xs, numeric = _axis([c[0] for c in st])
         pos = [(_num(x) if numeric else float(i)) for i, x in enumerate(xs)]
         ys = [float(st[(x,)]["value"]) for x in xs]
+        shown += ys
         ax.plot(pos, ys, "o-", ms=4, lw=1, label=est)
         bad = [
             (p, y if math.isfinite(y) else floor)
@@ -567,13 +613,13 @@ def line_plot(
         ax.axhline(bound, ls="--", color="k", lw=1, label=f"paper bound {bound:.3g} deg")
     ax.set_xlabel(key)
     ax.set_ylabel(PLOT_LABEL)
-    ax.set_yscale("log")
+    if use_log_axis(shown):
+        ax.set_yscale("log")
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7)
     ax.set_title(title, fontsize=9)
     fig.tight_layout()
-    fig.savefig(path, dpi=80)
-    plt.close(fig)
+    return fig
 
 
 def heatmap(

@@ -56,14 +56,41 @@ from bench.studies._extras import path_name, run_extras
 from bench.studies._plants import PLANTS, plant_variant
 from controller._registry import ESTIMATOR_NAMES
 
-#: Simulated seconds of a run in ``--quick`` mode (smoke test, not comparable with the papers).
+#: Simulated seconds of a run in ``--quick`` mode (smoke test, not comparable with the papers):
+#: wen-5.1's start-up and ramp end at 0.8 s, the scored window is the last 0.2 s or more.
 QUICK_DURATION_S = 1.6
+
+
+@dataclass(frozen=True, slots=True)
+class Smoke:
+    """What ``bench suite paper --quick`` runs when no scenario or estimator is chosen.
+
+    One run over CAN per estimator family and paper (Wen's rotating
+    injection, Xue's square wave, the hybrid of the full speed range), on
+    the ideal plant, cut to :data:`QUICK_DURATION_S`; and one sweep (speed,
+    its quick values, the three rotating demodulators, in-process), so every
+    path of the suite (runs over the bus, sweep points, claims, report) runs
+    once: 3 runs and 9 sweep points, instead of every shipped scenario,
+    estimator, plant and sweep cut short.  Its measured time is in
+    README.md ("Results").
+    """
+
+    scenarios: tuple[str, ...] = ("wen-5.1", "xue-fig13", "wide-speed-xue")
+    #: each listed by one of the scenarios only: one run per scenario
+    estimators: tuple[str, ...] = ("tt-dq", "square-wave", "hybrid-square-wave")
+    plants: tuple[str, ...] = ("ideal",)
+    sweeps: tuple[str, ...] = ("speed",)
+
+
+SMOKE = Smoke()
 #: Relative cost of a step over a bus versus in-process (for the time-left estimate only).
 BUS_STEP_COST = 6.0
 #: Fixed cost of a run (process start, analysis, plots), in in-process steps.
 RUN_OVERHEAD_STEPS = 15000.0
 #: Width of the per-run plot copied into the suite's output folder (pixels).
 PNG_WIDTH = 760
+#: The error of a job that did not run to its end (the suite was interrupted).
+UNFINISHED = "not finished: the suite was interrupted"
 
 #: Metrics of a run kept in ``summary.json``.
 SUMMARY_METRICS = (
@@ -156,6 +183,8 @@ class RunJob:
             metrics, meta = self._run()
         except Exception as e:  # one failing run must not end the suite
             return {"error": f"{type(e).__name__}: {e}", "wall_s": time.perf_counter() - t0}
+        if meta.get("interrupted"):  # a signal reached the run: its numbers are not a result
+            return {"error": UNFINISHED, "wall_s": time.perf_counter() - t0}
         gains = meta.get("controller_gains") or {}
         return {"metrics": metrics, "gains": gains, "wall_s": time.perf_counter() - t0}
 
@@ -265,37 +294,36 @@ def run_jobs(
     progress: bool = True,
     on_done: Callable[[Job, dict[str, Any]], None] | None = None,
 ) -> list[dict[str, Any]]:
-    """Run ``jobs`` (longest first) on ``workers`` processes; results in ``jobs`` order."""
+    """Run ``jobs`` (longest first) on ``workers`` processes; results in ``jobs`` order.
+
+    The jobs run in worker processes even with one worker, so that the command's
+    own process only waits and reacts to signals at once
+    (:mod:`bench.studies._executors`).  A job that did not finish (SIGINT or
+    SIGTERM stopped the batch) has ``{"error": UNFINISHED}``.
+    """
+    # the same engine as bench sweep: a process pool that resubmits the
+    # unfinished runs of a worker that died (bench.studies._executors)
+    from bench.studies._executors import LOST, execute
+
     order = sorted(range(len(jobs)), key=lambda i: -jobs[i].cost)
     results: list[dict[str, Any] | None] = [None] * len(jobs)
     prog = Progress(sum(j.cost for j in jobs), len(jobs), enabled=progress)
 
-    def _record(i: int, res: dict[str, Any]) -> None:
+    def _done(k: int, res: dict[str, Any]) -> None:
+        i = order[k]
+        if res.get("error") == LOST:
+            res = {"error": f"worker died: {res.get('why', '')}", "wall_s": math.nan}
         results[i] = res
         prog.finished(jobs[i], "error" not in res)
         if on_done is not None:
             on_done(jobs[i], res)
+        prog.show([])
 
     try:
-        if workers <= 1:
-            for i in order:
-                prog.show([jobs[i].label])
-                _record(i, jobs[i]())
-        else:
-            # the same engine as bench sweep: a process pool that resubmits the
-            # unfinished runs of a worker that died (bench.studies._executors)
-            from bench.studies._executors import LOST, execute
-
-            def _done(k: int, res: dict[str, Any]) -> None:
-                if res.get("error") == LOST:
-                    res = {"error": f"worker died: {res.get('why', '')}", "wall_s": math.nan}
-                _record(order[k], res)
-                prog.show([])
-
-            execute([jobs[i] for i in order], _call, _done, workers=workers)
+        execute([jobs[i] for i in order], _call, _done, workers=max(1, workers))
     finally:
         prog.close()
-    return [r if r is not None else {"error": "not run"} for r in results]
+    return [r if r is not None else {"error": UNFINISHED} for r in results]
 
 
 def suite_transport(interface: str | None = None, channel: str | None = None) -> tuple[str, str]:
@@ -436,7 +464,14 @@ class SuiteOptions:
 
 
 def run_suite(opt: SuiteOptions) -> dict[str, Any]:
-    """Run the suite, write ``report.md``, ``summary.json`` and plots; return the summary."""
+    """Run the suite, write ``report.md``, ``summary.json`` and plots; return the summary.
+
+    Each run's small files go to ``out_dir`` as it finishes.  Stopped by
+    SIGINT/SIGTERM (under :func:`bench.studies._executors.catch_signals`),
+    it writes ``summary.json`` and ``report.md`` of what finished, without the
+    sweep plots, and the summary's ``suite.interrupted`` is set.
+    """
+    from bench.studies._executors import interrupted
     from bench.studies._report import build_summary, write_report
     from bench.studies._sweep import collect, plot_sweeps, sweep_jobs
 
@@ -473,16 +508,31 @@ def run_suite(opt: SuiteOptions) -> dict[str, Any]:
             file=sys.stderr,
         )
     jobs: list[Job] = [*runs, *sweeps]
-    results = run_jobs(jobs, workers=workers, progress=opt.progress)
-    records = []
-    for job, res in zip(runs, results[: len(runs)], strict=True):
-        if "error" not in res:
-            export_run(job, opt.out_dir)
-        records.append(run_record(job, res, opt.out_dir))
+    finished: dict[int, dict[str, Any]] = {}  # id(run job) -> its summary record
+
+    def on_done(job: Job, res: dict[str, Any]) -> None:
+        # a run's small files and its record the moment it ends: kept whatever comes next
+        if isinstance(job, RunJob):
+            if "error" not in res:
+                export_run(job, opt.out_dir)
+            finished[id(job)] = run_record(job, res, opt.out_dir)
+
+    results = run_jobs(jobs, workers=workers, progress=opt.progress, on_done=on_done)
+    stopped = interrupted()
+    # interrupted: the runs and sweep points that finished, nothing invented for the others
+    records = [finished[id(job)] for job in runs if id(job) in finished]
+    done_sweeps = [
+        (job, res)
+        for job, res in zip(sweeps, results[len(runs) :], strict=True)
+        if res.get("error") != UNFINISHED
+    ]
     sweep_summary: dict[str, Any] = {}
-    if sweeps:
-        sweep_summary = collect(sweeps, results[len(runs) :], quick=opt.sweep_quick)
-        plot_sweeps(sweep_summary, opt.out_dir / "sweeps")
+    if done_sweeps:
+        sweep_summary = collect(
+            [j for j, _ in done_sweeps], [r for _, r in done_sweeps], quick=opt.sweep_quick
+        )
+        if not stopped:  # plots take seconds of matplotlib: not within the time a signal allows
+            plot_sweeps(sweep_summary, opt.out_dir / "sweeps")
     info = {
         "command": " ".join(["bench", *sys.argv[1:]]) if sys.argv[0].endswith("bench") else "",
         "transport": "in-process" if transport is None else f"{transport[0]} {transport[1]}",
@@ -495,6 +545,29 @@ def run_suite(opt: SuiteOptions) -> dict[str, Any]:
         "note": note,
         "runs_dir": str(opt.runs_dir),
     }
+    fin = {
+        "runs": len(records),
+        "runs_planned": len(runs),
+        "sweep_points": len(done_sweeps),
+        "sweep_points_planned": len(sweeps),
+    }
+    if stopped:
+        info["interrupted"] = True
+        info["finished"] = fin
     summary = build_summary(records, sweep_summary, info)
     write_report(summary, opt.out_dir)
+    if stopped:
+        _mark_interrupted(opt.out_dir / "report.md", fin)
     return summary
+
+
+def _mark_interrupted(report: Path, fin: dict[str, int]) -> None:
+    """Say at the top of ``report.md`` that it holds only the part that finished."""
+    text = report.read_text(encoding="utf-8")
+    head, sep, rest = text.partition("\n\n")
+    line = (
+        f"**Interrupted: {fin['runs']} of {fin['runs_planned']} runs and {fin['sweep_points']} "
+        f"of {fin['sweep_points_planned']} sweep points finished; this report holds only "
+        "those (no sweep plots).**"
+    )
+    report.write_text(f"{head}{sep}{line}\n\n{rest}", encoding="utf-8")
