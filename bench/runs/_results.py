@@ -32,7 +32,14 @@ from bench.runs._metrics import (
     split_corner_hz,
 )
 from bench.scenarios._schema import Scenario
-from bench.scenarios._setup import get_preset, lockstep_delay, n_steps, plant_setup, sample_period
+from bench.scenarios._setup import (
+    countermeasures,
+    get_preset,
+    lockstep_delay,
+    n_steps,
+    plant_setup,
+    sample_period,
+)
 from bench.wire._codec import Codec
 from bench.wire._protocol import unwrap
 
@@ -98,6 +105,8 @@ def run_metadata(
         # (controller.Controller.gains); none for an external controller
         "controller": "external" if estimator == "external" else "bench",
         "controller_gains": {} if estimator == "external" else _controller_gains(scn, estimator),
+        # the drive's countermeasures the bench's controller runs (None: a controller under test)
+        "countermeasures": None if estimator == "external" else countermeasures(scn),
         "versions": _versions(),
     }
 

@@ -366,7 +366,12 @@ KEYS: dict[str, dict[str, Key]] = {
     },
     "controller": {
         "dead_time_compensation": Key(
-            "", "Feed-forward of the dead time and device drops.", "true, false", "false", 1
+            "",
+            "Feed-forward of the dead time and device drops.",
+            "true, false",
+            "true where the controller's t_dead, v_ce or v_f is above 0 "
+            "(drive profile: true; ideal: false)",
+            1,
         ),
         "t_dead": Key(
             "s",
@@ -390,7 +395,12 @@ KEYS: dict[str, dict[str, Key]] = {
             -1.0,
         ),
         "cross_saturation_compensation": Key(
-            "", "Correct the HF estimators' cross-saturation angle.", "true, false", "false", 1
+            "",
+            "Correct the HF estimators' cross-saturation angle.",
+            "true, false",
+            "true where the plant has cross-saturation with a c_dq other than 0, or k_dq "
+            "is given and not 0 (drive profile: true; ideal: false)",
+            1,
         ),
         "k_dq": Key(
             "H/A",
@@ -403,7 +413,7 @@ KEYS: dict[str, dict[str, Key]] = {
             "",
             "Measure the current offsets at standstill before the start.",
             "true, false",
-            "false",
+            "true where the current sensors have an offset (drive profile: true; ideal: false)",
             1,
         ),
         "offset_periods": Key(
