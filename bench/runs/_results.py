@@ -273,16 +273,15 @@ def finish_run(
         json.dumps(meta, indent=2, sort_keys=True, default=str) + "\n"
     )
     if plots:
-        from bench.runs._plots import controller_label, plot_run
+        from bench.runs._plots import plot_run
 
         plot_run(
             cap.table,
             out_dir,
-            title=f"{scn.name} / {controller_label(meta)}",
+            meta=meta,  # title, paper, its bound and the run's variations
             metrics=m,
             scored_from_s=scn.score_from_s,
             f_split_hz=fundamental_corner_hz(scn, str(meta.get("estimator", "")), cap.table),
-            paper=scn.paper,
             n_p=n_p,
         )
     return RunResult(out_dir=out_dir, metrics=m, capture=capture or out_dir, meta=meta)

@@ -271,7 +271,9 @@ def countermeasures(scn: Scenario) -> dict[str, bool]:
     inv = prof.inverter
     bridge = any(float(c.get(k, getattr(inv, k))) > 0.0 for k in ("t_dead", "v_ce", "v_f"))
     offsets = any(o != 0.0 for o in prof.sensors.offset_abc)
-    cross = (prof.cross_saturation and p.motor.cross.c_dq != 0.0) or float(c.get("k_dq", 0.0)) != 0.0
+    cross = (prof.cross_saturation and p.motor.cross.c_dq != 0.0) or float(
+        c.get("k_dq", 0.0)
+    ) != 0.0
     default = {
         "dead_time_compensation": bridge,
         "cross_saturation_compensation": cross,
