@@ -391,7 +391,7 @@ def run_figure(
         ax_err.axhline(b, color="tab:green", ls="--", lw=1.0, gid="paper_bound",
                        label=text if i == 0 else None)  # fmt: skip
     rng = _nanrange(err[scored]) or (-1.0, 1.0)
-    lo, hi = min(rng[0], *bounds), max(rng[1], *bounds)
+    lo, hi = min([rng[0], *bounds]), max([rng[1], *bounds])
     pad = max(0.1 * (hi - lo), 0.05)
     ax_err.set_ylim(lo - pad, hi + pad + 0.6 * (hi - lo + 2 * pad))  # room for the inset
     ax_err.set_ylabel(r"$\Delta\theta$ (deg, electrical)")
