@@ -258,3 +258,22 @@ def test_bench_plot_draws_a_run_with_empty_estimate_cells(tmp_path: Path) -> Non
     (tmp_path / "signals.csv").write_text("\n".join(lines) + "\n")
     assert main(["plot", str(tmp_path)]) == 0
     assert main(["plot", str(tmp_path), "--from", "3.2", "--to", "3.5"]) == 0
+
+
+def test_legends_the_box_and_the_inset_leave_the_traces_free(figs: list[Any]) -> None:
+    ax = draw(figs, table())
+    fig = figs[-1]
+    fig.canvas.draw()
+    for a in ax.values():
+        right = a.get_window_extent().x1
+        leg = a.get_legend()
+        assert leg is not None and leg.get_window_extent().x0 >= right, a.get_label()
+    err = ax["error"]
+    box = next(t for t in err.texts if "dtheta" in t.get_text())
+    assert box.get_window_extent().x0 >= err.get_window_extent().x1
+    # the inset sits above every scored error and the paper's bound
+    (inset,) = err.child_axes
+    top = max(4.0, float(np.nanmax(table()["theta_err_deg"][table()["t"] >= 1.0])))
+    inset_bottom = inset.get_window_extent().y0
+    y_top = err.transData.transform((0.0, top))[1]
+    assert inset_bottom > y_top

@@ -398,7 +398,7 @@ def run_figure(
     ax_err.set_title("position error, scaled to the scored rows (inset: full scale)",
                      fontsize=9, loc="left")  # fmt: skip
     _markers(ax_err, t, table, m_run, T_s, scored_from_s, legend=False, loads=loads)
-    inset = ax_err.inset_axes((0.6, 0.6, 0.38, 0.3))
+    inset = ax_err.inset_axes((0.6, 0.65, 0.38, 0.27))
     inset.plot(t, err, lw=0.4, color="tab:red")
     _markers(inset, t, table, m_run, T_s, scored_from_s, legend=False, loads=loads)
     inset.set_xlim(t_lo, t_hi)

@@ -194,7 +194,11 @@ KEYS: dict[str, dict[str, Key]] = {
         "sensors": Key("", "Single values of the profile's current sensing.", _TABLE, "none"),
         "magnetics": Key("", "Single values of the plant's magnetics.", _TABLE, "none"),
         "controller": Key(
-            "", "What a real drive does against the plant (all off by default).", _TABLE, "none"
+            "",
+            "What a real drive does against the plant (each on where the plant has what it "
+            "counters).",
+            _TABLE,
+            "none",
         ),
     },
     "noise": {
