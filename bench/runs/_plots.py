@@ -244,7 +244,7 @@ def metrics_text(m: dict[str, Any]) -> str:
         f"speed error max {_fmt(m.get('speed_err_max_rpm'), '.1f')} rpm",
     ]
     if "thd_phase_a_pct" in m:
-        lines.append(f"THD i_a {_fmt(m['thd_phase_a_pct'], '.1f')} %")
+        lines.append(f"THD i_a {_fmt(m['thd_phase_a_pct'], '.2g')} %")
     if m.get("plant_fault") not in (None, "none"):
         lines.append(f"TRIP: {m['plant_fault']} (not a scenario result)")
     if m.get("lock_lost"):
