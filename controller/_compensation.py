@@ -1,11 +1,15 @@
 """What a real drive does against its inverter and sensors: dead-time feed-forward,
 cross-saturation angle correction, current-offset calibration.
 
-Every part is off by default (:class:`CompensationPars`), so a controller
-against the ideal plant does exactly what it did before. The controller
-never reads the plant's settings: each part works from the controller's
-own idea of its hardware (``t_dead``, device drops, ADC resolution) and of
-its motor (:class:`~controller.MotorModel`, ``k_dq``).
+Every part is off in a bare :class:`CompensationPars`; whoever configures
+the controller switches each on for the hardware it drives, as a drive's
+firmware is configured for its own bridge, sensors and motor (a bench
+scenario does so where its plant has dead time or device drops, current
+offsets or cross-saturation, so the ideal plant's controller stays the
+papers'). The controller never reads the plant's settings: each part works
+from the controller's own idea of its hardware (``t_dead``, device drops,
+ADC resolution) and of its motor (:class:`~controller.MotorModel`,
+``k_dq``).
 
 Dead time (:func:`dead_time_voltage`, :class:`DeadTimeCompensator`)
 -------------------------------------------------------------------
@@ -97,7 +101,7 @@ _TWO_OVER_PI = 2.0 / math.pi
 
 @dataclass(frozen=True, slots=True)
 class CompensationPars:
-    """The drive's countermeasures (module docstring); everything off by default.
+    """The drive's countermeasures (module docstring); everything off unless switched on.
 
     Parameters
     ----------

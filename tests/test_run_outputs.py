@@ -164,10 +164,10 @@ def test_run_png_scales_the_error_panel_to_the_scored_window(tmp_path: Path) -> 
     ax_err = fig.axes[1]
     lo, hi = ax_err.get_ylim()
     assert -1.0 < lo < -0.3 and 0.3 < hi < 2.0  # scaled to the scored +-0.3 deg
-    x0, x1 = ax_err.get_xlim()
-    assert x0 == pytest.approx(1.0) and x1 == pytest.approx(3.999)
+    x0, x1 = ax_err.get_xlim()  # the time axis the other panels share (tests/test_plots.py)
+    assert x0 == pytest.approx(0.0) and x1 == pytest.approx(4.0)
     legend = [t.get_text() for t in fig.axes[2].get_legend().get_texts()]
-    for label in ("align", "polarity test", "scoring start", "trip: over_current"):
+    for label in ("align (100 ms)", "polarity test (50 ms)", "scoring start", "trip: over_current"):
         assert label in legend
     real_close(fig)
     assert (tmp_path / "run.png").stat().st_size > 10_000

@@ -156,7 +156,7 @@ def test_the_controller_table_switches_the_drives_countermeasures(tmp_path: Path
         - flux_dq(p.motor, 0.0, i_q - h, True, True)[0]
     )
     assert ctrl.motor.k_dq * i_q == pytest.approx(dpsi / (2 * h), rel=1e-6)
-    # off unless asked
+    # off on the ideal plant, which has nothing to counter
     plain = build_controller(load_scenario("xue-fig15"), "square-wave").pars
     assert not (plain.compensation.dead_time or plain.compensation.offset_calibration)
     assert plain.current_feedback == "filtered"

@@ -81,15 +81,18 @@ def cmd_plot(args: argparse.Namespace) -> int:
         if scenario is not None:
             f_c = fundamental_corner_hz(scenario, str(meta.get("estimator", "")), part)
         out = Path(args.out) if args.out else run / "run.png"
+        t = part["t"]
+        windowed = args.t_from is not None or args.t_to is not None
         plot_run(
             part,
             out.parent,
             title=title,
-            metrics=metrics,
+            meta=meta,
+            metrics=metrics,  # the whole run's; a window's are recomputed from its rows
             scored_from_s=float(meta.get("scored_from_s", scn.get("score_from_s", 0.0)) or 0.0),
             f_split_hz=f_c,
-            paper=str(scn.get("paper", "")),
             n_p=_pole_pairs(scenario),
+            window=(float(t[0]), float(t[-1])) if windowed else None,
             name=out.name,
         )
     print(f"plot: {out}")

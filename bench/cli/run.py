@@ -68,7 +68,7 @@ def _start_monitor(spec: Any, scn: Any, est: str, mode: str, out: Path) -> _View
 def cmd_run(args: argparse.Namespace) -> int:
     from bench.runs._results import format_metrics, frames_warning, outcome, realtime_warning
     from bench.runs._run import run_scenario
-    from bench.scenarios._setup import sample_period
+    from bench.scenarios._setup import countermeasures_text, sample_period
 
     scn = scenario_from_args(args)
     external = args.controller == "external"
@@ -128,6 +128,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         for why in ((rep or {}).get("rt") or {}).get("refused", []):
             print(f"{role}: real-time setting refused: {why}", file=sys.stderr)
     print(format_metrics(res.metrics, scn.paper_result, scn.estimator, est))
+    print(f"countermeasures: {countermeasures_text(res.meta.get('countermeasures'))}")
     if args.mode == "realtime" and (warn := realtime_warning(res.metrics)):
         print(warn, file=sys.stderr)
     if warn := frames_warning(res.metrics):

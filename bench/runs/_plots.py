@@ -1,24 +1,39 @@
-"""Per-run plots: ``run.png``, read at a glance, and custom figures of ``signals.csv``.
+"""Per-run plots: ``run.png``, read like a scope, and custom figures of ``signals.csv``.
 
-:func:`plot_run` draws, top to bottom:
+:func:`plot_run` (:func:`run_figure`) draws, top to bottom:
 
-- the true and estimated electrical angle over the last electrical periods
-  of the run (as the papers' figures show them: Wen Fig. 14, Xue Fig. 13);
-- the position error over the scored window, scaled to it, with a small
-  inset of the whole run (the start-up transient is tens of degrees, the
-  scored error a fraction of one);
-- the true, estimated and reference mechanical speed;
-- the raw phase-A current (with the injection) and its fundamental: the
-  true rotor frame's ``i_d``, ``i_q`` through the zero-phase low-pass of
-  :func:`bench.runs._metrics.lowpass_zero_phase` below the injection, turned
-  back with the true angle.
+- a zoom: the true and estimated electrical angle over the last electrical
+  periods of the time window (as the papers' figures show them: Wen Fig. 14,
+  Xue Fig. 13); its span is shaded on the panels below;
+- on one shared time axis (a cursor runs through all of them):
 
-The full-run panels shade the controller's start-up phases (``mode`` 1
-align, 2 polarity test; 3 run unshaded; 4 fault) and mark the scoring
-start, a protection trip and a lost lock.  A text box gives the key
-metrics; the title names the scenario, the controller (``meta.json``'s
-``controller`` when it names one, its ``estimator`` otherwise) and the
-paper's figure to compare with.
+  - the position error, scaled to the scored rows (the start-up transient is
+    tens of degrees, the scored error a fraction of one), with the paper's
+    bound where the scenario has one and a small inset of the same time axis
+    at full scale;
+  - the true, estimated and reference mechanical speed;
+  - the phase-A current: with an injection the raw sample and its
+    fundamental (the true rotor frame's ``i_d``, ``i_q`` through the
+    zero-phase low-pass of :func:`bench.runs._metrics.lowpass_zero_phase`
+    below the injection, turned back with the true angle), without one the
+    sample alone; scaled to the current outside the start-up pulses;
+  - the load torque on the shaft, the commanded load and the
+    electromagnetic torque.
+
+The shared panels shade the controller's start-up phases (``mode`` 1 align,
+2 polarity test, each at least :data:`MIN_SPAN` of the axis wide so a 9 ms
+test stays visible; 3 run unshaded; 4 fault) and mark the scoring start, a
+protection trip, a lost lock, and each load step (a line) or ramp (a band).
+A row whose controller was disabled (``mode`` 0: before the start, the last
+row after the stop) or whose estimate is missing (an empty cell: the
+controller's telemetry stopped) draws no estimate: a gap. Legends and the
+metrics box sit right of the panels, never over a trace. The metrics are the
+whole run's (``metrics.json``) or, for a time window, recomputed from the
+window's scored rows; the box says which. The title names the scenario, the
+controller (``meta.json``'s ``controller`` when it names one, its
+``estimator`` otherwise), the paper's figure to compare with, and the run's
+variations (:func:`run_variations`: plant profile, countermeasures, injected
+delay, the controller's model errors, a time window).
 
 :func:`plot_signals` is ``bench plot RUN_DIR --signals a,b``: one panel per
 column of ``signals.csv``, with its unit, over a chosen time window.
@@ -39,10 +54,23 @@ from bench.runs._metrics import METRIC_LABELS
 Array = npt.NDArray[np.float64]
 
 #: Controller modes (``CtrlTelemetry.mode`` in ``dbc/bench.dbc``) shaded on the
-#: full-run panels: mode code, label, colour.
+#: time panels: mode code, label, colour.
 PHASES = ((1, "align", "tab:olive"), (2, "polarity test", "tab:orange"), (4, "fault", "tab:red"))
-#: Electrical periods shown in the angle panel.
+#: Opacity of each phase's shading: the short polarity test darker, so it stands out at
+#: the end of the align phase it follows.
+PHASE_ALPHA = {1: 0.25, 2: 0.6, 4: 0.3}
+#: Electrical periods shown in the angle zoom.
 ANGLE_PERIODS = 3.0
+#: Narrowest shaded span, as a fraction of the time axis: 0.4 % is about 3 pixels of the
+#: 1300-pixel figure's panels, the least an eye finds without looking for it.
+MIN_SPAN = 0.004
+#: Changes of the commanded load closer than this (s) are one ramp (:func:`load_events`): a
+#: ramp reaches the plant as a staircase at the scenario's reference rate (a step every
+#: 1 ms at the default 1 kHz), while the papers' load steps are seconds apart.
+LOAD_GAP_S = 0.05
+#: The panels of :func:`run_figure` (each axes' label), top to bottom; all but the
+#: first share the time axis.
+PANELS = ("angle", "error", "speed", "current", "load")
 
 
 def controller_label(meta: dict[str, Any]) -> str:
@@ -51,7 +79,9 @@ def controller_label(meta: dict[str, Any]) -> str:
     given by ``--dut-name``) for a controller under test."""
     if meta.get("controller") == "external":
         name = meta.get("controller_name")
-        return f"external controller {name}" if name and name != "external" else "external controller"
+        return (
+            f"external controller {name}" if name and name != "external" else "external controller"
+        )
     return str(meta.get("estimator") or "?")
 
 
@@ -64,6 +94,60 @@ def paper_figure(paper: str) -> str | None:
     return f"{who}, {m.group(0)}"
 
 
+def run_variations(meta: dict[str, Any], window: tuple[float, float] | None = None) -> list[str]:
+    """What sets a run apart from its scenario as shipped, from its ``meta.json``: the
+    plant profile, the countermeasures, the injected delay, the controller's model errors,
+    an own ``[motor]``, real time, and the plotted time window."""
+    from bench.scenarios._setup import countermeasures_text
+
+    scn = meta.get("scenario") or {}
+    out: list[str] = []
+    plant = (meta.get("plant") or {}).get("profile") or scn.get("plant_profile")
+    if plant:
+        out.append(f"{plant} plant")
+    if "countermeasures" in meta:
+        out.append(f"countermeasures: {countermeasures_text(meta['countermeasures'])}")
+    delay = int(meta.get("lockstep_delay_steps") or 0)
+    if delay:
+        out.append(f"delay +{delay} period{'s' if delay != 1 else ''}")
+    lat = scn.get("latency") or {}
+    us = float(lat.get("duty_delay_us") or 0.0) + float(lat.get("sample_delay_us") or 0.0)
+    if us:
+        out.append(f"latency {us:g} us")
+    if lat.get("jitter_us"):
+        out.append(f"jitter {float(lat['jitter_us']):g} us")
+    if lat.get("drop_prob"):
+        out.append(f"drop {float(lat['drop_prob']):g}")
+    errs = [f"{k} x{float(v):g}" for k, v in (scn.get("controller_model") or {}).items()
+            if float(v) != 1.0]  # fmt: skip
+    if errs:
+        out.append("model " + ", ".join(errs))
+    if scn.get("motor"):
+        out.append("own [motor]")
+    if meta.get("mode") == "realtime":
+        out.append("real time")
+    if window is not None:
+        out.append(f"window {window[0]:g}-{window[1]:g} s")
+    return out
+
+
+def paper_bounds(paper_result: dict[str, Any] | None) -> tuple[list[float], str]:
+    """The paper's bounds on the position error (deg) and their legend text, from a
+    scenario's ``paper_result``: its largest and smallest error (Wen's tables), or +- its
+    largest |error| (Xue's bounds, in rad); none without either."""
+    pr = paper_result or {}
+    if "theta_err_max_deg" in pr or "theta_err_min_deg" in pr:
+        vals = [float(pr[k]) for k in ("theta_err_min_deg", "theta_err_max_deg") if k in pr]
+        return vals, "paper's range " + " .. ".join(f"{v:+g}" for v in vals) + " deg"
+    if "theta_err_abs_max_rad" in pr:
+        b = float(pr["theta_err_abs_max_rad"])
+        return [-math.degrees(b), math.degrees(b)], f"paper's bound |dtheta| <= {b:g} rad"
+    if "theta_err_abs_max_deg" in pr:
+        b = float(pr["theta_err_abs_max_deg"])
+        return [-b, b], f"paper's bound |dtheta| <= {b:g} deg"
+    return [], ""
+
+
 def _spans(mask: npt.NDArray[np.bool_], t: Array) -> list[tuple[float, float]]:
     """Contiguous runs of ``mask`` as (t_start, t_end) pairs."""
     if not np.any(mask):
@@ -71,7 +155,30 @@ def _spans(mask: npt.NDArray[np.bool_], t: Array) -> list[tuple[float, float]]:
     m = mask.astype(np.int8)
     edges = np.flatnonzero(np.diff(np.concatenate(([0], m, [0]))))
     dt = float(t[1] - t[0]) if len(t) > 1 else 0.0
-    return [(float(t[a]), float(t[b - 1]) + dt) for a, b in zip(edges[::2], edges[1::2], strict=True)]
+    return [
+        (float(t[a]), float(t[b - 1]) + dt) for a, b in zip(edges[::2], edges[1::2], strict=True)
+    ]
+
+
+def load_events(t: Array, load: Array) -> tuple[list[float], list[tuple[float, float]]]:
+    """Load steps (the time of a lone change) and ramps (the span of a run of changes) of a
+    load column: changes less than :data:`LOAD_GAP_S` apart are one ramp, the staircase
+    a ramp becomes at the scenario's reference rate."""
+    if len(t) < 2:
+        return [], []
+    x = np.nan_to_num(np.asarray(load, dtype=float))
+    k = np.flatnonzero(np.abs(np.diff(x)) > 1e-9) + 1
+    steps: list[float] = []
+    ramps: list[tuple[float, float]] = []
+    if not len(k):
+        return steps, ramps
+    groups = np.split(k, np.flatnonzero(np.diff(t[k]) > LOAD_GAP_S) + 1)
+    for g in groups:
+        if len(g) == 1:
+            steps.append(float(t[g[0]]))
+        else:
+            ramps.append((float(t[g[0]]), float(t[g[-1]])))
+    return steps, ramps
 
 
 def fundamental_a(table: dict[str, Array], T_s: float, f_c: float) -> Array:
@@ -86,20 +193,37 @@ def fundamental_a(table: dict[str, Array], T_s: float, f_c: float) -> Array:
 
 
 def _markers(ax: Any, t: Array, table: dict[str, Array], m: dict[str, Any], T_s: float,
-             t0: float, legend: bool) -> None:  # fmt: skip
-    """Phases shaded, scoring start, trip and lost lock on one full-run panel."""
+             t0: float, legend: bool, loads: tuple[list[float], list[tuple[float, float]]],
+             ) -> None:  # fmt: skip
+    """Phases shaded, scoring start, load events, trip and lost lock on one time panel."""
+    t_lo, t_hi = (float(t[0]), float(t[-1])) if len(t) else (0.0, 1.0)
+    w_min = MIN_SPAN * max(t_hi - t_lo, T_s)
     if "mode" in table:
         for code, label, colour in PHASES:
-            for i, (a, b) in enumerate(_spans(table["mode"] == code, t)):
-                ax.axvspan(a, b, color=colour, alpha=0.15, lw=0,
-                           label=label if legend and i == 0 else None)  # fmt: skip
-    ax.axvline(t0, color="k", ls=":", lw=1.0, label="scoring start" if legend else None)
+            spans = _spans(table["mode"] == code, t)
+            for i, (a, b) in enumerate(spans):
+                dur = b - a
+                if b - a < w_min:  # widened to be seen; the label keeps the true length
+                    a, b = a - 0.5 * (w_min - dur), b + 0.5 * (w_min - dur)
+                ms = f" ({1e3 * sum(y - x for x, y in spans):.0f} ms)" if code != 4 else ""
+                ax.axvspan(a, b, color=colour, alpha=PHASE_ALPHA[code], lw=0, gid=f"phase{code}",
+                           label=label + ms if legend and i == 0 else None)  # fmt: skip
+    if t_lo <= t0 <= t_hi:
+        ax.axvline(t0, color="k", ls=":", lw=1.0, label="scoring start" if legend else None)
+    steps, ramps = loads
+    for i, s in enumerate(steps):
+        ax.axvline(s, color="tab:brown", ls="-.", lw=1.0,
+                   label="load step" if legend and i == 0 else None)  # fmt: skip
+    for i, (a, b) in enumerate(ramps):
+        ax.axvspan(a, b, color="tab:brown", alpha=0.12, lw=0,
+                   label="load ramp" if legend and i == 0 else None)  # fmt: skip
     k = int(m.get("plant_fault_step", -1) or -1)
-    if m.get("plant_fault") not in (None, "none") and k >= 0:
+    if m.get("plant_fault") not in (None, "none") and k >= 0 and t_lo <= k * T_s <= t_hi:
         ax.axvline(k * T_s, color="tab:red", lw=1.5,
                    label=f"trip: {m['plant_fault']}" if legend else None)  # fmt: skip
-    if m.get("lock_lost") and m.get("lock_lost_at_s") is not None:
-        ax.axvline(float(m["lock_lost_at_s"]), color="tab:purple", lw=1.5, ls="--",
+    lost = m.get("lock_lost_at_s")
+    if m.get("lock_lost") and lost is not None and t_lo <= float(lost) <= t_hi:
+        ax.axvline(float(lost), color="tab:purple", lw=1.5, ls="--",
                    label="lock lost" if legend else None)  # fmt: skip
 
 
@@ -123,7 +247,7 @@ def metrics_text(m: dict[str, Any]) -> str:
         f"speed error max {_fmt(m.get('speed_err_max_rpm'), '.1f')} rpm",
     ]
     if "thd_phase_a_pct" in m:
-        lines.append(f"THD i_a {_fmt(m['thd_phase_a_pct'], '.1f')} %")
+        lines.append(f"THD i_a {_fmt(m['thd_phase_a_pct'], '.2g')} %")
     if m.get("plant_fault") not in (None, "none"):
         lines.append(f"TRIP: {m['plant_fault']} (not a scenario result)")
     if m.get("lock_lost"):
@@ -131,101 +255,258 @@ def metrics_text(m: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def plot_run(
+def estimate_rows(table: dict[str, Array]) -> npt.NDArray[np.bool_]:
+    """Rows with an estimate: the controller enabled (``mode`` not 0) and its telemetry
+    present (no empty cell)."""
+    ok = np.isfinite(table["theta_hat"]) & np.isfinite(table["w_hat_rpm"])
+    if "theta_err_deg" in table:
+        ok &= np.isfinite(table["theta_err_deg"])
+    if "mode" in table:
+        ok &= np.isfinite(table["mode"]) & (table["mode"] != 0)
+    out: npt.NDArray[np.bool_] = ok
+    return out
+
+
+def window_metrics(
+    table: dict[str, Array], T_s: float, n_p: int | None, scored_from_s: float
+) -> tuple[dict[str, Any], str]:
+    """The metrics of a time window's scored rows (:func:`bench.runs._metrics.compute_metrics`
+    over the rows with an estimate), and the box's heading. A window before the scoring
+    start is scored over all its rows, and says so."""
+    from bench.runs._metrics import compute_metrics
+
+    ok = estimate_rows(table)
+    part = {k: v[ok] for k, v in table.items()}
+    t = part["t"]
+    if len(t) < 2:
+        return {}, "window: no estimate to score"
+    t0 = max(scored_from_s, float(t[0]))
+    head = f"window {float(table['t'][0]):g}-{float(table['t'][-1]):g} s, scored from {t0:g} s"
+    if t0 >= float(t[-1]):
+        t0 = float(t[0])
+        head = (f"window {float(table['t'][0]):g}-{float(table['t'][-1]):g} s, all rows "
+                f"(before the run's scoring start, {scored_from_s:g} s)")  # fmt: skip
+    try:
+        m = compute_metrics(part, T_s=T_s, n_p=n_p or 4, score_from_s=t0)
+    except ValueError:
+        return {}, "window: no estimate to score"
+    return m, head
+
+
+def _nanrange(x: Array) -> tuple[float, float] | None:
+    x = x[np.isfinite(x)]
+    if not len(x):
+        return None
+    return float(np.min(x)), float(np.max(x))
+
+
+def run_figure(
     table: dict[str, Array],
-    out_dir: Path,
     *,
-    title: str,
+    title: str = "",
     metrics: dict[str, Any] | None = None,
     scored_from_s: float = 0.0,
     f_split_hz: float | None = None,
     paper: str = "",
+    paper_result: dict[str, Any] | None = None,
     n_p: int | None = None,
-    name: str = "run.png",
-) -> Path:
-    """The run's figure (see the module's docstring); ``f_split_hz``: the fundamental's
-    low-pass corner (None: no injection, the raw current is the fundamental)."""
+    meta: dict[str, Any] | None = None,
+    window: tuple[float, float] | None = None,
+) -> Any:
+    """The figure of :func:`plot_run` (a matplotlib ``Figure``; the caller closes it).
+
+    ``table`` holds the rows to draw (a time window's, when ``window`` names it);
+    ``metrics`` the whole run's. ``meta`` (a ``meta.json``) gives the title, the paper,
+    its bounds and the run's variations where ``title``, ``paper`` and ``paper_result``
+    are not given.
+    """
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    m = metrics or {}
+    meta = meta or {}
+    scn = meta.get("scenario") or {}
+    title = title or f"{scn.get('name', 'run')} / {controller_label(meta)}"
+    paper = paper or str(scn.get("paper", ""))
+    if paper_result is None:
+        paper_result = scn.get("paper_result") or {}
+    m_run = metrics or {}
     t = table["t"]
     T_s = float(t[1] - t[0]) if len(t) > 1 else 1.0
-    scored = t >= scored_from_s
-    if "mode" in table:
-        scored &= table["mode"] != 0
+    t_lo, t_hi = (float(t[0]), float(t[-1]) + T_s) if len(t) else (0.0, 1.0)
+    est = estimate_rows(table)
+    nan = np.full(len(t), np.nan)
+    theta_hat = np.where(est, table["theta_hat"], nan)
+    w_hat = np.where(est, table["w_hat_rpm"], nan)
+    err = np.where(est, table["theta_err_deg"], nan)
+    scored = est & (t >= scored_from_s)
     if np.count_nonzero(scored) < 2:  # a window before the scoring start: all of it
-        scored = np.ones_like(t, dtype=bool)
-    fig = plt.figure(figsize=(10, 12))
-    gs = fig.add_gridspec(4, 1, height_ratios=(1.0, 1.3, 1.0, 1.0))
-    ax_ang = fig.add_subplot(gs[0])
-    ax_err = fig.add_subplot(gs[1])
-    ax_spd = fig.add_subplot(gs[2])
-    ax_cur = fig.add_subplot(gs[3], sharex=ax_spd)
+        scored = est.copy()
+    if window is not None:
+        m_box, head = window_metrics(table, T_s, n_p, scored_from_s)
+        for k in ("plant_fault", "plant_fault_step"):
+            if k in m_run:
+                m_box[k] = m_run[k]
+    else:
+        m_box, head = m_run, f"whole run, scored from {scored_from_s:g} s"
+    loads = load_events(t, table["load_ref_nm"]) if "load_ref_nm" in table else ([], [])
 
-    # angle: the last electrical periods of the scored window
-    ts = t[scored]
-    t_end = float(ts[-1])
-    w_e = abs(float(np.mean(table["w_m_rpm"][scored][-max(1, int(0.1 / T_s)) :])))
-    f_e = w_e / 60.0 * (n_p or _pole_pairs(table, scored))
+    fig = plt.figure(figsize=(12, 14.5))
+    gs = fig.add_gridspec(5, 1, height_ratios=(0.9, 1.4, 1.0, 1.0, 0.7), hspace=0.32)
+    fig.subplots_adjust(left=0.08, right=0.72, top=0.93, bottom=0.05)
+    ax_ang = fig.add_subplot(gs[0], label="angle")
+    ax_err = fig.add_subplot(gs[1], label="error")
+    ax_spd = fig.add_subplot(gs[2], sharex=ax_err, label="speed")
+    ax_cur = fig.add_subplot(gs[3], sharex=ax_err, label="current")
+    ax_load = fig.add_subplot(gs[4], sharex=ax_err, label="load")
+    shared = (ax_err, ax_spd, ax_cur, ax_load)
+    outside = {"loc": "upper left", "bbox_to_anchor": (1.01, 1.0), "fontsize": 8,
+               "borderaxespad": 0.0}  # fmt: skip
+
+    # angle zoom: the last electrical periods of the window's scored rows
+    sel = scored if np.any(scored) else np.ones(len(t), dtype=bool)
+    t_end = float(t[sel][-1]) if np.any(sel) else t_hi
+    tail = sel & (t >= t_end - 0.1)
+    w_e = abs(float(np.nanmean(table["w_m_rpm"][tail]))) if np.any(tail) else 0.0
+    f_e = w_e / 60.0 * (n_p or _pole_pairs(table, sel))
     span = min(ANGLE_PERIODS / f_e, 0.5) if f_e > 0.5 else 0.5
-    win = scored & (t >= t_end - span)
-    ax_ang.plot(t[win], table["theta_e"][win], lw=1.0, label=r"$\theta_e$ (true)")
-    ax_ang.plot(t[win], table["theta_hat"][win], lw=1.0, ls="--",
+    span = min(span, max(t_end - t_lo, T_s))
+    zoom = (t >= t_end - span) & (t <= t_end)
+    ax_ang.plot(t[zoom], table["theta_e"][zoom], lw=1.0, label=r"$\theta_e$ (true)")
+    ax_ang.plot(t[zoom], theta_hat[zoom], lw=1.0, ls="--",
                 label=r"$\hat\theta_e$ (estimated)")  # fmt: skip
     ax_ang.set_ylabel("electrical angle (rad)")
-    ax_ang.set_title(f"angle, last {span:.3g} s of the run", fontsize=9, loc="left")
-    ax_ang.legend(loc="upper right", fontsize=8)
+    ax_ang.set_xlabel("time (s)", fontsize=8)
+    shade_zoom = span < 0.5 * (t_hi - t_lo)  # else it would grey most of the window
+    where = "shaded grey on the time axis below" if shade_zoom else "the end of the time axis below"
+    ax_ang.set_title(f"zoom: angle over {float(t_end - span):.3f}-{t_end:.3f} s ({where})",
+                     fontsize=9, loc="left")  # fmt: skip
+    ax_ang.legend(**outside)
 
-    # position error: the scored window, with the whole run in an inset
-    err = table["theta_err_deg"]
-    ax_err.plot(ts, err[scored], lw=0.6, color="tab:red")
+    # position error: scaled to the scored rows and the paper's bound; full scale inset
+    ax_err.plot(t, err, lw=0.6, color="tab:red", label=r"$\Delta\theta$")
     ax_err.axhline(0.0, color="k", lw=0.5)
-    known = err[scored][np.isfinite(err[scored])]  # none where no telemetry came
-    lo, hi = (float(known.min()), float(known.max())) if len(known) else (-1.0, 1.0)
+    bounds, bound_text = paper_bounds(paper_result)
+    method = scn.get("estimator")
+    for i, b in enumerate(bounds):
+        text = bound_text + (f"\n(for {method})" if method else "")
+        ax_err.axhline(b, color="tab:green", ls="--", lw=1.0, gid="paper_bound",
+                       label=text if i == 0 else None)  # fmt: skip
+    rng = _nanrange(err[scored]) or (-1.0, 1.0)
+    lo, hi = min([rng[0], *bounds]), max([rng[1], *bounds])
     pad = max(0.1 * (hi - lo), 0.05)
     ax_err.set_ylim(lo - pad, hi + pad + 0.6 * (hi - lo + 2 * pad))  # room for the inset
     ax_err.set_ylabel(r"$\Delta\theta$ (deg, electrical)")
-    ax_err.set_title(f"position error over the scored window ({float(ts[0]):.2f} s on)",
+    ax_err.set_title("position error, scaled to the scored rows (inset: full scale)",
                      fontsize=9, loc="left")  # fmt: skip
-    _markers(ax_err, t, table, m, T_s, scored_from_s, legend=False)
-    ax_err.set_xlim(float(ts[0]), t_end)  # the markers may lie outside the window
-    inset = ax_err.inset_axes((0.62, 0.62, 0.36, 0.34))
+    _markers(ax_err, t, table, m_run, T_s, scored_from_s, legend=False, loads=loads)
+    inset = ax_err.inset_axes((0.6, 0.65, 0.38, 0.27))
     inset.plot(t, err, lw=0.4, color="tab:red")
-    _markers(inset, t, table, m, T_s, scored_from_s, legend=False)
-    inset.set_title("whole run", fontsize=7)
+    _markers(inset, t, table, m_run, T_s, scored_from_s, legend=False, loads=loads)
+    inset.set_xlim(t_lo, t_hi)
+    inset.set_title("full scale, same time axis", fontsize=7)
     inset.tick_params(labelsize=6)
-    ax_err.text(0.01, 0.97, metrics_text(m), transform=ax_err.transAxes, va="top", ha="left",
-                fontsize=8, family="monospace",
-                bbox={"boxstyle": "round", "fc": "white", "alpha": 0.85})  # fmt: skip
+    ax_err.legend(**outside)
+    ax_err.text(1.01, 0.0, f"{head}\n" + metrics_text(m_box), transform=ax_err.transAxes,
+                va="bottom", ha="left", fontsize=7.5, family="monospace",
+                bbox={"boxstyle": "round", "fc": "white", "alpha": 0.9})  # fmt: skip
 
-    # speed and current: the whole run, phases shaded
+    # speed
     ax_spd.plot(t, table["w_m_rpm"], lw=0.8, label="true")
-    ax_spd.plot(t, table["w_hat_rpm"], lw=0.8, ls="--", label="estimated")
+    ax_spd.plot(t, w_hat, lw=0.8, ls="--", label="estimated")
     ax_spd.plot(t, table["w_ref_rpm"], lw=0.8, color="k", alpha=0.5, label="reference")
     ax_spd.set_ylabel("mechanical speed (rpm)")
-    _markers(ax_spd, t, table, m, T_s, scored_from_s, legend=True)
-    ax_spd.legend(loc="upper right", fontsize=7, ncol=2)
-    ax_cur.plot(t, table["i_a"], lw=0.4, color="0.65", label="raw (with injection)")
-    if f_split_hz is not None and len(t) > 30:
-        ax_cur.plot(t, fundamental_a(table, T_s, f_split_hz), lw=0.9, color="tab:blue",
+    _markers(ax_spd, t, table, m_run, T_s, scored_from_s, legend=True, loads=loads)
+    if shade_zoom:
+        ax_spd.axvspan(t_end - span, t_end, color="0.5", alpha=0.15, lw=0, label="angle zoom")
+    ax_spd.legend(**outside)
+
+    # current: scaled to the current outside the start-up pulses (align, polarity test)
+    injected = f_split_hz is not None
+    ax_cur.plot(t, table["i_a"], lw=0.4 if injected else 0.7, color="0.6" if injected else "tab:blue",
+                label="sample (with injection)" if injected else "sample")  # fmt: skip
+    if injected and len(t) > 30 and np.all(np.isfinite(table["i_d"])) \
+            and np.all(np.isfinite(table["i_q"])):  # fmt: skip
+        ax_cur.plot(t, fundamental_a(table, T_s, float(f_split_hz or 0.0)), lw=0.9,
+                    color="tab:blue",
                     label=f"fundamental (d-q low-pass {f_split_hz:.0f} Hz)")  # fmt: skip
-    _markers(ax_cur, t, table, m, T_s, scored_from_s, legend=False)
-    if m.get("plant_fault") in (None, "none"):
-        # scaled to the scored part: the start-up's polarity pulses would flatten it
-        peak = float(np.nanmax(np.abs(table["i_a"][scored]))) if np.any(scored) else 0.0
-        if math.isfinite(peak) and peak > 0.0:
-            ax_cur.set_ylim(-1.3 * peak, 1.3 * peak)
+    _markers(ax_cur, t, table, m_run, T_s, scored_from_s, legend=False, loads=loads)
+    running = np.ones(len(t), dtype=bool)
+    if "mode" in table:
+        running = ~np.isin(table["mode"], (1, 2))
+    k_trip = int(m_run.get("plant_fault_step", -1) or -1)
+    if m_run.get("plant_fault") not in (None, "none") and k_trip >= 0:
+        running &= t < k_trip * T_s  # the trip's current is the protection's, not the run's
+    if not np.any(running):
+        running = np.ones(len(t), dtype=bool)
+    r = _nanrange(np.abs(table["i_a"][running]))
+    if r is not None and r[1] > 0.0:
+        ax_cur.set_ylim(-1.2 * r[1], 1.2 * r[1])
     ax_cur.set_ylabel(r"$i_a$ (A)")
-    ax_cur.set_xlabel("time (s)")
-    ax_cur.legend(loc="upper right", fontsize=7)
-    for a in (ax_ang, ax_err, ax_spd, ax_cur):
+    ax_cur.set_title("phase-A current, scaled outside the start-up pulses", fontsize=9,
+                     loc="left")  # fmt: skip
+    ax_cur.legend(**outside)
+
+    # torque: the load on the shaft, the commanded load, the machine's torque
+    if "tau_e" in table:
+        tau_e, what = table["tau_e"], "electromagnetic torque"
+        if injected and len(t) > 30 and np.all(np.isfinite(tau_e)):
+            from bench.runs._metrics import lowpass_zero_phase
+
+            # the injection's torque ripple would hide the load; its fundamental part
+            tau_e = lowpass_zero_phase(tau_e, T_s, float(f_split_hz or 0.0))
+            what += f" (low-pass {f_split_hz:.0f} Hz)"
+        ax_load.plot(t, tau_e, lw=0.8, color="tab:cyan", label=what)
+    if "tau_L" in table:
+        ax_load.plot(t, table["tau_L"], lw=1.6, color="tab:brown", label="load torque",
+                     zorder=3)  # fmt: skip
+    if "load_ref_nm" in table:
+        ax_load.plot(t, table["load_ref_nm"], lw=1.0, ls=":", color="k",
+                     label="load commanded", zorder=4)  # fmt: skip
+    _markers(ax_load, t, table, m_run, T_s, scored_from_s, legend=False, loads=loads)
+    ax_load.set_ylabel("torque (N m)")
+    ax_load.set_xlabel("time (s)")
+    ax_load.legend(**outside)
+
+    for a in shared:
+        if shade_zoom and a is not ax_spd:
+            a.axvspan(t_end - span, t_end, color="0.5", alpha=0.15, lw=0)
         a.grid(alpha=0.3)
+    ax_ang.grid(alpha=0.3)
+    ax_err.set_xlim(t_lo, t_hi)
+    for a in shared[:-1]:
+        a.tick_params(labelbottom=False)
     fig_ref = paper_figure(paper)
-    fig.suptitle(title + (f"  (compare: {fig_ref})" if fig_ref else ""))
-    fig.tight_layout()
+    head1 = title + (f"  (compare: {fig_ref})" if fig_ref else "")
+    var = run_variations(meta, window)
+    fig.suptitle(head1 + ("\n" + " | ".join(var) if var else ""), fontsize=11)
+    return fig
+
+
+def plot_run(
+    table: dict[str, Array],
+    out_dir: Path,
+    *,
+    title: str = "",
+    metrics: dict[str, Any] | None = None,
+    scored_from_s: float = 0.0,
+    f_split_hz: float | None = None,
+    paper: str = "",
+    paper_result: dict[str, Any] | None = None,
+    n_p: int | None = None,
+    meta: dict[str, Any] | None = None,
+    window: tuple[float, float] | None = None,
+    name: str = "run.png",
+) -> Path:
+    """The run's figure (see the module's docstring, :func:`run_figure`) to
+    ``out_dir / name``; ``f_split_hz``: the fundamental's low-pass corner (None: no
+    injection, the sample is the fundamental)."""
+    import matplotlib.pyplot as plt
+
+    fig = run_figure(table, title=title, metrics=metrics, scored_from_s=scored_from_s,
+                     f_split_hz=f_split_hz, paper=paper, paper_result=paper_result, n_p=n_p,
+                     meta=meta, window=window)  # fmt: skip
     path = out_dir / name
     fig.savefig(path, dpi=110)
     plt.close(fig)

@@ -32,7 +32,14 @@ from bench.runs._metrics import (
     split_corner_hz,
 )
 from bench.scenarios._schema import Scenario
-from bench.scenarios._setup import get_preset, lockstep_delay, n_steps, plant_setup, sample_period
+from bench.scenarios._setup import (
+    countermeasures,
+    get_preset,
+    lockstep_delay,
+    n_steps,
+    plant_setup,
+    sample_period,
+)
 from bench.wire._codec import Codec
 from bench.wire._protocol import unwrap
 
@@ -80,6 +87,8 @@ def run_metadata(
         "controller_gains": {} if estimator == "external" else _controller_gains(scn, estimator),
         # the scenario's [estimator_options] this estimator does not take, and the note on them
         "estimator_options_left_out": [] if estimator == "external" else _left_out(scn, estimator),
+        # the drive's countermeasures the bench's controller runs (None: a controller under test)
+        "countermeasures": None if estimator == "external" else countermeasures(scn),
         "versions": _versions(),
     }
 
@@ -321,16 +330,15 @@ def finish_run(
         json.dumps(meta, indent=2, sort_keys=True, default=str) + "\n"
     )
     if plots:
-        from bench.runs._plots import controller_label, plot_run
+        from bench.runs._plots import plot_run
 
         plot_run(
             cap.table,
             out_dir,
-            title=f"{scn.name} / {controller_label(meta)}",
+            meta=meta,  # title, paper, its bound and the run's variations
             metrics=m,
             scored_from_s=scn.score_from_s,
             f_split_hz=fundamental_corner_hz(scn, str(meta.get("estimator", "")), cap.table),
-            paper=scn.paper,
             n_p=n_p,
         )
     return RunResult(out_dir=out_dir, metrics=m, capture=capture or out_dir, meta=meta)

@@ -192,7 +192,11 @@ KEYS: dict[str, dict[str, Key]] = {
         "sensors": Key("", "Single values of the profile's current sensing.", _TABLE, "none"),
         "magnetics": Key("", "Single values of the plant's magnetics.", _TABLE, "none"),
         "controller": Key(
-            "", "What a real drive does against the plant (all off by default).", _TABLE, "none"
+            "",
+            "What a real drive does against the plant (each on where the plant has what it "
+            "counters).",
+            _TABLE,
+            "none",
         ),
     },
     "noise": {
@@ -364,7 +368,12 @@ KEYS: dict[str, dict[str, Key]] = {
     },
     "controller": {
         "dead_time_compensation": Key(
-            "", "Feed-forward of the dead time and device drops.", "true, false", "false", 1
+            "",
+            "Feed-forward of the dead time and device drops.",
+            "true, false",
+            "true where the controller's t_dead, v_ce or v_f is above 0 "
+            "(drive profile: true; ideal: false)",
+            1,
         ),
         "t_dead": Key(
             "s",
@@ -388,7 +397,12 @@ KEYS: dict[str, dict[str, Key]] = {
             -1.0,
         ),
         "cross_saturation_compensation": Key(
-            "", "Correct the HF estimators' cross-saturation angle.", "true, false", "false", 1
+            "",
+            "Correct the HF estimators' cross-saturation angle.",
+            "true, false",
+            "true where the plant has cross-saturation with a c_dq other than 0, or k_dq "
+            "is given and not 0 (drive profile: true; ideal: false)",
+            1,
         ),
         "k_dq": Key(
             "H/A",
@@ -401,7 +415,7 @@ KEYS: dict[str, dict[str, Key]] = {
             "",
             "Measure the current offsets at standstill before the start.",
             "true, false",
-            "false",
+            "true where the current sensors have an offset (drive profile: true; ideal: false)",
             1,
         ),
         "offset_periods": Key(

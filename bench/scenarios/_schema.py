@@ -81,11 +81,11 @@ this module and :mod:`bench.scenarios._reference`)::
     sigma = 0.15                     # d-axis saturation depth, - (plant_rt.SaturationPars)
     i_sat = 2.0                      # d-axis saturation current, A
     c_dq = 0.0                       # cross-saturation coefficient (plant_rt.CrossSaturationPars)
-    [controller]                     # what a real drive does against the plant (all off by
-    dead_time_compensation = false   # default): dead-time and device-drop feed-forward, with
-    t_dead = 2e-6                    # the controller's own setting (s, V; default: the plant's
-    v_ce = 1.5                       # inverter, as a drive is configured for its own bridge)
-    v_f = 1.5
+    [controller]                     # what a real drive does against the plant (each on by
+    dead_time_compensation = false   # default where the plant has what it counters):
+    t_dead = 2e-6                    # dead-time and device-drop feed-forward, with the
+    v_ce = 1.5                       # controller's own setting (s, V; default: the plant's
+    v_f = 1.5                        # inverter, as a drive is configured for its own bridge)
     cross_saturation_compensation = false   # correct the HF estimators' cross-saturation angle
     k_dq = -1e-4                     # L_dq = k_dq i_q (H/A; default: the plant's flux map at i_d = 0)
     offset_calibration = false       # measure the current offsets at standstill before the start

@@ -222,30 +222,92 @@ def build_controller(scn: Scenario, estimator: str, engine: str | None = None) -
         raise ScenarioError(f"{scn.source}: field 'estimator_options': {e}") from None
 
 
-def _countermeasures(scn: Scenario) -> tuple[CompensationPars, float | None]:
-    """The ``[controller]`` table's countermeasures, and the model's ``k_dq`` (None: kept).
+#: The ``[controller]`` switches of the drive's countermeasures, in the order they are named.
+COUNTERMEASURES = ("dead_time_compensation", "cross_saturation_compensation", "offset_calibration")
+#: How titles and tables name each countermeasure.
+COUNTERMEASURE_LABELS = {
+    "dead_time_compensation": "dead-time comp.",
+    "cross_saturation_compensation": "cross-saturation comp.",
+    "offset_calibration": "offset calibration",
+}
 
-    What the table leaves open comes from the plant as built, as a drive's
-    designer configures it for the bridge and motor it drives: the dead time
-    and device drops of the plant's inverter; the current sensors' noise and
-    LSB (2 full scale / 2^bits) for the offset calibration's length; and the
-    cross-saturation coefficient from the plant's flux map at ``i_d = 0``
-    (:class:`plant_rt.CrossSaturationPars`: ``L_dq = -c_dq (i_d + psi_f / L_d)
-    i_q``, so ``k_dq = -c_dq psi_f / L_d``).
+
+def countermeasures(scn: Scenario) -> dict[str, bool]:
+    """Which of :data:`COUNTERMEASURES` the scenario's controller runs.
+
+    A ``[controller]`` switch the scenario sets wins. One it leaves open
+    follows what the scenario tells the controller about its own hardware,
+    as a drive's firmware is configured for the bridge, sensors and motor it
+    drives:
+
+    - ``dead_time_compensation``: on when the controller's bridge has a dead
+      time or device drops (its ``t_dead``, ``v_ce``, ``v_f``, which default
+      to the plant's inverter): the firmware programs the dead time into its
+      PWM unit, so it knows it.
+    - ``offset_calibration``: on when the current sensors have an offset
+      (``[sensors] current_offset_a``, the ``drive`` profile's): a drive
+      measures its offsets at standstill before every start, since a
+      sensor's zero drifts.
+    - ``cross_saturation_compensation``: on when the plant's magnetics have
+      cross-saturation (``[magnetics] cross_saturation`` with a ``c_dq`` other
+      than 0, the ``drive`` profile's) or the ``[controller]`` table gives a
+      ``k_dq`` other than 0: the offset it corrects is a property of the
+      motor, identified with its inductances at commissioning (the same
+      flux map the plant runs), not something an estimator can observe.
+
+    On the ``ideal`` profile (no dead time, drops, offsets or cross-saturation)
+    everything is off, so the papers' plant sees the papers' controller.
     """
+    p, prof = plant_setup(scn)
     c = scn.controller
-    if not c:
+    inv = prof.inverter
+    bridge = any(float(c.get(k, getattr(inv, k))) > 0.0 for k in ("t_dead", "v_ce", "v_f"))
+    offsets = any(o != 0.0 for o in prof.sensors.offset_abc)
+    cross = (prof.cross_saturation and p.motor.cross.c_dq != 0.0) or float(
+        c.get("k_dq", 0.0)
+    ) != 0.0
+    default = {
+        "dead_time_compensation": bridge,
+        "cross_saturation_compensation": cross,
+        "offset_calibration": offsets,
+    }
+    return {k: bool(c.get(k, default[k])) for k in COUNTERMEASURES}
+
+
+def countermeasures_text(on: dict[str, bool] | None) -> str:
+    """``"dead-time comp., offset calibration"``, ``"none"``, or ``"the controller's own"``
+    (``None``: a controller under test, whose firmware the bench does not know)."""
+    if on is None:
+        return "the controller's own"
+    return ", ".join(COUNTERMEASURE_LABELS[k] for k in COUNTERMEASURES if on.get(k)) or "none"
+
+
+def _countermeasures(scn: Scenario) -> tuple[CompensationPars, float | None]:
+    """The countermeasures (:func:`countermeasures`) with the controller's settings, and
+    the model's ``k_dq`` (None: kept).
+
+    What the ``[controller]`` table leaves open comes from the plant as built,
+    as a drive's designer configures it for the bridge and motor it drives:
+    the dead time and device drops of the plant's inverter; the current
+    sensors' noise and LSB (2 full scale / 2^bits) for the offset
+    calibration's length; and the cross-saturation coefficient from the
+    plant's flux map at ``i_d = 0`` (:class:`plant_rt.CrossSaturationPars`:
+    ``L_dq = -c_dq (i_d + psi_f / L_d) i_q``, so ``k_dq = -c_dq psi_f / L_d``).
+    """
+    on = countermeasures(scn)
+    c = scn.controller
+    if not c and not any(on.values()):
         return CompensationPars(), None
     p, prof = plant_setup(scn)
     inv, sens = prof.inverter, prof.sensors
     lsb = 2.0 * sens.i_fs / (1 << sens.bits) if sens.bits else 0.0
     comp = CompensationPars(
-        dead_time=bool(c.get("dead_time_compensation", False)),
+        dead_time=on["dead_time_compensation"],
         t_dead=float(c.get("t_dead", inv.t_dead)),
         v_ce=float(c.get("v_ce", inv.v_ce)),
         v_f=float(c.get("v_f", inv.v_f)),
-        cross_saturation=bool(c.get("cross_saturation_compensation", False)),
-        offset_calibration=bool(c.get("offset_calibration", False)),
+        cross_saturation=on["cross_saturation_compensation"],
+        offset_calibration=on["offset_calibration"],
         offset_periods=c.get("offset_periods"),
         current_noise=float(sens.noise_i),
         adc_lsb=lsb,

@@ -7,6 +7,7 @@ from dataclasses import replace
 
 from bench._errors import BenchError
 from bench.scenarios._schema import Scenario
+from bench.scenarios._setup import COUNTERMEASURES
 
 #: The plants of the suite (:func:`plant_variant`), in report order.
 PLANTS = ("ideal", "drive", "drive-nocomp")
@@ -16,20 +17,21 @@ PLANT_LABELS = {
     "drive": "drive plant, countermeasures on",
     "drive-nocomp": "drive plant, countermeasures off",
 }
-#: The ``[controller]`` countermeasures ``drive`` switches on and ``drive-nocomp`` off.
-COUNTERMEASURES = ("dead_time_compensation", "cross_saturation_compensation", "offset_calibration")
 
 
 def plant_variant(scn: Scenario, plant: str) -> Scenario:
-    """``scn`` on one of :data:`PLANTS`: as shipped (``ideal``), or on the ``drive``
-    profile with every countermeasure of :data:`COUNTERMEASURES` on (``drive``) or off
-    (``drive-nocomp``); the scenario's own ``[controller]`` values are kept otherwise."""
-    if plant == "ideal":
-        return scn
+    """``scn`` on one of :data:`PLANTS`: the shipped scenario's plant with every
+    countermeasure of :data:`~bench.scenarios._setup.COUNTERMEASURES` off (``ideal``), or
+    the ``drive`` profile with all of them on (``drive``) or off (``drive-nocomp``: what
+    the drive does to a firmware that does not compensate). Each plant sets the three
+    switches itself rather than take the defaults
+    (:func:`bench.scenarios._setup.countermeasures`), so a column means the same whatever
+    the defaults; the scenario's other ``[controller]`` values are kept."""
     if plant not in PLANTS:
         raise BenchError(f"unknown plant {plant!r} (known: {', '.join(PLANTS)})")
-    on = plant == "drive"
-    ctl = {**scn.controller, **dict.fromkeys(COUNTERMEASURES, on)}
+    ctl = {**scn.controller, **dict.fromkeys(COUNTERMEASURES, plant == "drive")}
+    if plant == "ideal":
+        return replace(scn, controller=ctl)
     return replace(scn, plant_profile="drive", controller=ctl)
 
 
