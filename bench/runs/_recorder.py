@@ -59,6 +59,12 @@ class Recorder(can.Listener):
         self.foreign: dict[int, int] = {}
         #: Plant and bench frames seen (before the nodes start: another run's).
         self.known = 0
+        #: ``CtrlTelemetry`` as (step, cmd_ack_valid, cmd_ack), for the pacer (DBC 2.2).
+        self.tel_id = codec.frame_id("CtrlTelemetry")
+        self.acks: list[tuple[int, int, int]] = []
+        #: The raw ``PlantStatus.step`` of the first status that carried each fault code
+        #: (the trip's own frame; later ones carry later steps).
+        self.fault_steps: dict[int, int] = {}
 
     def on_message_received(self, msg: can.Message) -> None:
         msg.channel = self.channel
@@ -73,6 +79,11 @@ class Recorder(can.Listener):
                 rid = int(d.signals["run_id"])
                 if rid not in (self.run_id, 0):  # 0: a controller that copies no nonce
                     self.foreign[rid] = self.foreign.get(rid, 0) + 1
+                elif msg.arbitration_id == self.tel_id:
+                    sig = d.signals
+                    self.acks.append(
+                        (int(sig["step"]), int(sig["cmd_ack_valid"]), int(sig["cmd_ack"]))
+                    )
         elif msg.arbitration_id == self.samples_id:
             d = self.codec.decode(msg)
             if d is not None and d.reason is None:
@@ -95,6 +106,7 @@ class Recorder(can.Listener):
             d = self.codec.decode(msg)
             if d is not None and d.reason is None:
                 self.status = {k: int(v) for k, v in d.signals.items()}
+                self.fault_steps.setdefault(self.status["fault_code"], self.status["step"])
                 if int(d.signals["state"]) == STATE_DONE:
                     self.done.set()
 

@@ -37,7 +37,7 @@ from typing import Any
 import can
 
 from bench import _jsonio as jsonio
-from bench._errors import BenchError
+from bench._errors import BenchError, CommandsLost
 from bench.nodes._counters import RejectionSummary, rejection_text
 from bench.nodes._loops import trip_text
 from bench.runs._processes import (
@@ -161,6 +161,7 @@ def run_scenario(
     dut = DutWatch(rec, dut_timeout, spec_b.describe(), dut_name) if external else None
     t_wall0 = time.perf_counter()
     start_error: str | None = None
+    pacer: CommandPacer | None = None
     with _catch_signals() as interrupted:
         try:
             start_error = _bus_in_use(rec, spec, interrupted)
@@ -171,7 +172,7 @@ def run_scenario(
             except BenchError as e:  # a node that never became ready: nothing to record
                 start_error = str(e)
             if start_error is None:
-                pacer = CommandPacer(scn, codec, mode=mode, pace_every=pace)
+                pacer = CommandPacer(scn, codec, mode=mode, pace_every=pace, external=external)
                 plant = dict(procs).get("plant")
                 if plant is not None and not interrupted():
                     ended = _drive(
@@ -223,6 +224,8 @@ def run_scenario(
     meta["exit_codes"] = {role: p.returncode for role, p in procs}
     if interrupted():
         meta["interrupted"] = True
+    if pacer is not None:
+        meta["commands"] = pacer.report()
     frames = rec.frames()
     codes = dict(meta["exit_codes"])
     if not frames and (ended or failures) and not interrupted():
@@ -249,6 +252,12 @@ def run_scenario(
         raise BenchError(shared_bus_line(shared, spec.describe(), rec.plant_step, out_dir))
     if ended == "dut" and dut is not None and not interrupted():
         raise BenchError(f"{dut.failure_text()}; files in {out_dir}")
+    if external and pacer is not None and not interrupted() and not ended:
+        lost = pacer.verification_line()
+        if lost is not None and pacer.acked is not None:
+            raise CommandsLost(f"{lost}; files in {out_dir}")
+        if lost is not None:
+            print(f"warning: {lost}", file=sys.stderr, flush=True)
     if ended and not interrupted():
         raise BenchError(
             f"{ended} process ended before the run did ({how_ended(out_dir, ended, codes[ended])}); "
@@ -350,9 +359,16 @@ def _drive(
     bar = _Progress(n_steps(scn)) if progress else None
     t_moved, seen_step = time.monotonic(), -1
     ended: str | None = None
+    tel = rec.recorders[-1]  # the controller's side: its CtrlTelemetry
+    n_acks = 0
     while not interrupted():
         full_step = max(0, rec.plant_step)
-        pacer.send_due(bus, full_step)
+        now = time.monotonic()
+        acks = tel.acks
+        while n_acks < len(acks):
+            pacer.on_telemetry(*acks[n_acks], now)
+            n_acks += 1
+        pacer.send_due(bus, full_step, now)
         if full_step != seen_step:
             t_moved, seen_step = time.monotonic(), full_step
         elif pacer.pace_every and pacer.sent and time.monotonic() - t_moved > 1.0:
@@ -443,7 +459,9 @@ class DutWatch:
         st = self.rec.recorders[0].status
         code = st.get("fault_code", 0)
         if code and code != self.fault:
-            step = unwrap(st.get("step", 0), plant_step, 1 << 16)
+            # the step of the trip's own status frame, not of the newest one
+            raw = self.rec.recorders[0].fault_steps.get(code, st.get("step", 0))
+            step = unwrap(raw, plant_step, 1 << 16)
             self._say(f"plant: {trip_text(code, step)}")
         self.fault = code
         late = st.get("late_frames", 0)
