@@ -33,9 +33,11 @@ def _run(
     mistake: str | None = None,
     dut_timeout: float = 60.0,
     scenario: Path = SCENARIO,
+    extra_ctrl: tuple[str, ...] = (),
 ) -> tuple[subprocess.CompletedProcess[str], Path]:
     """``bench run --controller external`` with the test controller beside it."""
     port = str(free_port())
+    tmp.mkdir(parents=True, exist_ok=True)
     show = tmp / f"show-{scenario.stem}.json"
     if not show.exists():
         out = subprocess.run(
@@ -49,7 +51,7 @@ def _run(
     run_dir = tmp / f"run-{scenario.stem}-{mistake or 'ok'}"
     ctrl = subprocess.Popen(
         [sys.executable, str(CONTROLLER), "--show", str(show), "-c", GROUP, "-p", port,
-         "--idle-s", "30", *(["--mistake", mistake] if mistake else [])],
+         "--idle-s", "30", *(["--mistake", mistake] if mistake else []), *extra_ctrl],
         cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
     )  # fmt: skip
     try:
