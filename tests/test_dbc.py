@@ -15,7 +15,17 @@ EXPECTED = {
     "PwmDuty": {"duty_a", "duty_b", "duty_c", "enable", "step", "crc"},
     "PhaseSamples": {"i_a", "i_b", "u_dc", "step", "status", "crc"},
     "PlantTruth": {"theta_e", "w_m", "tau_e", "tau_L", "step", "duty_age", "run_id", "crc"},
-    "CtrlTelemetry": {"theta_hat", "w_hat", "err", "mode", "step", "run_id", "crc"},
+    "CtrlTelemetry": {
+        "theta_hat",
+        "w_hat",
+        "err",
+        "mode",
+        "step",
+        "run_id",
+        "crc",
+        "cmd_ack_valid",
+        "cmd_ack",
+    },
     "BenchCommand": {"cmd", "speed_ref", "load_torque", "seq", "step", "crc"},
     "PlantStatus": {"state", "fault_code", "overruns", "late_frames", "step", "crc"},
 }
@@ -94,7 +104,7 @@ def test_protocol_version_attribute(db):
 
     assert db.version == str(db.dbc.attributes["ProtocolVersion"].value) == Codec().version
     assert int(db.version.split(".")[0]) >= 2  # 2.0: duty scale and PwmDuty data ID changed
-    assert db.version != "2.0"  # 2.1: crc and run_id in PlantTruth and CtrlTelemetry
+    assert db.version == "2.2"  # 2.1: crc and run_id in PlantTruth and CtrlTelemetry; 2.2: cmd_ack
 
 
 def test_duty_one_encodes_strictly_and_above_one_is_out_of_range(db):

@@ -38,6 +38,8 @@ verified: :meth:`CommandPacer.verification_line` says so.
 
 from __future__ import annotations
 
+import bisect
+
 import can
 
 from bench.nodes._loops import command_frames
@@ -122,8 +124,12 @@ class CommandPacer:
         self.lead = command_lead(sample_period(scn), mode)
         #: How many of :attr:`frames` have been sent.
         self.sent = 0
+        self._steps = [k for k, _ in self.frames]
         #: Commands sent beyond the plant's step at most.
         self.window = ACK_WINDOW if external else COMMAND_BURST
+        #: Whether acknowledgements are followed: only within :data:`ACK_WINDOW`,
+        #: i.e. for a controller under test, can a 4-bit seq name one command.
+        self.external = external
         #: Index (in :attr:`frames`) of the newest command the controller acknowledged
         #: (-1: none); None while it has reported nothing (DBC 2.1 or no telemetry).
         self.acked: int | None = None
@@ -138,6 +144,8 @@ class CommandPacer:
 
     def on_telemetry(self, step: int, valid: int, ack: int, now: float) -> None:
         """Take one ``CtrlTelemetry`` (its full step, ``cmd_ack_valid``, ``cmd_ack``)."""
+        if not self.external:
+            return
         if not valid:
             self.silent_reports += 1
             return
@@ -187,11 +195,8 @@ class CommandPacer:
         return n
 
     def _first_beyond(self, step: int) -> int:
-        """Index of the first sent command that applies after ``step`` (``sent`` if none)."""
-        j = self.sent
-        while j > 0 and self.frames[j - 1][0] > step:
-            j -= 1
-        return j
+        """Index of the first command that applies after ``step``."""
+        return bisect.bisect_right(self._steps, step)
 
     @property
     def unacknowledged(self) -> int:
