@@ -14,11 +14,13 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import pytest
+
 from bench.nodes._counters import CommandQueue, NodeCounters
 from bench.runs._pacing import CommandPacer
 from bench.wire._codec import Codec
 from bench.wire._protocol import ACK_WINDOW
-from tests.test_external_controller import _run
+from tests.test_external_controller import ROOT, _run
 
 
 def _cmd(step: int, seq: int) -> dict[str, float]:
@@ -77,3 +79,20 @@ def test_a_21_controller_runs_and_is_told_unverified(tmp_path: Path) -> None:
     assert res.returncode == 0, res.stderr[-2000:]
     assert "cannot verify that it received its BenchCommand frames" in res.stderr
     assert not json.loads((d / "meta.json").read_text())["commands"]["commands_verified"]
+
+
+@pytest.mark.slow
+def test_twenty_external_runs_on_a_default_socket_are_identical(tmp_path: Path) -> None:
+    """Issue 26: xue-fig13 (502 commands, a ramp of one per period) twenty times in
+    external lockstep with the test controller's default receive buffer: one
+    ``signals.csv``, every run verified, none late."""
+    scn = ROOT / "bench" / "scenarios" / "xue-fig13.toml"
+    traces = set()
+    for i in range(20):
+        res, d = _run(tmp_path / f"r{i}", scenario=scn)
+        assert res.returncode == 0, res.stderr[-2000:]
+        c = json.loads((d / "meta.json").read_text())["commands"]
+        assert c["commands_verified"] and c["commands_late"] == 0, c
+        assert c["commands_unacknowledged"] == 0, c
+        traces.add(_signals(d))
+    assert len(traces) == 1

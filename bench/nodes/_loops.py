@@ -519,6 +519,38 @@ def _serve_lockstep(
         last_progress = time.monotonic()
         if diag is not None:
             diag.poll()
+    if node.external and node.done and not stop():
+        _last_answer(bus, node, ids, stop)
+
+
+#: Lockstep with a controller under test: how long the plant waits, resending, for
+#: the answer to its last sample (the controller may have lost it; no period follows
+#: that would make the plant resend it otherwise).
+LAST_ANSWER_S = 2.0
+
+
+def _last_answer(bus: can.BusABC, node: PlantNode, ids: set[int], stop: Callable[[], bool]) -> None:
+    """Resend the last frames until the answer to the last sample has come (or a while).
+
+    The recorder's last rows need the controller's telemetry of the last
+    samples; without this a controller whose socket dropped the last sample
+    would leave them out, and a lossy run would have fewer rows than a clean one.
+    """
+    want = node.plant.k + 1 - node.delay
+    t_end = time.monotonic() + LAST_ANSWER_S
+    t_sent = 0.0
+
+    def answered() -> bool:
+        return want in node.duties or time.monotonic() > t_end
+
+    def again() -> None:
+        nonlocal t_sent
+        if time.monotonic() - t_sent >= RETRANSMIT_S:
+            send_all(bus, node.retransmit(), node.counters)
+            t_sent = time.monotonic()
+
+    t_sent = time.monotonic()
+    _receive_until(bus, node, ids, answered, stop, again)
 
 
 class _RunOver(Exception):
