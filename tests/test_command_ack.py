@@ -96,3 +96,37 @@ def test_twenty_external_runs_on_a_default_socket_are_identical(tmp_path: Path) 
         assert c["commands_unacknowledged"] == 0, c
         traces.add(_signals(d))
     assert len(traces) == 1
+
+
+def test_a_trip_is_named_with_its_own_period_not_the_newest_status(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """A run that printed "tripped watchdog in period 20000" (its last PlantStatus)
+    while the plant tripped in period 6776: the line takes the trip's own frame."""
+    import can
+
+    from bench.runs._recorder import Recorder
+    from bench.runs._run import DutWatch
+
+    codec = Codec()
+
+    class Drop(can.Listener):
+        def on_message_received(self, msg: can.Message) -> None:
+            pass
+
+    rec = Recorder(codec, Drop(), 1)
+    for state, code, step in ((1, 0, 6000), (2, 1, 6776), (2, 1, 7000), (0, 1, 20000)):
+        rec.on_message_received(
+            codec.encode(
+                "PlantStatus",
+                {"state": state, "fault_code": code, "overruns": 0, "late_frames": 0, "step": step},
+            )
+        )
+
+    class Rec:
+        def __init__(self) -> None:
+            self.recorders = [rec]
+            self.duty_watch = rec
+
+    DutWatch(Rec(), 5.0, "bus").check(20000)  # type: ignore[arg-type]
+    assert "tripped watchdog in period 6776," in capsys.readouterr().err

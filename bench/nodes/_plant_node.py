@@ -162,7 +162,7 @@ class PlantNode:
         self.latest_duty_step = -1
         self.commands = CommandQueue(self.m_cmd)
         #: Lockstep pacing (0: off): run period k only once a bench command
-        #: for step k or later has arrived. ``bench run`` sends one at least
+        #: for step k + 1 or later has arrived. ``bench run`` sends one at least
         #: every this many periods, as far ahead as its recorder has seen, so
         #: the plant never outruns the recording (whose socket would overflow
         #: on a loaded machine) and no command is ever late.
@@ -391,8 +391,13 @@ class PlantNode:
         return t <= 0 or t in self.duties
 
     def paced(self) -> bool:
-        """Lockstep: whether pacing lets the current period run (always when off)."""
-        return self.pace_every <= 0 or self.plant.k <= self.cmd_horizon
+        """Lockstep: whether pacing lets the current period run (always when off).
+
+        Running period ``k`` ends with the commands of step ``k + 1`` (the
+        plant applies them before it samples ``k + 1``, the controller before
+        it computes that sample): a command for ``k + 1`` or later must be here.
+        """
+        return self.pace_every <= 0 or self.plant.k < self.cmd_horizon
 
     def needed_ack(self) -> int:
         """seq of the newest command the controller must hold before this period runs.
