@@ -100,9 +100,10 @@ class CommandPacer:
         Keep-alive spacing in periods; default :data:`PACE_EVERY` in lockstep, 0 in
         real time.  It must match the plant's ``--pace-every``.
     external : bool
-        A controller under test: at most :data:`ACK_WINDOW` commands beyond the
-        plant's step (else :data:`COMMAND_BURST`), the bound a lockstep plant's
-        acknowledgement gate needs to compare 4-bit seq
+        A controller under test: its acknowledgements are followed, with at most
+        :data:`ACK_WINDOW` commands beyond the newest acknowledged one; in lockstep
+        also at most that many beyond the plant's step (else :data:`COMMAND_BURST`),
+        the bound the plant's acknowledgement gate needs to compare 4-bit seq
         (:meth:`bench.nodes._plant_node.PlantNode.acked`).
     """
 
@@ -126,7 +127,7 @@ class CommandPacer:
         self.sent = 0
         self._steps = [k for k, _ in self.frames]
         #: Commands sent beyond the plant's step at most.
-        self.window = ACK_WINDOW if external else COMMAND_BURST
+        self.window = ACK_WINDOW if external and mode == "lockstep" else COMMAND_BURST
         #: Whether acknowledgements are followed: only within :data:`ACK_WINDOW`,
         #: i.e. for a controller under test, can a 4-bit seq name one command.
         self.external = external
