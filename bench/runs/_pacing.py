@@ -66,6 +66,13 @@ DEFAULT_SOCKET_FRAMES = 256
 #: 3 periods) and to a reader that falls behind.  One command per period over a
 #: whole ramp then reaches the controller 32 at a time, never 1,579 frames in a burst.
 COMMAND_BURST = DEFAULT_SOCKET_FRAMES // 4 // 2
+#: Telemetry frames without an acknowledgement after which a controller under test
+#: counts as one that does not report (2.1), and the commands go on without it: a
+#: 2.2 controller holds the start before its first sample (the plant sends sample 0
+#: only after the start, and ``bench run`` resends every command at the first
+#: answer), so it reports from its first or second telemetry; ten leaves room for
+#: a few lost frames, and costs a 2.1 controller ten periods of its first commands.
+SILENT_REPORTS = 10
 #: Resend the commands beyond the acknowledged one when the acknowledgement has
 #: not moved for this long (s): the plant's own resend interval
 #: (:data:`bench.nodes._loops.RETRANSMIT_S`), so a lost command costs one round.
@@ -176,7 +183,10 @@ class CommandPacer:
         step = max(0, plant_step)
         limit = step + self.lead
         cap = self._first_beyond(step) + self.window
-        if self.acked is not None:
+        if self.acked is None:
+            if self.external and self.silent_reports < SILENT_REPORTS:
+                cap = min(cap, ACK_WINDOW)  # until it says whether it acknowledges
+        else:
             cap = min(cap, self.acked + 1 + ACK_WINDOW)
             if now is not None and self.sent > self.acked + 1 and now - self._t_ack > RESEND_S:
                 for _, m in self.frames[self.acked + 1 : self.sent]:
