@@ -27,6 +27,7 @@ EXPECTED = {
         "cmd_ack",
     },
     "BenchCommand": {"cmd", "speed_ref", "load_torque", "seq", "step", "crc"},
+    "PositionSensor": {"theta_m", "step", "crc"},
     "PlantStatus": {"state", "fault_code", "overruns", "late_frames", "step", "crc"},
 }
 
@@ -90,7 +91,7 @@ def test_crc_and_e2e_data_ids(db):
         assert crc, m.name
         assert crc[0].length == 8 and crc[0].start == 0
         ids.append(m.dbc.attributes["E2EDataId"].value)
-    assert len(ids) == 6 and len(set(ids)) == 6
+    assert len(ids) == 7 and len(set(ids)) == 7
     # a data ID fed in the wrong byte order must fail the check: its two bytes
     # differ, and swapped it is no other message's data ID
     swapped = {(i >> 8) | ((i & 0xFF) << 8) for i in ids}

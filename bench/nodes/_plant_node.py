@@ -88,6 +88,7 @@ from plant_rt import (
     Plant,
     Protection,
     ProtectionPars,
+    encoder_angle,
 )
 
 _SAFE_DUTY = (0.5, 0.5, 0.5, False)
@@ -203,6 +204,10 @@ class PlantNode:
         #: lockstep watchdog counts only from its first answer, and a lockstep
         #: trip ends the run (no duty will come: the periods cannot advance).
         self.external = False
+        #: The position sensor of a sensored controller (``[sensors] encoder_counts``,
+        #: DBC 2.2 ``PositionSensor``): sent every this many periods; 0: none.
+        sp = plant.sensor_pars
+        self.encoder_every = sp.encoder_every(plant.T_s) if sp.encoder_counts > 0 else 0
         #: ``CtrlTelemetry.cmd_ack`` of the controller (DBC 2.2): the seq of the
         #: newest command it holds with no gap, from its newest reporting
         #: telemetry; None while it has reported none (a 2.1 controller, or
@@ -448,6 +453,17 @@ class PlantNode:
                 },
             )
         ]
+        if self.encoder_every and s.k % self.encoder_every == 0:
+            tr = p.truth()
+            frames.append(
+                self.codec.encode(
+                    "PositionSensor",
+                    {
+                        "theta_m": encoder_angle(tr.theta_m, tr.w_m, p.sensor_pars),
+                        "step": s.k % self.m_samples,
+                    },
+                )
+            )
         if s.k % self.truth_every == 0:
             tr = p.truth()
             frames.append(
