@@ -47,6 +47,10 @@ would run the loop without its computation delay. The plant rejects it
 ``GenMsgCycleTime``, 100 ms of plant time) while the run is on; its
 ``late_frames`` counts the periods without their own duty and the duty frames
 rejected. docs/PROTOCOL.md is the same contract for a controller's author.
+
+Serving a controller under test in lockstep, the plant also reads its
+``CtrlTelemetry.cmd_ack`` (DBC 2.2) and runs no period whose next sample
+needs a bench command the controller has not acknowledged (:meth:`PlantNode.acked`).
 """
 
 from __future__ import annotations
