@@ -12,12 +12,14 @@ Each message names the file (or interface), the field and the reason, e.g.
 from __future__ import annotations
 
 __all__ = [
+    "EXIT_COMMANDS_LOST",
     "EXIT_INTERRUPTED",
     "EXIT_LOCK_LOST",
     "EXIT_PLANT_TRIPPED",
     "EXIT_USER_ERROR",
     "BenchError",
     "CaptureError",
+    "CommandsLost",
     "DbcError",
     "InterfaceError",
     "ScenarioError",
@@ -33,6 +35,10 @@ EXIT_PLANT_TRIPPED = 3
 #: rotor angle (|dtheta| > 90 deg electrical for more than 50 ms after the
 #: scoring start; every file written).
 EXIT_LOCK_LOST = 4
+#: Exit status of ``bench run`` when the controller under test held bench
+#: commands only after their step or never (``CtrlTelemetry.cmd_ack``, DBC 2.2;
+#: every file written; the run did not follow the scenario's set-points).
+EXIT_COMMANDS_LOST = 5
 #: Exit status of an interrupted command (Ctrl-C), with the files of the part that ran.
 EXIT_INTERRUPTED = 130
 
@@ -71,3 +77,9 @@ class CaptureError(BenchError):
 
 class DbcError(BenchError):
     """The DBC file is unusable, or a value cannot be encoded with it."""
+
+
+class CommandsLost(BenchError):
+    """The controller under test held commands late or never (exit 5, files written)."""
+
+    exit_code = EXIT_COMMANDS_LOST

@@ -19,7 +19,9 @@
  *   out  PwmDuty       0x010  duties for period k + 1; step = (k + 1) mod 1024, E2E CRC
  *   out  CtrlTelemetry 0x101  CAN FD: theta_hat = the angle used (the true one),
  *                             w_hat (electrical), mode; step = k; run_id copied
- *                             from the truth (docs/PROTOCOL.md), E2E CRC
+ *                             from the truth (docs/PROTOCOL.md), E2E CRC;
+ *                             cmd_ack (DBC 2.2): seq of the newest command held
+ *                             with no gap, sent again when it moves
  *
  * Period k is computed when PhaseSamples(k) and a PlantTruth not older than
  * the truth decimation (-e) are both in; the angle is extrapolated from the
@@ -72,6 +74,10 @@ enum { CMD_NONE = 0, CMD_START = 1, CMD_STOP = 2, CMD_RESET = 3, CMD_ENABLE = 4,
 /* CtrlTelemetry.mode values (DBC VAL_ table). */
 enum { MODE_DISABLED = 0, MODE_RUN = 3 };
 
+/* BenchCommand.seq counts commands modulo this (DBC 2.2); the bench keeps fewer
+ * than half of it beyond the acknowledged one. */
+#define SEQ_MOD 16
+
 /* Commands received ahead of their apply step wait here (fixed size). */
 #define CMD_QUEUE_LEN 128
 
@@ -99,6 +105,13 @@ typedef struct {
     int n_queued;
     int last_seq;
     int64_t last_cmd_step;
+    /* acknowledgement (DBC 2.2): newest seq held with no gap (-1: none), its
+     * step, and the steps of the commands held beyond a gap, by seq (-1: none) */
+    int ack_seq;
+    int64_t ack_step;
+    int64_t beyond[SEQ_MOD];
+    struct bench_dbc_ctrl_telemetry_t last_tel;
+    bool have_last_tel;
     bool stop;
     /* counters */
     long steps, rejected, repeats, cmd_dropped, send_errors;
@@ -170,6 +183,8 @@ static uint16_t angle_raw(double theta)
     return (uint16_t)r;
 }
 
+static void send_telemetry(int sock, node_t *n);
+
 static void send_outputs(int sock, node_t *n, int64_t k, const foc_output_t *o, double theta,
                          double w_e, bool enabled)
 {
@@ -198,7 +213,20 @@ static void send_outputs(int sock, node_t *n, int64_t k, const foc_output_t *o, 
     tel.mode = enabled ? MODE_RUN : MODE_DISABLED;
     tel.step = (uint32_t)k;
     tel.run_id = n->run_id;
-    len = bench_dbc_ctrl_telemetry_pack(buf, &tel, sizeof buf);
+    n->last_tel = tel;
+    n->have_last_tel = true;
+    send_telemetry(sock, n);
+}
+
+/* The newest CtrlTelemetry with the acknowledgement held now (DBC 2.2). */
+static void send_telemetry(int sock, node_t *n)
+{
+    uint8_t buf[64];
+    struct canfd_frame fr;
+    struct bench_dbc_ctrl_telemetry_t tel = n->last_tel;
+    tel.cmd_ack_valid = n->ack_seq >= 0 ? 1u : 0u;
+    tel.cmd_ack = (uint8_t)(n->ack_seq >= 0 ? n->ack_seq : 0);
+    int len = bench_dbc_ctrl_telemetry_pack(buf, &tel, sizeof buf);
     bench_e2e_protect(BENCH_E2E_CTRL_TELEMETRY_DATA_ID, buf, (size_t)len,
                       BENCH_E2E_CTRL_TELEMETRY_CRC_INDEX);
     make_frame(&fr, BENCH_DBC_CTRL_TELEMETRY_FRAME_ID, buf, (size_t)len);
@@ -280,6 +308,9 @@ static void on_frame(int sock, node_t *n, foc_t *foc, const struct canfd_frame *
             n->repeats++;
             if (k == n->next_k - 1 && n->have_last_duty) {
                 send_frame(sock, &n->last_duty, n);
+                if (n->have_last_tel) {
+                    send_telemetry(sock, n); /* with the acknowledgement held now */
+                }
             }
             return;
         }
@@ -321,11 +352,28 @@ static void on_frame(int sock, node_t *n, foc_t *foc, const struct canfd_frame *
             return;
         }
         int64_t step = unwrap(c.step, n->next_k, COMMAND_STEP_BITS);
-        if (c.seq == n->last_seq && step == n->last_cmd_step) {
-            return; /* the same transmission again (DBC: same seq = repeat) */
+        if ((c.seq == n->last_seq && step == n->last_cmd_step) || step <= n->ack_step) {
+            /* the same transmission again (DBC: same seq = repeat), or a copy of a
+             * command held (at or before the newest gap-free one) */
+            return;
         }
         n->last_seq = c.seq;
         n->last_cmd_step = step;
+        if ((c.seq - n->ack_seq - 1 + 2 * SEQ_MOD) % SEQ_MOD < SEQ_MOD / 2) {
+            n->beyond[c.seq] = step;
+            bool moved = false;
+            int nxt = (n->ack_seq + 1) % SEQ_MOD;
+            while (n->beyond[nxt] >= 0) {
+                n->ack_step = n->beyond[nxt];
+                n->beyond[nxt] = -1;
+                n->ack_seq = nxt;
+                nxt = (nxt + 1) % SEQ_MOD;
+                moved = true;
+            }
+            if (moved && n->have_last_tel) {
+                send_telemetry(sock, n); /* the acknowledgement moved: say so now */
+            }
+        }
         bool queued = false;
         for (int i = 0; i < n->n_queued; i++) {
             queued = queued || n->queue[i].apply_step == step; /* one command per step */
@@ -432,6 +480,11 @@ int main(int argc, char **argv)
     static foc_t foc;
     node.last_seq = -1;
     node.last_cmd_step = -1;
+    node.ack_seq = -1;
+    node.ack_step = -1;
+    for (int i = 0; i < SEQ_MOD; i++) {
+        node.beyond[i] = -1;
+    }
     foc_init(&foc, 1.0 / PWM_FREQ_HZ, MOTOR_N_P, MOTOR_R_S, MOTOR_L_D, MOTOR_L_Q, MOTOR_PSI_F,
              MOTOR_J, MOTOR_I_MAX, MOTOR_TAU_MAX, ALPHA_C, ALPHA_S);
 

@@ -44,7 +44,7 @@ from plant_rt._protection import (
     Protection,
     ProtectionPars,
 )
-from plant_rt._sensors import SensorPars
+from plant_rt._sensors import SensorPars, encoder_angle
 
 __all__ = [
     "ENGINES",
@@ -83,6 +83,7 @@ __all__ = [
     "cross_saturation_check",
     "device_drop_error",
     "drive_profile",
+    "encoder_angle",
     "flux_d",
     "flux_dq",
     "ideal_profile",

@@ -1,4 +1,5 @@
-"""Current and DC-link voltage sensing: gain, offset, noise and ADC quantisation.
+"""Current and DC-link voltage sensing: gain, offset, noise and ADC quantisation;
+and the rotor-position sensor of a sensored drive (:func:`encoder_angle`).
 
 Each measured value is ``quantise(gain * x + offset + noise)``. Noise is
 white and Gaussian, drawn from one ``random.Random(seed)`` stream in a fixed
@@ -50,6 +51,16 @@ class SensorPars:
         the currents and the DC-link voltage of ``k T_s - t_delay`` (the
         group delay of an anti-aliasing filter or of the sensor). The plant
         checks it against its period.
+    encoder_counts : int
+        Position sensor (encoder or resolver-to-digital converter) of a
+        sensored drive: counts per mechanical revolution, at most 65536
+        (the ``PositionSensor`` frame's 16 bits); 0: no position sensor.
+    encoder_rate_hz : float
+        Readings per second (the sensor interface's update rate); 0: one per
+        PWM period. See :meth:`encoder_every`.
+    encoder_delay_s : float
+        Age of a reading (s): the angle read at ``t`` is the shaft's at
+        ``t - encoder_delay_s`` (transmission and conversion of the sensor).
 
     Notes
     -----
@@ -72,8 +83,17 @@ class SensorPars:
     noise_u: float = 0.0
     seed: int = 0
     t_delay: float = 0.0
+    encoder_counts: int = 0
+    encoder_rate_hz: float = 0.0
+    encoder_delay_s: float = 0.0
 
     def __post_init__(self) -> None:
+        if not 0 <= self.encoder_counts <= 1 << 16:
+            raise ValueError(
+                f"SensorPars.encoder_counts must be in 0..65536, got {self.encoder_counts}"
+            )
+        if not (self.encoder_rate_hz >= 0.0 and self.encoder_delay_s >= 0.0):
+            raise ValueError("SensorPars.encoder_rate_hz and encoder_delay_s must be >= 0")
         if self.bits is not None and not 1 <= self.bits <= 32:
             raise ValueError(f"SensorPars.bits must be in 1..32 or None, got {self.bits}")
         if not (self.i_fs > 0.0 and self.u_fs > 0.0):
@@ -96,6 +116,9 @@ class SensorPars:
         current_noise_a: float = 0.0,
         sample_delay_s: float = 0.0,
         seed: int = 0,
+        encoder_counts: int = 0,
+        encoder_rate_hz: float = 0.0,
+        encoder_delay_s: float = 0.0,
     ) -> SensorPars:
         """Sensor errors from the keys of a scenario's ``[sensors]`` table.
 
@@ -115,8 +138,13 @@ class SensorPars:
             Sensor delay (s), see ``t_delay``.
         seed : int
             Seed of the noise generator.
+        encoder_counts, encoder_rate_hz, encoder_delay_s
+            The position sensor, as the fields of the same names.
         """
         return cls(
+            encoder_counts=int(encoder_counts),
+            encoder_rate_hz=float(encoder_rate_hz),
+            encoder_delay_s=float(encoder_delay_s),
             bits=adc_bits or None,
             i_fs=float(current_full_scale_a),
             offset_abc=_three(current_offset_a, "current_offset_a"),
@@ -157,6 +185,12 @@ class SensorPars:
         """Sensor delay (s), the ``[sensors]`` key of ``t_delay``."""
         return self.t_delay
 
+    def encoder_every(self, T_s: float) -> int:
+        """PWM periods between two position readings: ``round(1 / (rate T_s))``, at least 1."""
+        if self.encoder_rate_hz <= 0.0:
+            return 1
+        return max(1, round(1.0 / (self.encoder_rate_hz * T_s)))
+
     @property
     def lsb_i(self) -> float:
         """Current ADC step (A); 0 without quantisation."""
@@ -166,6 +200,28 @@ class SensorPars:
     def lsb_u(self) -> float:
         """Voltage ADC step (V); 0 without quantisation."""
         return 0.0 if self.bits is None else self.u_fs / 2**self.bits
+
+
+def encoder_angle(theta_m: float, w_m: float, pars: SensorPars) -> float:
+    """The mechanical angle a position sensor reports (rad, [0, 2 pi)).
+
+    The shaft's angle ``theta_m`` and speed ``w_m`` at the instant of the
+    reading give the angle ``encoder_delay_s`` earlier, ``theta_m - w_m
+    encoder_delay_s`` (exact at constant speed over the delay, the sensor's
+    own transmission time being far shorter than a mechanical time constant);
+    the sensor reports the whole count it has reached, ``floor(theta N / 2
+    pi)`` of ``N = encoder_counts`` per revolution, as the angle of that count.
+    Without a sensor (``encoder_counts`` 0) the angle itself.
+    """
+    th = theta_m - w_m * pars.encoder_delay_s
+    n = pars.encoder_counts
+    if n <= 0:
+        return th % TWO_PI
+    count = math.floor(th * n / TWO_PI) % n
+    return count * TWO_PI / n
+
+
+TWO_PI = 2.0 * math.pi
 
 
 def _three(v: float | Sequence[float], name: str, add: float = 0.0) -> tuple[float, float, float]:

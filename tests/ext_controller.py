@@ -24,6 +24,14 @@ the true angle and the recorder's angle error is zero.  Gains by design
 about: ``crc-no-id`` (the E2E CRC without the data ID), ``step-k`` (the duty
 of sample k sent with step k, no one-period delay), ``out-of-range`` (duty
 1.2 sent without clipping), ``every-other`` (only even samples answered).
+
+Command acknowledgement (DBC 2.2, docs/PROTOCOL.md "Commands"): it reports
+in ``CtrlTelemetry.cmd_ack`` the seq of the newest ``BenchCommand`` it holds
+with every earlier one (seq counts commands from 0, the start), and sends its
+newest telemetry again when that moves.  ``--protocol 2.1`` sends 0 there, as a
+controller written to 2.1 does.  ``--drop P`` throws away a share ``P`` of the
+``BenchCommand`` and ``PhaseSamples`` frames it receives, at random
+(``--seed``), as an overflowing receive buffer does.
 """
 
 from __future__ import annotations
@@ -31,6 +39,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import random
 import sys
 from pathlib import Path
 from typing import Any
@@ -156,7 +165,12 @@ def main() -> int:
     ap.add_argument("-p", "--port", type=int)
     ap.add_argument("--mistake", choices=MISTAKES)
     ap.add_argument("--idle-s", type=float, default=60.0)
+    ap.add_argument("--protocol", choices=("2.1", "2.2"), default="2.2")
+    ap.add_argument("--drop", type=float, default=0.0, help="share of frames thrown away")
+    ap.add_argument("--seed", type=int, default=1)
     a = ap.parse_args()
+    rng = random.Random(a.seed)
+    dropped = 0
     show = json.loads(Path(a.show).read_text())
     wire = Wire(a.mistake)
     foc = Foc(show)
@@ -167,6 +181,17 @@ def main() -> int:
     answers: dict[int, list[can.Message]] = {}
     commands: dict[int, dict[str, float]] = {}
     seen_cmds: set[tuple[int, int]] = set()
+    # seq of the newest command held with no gap (-1: none), its step, and the ones beyond a gap
+    ack, ack_step = -1, -1
+    beyond: dict[int, int] = {}
+    last_tel: dict[str, float] | None = None
+
+    def telemetry(sig: dict[str, float]) -> can.Message:
+        rep = a.protocol == "2.2" and ack >= 0
+        return wire.encode(
+            "CtrlTelemetry", {**sig, "cmd_ack_valid": int(rep), "cmd_ack": ack if rep else 0}
+        )
+
     next_k = 0
     stop = False
     print("READY", flush=True)
@@ -180,17 +205,34 @@ def main() -> int:
             if d is None:
                 continue
             name, sig = d
+            if name in ("BenchCommand", "PhaseSamples") and a.drop and rng.random() < a.drop:
+                dropped += 1
+                continue
             if name == "BenchCommand":
                 step = unwrap(int(sig["step"]), next_k, 16)
-                if (step, int(sig["seq"])) not in seen_cmds:
-                    seen_cmds.add((step, int(sig["seq"])))
+                seq = int(sig["seq"])
+                # a step at or before the gap-free run's is a copy of a command held
+                if step > ack_step and (step, seq) not in seen_cmds:
+                    seen_cmds.add((step, seq))
                     commands[step] = sig
+                    if (seq - ack - 1) % 16 < 8:  # not older than the gap-free run
+                        beyond[seq] = step
+                    moved = False
+                    while (ack + 1) % 16 in beyond:
+                        ack_step = beyond.pop((ack + 1) % 16)
+                        ack = (ack + 1) % 16
+                        moved = True
+                    if moved and last_tel is not None:
+                        bus.send(telemetry(last_tel))  # the acknowledgement moved: say so now
                 continue
             if name == "PhaseSamples":
                 k = unwrap(int(sig["step"]), next_k, 10)
-                if k < next_k:  # a resend (lockstep): the same answer again
-                    for m in answers.get(k, []):
+                if k < next_k:  # a resend (lockstep): the same duty again
+                    cached = answers.get(k, [])
+                    for m in cached[:1]:
                         bus.send(m)
+                    if cached and k == next_k - 1 and last_tel is not None:
+                        bus.send(telemetry(last_tel))  # with the acknowledgement held now
                     continue
                 samples[k] = sig
             elif name == "PlantTruth":
@@ -228,19 +270,17 @@ def main() -> int:
                         },
                         strict=a.mistake != "out-of-range",
                     ),
-                    wire.encode(
-                        "CtrlTelemetry",
-                        {
-                            "theta_hat": theta,
-                            "w_hat": foc.n_p * w_m,
-                            "err": 0.0,
-                            "mode": 3 if foc.enabled else 0,
-                            "step": k,
-                            # DBC 2.1: the run's nonce, copied from the truth it answers
-                            "run_id": int(tr["run_id"]),
-                        },
-                    ),
                 ]
+                last_tel = {
+                    "theta_hat": theta,
+                    "w_hat": foc.n_p * w_m,
+                    "err": 0.0,
+                    "mode": 3 if foc.enabled else 0,
+                    "step": k,
+                    # DBC 2.1: the run's nonce, copied from the truth it answers
+                    "run_id": int(tr["run_id"]),
+                }
+                out.append(telemetry(last_tel))
                 if a.mistake == "every-other" and k % 2:
                     out = []
                 answers[k] = out
@@ -250,7 +290,7 @@ def main() -> int:
                 next_k = k + 1
     finally:
         bus.shutdown()
-    print(f"ext_controller: {next_k} periods", file=sys.stderr)
+    print(f"ext_controller: {next_k} periods, {dropped} frames dropped", file=sys.stderr)
     return 0
 
 

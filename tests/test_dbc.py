@@ -15,8 +15,19 @@ EXPECTED = {
     "PwmDuty": {"duty_a", "duty_b", "duty_c", "enable", "step", "crc"},
     "PhaseSamples": {"i_a", "i_b", "u_dc", "step", "status", "crc"},
     "PlantTruth": {"theta_e", "w_m", "tau_e", "tau_L", "step", "duty_age", "run_id", "crc"},
-    "CtrlTelemetry": {"theta_hat", "w_hat", "err", "mode", "step", "run_id", "crc"},
+    "CtrlTelemetry": {
+        "theta_hat",
+        "w_hat",
+        "err",
+        "mode",
+        "step",
+        "run_id",
+        "crc",
+        "cmd_ack_valid",
+        "cmd_ack",
+    },
     "BenchCommand": {"cmd", "speed_ref", "load_torque", "seq", "step", "crc"},
+    "PositionSensor": {"theta_m", "step", "crc"},
     "PlantStatus": {"state", "fault_code", "overruns", "late_frames", "step", "crc"},
 }
 
@@ -80,7 +91,7 @@ def test_crc_and_e2e_data_ids(db):
         assert crc, m.name
         assert crc[0].length == 8 and crc[0].start == 0
         ids.append(m.dbc.attributes["E2EDataId"].value)
-    assert len(ids) == 6 and len(set(ids)) == 6
+    assert len(ids) == 7 and len(set(ids)) == 7
     # a data ID fed in the wrong byte order must fail the check: its two bytes
     # differ, and swapped it is no other message's data ID
     swapped = {(i >> 8) | ((i & 0xFF) << 8) for i in ids}
@@ -94,7 +105,7 @@ def test_protocol_version_attribute(db):
 
     assert db.version == str(db.dbc.attributes["ProtocolVersion"].value) == Codec().version
     assert int(db.version.split(".")[0]) >= 2  # 2.0: duty scale and PwmDuty data ID changed
-    assert db.version != "2.0"  # 2.1: crc and run_id in PlantTruth and CtrlTelemetry
+    assert db.version == "2.2"  # 2.1: crc and run_id in PlantTruth and CtrlTelemetry; 2.2: cmd_ack
 
 
 def test_duty_one_encodes_strictly_and_above_one_is_out_of_range(db):

@@ -31,6 +31,7 @@ GROUP = "239.74.163.2"
 
 def _show(tmp: Path, scenario: Path) -> Path:
     """``bench show SCENARIO --json`` into a file (what the controller reads)."""
+    tmp.mkdir(parents=True, exist_ok=True)
     show = tmp / f"show-{scenario.stem}.json"
     if not show.exists():
         out = subprocess.run(
@@ -44,11 +45,13 @@ def _show(tmp: Path, scenario: Path) -> Path:
     return show
 
 
-def _controller(show: Path, port: str, mistake: str | None = None) -> subprocess.Popen[str]:
+def _controller(
+    show: Path, port: str, mistake: str | None = None, extra_ctrl: tuple[str, ...] = ()
+) -> subprocess.Popen[str]:
     """The test controller on ``port``, once it listens."""
     ctrl = subprocess.Popen(
         [sys.executable, str(CONTROLLER), "--show", str(show), "-c", GROUP, "-p", port,
-         "--idle-s", "30", *(["--mistake", mistake] if mistake else [])],
+         "--idle-s", "30", *(["--mistake", mistake] if mistake else []), *extra_ctrl],
         cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
     )  # fmt: skip
     assert ctrl.stdout is not None and ctrl.stdout.readline().strip() == "READY"
@@ -72,12 +75,13 @@ def _run(
     scenario: Path = SCENARIO,
     quiet: bool = True,
     controller: bool = True,
+    extra_ctrl: tuple[str, ...] = (),
 ) -> tuple[subprocess.CompletedProcess[str], Path]:
     """``bench run --controller external`` with the test controller beside it (or none)."""
     port = str(free_port())
     show = _show(tmp, scenario)
     run_dir = tmp / f"run-{scenario.stem}-{mistake or 'ok'}"
-    ctrl = _controller(show, port, mistake) if controller else None
+    ctrl = _controller(show, port, mistake, extra_ctrl) if controller else None
     try:
         res = subprocess.run(
             _bench_run(scenario, port, run_dir, dut_timeout, *(["-q"] if quiet else []), *extra),
@@ -121,7 +125,7 @@ def test_external_controller_is_run_and_scored(good_run: dict[str, Any]) -> None
     # the IMC-tuned speed loop holds the 100 rpm reference after the 50 ms ramp
     assert m["speed_err_max_rpm"] < 5.0
     assert meta["controller"] == "external" and meta["controller_name"] == "ext-py"
-    assert meta["controller_gains"] == {} and meta["dbc_version"] == "2.1"
+    assert meta["controller_gains"] == {} and meta["dbc_version"] == "2.2"
     assert (run_dir / "run.png").is_file() and not (run_dir / "controller.log").exists()
     # PlantStatus every 100 ms of plant time (0.3 s: at 1000 and 2000) and at the end
     assert json.loads((run_dir / "plant.json").read_text())["late_frames"] == 0
@@ -174,7 +178,7 @@ def test_analyze_duration_warning_status_counters_and_name(
     assert m["plant_status_late_frames"] == 0 and m["plant_status_overruns"] == 0
     assert "external controller fw-1.2" in res.stdout
     meta = json.loads((tmp_path / "a4" / "meta.json").read_text())
-    assert meta["controller_name"] == "fw-1.2" and meta["dbc_version"] == "2.1"
+    assert meta["controller_name"] == "fw-1.2" and meta["dbc_version"] == "2.2"
 
 
 def test_external_controller_in_real_time(tmp_path: Path) -> None:

@@ -65,12 +65,13 @@ def test_a_paced_plant_waits_for_the_commands_and_the_trace_is_unchanged() -> No
         first = [m for k, m in cmds if k <= 200]
         for m in first:
             bus_r.send(m)
-        # the plant runs the periods up to the last command it has (200), then waits
+        # the plant runs the periods before the last command it has (200), then waits:
+        # period 200 would end with the commands of step 201, not here yet
         t0 = time.monotonic()
-        while pn.plant.k < 201 and time.monotonic() - t0 < 30:
+        while pn.plant.k < 200 and time.monotonic() - t0 < 30:
             time.sleep(0.01)
         time.sleep(0.3)  # time to run further, were it not paced
-        assert pn.plant.k == 201 and pn.cmd_horizon == 200 and not pn.paced()
+        assert pn.plant.k == 200 and pn.cmd_horizon == 200 and not pn.paced()
         for m in (m for k, m in cmds if k > 200):
             bus_r.send(m)
         tp.join(60)

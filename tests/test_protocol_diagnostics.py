@@ -17,7 +17,7 @@ import pytest
 from bench.nodes._counters import RejectionSummary, rejection_text
 from bench.nodes._loops import make_plant_node, stall_text, trip_text
 from bench.nodes._plant_node import fault_name
-from bench.runs._pacing import PACE_EVERY, CommandPacer, command_lead
+from bench.runs._pacing import COMMAND_BURST, PACE_EVERY, CommandPacer, command_lead
 from bench.scenarios._schema import load_scenario
 from bench.scenarios._setup import command_schedule
 from bench.wire._codec import Codec
@@ -138,12 +138,16 @@ def test_command_pacer_sends_each_command_twice_a_lead_ahead() -> None:
     bus = _Sink()
     n = pacer.send_due(bus, 0)
     steps = [s for s, _ in pacer.frames]
-    assert n == sum(s <= 5000 for s in steps) and len(bus.sent) == 2 * n
+    # a lead ahead, but never more than COMMAND_BURST beyond the plant's step
+    assert sum(s <= 5000 for s in steps) > 1 + COMMAND_BURST
+    assert n == 1 + COMMAND_BURST and len(bus.sent) == 2 * n
     assert bus.sent[0].data == bus.sent[1].data  # the same command twice, same seq
     # keep-alives at least every PACE_EVERY periods, the scenario's own commands among them
     assert all(b - a <= PACE_EVERY for a, b in itertools.pairwise(steps))
     assert {c.apply_step for c in command_schedule(scn)} <= set(steps)
-    assert pacer.send_due(bus, 10) == sum(5000 < s <= 5010 for s in steps)
+    k = steps[n - 1]  # the plant reaches the newest command sent: 32 more
+    assert pacer.send_due(bus, k) == COMMAND_BURST
+    assert sum(s > k for s in steps[: pacer.sent]) == COMMAND_BURST
     before = len(bus.sent)
     pacer.resend_all(bus)
     assert len(bus.sent) - before == pacer.sent
@@ -161,7 +165,7 @@ def test_show_gives_transport_port_and_dbc_version() -> None:
     )  # fmt: skip
     d = json.loads(out.stdout)
     assert d["transport"]["port"] == 43113 and d["transport"]["channel"]
-    assert d["dbc_version"] == CODEC.version == "2.1"
+    assert d["dbc_version"] == CODEC.version == "2.2"
 
 
 @pytest.mark.skipif(shutil.which("cc") is None, reason="needs a C compiler")

@@ -222,7 +222,7 @@ def test_delays_beyond_the_step_counters_are_one_line(
     path = _write(tmp_path, f"[latency]\n{extra}\n")
     line = _cli_error(capsys, ["run", path])
     assert f"{path}: field {needle}" in line
-    assert "10-bit step counters of PwmDuty/PhaseSamples wrap" in line
+    assert "10-bit step counters of PwmDuty/PhaseSamples/PositionSensor wrap" in line
 
 
 def test_delay_bound_is_inclusive_and_applies_to_command_line_overrides(

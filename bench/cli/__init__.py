@@ -159,7 +159,7 @@ def main(argv: list[str] | None = None) -> int:
         return rc
     except BenchError as e:
         print(error_line(e), file=sys.stderr)
-        return 2
+        return e.exit_code
     except KeyboardInterrupt:
         print("bench: interrupted", file=sys.stderr)
         return 130

@@ -66,6 +66,9 @@ class ControllerNode:
         self.sample_timeouts = 0
         #: True from a sample timeout until a reset/enable command.
         self.faulted = False
+        #: The newest output, whose telemetry is sent again when the command
+        #: acknowledgement moves (``CtrlTelemetry.cmd_ack``, DBC 2.2).
+        self.last_output: ControlOutput | None = None
 
     def on_message(self, msg: can.Message) -> list[can.Message]:
         """Take one received frame; return the frames to send. Never raises for any content."""
@@ -88,7 +91,12 @@ class ControllerNode:
             # that step), as in the plant: the bench sends commands ahead of
             # time, and applied on arrival a stop would end the controller
             # (and a set-point change reach it) that much early.
+            before = self.commands.ack_seq
             self.commands.add(d.signals, self.next_k, c)
+            if self.commands.ack_seq != before and self.last_output is not None:
+                # DBC 2.2: the acknowledgement moved; say so at once (a lockstep
+                # plant may be waiting for it, with no sample left to answer)
+                return [self._telemetry(self.last_output)]
             return []
         if name == "PhaseSamples":
             k = unwrap(int(d.signals["step"]), self.next_k, self.m_step)
@@ -98,6 +106,10 @@ class ControllerNode:
                     c.reject(REJECT_STALE_COUNTER)
                     return []
                 c.reject(REPEATED_COUNTER)
+                last = self.last_output
+                if last is not None and last.k == k:
+                    # the same duty; the telemetry with the acknowledgement held now
+                    return [cached[0], self._telemetry(last)]
                 return list(cached)
             if k in self.samples:
                 c.reject(REPEATED_COUNTER)
@@ -162,6 +174,7 @@ class ControllerNode:
             i_a, i_b = float(s["i_a"]), float(s["i_b"])
             m = Measurement(k, i_a, i_b, -i_a - i_b, float(s["u_dc"]), theta, w_e)
             o = self.ctrl.step(m)
+            self.last_output = o
             frames = self.encode_output(o)
             self.answers[k] = frames
             self.answers.pop(k - 8, None)
@@ -175,6 +188,23 @@ class ControllerNode:
         out.update(steps=self.next_k, sample_timeouts=self.sample_timeouts)
         return out
 
+    def _telemetry(self, o: ControlOutput) -> can.Message:
+        """``CtrlTelemetry`` of output ``o`` with the command acknowledgement held now."""
+        ack = self.commands.ack_seq
+        return self.codec.encode(
+            "CtrlTelemetry",
+            {
+                "theta_hat": o.theta_hat,
+                "w_hat": o.w_hat,
+                "err": o.err,
+                "mode": o.mode,
+                "step": o.k % self.m_tel,
+                "run_id": self.run_id,
+                "cmd_ack_valid": 1 if ack >= 0 else 0,
+                "cmd_ack": max(0, ack),
+            },
+        )
+
     def encode_output(self, o: ControlOutput) -> list[can.Message]:
         return [
             self.codec.encode(
@@ -187,15 +217,5 @@ class ControllerNode:
                     "step": (o.k + 1) % self.m_step,
                 },
             ),
-            self.codec.encode(
-                "CtrlTelemetry",
-                {
-                    "theta_hat": o.theta_hat,
-                    "w_hat": o.w_hat,
-                    "err": o.err,
-                    "mode": o.mode,
-                    "step": o.k % self.m_tel,
-                    "run_id": self.run_id,
-                },
-            ),
+            self._telemetry(o),
         ]

@@ -11,7 +11,7 @@ from __future__ import annotations
 from collections import deque
 from dataclasses import dataclass, field
 
-from bench.wire._protocol import unwrap
+from bench.wire._protocol import SEQ_MODULUS, unwrap
 
 #: A counter that is older than the receiver accepts (replayed or very late frame).
 REJECT_STALE_COUNTER = "stale_counter"
@@ -35,6 +35,7 @@ class Command:
     cmd: int
     speed_ref_rpm: float
     load_nm: float
+    seq: int = 0
 
 
 @dataclass(slots=True)
@@ -97,7 +98,16 @@ class NodeCounters:
 
 
 class CommandQueue:
-    """Bench commands ordered by apply step, de-duplicated by apply step and alive counter."""
+    """Bench commands ordered by apply step, de-duplicated by apply step and seq.
+
+    It also follows ``BenchCommand.seq``, which counts distinct commands in
+    step order (DBC 2.2): :attr:`ack_seq` is the seq of the newest command
+    held with every earlier one (no gap), what a controller reports in
+    ``CtrlTelemetry.cmd_ack``.  The first command of a run (``start``) has
+    seq 0.  A command at or before the step of that newest gap-free command
+    is a copy of one already held (one command per step, seq in step
+    order): a repeat, never a late command, however long after it comes.
+    """
 
     def __init__(self, modulus: int) -> None:
         self.modulus = modulus
@@ -105,6 +115,28 @@ class CommandQueue:
         self.applied_upto = -1
         self.recent: deque[tuple[int, int]] = deque(maxlen=64)
         self.next_step = _FAR
+        #: seq of the newest command held with no gap before it (-1: none yet).
+        self.ack_seq = -1
+        #: its apply step (-1: none yet).
+        self.ack_step = -1
+        #: commands held beyond a gap: seq -> apply step.
+        self.ahead: dict[int, int] = {}
+        #: seq of the newest command applied (-1: none).
+        self.applied_seq = -1
+
+    def _follow_seq(self, seq: int, step: int) -> bool:
+        """Record a new command's seq; True when it extended the gap-free run."""
+        nxt = (self.ack_seq + 1) % SEQ_MODULUS
+        if (seq - nxt) % SEQ_MODULUS >= SEQ_MODULUS // 2:
+            return False  # older than the gap-free run: nothing to record
+        self.ahead[seq] = step
+        moved = False
+        while nxt in self.ahead:
+            self.ack_step = self.ahead.pop(nxt)
+            self.ack_seq = nxt
+            nxt = (nxt + 1) % SEQ_MODULUS
+            moved = True
+        return moved
 
     def add(self, sig: dict[str, float], now: int, counters: NodeCounters) -> int | None:
         """Queue a command; its unwrapped apply step if it is known now (new or a repeat)."""
@@ -114,8 +146,9 @@ class CommandQueue:
             # another (longer) run's, whose set-points would apply here as late
             counters.reject(REJECT_STALE_COUNTER)
             return None
-        key = (s, int(sig["seq"]))
-        if key in self.recent:
+        seq = int(sig["seq"])
+        key = (s, seq)
+        if key in self.recent or (0 <= s <= self.ack_step):
             counters.reject(REPEATED_COUNTER)
             return s
         if s <= self.applied_upto:
@@ -123,6 +156,8 @@ class CommandQueue:
                 counters.reject(REJECT_STALE_COUNTER)
                 return None
             counters.late_commands += 1
+            self.recent.append(key)
+            self._follow_seq(seq, s)
             # late: at the next call of due() (the next period the node handles;
             # a plant waiting for its start asks for step 0 again and again, and
             # a start moved to step 1 never came due), after any other late
@@ -130,17 +165,19 @@ class CommandQueue:
             s = self.applied_upto
             while s in self.pending:
                 s += 1
-        if s in self.pending:
+        elif s in self.pending:
             counters.reject(REPEATED_COUNTER)
             return s
+        else:
+            self.recent.append(key)
+            self._follow_seq(seq, s)
         if len(self.pending) >= MAX_PENDING_COMMANDS:
             counters.reject(REJECT_QUEUE_FULL)
             return None
         counters.frames_accepted += 1
-        self.recent.append(key)
         self.next_step = min(self.next_step, s)
         self.pending[s] = Command(
-            s, int(sig["cmd"]), float(sig["speed_ref"]), float(sig["load_torque"])
+            s, int(sig["cmd"]), float(sig["speed_ref"]), float(sig["load_torque"]), seq
         )
         return s
 
@@ -152,6 +189,7 @@ class CommandQueue:
         out = [c for s, c in sorted(self.pending.items()) if s <= step]
         for c in out:
             del self.pending[c.apply_step]
+            self.applied_seq = c.seq
         self.next_step = min(self.pending) if self.pending else _FAR
         return out
 

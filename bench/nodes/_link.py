@@ -1,7 +1,7 @@
 """The latency link: a gateway between two buses with delay, jitter and drop.
 
 Like ``cangw``, but it delays what it forwards.  Side A is the plant's bus,
-side B the controller's.  It forwards ``PhaseSamples`` and ``PlantTruth``
+side B the controller's.  It forwards ``PhaseSamples``, ``PositionSensor`` and ``PlantTruth``
 from A to B, ``PwmDuty`` from B to A, and ``BenchCommand`` from A to B at
 once (the bench sends its commands on the plant's side; forwarding them both
 ways would echo them forever on a bus that delivers a node's own frames back
@@ -102,6 +102,7 @@ class LockstepLink:
         self.m = 1 << codec.step_bits("PhaseSamples")
         self.id_samples = codec.frame_id("PhaseSamples")
         self.id_truth = codec.frame_id("PlantTruth")
+        self.id_pos = codec.frame_id("PositionSensor")
         self.id_duty = codec.frame_id("PwmDuty")
         self.id_cmd = codec.frame_id("BenchCommand")
         self.latest_a = -1
@@ -142,7 +143,7 @@ class LockstepLink:
         fid = msg.arbitration_id
         if fid == self.id_cmd:
             return [msg], []
-        if fid not in (self.id_samples, self.id_truth):
+        if fid not in (self.id_samples, self.id_truth, self.id_pos):
             return [], []
         d = self.codec.decode(msg)
         if d is None or d.reason is not None:
@@ -276,7 +277,9 @@ class RealtimeLink:
         self.clock = clock
         self.heap: list[tuple[float, int, str, can.Message]] = []
         self.n = 0
-        self.forward_a = {codec.frame_id("PhaseSamples"), codec.frame_id("PlantTruth")}
+        self.forward_a = {
+            codec.frame_id(n) for n in ("PhaseSamples", "PlantTruth", "PositionSensor")
+        }
         self.id_duty = codec.frame_id("PwmDuty")
         self.id_cmd = codec.frame_id("BenchCommand")
 

@@ -244,9 +244,12 @@ def plant_loop(
     in lockstep a watchdog trip ends the run.  Rejected duty frames and a
     trip are reported on stderr as they happen (:class:`PlantDiagnostics`).
     """
-    ids = {node.codec.frame_id(n) for n in ("PwmDuty", "BenchCommand")}
     node.realtime = realtime
     node.external = dut_timeout_s > 0
+    names = ["PwmDuty", "BenchCommand"]
+    if node.external and not realtime:
+        names.append("CtrlTelemetry")  # its cmd_ack gates the periods (DBC 2.2)
+    ids = {node.codec.frame_id(n) for n in names}
     if on_ready:
         on_ready()
     if not _wait_for_start(bus, node, ids, stop):
@@ -327,9 +330,12 @@ def stall_text(node: PlantNode, waited_s: float) -> str:
     s = f"no valid PwmDuty for step {need} (the answer to sample {need - 1}) in {waited_s:.0f} s"
     later = sorted(t for t in node.duties if t > need)
     if later:
+        # the plant sent sample need - 1 (and resent it): whether the controller's
+        # socket lost it or the controller passed it over, the bus does not say
         s += (
-            f"; PwmDuty for later steps came ({', '.join(map(str, later[:4]))}): the "
-            f"controller skipped sample {need - 1}"
+            f"; PwmDuty for later steps came ({', '.join(map(str, later[:4]))}): sample "
+            f"{need - 1}, sent and resent every {RETRANSMIT_S * 1e3:.0f} ms, was lost in transit "
+            f"(the controller's receive buffer) or the controller skipped sample {need - 1}"
         )
     if node.duty_rejected:
         s += f"; PwmDuty: {rejection_text(node.duty_rejected)} since the start"
@@ -477,6 +483,24 @@ def _serve_lockstep(
                 "(paced by bench run: has its recorder stopped?)"
             )
 
+    t_ack = time.monotonic()
+
+    def no_ack() -> None:
+        # the controller has not acknowledged a command the next sample needs:
+        # our frames again (its answer to a repeated sample carries its newest
+        # acknowledgement), while bench run resends the commands it lacks
+        nonlocal t_ack
+        now = time.monotonic()
+        if now - last_progress > watchdog_s:
+            raise BenchError(
+                f"plant: the controller has not acknowledged BenchCommand seq "
+                f"{node.needed_ack()} (needed for sample {node.plant.k + 1}) in "
+                f"{watchdog_s:.0f} s; its newest CtrlTelemetry.cmd_ack is {node.ctrl_ack}"
+            )
+        if now - t_ack >= RETRANSMIT_S:
+            send_all(bus, node.retransmit(), node.counters)
+            t_ack = now
+
     while not node.done and not stop():
         t_wait = time.monotonic()
         try:
@@ -487,10 +511,46 @@ def _serve_lockstep(
         # paced by bench run: not ahead of the commands (and so of its recorder)
         if not _receive_until(bus, node, ids, node.paced, stop, no_command):
             break
+        # a controller under test that reports (DBC 2.2): not before it holds the commands
+        t_ack = time.monotonic()
+        if not _receive_until(bus, node, ids, node.acked, stop, no_ack):
+            break
         send_all(bus, node.advance_lockstep(), node.counters)
         last_progress = time.monotonic()
         if diag is not None:
             diag.poll()
+    if node.external and node.done and not stop():
+        _last_answer(bus, node, ids, stop)
+
+
+#: Lockstep with a controller under test: how long the plant waits, resending, for
+#: the answer to its last sample (the controller may have lost it; no period follows
+#: that would make the plant resend it otherwise).
+LAST_ANSWER_S = 2.0
+
+
+def _last_answer(bus: can.BusABC, node: PlantNode, ids: set[int], stop: Callable[[], bool]) -> None:
+    """Resend the last frames until the answer to the last sample has come (or a while).
+
+    The recorder's last rows need the controller's telemetry of the last
+    samples; without this a controller whose socket dropped the last sample
+    would leave them out, and a lossy run would have fewer rows than a clean one.
+    """
+    want = node.plant.k + 1 - node.delay
+    t_end = time.monotonic() + LAST_ANSWER_S
+    t_sent = 0.0
+
+    def answered() -> bool:
+        return want in node.duties or time.monotonic() > t_end
+
+    def again() -> None:
+        nonlocal t_sent
+        if time.monotonic() - t_sent >= RETRANSMIT_S:
+            send_all(bus, node.retransmit(), node.counters)
+            t_sent = time.monotonic()
+
+    t_sent = time.monotonic()
+    _receive_until(bus, node, ids, answered, stop, again)
 
 
 class _RunOver(Exception):

@@ -47,6 +47,10 @@ would run the loop without its computation delay. The plant rejects it
 ``GenMsgCycleTime``, 100 ms of plant time) while the run is on; its
 ``late_frames`` counts the periods without their own duty and the duty frames
 rejected. docs/PROTOCOL.md is the same contract for a controller's author.
+
+Serving a controller under test in lockstep, the plant also reads its
+``CtrlTelemetry.cmd_ack`` (DBC 2.2) and runs no period whose next sample
+needs a bench command the controller has not acknowledged (:meth:`PlantNode.acked`).
 """
 
 from __future__ import annotations
@@ -77,6 +81,7 @@ from bench.wire._protocol import (
     STATE_FAULT,
     STATE_IDLE,
     STATE_RUNNING,
+    seq_at_least,
     unwrap,
 )
 from plant_rt import (
@@ -87,6 +92,7 @@ from plant_rt import (
     Plant,
     Protection,
     ProtectionPars,
+    encoder_angle,
 )
 
 _SAFE_DUTY = (0.5, 0.5, 0.5, False)
@@ -161,7 +167,7 @@ class PlantNode:
         self.latest_duty_step = -1
         self.commands = CommandQueue(self.m_cmd)
         #: Lockstep pacing (0: off): run period k only once a bench command
-        #: for step k or later has arrived. ``bench run`` sends one at least
+        #: for step k + 1 or later has arrived. ``bench run`` sends one at least
         #: every this many periods, as far ahead as its recorder has seen, so
         #: the plant never outruns the recording (whose socket would overflow
         #: on a loaded machine) and no command is ever late.
@@ -202,6 +208,16 @@ class PlantNode:
         #: lockstep watchdog counts only from its first answer, and a lockstep
         #: trip ends the run (no duty will come: the periods cannot advance).
         self.external = False
+        #: The position sensor of a sensored controller (``[sensors] encoder_counts``,
+        #: DBC 2.2 ``PositionSensor``): sent every this many periods; 0: none.
+        sp = plant.sensor_pars
+        self.encoder_every = sp.encoder_every(plant.T_s) if sp.encoder_counts > 0 else 0
+        #: ``CtrlTelemetry.cmd_ack`` of the controller (DBC 2.2): the seq of the
+        #: newest command it holds with no gap, from its newest reporting
+        #: telemetry; None while it has reported none (a 2.1 controller, or
+        #: no telemetry): lockstep then runs ungated (:meth:`acked`).
+        self.ctrl_ack: int | None = None
+        self.id_tel = codec.frame_id("CtrlTelemetry")
         self._outbox: list[can.Message] = []
 
     # -- receiving ---------------------------------------------------------
@@ -224,6 +240,13 @@ class PlantNode:
             known = self.commands.add(d.signals, self.plant.k, c)
             if known is not None and known > self.cmd_horizon:
                 self.cmd_horizon = known
+        elif d.name == "CtrlTelemetry":
+            c.frames_ignored += 1
+            if d.reason is None and int(d.signals.get("cmd_ack_valid", 0)):
+                a = int(d.signals["cmd_ack"])
+                # the newest acknowledgement wins; an older one (a reordered frame) is dropped
+                if self.ctrl_ack is None or seq_at_least(a, self.ctrl_ack):
+                    self.ctrl_ack = a
         else:
             if d.name == "PlantTruth" and d.reason is None:
                 rid = int(d.signals.get("run_id", 0))
@@ -377,8 +400,42 @@ class PlantNode:
         return t <= 0 or t in self.duties
 
     def paced(self) -> bool:
-        """Lockstep: whether pacing lets the current period run (always when off)."""
-        return self.pace_every <= 0 or self.plant.k <= self.cmd_horizon
+        """Lockstep: whether pacing lets the current period run (always when off).
+
+        Running period ``k`` ends with the commands of step ``k + 1`` (the
+        plant applies them before it samples ``k + 1``, the controller before
+        it computes that sample): a command for ``k + 1`` or later must be here.
+        """
+        return self.pace_every <= 0 or self.plant.k < self.cmd_horizon
+
+    def needed_ack(self) -> int:
+        """seq of the newest command the controller must hold before this period runs.
+
+        Running period ``k`` sends sample ``k + 1``, which the controller
+        computes after the commands of steps up to ``k + 1``: the newest of
+        them the plant holds (the one pending at ``k + 1``, else the newest
+        applied); -1 for none.
+        """
+        nxt = self.commands.pending.get(self.plant.k + 1)
+        return nxt.seq if nxt is not None else self.commands.applied_seq
+
+    def acked(self) -> bool:
+        """Lockstep (DBC 2.2): whether the controller acknowledged every command
+        the next sample needs (always, for a controller that does not report,
+        and for the bench's own controller, whose socket is 64 MiB deep).
+
+        Only with a controller under test: ``bench run`` then keeps at most
+        :data:`bench.wire._protocol.ACK_WINDOW` commands beyond its
+        acknowledgement, which the 4-bit seq comparison needs.
+
+        With this gate a lost command cannot change a lockstep trace: the
+        plant waits (and resends its frames) while the bench resends the
+        command, and the controller computes no sample without it.
+        """
+        if self.ctrl_ack is None or self.realtime or not self.external:
+            return True
+        need = self.needed_ack()
+        return need < 0 or seq_at_least(self.ctrl_ack, need)
 
     def frames_now(self) -> list[can.Message]:
         """The frames describing the plant at the current instant ``k T_s``."""
@@ -400,6 +457,17 @@ class PlantNode:
                 },
             )
         ]
+        if self.encoder_every and s.k % self.encoder_every == 0:
+            tr = p.truth()
+            frames.append(
+                self.codec.encode(
+                    "PositionSensor",
+                    {
+                        "theta_m": encoder_angle(tr.theta_m, tr.w_m, p.sensor_pars),
+                        "step": s.k % self.m_samples,
+                    },
+                )
+            )
         if s.k % self.truth_every == 0:
             tr = p.truth()
             frames.append(

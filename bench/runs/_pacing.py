@@ -20,9 +20,25 @@ one's own can use it as it is (docs/PROTOCOL.md, "Bench commands and pacing")::
     while not done:
         pacer.send_due(bus, plant_step)   # plant_step: newest PhaseSamples.step seen
     pacer.send_stop(bus)
+
+Every command's arrival is verifiable (DBC 2.2): ``BenchCommand.seq`` counts
+distinct commands, and a controller reports in ``CtrlTelemetry.cmd_ack`` the
+seq of the newest command it holds with no gap before it.  With such a
+controller the pacer keeps at most :data:`bench.wire._protocol.ACK_WINDOW`
+commands beyond the acknowledged one and resends the unacknowledged ones
+every :data:`RESEND_S` while the acknowledgement does not move
+(:meth:`CommandPacer.on_telemetry`, :meth:`CommandPacer.send_due`).  It also
+counts, from each telemetry's step, the commands the controller had not
+received by their step (:attr:`CommandPacer.late`: applied late, a result in
+real time; in lockstep the plant's gate makes it impossible after the first
+reporting telemetry) and, at the end, those it never acknowledged.  For a
+controller that does not report (2.1, or no telemetry) nothing of this can be
+verified: :meth:`CommandPacer.verification_line` says so.
 """
 
 from __future__ import annotations
+
+import bisect
 
 import can
 
@@ -30,12 +46,37 @@ from bench.nodes._loops import command_frames
 from bench.scenarios._schema import Scenario
 from bench.scenarios._setup import sample_period
 from bench.wire._codec import Codec
+from bench.wire._protocol import ACK_WINDOW, SEQ_MODULUS
 
-__all__ = ["PACE_EVERY", "CommandPacer", "command_lead"]
+__all__ = ["COMMAND_BURST", "PACE_EVERY", "RESEND_S", "CommandPacer", "command_lead"]
 
 #: Lockstep pacing: a bench command (a keep-alive when nothing changes) at
 #: least every this many periods; see :attr:`bench.nodes._plant_node.PlantNode.pace_every`.
 PACE_EVERY = 100
+
+#: Datagrams a receive buffer of Linux's default size (``net.core.rmem_default``,
+#: 212,992 bytes) holds of python-can's udp_multicast frames: 256, measured with a
+#: ``BenchCommand`` (160 bytes of msgpack, about 830 bytes of kernel accounting
+#: each).  A controller under test opens its bus with that default.
+DEFAULT_SOCKET_FRAMES = 256
+#: Commands sent ahead of the plant's step at most, for a controller that does
+#: not acknowledge them: two copies each may fill a quarter of a default receive
+#: buffer (:data:`DEFAULT_SOCKET_FRAMES` / 4 / 2), the rest being left to the
+#: plant's frames (four per period with the recorder frames, plus its resends of
+#: 3 periods) and to a reader that falls behind.  One command per period over a
+#: whole ramp then reaches the controller 32 at a time, never 1,579 frames in a burst.
+COMMAND_BURST = DEFAULT_SOCKET_FRAMES // 4 // 2
+#: Telemetry frames without an acknowledgement after which a controller under test
+#: counts as one that does not report (2.1), and the commands go on without it: a
+#: 2.2 controller holds the start before its first sample (the plant sends sample 0
+#: only after the start, and ``bench run`` resends every command at the first
+#: answer), so it reports from its first or second telemetry; ten leaves room for
+#: a few lost frames, and costs a 2.1 controller ten periods of its first commands.
+SILENT_REPORTS = 10
+#: Resend the commands beyond the acknowledged one when the acknowledgement has
+#: not moved for this long (s): the plant's own resend interval
+#: (:data:`bench.nodes._loops.RETRANSMIT_S`), so a lost command costs one round.
+RESEND_S = 0.05
 
 
 def command_lead(T_s: float, mode: str) -> int:
@@ -65,10 +106,22 @@ class CommandPacer:
     pace_every : int, optional
         Keep-alive spacing in periods; default :data:`PACE_EVERY` in lockstep, 0 in
         real time.  It must match the plant's ``--pace-every``.
+    external : bool
+        A controller under test: its acknowledgements are followed, with at most
+        :data:`ACK_WINDOW` commands beyond the newest acknowledged one; in lockstep
+        also at most that many beyond the plant's step (else :data:`COMMAND_BURST`),
+        the bound the plant's acknowledgement gate needs to compare 4-bit seq
+        (:meth:`bench.nodes._plant_node.PlantNode.acked`).
     """
 
     def __init__(
-        self, scn: Scenario, codec: Codec, *, mode: str, pace_every: int | None = None
+        self,
+        scn: Scenario,
+        codec: Codec,
+        *,
+        mode: str,
+        pace_every: int | None = None,
+        external: bool = False,
     ) -> None:
         if pace_every is None:
             pace_every = PACE_EVERY if mode == "lockstep" else 0
@@ -79,18 +132,112 @@ class CommandPacer:
         self.lead = command_lead(sample_period(scn), mode)
         #: How many of :attr:`frames` have been sent.
         self.sent = 0
+        self._steps = [k for k, _ in self.frames]
+        #: Commands sent beyond the plant's step at most.
+        self.window = ACK_WINDOW if external and mode == "lockstep" else COMMAND_BURST
+        #: Whether acknowledgements are followed: only within :data:`ACK_WINDOW`,
+        #: i.e. for a controller under test, can a 4-bit seq name one command.
+        self.external = external
+        #: Index (in :attr:`frames`) of the newest command the controller acknowledged
+        #: (-1: none); None while it has reported nothing (DBC 2.1 or no telemetry).
+        self.acked: int | None = None
+        #: Telemetry frames that reported an acknowledgement / that did not.
+        self.reports = 0
+        self.silent_reports = 0
+        #: Indexes of the commands the controller held only after their step.
+        self.late: set[int] = set()
+        #: Rounds of resent unacknowledged commands.
+        self.resends = 0
+        self._t_ack = 0.0
 
-    def send_due(self, bus: can.BusABC, plant_step: int) -> int:
-        """Send (twice each) the commands that apply up to ``plant_step + lead``; how many."""
+    def on_telemetry(self, step: int, valid: int, ack: int, now: float) -> None:
+        """Take one ``CtrlTelemetry`` (its full step, ``cmd_ack_valid``, ``cmd_ack``)."""
+        if not self.external:
+            return
+        if not valid:
+            self.silent_reports += 1
+            return
+        self.reports += 1
+        base = -1 if self.acked is None else self.acked
+        # the acknowledged index: the one with seq ``ack`` at or after base (window < 8)
+        i = base + (ack - base) % SEQ_MODULUS
+        if i >= self.sent:
+            return  # not a command sent yet: garbage, or another run's
+        if self.acked is None or i > self.acked:
+            self.acked = i
+            self._t_ack = now
+        # commands up to this telemetry's step that the controller did not yet hold
+        j = max(self.acked, max(self.late, default=-1)) + 1
+        while j < self.sent and self.frames[j][0] <= step:
+            self.late.add(j)
+            j += 1
+
+    def send_due(self, bus: can.BusABC, plant_step: int, now: float | None = None) -> int:
+        """Send (twice each) the commands that apply up to ``plant_step + lead``; how many.
+
+        At most :data:`COMMAND_BURST` beyond the plant's step; with a controller
+        that acknowledges, at most :data:`ACK_WINDOW` beyond its acknowledgement,
+        and the ones beyond it again every :data:`RESEND_S` while it does not move.
+        """
         n = 0
-        limit = max(0, plant_step) + self.lead
-        while self.sent < len(self.frames) and self.frames[self.sent][0] <= limit:
+        step = max(0, plant_step)
+        limit = step + self.lead
+        cap = self._first_beyond(step) + self.window
+        if self.acked is None:
+            if self.external and self.silent_reports < SILENT_REPORTS:
+                cap = min(cap, ACK_WINDOW)  # until it says whether it acknowledges
+        else:
+            cap = min(cap, self.acked + 1 + ACK_WINDOW)
+            if now is not None and self.sent > self.acked + 1 and now - self._t_ack > RESEND_S:
+                for _, m in self.frames[self.acked + 1 : self.sent]:
+                    bus.send(m)
+                self.resends += 1
+                self._t_ack = now
+        while (
+            self.sent < len(self.frames) and self.frames[self.sent][0] <= limit and self.sent < cap
+        ):
             msg = self.frames[self.sent][1]
             bus.send(msg)
             bus.send(msg)
             self.sent += 1
             n += 1
+        if n and now is not None and self.acked is not None and self.sent == self.acked + 1 + n:
+            self._t_ack = now  # the resend clock starts with the first unacknowledged command
         return n
+
+    def _first_beyond(self, step: int) -> int:
+        """Index of the first command that applies after ``step``."""
+        return bisect.bisect_right(self._steps, step)
+
+    @property
+    def unacknowledged(self) -> int:
+        """Commands sent that the controller never acknowledged (0 when it does not report)."""
+        return 0 if self.acked is None else self.sent - 1 - self.acked
+
+    def verification_line(self) -> str | None:
+        """The line on what could not be verified or went wrong; None when all is well."""
+        if self.acked is None:
+            return (
+                "the controller reported no command acknowledgement (CtrlTelemetry.cmd_ack_valid, "
+                "DBC 2.2): the bench cannot verify that it received its BenchCommand frames"
+            )
+        if self.late or self.unacknowledged:
+            return (
+                f"the controller held {len(self.late)} of {self.sent} BenchCommand(s) only after "
+                f"their step and never acknowledged {self.unacknowledged} "
+                "(CtrlTelemetry.cmd_ack): its set-points were not those of the scenario"
+            )
+        return None
+
+    def report(self) -> dict[str, object]:
+        """For ``meta.json``: ``commands_sent``, ``_late``, ``_unacknowledged``, ``_verified``."""
+        return {
+            "commands_sent": self.sent,
+            "commands_verified": self.acked is not None,
+            "commands_late": len(self.late),
+            "commands_unacknowledged": self.unacknowledged,
+            "command_resends": self.resends,
+        }
 
     def resend_recent(self, bus: can.BusABC, n: int = 8) -> None:
         """Send the newest ``n`` commands sent once more (a paced plant that stopped moving

@@ -64,6 +64,12 @@ class Recorder(can.Listener):
         #: (another run's: the nodes of this one have not started).
         self.known = 0
         self._known_seen: set[tuple[int, bytes]] = set()
+        #: ``CtrlTelemetry`` as (step, cmd_ack_valid, cmd_ack), for the pacer (DBC 2.2).
+        self.tel_id = codec.frame_id("CtrlTelemetry")
+        self.acks: list[tuple[int, int, int]] = []
+        #: The raw ``PlantStatus.step`` of the first status that carried each fault code
+        #: (the trip's own frame; later ones carry later steps).
+        self.fault_steps: dict[int, int] = {}
 
     def on_message_received(self, msg: can.Message) -> None:
         msg.channel = self.channel
@@ -89,6 +95,11 @@ class Recorder(can.Listener):
                     if seen not in self._foreign_seen and len(self._foreign_seen) < 4096:
                         self._foreign_seen.add(seen)
                         self.foreign[rid] = self.foreign.get(rid, 0) + 1
+                elif msg.arbitration_id == self.tel_id:
+                    sig = d.signals
+                    self.acks.append(
+                        (int(sig["step"]), int(sig["cmd_ack_valid"]), int(sig["cmd_ack"]))
+                    )
         elif msg.arbitration_id == self.samples_id:
             d = self.codec.decode(msg)
             if d is not None and d.reason is None:
@@ -111,6 +122,7 @@ class Recorder(can.Listener):
             d = self.codec.decode(msg)
             if d is not None and d.reason is None:
                 self.status = {k: int(v) for k, v in d.signals.items()}
+                self.fault_steps.setdefault(self.status["fault_code"], self.status["step"])
                 if int(d.signals["state"]) == STATE_DONE:
                     self.done.set()
 

@@ -37,7 +37,7 @@ from typing import Any
 import can
 
 from bench import _jsonio as jsonio
-from bench._errors import BenchError
+from bench._errors import BenchError, CommandsLost
 from bench.nodes._counters import RejectionSummary, rejection_text
 from bench.nodes._loops import STALL_S, trip_text
 from bench.runs._analysis import NoRowsError
@@ -174,6 +174,7 @@ def run_scenario(
     dut = DutWatch(rec, dut_timeout, spec_b.describe(), dut_name) if external else None
     t_wall0 = time.perf_counter()
     start_error: str | None = None
+    pacer: CommandPacer | None = None
     with _catch_signals() as interrupted:
         try:
             start_error = _bus_in_use(rec, spec, interrupted)
@@ -184,7 +185,7 @@ def run_scenario(
             except BenchError as e:  # a node that never became ready: nothing to record
                 start_error = str(e)
             if start_error is None:
-                pacer = CommandPacer(scn, codec, mode=mode, pace_every=pace)
+                pacer = CommandPacer(scn, codec, mode=mode, pace_every=pace, external=external)
                 plant = dict(procs).get("plant")
                 if plant is not None and not interrupted():
                     ended = _drive(
@@ -248,6 +249,8 @@ def run_scenario(
     meta["exit_codes"] = {role: p.returncode for role, p in procs}
     if interrupted():
         meta["interrupted"] = True
+    if pacer is not None:
+        meta["commands"] = pacer.report()
     frames = rec.frames()
     codes = dict(meta["exit_codes"])
     plant_rejects = (meta["node_reports"].get("plant") or {}).get("reject_reasons")
@@ -297,6 +300,14 @@ def run_scenario(
         # the line of a run that ends with status 2, kept beside what it recorded
         (out_dir / "error.txt").write_text(line + "\n")
         raise BenchError(line)
+    if external and pacer is not None:
+        lost = pacer.verification_line()
+        tripped = result.metrics.get("plant_fault", "none") not in ("none", None)
+        if lost is not None and pacer.acked is not None and not tripped:
+            # a trip (exit 3) is the cause of what the controller missed after it
+            raise CommandsLost(f"{lost}; files in {out_dir}")
+        if lost is not None:
+            print(f"warning: {lost}", file=sys.stderr, flush=True)
     return result
 
 
@@ -420,10 +431,16 @@ def _drive(
     t_start: float | None = None
     t_seen, last_step, waiting_dut = t_moved, -1, dut is not None and not dut.answered
     ended: str | None = None
+    tel = rec.recorders[-1]  # the controller's side: its CtrlTelemetry
+    n_acks = 0
     while not interrupted():
         full_step = max(0, rec.plant_step)
-        pacer.send_due(bus, full_step)
         now = time.monotonic()
+        acks = tel.acks
+        while n_acks < len(acks):
+            pacer.on_telemetry(*acks[n_acks], now)
+            n_acks += 1
+        pacer.send_due(bus, full_step, now)
         if t_start is None and pacer.sent:
             t_start = t_seen = now
         if rec.plant_step != last_step or (waiting_dut and dut is not None and dut.answered):
@@ -525,7 +542,9 @@ class DutWatch:
         st = self.rec.recorders[0].status
         code = st.get("fault_code", 0)
         if code and code != self.fault:
-            step = unwrap(st.get("step", 0), plant_step, 1 << 16)
+            # the step of the trip's own status frame, not of the newest one
+            raw = self.rec.recorders[0].fault_steps.get(code, st.get("step", 0))
+            step = unwrap(raw, plant_step, 1 << 16)
             self._say(f"plant: {trip_text(code, step)}")
         self.fault = code
         late = st.get("late_frames", 0)

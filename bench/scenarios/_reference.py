@@ -346,6 +346,25 @@ KEYS: dict[str, dict[str, Key]] = {
         "sample_delay_s": Key(
             "s", "Delay of the sensor chain.", "0 to below one PWM period", None, 1.0
         ),
+        "encoder_counts": Key(
+            "count/rev",
+            "Position sensor of a sensored controller (PositionSensor frame): counts per "
+            "mechanical revolution; 0: none.",
+            "0 to 65536",
+            None,
+            70000,
+        ),
+        "encoder_rate_hz": Key(
+            "Hz",
+            "Position readings per second (rounded to whole PWM periods, at most one per "
+            "period); 0: one per PWM period.",
+            ">= 0",
+            None,
+            -1.0,
+        ),
+        "encoder_delay_s": Key(
+            "s", "Age of a position reading (the shaft's angle that long ago).", ">= 0", None, -1.0
+        ),
     },
     "magnetics": {
         "saturation": Key(
@@ -501,6 +520,9 @@ def _profile_defaults() -> dict[str, dict[str, str]]:
                 "current_full_scale_a": s.i_fs,
                 "current_noise_a": s.noise_i,
                 "sample_delay_s": s.t_delay,
+                "encoder_counts": s.encoder_counts,
+                "encoder_rate_hz": s.encoder_rate_hz,
+                "encoder_delay_s": s.encoder_delay_s,
             }
             for k, v in vals.items():
                 sen.setdefault(k, []).append(f"{tag} {_show(v)}")

@@ -466,6 +466,9 @@ SENSOR_KEYS = (
     "current_full_scale_a",
     "current_noise_a",
     "sample_delay_s",
+    "encoder_counts",
+    "encoder_rate_hz",
+    "encoder_delay_s",
 )
 #: ``[magnetics]`` keys.
 MAGNETICS_KEYS = ("saturation", "cross_saturation", "sigma", "i_sat", "c_dq")
@@ -1128,6 +1131,11 @@ def _parse_plant(
             sensors[k] = st.num(k, lo=0.0)
             if not sensors[k] < T_s:
                 raise st.fail(k, f"must be below one PWM period ({T_s:g} s), got {sensors[k]}")
+        elif k == "encoder_counts":
+            sensors[k] = st.integer(k, 0, lo=0)
+            if sensors[k] > 1 << 16:
+                raise st.fail(k, f"must be at most 65536 (16 bits on the wire), got {sensors[k]}")
+
         else:
             sensors[k] = st.num(k, lo=0.0)
     mg = r.table("magnetics", set(MAGNETICS_KEYS))

@@ -75,6 +75,9 @@ _SENSOR_FIELDS = {
     "current_gain_error": ("gain_abc",),
     "current_noise_a": ("noise_i",),
     "sample_delay_s": ("t_delay",),
+    "encoder_counts": ("encoder_counts",),
+    "encoder_rate_hz": ("encoder_rate_hz",),
+    "encoder_delay_s": ("encoder_delay_s",),
 }
 
 

@@ -47,3 +47,17 @@ def unwrap(raw: int, expected: int, modulus: int) -> int:
     half = modulus // 2
     d = (raw - expected + half) % modulus - half
     return expected + d
+
+
+#: ``BenchCommand.seq`` counts distinct commands (keep-alives included) modulo this.
+SEQ_MODULUS = 16
+#: Commands the host may have sent beyond the newest one the controller
+#: acknowledged (``CtrlTelemetry.cmd_ack``): fewer than half the seq range, so
+#: any two seq a receiver compares are less than half a cycle apart and
+#: :func:`seq_at_least` is exact (serial-number arithmetic, as RFC 1982).
+ACK_WINDOW = SEQ_MODULUS // 2 - 1
+
+
+def seq_at_least(a: int, b: int) -> bool:
+    """Whether seq ``a`` is ``b`` or newer, for seq less than half a cycle apart."""
+    return (a - b) % SEQ_MODULUS < SEQ_MODULUS // 2

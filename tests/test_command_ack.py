@@ -1,0 +1,132 @@
+"""Commands cannot be lost silently (DBC 2.2, ``CtrlTelemetry.cmd_ack``).
+
+A controller under test that throws away a share of the ``BenchCommand`` and
+``PhaseSamples`` frames it receives (``tests/ext_controller.py --drop``, as an
+overflowing receive buffer does) gives, in external lockstep runs, the
+``signals.csv`` of the clean run: the plant runs no period whose next sample
+needs a command the controller has not acknowledged, and the bench resends
+what it lacks.  A controller written to 2.1 still runs, with one line saying
+what the bench cannot verify.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from bench.nodes._counters import CommandQueue, NodeCounters
+from bench.runs._pacing import CommandPacer
+from bench.wire._codec import Codec
+from bench.wire._protocol import ACK_WINDOW
+from tests.test_external_controller import ROOT, _run
+
+
+def _cmd(step: int, seq: int) -> dict[str, float]:
+    return {"step": step, "seq": seq, "cmd": 0, "speed_ref": 0.0, "load_torque": 0.0}
+
+
+def test_the_acknowledgement_stops_at_a_gap_and_a_late_copy_is_a_repeat() -> None:
+    q, c = CommandQueue(1 << 16), NodeCounters()
+    q.add(_cmd(0, 0), 0, c)
+    q.add(_cmd(5, 2), 0, c)  # seq 1 lost
+    assert q.ack_seq == 0
+    q.add(_cmd(3, 1), 0, c)  # the resend closes the gap
+    assert (q.ack_seq, q.ack_step) == (2, 5)
+    q.due(100)
+    q.add(_cmd(0, 0), 100, c)  # the start's third copy, long after: not late
+    assert c.late_commands == 0 and c.duplicates == 1
+
+
+def test_the_pacer_counts_a_command_held_after_its_step() -> None:
+    from tests.trace_helpers import short
+
+    codec = Codec()
+    p = CommandPacer(short("wen-5.1", 0.05), codec, mode="realtime", external=True)
+
+    class Sink:
+        def send(self, m: object) -> None:
+            pass
+
+    p.send_due(Sink(), 0, 0.0)  # type: ignore[arg-type]
+    assert p.sent == ACK_WINDOW  # until it says whether it acknowledges
+    p.on_telemetry(0, 1, 0, 0.0)  # start held at step 0
+    step2 = p.frames[2][0]
+    p.on_telemetry(step2, 1, 0, 0.01)  # command 1 and 2 not held by their step
+    assert p.late == {1, 2} and p.verification_line() is not None
+
+
+def _signals(run_dir: Path) -> str:
+    return (run_dir / "signals.csv").read_text()
+
+
+def test_a_dropping_controller_gives_the_clean_trace(tmp_path: Path) -> None:
+    res, clean = _run(tmp_path / "clean")
+    assert res.returncode == 0, res.stderr[-2000:]
+    ref = _signals(clean)
+    meta = json.loads((clean / "meta.json").read_text())
+    assert meta["commands"]["commands_verified"] and meta["commands"]["commands_late"] == 0
+    assert json.loads((clean / "metrics.json").read_text())["late_commands"] == 0
+    for seed in (1, 2, 3):
+        res, d = _run(tmp_path / f"drop{seed}", extra_ctrl=("--drop", "0.1", "--seed", str(seed)))
+        assert res.returncode == 0, res.stderr[-2000:]
+        assert _signals(d) == ref, f"seed {seed}: the trace changed"
+
+
+def test_a_21_controller_runs_and_is_told_unverified(tmp_path: Path) -> None:
+    res, d = _run(tmp_path, extra_ctrl=("--protocol", "2.1"))
+    assert res.returncode == 0, res.stderr[-2000:]
+    assert "cannot verify that it received its BenchCommand frames" in res.stderr
+    assert not json.loads((d / "meta.json").read_text())["commands"]["commands_verified"]
+
+
+@pytest.mark.slow
+def test_twenty_external_runs_on_a_default_socket_are_identical(tmp_path: Path) -> None:
+    """Issue 26: xue-fig13 (502 commands, a ramp of one per period) twenty times in
+    external lockstep with the test controller's default receive buffer: one
+    ``signals.csv``, every run verified, none late."""
+    scn = ROOT / "bench" / "scenarios" / "xue-fig13.toml"
+    traces = set()
+    for i in range(20):
+        res, d = _run(tmp_path / f"r{i}", scenario=scn)
+        assert res.returncode == 0, res.stderr[-2000:]
+        c = json.loads((d / "meta.json").read_text())["commands"]
+        assert c["commands_verified"] and c["commands_late"] == 0, c
+        assert c["commands_unacknowledged"] == 0, c
+        traces.add(_signals(d))
+    assert len(traces) == 1
+
+
+def test_a_trip_is_named_with_its_own_period_not_the_newest_status(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """A run that printed "tripped watchdog in period 20000" (its last PlantStatus)
+    while the plant tripped in period 6776: the line takes the trip's own frame."""
+    import can
+
+    from bench.runs._recorder import Recorder
+    from bench.runs._run import DutWatch
+
+    codec = Codec()
+
+    class Drop(can.Listener):
+        def on_message_received(self, msg: can.Message) -> None:
+            pass
+
+    rec = Recorder(codec, Drop(), 1)
+    for state, code, step in ((1, 0, 6000), (2, 1, 6776), (2, 1, 7000), (0, 1, 20000)):
+        rec.on_message_received(
+            codec.encode(
+                "PlantStatus",
+                {"state": state, "fault_code": code, "overruns": 0, "late_frames": 0, "step": step},
+            )
+        )
+
+    class Rec:
+        def __init__(self) -> None:
+            self.recorders = [rec]
+            self.duty_watch = rec
+
+    DutWatch(Rec(), 5.0, "bus").check(20000)  # type: ignore[arg-type]
+    assert "tripped watchdog in period 6776," in capsys.readouterr().err
