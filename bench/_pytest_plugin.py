@@ -87,7 +87,9 @@ class Hil:
 
         self._n += 1
         n = self._n
-        name = re.sub(r"[^A-Za-z0-9_.-]+", "-", Path(str(getattr(scenario, "name", scenario))).stem)
+        name = Path(str(getattr(scenario, "name", scenario))).name
+        name = re.sub(r"\.(toml|json)$", "", name)  # a file's stem; wen-5.1 stays wen-5.1
+        name = re.sub(r"[^A-Za-z0-9_.-]+", "-", name)
         kw.setdefault("out", self._tmp / f"hil-{n}-{name}")
         if "transport" not in kw:
             kw["transport"] = self.transport(kw.get("controller", "bench"))
