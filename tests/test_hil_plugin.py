@@ -184,3 +184,23 @@ def test_assert_settles_must_stay() -> None:
         assert_settles(run, "w", to=100.0, within=2.0, by_s=2.0)
     with pytest.raises(AssertionError, match=r"^nope: not a signal of this run"):
         assert_settles(run, "nope", to=1.0, within=1.0, by_s=0.0)
+
+
+def test_run_png_goes_into_the_html_report(pytester: pytest.Pytester) -> None:
+    pytest.importorskip("pytest_html")
+    pytester.makepyfile(
+        test_html=f"""
+def test_one(hil):
+    run = hil.run({str(SCENARIO)!r}, duration=0.25)
+    assert (run.folder / "run.png").is_file()
+"""
+    )
+    res = pytester.runpytest_subprocess("--html=report.html", "--self-contained-html")
+    res.assert_outcomes(passed=1)
+    html = (pytester.path / "report.html").read_text()
+    png = next(pytester.path.parent.parent.rglob("hil-1-firmware-100rpm/run.png"))
+    import base64
+
+    # the picture itself, base64 in the page (pytest-html escapes its data as JSON)
+    head = base64.b64encode(png.read_bytes()).decode("ascii")[:200]
+    assert head.replace("/", "\\/") in html or head in html
