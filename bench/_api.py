@@ -136,10 +136,9 @@ class Run:
 def _read_signals(folder: Path | None) -> dict[str, np.ndarray]:
     from bench.runs._analysis import read_csv
 
-    path = (folder or Path(".")) / "signals.csv"
-    if folder is None or not path.is_file():
-        raise BenchError(f"{path}: no signals.csv (the run recorded no complete period)")
-    return read_csv(str(path))
+    if folder is None or not (folder / "signals.csv").is_file():
+        raise BenchError(f"run {folder}: no signals.csv (the run recorded no complete period)")
+    return read_csv(str(folder / "signals.csv"))
 
 
 def _run_from(res: RunResult, folder: Path | None, *, analysis: bool = False) -> Run:
@@ -244,12 +243,18 @@ def _engine(engine: str) -> Iterator[str]:
             os.environ[ENGINE_ENV] = before
 
 
-def bus_of(transport: str | None) -> BusSpec:
+def bus_of(transport: str | None, *, known_port: bool = False) -> BusSpec:
     """The bus of ``transport=``: ``"socketcan:vcan0"``, ``"udp_multicast"`` (its group, on a
     port of the run's own), ``"udp_multicast:GROUP:PORT"``, any python-can interface as
     ``"NAME:CHANNEL"``; None: ``bench run``'s default (vcan0 when it is up, else
-    udp_multicast on a port of the run's own)."""
+    udp_multicast on a port of the run's own).
+
+    ``known_port``: udp_multicast without a port takes python-can's default port
+    instead, where a controller under test that was told nothing finds it (as ``bench
+    run --controller external`` does).
+    """
     from bench.wire._bus import (
+        UDP_DEFAULT_PORT,
         BusSpec,
         check_interface,
         default_channel,
@@ -286,7 +291,8 @@ def bus_of(transport: str | None) -> BusSpec:
                 f"transport {transport}: this adapter needs a channel (NAME:CHANNEL)"
             )
     if iface == "udp_multicast" and port is None:
-        port = own_udp_port()  # parallel runs must not hear each other
+        # parallel runs must not hear each other, unless the other side must find this one
+        port = UDP_DEFAULT_PORT if known_port else own_udp_port()
     return BusSpec(iface, chan, port)
 
 
@@ -355,7 +361,8 @@ def run(
     controller : {"bench", "external"}
         ``"external"``: no controller of the bench's; the controller under
         test is ``dut`` (or any node on the bus), as ``bench run
-        --controller external``.
+        --controller external``: without ``dut``, udp_multicast without a
+        port is python-can's default port, where a device told nothing finds it.
     dut : list of str, optional
         With ``controller="external"``: the command of the controller under
         test, started for the run and stopped after it (its output in
@@ -408,7 +415,7 @@ def run(
         if note := check_estimator_fits(scn, est):
             print(note, file=sys.stderr)
     local = transport is None and not external and mode == "lockstep"
-    spec = None if local else bus_of(transport)
+    spec = None if local else bus_of(transport, known_port=external and not dut)
     folder = _out_dir(out) if out is not None else None
     with _engine(engine), _folder(folder) as where:
         if spec is None:

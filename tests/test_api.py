@@ -144,3 +144,21 @@ def test_import_bench_imports_nothing_else() -> None:
     code = "import sys, bench; print(sorted(m for m in sys.modules if m.startswith('bench')))"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "['bench']"
+
+
+def test_transport_names_a_bus() -> None:
+    from bench._api import bus_of
+    from bench.wire._bus import UDP_DEFAULT_PORT, udp_multicast_group
+
+    spec = bus_of("udp_multicast:239.1.2.3:45000")
+    assert (spec.interface, spec.channel, spec.port) == ("udp_multicast", "239.1.2.3", 45000)
+    full6 = "ff15:7079:7468:6f6e:6465:6d6f:6d63:6173"
+    assert bus_of(f"udp_multicast:{full6}:45002").port == 45002
+    # a run's own port, but python-can's where a controller under test must find the bus
+    own = bus_of("udp_multicast")
+    assert own.channel == udp_multicast_group() and own.port != UDP_DEFAULT_PORT
+    assert bus_of("udp_multicast", known_port=True).port == UDP_DEFAULT_PORT
+    with pytest.raises(bench.InterfaceError, match="virtual"):
+        bus_of("virtual")
+    with pytest.raises(bench.InterfaceError, match="'nosuch': unknown"):
+        bench.run(SCENARIO, transport="nosuch:x")
