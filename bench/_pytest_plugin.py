@@ -83,7 +83,7 @@ class Hil:
 
     def run(self, scenario: Any, **kw: Any) -> Any:
         """:func:`bench.run` (same arguments); the folder defaults to one under ``tmp_path``."""
-        import bench
+        from bench._api import run as bench_run
 
         self._n += 1
         n = self._n
@@ -95,7 +95,7 @@ class Hil:
             kw["transport"] = self.transport(kw.get("controller", "bench"))
         kw.setdefault("engine", self.engine)
         print(f"hil: {name} over {kw['transport'] or 'in-process'} -> {kw['out']}", flush=True)
-        run = bench.run(scenario, **kw)
+        run = bench_run(scenario, **kw)
         self.runs.append(run)
         self._record(n, run)
         return run
