@@ -51,6 +51,14 @@ def test_without_a_folder_nothing_is_left_and_the_numbers_are_the_same(
     np.testing.assert_array_equal(run.signals["w_m_rpm"], local_run.signals["w_m_rpm"])
 
 
+def test_a_folder_used_again_keeps_no_earlier_file(tmp_path: Path) -> None:
+    (tmp_path / "capture.blf").write_bytes(b"an earlier run's")
+    (tmp_path / "notes.txt").write_text("mine")
+    run = bench.run(SCENARIO, duration=0.1, out=tmp_path)
+    assert not (tmp_path / "capture.blf").exists() and (tmp_path / "notes.txt").exists()
+    assert run.metrics["steps"] == 1001 and (tmp_path / "run.png").is_file()
+
+
 def test_overrides_are_the_dotted_keys_of_bench_sweep(local_run: bench.Run) -> None:
     run = bench.run(SCENARIO, overrides={"speed_rpm": [[0.0, 0.0], [0.05, 50.0]]}, duration=0.25)
     assert run.metrics["steps"] == 2501

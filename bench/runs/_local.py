@@ -44,9 +44,11 @@ def run_local(
     process.  ``plots=False`` leaves out ``run.png`` (seconds of matplotlib).
     """
     from bench.nodes._loops import run_inprocess
+    from bench.runs._run import clear_run_files
 
     codec = codec or Codec()
     out_dir.mkdir(parents=True, exist_ok=True)
+    clear_run_files(out_dir)  # an earlier run's capture or plot must not pass for this one's
     t0 = time.perf_counter()
     frames = run_inprocess(scn, estimator, codec, engine=engine)
     meta = run_metadata(scn, estimator, mode="lockstep", transport=INPROCESS, link=False)
