@@ -16,6 +16,9 @@ import tempfile
 
 import pytest
 
+# pytester: the hil plugin's own tests run pytest on a test file of a user's
+pytest_plugins = ["pytester"]
+
 # bench rtcheck keeps this host's result under $XDG_CACHE_HOME and bench run reads
 # it: the tests (and the node processes they start) use a folder of their own
 os.environ["XDG_CACHE_HOME"] = _CACHE = tempfile.mkdtemp(prefix="bench-tests-cache-")

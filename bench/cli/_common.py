@@ -11,7 +11,6 @@ import argparse
 import json
 import math
 import os
-import random
 import signal
 import sys
 import threading
@@ -224,7 +223,13 @@ def bus_spec(args: argparse.Namespace, *, announce: bool, one_process: bool = Fa
     ``virtual`` bus (replay); the bench's nodes are separate processes and
     cannot meet on it.
     """
-    from bench.wire._bus import BusSpec, check_interface, default_transport, python_can_config
+    from bench.wire._bus import (
+        BusSpec,
+        check_interface,
+        default_transport,
+        own_udp_port,
+        python_can_config,
+    )
 
     why: str | None = None
     if args.interface is None and (cfg := python_can_config()) is not None:
@@ -252,7 +257,7 @@ def bus_spec(args: argparse.Namespace, *, announce: bool, one_process: bool = Fa
         port = args.port
         if iface == "udp_multicast" and port is None:
             # a port of its own per run: parallel runs must not hear each other
-            port = 44000 + 2 * random.Random(os.getpid()).randrange(5000)
+            port = own_udp_port(os.getpid())
         spec = BusSpec(
             iface, chan, port, getattr(args, "bitrate", None), getattr(args, "data_bitrate", None)
         )

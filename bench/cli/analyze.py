@@ -15,8 +15,9 @@ def cmd_analyze(args: argparse.Namespace) -> int:
     from bench.captures._read import (
         analyze_capture,
     )
+    from bench.runs._local import exit_status
     from bench.runs._plots import controller_label
-    from bench.runs._results import format_metrics, outcome
+    from bench.runs._results import format_metrics
 
     plots = not getattr(args, "no_plots", False)
     log = Path(args.log)
@@ -38,7 +39,7 @@ def cmd_analyze(args: argparse.Namespace) -> int:
             res.metrics, scn.get("paper_result"), scn.get("estimator"), res.meta.get("estimator")
         )
     )
-    status, warnings = outcome(res.metrics, float(res.meta.get("T_s") or 0.0))
+    status, warnings = exit_status(res, analysis=True)
     for line in warnings:
         print(line, file=sys.stderr)
     missing = int(res.metrics.get("steps_missing", 0))

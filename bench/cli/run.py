@@ -66,7 +66,8 @@ def _start_monitor(spec: Any, scn: Any, est: str, mode: str, out: Path) -> _View
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    from bench.runs._results import format_metrics, frames_warning, outcome, realtime_warning
+    from bench.runs._local import exit_status
+    from bench.runs._results import format_metrics, frames_warning, realtime_warning
     from bench.runs._run import run_scenario
     from bench.scenarios._setup import countermeasures_text, sample_period
 
@@ -133,7 +134,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         print(warn, file=sys.stderr)
     if warn := frames_warning(res.metrics):
         print(warn, file=sys.stderr)
-    status, warnings = outcome(res.metrics, sample_period(scn))
+    status, warnings = exit_status(res)
     for line in warnings:
         print(line, file=sys.stderr)
     missing = int(res.metrics.get("steps_missing", 0))
@@ -154,7 +155,6 @@ def cmd_run(args: argparse.Namespace) -> int:
     print(f"files: {out}/ ({', '.join(written)})")
     if res.meta.get("interrupted"):
         print("bench: interrupted", file=sys.stderr)
-        return 130
     # every file is written; the status says the run is not a scenario result
     return status
 

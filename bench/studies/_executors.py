@@ -371,6 +371,12 @@ def _dask(
                 client = Client(scheduler, timeout="20s")
             except OSError as e:
                 raise BenchError(f"--scheduler {scheduler}: cannot connect ({e})") from None
+            except (TypeError, ValueError) as e:  # tls:// without Dask's TLS configuration
+                raise BenchError(
+                    f"--scheduler {scheduler}: cannot connect ({e}); a tls:// scheduler needs "
+                    "Dask's TLS configuration: distributed.comm.tls.ca-file, client.cert and "
+                    "client.key (docs/SCALING.md)"
+                ) from None
             info.workers = len(client.scheduler_info().get("workers", {}))
         else:
             cluster = LocalCluster(

@@ -698,6 +698,20 @@ result.  A
 udp_multicast port of its own per process; where vcan0 exists it is the
 default bus, shared by every run, so parallel runs must name a bus each.
 
+**What E2E and `run_id` protect against, and what they do not.** They
+protect a run against errors (corrupted, lost, repeated, late or reordered
+frames: E2E) and against another run on the same bus (`run_id`, the refusal
+above).  They do not protect against a hostile host on the same link: the
+CRC is not a secret (its data IDs are in the DBC), so a valid frame with a
+fresh counter is accepted from anyone who can send on the bus, and
+udp_multicast has neither authentication nor encryption.  The bus is a
+trusted link, as a CAN bus in a drive is.  udp_multicast keeps python-can's
+hop limit of 1 (the bench never sets another; `tests/test_dask_tls.py`
+checks it), so its frames do not leave the local link; run on a link (a
+host, a lab network, a CI runner) that only trusted machines share.  A Dask
+cluster for sweeps is another matter: its scheduler runs the code it is
+sent, so a remote one is started with TLS (docs/SCALING.md).
+
 ## Tests
 
 | file | what |

@@ -130,15 +130,12 @@ def plant_compute_us(periods: int = 4000) -> dict[str, float]:
 def send_cost_us(periods: int = 2000) -> dict[str, float]:
     """Sending one period's plant frames on the default transport (us): median and p99."""
     import os
-    import random
 
-    from bench.wire._bus import BusSpec, default_transport
+    from bench.wire._bus import BusSpec, default_transport, own_udp_port
     from bench.wire._codec import Codec
 
     iface, chan, _ = default_transport()
-    port = (
-        44000 + 2 * random.Random(os.getpid()).randrange(5000) if iface == "udp_multicast" else None
-    )
+    port = own_udp_port(os.getpid()) if iface == "udp_multicast" else None
     codec = Codec()
     frames = [
         codec.encode(

@@ -189,30 +189,14 @@ class RunJob:
         return {"metrics": metrics, "gains": gains, "wall_s": time.perf_counter() - t0}
 
     def _run(self) -> tuple[dict[str, Any], dict[str, Any]]:
-        from bench.runs._results import finish_run, run_metadata
+        from bench.runs._local import run_local
         from bench.runs._run import run_scenario
         from bench.wire._bus import BusSpec
         from bench.wire._codec import Codec
 
         codec = Codec()
         if self.transport is None:
-            from bench.nodes._loops import run_inprocess
-
-            self.run_dir.mkdir(parents=True, exist_ok=True)
-            t0 = time.perf_counter()
-            frames = run_inprocess(self.scenario, self.estimator, codec)
-            meta = run_metadata(
-                self.scenario, self.estimator, mode="lockstep", transport="in-process", link=False
-            )
-            res = finish_run(
-                frames,
-                codec,
-                self.scenario,
-                self.run_dir,
-                meta=meta,
-                wall_s=time.perf_counter() - t0,
-                capture=None,
-            )
+            res = run_local(self.scenario, self.estimator, self.run_dir, codec=codec)
             return res.metrics, res.meta
         iface, chan, port = self.transport
         res = run_scenario(

@@ -123,6 +123,21 @@ def default_transport(sys_net: Path = _SYS_NET) -> tuple[str, str, str]:
     )
 
 
+#: The range a run's own udp_multicast port is drawn from: even ports (a latency
+#: link's second bus takes the next one, :meth:`BusSpec.peer`) above python-can's default.
+OWN_PORT_BASE, OWN_PORT_CHOICES = 44000, 5000
+
+
+def own_udp_port(seed: int | None = None) -> int:
+    """A udp_multicast port of a run's own (even; the next one free for a latency link's
+    second bus): parallel runs on one host must not hear each other.  ``seed``: the same
+    seed, the same port (the command line seeds with its process id); None draws anew."""
+    import random
+
+    rng = random.Random(seed) if seed is not None else random.SystemRandom()
+    return OWN_PORT_BASE + 2 * rng.randrange(OWN_PORT_CHOICES)
+
+
 def default_channel(interface: str) -> str | None:
     """The channel :func:`open_bus` uses for ``interface`` when none is given.
 
