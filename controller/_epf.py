@@ -83,6 +83,7 @@ class EPFEstimator(RotatingHFEstimator):
         self._bpf = Biquad2(*self.bpf_z)
         self._lpf_p = FirstOrder2(*self.lpf_z)
         self._lpf_n = FirstOrder2(*self.lpf_z)
+        self._lpf_m = FirstOrder2(*self.lpf_z)
         self._inv_norm = 1.0 / (2.0 * self.I_p * self.I_n)
         self._floor = 0.1 * self.I_p * self.I_n
 
@@ -90,6 +91,7 @@ class EPFEstimator(RotatingHFEstimator):
         self._bpf.reset()
         self._lpf_p.reset()
         self._lpf_n.reset()
+        self._lpf_m.reset()
 
     def update(self, x: EstimatorInput) -> None:
         """Demodulate sample ``k`` with the two demodulation signals; advance the observer."""
@@ -115,8 +117,11 @@ class EPFEstimator(RotatingHFEstimator):
         # P_p P_n = I_p I_n exp(j 2 dtheta)
         f = p_r * n_i + p_i * n_r
         if self.measured:
-            g = p_r * n_r - p_i * n_i
-            err = f / (2.0 * max(math.hypot(f, g), self._floor))
+            # the amplitude I_p I_n from the product and its quadrature, low-passed once
+            # more: each LPF leaves a tenth of the other sequence at 2 w_h, which would
+            # make the instantaneous hypot ripple; f itself stays as the loop is designed
+            a_f, a_g = self._lpf_m.update(f, p_r * n_r - p_i * n_i)
+            err = f / (2.0 * max(math.hypot(a_f, a_g), self._floor))
         else:
             err = f * self._inv_norm
         i_df = i_d - i_dh
