@@ -156,7 +156,7 @@ def test_designed_like_the_others(name: str) -> None:
     loop (no gain of its own): epf has tt-dq's in-loop response and so tt-dq's bandwidth;
     self-demod's is ``|H_B(w_h) H_B(-w_h)|`` times the LPF, as sfhf's with its own gain."""
     est = make_estimator(name, MODEL, T_S)
-    g = est.gains()  # type: ignore[attr-defined]
+    g = est.gains()
     assert g["pm_deg"] == pytest.approx(g["pm_target_deg"], abs=0.05)
     assert g["w_c"] <= g["lpf_corner"] * (1 + 1e-9)
     if name == EPF:
