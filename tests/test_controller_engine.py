@@ -257,7 +257,10 @@ def test_the_cover_and_the_reasons() -> None:
     for name in SCENARIOS:
         for est in load_scenario(name).estimators:
             c = build_controller(load_scenario(name), est, "compiled")
-            assert (c.engine, c.engine_note) == ("compiled", None), (name, est)
+            if est in COMPILED:
+                assert (c.engine, c.engine_note) == ("compiled", None), (name, est)
+            else:  # a scenario may list an estimator without a C twin: it says so
+                assert c.engine == "python" and f"the {est} estimator" in str(c.engine_note)
     c = build_controller(scn, "tt-dq", "python")
     assert (c.engine, c.engine_note) == ("python", None)
     pars = build_controller(scn, "tt-dq", "python").pars
