@@ -1,4 +1,4 @@
-"""Rotating HF voltage injection (Wen Sec. 2), shared by the three demodulators.
+"""Rotating HF voltage injection (Wen Sec. 2), shared by the five demodulators.
 
 Injection, Wen eq. (3): ``u_ab,h = V_h exp(j w_h t)``.
 
@@ -52,6 +52,13 @@ normalised to ``err ~ theta_e - theta_hat``, the response ``G`` from
   with ``H`` the discrete BPF (each sequence's envelope seen through the
   BPF, normalised to the carrier it rides on), evaluated at
   standstill.
+- ``epf`` ([25], reconstructed): the same as tt-dq; ``theta_hat`` also
+  enters the two demodulation signals after the BPF, but those direct
+  parts cancel in the product of the two sequences (:mod:`controller._epf`);
+- ``self-demod`` ([27], reconstructed): the heterodyne with ``2 theta_hat``
+  comes after the BPF and the sequence separation, before the LPF:
+  ``G = |H_B(w_h) H_B(-w_h)| LPF(z)`` (``"pn+lpf"``; the separation passes
+  each sequence whole at ``+-w_h``, :func:`separation_gains`).
 
 ``w_o`` is the largest bandwidth that keeps the phase margin at
 :data:`controller._design.PM_TARGET_DEG` with the actual discretised
