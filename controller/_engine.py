@@ -10,13 +10,17 @@ gives the same trace bit for bit (``tests/test_controller_engine.py``).
 ``"auto"``: compiled when it is built and covers the controller, else Python.
 
 What it covers (:func:`compiled_cover`): the speed and current control of
-the alignment and run modes with every shipped estimator: ``tt-dq``,
+the alignment and run modes with the shipped estimators of
+:data:`COMPILED_ESTIMATORS`: ``tt-dq``,
 ``tt-ab`` and ``sfhf`` (model normalisation), ``square-wave``,
 ``square-wave-nocic``, ``sensored``, and the hybrids ``hybrid-tt-dq`` and
 ``hybrid-square-wave`` (flux observer, hand-over band, trackers), with the
 current fed to the PIs filtered or raw. A controller outside it runs in
-Python whatever the choice, and says why
-(:attr:`controller.Controller.engine_note`): the measured normalisation, the
+Python whatever the choice, and says why in one line
+(:attr:`controller.Controller.engine_note`; ``bench run`` and ``bench
+controller`` print it, and the controller node's report keeps it): an
+estimator the core does not know (``self-demod`` and ``epf``, Wen's
+references [27] and [25], and every plug-in), the measured normalisation, the
 mechanical position observer (``observer = "mechanical"``) and
 the drive countermeasures (dead-time feed-forward, cross-saturation
 correction, offset calibration). Inside it,
@@ -76,6 +80,11 @@ _KINDS = {
     "hybrid-tt-dq": 6,
     "hybrid-square-wave": 7,
 }
+
+
+#: The estimators the compiled core covers, by name; any other (a shipped one without a C
+#: twin, a plug-in) runs in Python and :func:`compiled_cover` says so.
+COMPILED_ESTIMATORS: tuple[str, ...] = tuple(_KINDS)
 
 
 def compiled_controller_missing() -> str | None:

@@ -2,7 +2,8 @@
 
 Each estimator module exposes ``create(motor, T_s, **options) -> Estimator``.
 The names are part of the command-line contract (DESIGN.md): ``sfhf``,
-``tt-ab``, ``tt-dq``, ``square-wave``, ``square-wave-nocic``, ``sensored``,
+``tt-ab``, ``tt-dq``, ``self-demod`` and ``epf`` (Wen's references [27] and
+[25], reconstructed), ``square-wave``, ``square-wave-nocic``, ``sensored``,
 ``hybrid-tt-dq``, ``hybrid-square-wave`` (the injection family of a hybrid is
 its injection estimator's: it injects below its transition band).
 
@@ -62,6 +63,8 @@ _ESTIMATORS: dict[str, tuple[str, dict[str, Any], str]] = {
     "sfhf": ("controller._sfhf", {}, "rotating"),
     "tt-ab": ("controller._tt_ab", {}, "rotating"),
     "tt-dq": ("controller._tt_dq", {}, "rotating"),
+    "self-demod": ("controller._self_demod", {}, "rotating"),
+    "epf": ("controller._epf", {}, "rotating"),
     "square-wave": ("controller._square_wave", {"cic": True}, "square"),
     "square-wave-nocic": ("controller._square_wave", {"cic": False}, "square"),
     "sensored": ("controller._sensored", {}, "none"),

@@ -1,4 +1,4 @@
-"""Rotating HF voltage injection (Wen Sec. 2), shared by the three demodulators.
+"""Rotating HF voltage injection (Wen Sec. 2), shared by the five demodulators.
 
 Injection, Wen eq. (3): ``u_ab,h = V_h exp(j w_h t)``.
 
@@ -52,6 +52,13 @@ normalised to ``err ~ theta_e - theta_hat``, the response ``G`` from
   with ``H`` the discrete BPF (each sequence's envelope seen through the
   BPF, normalised to the carrier it rides on), evaluated at
   standstill.
+- ``epf`` ([25], reconstructed): the same as tt-dq; ``theta_hat`` also
+  enters the two demodulation signals after the BPF, but those direct
+  parts cancel in the product of the two sequences (:mod:`controller._epf`);
+- ``self-demod`` ([27], reconstructed): the heterodyne with ``2 theta_hat``
+  comes after the BPF and the sequence separation, before the LPF:
+  ``G = |H_B(w_h) H_B(-w_h)| LPF(z)`` (``"pn+lpf"``; the separation passes
+  each sequence whole at ``+-w_h``, :func:`separation_gains`).
 
 ``w_o`` is the largest bandwidth that keeps the phase margin at
 :data:`controller._design.PM_TARGET_DEG` with the actual discretised
@@ -214,8 +221,11 @@ def in_loop_response(
 ) -> np.ndarray:
     """Response ``G`` from ``theta_hat`` to ``err`` of a demodulator (module docstring).
 
-    ``loop`` is ``"none"`` (tt-ab), ``"lpf"`` (sfhf) or ``"bpf+lpf"`` (tt-dq);
-    ``filters`` the discrete ``(bpf_z, hpf_z, lpf_z)``.
+    ``loop`` is ``"none"`` (tt-ab), ``"lpf"`` (sfhf), ``"pn+lpf"`` (self-demod:
+    ``theta_hat`` enters after the BPF and the sequence separation, before the
+    LPF; the separation passes each sequence at ``+-w_h`` with gain 1,
+    :mod:`controller._self_demod`) or ``"bpf+lpf"`` (tt-dq, epf); ``filters``
+    the discrete ``(bpf_z, hpf_z, lpf_z)``.
     """
     bpf_z, hpf_z, lpf_z = filters
     w = np.asarray(w, float)
@@ -228,6 +238,8 @@ def in_loop_response(
     if loop == "lpf":
         k = abs(h_n * complex(freq_response(*hpf_z, -2.0 * w_h * one, T_s)[0]))
         return k * g
+    if loop == "pn+lpf":
+        return abs(h_p * h_n) * g
     if loop != "bpf+lpf":
         raise ValueError(f"unknown loop {loop!r}")
     env = 0.5 * (
@@ -251,9 +263,11 @@ def theta_response(
     with ``P(W) = H(w_0 + W) / H(w_0)``. For tt-dq and tt-ab that is the
     BPF's on ``-w_h``, then the LPF. For sfhf it is the BPF's on ``-w_h``
     times the HPF's on ``-2 w_h`` (the synchronous frame), then the LPF. The
-    static gains are those of :func:`in_loop_response`. For tt-dq it equals
-    the in-loop response: at standstill the two sequences' envelopes are
-    alike.
+    static gains are those of :func:`in_loop_response`. For tt-dq (and epf) it
+    equals the in-loop response: at standstill the two sequences' envelopes
+    are alike. For self-demod it is the BPF's on ``-w_h`` times the sequence
+    separation's negative-sequence gain (:func:`separation_gains`), then the
+    LPF.
     """
     bpf_z, hpf_z, lpf_z = filters
     w = np.asarray(w, float)
@@ -266,6 +280,8 @@ def theta_response(
         if loop == "lpf":
             h_h = complex(freq_response(*hpf_z, -2.0 * w_h * one, T_s)[0])
             out = out * freq_response(*hpf_z, x - 2.0 * w_h, T_s) / h_h
+        elif loop == "pn+lpf":
+            out = out * separation_gains(x - w_h, w_h, T_s)[1]
         return out
 
     env = 0.5 * (p(w) + np.conj(p(-w)))
@@ -274,6 +290,23 @@ def theta_response(
         k = abs(h_n * complex(freq_response(*hpf_z, -2.0 * w_h * one, T_s)[0]))
         return k * env * g
     return abs(h_p * h_n) * env * g
+
+
+def separation_gains(w: np.ndarray, w_h: float, T_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """Gains ``(S_p, S_n)`` of self-demod's sequence separation for a component at ``w``.
+
+    The separation (:mod:`controller._self_demod`) takes the BPF's output ``d``
+    and its quadrature twin ``q = (s / w_h) d`` (the same filter times
+    ``s / w_h``, discretised with the same bilinear map pre-warped at ``w_h``),
+    and forms ``i_p = (d - j q) / 2`` and ``i_n = (d + j q) / 2``. For a
+    component at ``w`` (rad/s, signed) the map gives ``q = j (W / w_h) d``
+    with the warped frequency ``W = w_h tan(w T_s / 2) / tan(w_h T_s / 2)``,
+    so ``S_p = (1 + W / w_h) / 2`` and ``S_n = (1 - W / w_h) / 2``: real (the
+    separation adds no phase), ``S_p(w_h) = S_n(-w_h) = 1`` and
+    ``S_p(-w_h) = S_n(w_h) = 0`` exactly.
+    """
+    r = np.tan(0.5 * np.asarray(w, float) * T_s) / math.tan(0.5 * w_h * T_s)
+    return 0.5 * (1.0 + r), 0.5 * (1.0 - r)
 
 
 @functools.lru_cache(maxsize=64)
@@ -372,6 +405,8 @@ class RotatingHFEstimator:
         b, a = pars.bpf
         if pars.bpf == BPF_WEN and pars.f_h != 500.0:
             a = (1.0, a[1], self.w_h * self.w_h)
+        #: The continuous BPF ``(b, a)`` in use (eq. 11, centred on ``w_h``).
+        self.bpf_s = (tuple(b), tuple(a))
         self.bpf_z = discretize(b, a, T_s, self.w_h)
         self.bpf_tracking = bool(pars.bpf_tracking)
         #: Bandwidth (rad/s) of the tracking BPF (``bpf_tracking``), 0 when it is fixed.

@@ -1,4 +1,4 @@
-"""Rotating HF injection and the three demodulators on synthetic currents (Wen Secs. 2-4).
+"""Rotating HF injection and the five demodulators on synthetic currents (Wen Secs. 2-4).
 
 The synthetic currents are eq. (7)/(18) with the derived sign of the negative
 sequence, ``I_n = V_h (L_q - L_d) / (2 w_h L_d L_q) > 0``, sampled at
@@ -70,7 +70,7 @@ def test_injection_response_of_rotor_frame_inductances_is_eq4_with_derived_sign(
     assert I_n == pytest.approx(0.0426, rel=0.01)  # tens of mA at V_h = 50 V
 
 
-@pytest.mark.parametrize("name", ["tt-dq", "tt-ab", "sfhf"])
+@pytest.mark.parametrize("name", ["tt-dq", "tt-ab", "sfhf", "self-demod", "epf"])
 @pytest.mark.parametrize(
     ("dtheta", "phi_p", "phi_n"), [(0.3, 0.0, 0.0), (-0.5, 0.2, -0.2), (1.0, 0.1, 0.05)]
 )
@@ -81,7 +81,8 @@ def test_demodulator_returns_closed_form(
     over one HF period in steady state, equals the closed form within 1 %:
 
     - ``tt-dq`` (eq. 34) and ``tt-ab`` (eq. 28): ``I_p I_n |H_B|^2 sin(2 dtheta + phi_p + phi_n)``
-      (the BPF phases at +-w_h cancel);
+      (the BPF phases at +-w_h cancel), and so do ``self-demod`` ([27], the product of the
+      separated sequences) and ``epf`` ([25], the product of the two demodulated ones);
     - ``sfhf`` (eq. 9): ``I_n |H_B H_H| sin(2 dtheta + phi_n + arg H_B(-w_h) + arg H_H(-2 w_h))``
       (the negative sequence keeps the filter phases: Table 3, conventional).
     """
@@ -109,7 +110,7 @@ def test_demodulator_returns_closed_form(
     assert est.i_beta_f == pytest.approx(-0.5, abs=0.01 * I_p + 1e-3)
 
 
-@pytest.mark.parametrize("name", ["tt-dq", "tt-ab", "sfhf"])
+@pytest.mark.parametrize("name", ["tt-dq", "tt-ab", "sfhf", "self-demod", "epf"])
 @pytest.mark.parametrize("err0_deg", [30.0, 80.0, 100.0, -60.0])
 def test_observer_locks_at_zero_error_not_ninety(name: str, err0_deg: float) -> None:
     """Observer running on eq. (7) at standstill: from 30, 80, 100 and -60 degrees it
@@ -153,12 +154,15 @@ def test_printed_sign_of_eq6_would_lock_at_ninety_degrees() -> None:
     assert math.degrees(e) == pytest.approx(90.0, abs=1.0)
 
 
-@pytest.mark.parametrize("name", ["tt-dq", "tt-ab", "sfhf"])
+@pytest.mark.parametrize("name", ["tt-dq", "tt-ab", "sfhf", "self-demod", "epf"])
 def test_measured_normalisation_is_independent_of_amplitude(name: str) -> None:
     """With ``normalise="measured"`` the error is ``sin(2 dtheta)/2`` whatever the HF
     amplitude (here the currents are 3 times the model's, as for a motor whose
     inductances are a third of the model's); the model normalisation scales with the
-    amplitude (9 times for the TT products, 3 times for sfhf)."""
+    amplitude (9 times for the TT products, 3 times for sfhf). epf within 3 %: its
+    product of two low-passed sequences ripples at ``2 w_h`` by half its size (each LPF
+    of eq. 13 passes a tenth of the other sequence, ``I_p`` about 5.6 ``I_n``), and the tenth
+    of it that its normaliser's LPF passes correlates with the ripple of the error (2.5 %)."""
     dtheta, theta, scale = 0.25, 0.7, 3.0
     errs = {}
     for norm in ("model", "measured"):
@@ -178,7 +182,7 @@ def test_measured_normalisation_is_independent_of_amplitude(name: str) -> None:
     else:
         want = 0.5 * math.sin(2 * dtheta)
         ratio = scale**2 * abs(_h(est.bpf_z, W_H)) ** 2  # type: ignore[attr-defined]
-    assert errs["measured"] == pytest.approx(want, rel=0.02)
+    assert errs["measured"] == pytest.approx(want, rel=0.03 if name == "epf" else 0.02)
     assert errs["model"] == pytest.approx(ratio * want, rel=0.02)
 
 

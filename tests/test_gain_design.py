@@ -411,7 +411,7 @@ def test_controller_gains_are_complete(name: str) -> None:
 # ------------------------------------------------------------------------------ speed loop
 
 
-@pytest.mark.parametrize("name", ["tt-dq", "tt-ab"])
+@pytest.mark.parametrize("name", ["tt-dq", "tt-ab", "self-demod", "epf"])
 @pytest.mark.parametrize("w_mod", [20.0, 60.0])
 def test_speed_response_matches_the_code(name: str, w_mod: float) -> None:
     """The PLL's speed estimate on eq. (7) currents whose angle carries a speed wobble of

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from typing import Any
 
 from bench.cli._common import (
@@ -28,6 +29,8 @@ def cmd_controller(args: argparse.Namespace) -> int:
     spec = bus_spec(args, announce=False)
     codec = Codec()
     node = make_controller_node(scn, est, codec)
+    if node.ctrl.engine_note:  # e.g. an estimator the compiled core lacks
+        print(f"controller: {node.ctrl.engine_note}", file=sys.stderr)
     node.run_id = args.run_id
     return serve_node(
         args,

@@ -183,9 +183,11 @@ class ControllerNode:
         return out
 
     def report(self) -> dict[str, object]:
-        """Counters, for the node's JSON report."""
+        """Counters, for the node's JSON report; the controller's ``engine`` and, when it runs
+        in Python although the compiled engine was asked for, why (``engine_note``)."""
         out = self.counters.as_dict()
         out.update(steps=self.next_k, sample_timeouts=self.sample_timeouts)
+        out.update(engine=self.ctrl.engine, engine_note=self.ctrl.engine_note)
         return out
 
     def _telemetry(self, o: ControlOutput) -> can.Message:
