@@ -65,8 +65,11 @@ def test_every_claims_verdict_is_the_reference_runs(
 def test_every_runs_numbers_are_the_reference_runs(
     fresh: dict[str, Any], committed: dict[str, Any]
 ) -> None:
-    def runs(s: dict[str, Any]) -> dict[tuple[str, str], dict[str, float]]:
-        return {(r["scenario"], r["estimator"]): r["metrics"] for r in s["runs"]}
+    def runs(s: dict[str, Any]) -> dict[tuple[str, str, str], dict[str, float]]:
+        # one run per scenario, estimator and plant: every plant's numbers are checked
+        out = {(r["scenario"], r["estimator"], r["plant"]): r["metrics"] for r in s["runs"]}
+        assert len(out) == len(s["runs"])
+        return out
 
     want, got = runs(committed), runs(fresh)
     assert got.keys() == want.keys() and len(got) >= 30
