@@ -28,10 +28,9 @@ def cmd_plant(args: argparse.Namespace) -> int:
     import sys
 
     from bench.nodes._loops import make_plant_node, plant_loop
+    from bench.scenarios._setup import with_position_sensor
     from bench.wire._codec import Codec
     from bench.wire._protocol import new_run_id
-
-    from bench.scenarios._setup import with_position_sensor
 
     scn = scenario_from_args(args)
     if args.dut_timeout:
