@@ -135,6 +135,11 @@ class SpeedFromAngle:
         self.prev: float | None = None
         self.w = 0.0
 
+    def quantisation_noise(self, counts: int) -> tuple[float, float]:
+        """Speed error (rad/s) from an encoder of ``counts``: (rms, largest), the module docstring's."""
+        q, a = 2 * math.pi / counts, self.a
+        return q / math.sqrt(12) * a / self.T_r * math.sqrt(2 / (2 - a)), q * a / self.T_r
+
     def update(self, theta_m: float) -> float:
         """Take the next reading (rad, mechanical); returns the speed estimate (rad/s)."""
         if self.prev is not None:

@@ -220,6 +220,25 @@ def test_external_controller_is_run_and_scored(good_run: dict[str, Any]) -> None
     assert json.loads((run_dir / "plant.json").read_text())["late_frames"] == 0
 
 
+def test_the_speed_estimate_has_the_encoders_noise(good_run: dict[str, Any]) -> None:
+    """The test controller's speed, from the encoder's differences through its filter, is
+    off the truth by the quantisation noise its design states (ext_controller.py): rms
+    within 30 % of the prediction, never beyond the largest (plus the truth's LSB,
+    0.01 rad/s, rounded)."""
+    from tests.ext_controller import Foc
+
+    foc = Foc(json.loads(_show(good_run["tmp"], SCENARIO).read_text()))
+    rms, top = foc.speed.quantisation_noise(65536)
+    tab = np.genfromtxt(good_run["dir"] / "signals.csv", delimiter=",", names=True)
+    steady = tab["t"] >= load_scenario(str(SCENARIO)).score_from_s
+    e = (tab["w_hat_rpm"] - tab["w_m_rpm"])[steady] * np.pi / 30.0
+    print(
+        f"speed estimate error: rms {np.std(e):.4f} rad/s (predicted {rms:.4f}), max {np.max(np.abs(e)):.4f} (bound {top:.4f})"
+    )
+    assert np.std(e) == pytest.approx(rms, rel=0.3)
+    assert np.max(np.abs(e)) <= top + 0.005
+
+
 def test_analyze_of_the_capture_gives_the_same_metrics(good_run: dict[str, Any]) -> None:
     run_dir = good_run["dir"]
     out = good_run["tmp"] / "analyzed"
