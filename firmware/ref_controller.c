@@ -11,28 +11,39 @@
  *
  * Frames (DBC names; one of each per PWM period k unless noted):
  *   in   PhaseSamples  0x011  i_a, i_b, u_dc sampled at k T_s; step = k mod 1024
- *   in   PlantTruth    0x100  CAN FD: true electrical angle and mechanical speed
- *                             at k T_s (the "sensor" of this sensored controller),
- *                             run_id (the run's nonce), E2E CRC (DBC 2.1)
+ *   in   PositionSensor 0x012 the rotor's mechanical angle as the encoder reads
+ *                             it (DBC 2.2): every -e periods, with PhaseSamples;
+ *                             the input of this sensored controller.  PlantTruth
+ *                             (0x100) is the recorder's and is never read here.
  *   in   BenchCommand  0x020  start/stop/enable/disable, speed_ref; step = the
  *                             period the command applies in (mod 65536), sent ahead
  *   out  PwmDuty       0x010  duties for period k + 1; step = (k + 1) mod 1024, E2E CRC
- *   out  CtrlTelemetry 0x101  CAN FD: theta_hat = the angle used (the true one),
- *                             w_hat (electrical), mode; step = k; run_id copied
- *                             from the truth (docs/PROTOCOL.md), E2E CRC;
+ *   out  CtrlTelemetry 0x101  CAN FD: theta_hat = the angle used (the encoder's),
+ *                             w_hat (electrical, the estimate below), mode;
+ *                             step = k; run_id 0 (the run's nonce is in
+ *                             PlantTruth, not read), E2E CRC;
  *                             cmd_ack (DBC 2.2): seq of the newest command held
  *                             with no gap, sent again when it moves
  *
- * Period k is computed when PhaseSamples(k) and a PlantTruth not older than
- * the truth decimation (-e) are both in; the angle is extrapolated from the
- * truth's step to k with its speed (exact when truth comes every period).
+ * Period k is computed when PhaseSamples(k) is in and, in a period the sensor
+ * reads (k a multiple of -e), PositionSensor(k) too.  The angle at k is the
+ * newest reading plus half a count (the encoder floors to a count of -n per
+ * revolution) advanced by the estimated speed over the reading's age (its
+ * delay -d and the periods since it).  The speed comes from the angle: the
+ * difference of two readings over their spacing T_r through a first-order
+ * filter of bandwidth SPEED_FILTER_BW (below, with its derivation).
  * A repeated PhaseSamples(k) (the lockstep plant re-sends when a duty is
  * late) gets the same PwmDuty again.  Frames with a bad length, a bad E2E
  * CRC or an out-of-range value are counted and dropped.
  *
- * Usage: ref_controller [-i IFACE] [-e TRUTH_EVERY] [-t IDLE_S]
+ * Usage: ref_controller [-i IFACE] [-e SENSOR_EVERY] [-n COUNTS] [-d DELAY_US] [-t IDLE_S]
  *   -i  SocketCAN interface (default vcan0); CAN FD must be enabled on it
- *   -e  the plant's --truth-every (default 1)
+ *   -e  PWM periods between two PositionSensor readings (default 1)
+ *   -n  the encoder's counts per mechanical revolution (default 65536)
+ *   -d  the age of a reading [us] (default 0)
+ *   (bench show SCENARIO --json: position_sensor every, counts, delay_s; the
+ *   defaults are the sensor the plant gives a controller under test when the
+ *   scenario states none)
  *   -t  exit after this many seconds without a frame (default 30)
  * Prints READY when listening; exits 0 after the stop command, with a summary.
  */
@@ -61,12 +72,30 @@
 
 #define TWO_PI 6.28318530717958647692
 
-/* Widths of the step counters (DBC: PhaseSamples.step and PwmDuty.step are
- * 10 bits, BenchCommand.step 16 bits, PlantTruth.step and CtrlTelemetry.step
- * 32 bits).  Receivers unwrap them against the step they expect. */
+/* Widths of the step counters (DBC: PhaseSamples.step, PositionSensor.step and
+ * PwmDuty.step are 10 bits, BenchCommand.step 16 bits, CtrlTelemetry.step 32
+ * bits).  Receivers unwrap them against the step they expect. */
 #define SAMPLE_STEP_BITS 10
 #define COMMAND_STEP_BITS 16
-#define TRUTH_STEP_BITS 32
+
+/* Readings that arrived before their sample is computed wait here, by step
+ * (two samples are in flight at a lockstep start; a few more on a resend). */
+#define READING_RING 16
+
+/* Bandwidth of the speed estimate's filter [rad/s]: 10 alpha_s.  Target: the
+ * filter costs the speed loop at most 6 degrees of phase at its crossover
+ * alpha_s: atan(1/10) = 5.7 degrees, plus alpha_s T_r / 2 for the half-reading
+ * delay of a difference (0.09 degrees at 10 kHz).  Price: the encoder's
+ * quantisation.  A reading's error e, uniform over one count q = 2 pi / COUNTS,
+ * reaches the estimate through (a / T_r) (1 - z^-1) / (1 - (1 - a) z^-1),
+ * a = 1 - exp(-SPEED_FILTER_BW T_r), whose squared impulse response sums to
+ * 2 / (2 - a): rms (q / sqrt 12) (a / T_r) sqrt(2 / (2 - a)), at most
+ * q a / T_r (about q SPEED_FILTER_BW).  65536 counts at 10 kHz with the
+ * default alpha_s (2 pi 5 Hz): 0.009 rad/s rms, at most 0.03 rad/s (0.3 rpm);
+ * a 4096-count encoder gives sixteen times that. */
+#ifndef SPEED_FILTER_BW
+#define SPEED_FILTER_BW (10.0 * ALPHA_S)
+#endif
 
 /* BenchCommand.cmd values (DBC VAL_ table). */
 enum { CMD_NONE = 0, CMD_START = 1, CMD_STOP = 2, CMD_RESET = 3, CMD_ENABLE = 4, CMD_DISABLE = 5 };
@@ -87,15 +116,27 @@ typedef struct {
     double speed_ref_rpm;
 } command_t;
 
+/* The position sensor as the controller knows it (command line). */
 typedef struct {
-    /* sample and truth waiting to be used */
+    int every;       /* PWM periods between readings */
+    double counts;   /* counts per mechanical revolution */
+    double delay_s;  /* age of a reading [s] */
+    double a;        /* speed filter coefficient 1 - exp(-SPEED_FILTER_BW T_r) */
+} sensor_t;
+
+typedef struct {
+    /* sample waiting to be used */
     bool have_sample;
     int64_t sample_k;
     double i_a, i_b, u_dc;
-    bool have_truth;
-    int64_t truth_k;
-    uint16_t run_id; /* PlantTruth.run_id, copied into CtrlTelemetry (DBC 2.1) */
-    double theta_e, w_m;
+    /* PositionSensor readings by step mod READING_RING (-1: none) */
+    int64_t reading_k[READING_RING];
+    double reading_theta[READING_RING];
+    /* the newest reading used, and the speed estimated from the readings */
+    bool have_angle;
+    int64_t angle_k;
+    double theta_m;
+    double w_m_hat;
     /* the next period to compute, and the last answer (for repeats) */
     int64_t next_k;
     struct canfd_frame last_duty;
@@ -190,7 +231,6 @@ static void send_outputs(int sock, node_t *n, int64_t k, const foc_output_t *o, 
 {
     uint8_t buf[64];
     struct canfd_frame fr;
-
     struct bench_dbc_pwm_duty_t duty;
     bench_dbc_pwm_duty_init(&duty);
     duty.duty_a = duty_raw(o->d_a);
@@ -212,7 +252,7 @@ static void send_outputs(int sock, node_t *n, int64_t k, const foc_output_t *o, 
     tel.err = 0;
     tel.mode = enabled ? MODE_RUN : MODE_DISABLED;
     tel.step = (uint32_t)k;
-    tel.run_id = n->run_id;
+    tel.run_id = 0; /* unknown: the nonce is in PlantTruth, which this controller does not read */
     n->last_tel = tel;
     n->have_last_tel = true;
     send_telemetry(sock, n);
@@ -261,22 +301,42 @@ static void apply_commands(node_t *n, foc_t *foc, int64_t k)
     }
 }
 
-/* Compute period sample_k when its sample and a recent enough truth are in. */
-static void try_compute(int sock, node_t *n, foc_t *foc, int truth_every)
+/* Compute period sample_k when its sample (and its reading, if the sensor reads
+ * in that period) are in. */
+static void try_compute(int sock, node_t *n, foc_t *foc, const sensor_t *sen)
 {
-    if (!n->have_sample || !n->have_truth) {
+    if (!n->have_sample) {
         return;
     }
     int64_t k = n->sample_k;
-    int64_t age = k - n->truth_k;
-    if (age < 0 || age >= truth_every) {
-        return; /* wait for the truth of this period */
+    if (k % sen->every == 0) {
+        int slot = (int)(k % READING_RING);
+        if (n->reading_k[slot] != k) {
+            return; /* wait for the reading of this period */
+        }
+        double th = n->reading_theta[slot];
+        n->reading_k[slot] = -1;
+        if (n->have_angle) {
+            /* the angle's difference over the readings' spacing, filtered */
+            double d = remainder(th - n->theta_m, TWO_PI);
+            double T_r = (double)(k - n->angle_k) / PWM_FREQ_HZ;
+            n->w_m_hat += sen->a * (d / T_r - n->w_m_hat);
+        }
+        n->have_angle = true;
+        n->angle_k = k;
+        n->theta_m = th;
     }
     apply_commands(n, foc, k);
-    /* the angle at the sample instant (extrapolated when truth is decimated) */
-    double w_e = MOTOR_N_P * n->w_m;
-    double theta = fmod(n->theta_e + w_e * (double)age / PWM_FREQ_HZ, TWO_PI);
-    foc_input_t in = {n->i_a, n->i_b, n->u_dc, theta, n->w_m};
+    /* the angle at the sample instant: the count's middle, advanced by the
+     * estimated speed over the reading's age */
+    double age_s = sen->delay_s + (double)(k - n->angle_k) / PWM_FREQ_HZ;
+    double th_m = n->have_angle ? n->theta_m + M_PI / sen->counts + n->w_m_hat * age_s : 0.0;
+    double w_e = MOTOR_N_P * n->w_m_hat;
+    double theta = fmod(MOTOR_N_P * th_m, TWO_PI);
+    if (theta < 0.0) {
+        theta += TWO_PI;
+    }
+    foc_input_t in = {n->i_a, n->i_b, n->u_dc, theta, n->w_m_hat};
     foc_output_t out;
     foc_step(foc, &in, &out);
     send_outputs(sock, n, k, &out, theta, w_e, foc->enabled);
@@ -286,7 +346,7 @@ static void try_compute(int sock, node_t *n, foc_t *foc, int truth_every)
 }
 
 static void on_frame(int sock, node_t *n, foc_t *foc, const struct canfd_frame *fr,
-                     int truth_every)
+                     const sensor_t *sen)
 {
     if (fr->can_id & (CAN_EFF_FLAG | CAN_RTR_FLAG | CAN_ERR_FLAG)) {
         return;
@@ -321,24 +381,21 @@ static void on_frame(int sock, node_t *n, foc_t *foc, const struct canfd_frame *
         n->u_dc = bench_dbc_phase_samples_u_dc_decode(s.u_dc);
         break;
     }
-    case BENCH_DBC_PLANT_TRUTH_FRAME_ID: {
-        struct bench_dbc_plant_truth_t t;
-        if (fr->len != BENCH_DBC_PLANT_TRUTH_LENGTH ||
-            !bench_e2e_check(BENCH_E2E_PLANT_TRUTH_DATA_ID, fr->data, fr->len,
-                             BENCH_E2E_PLANT_TRUTH_CRC_INDEX) ||
-            bench_dbc_plant_truth_unpack(&t, fr->data, fr->len) != 0) {
+    case BENCH_DBC_POSITION_SENSOR_FRAME_ID: {
+        struct bench_dbc_position_sensor_t p;
+        if (fr->len != BENCH_DBC_POSITION_SENSOR_LENGTH ||
+            !bench_e2e_check(BENCH_E2E_POSITION_SENSOR_DATA_ID, fr->data, fr->len,
+                             BENCH_E2E_POSITION_SENSOR_CRC_INDEX) ||
+            bench_dbc_position_sensor_unpack(&p, fr->data, fr->len) != 0) {
             n->rejected++;
             return;
         }
-        int64_t k = unwrap(t.step, n->next_k, TRUTH_STEP_BITS);
-        if (n->have_truth && k <= n->truth_k) {
-            return; /* old or repeated */
+        int64_t k = unwrap(p.step, n->next_k, SAMPLE_STEP_BITS);
+        if (k < n->next_k || k >= n->next_k + READING_RING) {
+            return; /* a resend of a reading used, or too far ahead */
         }
-        n->have_truth = true;
-        n->truth_k = k;
-        n->run_id = t.run_id;
-        n->theta_e = bench_dbc_plant_truth_theta_e_decode(t.theta_e);
-        n->w_m = bench_dbc_plant_truth_w_m_decode(t.w_m);
+        n->reading_k[k % READING_RING] = k;
+        n->reading_theta[k % READING_RING] = bench_dbc_position_sensor_theta_m_decode(p.theta_m);
         break;
     }
     case BENCH_DBC_BENCH_COMMAND_FRAME_ID: {
@@ -396,7 +453,7 @@ static void on_frame(int sock, node_t *n, foc_t *foc, const struct canfd_frame *
     default:
         return;
     }
-    try_compute(sock, n, foc, truth_every);
+    try_compute(sock, n, foc, sen);
 }
 
 /* Raw CAN socket on `ifname` with CAN FD frames enabled and the three input IDs. */
@@ -415,7 +472,7 @@ static int open_can(const char *ifname)
     }
     struct can_filter filters[] = {
         {BENCH_DBC_PHASE_SAMPLES_FRAME_ID, CAN_SFF_MASK | CAN_EFF_FLAG | CAN_RTR_FLAG},
-        {BENCH_DBC_PLANT_TRUTH_FRAME_ID, CAN_SFF_MASK | CAN_EFF_FLAG | CAN_RTR_FLAG},
+        {BENCH_DBC_POSITION_SENSOR_FRAME_ID, CAN_SFF_MASK | CAN_EFF_FLAG | CAN_RTR_FLAG},
         {BENCH_DBC_BENCH_COMMAND_FRAME_ID, CAN_SFF_MASK | CAN_EFF_FLAG | CAN_RTR_FLAG},
     };
     if (setsockopt(sock, SOL_CAN_RAW, CAN_RAW_FILTER, filters, sizeof filters) != 0) {
@@ -446,29 +503,38 @@ static int open_can(const char *ifname)
 int main(int argc, char **argv)
 {
     const char *ifname = "vcan0";
-    int truth_every = 1;
+    sensor_t sen = {1, 65536.0, 0.0, 0.0};
     double idle_s = 30.0;
     int opt;
-    while ((opt = getopt(argc, argv, "i:e:t:")) != -1) {
+    while ((opt = getopt(argc, argv, "i:e:n:d:t:")) != -1) {
         switch (opt) {
         case 'i':
             ifname = optarg;
             break;
         case 'e':
-            truth_every = atoi(optarg);
+            sen.every = atoi(optarg);
+            break;
+        case 'n':
+            sen.counts = atof(optarg);
+            break;
+        case 'd':
+            sen.delay_s = atof(optarg) * 1e-6;
             break;
         case 't':
             idle_s = atof(optarg);
             break;
         default:
-            fprintf(stderr, "usage: %s [-i IFACE] [-e TRUTH_EVERY] [-t IDLE_S]\n", argv[0]);
+            fprintf(stderr,
+                    "usage: %s [-i IFACE] [-e SENSOR_EVERY] [-n COUNTS] [-d DELAY_US] [-t IDLE_S]\n",
+                    argv[0]);
             return 2;
         }
     }
-    if (truth_every < 1 || !(idle_s > 0.0)) {
-        fprintf(stderr, "ref_controller: -e must be >= 1 and -t > 0\n");
+    if (sen.every < 1 || !(sen.counts >= 1.0) || !(sen.delay_s >= 0.0) || !(idle_s > 0.0)) {
+        fprintf(stderr, "ref_controller: -e must be >= 1, -n >= 1, -d >= 0 and -t > 0\n");
         return 2;
     }
+    sen.a = 1.0 - exp(-SPEED_FILTER_BW * (double)sen.every / PWM_FREQ_HZ);
     int sock = open_can(ifname);
     if (sock < 0) {
         return 1;
@@ -484,6 +550,9 @@ int main(int argc, char **argv)
     node.ack_step = -1;
     for (int i = 0; i < SEQ_MOD; i++) {
         node.beyond[i] = -1;
+    }
+    for (int i = 0; i < READING_RING; i++) {
+        node.reading_k[i] = -1;
     }
     foc_init(&foc, 1.0 / PWM_FREQ_HZ, MOTOR_N_P, MOTOR_R_S, MOTOR_L_D, MOTOR_L_Q, MOTOR_PSI_F,
              MOTOR_J, MOTOR_I_MAX, MOTOR_TAU_MAX, ALPHA_C, ALPHA_S);
@@ -519,7 +588,7 @@ int main(int argc, char **argv)
             node.rejected++;
             continue;
         }
-        on_frame(sock, &node, &foc, &fr, truth_every);
+        on_frame(sock, &node, &foc, &fr, &sen);
     }
     close(sock);
     printf("ref_controller: %ld steps, %ld rejected, %ld repeats, %ld commands dropped, "

@@ -125,10 +125,45 @@ def test_recorder_frames_cost_and_fd_helps(table):
 
 
 def test_rows_cover_layouts_and_buses(table):
-    assert len(table) == 2 * len(BUSES)
+    assert len(table) == 3 * len(BUSES)
     assert {r["bus"] for r in table} == {b.name for b in BUSES}
     custom = busload_table(Codec(), [1e3], layouts={"duty": ("PwmDuty",)}, buses=[Bus("x", 1e6)])
     assert len(custom) == 1 and custom[0]["period_us_max"] == pytest.approx(135.0)
+
+
+def test_a_sensored_loop_adds_one_classic_frame(table):
+    """PositionSensor every period: three 8-byte classic frames of 111-135 bits, so
+    405 us per period at 1 Mbit/s and at most (1 - background) / 405 us = 2.47 kHz."""
+    row = _row(table, "control+sensor", "classic 1M")
+    assert row["frames"] == ["PwmDuty", "PhaseSamples", "PositionSensor"]
+    assert (row["period_us_min"], row["period_us_max"]) == (
+        pytest.approx(333.0),
+        pytest.approx(405.0),
+    )
+    assert row["max_rate_hz"] == pytest.approx((1.0 - row["background_load"]) / 405e-6)
+    assert 2.4e3 < row["max_rate_hz"] < 2.5e3
+
+
+def test_protocol_md_states_the_sensored_loops_rates(table):
+    """docs/PROTOCOL.md's figures for the sensored loop are bench busload's."""
+    from pathlib import Path
+
+    doc = " ".join((Path(__file__).parents[1] / "docs" / "PROTOCOL.md").read_text().split())
+    c1, c500 = (
+        _row(table, "control+sensor", "classic 1M"),
+        _row(table, "control+sensor", "classic 500k"),
+    )
+    alone = _row(table, "control", "classic 1M")
+    half = (1.0 - c1["background_load"]) / ((alone["period_us_max"] + 135.0 / 2) * 1e-6)
+    for x in (
+        c1["max_rate_hz"],
+        c1["max_rate_hz_practical"],
+        c500["max_rate_hz"],
+        alone["max_rate_hz"],
+        half,
+    ):
+        assert f"{x / 1e3:.2f} kHz" in doc, x
+    assert f"{c1['period_us_min']:.0f}-{c1['period_us_max']:.0f} us per period" in doc
 
 
 def test_format(table):

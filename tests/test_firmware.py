@@ -236,6 +236,17 @@ def test_c_control_law_gains_and_svpwm(tmp_path: Path) -> None:
         assert row == pytest.approx(list(svpwm(a, b, u)), abs=1e-12)
 
 
+def test_the_firmware_reads_no_plant_truth() -> None:
+    """A sensored controller reads PositionSensor; PlantTruth is the recorder's (DBC 2.2):
+    the C code (comments left out) names neither the frame nor its codec."""
+    code = re.sub(
+        r"/\*.*?\*/|//[^\n]*", "", (FIRMWARE / "ref_controller.c").read_text(), flags=re.S
+    )
+    assert "BENCH_DBC_POSITION_SENSOR_FRAME_ID" in code
+    assert "bench_dbc_position_sensor_theta_m_decode" in code
+    assert not re.search(r"plant_truth", code, flags=re.I)
+
+
 def test_firmware_builds_with_the_makefile(build: Path) -> None:
     """firmware/Makefile runs `bench codegen` and compiles with -Wall -Wextra -Werror."""
     assert (build / "ref_controller").is_file()

@@ -14,6 +14,7 @@ import pytest
 
 from bench._api import Run
 from bench.testing import assert_lock_kept, assert_settles, assert_tracks, assert_within
+from tests.test_external_controller import N_P, encoder_err_bound_deg
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENARIO = ROOT / "tests" / "data" / "firmware-100rpm.toml"
@@ -83,6 +84,8 @@ def test_an_external_controller_started_by_the_fixture(
         cwd=ROOT, capture_output=True, text=True, check=True,
     )  # fmt: skip
     show.write_text(out.stdout)
+    # the controller reads the plant's default encoder (PositionSensor): its bound
+    bound = encoder_err_bound_deg(N_P)
     pytester.makepyfile(
         test_dut=f"""
 import sys
@@ -100,7 +103,7 @@ def test_my_controller(hil):
     assert run.meta["controller"] == "external" and run.meta["controller_name"] == "ext-py"
     assert (run.folder / "dut.log").is_file()
     assert_lock_kept(run)
-    assert_within(run, theta_err_abs_max_deg=0.01, speed_err_max_rpm=5.0, frames_rejected=0)
+    assert_within(run, theta_err_abs_max_deg={bound!r}, speed_err_max_rpm=5.0, frames_rejected=0)
     print("TRANSPORT", run.transport)
 """
     )

@@ -77,3 +77,48 @@ def test_the_scenario_keys_are_checked(tmp_path: Path) -> None:
         load_scenario(str(f))
     f.write_text('extends = "wen-5.1"\n[sensors]\nencoder_counts = 4096\nencoder_delay_s = 1e-4\n')
     assert load_scenario(str(f)).sensors["encoder_counts"] == 4096
+
+
+def test_a_controller_under_test_always_gets_a_sensor() -> None:
+    """No [sensors] encoder: 65536 counts every period, no delay (the frame's own
+    resolution); a scenario's own sensor stays as it is; the plant's numbers do not move."""
+    from bench.scenarios._setup import (
+        EXTERNAL_ENCODER_COUNTS,
+        position_sensor,
+        with_position_sensor,
+    )
+
+    codec = Codec()
+    scn = short("wen-5.1", 0.01)
+    ext = with_position_sensor(scn)
+    assert ext.sensors["encoder_counts"] == EXTERNAL_ENCODER_COUNTS == 65536
+    assert "encoder_counts" not in scn.sensors  # the caller's scenario is not changed
+    ps = position_sensor(scn)
+    assert (ps["counts"], ps["every"], ps["delay_s"], ps["default"]) == (65536, 1, 0.0, True)
+    assert ps["rate_hz"] == pytest.approx(10e3)
+    names = [codec.decode(m).name for m in make_plant_node(ext, codec).frames_now()]  # type: ignore[union-attr]
+    assert names.count("PositionSensor") == 1
+    own = short("wen-5.1", 0.01)
+    own.sensors.update(encoder_counts=2048, encoder_rate_hz=2500.0, encoder_delay_s=1e-4)
+    assert with_position_sensor(own) is own
+    ps = position_sensor(own)
+    assert (ps["counts"], ps["every"], ps["delay_s"], ps["default"]) == (2048, 4, 1e-4, False)
+    # the sensor adds a frame and changes nothing the plant computes
+    a, b = make_plant_node(scn, codec).plant, make_plant_node(ext, codec).plant
+    for _ in range(50):
+        a.step(0.6, 0.4, 0.5, True)
+        b.step(0.6, 0.4, 0.5, True)
+    assert a.truth() == b.truth() and a.sample() == b.sample()
+
+
+def test_an_external_run_records_the_sensor_it_sent(tmp_path: Path) -> None:
+    """bench run --controller external writes the effective scenario (with the sensor)
+    that its plant ran: scenario.json names the counts the controller got."""
+    import json
+
+    from tests.test_external_controller import _run
+
+    res, run_dir = _run(tmp_path)
+    assert res.returncode == 0, res.stderr[-2000:]
+    sc = json.loads((run_dir / "scenario.json").read_text())
+    assert sc["sensors"]["encoder_counts"] == 65536

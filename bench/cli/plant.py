@@ -28,10 +28,14 @@ def cmd_plant(args: argparse.Namespace) -> int:
     import sys
 
     from bench.nodes._loops import make_plant_node, plant_loop
+    from bench.scenarios._setup import with_position_sensor
     from bench.wire._codec import Codec
     from bench.wire._protocol import new_run_id
 
     scn = scenario_from_args(args)
+    if args.dut_timeout:
+        # a controller under test reads PositionSensor (docs/PROTOCOL.md)
+        scn = with_position_sensor(scn)
     spec = bus_spec(args, announce=False)
     run_id = args.run_id or new_run_id()
     # a controller author needs to know where to listen (bench show SCENARIO says it too)
@@ -107,7 +111,8 @@ def register(sub: Any) -> None:
         type=POS_FLOAT,
         metavar="S",
         help="serve a controller under test: wait up to S seconds for its first PwmDuty "
-        "(real time: the clock starts then); a lockstep watchdog trip ends the run",
+        "(real time: the clock starts then); a lockstep watchdog trip ends the run; "
+        "sends PositionSensor (the scenario's sensor, or a 16-bit one every period)",
     )
     add_engine(p)
     add_rt(p)

@@ -12,6 +12,7 @@ from bench.cli._common import add_bus, add_plant_profile, add_scenario_overrides
 def cmd_show(args: argparse.Namespace) -> int:
     from bench.cli._common import bus_spec, scenario_from_args
     from bench.scenarios._describe import describe, schedule_lines
+    from bench.scenarios._setup import position_sensor
 
     scn = scenario_from_args(args)
     d = describe(scn)
@@ -33,6 +34,8 @@ def cmd_show(args: argparse.Namespace) -> int:
         ),
     }
     d["dbc_version"] = default_codec().version
+    # what a controller under test reads for its angle (docs/PROTOCOL.md)
+    d["position_sensor"] = position_sensor(scn)
     if args.json:
         print(json.dumps(d, indent=2))
         return 0
@@ -60,6 +63,12 @@ def cmd_show(args: argparse.Namespace) -> int:
         f"transport {tr['interface']} {tr['channel']}"
         + (f" port {tr['port']}" if tr["port"] is not None else "")
         + (f" ({tr['note']})" if tr["note"] else "")
+    )
+    ps = d["position_sensor"]
+    print(
+        f"position sensor (PositionSensor, --controller external): {ps['counts']} counts/rev, "
+        f"every {ps['every']} period(s) ({ps['rate_hz']:g} Hz), {ps['delay_s']:g} s old"
+        + (" (no [sensors] encoder_counts: the 16-bit default)" if ps["default"] else "")
     )
     st = d["start"]
     print(

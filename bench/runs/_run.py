@@ -54,7 +54,7 @@ from bench.runs._processes import (
 from bench.runs._recorder import Recording
 from bench.runs._results import RunResult, finish_run, run_metadata, scoring_scenario
 from bench.scenarios._schema import Scenario, write_effective
-from bench.scenarios._setup import n_steps, sample_period
+from bench.scenarios._setup import n_steps, sample_period, with_position_sensor
 from bench.wire._bus import BusSpec
 from bench.wire._codec import Codec
 from bench.wire._protocol import SHARED_RUN_FRAMES, new_run_id, unwrap
@@ -145,6 +145,10 @@ def run_scenario(
     capture = out_dir / f"capture{LOG_SUFFIX[log_format]}"
     link = scn.latency.any
     spec_b = spec.peer() if link else spec
+    if external:
+        # a drive under test reads its angle from its sensor, never from the
+        # recorder's PlantTruth: the plant sends PositionSensor (docs/PROTOCOL.md)
+        scn = with_position_sensor(scn)
     # the nodes get the exact scenario of this run (every override included)
     scn_file = write_effective(scn, out_dir / "scenario.json")
     # Lockstep: the plant runs no further than the commands this process has

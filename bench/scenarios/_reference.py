@@ -349,7 +349,8 @@ KEYS: dict[str, dict[str, Key]] = {
         "encoder_counts": Key(
             "count/rev",
             "Position sensor of a sensored controller (PositionSensor frame): counts per "
-            "mechanical revolution; 0: none.",
+            "mechanical revolution; 0: none, and under --controller external 65536 (a "
+            "controller under test always gets a sensor).",
             "0 to 65536",
             None,
             70000,

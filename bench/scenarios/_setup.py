@@ -81,6 +81,47 @@ _SENSOR_FIELDS = {
 }
 
 
+#: Counts per revolution of the position sensor a controller under test gets
+#: (``bench run --controller external``, ``bench plant --dut-timeout``) when
+#: the scenario states none (``[sensors] encoder_counts`` 0): the resolution of
+#: the ``PositionSensor.theta_m`` signal itself (16 bits), as a 16-bit
+#: resolver-to-digital converter reads it, so the sensor adds no error the
+#: frame would not add anyway. A drive under test needs its sensor, and the
+#: recorder's ``PlantTruth`` is no sensor (docs/PROTOCOL.md).
+EXTERNAL_ENCODER_COUNTS = 1 << 16
+
+
+def with_position_sensor(scn: Scenario) -> Scenario:
+    """The scenario with a position sensor: its own, or :data:`EXTERNAL_ENCODER_COUNTS`.
+
+    The scenario's ``encoder_rate_hz`` and ``encoder_delay_s`` stay (default:
+    one reading per PWM period, no delay). The sensor changes no number of the
+    plant: it only adds the ``PositionSensor`` frame.
+    """
+    if plant_setup(scn)[1].sensors.encoder_counts > 0:
+        return scn
+    return replace(scn, sensors={**scn.sensors, "encoder_counts": EXTERNAL_ENCODER_COUNTS})
+
+
+def position_sensor(scn: Scenario) -> dict[str, Any]:
+    """What a controller under test reads in ``PositionSensor`` (``bench show``).
+
+    ``counts`` per mechanical revolution, one reading every ``every`` PWM
+    periods (``rate_hz`` readings per second), each ``delay_s`` old.
+    """
+    sp = plant_setup(with_position_sensor(scn))[1].sensors
+    T_s = sample_period(scn)
+    every = sp.encoder_every(T_s)
+    return {
+        "frame": "PositionSensor",
+        "counts": sp.encoder_counts,
+        "every": every,
+        "rate_hz": 1.0 / (every * T_s),
+        "delay_s": sp.encoder_delay_s,
+        "default": plant_setup(scn)[1].sensors.encoder_counts == 0,
+    }
+
+
 def plant_setup(scn: Scenario) -> tuple[Preset, PlantProfile]:
     """The plant of a scenario: its motor preset and its effective profile.
 

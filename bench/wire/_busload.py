@@ -61,9 +61,12 @@ lower-priority frames grow without bound as the load approaches 100 %)."""
 
 LAYOUTS: dict[str, tuple[str, ...]] = {
     "control": ("PwmDuty", "PhaseSamples"),
+    "control+sensor": ("PwmDuty", "PhaseSamples", "PositionSensor"),
     "control+recorder": ("PwmDuty", "PhaseSamples", "PlantTruth", "CtrlTelemetry"),
 }
-"""Frames sent every PWM period, by layout name."""
+"""Frames sent every PWM period, by layout name. ``control+sensor`` is a
+sensored controller's loop (``PositionSensor`` every period, as
+``--controller external`` sends it by default: docs/PROTOCOL.md)."""
 
 _FD_LENGTHS = (0, 1, 2, 3, 4, 5, 6, 7, 8, 12, 16, 20, 24, 32, 48, 64)
 
