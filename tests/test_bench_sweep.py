@@ -30,7 +30,14 @@ def test_dotted_keys_change_one_value_and_are_validated() -> None:
     scn = scenario_with(base, {"controller_model.L_q": 1.2, "inverter.t_dead": 2e-6, "seed": 7})
     assert scn.controller_model.L_q == 1.2 and scn.controller_model.L_d == 1.0
     assert scn.inverter["t_dead"] == 2e-6 and scn.seed == 7
-    assert scn.estimators == ("sfhf", "tt-ab", "tt-dq", "sensored")  # the rest is wen-5.1's
+    assert scn.estimators == (
+        "sfhf",
+        "tt-ab",
+        "tt-dq",
+        "self-demod",
+        "epf",
+        "sensored",
+    )  # the rest is wen-5.1's
     with pytest.raises(ScenarioError, match="controller_model"):
         scenario_with(base, {"controller_model.L_x": 1.2})
     with pytest.raises(ScenarioError, match="inverter"):

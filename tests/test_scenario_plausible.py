@@ -187,7 +187,10 @@ def test_one_file_serves_both_injection_families(
     assert sq.gains()["estimator.U_h"] == 25.0
     note = check_estimator_fits(scn, "square-wave")
     assert note is not None and "\n" not in note
-    assert "square-wave leaves out" in note and "V_h: sfhf, tt-ab, tt-dq, hybrid-tt-dq" in note
+    assert (
+        "square-wave leaves out" in note
+        and "V_h: sfhf, tt-ab, tt-dq, self-demod, epf, hybrid-tt-dq" in note
+    )
     rot = build_controller(scn, "tt-dq")
     assert rot.gains()["estimator.V_h"] == 40.0
     note = check_estimator_fits(scn, "tt-dq")

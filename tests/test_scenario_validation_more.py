@@ -251,7 +251,7 @@ def test_non_salient_motor_blames_the_motor_not_the_controller_model(
 def test_non_salient_motor_by_l_d_alone_names_motor_l_d(tmp_path: Path) -> None:
     msg = _error(_write(tmp_path, "[motor]\nL_d = 0.1\n"))  # above the preset's L_q 0.082 H
     assert "field 'motor.L_d': the motor is not salient (L_q 0.082 H <= L_d 0.1 H)" in msg
-    assert "(sfhf, tt-ab, tt-dq)" in msg
+    assert "(sfhf, tt-ab, tt-dq, self-demod, epf)" in msg
 
 
 def test_non_salient_motor_runs_with_the_sensored_estimator(tmp_path: Path) -> None:

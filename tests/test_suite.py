@@ -57,13 +57,13 @@ def test_quick_suite_writes_filled_report_and_summary(quick_suite: tuple[Path, P
     on_disk = json.loads((out / "summary.json").read_text())
     assert on_disk["claims"] == summary["claims"]
     # every estimator each scenario lists, on each plant
-    assert len(summary["runs"]) == 2 * (4 + 3)
+    assert len(summary["runs"]) == 2 * (6 + 3)
     for r in summary["runs"]:
         assert "error" not in r, r
         for k in ("theta_err_max_deg", "theta_err_abs_mean_deg", "speed_err_max_rpm"):
             assert math.isfinite(r["metrics"][k]), (r["scenario"], r["estimator"], k)
     drive = [r for r in summary["runs"] if r["plant"] == "drive"]
-    assert len(drive) == 7 and all(r["files"].startswith("runs/drive/") for r in drive)
+    assert len(drive) == 9 and all(r["files"].startswith("runs/drive/") for r in drive)
     assert (out / "runs" / "drive" / "wen-5.4" / "tt-dq" / "metrics.json").is_file()
     # each run claim once per plant: the drive's with its own numbers
     ids = {c["id"]: c for c in summary["claims"]}
@@ -75,7 +75,7 @@ def test_quick_suite_writes_filled_report_and_summary(quick_suite: tuple[Path, P
         for r in summary["runs"]
         if r["scenario"] == "wen-5.4" and r["plant"] == "ideal"
     }
-    assert len(thd) == 4 and all(math.isfinite(v) and v > 0 for v in thd.values())
+    assert len(thd) == 6 and all(math.isfinite(v) and v > 0 for v in thd.values())
     over = [
         r["metrics"]["speed_overshoot_rpm"]
         for r in summary["runs"]

@@ -60,6 +60,15 @@ COLUMNS: tuple[tuple[str, str], ...] = (
 )
 
 
+#: Signals a frame sent again for its step may carry anew, by message: a
+#: controller sends its newest ``CtrlTelemetry`` again when its command
+#: acknowledgement moves (DBC 2.2, docs/PROTOCOL.md), so a later telemetry of
+#: a step that differs only there (and in its CRC) is a copy, not a duplicate.
+_UPDATED_AGAIN: dict[str, tuple[str, ...]] = {
+    "CtrlTelemetry": ("crc", "cmd_ack", "cmd_ack_valid"),
+}
+
+
 @dataclass(slots=True)
 class Capture:
     """Decoded content of a capture."""
@@ -265,10 +274,13 @@ def analyze_frames(
         later = np.ones(len(full), dtype=bool)
         later[first] = False
         if later.any():
-            # a later frame of a step is a copy when every signal equals the first frame's
+            # a later frame of a step is a copy when every signal equals the first
+            # frame's, but for what a frame sent again may update (_UPDATED_AGAIN)
             same = np.ones(int(np.count_nonzero(later)), dtype=bool)
             ref = first[inv[later]]
-            for v in b.signals.values():
+            for sig, v in b.signals.items():
+                if sig in _UPDATED_AGAIN.get(name, ()):
+                    continue
                 same &= (v[later] == v[ref]) | (np.isnan(v[later]) & np.isnan(v[ref]))
             n_same = int(np.count_nonzero(same))
             cap.copies += n_same
