@@ -11,21 +11,16 @@ from pathlib import Path
 
 import pytest
 
+from bench.runs._metrics import ANGLE_METRICS
 from bench.runs._run import run_scenario
 from bench.scenarios._schema import load_scenario
 from bench.wire._bus import BusSpec
 from tests.ports import free_port
 
-#: The metrics that a capture's analysis must reproduce exactly.
+#: The metrics that a capture's analysis must reproduce exactly: the angle metrics
+#: and the speed tracking, period counts and simulated time.
 POSITION_SPEED = (
-    "theta_err_max_deg",
-    "theta_err_min_deg",
-    "theta_err_mean_deg",
-    "theta_err_abs_mean_deg",
-    "theta_err_rms_deg",
-    "theta_err_abs_max_deg",
-    "theta_err_abs_max_rad",
-    "speed_err_max_rpm",
+    *ANGLE_METRICS,
     "speed_track_err_max_rpm",
     "steps",
     "scored_steps",
