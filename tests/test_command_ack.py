@@ -57,6 +57,28 @@ def test_the_pacer_counts_a_command_held_after_its_step() -> None:
     assert p.late == {1, 2} and p.verification_line() is not None
 
 
+def test_reports_received_after_the_plant_ended_still_count() -> None:
+    """A recorder that lags the plant holds the last acknowledgements after its last
+    period: the pacer takes them then, and they are not counted twice."""
+    from tests.trace_helpers import short
+
+    p = CommandPacer(short("wen-5.1", 0.05), Codec(), mode="realtime", external=True)
+
+    class Sink:
+        def send(self, m: object) -> None:
+            pass
+
+    acks: list[tuple[int, int, int]] = [(0, 1, 0)]
+    p.send_due(Sink(), 0, 0.0)  # type: ignore[arg-type]
+    p.take(acks, 0.0)
+    p.send_due(Sink(), 0, 0.0)  # type: ignore[arg-type]
+    assert p.sent == 1 + ACK_WINDOW and p.unacknowledged == ACK_WINDOW
+    acks.append((0, 1, ACK_WINDOW % 16))  # arrives after the run's loop ended
+    p.take(acks, 1.0)
+    p.take(acks, 2.0)
+    assert p.unacknowledged == 0 and p.reports == 2 and p.verification_line() is None
+
+
 def _signals(run_dir: Path) -> str:
     return (run_dir / "signals.csv").read_text()
 

@@ -149,6 +149,19 @@ class CommandPacer:
         #: Rounds of resent unacknowledged commands.
         self.resends = 0
         self._t_ack = 0.0
+        self._n_taken = 0
+
+    def take(self, acks: list[tuple[int, int, int]], now: float) -> None:
+        """Take the ``CtrlTelemetry`` reports of ``acks`` not taken yet (a recorder's
+        :attr:`bench.runs._recorder.Recorder.acks`, which only grows).
+
+        Called as the run goes and once more after the nodes stopped: a recorder
+        that lags the plant (thousands of frames on a slow host) still holds the
+        reports of the last commands when the plant's last period is seen.
+        """
+        while self._n_taken < len(acks):
+            self.on_telemetry(*acks[self._n_taken], now)
+            self._n_taken += 1
 
     def on_telemetry(self, step: int, valid: int, ack: int, now: float) -> None:
         """Take one ``CtrlTelemetry`` (its full step, ``cmd_ack_valid``, ``cmd_ack``)."""

@@ -236,6 +236,9 @@ def run_scenario(
                     p.kill()
                     p.wait()
             rec.close()
+            if pacer is not None:
+                # the reports the recorder received after the plant's last period
+                pacer.take(rec.recorders[-1].acks, time.monotonic())
     if start_error is not None:
         raise failed_before_recording(out_dir, start_error)
     wall = time.perf_counter() - t_wall0
@@ -436,14 +439,10 @@ def _drive(
     t_seen, last_step, waiting_dut = t_moved, -1, dut is not None and not dut.answered
     ended: str | None = None
     tel = rec.recorders[-1]  # the controller's side: its CtrlTelemetry
-    n_acks = 0
     while not interrupted():
         full_step = max(0, rec.plant_step)
         now = time.monotonic()
-        acks = tel.acks
-        while n_acks < len(acks):
-            pacer.on_telemetry(*acks[n_acks], now)
-            n_acks += 1
+        pacer.take(tel.acks, now)
         pacer.send_due(bus, full_step, now)
         if t_start is None and pacer.sent:
             t_start = t_seen = now
