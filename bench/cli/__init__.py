@@ -31,6 +31,7 @@ SUBCOMMANDS = (
     "show",
     "list",
     "schema",
+    "faults",
     "plant",
     "controller",
     "link",

@@ -198,6 +198,13 @@ KEYS: dict[str, dict[str, Key]] = {
             _TABLE,
             "none",
         ),
+        "faults": Key(
+            "",
+            "A timeline of faults (`[[faults]]` entries, below; `bench faults`).",
+            "an array of tables",
+            "none",
+            3,
+        ),
     },
     "noise": {
         "current_std_a": Key("A rms", "White noise on each phase current.", ">= 0", None, -1.0),
@@ -689,6 +696,9 @@ def render() -> str:
             rng, d = key.range.format(**fill), d.format(**fill)
             lines.append(f"| `{k}` | {key.unit} | {d} | {rng} | {key.meaning} |")
         lines.append("")
+    from bench.scenarios._faults import reference_md
+
+    lines += reference_md()
     lines += [
         "## [estimator_options]",
         "",

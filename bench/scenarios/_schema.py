@@ -131,6 +131,12 @@ this module and :mod:`bench.scenarios._reference`)::
     J = 1.0
     [paper_result]                   # the paper's numbers, for reports only
     theta_err_max_deg = 4.0
+    [[faults]]                       # a fault timeline (bench/scenarios/_faults.py, bench faults)
+    at_s = 2.0                       # *required*: plant time at which it starts, s
+    duration_s = 0.5                 # absent: to the end of the run
+    kind = "resistance_drift"        # *required*, with the kind's parameters
+    R_s_factor = 1.5
+    expect = "ride_through"          # "trip" | "detect" | "ride_through"
 """
 
 from __future__ import annotations
@@ -146,6 +152,7 @@ from pathlib import Path
 from typing import Any
 
 from bench._errors import ScenarioError
+from bench.scenarios._faults import Fault, parse_faults
 
 #: The papers' scenarios (what ``bench suite paper`` runs).
 PAPER = (
@@ -366,6 +373,8 @@ class Scenario:
     magnetics: dict[str, Any] = field(default_factory=dict)
     #: ``[controller]``: the drive's countermeasures and options.
     controller: dict[str, Any] = field(default_factory=dict)
+    #: ``[[faults]]``: the fault timeline (:mod:`bench.scenarios._faults`).
+    faults: tuple[Fault, ...] = ()
 
     def with_overrides(self, **kw: Any) -> Scenario:
         """A copy with some fields replaced (command-line options).
@@ -421,6 +430,7 @@ class Scenario:
             "sensors": dict(self.sensors),
             "magnetics": dict(self.magnetics),
             "controller": dict(self.controller),
+            "faults": [f.to_dict() for f in self.faults],
         }
 
 
@@ -454,6 +464,7 @@ _TOP_KEYS = {
     "magnetics",
     "extends",
     "controller",
+    "faults",
 }
 
 #: ``[inverter]`` keys: fields of :class:`plant_rt.InverterPars`, with their checks.
@@ -1059,6 +1070,13 @@ def parse_scenario(data: dict[str, Any], src: str) -> Scenario:
         sensors=sensors,
         magnetics=magnetics,
         controller=controller,
+        faults=parse_faults(
+            data.get("faults"),
+            src,
+            duration=duration,
+            f_sw=f_eff,
+            max_delay_steps=_wire_limits().max_delay_steps,
+        ),
     )
 
 
