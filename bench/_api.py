@@ -82,9 +82,11 @@ class Run:
         Every key of ``metrics.json`` (docs/RUNS.md), as the file holds it
         (a metric without a value is None).
     exit_status : int
-        What ``bench run`` (or ``bench analyze``) would exit with: 0 done,
+        What ``bench run`` (or ``bench analyze``) would exit with: 0 done
+        (also when every declared fault expectation held, a trip included),
         3 the plant tripped a protection, 4 the estimator lost the rotor
-        angle, 130 interrupted (DESIGN.md).
+        angle, 5 commands held late or never, 6 a fault expectation missed
+        (``[[faults]]`` ``expect``), 130 interrupted (DESIGN.md).
     folder : Path or None
         The run folder (``out=``); None when the run was given none (its
         files were read and removed).

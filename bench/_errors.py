@@ -13,6 +13,7 @@ from __future__ import annotations
 
 __all__ = [
     "EXIT_COMMANDS_LOST",
+    "EXIT_FAULT_EXPECTATION",
     "EXIT_INTERRUPTED",
     "EXIT_LOCK_LOST",
     "EXIT_PLANT_TRIPPED",
@@ -39,6 +40,11 @@ EXIT_LOCK_LOST = 4
 #: commands only after their step or never (``CtrlTelemetry.cmd_ack``, DBC 2.2;
 #: every file written; the run did not follow the scenario's set-points).
 EXIT_COMMANDS_LOST = 5
+#: Exit status of ``bench run`` / ``bench analyze`` when a fault of the scenario's
+#: ``[[faults]]`` timeline did not get the reaction its ``expect`` declares
+#: (``metrics.json`` ``faults``; every file written).  A run whose every declared
+#: expectation holds exits 0, even when what it expected is a trip.
+EXIT_FAULT_EXPECTATION = 6
 #: Exit status of an interrupted command (Ctrl-C), with the files of the part that ran.
 EXIT_INTERRUPTED = 130
 

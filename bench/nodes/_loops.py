@@ -80,7 +80,7 @@ def make_plant_node(
     cycle_ms = codec.message("PlantStatus").cycle_time or 0
     if protection is None:
         protection = ProtectionPars.from_preset(plant.motor, plant.inverter)
-    return PlantNode(
+    node = PlantNode(
         codec,
         plant,
         n_steps=n_steps(scn),
@@ -91,6 +91,11 @@ def make_plant_node(
         watchdog_rounds=watchdog_rounds,
         status_every=max(1, round(cycle_ms * 1e-3 / plant.T_s)) if cycle_ms else 0,
     )
+    if scn.faults:
+        from bench.nodes._fault_bus import NodeFaults
+
+        node.faults = NodeFaults(scn.faults, plant, scn.seed)
+    return node
 
 
 def make_controller_node(scn: Scenario, estimator: str, codec: Codec) -> ControllerNode:
@@ -163,7 +168,10 @@ def run_inprocess(
     ``engine`` is the plant's (:class:`plant_rt.Plant`).
     """
     from bench.nodes._link import LockstepLink
+    from bench.scenarios._faults import lockstep_error
 
+    if err := lockstep_error(scn.faults, scn.source):
+        raise err
     pn = make_plant_node(scn, codec, engine=engine)
     cn = make_controller_node(scn, estimator, codec)
     lt = scn.latency

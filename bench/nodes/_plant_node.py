@@ -68,7 +68,8 @@ from bench.nodes._counters import (
     CommandQueue,
     NodeCounters,
 )
-from bench.wire._codec import REJECT_OUT_OF_RANGE, Codec
+from bench.nodes._fault_bus import NodeFaults
+from bench.wire._codec import REJECT_BAD_CRC, REJECT_OUT_OF_RANGE, Codec
 from bench.wire._protocol import (
     CMD_ENABLE,
     CMD_RESET,
@@ -162,6 +163,8 @@ class PlantNode:
         self.m_status = 1 << codec.step_bits("PlantStatus")
         self.id_duty = codec.frame_id("PwmDuty")
         self.id_cmd = codec.frame_id("BenchCommand")
+        self.id_samples = codec.frame_id("PhaseSamples")
+        self.id_pos = codec.frame_id("PositionSensor")
         self.duties: dict[int, tuple[float, float, float, bool]] = {}
         self.latest_duty: tuple[float, float, float, bool] = _SAFE_DUTY
         self.latest_duty_step = -1
@@ -219,6 +222,8 @@ class PlantNode:
         self.ctrl_ack: int | None = None
         self.id_tel = codec.frame_id("CtrlTelemetry")
         self._outbox: list[can.Message] = []
+        #: The scenario's fault timeline (``[[faults]]``; :mod:`bench.nodes._fault_bus`).
+        self.faults: NodeFaults | None = None
 
     # -- receiving ---------------------------------------------------------
     def on_message(self, msg: can.Message) -> None:
@@ -284,6 +289,13 @@ class PlantNode:
         if t > k + 1:
             # the controller answers sample k with duty k + 1 at the latest
             self._reject_duty(REJECT_FUTURE_COUNTER)
+            return
+        fate = None if self.faults is None else self.faults.duty_fate(t + self.delay)
+        if fate is not None:  # a bus fault: lost, or arrives with a bad E2E CRC
+            if fate == "corrupt":
+                self._reject_duty(REJECT_BAD_CRC)
+            else:
+                self.faults.duties_lost += 1  # type: ignore[union-attr]
             return
         if self.realtime:
             if t == self.latest_duty_step or t in self.duties:
@@ -397,7 +409,11 @@ class PlantNode:
     def ready(self) -> bool:
         """Lockstep: whether the duty for the current period has arrived."""
         t = self.needed_duty()
-        return t <= 0 or t in self.duties
+        return (
+            t <= 0
+            or t in self.duties
+            or (self.faults is not None and self.faults.duty_fate(self.plant.k) is not None)
+        )
 
     def paced(self) -> bool:
         """Lockstep: whether pacing lets the current period run (always when off).
@@ -440,7 +456,10 @@ class PlantNode:
     def frames_now(self) -> list[can.Message]:
         """The frames describing the plant at the current instant ``k T_s``."""
         p = self.plant
-        s = p.sample()
+        nf = self.faults
+        if nf is not None:
+            nf.plant.before_period(p)  # the parameters of this instant and the next period
+        s = p.sample() if nf is None else nf.plant.sample(p.sample())
         if self.fault != FAULT_NONE:
             status = STATE_FAULT
         else:
@@ -484,6 +503,16 @@ class PlantNode:
                     },
                 )
             )
+        if nf is not None:
+            if not nf.sends("PhaseSamples", s.k):
+                frames = [m for m in frames if m.arbitration_id != self.id_samples]
+            if not nf.sends("PositionSensor", s.k):
+                frames = [m for m in frames if m.arbitration_id != self.id_pos]
+            to_plant, to_ctrl = nf.babble(s.k, self.codec)
+            if to_plant is not None:
+                self.on_message(to_plant)
+            if to_ctrl is not None:
+                frames.append(to_ctrl)
         self.sent.append(frames)
         return frames
 
@@ -504,11 +533,28 @@ class PlantNode:
         if t <= 0:
             d_a, d_b, d_c, en = _SAFE_DUTY
             self.duty_age = 255
+        elif t not in self.duties:  # lost to a bus fault: held, counted, watched as in real time
+            d_a, d_b, d_c, en = self.latest_duty
+            self.duty_age = (
+                255 if self.latest_duty_step < 0 else min(254, t - self.latest_duty_step)
+            )
+            self.counters.late_duties += 1
+            if (
+                self.watchdog_periods
+                and self.latest_duty_step >= 0
+                and self.fault == FAULT_NONE
+                and self.plant.k - self.last_duty_k >= self.watchdog_periods
+            ):
+                self.trip(FAULT_WATCHDOG)
         else:
             self.duty_age = min(254, self.plant.k - t)
             d_a, d_b, d_c, en = self.duties.pop(t)
             for old in [s for s in self.duties if s < t]:
                 del self.duties[old]
+            if self.faults is not None:  # a delay fault applies an older duty
+                self.faults.keep(t, (d_a, d_b, d_c, en))
+                d_a, d_b, d_c, en = self.faults.delayed(self.plant.k, t, (d_a, d_b, d_c, en))
+                self.duty_age = min(254, self.duty_age + self.faults.duty_shift(self.plant.k))
         if self.fault != FAULT_NONE:
             en = False
             self.duty_age = 255  # the safe state applies no duty (the DBC's 255)
@@ -533,7 +579,8 @@ class PlantNode:
         already runs in the safe state.
         """
         k = self.plant.k
-        due = [t for t in self.duties if t <= k]
+        shift = 0 if self.faults is None else self.faults.duty_shift(k, realtime=True)
+        due = [t for t in self.duties if t <= k - shift]
         if due:
             t = max(due)
             self.latest_duty_step = t
@@ -608,6 +655,7 @@ class PlantNode:
             trips=dict(self.trips),
             resets=self.resets,
             run_id=self.run_id,
+            faults=None if self.faults is None else self.faults.report(),
             other_plants={
                 f"{k:#06x}": v for k, v in self.other_plants.items() if v >= SHARED_RUN_FRAMES
             },

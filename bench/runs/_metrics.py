@@ -579,3 +579,84 @@ def band_metrics(
         m[f"theta_err_{name}_max_deg"] = float(np.max(err_deg[rows])) if rows.any() else None
     m["steady_settle_s"] = STEADY_SETTLE / loop.alpha_s
     return m
+
+
+# ---------------------------------------------------------------- fault timeline
+
+#: The keys of each entry of ``metrics.json`` ``faults`` (docs/RUNS.md), in order.
+FAULT_KEYS = (
+    "kind",
+    "at_s",
+    "detected_at_s",
+    "detected_by",
+    "reaction_ms",
+    "theta_err_abs_max_deg",
+    "speed_err_max_rpm",
+    "lock_kept",
+    "expect",
+    "met",
+)
+
+
+def fault_metrics(
+    table: Mapping[str, Array],
+    faults: list[tuple[str, float, float, str | None]],
+    *,
+    T_s: float,
+    plant_fault: str | None,
+    plant_fault_step: int,
+) -> list[dict[str, Any]]:
+    """One entry per fault of the timeline: what the drive did while it lasted.
+
+    ``faults`` holds ``(kind, at_s, end_s, expect)`` (``end_s`` the end of the
+    fault, or of the run).  A fault is detected when a plant protection
+    tripped in ``[at_s, end_s]`` (``detected_by`` its name, ``reaction_ms``
+    the time from ``at_s``); the shipped controller reports no fault mode yet,
+    so ``detected_by`` is a protection or null.  ``theta_err_abs_max_deg`` and
+    ``speed_err_max_rpm`` are taken over the rows of ``[at_s, end_s)`` with an
+    estimate (null without one), ``lock_kept`` is :func:`lock_lost`'s rule
+    over those rows.  ``met`` follows ``expect``: ``trip`` a protection
+    detected it; ``detect`` anything did; ``ride_through`` nothing tripped and
+    the lock was kept; null without an expectation.
+    """
+    t = table["t"]
+    trip_at = (
+        plant_fault_step * T_s
+        if plant_fault not in (None, "none") and plant_fault_step >= 0
+        else None
+    )
+    out: list[dict[str, Any]] = []
+    for kind, at_s, end_s, expect in faults:
+        by = at = None
+        if trip_at is not None and at_s - 1e-9 <= trip_at <= end_s + 1e-9:
+            by, at = plant_fault, trip_at
+        win = (t >= at_s - 1e-9) & (t < end_s - 1e-9)
+        est = win & np.isfinite(table["theta_hat"])
+        err_max = w_max = None
+        kept: bool | None = None
+        if np.any(est):
+            err_deg = np.degrees(wrap_pi(table["theta_e"][est] - table["theta_hat"][est]))
+            err_max = float(np.max(np.abs(err_deg)))
+            w_err = np.abs(table["w_hat_rpm"][est] - table["w_m_rpm"][est])
+            w_max = float(np.nanmax(w_err)) if np.any(np.isfinite(w_err)) else None
+            kept = not lock_lost(t[est], err_deg, T_s)[0]
+        met: bool | None = None
+        if expect in ("trip", "detect"):
+            met = by is not None
+        elif expect == "ride_through":
+            met = (trip_at is None or trip_at > end_s + 1e-9) and kept is not False
+        out.append(
+            {
+                "kind": kind,
+                "at_s": at_s,
+                "detected_at_s": at,
+                "detected_by": by,
+                "reaction_ms": None if at is None else 1e3 * (at - at_s),
+                "theta_err_abs_max_deg": err_max,
+                "speed_err_max_rpm": w_max,
+                "lock_kept": kept,
+                "expect": expect,
+                "met": met,
+            }
+        )
+    return out

@@ -20,7 +20,7 @@ import can
 import numpy as np
 
 from bench import _jsonio as jsonio
-from bench._errors import EXIT_LOCK_LOST, EXIT_PLANT_TRIPPED
+from bench._errors import EXIT_FAULT_EXPECTATION, EXIT_LOCK_LOST, EXIT_PLANT_TRIPPED
 from bench.nodes._counters import REPEATED_COUNTER
 from bench.runs._analysis import analyze_frames, signals_doc, write_csv
 from bench.runs._metrics import (
@@ -29,6 +29,7 @@ from bench.runs._metrics import (
     SpeedLoop,
     band_metrics,
     compute_metrics,
+    fault_metrics,
     split_corner_hz,
 )
 from bench.scenarios._schema import Scenario
@@ -309,6 +310,13 @@ def finish_run(
         fault, fault_step = str(plant_r["fault"]), int(plant_r.get("fault_step", -1))
     m["plant_fault"] = fault
     m["plant_fault_step"] = fault_step
+    m["faults"] = fault_metrics(
+        cap.table,
+        [(f.kind, f.at_s, f.end_s(m["sim_s"]), f.expect) for f in scn.faults if f.at_s < m["sim_s"]],
+        T_s=T_s,
+        plant_fault=fault,
+        plant_fault_step=fault_step,
+    )
     # the plant's own counters as it sent them (PlantStatus), e.g. for a capture
     # of a controller under test analysed without the node's report
     status = plant_status_counters(frames, codec)
@@ -532,9 +540,28 @@ def outcome(m: dict[str, Any], T_s: float) -> tuple[int, list[str]]:
 
     3 when the plant tripped a protection, 4 when the estimator lost the rotor
     angle, 0 otherwise (DESIGN.md).  A trip comes first: an estimator whose
-    inverter was switched off loses the angle as a consequence.
+    inverter was switched off loses the angle as a consequence.  A run with
+    fault expectations (``[[faults]]`` ``expect``) exits 6 when one was missed
+    and 0 when every one held, even when what held was a trip (the lines
+    still say what happened).
     """
     lines = [w for w in (fault_warning(m, T_s), lock_warning(m), telemetry_warning(m)) if w]
+    expected = [f for f in m.get("faults") or [] if f.get("expect") is not None]
+    missed = [f for f in expected if not f.get("met")]
+    for f in missed:
+        lines.append(
+            f"warning: fault {f['kind']} at {f['at_s']:g} s: expected {f['expect']}, got "
+            + (
+                f"{f['detected_by']} after {f['reaction_ms']:.1f} ms"
+                if f.get("detected_by")
+                else "no detection"
+            )
+            + ("" if f.get("lock_kept") is not False else ", rotor angle lost")
+        )
+    if missed:
+        return EXIT_FAULT_EXPECTATION, lines
+    if expected:
+        return 0, lines
     if m.get("plant_fault", "none") not in ("none", None):
         return EXIT_PLANT_TRIPPED, lines
     if m.get("lock_lost"):

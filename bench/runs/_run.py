@@ -53,6 +53,7 @@ from bench.runs._processes import (
 )
 from bench.runs._recorder import Recording
 from bench.runs._results import RunResult, finish_run, run_metadata, scoring_scenario
+from bench.scenarios._faults import lockstep_error
 from bench.scenarios._schema import Scenario, write_effective
 from bench.scenarios._setup import n_steps, sample_period, with_position_sensor
 from bench.wire._bus import BusSpec
@@ -135,6 +136,8 @@ def run_scenario(
     naming the duty frames the bench rejected.
     """
     codec = codec or Codec()
+    if mode == "lockstep" and (err := lockstep_error(scn.faults, scn.source)):
+        raise err
     external = controller == EXTERNAL
     if external:
         estimator = EXTERNAL
