@@ -536,14 +536,17 @@ class PlantNode:
         elif t not in self.duties:  # lost to a bus fault: held, counted, watched as in real time
             d_a, d_b, d_c, en = self.latest_duty
             self.duty_age = (
-                255 if self.latest_duty_step < 0 else min(254, t - self.latest_duty_step)
+                255 if self.latest_duty_step < 0 else min(254, self.plant.k - self.latest_duty_step)
             )
             self.counters.late_duties += 1
+            # the real-time watchdog counts from the period the last duty arrived in,
+            # for a controller answering within its period the one before that duty's:
+            # here from the duty's own tag, which scheduling cannot move
             if (
                 self.watchdog_periods
                 and self.latest_duty_step >= 0
                 and self.fault == FAULT_NONE
-                and self.plant.k - self.last_duty_k >= self.watchdog_periods
+                and t - self.latest_duty_step >= self.watchdog_periods - 1
             ):
                 self.trip(FAULT_WATCHDOG)
         else:

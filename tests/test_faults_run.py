@@ -1,0 +1,173 @@
+"""Fault timelines in runs: the schema's one-line errors, the bus faults' lockstep
+semantics, the scoring in metrics.json and the exit status of an expectation."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+import bench
+from bench._errors import EXIT_FAULT_EXPECTATION, ScenarioError
+from bench.nodes._loops import WATCHDOG_MIN_S, WATCHDOG_PERIODS
+from bench.scenarios._faults import KINDS
+from bench.scenarios._schema import load_scenario
+
+T_S = 1e-3  # xue-fig13: 1 kHz
+
+
+def _scenario(tmp_path: Path, faults: list[dict[str, Any]], duration: float = 1.3) -> str:
+    lines = ['extends = "xue-fig13"', f"duration = {duration}"]
+    for f in faults:
+        lines.append("[[faults]]")
+        for k, v in f.items():
+            lines.append(f"{k} = {v!r}".replace("'", '"'))
+    p = tmp_path / "f.toml"
+    p.write_text("\n".join(lines) + "\n")
+    return str(p)
+
+
+@pytest.mark.parametrize(
+    ("fault", "field", "words"),
+    [
+        ({"at_s": 1.0, "kind": "open_door"}, "faults[0].kind", "unknown kind"),
+        ({"kind": "current_lost", "phase": "a"}, "faults[0].at_s", "required"),
+        ({"at_s": 1.0, "kind": "current_lost"}, "faults[0].phase", "required"),
+        ({"at_s": 1.0, "kind": "current_lost", "phase": "d"}, "faults[0].phase", '"a", "b"'),
+        ({"at_s": 1.0, "kind": "current_lost", "phase": "a", "a": 1.0}, "faults[0].a", "unknown key"),
+        ({"at_s": 9.0, "kind": "current_lost", "phase": "a"}, "faults[0].at_s", "within the run"),
+        ({"at_s": 1.0, "duration_s": 0.0, "kind": "silence"}, "faults[0].duration_s", "> 0"),
+        ({"at_s": 1.0, "kind": "demagnetisation", "psi_f_factor": 1.2}, "faults[0].psi_f_factor", "(0, 1]"),
+        ({"at_s": 1.0, "kind": "drop", "message": "PlantTruth", "prob": 1.0}, "faults[0].message", "one of"),
+        ({"at_s": 1.0, "kind": "drop", "message": "PwmDuty", "prob": 2.0}, "faults[0].prob", "[0, 1]"),
+        ({"at_s": 1.0, "kind": "delay", "message": "PwmDuty"}, "faults[0].steps", "steps"),
+        ({"at_s": 1.0, "kind": "babble", "rate_hz": 5000.0}, "faults[0].rate_hz", "one foreign"),
+        ({"at_s": 1.0, "kind": "silence", "expect": "survive"}, "faults[0].expect", "one of"),
+        ({"at_s": 1.0, "kind": "open_phase", "phase": "b"}, "faults[0].kind", "not implemented yet"),
+        ({"at_s": 1.0, "kind": "open_switch", "phase": "b", "device": "upper"}, "faults[0].kind",
+         "not implemented yet"),
+    ],
+)  # fmt: skip
+def test_a_wrong_fault_entry_is_one_line_naming_file_field_and_reason(
+    tmp_path: Path, fault: dict[str, Any], field: str, words: str
+) -> None:
+    src = _scenario(tmp_path, [fault])
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(src)
+    msg = str(info.value)
+    assert "\n" not in msg
+    assert msg.startswith(src) and f"'{field}'" in msg and words in msg, msg
+
+
+def test_the_timeline_round_trips_through_the_effective_scenario(tmp_path: Path) -> None:
+    from bench.scenarios._schema import scenario_from_dict
+
+    scn = load_scenario(
+        _scenario(
+            tmp_path,
+            [
+                {"at_s": 1.0, "kind": "delay", "message": "PwmDuty", "steps": 3},
+                {"at_s": 1.1, "duration_s": 0.1, "kind": "current_gain", "phase": "c",
+                 "factor": 0.5, "expect": "ride_through"},
+            ],
+        )
+    )  # fmt: skip
+    assert [f.kind for f in scn.faults] == ["delay", "current_gain"]
+    assert scenario_from_dict(scn.to_dict(), "x").faults == scn.faults
+    assert scn.faults[1].periods(T_S) == (1100, 1200)
+
+
+def test_bench_faults_lists_every_kind_with_its_parameters(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    from bench.cli import main
+
+    assert main(["faults"]) == 0
+    out = capsys.readouterr().out
+    for k in KINDS.values():
+        assert f"  {k.name}(" in out
+        for p in k.params:
+            assert f"      {p.name}: " in out
+
+
+def test_a_lost_duty_burst_trips_the_lockstep_watchdog_after_the_real_time_periods(
+    tmp_path: Path,
+) -> None:
+    """drop PwmDuty prob 1.0 for 50 ms from t = 1.0 s: the last duty (for period 999)
+    arrived in period 998; the watchdog trips W = max(10, 20 ms / T) periods later,
+    as the real-time plant's, and the expected trip makes the run exit 0."""
+    src = _scenario(
+        tmp_path,
+        [{"at_s": 1.0, "duration_s": 0.05, "kind": "drop", "message": "PwmDuty", "prob": 1.0,
+          "expect": "trip"}],
+    )  # fmt: skip
+    run = bench.run(src, estimator="sensored", out=tmp_path / "run")
+    W = max(WATCHDOG_PERIODS, math.ceil(WATCHDOG_MIN_S / T_S - 1e-9))
+    assert run.metrics["plant_fault"] == "watchdog"
+    assert run.metrics["plant_fault_step"] == 998 + W
+    (f,) = run.metrics["faults"]
+    assert f["detected_by"] == "watchdog"
+    assert f["reaction_ms"] == pytest.approx((998 + W - 1000) * T_S * 1e3)
+    assert f["expect"] == "trip" and f["met"] is True
+    assert run.exit_status == 0
+
+
+def test_a_missed_expectation_exits_with_its_own_status(tmp_path: Path) -> None:
+    src = _scenario(
+        tmp_path,
+        [{"at_s": 1.0, "duration_s": 0.2, "kind": "resistance_drift", "R_s_factor": 1.3,
+          "expect": "trip"}],
+    )  # fmt: skip
+    run = bench.run(src, estimator="sensored", out=tmp_path / "run")
+    (f,) = run.metrics["faults"]
+    assert f["detected_by"] is None and f["met"] is False and f["lock_kept"] is True
+    assert run.exit_status == EXIT_FAULT_EXPECTATION
+    assert any("expected trip" in w for w in run.warnings)
+
+
+def test_sensor_and_bus_faults_reach_the_controller_and_lockstep_stays_deterministic(
+    tmp_path: Path,
+) -> None:
+    faults = [
+        {"at_s": 1.0, "duration_s": 0.1, "kind": "current_offset", "phase": "a", "a": 0.5},
+        {"at_s": 1.05, "duration_s": 0.05, "kind": "drop", "message": "PwmDuty", "prob": 0.3},
+        {"at_s": 1.1, "duration_s": 0.01, "kind": "corrupt", "message": "PwmDuty"},
+        {"at_s": 1.15, "duration_s": 0.05, "kind": "babble", "rate_hz": 200.0},
+        {"at_s": 1.2, "duration_s": 0.05, "kind": "delay", "message": "PwmDuty", "steps": 1},
+    ]
+    src = _scenario(tmp_path, faults)
+    runs = [bench.run(src, estimator="sensored", out=tmp_path / f"r{i}") for i in range(2)]
+    a, b = (r.signals for r in runs)
+    for col in ("i_a", "i_b", "theta_err_deg", "w_m_rpm", "duty_age"):
+        np.testing.assert_array_equal(a[col], b[col])
+    assert runs[0].metrics == {**runs[1].metrics, "wall_s": runs[0].metrics["wall_s"],
+                               "realtime_factor": runs[0].metrics["realtime_factor"]}  # fmt: skip
+    t = a["t"]
+    base = bench.run(_scenario(tmp_path, []), estimator="sensored", out=tmp_path / "base").signals
+    # no fault before 1.0 s: the same trace
+    np.testing.assert_array_equal(a["i_a"][t < 1.0], base["i_a"][t < 1.0])
+    # the offset is on the measured phase-a current (the controller reacts after it)
+    k = int(round(1.0 / T_S))
+    assert a["i_a"][k] - base["i_a"][k] == pytest.approx(0.5, abs=2e-3)  # wire LSB 1.95 mA
+    assert runs[0].metrics["plant_fault"] == "none"
+    # duties lost (drop 0.3, then 10 corrupt ones) are held: the applied duty ages
+    lost = (t >= 1.05) & (t < 1.12)
+    ages = a["duty_age"][lost]
+    assert 0 < np.count_nonzero(ages > 0) < len(ages) and np.max(ages) >= 10
+    assert np.all(a["duty_age"][(t < 1.05) & (t > 0.5)] == 0)
+    # babble: 10 foreign PhaseSamples (200 Hz for 50 ms), rejected by their E2E CRC
+    assert runs[0].metrics["frames_rejected_by_reason"] == {"bad_crc": 10}
+    # the delay: duties 1 period older in the periods 1200 to 1249 (each row's duty_age
+    # is the age of the duty of the period before it)
+    k = np.rint(t / T_S)
+    assert set(a["duty_age"][(k > 1200) & (k <= 1250)]) == {1.0}
+    assert set(a["duty_age"][(k > 1250) & (t < 1.29)]) == {0.0}
+
+
+def test_silence_is_refused_in_lockstep_with_one_line(tmp_path: Path) -> None:
+    src = _scenario(tmp_path, [{"at_s": 1.0, "kind": "silence"}])
+    with pytest.raises(ScenarioError, match=r"faults\[0\]\.kind.*not implemented in lockstep"):
+        bench.run(src, estimator="sensored", out=tmp_path / "run")
