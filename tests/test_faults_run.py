@@ -162,9 +162,9 @@ def test_sensor_and_bus_faults_reach_the_controller_and_lockstep_stays_determini
     assert runs[0].metrics["frames_rejected_by_reason"] == {"bad_crc": 10}
     # the delay: duties 1 period older in the periods 1200 to 1249 (each row's duty_age
     # is the age of the duty of the period before it)
-    k = np.rint(t / T_S)
-    assert set(a["duty_age"][(k > 1200) & (k <= 1250)]) == {1.0}
-    assert set(a["duty_age"][(k > 1250) & (t < 1.29)]) == {0.0}
+    kk = np.rint(t / T_S)
+    assert set(a["duty_age"][(kk > 1200) & (kk <= 1250)]) == {1.0}
+    assert set(a["duty_age"][(kk > 1250) & (t < 1.29)]) == {0.0}
 
 
 def test_silence_is_refused_in_lockstep_with_one_line(tmp_path: Path) -> None:
