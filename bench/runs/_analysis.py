@@ -57,6 +57,7 @@ COLUMNS: tuple[tuple[str, str], ...] = (
     ("est_err", "estimator error signal, rad"),
     ("mode", "controller mode: 0 disabled, 1 align, 2 polarity test, 3 run, 4 fault (DBC)"),
     ("duty_age", "age of the duty applied in the previous period, PWM periods (255: none)"),
+    ("fault_active", "faults of the scenario's [[faults]] timeline active in period k, count"),
 )
 
 

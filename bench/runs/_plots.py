@@ -217,6 +217,18 @@ def _markers(ax: Any, t: Array, table: dict[str, Array], m: dict[str, Any], T_s:
     for i, (a, b) in enumerate(ramps):
         ax.axvspan(a, b, color="tab:brown", alpha=0.12, lw=0,
                    label="load ramp" if legend and i == 0 else None)  # fmt: skip
+    if "fault_active" in table:  # the [[faults]] windows, and each detection
+        for i, (a, b) in enumerate(_spans(table["fault_active"] > 0, t)):
+            ax.axvspan(a, max(b, a + w_min), facecolor="none", edgecolor="tab:red", hatch="//",
+                       alpha=0.35, lw=0, gid="fault",
+                       label="fault active" if legend and i == 0 else None)  # fmt: skip
+        seen = False
+        for f in m.get("faults") or []:
+            at = f.get("detected_at_s")
+            if at is not None and t_lo <= float(at) <= t_hi:
+                ax.axvline(float(at), color="tab:orange", lw=1.2, ls=(0, (4, 1)),
+                           label="fault detected" if legend and not seen else None)  # fmt: skip
+                seen = True
     k = int(m.get("plant_fault_step", -1) or -1)
     if m.get("plant_fault") not in (None, "none") and k >= 0 and t_lo <= k * T_s <= t_hi:
         ax.axvline(k * T_s, color="tab:red", lw=1.5,
@@ -252,6 +264,14 @@ def metrics_text(m: dict[str, Any]) -> str:
         lines.append(f"TRIP: {m['plant_fault']} (not a scenario result)")
     if m.get("lock_lost"):
         lines.append(f"LOCK LOST at {_fmt(m.get('lock_lost_at_s'), '.3f')} s")
+    for f in m.get("faults") or []:
+        seen = (
+            f"{f['detected_by']} +{_fmt(f.get('reaction_ms'), '.1f')} ms"
+            if f.get("detected_by")
+            else "not detected"
+        )
+        met = "" if f.get("met") is None else (", met" if f["met"] else ", MISSED")
+        lines.append(f"fault {f['kind']} @ {f['at_s']:g} s: {seen}{met}")
     return "\n".join(lines)
 
 

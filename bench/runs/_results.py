@@ -214,6 +214,7 @@ def finish_run(
     n_p = get_preset(scn).motor.n_p
     run_id = meta.get("run_id")
     cap = analyze_frames(frames, codec, T_s=T_s, n_p=n_p, run_id=run_id)
+    cap.table["fault_active"] = fault_active(cap.table["step"], scn, T_s)
     write_csv(str(out_dir / "signals.csv"), cap.table)
     (out_dir / "signals.md").write_text(signals_doc(codec))
     m: dict[str, Any] = compute_metrics(
@@ -533,6 +534,16 @@ def frames_warning(m: dict[str, Any]) -> str | None:
     if not parts:
         return None
     return f"warning: {'; '.join(parts)}: not scored"
+
+
+def fault_active(step: Any, scn: Scenario, T_s: float) -> Any:
+    """``signals.csv`` ``fault_active``: how many faults of the timeline cover each period."""
+    k = np.asarray(step, dtype=float)
+    out = np.zeros(len(k))
+    for f in scn.faults:
+        k0, k1 = f.periods(T_s)
+        out += (k >= k0) & (k < (math.inf if k1 is None else k1))
+    return out
 
 
 def outcome(m: dict[str, Any], T_s: float) -> tuple[int, list[str]]:
