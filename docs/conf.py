@@ -45,7 +45,7 @@ napoleon_numpy_docstring = True
 napoleon_use_rtype = False
 napoleon_use_ivar = True  # a class's "Attributes" section: fields, not a second entry per attribute
 autodoc_member_order = "bysource"
-autodoc_typehints = "description"
+autodoc_typehints = "signature"
 autodoc_typehints_format = "short"
 autodoc_default_options = {"members": True, "undoc-members": True, "show-inheritance": True}
 
@@ -170,6 +170,15 @@ def _constants_directive() -> Any:
     return PublicConstants
 
 
+def _no_protocol_signature(
+    app: Any, what: str, name: str, obj: Any, options: Any, signature: str | None, ret: str | None
+) -> tuple[str, str | None] | None:
+    """A :class:`typing.Protocol` (``controller.Estimator``) is implemented, not called."""
+    if what == "class" and signature == "(*args, **kwargs)":
+        return "", ret
+    return None
+
+
 def setup(app: Any) -> None:
     app.add_directive("hil-options", _hil_options_directive())
     app.add_directive("public-constants", _constants_directive())
@@ -177,3 +186,4 @@ def setup(app: Any) -> None:
     app.config.public_names = _public_names()
     app.connect("autodoc-process-docstring", _undocumented)
     app.connect("autodoc-skip-member", _keep_public)
+    app.connect("autodoc-process-signature", _no_protocol_signature)
