@@ -179,7 +179,42 @@ def _no_protocol_signature(
     return None
 
 
+def _repository_links() -> Any:
+    """Links of the guides to repository files that are not pages: shown as their text.
+
+    A guide links ``../bench/scenarios`` or ``../CONTRIBUTING.md`` for a
+    reader of the repository; on the site these are not pages, so the link
+    keeps its text and loses its target.  A link to a path that exists
+    nowhere is left to MyST, which warns (an error under ``-W``).
+    """
+    from docutils import nodes
+    from sphinx import addnodes
+    from sphinx.transforms.post_transforms import SphinxPostTransform
+
+    class RepositoryLinks(SphinxPostTransform):
+        default_priority = 5  # before MyST's resolver (9)
+
+        def _in_repository(self, node: Any) -> bool:
+            target = str(node["reftarget"])
+            here = Path(self.env.doc2path(node.get("refdoc", self.env.docname))).parent
+            if node.get("refdomain") == "doc":
+                if target in self.env.all_docs:
+                    return False
+                paths = [Path(self.env.srcdir) / f"{target}.md", Path(f"{target}.md")]
+            else:
+                paths = [here / target, ROOT / target]
+            return any(ROOT in p.resolve().parents and p.resolve().exists() for p in paths)
+
+        def run(self, **kwargs: Any) -> None:
+            for node in list(self.document.findall(addnodes.pending_xref)):
+                if node.get("reftype") == "myst" and self._in_repository(node):
+                    node.replace_self(nodes.inline("", "", *node.children))
+
+    return RepositoryLinks
+
+
 def setup(app: Any) -> None:
+    app.add_post_transform(_repository_links())
     app.add_directive("hil-options", _hil_options_directive())
     app.add_directive("public-constants", _constants_directive())
     app.add_config_value("public_names", set(), "env")

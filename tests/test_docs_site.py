@@ -121,3 +121,20 @@ def test_a_public_name_without_a_docstring_is_a_warning(caplog: pytest.LogCaptur
     data: list[str] = ["int([x]) -> integer"]  # not its type's docstring either
     conf._undocumented(App, "data", "plant_rt.FAULT_NONE", 0, None, data)
     assert data and "no fault" in " ".join(data)
+
+
+def _build_page(tmp_path: Path, text: str) -> subprocess.CompletedProcess[str]:
+    """A one-page site with docs/conf.py (``-c``): what ``-W`` makes of ``text``."""
+    src = tmp_path / "src"
+    src.mkdir(parents=True)
+    (src / "index.md").write_text(text)
+    cmd = [sys.executable, "-m", "sphinx", "-W", "-q", "-b", "html", "-c", str(DOCS)]
+    cmd += [str(src), str(tmp_path / "html")]
+    return subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=120)
+
+
+def test_a_broken_link_fails_and_a_link_to_a_repository_file_does_not(tmp_path: Path) -> None:
+    ok = _build_page(tmp_path / "ok", "# Page\n\nThe DBC: [`dbc/bench.dbc`](dbc/bench.dbc).\n")
+    assert ok.returncode == 0, ok.stderr[-3000:]
+    bad = _build_page(tmp_path / "bad", "# Page\n\nSee [the guide](NO_SUCH_GUIDE.md).\n")
+    assert bad.returncode != 0 and "NO_SUCH_GUIDE" in bad.stderr, bad.stderr[-3000:]
