@@ -65,7 +65,7 @@ docs-site: $(STAMP)
 	$(BIN)/sphinx-build -W --keep-going -q -b html docs docs/_build/html
 
 rtcheck: $(STAMP)
-	$(BIN)/bench rtcheck --out docs/realtime --doc docs/REALTIME.md --doc README.md
+	$(BIN)/bench rtcheck --out docs/realtime --doc docs/REALTIME.md
 
 # Reliability: fuzzing, injected faults, kills, signals, load and parallel runs;
 # docs/reliability/soak.json and docs/RELIABILITY.md rendered from it (a few minutes).
