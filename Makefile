@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test lint unit vcan suite reference perf docs rtcheck reliability clean
+.PHONY: demo test lint unit vcan suite reference perf docs docs-site rtcheck reliability clean
 
 # pip builds the compiled plant and controller engines (setup.py); tools/need-cc
 # installs their compiler and headers first when it may, and the last lines say
@@ -13,7 +13,7 @@ $(STAMP): pyproject.toml setup.py plant_rt/_cplant.c controller/_cctl.c
 	test -x $(BIN)/pip || tools/make-venv $(PYTHON) $(VENV)
 	tools/need-cc $(BIN)/python
 	$(BIN)/python -m pip install -q --upgrade pip
-	$(BIN)/python -m pip install -q -e '.[dev,dask]'
+	$(BIN)/python -m pip install -q -e '.[dev,dask,docs]'
 	$(BIN)/python -c 'import plant_rt; w = plant_rt.compiled_engine_missing(); w and print(w)'
 	$(BIN)/python -c 'import controller; w = controller.compiled_controller_missing(); w and print(w)'
 	touch $(STAMP)
@@ -59,8 +59,13 @@ perf: $(STAMP)
 docs: $(STAMP)
 	$(BIN)/bench schema --doc docs/SCENARIOS.md
 
+# The reference site: the guides (docs/*.md) and the API reference from the
+# docstrings (docs/conf.py), warnings as errors, into docs/_build/html.
+docs-site: $(STAMP)
+	$(BIN)/sphinx-build -W --keep-going -q -b html docs docs/_build/html
+
 rtcheck: $(STAMP)
-	$(BIN)/bench rtcheck --out docs/realtime --doc docs/REALTIME.md --doc README.md
+	$(BIN)/bench rtcheck --out docs/realtime --doc docs/REALTIME.md
 
 # Reliability: fuzzing, injected faults, kills, signals, load and parallel runs;
 # docs/reliability/soak.json and docs/RELIABILITY.md rendered from it (a few minutes).

@@ -131,7 +131,7 @@ class Run:
 
     @property
     def ok(self) -> bool:
-        """True when the run is a result: exit status 0."""
+        """Whether the run is a result (exit status 0)."""
         return self.exit_status == 0
 
 

@@ -33,7 +33,7 @@ EXIT_USER_ERROR = 2
 #: protection (every file written; the metrics are not a scenario result).
 EXIT_PLANT_TRIPPED = 3
 #: Exit status of ``bench run`` / ``bench analyze`` when the estimator lost the
-#: rotor angle (|dtheta| > 90 deg electrical for more than 50 ms after the
+#: rotor angle (``|dtheta|`` > 90 deg electrical for more than 50 ms after the
 #: scoring start; every file written).
 EXIT_LOCK_LOST = 4
 #: Exit status of ``bench run`` when the controller under test held bench

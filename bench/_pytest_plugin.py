@@ -122,7 +122,7 @@ class Hil:
 
 @pytest.fixture
 def hil(request: pytest.FixtureRequest, tmp_path: Path) -> Hil:
-    """Runs on the bench for this test: ``hil.run(scenario, estimator=..., ...)`` (docs/TESTING.md)."""
+    """The runs on the bench of this test, ``hil.run(scenario, estimator=..., ...)`` (docs/TESTING.md)."""
     return Hil(request, tmp_path)
 
 

@@ -46,7 +46,7 @@ def _span(run: Run) -> str:
 
 
 def assert_lock_kept(run: Run) -> None:
-    """The estimator kept the rotor angle (``lock_lost`` false: never |dtheta| > 90 deg
+    """The estimator kept the rotor angle (``lock_lost`` false: never ``|dtheta|`` > 90 deg
     electrical for more than 50 ms after the scoring start; the plant did not trip)."""
     m = run.metrics
     if m.get("lock_lost"):

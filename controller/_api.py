@@ -87,10 +87,15 @@ class ControlOutput:
     i_q: float = 0.0
 
 
+#: Controller mode (``ControlOutput.mode``, the DBC's ``mode`` values): disabled.
 MODE_DISABLED = 0
-MODE_ALIGN = 1  # standstill: HF estimator converging, speed loop held
-MODE_POLARITY = 2  # magnet polarity test (d-axis current pulses)
-MODE_RUN = 3  # speed loop released
+#: Controller mode: standstill, HF estimator converging, speed loop held.
+MODE_ALIGN = 1
+#: Controller mode: magnet polarity test (d-axis current pulses).
+MODE_POLARITY = 2
+#: Controller mode: speed loop released.
+MODE_RUN = 3
+#: Controller mode: fault (the DBC's value table of the telemetry's ``mode``).
 MODE_FAULT = 4
 
 

@@ -26,7 +26,9 @@ import numpy as np
 
 #: Coefficients (numerator, denominator) of Wen eqs. (11)-(13), highest power first.
 BPF_WEN: tuple[tuple[float, ...], tuple[float, ...]] = ((628.0, 0.0), (1.0, 628.0, 9859600.0))
+#: The high-pass filter of Wen eqs. (11)-(13), as :data:`BPF_WEN`.
 HPF_WEN: tuple[tuple[float, ...], tuple[float, ...]] = ((1.0, 0.0), (1.0, 1256.0))
+#: The low-pass filter of Wen eqs. (11)-(13), as :data:`BPF_WEN`.
 LPF_WEN: tuple[tuple[float, ...], tuple[float, ...]] = ((628.0,), (1.0, 628.0))
 
 

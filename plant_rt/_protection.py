@@ -28,10 +28,15 @@ __all__ = [
     "ProtectionPars",
 ]
 
+#: Fault code (``PlantStatus.fault_code``): no fault.
 FAULT_NONE = 0
+#: Fault code: the duty frames stopped (the plant's duty watchdog).
 FAULT_WATCHDOG = 1
+#: Fault code: a phase current above the limit.
 FAULT_OVER_CURRENT = 2
+#: Fault code: the DC-link voltage above the limit.
 FAULT_OVER_VOLTAGE = 3
+#: Fault code: the mechanical speed above the limit.
 FAULT_OVER_SPEED = 4
 FAULT_NAMES: dict[int, str] = {
     FAULT_NONE: "none",

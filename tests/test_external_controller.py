@@ -156,7 +156,7 @@ def test_the_controller_reads_no_plant_truth() -> None:
 
 
 def test_the_controller_runs_where_the_truth_comes_every_tenth_period(tmp_path: Path) -> None:
-    """The plant sends PlantTruth every 10th period only (``--truth-every 10``, README's
+    """The plant sends PlantTruth every 10th period only (``--truth-every 10``, docs/HARDWARE.md's
     real bus): a controller that waited for the truth of each period would stall (a
     lockstep watchdog trip); the test controller, which reads PositionSensor, answers
     every period, and its angle stays within the encoder's bound."""

@@ -4,8 +4,8 @@ Two processes on one SocketCAN bus: ``firmware/ref_controller`` (C, raw
 AF_CAN sockets with CAN FD, built from the C code `bench codegen` generates)
 and ``bench run SCENARIO --controller external``, which starts the plant,
 paces the scenario's commands, records every frame and scores the run, as a
-user puts a real controller under test (README, "Connect a real drive
-controller").
+user puts a real controller under test (docs/HARDWARE.md, "Connect a real
+drive controller").
 """
 
 from __future__ import annotations

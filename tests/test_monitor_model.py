@@ -367,7 +367,7 @@ def test_reader_thread_feeds_every_frame_and_never_sends(codec: Codec) -> None:
 
 
 def test_screenshot_renders_the_view_of_known_frames(codec: Codec, tmp_path) -> None:
-    """The README's picture: the view drawn headless to SVG holds the decoded numbers."""
+    """docs/USAGE.md's picture: the view drawn headless to SVG holds the decoded numbers."""
     from bench.monitor._screenshot import paced, screenshot
 
     frames = [m for k in range(400) for m in known.period_frames(codec, k)]

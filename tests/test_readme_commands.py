@@ -1,4 +1,5 @@
-"""Every command block of the README runs as written, in order, on a copy of the repository.
+"""Every command block of the README and of the guides its reference moved to runs as written,
+in order, on a copy of the repository.
 
 A fenced ``sh`` block is run with bash (``set -e``: every command must exit 0)
 unless the line before it is ``<!-- readme-test: skip (reason) -->``, which
@@ -25,6 +26,9 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
+#: The files whose command blocks run here, in this order: the README, then the guides of
+#: the bench's use (docs/USAGE.md: the README's runs/demo is there by then).
+FILES = ("README.md", "docs/USAGE.md", "docs/HARDWARE.md", "docs/SUITE.md", "docs/DEVELOPMENT.md")
 README = (ROOT / "README.md").read_text(encoding="utf-8")
 #: Simulated seconds of every ``bench run`` of the README here.
 DURATION = 1.2
@@ -46,6 +50,15 @@ def blocks(text: str) -> list[tuple[int, str, str | None]]:
             out.append((i + 1, "\n".join(lines[i + 1 : j]), m.group(1) if m else None))
             i = j
         i += 1
+    return out
+
+
+def all_blocks() -> list[tuple[str, str, str | None]]:
+    """``(file and line, code, skip reason or None)`` of every block of :data:`FILES`."""
+    out = []
+    for name in FILES:
+        for line, code, why in blocks((ROOT / name).read_text(encoding="utf-8")):
+            out.append((f"{name} line {line}", code, why))
     return out
 
 
@@ -77,7 +90,7 @@ def runnable(code: str) -> str:
 
 
 def test_the_readme_marks_what_it_does_not_run() -> None:
-    found = blocks(README)
+    found = all_blocks()
     run = [b for b in found if b[2] is None]
     skipped = [b for b in found if b[2] is not None]
     assert len(run) >= 4 and len(skipped) >= 4
@@ -118,7 +131,7 @@ def test_every_readme_command_block_runs_as_written(tmp_path: Path) -> None:
             (work / entry.name).symlink_to(entry)
     env = dict(os.environ, PATH=f"{Path(sys.executable).parent}:{os.environ['PATH']}")
     env.pop("CAN_INTERFACE", None)
-    for line, code, why in blocks(README):
+    for where, code, why in all_blocks():
         if why is not None:
             continue
         script = "set -euo pipefail\n" + runnable(code)
@@ -127,14 +140,14 @@ def test_every_readme_command_block_runs_as_written(tmp_path: Path) -> None:
             timeout=600,
         )  # fmt: skip
         assert r.returncode == 0, (
-            f"README.md line {line}: exit {r.returncode}\n{script}\n--- stdout\n"
+            f"{where}: exit {r.returncode}\n{script}\n--- stdout\n"
             f"{r.stdout[-2000:]}\n--- stderr\n{r.stderr[-3000:]}"
         )
     assert (work / "runs" / "demo" / "run.png").is_file()
 
 
-def test_the_readmes_real_time_block_is_rtchecks() -> None:
+def test_the_real_time_block_is_rtchecks() -> None:
     from bench.studies._rtcheck import render_doc_block
 
     res = json.loads((ROOT / "docs" / "realtime" / "rtcheck.json").read_text())
-    assert render_doc_block(res) in README
+    assert render_doc_block(res) in (ROOT / "docs" / "REALTIME.md").read_text()

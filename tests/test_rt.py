@@ -144,7 +144,7 @@ def test_a_realtime_run_that_did_not_keep_time_gets_a_warning() -> None:
     from bench.runs._results import realtime_warning
 
     clean = {"steps": 3000, "late_duty_periods": 20, "deadline_misses": 3, "jitter_us": {}}
-    assert realtime_warning(clean) is None  # 0.7 %: within what the README states
+    assert realtime_warning(clean) is None  # 0.7 %: within what docs/USAGE.md states
     bad = {"steps": 3000, "late_duty_periods": 243, "deadline_misses": 203,
            "jitter_us": {"max": 114000.0}}  # fmt: skip
     line = realtime_warning(bad)

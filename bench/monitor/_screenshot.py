@@ -1,4 +1,4 @@
-"""A picture of the monitor's view of known frames (the README's screenshot).
+"""A picture of the monitor's view of known frames (docs/USAGE.md's screenshot).
 
 The frames of a run (a capture, or a scenario run in this process) are fed
 to the model as the bus would deliver them, up to an instant, and the view is

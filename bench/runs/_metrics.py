@@ -515,7 +515,7 @@ def band_metrics(
     loop: SpeedLoop,
     score_from_s: float = 0.0,
 ) -> dict[str, Any]:
-    """The per-band metrics of a hybrid estimator's run (README, ``metrics.json``).
+    """The per-band metrics of a hybrid estimator's run (docs/PAPERS.md, ``metrics.json``).
 
     ``edges`` (rad/s, electrical) split the scored rows on the *true* speed
     into below / inside / above the transition band

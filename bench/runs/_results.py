@@ -602,7 +602,7 @@ def realtime_warning(m: dict[str, Any]) -> str | None:
     return (
         f"warning: real time not kept: {100 * late:.1f} % of periods ran with a late duty, "
         f"{100 * over:.1f} % started late (worst wake-up {worst:.1f} ms){host}; the figures "
-        "include this machine's scheduling, not only the controller (see README, --rt-priority)"
+        "include this machine's scheduling, not only the controller (see docs/USAGE.md, --rt-priority)"
     )
 
 
