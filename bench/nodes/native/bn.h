@@ -53,7 +53,7 @@ typedef struct {
  * arbitration_id, is_extended_id, is_remote_frame, is_error_frame, channel,
  * dlc, data, is_fd, bitrate_switch, error_state_indicator).  */
 
-/* Longest datagram bn_mp_pack writes (64 data bytes): 238 bytes. */
+/* Room for the longest datagram bn_mp_pack writes (64 data bytes: 220 bytes). */
 #define BN_MP_MAX 256
 
 /* Pack f into out (cap bytes); the number of bytes, 0 when cap is too small. */
@@ -75,8 +75,9 @@ typedef struct {
     struct sockaddr_storage dest;   /* UDP: the group and port */
     socklen_t dest_len;
     uint8_t buf[BN_MP_MAX + 64];    /* UDP datagram (a longer one is malformed) */
+    int64_t send_wait_ns;           /* bn_send waits this long for room (open: 1 ms) */
     /* counters */
-    uint64_t rx, tx, rx_malformed, tx_errors;
+    uint64_t rx, tx, rx_malformed, tx_errors, tx_waits;
 } bn_bus_t;
 
 /* Join python-can's udp_multicast bus: group (IPv6 "ff15:..." or IPv4
@@ -90,7 +91,10 @@ int bn_udp_open(bn_bus_t *b, const char *group, uint16_t port, int hop_limit, in
  * Own frames are not looped back to this socket.  0 or -errno. */
 int bn_can_open(bn_bus_t *b, const char *ifname, bool fd);
 
-/* Send one frame.  0, or -errno (the frame is counted in tx_errors). */
+/* Send one frame.  A full socket (EAGAIN, ENOBUFS: the kernel has not yet
+ * freed the datagrams or frames sent before) is waited on for at most
+ * b->send_wait_ns; python-can's send blocks instead.  0, or -errno (the frame
+ * is counted in tx_errors; a wait is counted in tx_waits). */
 int bn_send(bn_bus_t *b, const bn_frame_t *f);
 
 /* Receive one frame, waiting no later than deadline_ns (CLOCK_MONOTONIC ns;

@@ -40,6 +40,7 @@ static void bus_reset(bn_bus_t *b, int kind)
     memset(b, 0, sizeof *b);
     b->kind = kind;
     b->fd = -1;
+    b->send_wait_ns = 1000000;
 }
 
 static int fail(bn_bus_t *b)
@@ -65,6 +66,10 @@ int bn_udp_open(bn_bus_t *b, const char *group, uint16_t port, int hop_limit, in
         setsockopt(b->fd, SOL_SOCKET, SO_REUSEPORT, &one, sizeof one) < 0) {
         return fail(b);
     }
+    /* a datagram's memory stays charged to this socket until the device has sent it;
+     * a larger send buffer rides out a descheduled transmit completion */
+    int sndbuf = 1 << 20;
+    (void)setsockopt(b->fd, SOL_SOCKET, SO_SNDBUFFORCE, &sndbuf, sizeof sndbuf);
     if (rcvbuf > 0 &&
         setsockopt(b->fd, SOL_SOCKET, SO_RCVBUFFORCE, &rcvbuf, sizeof rcvbuf) < 0) {
         (void)setsockopt(b->fd, SOL_SOCKET, SO_RCVBUF, &rcvbuf, sizeof rcvbuf); /* best effort */
@@ -158,42 +163,69 @@ int bn_can_open(bn_bus_t *b, const char *ifname, bool fd)
     return 0;
 }
 
+/* The bytes of one frame on the socket: (pointer, length) in *p, *n; 0 or -errno. */
+static int encode(bn_bus_t *b, const bn_frame_t *f, struct canfd_frame *fr, const void **p,
+                  size_t *n)
+{
+    if (b->kind == BN_BUS_UDP) {
+        *n = bn_mp_pack(f, (double)bn_realtime_ns() * 1e-9, b->buf, sizeof b->buf);
+        *p = b->buf;
+        return *n ? 0 : -EMSGSIZE;
+    }
+    bool is_fd = (f->flags & BN_FD) != 0 || f->len > CAN_MAX_DLEN;
+    if (f->len > (is_fd ? CANFD_MAX_DLEN : CAN_MAX_DLEN) || (is_fd && !b->can_fd)) {
+        return -EMSGSIZE;
+    }
+    memset(fr, 0, sizeof *fr);
+    fr->can_id = f->id | ((f->flags & BN_EXT) ? CAN_EFF_FLAG : 0) |
+                 ((f->flags & BN_RTR) ? CAN_RTR_FLAG : 0);
+    fr->len = f->len;
+    if (is_fd) {
+        fr->flags = (uint8_t)(((f->flags & BN_BRS) ? CANFD_BRS : 0) |
+                              ((f->flags & BN_ESI) ? CANFD_ESI : 0));
+    }
+    memcpy(fr->data, f->data, f->len);
+    *p = fr;
+    *n = is_fd ? CANFD_MTU : CAN_MTU;
+    return 0;
+}
+
 int bn_send(bn_bus_t *b, const bn_frame_t *f)
 {
-    ssize_t want, got;
-    if (b->kind == BN_BUS_UDP) {
-        size_t n = bn_mp_pack(f, (double)bn_realtime_ns() * 1e-9, b->buf, sizeof b->buf);
-        want = (ssize_t)n;
-        got = n ? sendto(b->fd, b->buf, n, 0, (struct sockaddr *)&b->dest, b->dest_len) : -1;
-        if (!n) {
-            errno = EMSGSIZE;
+    struct canfd_frame fr;
+    const void *p;
+    size_t n;
+    int r = encode(b, f, &fr, &p, &n);
+    int64_t deadline = 0;
+    while (r == 0) {
+        ssize_t got = b->kind == BN_BUS_UDP
+                          ? sendto(b->fd, p, n, 0, (struct sockaddr *)&b->dest, b->dest_len)
+                          : write(b->fd, p, n);
+        if (got == (ssize_t)n) {
+            b->tx++;
+            return 0;
         }
-    } else {
-        struct canfd_frame fr;
-        bool is_fd = (f->flags & BN_FD) != 0 || f->len > CAN_MAX_DLEN;
-        if (f->len > (is_fd ? CANFD_MAX_DLEN : CAN_MAX_DLEN) || (is_fd && !b->can_fd)) {
-            b->tx_errors++;
-            return -EMSGSIZE;
+        r = got < 0 ? -errno : -EIO;
+        if (r != -EAGAIN && r != -EWOULDBLOCK && r != -ENOBUFS && r != -EINTR) {
+            break;
         }
-        memset(&fr, 0, sizeof fr);
-        fr.can_id = f->id | ((f->flags & BN_EXT) ? CAN_EFF_FLAG : 0) |
-                    ((f->flags & BN_RTR) ? CAN_RTR_FLAG : 0);
-        fr.len = f->len;
-        if (is_fd) {
-            fr.flags = (uint8_t)(((f->flags & BN_BRS) ? CANFD_BRS : 0) |
-                                 ((f->flags & BN_ESI) ? CANFD_ESI : 0));
+        int64_t now = bn_now_ns();
+        if (deadline == 0) {
+            deadline = now + b->send_wait_ns;
+            b->tx_waits++;
         }
-        memcpy(fr.data, f->data, f->len);
-        want = is_fd ? (ssize_t)CANFD_MTU : (ssize_t)CAN_MTU;
-        got = write(b->fd, &fr, (size_t)want);
+        if (now >= deadline) {
+            break;
+        }
+        /* ENOBUFS (a full CAN queue) does not wake poll: look again within 50 us */
+        int64_t wait = deadline - now < 50000 ? deadline - now : 50000;
+        struct pollfd pf = {b->fd, POLLOUT, 0};
+        struct timespec ts = {0, (long)wait};
+        (void)ppoll(&pf, 1, &ts, NULL);
+        r = 0;
     }
-    if (got != want) {
-        int e = got < 0 ? errno : EIO;
-        b->tx_errors++;
-        return -e;
-    }
-    b->tx++;
-    return 0;
+    b->tx_errors++;
+    return r;
 }
 
 /* One datagram or frame without waiting: 1, 0 (none), -errno. */

@@ -19,7 +19,7 @@
  *   -P  ping mode, N round trips; -w the wait for each answer (ms, default 100)
  * Prints READY when listening, and a summary line at the end:
  *   echo: answered=A rejected=R ignored=I malformed=M send_errors=E
- *   ping: sent=N answered=A rtt_us median=.. p99=.. max=..
+ *   ping: sent=S answered=A send_errors=E rtt_us median=.. p99=.. max=..
  * No allocation after the bus is open.
  */
 #include <signal.h>
@@ -124,7 +124,8 @@ static int run_echo(bn_bus_t *bus, long limit, double idle_s)
 
 static int run_ping(bn_bus_t *bus, long n, double wait_ms)
 {
-    long answered = 0, kept = 0;
+    long answered = 0, kept = 0, send_errors = 0;
+    int last_err = 0;
     int64_t wait_ns = (int64_t)(wait_ms * 1e6);
     bn_frame_t in, out;
     struct bench_dbc_phase_samples_t s;
@@ -140,7 +141,10 @@ static int run_ping(bn_bus_t *bus, long n, double wait_ms)
         bench_e2e_protect(BENCH_E2E_PHASE_SAMPLES_DATA_ID, out.data, out.len,
                           BENCH_E2E_PHASE_SAMPLES_CRC_INDEX);
         int64_t t0 = bn_now_ns();
-        if (bn_send(bus, &out) != 0) {
+        int err = bn_send(bus, &out);
+        if (err != 0) {
+            send_errors++;
+            last_err = -err;
             continue;
         }
         int64_t deadline = t0 + wait_ns;
@@ -170,8 +174,11 @@ static int run_ping(bn_bus_t *bus, long n, double wait_ms)
         p99 = rtt_ns[(kept * 99) / 100] * 1e-3;
         max = rtt_ns[kept - 1] * 1e-3;
     }
-    printf("ping: sent=%ld answered=%ld rtt_us median=%.1f p99=%.1f max=%.1f\n", n, answered,
-           med, p99, max);
+    printf("ping: sent=%ld answered=%ld send_errors=%ld rtt_us median=%.1f p99=%.1f max=%.1f\n",
+           n - send_errors, answered, send_errors, med, p99, max);
+    if (send_errors) {
+        fprintf(stderr, "ping: last send error: %s\n", strerror(last_err));
+    }
     return answered == n ? 0 : 1;
 }
 
