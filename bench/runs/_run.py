@@ -41,6 +41,7 @@ from bench._errors import BenchError, CommandsLost
 from bench.nodes._counters import RejectionSummary, rejection_text
 from bench.nodes._loops import STALL_S, trip_text
 from bench.runs._analysis import NoRowsError
+from bench.runs._busfit import check_bus_rate
 from bench.runs._pacing import PACE_EVERY, CommandPacer
 from bench.runs._processes import (
     ended_early,
@@ -141,6 +142,8 @@ def run_scenario(
     external = controller == EXTERNAL
     if external:
         estimator = EXTERNAL
+    if note := check_bus_rate(scn, spec, mode=mode, external=external, codec=codec):
+        print(note, file=sys.stderr, flush=True)  # above 100 % in real time: refused (raises)
     out_dir.mkdir(parents=True, exist_ok=True)
     # an earlier run's files in the same folder would mix with these (scenario.json:
     # bench run --monitor has just written this run's)

@@ -36,8 +36,11 @@ the DBC is counted as ``ceil(n / 8)`` classic frames (its payload split).
 
 from __future__ import annotations
 
+import json
 import math
-from collections.abc import Iterable, Sequence
+import shutil
+import subprocess
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -48,11 +51,16 @@ __all__ = [
     "LAYOUTS",
     "PRACTICAL_LOAD",
     "Bus",
+    "RateFit",
+    "bus_of",
     "busload_table",
     "classic_frame_bits",
     "fd_frame_bits",
     "format_busload",
     "frame_time_us",
+    "link_bitrates",
+    "parse_link_bitrates",
+    "rate_fit",
 ]
 
 PRACTICAL_LOAD = 0.8
@@ -204,6 +212,25 @@ def _message_time_us(length: int, is_fd: bool, extended: bool, bus: Bus, worst: 
     return frame_time_us(length, fd=False, bitrate=bus.bitrate, extended=extended, worst=worst)
 
 
+def _background(codec: Codec, bus: Bus) -> float:
+    """Load of the messages with a ``GenMsgCycleTime`` (independent of the PWM rate)."""
+    background = 0.0
+    for m in codec.db.messages:
+        if m.cycle_time:
+            t = _message_time_us(m.length, m.is_fd, m.is_extended_frame, bus, True)
+            background += t / (float(m.cycle_time) * 1e3)
+    return background
+
+
+def _period_us(codec: Codec, frames: Mapping[str, float], bus: Bus, worst: bool) -> float:
+    """Wire time per PWM period of ``frames`` (message name to frames per period)."""
+    t = 0.0
+    for name, per_period in frames.items():
+        m = codec.message(name)
+        t += per_period * _message_time_us(m.length, m.is_fd, m.is_extended_frame, bus, worst)
+    return t
+
+
 def busload_table(
     codec: Codec,
     rates: Sequence[float] = (1e3, 4e3, 10e3),
@@ -243,18 +270,12 @@ def busload_table(
     """
     layouts = LAYOUTS if layouts is None else layouts
     rows: list[dict[str, Any]] = []
-    periodic = [m for m in codec.db.messages if m.cycle_time]
     for bus in buses:
-        background = 0.0
-        for m in periodic:
-            t = _message_time_us(m.length, m.is_fd, m.is_extended_frame, bus, True)
-            background += t / (float(m.cycle_time or 0) * 1e3)
+        background = _background(codec, bus)
         for layout, names in layouts.items():
-            t_min = t_max = 0.0
-            for name in names:
-                m = codec.message(name)
-                t_min += _message_time_us(m.length, m.is_fd, m.is_extended_frame, bus, False)
-                t_max += _message_time_us(m.length, m.is_fd, m.is_extended_frame, bus, True)
+            once = dict.fromkeys(names, 1.0)
+            t_min = _period_us(codec, once, bus, False)
+            t_max = _period_us(codec, once, bus, True)
             rows.append(
                 {
                     "layout": layout,
@@ -274,6 +295,90 @@ def busload_table(
                 }
             )
     return rows
+
+
+@dataclass(frozen=True, slots=True)
+class RateFit:
+    """How a PWM rate fits a bus (worst-case stuffing, low-rate frames included).
+
+    ``load``: fraction of the bus at ``rate_hz``; ``max_rate_hz``: the highest
+    PWM rate at 100 % load; ``max_rate_hz_practical``: at :data:`PRACTICAL_LOAD`.
+    """
+
+    bus: Bus
+    rate_hz: float
+    load: float
+    max_rate_hz: float
+    max_rate_hz_practical: float
+
+
+def rate_fit(codec: Codec, frames: Mapping[str, float], bus: Bus, rate_hz: float) -> RateFit:
+    """The load of ``frames`` (message name to frames per PWM period) at ``rate_hz`` on ``bus``.
+
+    The same figures as :func:`busload_table`, for one layout, bus and rate; a
+    fractional count is a frame sent every few periods (``PositionSensor``).
+    """
+    background = _background(codec, bus)
+    t = _period_us(codec, frames, bus, True) * 1e-6
+    inf = math.inf
+    return RateFit(
+        bus,
+        rate_hz,
+        background + rate_hz * t,
+        (1.0 - background) / t if t > 0 else inf,
+        (PRACTICAL_LOAD - background) / t if t > 0 else inf,
+    )
+
+
+def bus_of(bitrate: float, data_bitrate: float | None = None) -> Bus:
+    """The :class:`Bus` of an interface's bit rates: CAN FD when it has a data bit rate."""
+
+    def short(r: float) -> str:
+        return f"{r / 1e6:g}M" if r >= 1e6 else f"{r / 1e3:g}k"
+
+    if data_bitrate:
+        return Bus(
+            f"FD {short(bitrate)}/{short(data_bitrate)}", float(bitrate), float(data_bitrate)
+        )
+    return Bus(f"classic {short(bitrate)}", float(bitrate))
+
+
+def parse_link_bitrates(ip_json: str) -> tuple[int, int | None] | None:
+    """Bit rates of a CAN device from ``ip -details -json link show dev DEV``.
+
+    ``(bitrate, data_bitrate)`` (``data_bitrate`` None when CAN FD is off), or
+    None for a device without bit timing (vcan, a device that is down and unset).
+    """
+    try:
+        (link,) = json.loads(ip_json)
+        data = link["linkinfo"]["info_data"]
+        bitrate = int(data["bittiming"]["bitrate"])
+    except (ValueError, KeyError, TypeError):
+        return None
+    if bitrate <= 0:
+        return None
+    dbt = data.get("data_bittiming") or {}
+    data_bitrate = int(dbt.get("bitrate") or 0)
+    return bitrate, (data_bitrate if data_bitrate > 0 else None)
+
+
+def link_bitrates(device: str) -> tuple[int, int | None] | None:
+    """Bit rates the kernel has set on a SocketCAN device (``ip link``), or None (vcan,
+    no ``ip`` command, unknown device)."""
+    ip = shutil.which("ip")
+    if ip is None:
+        return None
+    try:
+        res = subprocess.run(
+            [ip, "-details", "-json", "link", "show", "dev", device],
+            capture_output=True,
+            text=True,
+            timeout=5,
+            check=False,
+        )
+    except (OSError, subprocess.SubprocessError):
+        return None
+    return parse_link_bitrates(res.stdout) if res.returncode == 0 else None
 
 
 def _khz(x: float) -> str:

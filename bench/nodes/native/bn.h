@@ -1,0 +1,190 @@
+/* The native node loop's library: transports, the period clock and its counters.
+ *
+ * No allocation after the open/init calls: every buffer is in the structs
+ * below or given by the caller.  Layout and what is left: __init__.py beside
+ * this file.
+ *
+ *   bn_frame_t       one CAN or CAN FD frame (what both transports carry)
+ *   bn_bus_t         a transport: python-can's udp_multicast wire format
+ *                    (bn_udp_open) or a SocketCAN raw socket (bn_can_open)
+ *   bn_mp_pack/unpack the udp_multicast datagram: python-can's msgpack map
+ *   bn_clock_t       absolute CLOCK_MONOTONIC deadlines (clock_nanosleep
+ *                    TIMER_ABSTIME) with an optional busy-wait tail, missed
+ *                    deadlines and busy time per period
+ *   bn_rt_apply      SCHED_FIFO, mlockall, CPU pin; what was granted
+ *   bn_timing_run    the clock alone for N periods (measurement and tests)
+ */
+#ifndef BN_H
+#define BN_H
+
+#include <stdbool.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <sys/socket.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/* ---- frames ------------------------------------------------------------ */
+
+#define BN_MAX_DATA 64
+
+enum {
+    BN_EXT = 1u << 0, /* 29-bit identifier */
+    BN_FD = 1u << 1,  /* CAN FD frame */
+    BN_BRS = 1u << 2, /* FD bit-rate switch */
+    BN_ESI = 1u << 3, /* FD error state indicator */
+    BN_RTR = 1u << 4, /* remote frame */
+    BN_ERR = 1u << 5  /* error frame */
+};
+
+typedef struct {
+    uint32_t id;                /* identifier, without flag bits */
+    uint8_t len;                /* payload bytes, 0..64 */
+    uint8_t flags;              /* BN_* */
+    uint8_t data[BN_MAX_DATA];
+    int64_t t_ns;               /* receive time, CLOCK_REALTIME ns (0: unknown) */
+} bn_frame_t;
+
+/* ---- python-can udp_multicast wire format ---------------------------------
+ * One datagram per frame: a msgpack map of the eleven keys python-can's
+ * can/interfaces/udp_multicast/utils.py pack_message writes (timestamp,
+ * arbitration_id, is_extended_id, is_remote_frame, is_error_frame, channel,
+ * dlc, data, is_fd, bitrate_switch, error_state_indicator).  */
+
+/* Room for the longest datagram bn_mp_pack writes (64 data bytes: 220 bytes). */
+#define BN_MP_MAX 256
+
+/* Pack f into out (cap bytes); the number of bytes, 0 when cap is too small. */
+size_t bn_mp_pack(const bn_frame_t *f, double timestamp_s, uint8_t *out, size_t cap);
+
+/* Unpack a datagram; 0, or -1 when it is not a python-can message (unknown
+ * msgpack type, truncated, data longer than 64 bytes).  Unknown keys are
+ * skipped; a missing key keeps python-can's default (False, 0, no data). */
+int bn_mp_unpack(const uint8_t *in, size_t n, bn_frame_t *f);
+
+/* ---- transports ---------------------------------------------------------- */
+
+enum { BN_BUS_UDP = 1, BN_BUS_CAN = 2 };
+
+typedef struct {
+    int kind;                       /* BN_BUS_UDP or BN_BUS_CAN */
+    int fd;                         /* socket, -1 when closed */
+    bool can_fd;                    /* SocketCAN: CAN_RAW_FD_FRAMES granted */
+    struct sockaddr_storage dest;   /* UDP: the group and port */
+    socklen_t dest_len;
+    uint8_t buf[BN_MP_MAX + 64];    /* UDP datagram (a longer one is malformed) */
+    int64_t send_wait_ns;           /* bn_send waits this long for room (open: 1 ms) */
+    /* counters */
+    uint64_t rx, tx, rx_malformed, tx_errors, tx_waits;
+} bn_bus_t;
+
+/* Join python-can's udp_multicast bus: group (IPv6 "ff15:..." or IPv4
+ * "239.74.163.2"), port, hop limit / TTL (python-can: 1).  SO_REUSEADDR and
+ * SO_REUSEPORT as python-can sets them, so python-can nodes share the port.
+ * rcvbuf: receive buffer asked for (bytes, 0: the system's).  0 or -errno. */
+int bn_udp_open(bn_bus_t *b, const char *group, uint16_t port, int hop_limit, int rcvbuf);
+
+/* A SocketCAN raw socket on ifname (vcan0, can0); fd: also CAN FD frames
+ * (CAN_RAW_FD_FRAMES; -EPROTONOSUPPORT... when the kernel or device refuses).
+ * Own frames are not looped back to this socket.  0 or -errno. */
+int bn_can_open(bn_bus_t *b, const char *ifname, bool fd);
+
+/* Send one frame.  A full socket (EAGAIN, ENOBUFS: the kernel has not yet
+ * freed the datagrams or frames sent before) is waited on for at most
+ * b->send_wait_ns; python-can's send blocks instead.  0, or -errno (the frame
+ * is counted in tx_errors; a wait is counted in tx_waits). */
+int bn_send(bn_bus_t *b, const bn_frame_t *f);
+
+/* Receive one frame, waiting no later than deadline_ns (CLOCK_MONOTONIC ns;
+ * 0: do not wait).  1 a frame, 0 none by the deadline, -errno on an error.
+ * Malformed datagrams are counted and skipped. */
+int bn_recv_until(bn_bus_t *b, bn_frame_t *f, int64_t deadline_ns);
+
+/* bn_recv_until with a relative timeout (ns; 0: do not wait). */
+int bn_recv(bn_bus_t *b, bn_frame_t *f, int64_t timeout_ns);
+
+void bn_close(bn_bus_t *b);
+
+/* ---- time ---------------------------------------------------------------- */
+
+int64_t bn_now_ns(void);       /* CLOCK_MONOTONIC */
+int64_t bn_realtime_ns(void);  /* CLOCK_REALTIME */
+
+/* Real-time settings asked for and granted (errno of each refusal, 0: granted). */
+typedef struct {
+    int32_t priority;       /* SCHED_FIFO priority asked for (0: none) */
+    int32_t fifo;           /* 1 when SCHED_FIFO was granted */
+    int32_t memory_locked;  /* 1 when mlockall succeeded */
+    int32_t cpu;            /* CPU pinned to (-1: none) */
+    int32_t err_sched, err_mlock, err_cpu;
+} bn_rt_t;
+
+/* SCHED_FIFO at priority (0: leave the class), mlockall (lock), pin to cpu
+ * (-1: leave).  Fills *out; a refusal is not fatal. */
+void bn_rt_apply(int priority, bool lock, int cpu, bn_rt_t *out);
+
+/* What the clock counts, in a block Python reads with ctypes after the run
+ * (bench/nodes/native/_native.py: Stats mirrors it field by field). */
+typedef struct {
+    uint64_t periods;        /* waits returned */
+    uint64_t missed;         /* deadlines already passed when the period's work ended */
+    uint64_t late_half;      /* wake-ups more than half a period after the deadline */
+    uint64_t stalls;         /* wake-ups later than stall_ns (schedule moved on) */
+    uint64_t skipped;        /* periods skipped by those moves */
+    int64_t period_ns;
+    int64_t wall_ns;         /* start to the last wake-up */
+    int64_t late_min_ns;     /* earliest wake-up relative to its deadline (>= 0) */
+    int64_t late_max_ns;
+    int64_t busy_median_ns;  /* work per period: wake-up to the next wait */
+    int64_t busy_max_ns;
+    bn_rt_t rt;
+} bn_stats_t;
+
+typedef struct {
+    int64_t period_ns, busy_tail_ns, stall_ns;
+    int64_t t0_ns, woke_ns;
+    uint64_t n;              /* deadlines passed: deadline k is t0 + (k + 1) T */
+    bn_stats_t st;
+    uint32_t *busy;          /* caller's buffer: busy ns of each period */
+    size_t busy_cap;
+} bn_clock_t;
+
+/* A clock of period_ns; busy_tail_ns of spinning before each deadline (0:
+ * sleep to it); a wake-up more than stall_ns late moves the schedule on by
+ * the whole periods that passed (INT64_MAX: always catch up).  busy: caller's
+ * buffer of busy_cap entries (the first busy_cap periods count in the median). */
+void bn_clock_init(bn_clock_t *c, int64_t period_ns, int64_t busy_tail_ns, int64_t stall_ns,
+                   uint32_t *busy, size_t busy_cap);
+
+/* Start the schedule now: the first deadline is one period from now. */
+void bn_clock_start(bn_clock_t *c);
+
+/* The next deadline (CLOCK_MONOTONIC ns). */
+int64_t bn_clock_deadline(const bn_clock_t *c);
+
+/* End the period's work and wait for the next deadline; how late the wake-up
+ * was (ns, >= 0).  A deadline that has passed counts as missed and returns
+ * at once (the schedule stays absolute: the loop catches up). */
+int64_t bn_clock_wait(bn_clock_t *c);
+
+/* The counters with the busy median (sorts the caller's buffer: after the loop). */
+void bn_clock_stats(bn_clock_t *c, bn_stats_t *out);
+
+/* The clock alone: rt settings, then `periods` periods, each spinning work_ns
+ * (0: none) before it waits; the previous scheduling class, affinity and
+ * memory lock are restored afterwards.  busy: `periods` entries.  0 or -errno. */
+typedef struct {
+    int64_t period_ns, busy_tail_ns, stall_ns, work_ns;
+    uint64_t periods;
+    int32_t rt_priority, lock_memory, cpu;
+} bn_timing_cfg_t;
+
+int bn_timing_run(const bn_timing_cfg_t *cfg, uint32_t *busy, bn_stats_t *out);
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif /* BN_H */

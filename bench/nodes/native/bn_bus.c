@@ -1,0 +1,307 @@
+/* Transports of the native node loop: python-can's udp_multicast and SocketCAN raw.
+ *
+ * Both are non-blocking sockets; bn_recv_until waits with ppoll up to an
+ * absolute CLOCK_MONOTONIC deadline, so a loop receives until its period
+ * ends and never sleeps past it.
+ */
+#include <arpa/inet.h>
+#include <errno.h>
+#include <fcntl.h>
+#include <net/if.h>
+#include <netinet/in.h>
+#include <poll.h>
+#include <signal.h>
+#include <string.h>
+#include <sys/ioctl.h>
+#include <time.h>
+#include <unistd.h>
+
+#include <linux/can.h>
+#include <linux/can/raw.h>
+
+#include "bn.h"
+
+int64_t bn_now_ns(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (int64_t)ts.tv_sec * 1000000000 + ts.tv_nsec;
+}
+
+int64_t bn_realtime_ns(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_REALTIME, &ts);
+    return (int64_t)ts.tv_sec * 1000000000 + ts.tv_nsec;
+}
+
+static void bus_reset(bn_bus_t *b, int kind)
+{
+    memset(b, 0, sizeof *b);
+    b->kind = kind;
+    b->fd = -1;
+    b->send_wait_ns = 1000000;
+}
+
+static int fail(bn_bus_t *b)
+{
+    int e = errno;
+    if (b->fd >= 0) {
+        close(b->fd);
+        b->fd = -1;
+    }
+    return -e;
+}
+
+int bn_udp_open(bn_bus_t *b, const char *group, uint16_t port, int hop_limit, int rcvbuf)
+{
+    int one = 1;
+    bool v6 = strchr(group, ':') != NULL;
+    bus_reset(b, BN_BUS_UDP);
+    b->fd = socket(v6 ? AF_INET6 : AF_INET, SOCK_DGRAM | SOCK_NONBLOCK | SOCK_CLOEXEC, 0);
+    if (b->fd < 0) {
+        return fail(b);
+    }
+    if (setsockopt(b->fd, SOL_SOCKET, SO_REUSEADDR, &one, sizeof one) < 0 ||
+        setsockopt(b->fd, SOL_SOCKET, SO_REUSEPORT, &one, sizeof one) < 0) {
+        return fail(b);
+    }
+    /* a datagram's memory stays charged to this socket until the device has sent it;
+     * a larger send buffer rides out a descheduled transmit completion */
+    int sndbuf = 1 << 20;
+    (void)setsockopt(b->fd, SOL_SOCKET, SO_SNDBUFFORCE, &sndbuf, sizeof sndbuf);
+    if (rcvbuf > 0 &&
+        setsockopt(b->fd, SOL_SOCKET, SO_RCVBUFFORCE, &rcvbuf, sizeof rcvbuf) < 0) {
+        (void)setsockopt(b->fd, SOL_SOCKET, SO_RCVBUF, &rcvbuf, sizeof rcvbuf); /* best effort */
+    }
+    if (v6) {
+        struct sockaddr_in6 any, *dst = (struct sockaddr_in6 *)&b->dest;
+        struct ipv6_mreq mreq;
+        memset(&any, 0, sizeof any);
+        any.sin6_family = AF_INET6;
+        any.sin6_addr = in6addr_any;
+        any.sin6_port = htons(port);
+        memset(dst, 0, sizeof *dst);
+        dst->sin6_family = AF_INET6;
+        dst->sin6_port = htons(port);
+        if (inet_pton(AF_INET6, group, &dst->sin6_addr) != 1) {
+            errno = EINVAL;
+            return fail(b);
+        }
+        b->dest_len = sizeof *dst;
+        memset(&mreq, 0, sizeof mreq);
+        mreq.ipv6mr_multiaddr = dst->sin6_addr;
+        mreq.ipv6mr_interface = 0;
+        if (setsockopt(b->fd, IPPROTO_IPV6, IPV6_MULTICAST_HOPS, &hop_limit, sizeof hop_limit) <
+                0 ||
+            bind(b->fd, (struct sockaddr *)&any, sizeof any) < 0 ||
+            setsockopt(b->fd, IPPROTO_IPV6, IPV6_JOIN_GROUP, &mreq, sizeof mreq) < 0) {
+            return fail(b);
+        }
+    } else {
+        struct sockaddr_in any, *dst = (struct sockaddr_in *)&b->dest;
+        struct ip_mreq mreq;
+        memset(&any, 0, sizeof any);
+        any.sin_family = AF_INET;
+        any.sin_addr.s_addr = htonl(INADDR_ANY);
+        any.sin_port = htons(port);
+        memset(dst, 0, sizeof *dst);
+        dst->sin_family = AF_INET;
+        dst->sin_port = htons(port);
+        if (inet_pton(AF_INET, group, &dst->sin_addr) != 1) {
+            errno = EINVAL;
+            return fail(b);
+        }
+        b->dest_len = sizeof *dst;
+        memset(&mreq, 0, sizeof mreq);
+        mreq.imr_multiaddr = dst->sin_addr;
+        mreq.imr_interface.s_addr = htonl(INADDR_ANY);
+        if (setsockopt(b->fd, IPPROTO_IP, IP_MULTICAST_TTL, &hop_limit, sizeof hop_limit) < 0 ||
+            bind(b->fd, (struct sockaddr *)&any, sizeof any) < 0 ||
+            setsockopt(b->fd, IPPROTO_IP, IP_ADD_MEMBERSHIP, &mreq, sizeof mreq) < 0) {
+            return fail(b);
+        }
+    }
+    return 0;
+}
+
+int bn_can_open(bn_bus_t *b, const char *ifname, bool fd)
+{
+    struct sockaddr_can addr;
+    struct ifreq ifr;
+    int zero = 0, one = 1;
+    bus_reset(b, BN_BUS_CAN);
+    if (strlen(ifname) >= IFNAMSIZ) {
+        errno = ENAMETOOLONG;
+        return fail(b);
+    }
+    b->fd = socket(PF_CAN, SOCK_RAW | SOCK_NONBLOCK | SOCK_CLOEXEC, CAN_RAW);
+    if (b->fd < 0) {
+        return fail(b);
+    }
+    memset(&ifr, 0, sizeof ifr);
+    memcpy(ifr.ifr_name, ifname, strlen(ifname));
+    if (ioctl(b->fd, SIOCGIFINDEX, &ifr) < 0) {
+        return fail(b);
+    }
+    /* python-can's socketcan bus does not receive its own frames either */
+    if (setsockopt(b->fd, SOL_CAN_RAW, CAN_RAW_RECV_OWN_MSGS, &zero, sizeof zero) < 0) {
+        return fail(b);
+    }
+    if (fd) {
+        if (setsockopt(b->fd, SOL_CAN_RAW, CAN_RAW_FD_FRAMES, &one, sizeof one) < 0) {
+            return fail(b);
+        }
+        b->can_fd = true;
+    }
+    memset(&addr, 0, sizeof addr);
+    addr.can_family = AF_CAN;
+    addr.can_ifindex = ifr.ifr_ifindex;
+    if (bind(b->fd, (struct sockaddr *)&addr, sizeof addr) < 0) {
+        return fail(b);
+    }
+    return 0;
+}
+
+/* The bytes of one frame on the socket: (pointer, length) in *p, *n; 0 or -errno. */
+static int encode(bn_bus_t *b, const bn_frame_t *f, struct canfd_frame *fr, const void **p,
+                  size_t *n)
+{
+    if (b->kind == BN_BUS_UDP) {
+        *n = bn_mp_pack(f, (double)bn_realtime_ns() * 1e-9, b->buf, sizeof b->buf);
+        *p = b->buf;
+        return *n ? 0 : -EMSGSIZE;
+    }
+    bool is_fd = (f->flags & BN_FD) != 0 || f->len > CAN_MAX_DLEN;
+    if (f->len > (is_fd ? CANFD_MAX_DLEN : CAN_MAX_DLEN) || (is_fd && !b->can_fd)) {
+        return -EMSGSIZE;
+    }
+    memset(fr, 0, sizeof *fr);
+    fr->can_id = f->id | ((f->flags & BN_EXT) ? CAN_EFF_FLAG : 0) |
+                 ((f->flags & BN_RTR) ? CAN_RTR_FLAG : 0);
+    fr->len = f->len;
+    if (is_fd) {
+        fr->flags = (uint8_t)(((f->flags & BN_BRS) ? CANFD_BRS : 0) |
+                              ((f->flags & BN_ESI) ? CANFD_ESI : 0));
+    }
+    memcpy(fr->data, f->data, f->len);
+    *p = fr;
+    *n = is_fd ? CANFD_MTU : CAN_MTU;
+    return 0;
+}
+
+int bn_send(bn_bus_t *b, const bn_frame_t *f)
+{
+    struct canfd_frame fr;
+    const void *p;
+    size_t n;
+    int r = encode(b, f, &fr, &p, &n);
+    int64_t deadline = 0;
+    while (r == 0) {
+        ssize_t got = b->kind == BN_BUS_UDP
+                          ? sendto(b->fd, p, n, 0, (struct sockaddr *)&b->dest, b->dest_len)
+                          : write(b->fd, p, n);
+        if (got == (ssize_t)n) {
+            b->tx++;
+            return 0;
+        }
+        r = got < 0 ? -errno : -EIO;
+        if (r != -EAGAIN && r != -EWOULDBLOCK && r != -ENOBUFS && r != -EINTR) {
+            break;
+        }
+        int64_t now = bn_now_ns();
+        if (deadline == 0) {
+            deadline = now + b->send_wait_ns;
+            b->tx_waits++;
+        }
+        if (now >= deadline) {
+            break;
+        }
+        /* ENOBUFS (a full CAN queue) does not wake poll: look again within 50 us */
+        int64_t wait = deadline - now < 50000 ? deadline - now : 50000;
+        struct pollfd pf = {b->fd, POLLOUT, 0};
+        struct timespec ts = {0, (long)wait};
+        (void)ppoll(&pf, 1, &ts, NULL);
+        r = 0;
+    }
+    b->tx_errors++;
+    return r;
+}
+
+/* One datagram or frame without waiting: 1, 0 (none), -errno. */
+static int recv_now(bn_bus_t *b, bn_frame_t *f)
+{
+    for (;;) {
+        if (b->kind == BN_BUS_UDP) {
+            ssize_t n = recv(b->fd, b->buf, sizeof b->buf, MSG_DONTWAIT | MSG_TRUNC);
+            if (n < 0) {
+                return (errno == EAGAIN || errno == EWOULDBLOCK) ? 0 : -errno;
+            }
+            if ((size_t)n > sizeof b->buf || bn_mp_unpack(b->buf, (size_t)n, f) != 0) {
+                b->rx_malformed++;
+                continue;
+            }
+        } else {
+            struct canfd_frame fr;
+            ssize_t n = recv(b->fd, &fr, sizeof fr, MSG_DONTWAIT);
+            if (n < 0) {
+                return (errno == EAGAIN || errno == EWOULDBLOCK) ? 0 : -errno;
+            }
+            if (n != (ssize_t)CAN_MTU && n != (ssize_t)CANFD_MTU) {
+                b->rx_malformed++;
+                continue;
+            }
+            memset(f, 0, sizeof *f);
+            if (fr.can_id & CAN_EFF_FLAG) {
+                f->flags |= BN_EXT;
+                f->id = fr.can_id & CAN_EFF_MASK;
+            } else {
+                f->id = fr.can_id & CAN_SFF_MASK;
+            }
+            f->flags |= (fr.can_id & CAN_RTR_FLAG) ? BN_RTR : 0;
+            f->flags |= (fr.can_id & CAN_ERR_FLAG) ? BN_ERR : 0;
+            if (n == (ssize_t)CANFD_MTU) {
+                f->flags |= BN_FD;
+                f->flags |= (fr.flags & CANFD_BRS) ? BN_BRS : 0;
+                f->flags |= (fr.flags & CANFD_ESI) ? BN_ESI : 0;
+            }
+            f->len = fr.len > CANFD_MAX_DLEN ? CANFD_MAX_DLEN : fr.len;
+            memcpy(f->data, fr.data, f->len);
+        }
+        f->t_ns = bn_realtime_ns();
+        b->rx++;
+        return 1;
+    }
+}
+
+int bn_recv_until(bn_bus_t *b, bn_frame_t *f, int64_t deadline_ns)
+{
+    for (;;) {
+        int r = recv_now(b, f);
+        if (r != 0) {
+            return r;
+        }
+        int64_t left = deadline_ns - bn_now_ns();
+        if (deadline_ns == 0 || left <= 0) {
+            return 0;
+        }
+        struct pollfd p = {b->fd, POLLIN, 0};
+        struct timespec ts = {(time_t)(left / 1000000000), (long)(left % 1000000000)};
+        if (ppoll(&p, 1, &ts, NULL) < 0) {
+            return errno == EINTR ? 0 : -errno; /* a signal: the caller checks its flags */
+        }
+    }
+}
+
+int bn_recv(bn_bus_t *b, bn_frame_t *f, int64_t timeout_ns)
+{
+    return bn_recv_until(b, f, timeout_ns > 0 ? bn_now_ns() + timeout_ns : 0);
+}
+
+void bn_close(bn_bus_t *b)
+{
+    if (b->fd >= 0) {
+        close(b->fd);
+    }
+    b->fd = -1;
+}
