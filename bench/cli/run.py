@@ -21,7 +21,6 @@ from bench.cli._common import (
     scenario_from_args,
     writable_dir,
 )
-from bench.runs._export import EXPORT_FILES, check_formats, export_signals, parse_formats
 from bench.scenarios._setup import check_estimator_fits, check_estimator_name
 
 
@@ -67,6 +66,7 @@ def _start_monitor(spec: Any, scn: Any, est: str, mode: str, out: Path) -> _View
 
 
 def cmd_run(args: argparse.Namespace) -> int:
+    from bench.runs._export import EXPORT_FILES, check_formats, export_signals, parse_formats
     from bench.runs._local import exit_status
     from bench.runs._results import format_metrics, frames_warning, realtime_warning
     from bench.runs._run import run_scenario
