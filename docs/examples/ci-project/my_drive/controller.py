@@ -43,7 +43,6 @@ from importlib.resources import files
 from typing import Any
 
 import can
-import cantools
 
 
 def crc8(data: bytes) -> int:
@@ -60,6 +59,8 @@ class Wire:
     """The DBC's frames, with the E2E CRC in byte 0."""
 
     def __init__(self) -> None:
+        import cantools  # after the bus is open (main)
+
         self.db: Any = cantools.database.load_file(str(files("dbc") / "bench.dbc"))
 
     def _head(self, m: Any) -> bytes:
@@ -151,21 +152,18 @@ def main() -> int:
     ap.add_argument("-c", "--channel", default="vcan0")
     ap.add_argument("-p", "--port", default="", help="udp_multicast's port (empty: none)")
     a = ap.parse_args()
-    show = json.loads(
-        subprocess.run(
-            [sys.executable, "-m", "bench", "show", a.scenario, "--json"],
-            check=True,
-            capture_output=True,
-            text=True,
-        ).stdout
-    )
-    wire, foc = Wire(), Foc(show)
+    # the bus first: the bench sends its start command as soon as its plant is up, and
+    # the socket keeps the frames that come while the rest loads (a controller that
+    # misses the start is reported: PROTOCOL.md, "Bench commands and pacing")
     bus = can.Bus(
         interface=a.interface,
         channel=a.channel,
         fd=True,
         **({"port": int(a.port)} if a.port else {}),
     )
+    bench_show = [sys.executable, "-m", "bench", "show", a.scenario, "--json"]
+    show = json.loads(subprocess.run(bench_show, check=True, capture_output=True, text=True).stdout)
+    wire, foc = Wire(), Foc(show)
     print(f"my-drive: on {a.interface} {a.channel} {a.port}, T_s {foc.T_s} s", flush=True)
     samples: dict[int, dict[str, float]] = {}
     readings: dict[int, float] = {}
