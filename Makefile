@@ -13,7 +13,7 @@ $(STAMP): pyproject.toml setup.py plant_rt/_cplant.c controller/_cctl.c
 	test -x $(BIN)/pip || tools/make-venv $(PYTHON) $(VENV)
 	tools/need-cc $(BIN)/python
 	$(BIN)/python -m pip install -q --upgrade pip
-	$(BIN)/python -m pip install -q -e '.[dev,dask,docs]'
+	$(BIN)/python -m pip install -q -e '.[dev,dask,docs,mf4,parquet]'
 	$(BIN)/python -c 'import plant_rt; w = plant_rt.compiled_engine_missing(); w and print(w)'
 	$(BIN)/python -c 'import controller; w = controller.compiled_controller_missing(); w and print(w)'
 	touch $(STAMP)

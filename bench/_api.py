@@ -8,6 +8,7 @@
     run.metrics["theta_err_abs_mean_deg"]   # every key of metrics.json
     run.signals["theta_err_deg"]            # numpy arrays, the columns of signals.csv
     run.exit_status                         # as bench run would exit (0, 3, 4, ...)
+    run.save("signals.mf4")                 # ASAM MDF4 (or .parquet, .csv)
 
 Every function here goes through what the command line runs: the scenario
 through :func:`bench.scenarios._schema.load_scenario` (and the dotted keys of
@@ -128,6 +129,24 @@ class Run:
                 "(pip install 'can-hil-bench[pandas]', or use Run.signals: numpy arrays)"
             ) from None
         return pd.DataFrame(self.signals).set_index("t", drop=False)
+
+    def save(self, path: str | os.PathLike[str], format: str | None = None) -> Path:
+        """Write :attr:`signals` to ``path`` as ``format``: ``"csv"``, ``"mf4"`` or ``"parquet"``.
+
+        Without ``format``, the suffix of ``path`` names it (``.csv``, ``.mf4``,
+        ``.parquet``).  ``mf4`` is ASAM MDF4 (asammdf, the ``[mf4]`` extra),
+        ``parquet`` needs pyarrow (the ``[parquet]`` extra); both carry each
+        column's unit and description (``signals.md``).  A missing library or
+        an unknown format raises a :class:`~bench._errors.BenchError` that
+        says so; the run itself is untouched.  Returns ``path``.
+        """
+        from bench.runs._export import format_of, write_signals
+
+        fmt = format_of(path, format)
+        scenario = self.meta.get("scenario")
+        name = scenario.get("name", "") if isinstance(scenario, dict) else ""
+        title = " ".join(str(x) for x in (name, self.meta.get("estimator", "")) if x)
+        return write_signals(self.signals, path, fmt, title=title)
 
     @property
     def ok(self) -> bool:

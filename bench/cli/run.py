@@ -8,7 +8,7 @@ import threading
 from pathlib import Path
 from typing import Any
 
-from bench._errors import BenchError
+from bench._errors import EXIT_USER_ERROR, BenchError, error_line
 from bench.cli._common import (
     POS_FLOAT,
     add_bus,
@@ -66,6 +66,7 @@ def _start_monitor(spec: Any, scn: Any, est: str, mode: str, out: Path) -> _View
 
 
 def cmd_run(args: argparse.Namespace) -> int:
+    from bench.runs._export import EXPORT_FILES, check_formats, export_signals, parse_formats
     from bench.runs._local import exit_status
     from bench.runs._results import format_metrics, frames_warning, realtime_warning
     from bench.runs._run import run_scenario
@@ -95,6 +96,8 @@ def cmd_run(args: argparse.Namespace) -> int:
     out = writable_dir(
         Path(args.out) if args.out else Path("runs") / f"{scn.name}-{est.replace(':', '-')}"
     )
+    formats = parse_formats(args.signals_format or [])
+    check_formats(formats)  # a missing library costs no run
     spec = bus_spec(args, announce=True)
     who = f"external controller {args.dut_name}" if external and args.dut_name else est
     if external and not args.dut_name:
@@ -107,6 +110,8 @@ def cmd_run(args: argparse.Namespace) -> int:
         f_sw = 1.0 / sample_period(scn)
         if warn := host_warning(f_sw, args.rt_priority is not None, load_host_result()):
             print(warn, file=sys.stderr, flush=True)
+    for name in EXPORT_FILES:  # an earlier run's, which this run would not replace
+        (out / name).unlink(missing_ok=True)
     view = _start_monitor(spec, scn, est, args.mode, out) if args.monitor else None
     try:
         res = run_scenario(
@@ -146,9 +151,15 @@ def cmd_run(args: argparse.Namespace) -> int:
             "early, or frames the recording lost); the metrics cover the rows present",
             file=sys.stderr,
         )
+    try:
+        export_signals(out, formats, title=f"{scn.name} {est}")
+    except BenchError as e:  # every file of the run is written: keep them, say what is not
+        print(error_line(e), file=sys.stderr)
+        status = status or EXIT_USER_ERROR
     names = [
         f"capture{Path(res.capture).suffix}",
         "signals.csv",
+        *EXPORT_FILES,
         "signals.md",
         "metrics.json",
         "meta.json",
@@ -196,6 +207,14 @@ def register(sub: Any) -> None:
     p.add_argument("--out", "-o", help="run folder (default runs/SCENARIO-ESTIMATOR)")
     p.add_argument(
         "--log-format", choices=("blf", "asc", "log"), default="blf", help="capture format"
+    )
+    p.add_argument(
+        "--signals-format",
+        action="append",
+        metavar="FORMAT",
+        help="also write the signals as mf4 (ASAM MDF4, needs asammdf: the [mf4] extra) "
+        "and/or parquet (needs pyarrow: the [parquet] extra), with units and descriptions; "
+        "repeat it or list them (mf4,parquet); signals.csv is always written (default: csv)",
     )
     p.add_argument("--quiet", "-q", action="store_true", help="no progress line")
     p.add_argument(
