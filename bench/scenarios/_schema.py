@@ -491,21 +491,15 @@ MOTOR_KEYS = (
 )  # fmt: skip
 
 
-#: ``[estimator_options]`` keys checked against the scenario beyond their declaration
-#: (:func:`controller._registry.declared_options`, which states each key's type and range).
-_OPTION_AMPLITUDES = ("V_h", "U_h")  # injection amplitude (V): (0, u_dc / sqrt(3)]
-_OPTION_FREQUENCIES = ("f_h",)  # injection frequency (Hz): (0, Nyquist)
-
-
 @functools.cache
 def shipped_options() -> dict[str, Any]:
     """Every built-in estimator's ``[estimator_options]`` key with its declaration
     (:class:`controller.Option`; the first estimator's where several declare one key)."""
-    from controller._registry import ESTIMATOR_NAMES, declared_options
+    from controller._registry import SPECS
 
     out: dict[str, Any] = {}
-    for name in ESTIMATOR_NAMES:
-        for k, opt in (declared_options(name) or {}).items():
+    for spec in SPECS.values():
+        for k, opt in (spec.declared() or {}).items():
             out.setdefault(k, opt)
     return out
 
@@ -514,19 +508,15 @@ def shipped_options() -> dict[str, Any]:
 def estimator_option_keys() -> dict[str, Any]:
     """Every ``[estimator_options]`` key of the built-in estimators with its default.
 
-    The estimators' declarations (:func:`controller._registry.declared_options`):
-    rotating injection (``sfhf``, ``tt-ab``, ``tt-dq``) the fields of
-    :class:`controller._rotating.RotatingInjectionPars`; square-wave the
-    keyword parameters of :class:`controller._square_wave.SquareWaveEstimator`;
-    the hybrids add the hand-over's own (``controller._hybrid``).  ``sensored``
-    takes none.
+    The estimators' declarations: the fields of each registry entry's options
+    dataclass (:attr:`controller.EstimatorSpec.options`).
     """
     return {k: opt.default for k, opt in shipped_options().items()}
 
 
 def estimator_keys(estimator: str) -> frozenset[str]:
-    """The ``[estimator_options]`` keys one estimator declares (``sensored``: none; a plug-in
-    without a declaration: the keywords its factory names, none for ``**options``)."""
+    """The ``[estimator_options]`` keys one estimator declares (a plug-in without a
+    declaration: the keywords its factory names, none for ``**options``)."""
     from controller._registry import declared_options, plugin
 
     decl = declared_options(estimator)
@@ -646,7 +636,7 @@ def saliency_error(
     load for the scenario's estimators and again when an estimator chosen on
     the command line is built.
     """
-    from controller._registry import injection_family
+    from controller._registry import SPECS, injection_family
     from plant_rt import PRESETS
 
     base = PRESETS[preset].motor
@@ -655,11 +645,12 @@ def saliency_error(
     if not hf or L_q > L_d:
         return None
     key = "L_q" if "L_q" in motor or "L_d" not in motor else "L_d"
+    plain = [n for n, s in SPECS.items() if s.family == "none"]
     return ScenarioError(
         f"{src}: field 'motor.{key}': the motor is not salient (L_q {L_q:.4g} H <= L_d "
         f"{L_d:.4g} H), and the HF-injection estimators asked for ({', '.join(hf)}) need "
-        "L_q > L_d; only 'sensored' runs without saliency "
-        '(estimator = "sensored", estimators = ["sensored"])'
+        f"L_q > L_d; only {', '.join(map(repr, plain))} runs without saliency "
+        f'(estimator = "{plain[0]}", estimators = ["{plain[0]}"])'
     )
 
 
@@ -893,7 +884,6 @@ def _parse_estimator_options(
                 )
     eo = r.table("estimator_options")
     u_dc = PRESETS[preset].inverter.u_dc
-    u_lin = u_dc / math.sqrt(3.0)
     out: dict[str, Any] = {}
     for k in eo.t:
         if k not in keys:
@@ -901,28 +891,33 @@ def _parse_estimator_options(
             if opt is None:  # a plug-in without a declaration: its factory's own check
                 out[k] = eo.t[k]
                 continue
-            val, why = opt.check(eo.t[k])
-            if why is not None:
-                raise eo.fail(k, f"{why} (an option of {owner})")
-            out[k] = val
+            of = f" (an option of {owner})"
         else:
-            v, why = shipped_options()[k].check(eo.t[k])
-            if why is not None:
-                raise eo.fail(k, why)
-            if k in _OPTION_AMPLITUDES and v > u_lin:
-                raise eo.fail(
-                    k,
-                    f"injection amplitude {v:g} V is above the inverter's linear limit "
-                    f"u_dc/sqrt(3) = {u_lin:.4g} V (preset {preset}, u_dc = {u_dc:g} V)",
-                )
-            if k in _OPTION_FREQUENCIES and v >= f_s / 2.0:
-                raise eo.fail(
-                    k,
-                    f"injection frequency {v:g} Hz is not below the Nyquist frequency "
-                    f"{f_s / 2.0:g} Hz of the {f_s:g} Hz sample rate",
-                )
-            out[k] = v
+            opt, of = shipped_options()[k], ""
+        v, why = opt.check(eo.t[k])
+        if why is None and v is not None:
+            why = _limit_error(opt.limit, v, preset, u_dc, f_s)
+        if why is not None:
+            raise eo.fail(k, why + of)
+        out[k] = v
     return out
+
+
+def _limit_error(limit: str, v: float, preset: str, u_dc: float, f_s: float) -> str | None:
+    """Why the value ``v`` of an option with the scenario bound ``limit``
+    (:data:`controller._api.OPTION_LIMITS`) is out of it, or None."""
+    u_lin = u_dc / math.sqrt(3.0)
+    if limit == "inverter_linear" and v > u_lin:
+        return (
+            f"injection amplitude {v:g} V is above the inverter's linear limit "
+            f"u_dc/sqrt(3) = {u_lin:.4g} V (preset {preset}, u_dc = {u_dc:g} V)"
+        )
+    if limit == "below_nyquist" and v >= f_s / 2.0:
+        return (
+            f"injection frequency {v:g} Hz is not below the Nyquist frequency "
+            f"{f_s / 2.0:g} Hz of the {f_s:g} Hz sample rate"
+        )
+    return None
 
 
 def _shipped_names() -> tuple[str, ...]:

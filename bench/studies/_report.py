@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from bench.runs._metrics import GOAL_DIP_PCT, GOAL_STEADY_DEG, GOAL_TRANSIENT_DEG
+from bench.scenarios._setup import needs_truth
 from bench.studies._plants import PLANT_LABELS, PLANTS
 from bench.studies._sweep import FLAT_DEG, METHODS, SWEEPS
 
@@ -499,7 +500,7 @@ def _wen_section(summary: dict[str, Any]) -> list[str]:
         )
         for r in runs:
             m = r["metrics"]
-            src = "bench" + (", zero line" if r["estimator"] == "sensored" else "")
+            src = "bench" + (", zero line" if needs_truth(r["estimator"]) else "")
             if not _ok(r):
                 rows.append(
                     [_method(r), src, "failed", "failed", "failed"]
