@@ -105,6 +105,10 @@ class EstimatorSpec:
         It hands over between an injection estimator and a flux observer
         through a speed band (:class:`controller.HybridEstimator`): its runs
         report per-band metrics.
+    proposed_in : str
+        The paper whose proposed method it is (``wen``, ``xue``; the prefix of
+        that paper's scenarios), empty for the others: the report checks the
+        paper's claims on it.
     """
 
     name: str
@@ -115,6 +119,7 @@ class EstimatorSpec:
     compiled_kind: int | None = None
     summary: str = ""
     speed_band: bool = False
+    proposed_in: str = ""
 
     def declared(self) -> dict[str, Option] | None:
         """The options it declares, by name (:func:`options_of_dataclass`); None without
@@ -134,13 +139,15 @@ SPECS: dict[str, EstimatorSpec] = {
         EstimatorSpec("tt-ab", _tt_ab.create, "rotating", _WEN, compiled_kind=2,
                       summary="TT self-demodulation in the alpha-beta axes (Wen 4.2)"),
         EstimatorSpec("tt-dq", _tt_dq.create, "rotating", _WEN, compiled_kind=1,
-                      summary="TT self-demodulation in the estimated d-q axes (Wen 4.3)"),
+                      summary="TT self-demodulation in the estimated d-q axes (Wen 4.3)",
+                      proposed_in="wen"),
         EstimatorSpec("self-demod", _self_demod.create, "rotating", _WEN,
                       summary="HF response current self-demodulation, Wen's [27]"),
         EstimatorSpec("epf", _epf.create, "rotating", _WEN,
                       summary="estimated position feedback demodulation, Wen's [25]"),
         EstimatorSpec("square-wave", _square_wave.create, "square", _XUE, compiled_kind=4,
-                      summary="square-wave injection, CIC interpolation (Xue)"),
+                      summary="square-wave injection, CIC interpolation (Xue)",
+                      proposed_in="xue"),
         EstimatorSpec("square-wave-nocic", functools.partial(_square_wave.create, cic=False),
                       "square", _XUE, compiled_kind=4,
                       summary="square-wave injection, envelope held (Xue, no CIC)"),

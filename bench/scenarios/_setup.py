@@ -239,6 +239,13 @@ def needs_truth(estimator: str) -> bool:
         return False
 
 
+def proposed_methods() -> dict[str, str]:
+    """Paper (``wen``, ``xue``) -> the estimator it proposes (its spec's ``proposed_in``)."""
+    from controller._registry import SPECS
+
+    return {s.proposed_in: name for name, s in SPECS.items() if s.proposed_in}
+
+
 def build_controller(scn: Scenario, estimator: str, engine: str | None = None) -> Controller:
     """The scenario's controller for ``estimator``.
 
