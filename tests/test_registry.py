@@ -217,14 +217,25 @@ def test_a_plugin_declared_by_a_mapping_of_options_is_a_dataclass_too(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """The older declaration (``factory.options``, names to ``controller.Option``) still works
-    and gives the same spec form: a dataclass whose fields are the options."""
+    and gives the same spec form as the example's dataclass: a dataclass whose fields are
+    the options, with the same checks."""
+    (tmp_path / "plug_map.py").write_text(
+        "import math\nfrom controller import Option\nfrom my_estimator import create as flux\n"
+        "def create(motor, T_s, **options):\n    return flux(motor, T_s, **options)\n"
+        "create.options = {'alpha_o': Option(2 * math.pi * 20, 'rad/s', 'PLL bandwidth.', "
+        "positive=True), 'w_c': Option(20.0, 'rad/s', 'Corner.', minimum=0.0)}\n"
+    )
+    monkeypatch.syspath_prepend(str(tmp_path))
     monkeypatch.syspath_prepend(str(EXAMPLES))
-    s = estimator_spec("my_estimator:create")
-    assert s.options is not None and dataclasses.is_dataclass(s.options)
-    assert [f.name for f in dataclasses.fields(s.options)] == ["alpha_o", "w_c"]
-    decl = s.declared()
-    assert decl is not None and decl["w_c"].minimum == 0.0 and decl["w_c"].unit == "rad/s"
-    assert decl["alpha_o"].default == pytest.approx(2 * math.pi * 20)
+    by_map, by_class = estimator_spec("plug_map:create"), estimator_spec("my_estimator:create")
+    for s in (by_map, by_class):
+        assert s.options is not None and dataclasses.is_dataclass(s.options)
+        assert [f.name for f in dataclasses.fields(s.options)] == ["alpha_o", "w_c"]
+        decl = s.declared()
+        assert decl is not None and decl["w_c"].minimum == 0.0 and decl["w_c"].unit == "rad/s"
+        assert decl["alpha_o"].positive and decl["alpha_o"].default == pytest.approx(40 * math.pi)
+    with pytest.raises(EstimatorPluginError, match="option 'w_c': must be >= 0.0"):
+        make_estimator("plug_map:create", motor_model(preset("wen2023")), 1e-4, w_c=-1.0)
 
 
 def test_the_shipped_specs_hold_what_the_bench_reads() -> None:
