@@ -234,7 +234,7 @@ def test_a_plugin_declared_by_a_mapping_of_options_is_a_dataclass_too(
         decl = s.declared()
         assert decl is not None and decl["w_c"].minimum == 0.0 and decl["w_c"].unit == "rad/s"
         assert decl["alpha_o"].positive and decl["alpha_o"].default == pytest.approx(40 * math.pi)
-    with pytest.raises(EstimatorPluginError, match="option 'w_c': must be >= 0.0"):
+    with pytest.raises(EstimatorPluginError, match=r"option 'w_c': must be >= 0\.0"):
         make_estimator("plug_map:create", motor_model(preset("wen2023")), 1e-4, w_c=-1.0)
 
 
