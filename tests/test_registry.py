@@ -296,3 +296,37 @@ def test_no_estimator_name_is_tested_as_a_string() -> None:
         for hit in _name_tests(path, names, prefixes - {"dq", "ab", "wave"})
     ]
     assert found == []
+
+
+def test_a_plugin_run_with_estimator_receives_the_options_of_a_file_that_does_not_name_it(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``bench run FILE -e PLUGIN``: the plug-in's declared options in a file that names only
+    shipped estimators arrive, checked; the effective scenario the nodes read names it, so
+    they accept them too.  Without ``--estimator`` the key stays one line of error."""
+    import importlib
+
+    from bench.scenarios._schema import write_effective
+
+    (tmp_path / "plug_cli.py").write_text(PLUGIN_SPEC.format(extra=""))
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.syspath_prepend(str(EXAMPLES))
+    name = "plug_cli:SPEC"
+    f = tmp_path / "s.toml"
+    f.write_text(
+        'extends = "wen-5.1"\nknown_initial_angle = true\n[estimator_options]\nmode = "warm"\n'
+    )
+    with pytest.raises(ScenarioError, match="or in a run of it with --estimator"):
+        load_scenario(str(f))
+    scn = load_scenario(str(f), name)
+    assert scn.estimators[-1] == name and scn.estimator_options["mode"] == "warm"
+    again = load_scenario(str(write_effective(scn, tmp_path / "scenario.json")))
+    build_controller(again, name, "python")
+    assert importlib.import_module("plug_cli").RECEIVED == {"mode": "warm"}
+    f.write_text(f.read_text().replace('"warm"', '"hot"'))
+    with pytest.raises(ScenarioError) as e:
+        load_scenario(str(f), name)
+    assert str(e.value) == (
+        f"{f}: field 'estimator_options.mode': expected 'cold' or 'warm', got 'hot' "
+        f"(an option of {name})"
+    )

@@ -694,7 +694,8 @@ def render() -> str:
         "(below) and leaves out the others, which a run names in a note (one line on stderr, "
         "and `estimator_options_left_out` in `meta.json`). A key no estimator declares is an "
         "error naming the file and the key; a plug-in's own options are accepted in a file "
-        "that names the plug-in in `estimator` or `estimators` (docs/ESTIMATORS.md). Each "
+        "that names the plug-in in `estimator` or `estimators`, or in a run of it with "
+        "`--estimator` (docs/ESTIMATORS.md). Each "
         "value is checked by its key. `meta.json` (`controller_gains`) records the values a "
         "run used, derived ones included.",
         "",

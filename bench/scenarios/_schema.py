@@ -876,7 +876,7 @@ def _parse_estimator_options(
                     ""
                     if any(is_plugin_name(n) for n in named)
                     else "; a plug-in's options are accepted in a file that names the plug-in in "
-                    "estimator or estimators"
+                    "estimator or estimators, or in a run of it with --estimator"
                 )
                 raise ScenarioError(
                     f"{r.src}: field 'estimator_options.{k}': unknown key (known: "
@@ -937,8 +937,9 @@ def _estimator_error(name: str) -> str | None:
     return None
 
 
-def parse_scenario(data: dict[str, Any], src: str) -> Scenario:
-    """Validate a scenario table (already parsed from TOML)."""
+def parse_scenario(data: dict[str, Any], src: str, also: tuple[str, ...] = ()) -> Scenario:
+    """Validate a scenario table (already parsed from TOML); ``also``: estimators besides
+    the file's that may take its ``[estimator_options]`` (:func:`load_scenario`)."""
     from plant_rt import PRESETS
 
     for k in data:
@@ -1013,7 +1014,7 @@ def parse_scenario(data: dict[str, Any], src: str) -> Scenario:
     _check_plausible(r.src, preset, motor, inverter)
     controller = _parse_controller(r, 1.0 / f_eff)
     _check_delay_us(r.src, latency, f_eff)
-    opts = _parse_estimator_options(r, preset, f_eff, (estimator, *ests))
+    opts = _parse_estimator_options(r, preset, f_eff, (estimator, *ests, *also))
     paper = r.table("paper_result").t
     duration = r.num("duration", lo=1e-3)
     # default: past the start-up transient (0.5 s), or the second half of a shorter run
@@ -1187,13 +1188,36 @@ def write_effective(scn: Scenario, path: Path) -> Path:
     return path
 
 
-def load_scenario(name_or_path: str) -> Scenario:
+def load_scenario(name_or_path: str, run_with: str | None = None) -> Scenario:
     """Load a shipped scenario by name, or a user's TOML file by path.
 
     A ``.json`` file written by :func:`write_effective` (the effective
     scenario of a run, which ``bench run`` hands to its node processes) is
-    read too.
+    read too.  ``run_with``: the estimator a command runs on it
+    (``--estimator``); a plug-in the file does not name is taken as named in
+    ``estimators``, so the options it declares are accepted and checked as
+    the file's own (and the effective scenario names it for the nodes).
     """
+    scn = _load_scenario(name_or_path, run_with)
+    if run_with is not None and run_with not in scn.estimators and _takes_options(run_with):
+        scn = replace(scn, estimators=(*scn.estimators, run_with))
+    return scn
+
+
+def _takes_options(estimator: str) -> bool:
+    """A plug-in (not a shipped estimator) that declares or names options."""
+    from controller._registry import SPECS, UnknownEstimatorError, plugin
+
+    if estimator in SPECS:
+        return False
+    try:
+        p = plugin(estimator)
+    except UnknownEstimatorError:
+        return False  # said where the estimator is checked
+    return p is not None and (p.options is None or bool(p.options))
+
+
+def _load_scenario(name_or_path: str, run_with: str | None) -> Scenario:
     path = scenario_path(name_or_path)
     if path.suffix == ".json":
         try:
@@ -1204,7 +1228,8 @@ def load_scenario(name_or_path: str) -> Scenario:
             raise ScenarioError(f"{path}: not a scenario file")
         return scenario_from_dict(d, str(d.get("source", path)))
     src = name_or_path if not Path(name_or_path).exists() else str(path)
-    scn = parse_scenario(_resolved_toml(path, src, ()), src)
+    also = () if run_with is None else (run_with,)
+    scn = parse_scenario(_resolved_toml(path, src, ()), src, also)
     own = _read_toml(path)
     if "extends" not in own:  # every value checked first: a wrong one is named before this
         _check_options_have_a_motor(src, own)
