@@ -1198,14 +1198,16 @@ def load_scenario(name_or_path: str, run_with: str | None = None) -> Scenario:
     ``estimators``, so the options it declares are accepted and checked as
     the file's own (and the effective scenario names it for the nodes).
     """
-    scn = _load_scenario(name_or_path, run_with)
-    if run_with is not None and run_with not in scn.estimators and _takes_options(run_with):
-        scn = replace(scn, estimators=(*scn.estimators, run_with))
+    also = (run_with,) if run_with is not None and _takes_options(run_with) else ()
+    scn = _load_scenario(name_or_path, also)
+    if also and run_with not in scn.estimators:
+        scn = replace(scn, estimators=(*scn.estimators, *also))
     return scn
 
 
 def _takes_options(estimator: str) -> bool:
-    """A plug-in (not a shipped estimator) that declares or names options."""
+    """A plug-in (not a shipped estimator) that declares or names options; False for a name
+    that does not resolve (the command checks its estimator and says why in one line)."""
     from controller._registry import SPECS, UnknownEstimatorError, plugin
 
     if estimator in SPECS:
@@ -1217,7 +1219,7 @@ def _takes_options(estimator: str) -> bool:
     return p is not None and (p.options is None or bool(p.options))
 
 
-def _load_scenario(name_or_path: str, run_with: str | None) -> Scenario:
+def _load_scenario(name_or_path: str, also: tuple[str, ...]) -> Scenario:
     path = scenario_path(name_or_path)
     if path.suffix == ".json":
         try:
@@ -1228,7 +1230,6 @@ def _load_scenario(name_or_path: str, run_with: str | None) -> Scenario:
             raise ScenarioError(f"{path}: not a scenario file")
         return scenario_from_dict(d, str(d.get("source", path)))
     src = name_or_path if not Path(name_or_path).exists() else str(path)
-    also = () if run_with is None else (run_with,)
     scn = parse_scenario(_resolved_toml(path, src, ()), src, also)
     own = _read_toml(path)
     if "extends" not in own:  # every value checked first: a wrong one is named before this
