@@ -330,3 +330,18 @@ def test_a_plugin_run_with_estimator_receives_the_options_of_a_file_that_does_no
         f"{f}: field 'estimator_options.mode': expected 'cold' or 'warm', got 'hot' "
         f"(an option of {name})"
     )
+
+
+def test_the_controller_node_takes_the_truth_when_the_spec_says_so(
+    toy_spec: EstimatorSpec, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The node reads ``needs_truth`` from the spec, not the name: the new estimator gets the
+    truth once its spec says it needs it, and not before."""
+    from bench.nodes._loops import make_controller_node
+    from bench.wire._codec import Codec
+
+    scn = load_scenario("wen-5.1")
+    codec = Codec()
+    assert not make_controller_node(scn, "toy-flux", codec).needs_truth
+    monkeypatch.setitem(reg.SPECS, "toy-flux", dataclasses.replace(toy_spec, needs_truth=True))
+    assert make_controller_node(scn, "toy-flux", codec).needs_truth
