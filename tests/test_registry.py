@@ -301,11 +301,13 @@ def test_no_estimator_name_is_tested_as_a_string() -> None:
 def test_a_plugin_run_with_estimator_receives_the_options_of_a_file_that_does_not_name_it(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    """``bench run FILE -e PLUGIN``: the plug-in's declared options in a file that names only
-    shipped estimators arrive, checked; the effective scenario the nodes read names it, so
-    they accept them too.  Without ``--estimator`` the key stays one line of error."""
+    """``bench run FILE -e PLUGIN`` (and ``bench sweep``): the plug-in's declared options in a
+    file that names only shipped estimators arrive, checked; the effective scenario the nodes
+    read names it, so they accept them too.  Without ``--estimator`` the key stays one line
+    of error."""
     import importlib
 
+    from bench.scenarios._dotted import scenario_table, scenario_with
     from bench.scenarios._schema import write_effective
 
     (tmp_path / "plug_cli.py").write_text(PLUGIN_SPEC.format(extra=""))
@@ -318,14 +320,19 @@ def test_a_plugin_run_with_estimator_receives_the_options_of_a_file_that_does_no
     )
     with pytest.raises(ScenarioError, match="or in a run of it with --estimator"):
         load_scenario(str(f))
-    scn = load_scenario(str(f), name)
+    scn = load_scenario(str(f), (name,))
     assert scn.estimators[-1] == name and scn.estimator_options["mode"] == "warm"
     again = load_scenario(str(write_effective(scn, tmp_path / "scenario.json")))
     build_controller(again, name, "python")
     assert importlib.import_module("plug_cli").RECEIVED == {"mode": "warm"}
+    # bench sweep -e PLUGIN --grid estimator_options.mode=...: each point's scenario too
+    point = scenario_with(scenario_table(str(f)), {"estimator_options.mode": "cold"}, None, (name,))
+    assert point.estimator_options["mode"] == "cold" and name in point.estimators
+    with pytest.raises(ScenarioError, match=r"estimator_options\.mode.: unknown key"):
+        scenario_with(scenario_table(str(f)), {"estimator_options.mode": "cold"})
     f.write_text(f.read_text().replace('"warm"', '"hot"'))
     with pytest.raises(ScenarioError) as e:
-        load_scenario(str(f), name)
+        load_scenario(str(f), (name,))
     assert str(e.value) == (
         f"{f}: field 'estimator_options.mode': expected 'cold' or 'warm', got 'hot' "
         f"(an option of {name})"

@@ -938,8 +938,15 @@ def _estimator_error(name: str) -> str | None:
 
 
 def parse_scenario(data: dict[str, Any], src: str, also: tuple[str, ...] = ()) -> Scenario:
-    """Validate a scenario table (already parsed from TOML); ``also``: estimators besides
-    the file's that may take its ``[estimator_options]`` (:func:`load_scenario`)."""
+    """Validate a scenario table (already parsed from TOML).
+
+    ``also``: the estimators a command runs on it besides the file's
+    (``--estimator``).  A plug-in among them that takes options is taken as
+    named in ``estimators``: the options it declares are accepted and checked
+    as the file's own, and the effective scenario of a run names it for the
+    node processes.
+    """
+    also = tuple(e for e in dict.fromkeys(also) if _takes_options(e))
     from plant_rt import PRESETS
 
     for k in data:
@@ -1033,7 +1040,7 @@ def parse_scenario(data: dict[str, Any], src: str, also: tuple[str, ...] = ()) -
         description=r.string("description", ""),
         paper=r.string("paper", ""),
         estimator=estimator,
-        estimators=tuple(ests),
+        estimators=tuple(dict.fromkeys((*ests, *also))),
         f_sw=None if f_sw == -1.0 else f_sw,
         seed=r.integer("seed", 1, lo=0),
         saturation=r.boolean("saturation", True),
@@ -1188,21 +1195,15 @@ def write_effective(scn: Scenario, path: Path) -> Path:
     return path
 
 
-def load_scenario(name_or_path: str, run_with: str | None = None) -> Scenario:
+def load_scenario(name_or_path: str, run_with: tuple[str, ...] = ()) -> Scenario:
     """Load a shipped scenario by name, or a user's TOML file by path.
 
     A ``.json`` file written by :func:`write_effective` (the effective
     scenario of a run, which ``bench run`` hands to its node processes) is
-    read too.  ``run_with``: the estimator a command runs on it
-    (``--estimator``); a plug-in the file does not name is taken as named in
-    ``estimators``, so the options it declares are accepted and checked as
-    the file's own (and the effective scenario names it for the nodes).
+    read too.  ``run_with``: the estimators a command runs on it
+    (``--estimator``), as :func:`parse_scenario`'s ``also``.
     """
-    also = (run_with,) if run_with is not None and _takes_options(run_with) else ()
-    scn = _load_scenario(name_or_path, also)
-    if also and run_with not in scn.estimators:
-        scn = replace(scn, estimators=(*scn.estimators, *also))
-    return scn
+    return _load_scenario(name_or_path, run_with)
 
 
 def _takes_options(estimator: str) -> bool:
