@@ -14,6 +14,7 @@ from controller._api import (
     EstimatorInput,
     Measurement,
     Option,
+    option_field,
 )
 from controller._compensation import CompensationPars
 from controller._controller import Controller, ControllerPars
@@ -29,11 +30,13 @@ from controller._registry import (
     ENTRY_POINT_GROUP,
     ESTIMATOR_NAMES,
     EstimatorPluginError,
+    EstimatorSpec,
     UnknownEstimatorError,
     check_estimator,
     declared_options,
     make_estimator,
 )
+from controller._registry import spec as estimator_spec
 from controller._rotating import RotatingInjectionPars, hf_amplitudes
 from controller._startup import PolarityTest
 from controller._svpwm import svpwm
@@ -59,6 +62,7 @@ __all__ = [
     "Estimator",
     "EstimatorInput",
     "EstimatorPluginError",
+    "EstimatorSpec",
     "FluxObserver",
     "HybridDesign",
     "HybridEstimator",
@@ -77,10 +81,12 @@ __all__ = [
     "declared_options",
     "design",
     "discretize",
+    "estimator_spec",
     "hf_amplitudes",
     "inv_clarke",
     "inv_park",
     "make_estimator",
+    "option_field",
     "park",
     "pll_gains",
     "resolve_controller_engine",

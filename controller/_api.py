@@ -17,7 +17,7 @@ plant's truth at the same instant.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 
@@ -192,17 +192,24 @@ class Estimator(Protocol):
 #: The kinds of value an :class:`Option` holds.
 OPTION_KINDS = ("float", "int", "bool", "str", "filter")
 
+#: The bounds of an option that depend on the scenario (:attr:`Option.limit`):
+#: ``inverter_linear``, an injection amplitude (V) at most the inverter's linear limit
+#: ``u_dc / sqrt(3)`` of space-vector modulation; ``below_nyquist``, a frequency (Hz)
+#: below half the sample rate.
+OPTION_LIMITS = ("inverter_linear", "below_nyquist")
+
 
 @dataclass(frozen=True, slots=True)
 class Option:
     """One option an estimator declares: a key of a scenario's ``[estimator_options]``.
 
-    A plug-in declares its options as a mapping of names to :class:`Option`, or
-    as a dataclass whose fields are the options (their defaults, types, and
-    units and meanings from the numpydoc ``Parameters`` section;
-    ``field(metadata={...})`` sets any attribute below); the shipped
-    estimators' options are declared the same way
-    (:func:`controller._registry.declared_options`).  docs/ESTIMATORS.md.
+    Every estimator declares its options as a dataclass whose fields are the
+    options (:attr:`controller.EstimatorSpec.options`): their defaults and
+    types from the fields, units and meanings from the class's numpydoc
+    ``Parameters`` section, and the checks by :func:`option_field` (which sets
+    any attribute below).  A plug-in may still give a mapping of names to
+    :class:`Option` instead.  :func:`controller._registry.declared_options`
+    reads either; docs/ESTIMATORS.md.
 
     Parameters
     ----------
@@ -222,6 +229,11 @@ class Option:
         A number must be > 0.
     choices : tuple of str
         The strings a text option may be.
+    limit : str
+        A bound the scenario sets (one of :data:`OPTION_LIMITS`), empty for none.
+    default_doc : str
+        How the docs state the default when its value says too little (a
+        filter's source); empty: the value.
     """
 
     default: Any = None
@@ -232,6 +244,8 @@ class Option:
     maximum: float | None = None
     positive: bool = False
     choices: tuple[str, ...] = ()
+    limit: str = ""
+    default_doc: str = ""
 
     @property
     def value_kind(self) -> str:
@@ -313,6 +327,16 @@ class Option:
         if self.maximum is not None and v > self.maximum:
             return None, f"must be <= {self.maximum}, got {v}"
         return v, None
+
+
+def option_field(default: Any = None, **checks: Any) -> Any:
+    """A field of an options dataclass: ``default`` and the :class:`Option` attributes
+    ``checks`` (``positive=True``, ``minimum=0.0``, ``choices=(...)``, ``unit="V"``...).
+
+    The unit and meaning otherwise come from the class's numpydoc ``Parameters``.
+    An unknown attribute is an error when the options are declared.
+    """
+    return field(default=default, metadata=checks)
 
 
 def _finite_number(x: Any) -> bool:

@@ -49,6 +49,8 @@ from __future__ import annotations
 from types import ModuleType
 from typing import TYPE_CHECKING
 
+from controller._registry import SPECS
+
 if TYPE_CHECKING:
     from controller._controller import ControllerPars
 
@@ -69,17 +71,8 @@ else:
     _cctl = _built
     _why_not = None
 
-#: estimator name -> the kind of the compiled core (controller/_cctl.c)
-_KINDS = {
-    "tt-dq": 1,
-    "tt-ab": 2,
-    "sfhf": 3,
-    "square-wave": 4,
-    "square-wave-nocic": 4,
-    "sensored": 5,
-    "hybrid-tt-dq": 6,
-    "hybrid-square-wave": 7,
-}
+#: estimator name -> the kind of the compiled core (controller/_cctl.c), from the registry
+_KINDS = {s.name: s.compiled_kind for s in SPECS.values() if s.compiled_kind is not None}
 
 
 #: The estimators the compiled core covers, by name; any other (a shipped one without a C

@@ -119,16 +119,18 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from typing import Any, Protocol
 
 import numpy as np
 
-from controller._api import Estimator, EstimatorInput
+from controller._api import Estimator, EstimatorInput, option_field
 from controller._flux_observer import FluxObserver
 from controller._luenberger import LuenbergerObserver
 from controller._params import MotorModel
 from controller._pll import PositionObserver
+from controller._rotating import RotatingInjectionPars
+from controller._square_wave import SquareWaveOptions
 
 _TWO_PI = 2.0 * math.pi
 
@@ -255,14 +257,8 @@ def design(
     ----------
     motor : MotorModel
         The controller's motor model.
-    theta_max : float
-        Steady angle budget of the observer where it carries weight (rad).
-    r_tol : float
-        Relative uncertainty of ``R_s`` (-), taken at ``motor.i_max``.
-    u_err : float
-        Inverter voltage uncertainty (V).
-    theta_acc : float
-        PLL angle error allowed at the largest acceleration (rad).
+    theta_max, r_tol, u_err, theta_acc : float
+        The targets, as :class:`HybridOptions` states them.
     """
     if not (theta_max > 0.0 and theta_acc > 0.0 and r_tol >= 0.0 and u_err >= 0.0):
         raise ValueError("need theta_max, theta_acc > 0 and r_tol, u_err >= 0")
@@ -517,45 +513,89 @@ class HybridEstimator:
         self.weight, self.gain = band.weights(y)
 
 
-_OWN_OPTIONS = ("theta_max", "r_tol", "u_err", "theta_acc", "alpha_o", "zeta_f")
+@dataclass(frozen=True)
+class HybridOptions:
+    """The hybrids' own options, beside their injection estimator's (:func:`design`'s
+    targets and two overrides of the observer's designed gains).
 
-
-def create(motor: MotorModel, T_s: float, hf: str = "tt-dq", **options: Any) -> HybridEstimator:
-    """Build ``hybrid-tt-dq`` (``hf="tt-dq"``) or ``hybrid-square-wave`` (``"square-wave"``).
-
-    ``options``: the injection estimator's own (fields of
-    :class:`controller.RotatingInjectionPars`, or the keyword parameters of
-    the square-wave estimator), plus ``theta_max``, ``r_tol``, ``u_err``,
-    ``theta_acc`` of :func:`design` and ``alpha_o`` (rad/s), ``zeta_f`` (-)
-    to override the observer's gains. Unknown keys raise ``TypeError``.
+    Parameters
+    ----------
+    theta_max : float
+        Steady angle budget of the observer where it carries weight (rad).
+    r_tol : float
+        Relative uncertainty of ``R_s`` (-), taken at ``motor.i_max``.
+    u_err : float
+        Inverter voltage uncertainty (V).
+    theta_acc : float
+        PLL angle error allowed at the largest acceleration (rad).
+    alpha_o : float or None
+        Bandwidth of the hybrids' flux observer's speed tracker (rad/s); default:
+        designed from theta_acc.
+    zeta_f : float or None
+        Damping of the flux observer's correction (-); default: the design's.
     """
-    own = {k: options.pop(k) for k in _OWN_OPTIONS if k in options}
+
+    theta_max: float = option_field(THETA_MAX, positive=True)
+    r_tol: float = option_field(R_TOL, positive=True)
+    u_err: float = option_field(0.0, minimum=0.0)
+    theta_acc: float = option_field(THETA_ACC, positive=True)
+    alpha_o: float | None = option_field(None, positive=True)
+    zeta_f: float | None = option_field(None, positive=True)
+
+
+@dataclass(frozen=True)
+class HybridTtDqOptions(HybridOptions, RotatingInjectionPars):
+    """The options of ``hybrid-tt-dq``: tt-dq's, then the hybrids' own."""
+
+
+@dataclass(frozen=True)
+class HybridSquareWaveOptions(HybridOptions, SquareWaveOptions):
+    """The options of ``hybrid-square-wave``: square-wave's, then the hybrids' own."""
+
+
+def create_tt_dq(motor: MotorModel, T_s: float, **options: Any) -> HybridEstimator:
+    """Build ``hybrid-tt-dq``: tt-dq below the band, its BPF tracking the sequences.
+
+    ``options``: the fields of :class:`controller.RotatingInjectionPars` and of
+    :class:`HybridOptions`. Unknown keys raise ``TypeError``.
+    """
+    from controller._tt_dq import TTDQEstimator
+
+    own = _own(options)
+    # the BPF follows the sequences to the band's speeds (RotatingInjectionPars)
+    tt = TTDQEstimator(motor, T_s, RotatingInjectionPars(**{"bpf_tracking": True, **options}))
+    pll = tt.pll
+    tracker = (
+        _PllTracker(pll, T_s) if isinstance(pll, PositionObserver) else _MechanicalTracker(pll, T_s)
+    )
+    return _compose(motor, T_s, tt, tracker, own)
+
+
+def create_square_wave(motor: MotorModel, T_s: float, **options: Any) -> HybridEstimator:
+    """Build ``hybrid-square-wave``: square-wave (with CIC) below the band.
+
+    ``options``: the fields of :class:`controller._square_wave.SquareWaveOptions` and of
+    :class:`HybridOptions`. Unknown keys raise ``TypeError``.
+    """
+    from controller._square_wave import SquareWaveEstimator
+
+    own = _own(options)
+    sw = SquareWaveEstimator(motor, T_s, cic=True, **options)
+    return _compose(motor, T_s, sw, _LuenbergerTracker(sw.observer), own)
+
+
+def _own(options: dict[str, Any]) -> dict[str, Any]:
+    """The :class:`HybridOptions` keys taken out of ``options``."""
+    return {f.name: options.pop(f.name) for f in fields(HybridOptions) if f.name in options}
+
+
+def _compose(
+    motor: MotorModel, T_s: float, est: Estimator, tracker: _Tracker, own: dict[str, Any]
+) -> HybridEstimator:
+    """The hybrid of the injection estimator ``est`` and the flux observer :func:`design` gives."""
     alpha_o = own.pop("alpha_o", None)
     zeta_f = own.pop("zeta_f", None)
     d = design(motor, **own)
-    tracker: _Tracker
-    est: Estimator
-    if hf == "tt-dq":
-        from controller._rotating import RotatingInjectionPars
-        from controller._tt_dq import TTDQEstimator
-
-        # the BPF follows the sequences to the band's speeds (RotatingInjectionPars)
-        tt = TTDQEstimator(motor, T_s, RotatingInjectionPars(**{"bpf_tracking": True, **options}))
-        pll = tt.pll
-        tracker = (
-            _PllTracker(pll, T_s)
-            if isinstance(pll, PositionObserver)
-            else _MechanicalTracker(pll, T_s)
-        )
-        est = tt
-    elif hf == "square-wave":
-        from controller._square_wave import SquareWaveEstimator
-
-        sw = SquareWaveEstimator(motor, T_s, cic=True, **options)
-        tracker = _LuenbergerTracker(sw.observer)
-        est = sw
-    else:
-        raise ValueError(f"hf must be 'tt-dq' or 'square-wave', got {hf!r}")
     observer = FluxObserver(
         motor,
         T_s,

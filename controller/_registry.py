@@ -1,47 +1,46 @@
-"""Estimators by name, imported lazily, and the user's own as plug-ins.
+"""Estimators by name: one :class:`EstimatorSpec` per estimator, and the user's own as plug-ins.
 
-Each estimator module exposes ``create(motor, T_s, **options) -> Estimator``.
-The names are part of the command-line contract (DESIGN.md): ``sfhf``,
-``tt-ab``, ``tt-dq``, ``self-demod`` and ``epf`` (Wen's references [27] and
-[25], reconstructed), ``square-wave``, ``square-wave-nocic``, ``sensored``,
-``hybrid-tt-dq``, ``hybrid-square-wave`` (the injection family of a hybrid is
-its injection estimator's: it injects below its transition band).
+An estimator is, for the bench, one :class:`EstimatorSpec`: its name, its
+factory ``factory(motor, T_s, **options) -> Estimator``, its injection family,
+the dataclass that declares its options (types, ranges, units, meanings),
+whether it reads the plant's truth, and the kind of the compiled core that
+runs it.  :data:`SPECS` holds the shipped ones; their names are part of the
+command-line contract (DESIGN.md): ``sfhf``, ``tt-ab``, ``tt-dq``,
+``self-demod`` and ``epf`` (Wen's references [27] and [25], reconstructed),
+``square-wave``, ``square-wave-nocic``, ``sensored``, ``hybrid-tt-dq``,
+``hybrid-square-wave`` (the injection family of a hybrid is its injection
+estimator's: it injects below its transition band).  Everything else reads the
+spec (:func:`spec`): the scenario schema, docs/SCENARIOS.md and ``bench list``
+are generated from it, the nodes give the truth to an estimator whose spec
+``needs_truth``, and nothing tests an estimator's name.
 
 Plug-ins (docs/ESTIMATORS.md).  Wherever an estimator name is taken, a
 user's estimator is named
 
-- ``package.module:factory``: the callable ``factory`` of an importable
-  module, called as ``factory(motor, T_s, **options)``, or
+- ``package.module:obj``: an :class:`EstimatorSpec` or a factory ``obj`` of
+  an importable module, or
 - the name an installed package registers in the entry-point group
   :data:`ENTRY_POINT_GROUP` (``can_hil_bench.estimators``), as python-can
-  finds its interfaces; the entry point's object is the factory.
+  finds its interfaces; the entry point's object is the spec or the factory.
 
-The factory's attribute ``injection_family`` (``"rotating"``, ``"square"``
-or ``"none"``) tells the controller whether to run the HF start-up
-(alignment and polarity test) before the speed loop.  An estimator may
-say it itself (attribute ``injection_family``, as every shipped estimator's
-class does): a factory that declares none takes its estimator's
-(:func:`estimator_family`), so a plug-in that returns a shipped estimator
-runs as that estimator does, start-up and designed gains included; a
-factory and an estimator that disagree are an error.  A plug-in never
-receives the plant's truth (only the built-in ``sensored`` baseline does).
+A plug-in's spec declares its family and options as a shipped one does; a
+bare factory may say them as attributes (``injection_family``, ``options``: a
+dataclass, or a mapping of names to :class:`~controller._api.Option`).  The
+family tells the controller whether to run the HF start-up (alignment and
+polarity test) before the speed loop: a plug-in that declares none takes its
+estimator's (:func:`estimator_family`), so a plug-in that returns a shipped
+estimator runs as that estimator does, start-up and designed gains included;
+a declaration and an estimator that disagree are an error.  A plug-in never
+receives the plant's truth and never runs on the compiled core (a plug-in's
+spec that asks for either is an error).
 
-Options (:func:`declared_options`, :func:`hand_over`).  Every estimator's
-options are declared as :class:`controller._api.Option` values by name:
-the shipped ones from their parameter dataclass or signature and
-docstrings, a plug-in by its factory's attribute ``options`` (a mapping of
-names to :class:`~controller._api.Option`, or a dataclass whose fields are
-the options).  A declared plug-in receives the scenario's options it
-declares, checked as declared; one without a declaration receives them all
-(``**options``) or the keywords it names.  A plug-in that cannot be
-imported, whose declaration is malformed, or whose estimator lacks a member
-of :class:`controller._api.Estimator`, raises :class:`EstimatorPluginError`
-with one line naming it.
-
-What an estimator is, for the bench, is then four facts: its name, its
-factory, its injection family and its declared options (:class:`Plugin`
-holds them for a plug-in; ``_ESTIMATORS`` and :func:`_shipped_options` for
-a built-in one); one registry entry per estimator can hold the four.
+Options (:func:`declared_options`, :func:`hand_over`).  A declared estimator
+(every shipped one, a plug-in with options) receives the scenario's options it
+declares, checked as declared; a plug-in without a declaration receives them
+all (``**options``) or the keywords it names.  A plug-in that cannot be
+imported, whose declaration is malformed, or whose estimator lacks a member of
+:class:`controller._api.Estimator`, raises :class:`EstimatorPluginError` with
+one line naming it.
 """
 
 from __future__ import annotations
@@ -55,27 +54,12 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from controller._api import OPTION_KINDS, Estimator, Option
+from controller import _epf, _hybrid, _self_demod, _sensored, _sfhf, _square_wave, _tt_ab, _tt_dq
+from controller._api import OPTION_KINDS, OPTION_LIMITS, Estimator, Option
 from controller._params import MotorModel
+from controller._rotating import RotatingInjectionPars
 
-#: name -> (module, fixed keyword options, injection family)
-_ESTIMATORS: dict[str, tuple[str, dict[str, Any], str]] = {
-    "sfhf": ("controller._sfhf", {}, "rotating"),
-    "tt-ab": ("controller._tt_ab", {}, "rotating"),
-    "tt-dq": ("controller._tt_dq", {}, "rotating"),
-    "self-demod": ("controller._self_demod", {}, "rotating"),
-    "epf": ("controller._epf", {}, "rotating"),
-    "square-wave": ("controller._square_wave", {"cic": True}, "square"),
-    "square-wave-nocic": ("controller._square_wave", {"cic": False}, "square"),
-    "sensored": ("controller._sensored", {}, "none"),
-    "hybrid-tt-dq": ("controller._hybrid", {"hf": "tt-dq"}, "rotating"),
-    "hybrid-square-wave": ("controller._hybrid", {"hf": "square-wave"}, "square"),
-}
-
-#: The built-in estimators.
-ESTIMATOR_NAMES: tuple[str, ...] = tuple(_ESTIMATORS)
-
-#: Entry-point group under which installed packages register estimator factories.
+#: Entry-point group under which installed packages register estimators.
 ENTRY_POINT_GROUP = "can_hil_bench.estimators"
 
 #: The injection families the controller knows.
@@ -85,6 +69,102 @@ FAMILIES = ("rotating", "square", "none")
 #: ``gains`` is optional).
 PROTOCOL_ATTRIBUTES = ("theta_hat", "w_hat", "err", "i_alpha_f", "i_beta_f")
 PROTOCOL_METHODS = ("update", "injection", "reset")
+
+
+@dataclass(frozen=True, slots=True)
+class EstimatorSpec:
+    """Everything the bench knows of one estimator: its registry entry.
+
+    Parameters
+    ----------
+    name : str
+        The name ``--estimator`` and a scenario's ``estimator`` take.
+    factory : callable
+        ``factory(motor, T_s, **options) -> Estimator``; ``options`` are the
+        scenario's values of the keys ``options`` declares.
+    family : str
+        Injection family (one of :data:`FAMILIES`): ``"rotating"`` (Wen),
+        ``"square"`` (Xue) or ``"none"``; an HF family runs the start-up at
+        standstill (alignment and polarity test) and needs a salient motor.
+    options : type or None
+        A dataclass whose fields are the options (a scenario's
+        ``[estimator_options]`` keys): default and type from the field, unit
+        and meaning from the class's numpydoc ``Parameters``, checks from
+        :func:`controller.option_field`.  None: not declared (a plug-in that
+        takes what its factory's signature names).
+    needs_truth : bool
+        It reads the plant's rotor angle and speed (``Measurement.theta_e``,
+        ``w_e``): the sensored baseline only (DESIGN.md); the controller node
+        then subscribes to the truth and the controller skips the start-up.
+    compiled_kind : int or None
+        The kind of the compiled core (``controller/_cctl.c``) that runs it;
+        None: it runs in Python.
+    summary : str
+        One line for ``bench list``.
+    speed_band : bool
+        It hands over between an injection estimator and a flux observer
+        through a speed band (:class:`controller.HybridEstimator`): its runs
+        report per-band metrics.
+    proposed_in : str
+        The paper whose proposed method it is (``wen``, ``xue``; the prefix of
+        that paper's scenarios), empty for the others: the report checks the
+        paper's claims on it.
+    """
+
+    name: str
+    factory: Callable[..., Any]
+    family: str
+    options: type | None = None
+    needs_truth: bool = False
+    compiled_kind: int | None = None
+    summary: str = ""
+    speed_band: bool = False
+    proposed_in: str = ""
+
+    def declared(self) -> dict[str, Option] | None:
+        """The options it declares, by name (:func:`options_of_dataclass`); None without
+        a declaration."""
+        return None if self.options is None else dict(_declared(self.options))
+
+
+_WEN = RotatingInjectionPars
+_XUE = _square_wave.SquareWaveOptions
+
+#: The shipped estimators, by name: their registry entries.
+SPECS: dict[str, EstimatorSpec] = {
+    s.name: s
+    for s in (
+        EstimatorSpec("sfhf", _sfhf.create, "rotating", _WEN, compiled_kind=3,
+                      summary="synchronous-frame HPF demodulation, conventional (Wen 2.3)"),
+        EstimatorSpec("tt-ab", _tt_ab.create, "rotating", _WEN, compiled_kind=2,
+                      summary="TT self-demodulation in the alpha-beta axes (Wen 4.2)"),
+        EstimatorSpec("tt-dq", _tt_dq.create, "rotating", _WEN, compiled_kind=1,
+                      summary="TT self-demodulation in the estimated d-q axes (Wen 4.3)",
+                      proposed_in="wen"),
+        EstimatorSpec("self-demod", _self_demod.create, "rotating", _WEN,
+                      summary="HF response current self-demodulation, Wen's [27]"),
+        EstimatorSpec("epf", _epf.create, "rotating", _WEN,
+                      summary="estimated position feedback demodulation, Wen's [25]"),
+        EstimatorSpec("square-wave", _square_wave.create, "square", _XUE, compiled_kind=4,
+                      summary="square-wave injection, CIC interpolation (Xue)",
+                      proposed_in="xue"),
+        EstimatorSpec("square-wave-nocic", functools.partial(_square_wave.create, cic=False),
+                      "square", _XUE, compiled_kind=4,
+                      summary="square-wave injection, envelope held (Xue, no CIC)"),
+        EstimatorSpec("sensored", _sensored.create, "none", _sensored.SensoredOptions,
+                      needs_truth=True, compiled_kind=5,
+                      summary="the true angle and speed: the baseline"),
+        EstimatorSpec("hybrid-tt-dq", _hybrid.create_tt_dq, "rotating",
+                      _hybrid.HybridTtDqOptions, compiled_kind=6, speed_band=True,
+                      summary="tt-dq handed over to a flux observer above a speed band"),
+        EstimatorSpec("hybrid-square-wave", _hybrid.create_square_wave, "square",
+                      _hybrid.HybridSquareWaveOptions, compiled_kind=7, speed_band=True,
+                      summary="square-wave handed over to a flux observer above a speed band"),
+    )
+}  # fmt: skip
+
+#: The built-in estimators.
+ESTIMATOR_NAMES: tuple[str, ...] = tuple(SPECS)
 
 
 class UnknownEstimatorError(ValueError):
@@ -97,12 +177,12 @@ class EstimatorPluginError(UnknownEstimatorError):
 
 @dataclass(frozen=True, slots=True)
 class Plugin:
-    """A user's estimator factory, resolved from its name.
+    """A user's estimator, resolved from its name.
 
     Parameters
     ----------
     name : str
-        ``package.module:factory`` or an entry-point name.
+        ``package.module:obj`` or an entry-point name.
     factory : callable
         ``factory(motor, T_s, **options) -> Estimator``.
     family : str
@@ -110,11 +190,13 @@ class Plugin:
     keywords : tuple of str or None
         The keywords the factory names, None when it takes ``**options``.
     family_declared : bool
-        The factory sets ``injection_family`` (else ``family`` is ``"none"``
+        The plug-in declares ``injection_family`` (else ``family`` is ``"none"``
         until the estimator says otherwise, :func:`estimator_family`).
     options : dict or None
         The options it declares (name -> :class:`~controller._api.Option`), None
         without a declaration.
+    spec : EstimatorSpec
+        Its registry entry (``options`` as a dataclass).
     """
 
     name: str
@@ -123,6 +205,7 @@ class Plugin:
     keywords: tuple[str, ...] | None
     family_declared: bool = True
     options: dict[str, Option] | None = None
+    spec: EstimatorSpec | None = None
 
 
 _PLUGINS: dict[str, Plugin] = {}
@@ -160,8 +243,8 @@ def _import_user_module(mod_name: str) -> Any:
         return importlib.import_module(mod_name)
 
 
-def _load_factory(name: str) -> Callable[..., Any] | None:
-    """The factory object named ``name``; None when no plug-in has that name."""
+def _load_factory(name: str) -> Any:
+    """The object (a spec or a factory) named ``name``; None when no plug-in has that name."""
     if is_plugin_name(name):
         mod_name, _, attr = name.partition(":")
         if not mod_name or not attr:
@@ -193,12 +276,23 @@ def plugin(name: str) -> Plugin | None:
     """The plug-in called ``name`` (cached), or None when there is none."""
     if name in _PLUGINS:
         return _PLUGINS[name]
-    factory = _load_factory(name)
-    if factory is None:
+    obj = _load_factory(name)
+    if obj is None:
         return None
+    if isinstance(obj, EstimatorSpec):
+        if obj.needs_truth:
+            raise _fail(name, "needs_truth: only the built-in sensored baseline reads the truth")
+        if obj.compiled_kind is not None:
+            raise _fail(name, "compiled_kind: a plug-in runs in Python (leave it None)")
+        factory: Any = obj.factory
+        declared: Any = obj.family
+        decl: Any = obj.options
+    else:
+        factory = obj
+        declared = getattr(factory, "injection_family", None)
+        decl = getattr(factory, "options", None)
     if not callable(factory):
         raise _fail(name, f"{type(factory).__name__} object is not callable")
-    declared = getattr(factory, "injection_family", None)
     family = "none" if declared is None else declared
     if family not in FAMILIES:
         raise _fail(name, f"injection_family {family!r} is not one of {', '.join(FAMILIES)}")
@@ -213,8 +307,8 @@ def plugin(name: str) -> Plugin | None:
         pos = [p for p in params if p.kind in (p.POSITIONAL_ONLY, p.POSITIONAL_OR_KEYWORD)]
         if len(pos) < 2 and not any(p.kind is p.VAR_POSITIONAL for p in params):
             raise _fail(name, "the factory must take (motor, T_s, **options)")
-    decl = getattr(factory, "options", None)
-    options = None if decl is None else _declaration(name, decl)
+    cls = None if decl is None else _declaration(name, decl)
+    options = None if cls is None else dict(_declared(cls))
     if options is not None and keywords is not None:
         unnamed = [k for k in options if k not in keywords]
         if unnamed:
@@ -223,36 +317,44 @@ def plugin(name: str) -> Plugin | None:
                 f"declares options its factory does not take: {', '.join(unnamed)} "
                 "(name them as keywords, or take **options)",
             )
-    p = Plugin(name, factory, family, keywords, declared is not None, options)
+    spec_ = EstimatorSpec(name, factory, family, cls)
+    p = Plugin(name, factory, family, keywords, declared is not None, options, spec_)
     _PLUGINS[name] = p
     return p
 
 
-def _declaration(name: str, decl: Any) -> dict[str, Option]:
-    """A plug-in's ``options`` attribute as name -> :class:`Option` (one line when malformed)."""
+def _declaration(name: str, decl: Any) -> type:
+    """A plug-in's options as a dataclass (a mapping of names to :class:`Option` becomes
+    one); one line when malformed."""
     if isinstance(decl, type) and dataclasses.is_dataclass(decl):
         try:
-            return options_of_dataclass(decl)
+            _declared(decl)
         except (TypeError, ValueError) as e:
             raise _fail(name, f"options {decl.__name__}: {e}") from None
+        return decl
     if not isinstance(decl, Mapping):
         raise _fail(
             name,
             "options must be a dataclass or a mapping of names to controller.Option, "
             f"got {type(decl).__name__}",
         )
-    out: dict[str, Option] = {}
+    fields: list[tuple[str, Any, Any]] = []
     for k, v in decl.items():
         if not isinstance(k, str) or not k.isidentifier():
             raise _fail(name, f"option name {k!r} is not an identifier")
         if not isinstance(v, Option):
             raise _fail(name, f"option {k!r}: expected a controller.Option, got {type(v).__name__}")
-        if v.kind and v.kind not in OPTION_KINDS:
-            raise _fail(
-                name, f"option {k!r}: kind {v.kind!r} is not one of {', '.join(OPTION_KINDS)}"
-            )
-        out[k] = v
-    return out
+        fields.append((k, Any, dataclasses.field(default=v.default, metadata={_AS_IS: v})))
+    cls = dataclasses.make_dataclass("Options", fields, frozen=True)
+    try:
+        _declared(cls)
+    except (TypeError, ValueError) as e:
+        raise _fail(name, str(e)) from None
+    return cls
+
+
+#: The metadata key of a field declared by an :class:`Option` itself (a plug-in's mapping).
+_AS_IS = "controller.Option"
 
 
 def numpydoc_parameters(doc: str) -> dict[str, tuple[str, str]]:
@@ -305,11 +407,17 @@ def _kind_of(annotation: Any, default: Any) -> str:
 def options_of_dataclass(cls: type) -> dict[str, Option]:
     """The options a dataclass declares: one :class:`Option` per field.
 
-    Default and type from the field; meaning and unit from the class's numpydoc
-    ``Parameters`` (the unit in parentheses); ``field(metadata=...)`` sets any
-    :class:`Option` attribute (``unit``, ``positive``, ``minimum``, ``choices``...).
+    Default and type from the field; meaning and unit from the numpydoc
+    ``Parameters`` of the class or of the base that defines the field (the unit
+    in parentheses); the field's metadata (:func:`controller.option_field`) sets
+    any :class:`Option` attribute (``unit``, ``positive``, ``minimum``,
+    ``choices``, ``limit``...).  Raises ``ValueError`` for a field without a
+    default or a check that is not one (kind, limit) and ``TypeError`` for an
+    unknown attribute.
     """
-    doc = numpydoc_parameters(cls.__doc__ or "")
+    doc: dict[str, tuple[str, str]] = {}
+    for base in reversed(cls.__mro__):
+        doc.update(numpydoc_parameters(base.__doc__ or ""))
     out: dict[str, Option] = {}
     for f in dataclasses.fields(cls):
         if f.default is not dataclasses.MISSING:
@@ -318,102 +426,50 @@ def options_of_dataclass(cls: type) -> dict[str, Option]:
             default = f.default_factory()
         else:
             raise ValueError(f"field {f.name!r} has no default")
-        text = _plain(doc.get(f.name, ("", ""))[1])
-        kw: dict[str, Any] = {"unit": unit_in(text), "doc": text}
-        kw["kind"] = _kind_of(f.type, default)
-        kw.update(f.metadata)
-        out[f.name] = Option(default, **kw)
-    return out
-
-
-def _options_of_signature(
-    func: Callable[..., Any], skip: tuple[str, ...], doc: str
-) -> dict[str, Option]:
-    """The keyword parameters of ``func`` (less ``skip``) as options, described by ``doc``."""
-    text = numpydoc_parameters(doc)
-    out: dict[str, Option] = {}
-    for k, p in inspect.signature(func).parameters.items():
-        if k in skip or p.kind in (p.VAR_KEYWORD, p.VAR_POSITIONAL):
-            continue
-        d = None if p.default is inspect.Parameter.empty else p.default
-        meaning = _plain(text.get(k, ("", ""))[1])
-        out[k] = Option(d, unit_in(meaning), meaning, _kind_of(p.annotation, d))
+        if _AS_IS in f.metadata:
+            opt = f.metadata[_AS_IS]
+        else:
+            text = _plain(doc.get(f.name, ("", ""))[1])
+            kw: dict[str, Any] = {"unit": unit_in(text), "doc": text}
+            kw["kind"] = _kind_of(f.type, default)
+            kw.update(f.metadata)
+            opt = Option(default, **kw)
+        if opt.kind and opt.kind not in OPTION_KINDS:
+            raise ValueError(
+                f"option {f.name!r}: kind {opt.kind!r} is not one of {', '.join(OPTION_KINDS)}"
+            )
+        if opt.limit and opt.limit not in OPTION_LIMITS:
+            raise ValueError(
+                f"option {f.name!r}: limit {opt.limit!r} is not one of {', '.join(OPTION_LIMITS)}"
+            )
+        out[f.name] = opt
     return out
 
 
 @functools.cache
-def _shipped_options(name: str) -> dict[str, Option]:
-    """The declaration of a built-in estimator's options (:func:`declared_options`)."""
-    family = _ESTIMATORS[name][2]
-    out: dict[str, Option] = {}
-    if name == "sensored":
-        return out
-    if family == "rotating":
-        from controller._rotating import RotatingInjectionPars
-
-        out = options_of_dataclass(RotatingInjectionPars)
-    else:
-        from controller._square_wave import SquareWaveEstimator
-
-        out = _options_of_signature(
-            SquareWaveEstimator.__init__,
-            ("self", "motor", "T_s", "cic"),
-            SquareWaveEstimator.__doc__ or "",
-        )
-    if name.startswith("hybrid-"):
-        from controller._hybrid import _OWN_OPTIONS, design
-
-        own = _options_of_signature(design, ("motor",), design.__doc__ or "")
-        own.update(_HYBRID_GAINS)
-        out.update({k: own[k] for k in _OWN_OPTIONS})
-    return {
-        k: dataclasses.replace(
-            o, **_SHIPPED_CHECKS.get(k, {"positive": True} if o.value_kind == "float" else {})
-        )
-        for k, o in out.items()
-    }
+def _declared(cls: type) -> dict[str, Option]:
+    return options_of_dataclass(cls)
 
 
-#: What the shipped estimators' options accept beyond their type, by key; every other
-#: number is > 0.  The scenario also holds an injection amplitude (``V_h``, ``U_h``)
-#: within the inverter's linear range and ``f_h`` below the Nyquist frequency, which
-#: depend on the scenario (``bench/scenarios/_schema.py``).
-_SHIPPED_CHECKS: dict[str, dict[str, Any]] = {
-    "w_o": {"minimum": 0.0},  # 0 freezes the PLL
-    "delay_comp": {"minimum": 0.0},  # periods; 0 disables it
-    "u_err": {"minimum": 0.0},  # V
-    "M": {"kind": "int", "minimum": 1},  # CIC differential delay, PWM periods
-    "normalise": {"choices": ("model", "measured")},
-    "observer": {"choices": ("pll", "mechanical")},
-}
+def spec(name: str) -> EstimatorSpec:
+    """The registry entry of estimator ``name``: a shipped one's, or a plug-in's.
 
-
-#: The hybrids' options that override a designed gain (controller._hybrid.create).
-_HYBRID_GAINS = {
-    "alpha_o": Option(
-        None,
-        "rad/s",
-        "Bandwidth of the hybrids' flux observer's speed tracker; default: designed from theta_acc.",
-        positive=True,
-    ),
-    "zeta_f": Option(
-        None,
-        "-",
-        "Damping of the flux observer's correction; default: the design's.",
-        positive=True,
-    ),
-}
+    Raises :class:`UnknownEstimatorError` for an unknown name and
+    :class:`EstimatorPluginError` for a plug-in that cannot be loaded.
+    """
+    s = SPECS.get(name)
+    if s is not None:
+        return s
+    p = plugin(name)
+    if p is None or p.spec is None:
+        raise _unknown(name)
+    return p.spec
 
 
 def declared_options(name: str) -> dict[str, Option] | None:
     """The options estimator ``name`` declares, by name; None for a plug-in without a
     declaration (it takes what its factory's signature names, or everything)."""
-    if name in _ESTIMATORS:
-        return dict(_shipped_options(name))
-    p = plugin(name)
-    if p is None:
-        raise _unknown(name)
-    return None if p.options is None else dict(p.options)
+    return spec(name).declared()
 
 
 def hand_over(name: str, options: Mapping[str, Any]) -> tuple[dict[str, Any], list[str]]:
@@ -441,7 +497,7 @@ def check_options(name: str, options: Mapping[str, Any]) -> dict[str, Any]:
     declaration gets ``options`` unchecked.  The built-in estimators' values are
     checked by the scenario schema (``bench/scenarios/_schema.py``).
     """
-    p = plugin(name) if name not in _ESTIMATORS else None
+    p = plugin(name) if name not in SPECS else None
     if p is None or p.options is None:
         return dict(options)
     out: dict[str, Any] = {}
@@ -466,9 +522,9 @@ def estimator_family(name: str, est: object) -> str:
     A plug-in that declares a family other than its estimator's own is an
     :class:`EstimatorPluginError`.
     """
-    entry = _ESTIMATORS.get(name)
-    if entry is not None:
-        return entry[2]
+    s = SPECS.get(name)
+    if s is not None:
+        return s.family
     own = getattr(est, "injection_family", None)
     p = plugin(name)
     if p is None:
@@ -502,13 +558,7 @@ def injection_family(name: str) -> str:
     Raises :class:`UnknownEstimatorError` for an unknown name and
     :class:`EstimatorPluginError` for a plug-in that cannot be loaded.
     """
-    entry = _ESTIMATORS.get(name)
-    if entry is not None:
-        return entry[2]
-    p = plugin(name)
-    if p is None:
-        raise _unknown(name)
-    return p.family
+    return spec(name).family
 
 
 def check_estimator(name: str) -> str:
@@ -533,7 +583,7 @@ def make_estimator(name: str, motor: MotorModel, T_s: float, **options: Any) -> 
     Parameters
     ----------
     name : str
-        One of :data:`ESTIMATOR_NAMES`, ``package.module:factory`` or an
+        One of :data:`ESTIMATOR_NAMES`, ``package.module:obj`` or an
         entry-point name (module docstring).
     motor : MotorModel
         The controller's own (estimated) motor model.
@@ -544,11 +594,9 @@ def make_estimator(name: str, motor: MotorModel, T_s: float, **options: Any) -> 
         corners, observer bandwidth); unknown keys of a built-in estimator
         raise ``TypeError``.
     """
-    entry = _ESTIMATORS.get(name)
-    if entry is not None:
-        module_name, fixed, _ = entry
-        module = importlib.import_module(module_name)
-        est: Estimator = module.create(motor, T_s, **fixed, **options)
+    s = SPECS.get(name)
+    if s is not None:
+        est: Estimator = s.factory(motor, T_s, **options)
         return est
     p = plugin(name)
     if p is None:

@@ -79,7 +79,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from controller._api import EstimatorInput
+from controller._api import EstimatorInput, option_field
 from controller._design import PM_TARGET_DEG, freq_response
 from controller._filters import BPF_WEN, HPF_WEN, LPF_WEN, bandpass_coefficients, discretize
 from controller._luenberger import LuenbergerObserver, design_pole, observer_response
@@ -87,6 +87,10 @@ from controller._params import MotorModel
 from controller._pll import PositionObserver, design_bandwidth
 
 _TWO_PI = 2.0 * math.pi
+
+
+#: How the docs state the filters' defaults.
+_WEN_FILTERS = "Wen eqs. (11)-(13)"
 
 
 @dataclass(frozen=True, slots=True)
@@ -171,17 +175,24 @@ class RotatingInjectionPars:
         at its corner.
     """
 
-    V_h: float = 50.0
-    f_h: float = 500.0
-    w_o: float | None = None
-    pm_deg: float = PM_TARGET_DEG
-    observer: str = "pll"
-    a: float | None = None
-    normalise: str = "model"
+    # the checks each option takes as a scenario's [estimator_options] key (option_field)
+    V_h: float = option_field(50.0, positive=True, limit="inverter_linear")
+    f_h: float = option_field(500.0, positive=True, limit="below_nyquist")
+    w_o: float | None = option_field(None, minimum=0.0)  # 0 freezes the PLL
+    pm_deg: float = option_field(PM_TARGET_DEG, positive=True)
+    observer: str = option_field("pll", choices=("pll", "mechanical"))
+    a: float | None = option_field(None, positive=True)
+    normalise: str = option_field("model", choices=("model", "measured"))
     bpf_tracking: bool = False
-    bpf: tuple[tuple[float, ...], tuple[float, ...]] = BPF_WEN
-    hpf: tuple[tuple[float, ...], tuple[float, ...]] = HPF_WEN
-    lpf: tuple[tuple[float, ...], tuple[float, ...]] = LPF_WEN
+    bpf: tuple[tuple[float, ...], tuple[float, ...]] = option_field(
+        BPF_WEN, default_doc=_WEN_FILTERS
+    )
+    hpf: tuple[tuple[float, ...], tuple[float, ...]] = option_field(
+        HPF_WEN, default_doc=_WEN_FILTERS
+    )
+    lpf: tuple[tuple[float, ...], tuple[float, ...]] = option_field(
+        LPF_WEN, default_doc=_WEN_FILTERS
+    )
 
 
 def hf_amplitudes(motor: MotorModel, V_h: float, w_h: float, T_s: float) -> tuple[float, float]:

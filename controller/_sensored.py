@@ -2,10 +2,16 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any, ClassVar
 
 from controller._api import EstimatorInput
 from controller._params import MotorModel
+
+
+@dataclass(frozen=True, slots=True)
+class SensoredOptions:
+    """The sensored baseline takes no options: its angle and speed are the plant's."""
 
 
 class SensoredEstimator:

@@ -103,11 +103,12 @@ from __future__ import annotations
 
 import functools
 import math
+from dataclasses import dataclass
 from typing import Any, ClassVar
 
 import numpy as np
 
-from controller._api import EstimatorInput
+from controller._api import EstimatorInput, option_field
 from controller._cic import CicInterpolator
 from controller._design import PM_TARGET_DEG, margins, solve_largest
 from controller._luenberger import LuenbergerObserver, observer_response
@@ -163,18 +164,12 @@ def observer_pole(T_s: float, cic: bool, M: int, delay_comp: float, pm_deg: floa
     )
 
 
-class SquareWaveEstimator:
-    """Xue's square-wave injection estimator (eqs. 3-12), optionally without CIC.
+@dataclass(frozen=True, slots=True)
+class SquareWaveOptions:
+    """The options of the square-wave estimators (a scenario's ``[estimator_options]``).
 
     Parameters
     ----------
-    motor : MotorModel
-        The controller's motor model (``L_d``, ``L_q``, ``J``, ``n_p``).
-    T_s : float
-        PWM period = control period (s).
-    cic : bool
-        True: CIC interpolation of the envelope (``square-wave``);
-        False: zero-order hold (``square-wave-nocic``).
     U_h : float
         Injection amplitude (V).
     a : float or None
@@ -189,6 +184,32 @@ class SquareWaveEstimator:
         Phase-margin target of the observer loop (deg), used when ``a`` is None.
     """
 
+    U_h: float = option_field(20.0, positive=True, limit="inverter_linear")
+    a: float | None = option_field(None, positive=True)
+    M: int = option_field(2, kind="int", minimum=1)
+    delay_comp: float | None = option_field(None, minimum=0.0)  # 0 disables it
+    pm_deg: float = option_field(PM_TARGET_DEG, positive=True)
+
+
+_DEFAULTS = SquareWaveOptions()
+
+
+class SquareWaveEstimator:
+    """Xue's square-wave injection estimator (eqs. 3-12), optionally without CIC.
+
+    Parameters
+    ----------
+    motor : MotorModel
+        The controller's motor model (``L_d``, ``L_q``, ``J``, ``n_p``).
+    T_s : float
+        PWM period = control period (s).
+    cic : bool
+        True: CIC interpolation of the envelope (``square-wave``);
+        False: zero-order hold (``square-wave-nocic``).
+    U_h, a, M, delay_comp, pm_deg
+        The options (:class:`SquareWaveOptions`, which holds their defaults).
+    """
+
     #: The injection family (``controller._registry.estimator_family``).
     injection_family: ClassVar[str] = "square"
 
@@ -197,11 +218,11 @@ class SquareWaveEstimator:
         motor: MotorModel,
         T_s: float,
         cic: bool = True,
-        U_h: float = 20.0,
-        a: float | None = None,
-        M: int = 2,
-        delay_comp: float | None = None,
-        pm_deg: float = PM_TARGET_DEG,
+        U_h: float = _DEFAULTS.U_h,
+        a: float | None = _DEFAULTS.a,
+        M: int = _DEFAULTS.M,
+        delay_comp: float | None = _DEFAULTS.delay_comp,
+        pm_deg: float = _DEFAULTS.pm_deg,
     ) -> None:
         if not T_s > 0.0:
             raise ValueError(f"T_s must be > 0, got {T_s}")

@@ -79,16 +79,18 @@ class RerunResult:
 
 def injection_note(estimator: str, recorded: str | None) -> str:
     """What the comparison of ``estimator`` on a capture of ``recorded`` means."""
+    from bench.scenarios._setup import needs_truth
     from controller._registry import injection_family
 
     fam = injection_family(estimator)
+    truth = needs_truth(estimator)
     if recorded is None:
         return (
             "open loop on a capture of an unknown controller: the currents respond to the "
             f"injection that controller applied, not to the {fam} injection of {estimator}"
         )
     rec_fam = injection_family(recorded)
-    if estimator == recorded and estimator == "sensored":
+    if estimator == recorded and truth:
         return (
             f"same estimator as recorded ({recorded}, no injection): it reads the recorded "
             "truth angle; the logged estimate is reproduced"
@@ -98,7 +100,7 @@ def injection_note(estimator: str, recorded: str | None) -> str:
             f"same estimator as recorded ({recorded}): the currents respond to its own "
             "injection; with the same settings its logged estimate is reproduced"
         )
-    if estimator == "sensored":
+    if truth:
         return (
             f"the sensored baseline reads the recorded truth angle; the currents respond to "
             f"the {rec_fam} injection of {recorded}"
@@ -166,6 +168,7 @@ def rerun_capture(
         get_preset,
         sample_period,
     )
+    from bench.scenarios._setup import needs_truth as reads_truth
     from controller._registry import ESTIMATOR_NAMES, UnknownEstimatorError, check_estimator
 
     check_estimator_name(estimator)
@@ -189,7 +192,7 @@ def rerun_capture(
     mode = str(meta.get("mode", "lockstep"))
     T_s = sample_period(scn)
     n_p = get_preset(scn).motor.n_p
-    needs_truth = estimator == "sensored"
+    needs_truth = reads_truth(estimator)
     view, view_name = _controller_view(
         frames, codec.frame_id("PlantTruth") if needs_truth else None
     )

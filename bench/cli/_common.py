@@ -200,7 +200,8 @@ def scenario_from_args(args: argparse.Namespace) -> Any:
 
     from bench.scenarios._schema import load_scenario
 
-    scn = load_scenario(args.scenario)
+    est = getattr(args, "estimator", None)
+    scn = load_scenario(args.scenario, (est,) if isinstance(est, str) else ())
     lat = scn.latency
     if getattr(args, "delay_steps", None) is not None:
         lat = replace(lat, duty_delay_steps=max(0, args.delay_steps))

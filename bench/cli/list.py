@@ -20,9 +20,9 @@ def cmd_list(args: argparse.Namespace) -> int:
     print("presets (motor, inverter, PWM rate; bench show SCENARIO prints the motor):")
     for name, p in cat["presets"].items():
         print(f"  {name:16s} f_sw {p['f_sw_hz']:g} Hz, n_p {p['n_p']}, u_dc {p['u_dc']:g} V")
-    print("estimators (--estimator; injection family):")
-    for name, fam in cat["estimators"].items():
-        print(f"  {name:20s} {fam}")
+    print("estimators (--estimator; injection family; docs/SCENARIOS.md lists their options):")
+    for name, s in cat["estimator_specs"].items():
+        print(f"  {name:20s} {s['family']:9s} {s['summary']}")
     for name, fam in cat["estimator_plugins"].items():
         print(f"  {name:20s} {fam} (installed plug-in)")
     print("  package.module:factory  your own estimator (docs/ESTIMATORS.md)")

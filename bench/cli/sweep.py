@@ -33,7 +33,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         raise BenchError("--scheduler needs --executor dask")
     if args.workers < 1:
         raise BenchError(f"--workers must be >= 1, got {args.workers}")
-    scn = load_scenario(args.scenario)
+    scn = load_scenario(args.scenario, tuple(args.estimator or ()))
     ests = tuple(args.estimator or (scn.estimator,))
     for e in ests:
         check_estimator_name(e)

@@ -30,6 +30,7 @@ from bench.scenarios._setup import (
     command_schedule,
     lockstep_delay,
     n_steps,
+    needs_truth,
     sample_period,
 )
 from bench.wire._codec import Codec
@@ -100,7 +101,7 @@ def make_plant_node(
 
 def make_controller_node(scn: Scenario, estimator: str, codec: Codec) -> ControllerNode:
     return ControllerNode(
-        codec, build_controller(scn, estimator), needs_truth=estimator == "sensored"
+        codec, build_controller(scn, estimator), needs_truth=needs_truth(estimator)
     )
 
 

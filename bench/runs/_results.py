@@ -408,9 +408,12 @@ def hybrid_band_metrics(table: dict[str, Any], scn: Scenario, estimator: str) ->
     """
     from bench._errors import BenchError
     from bench.scenarios._setup import build_controller
-    from controller import HybridEstimator
+    from controller import HybridEstimator, UnknownEstimatorError, estimator_spec
 
-    if not estimator.startswith("hybrid"):
+    try:
+        if not estimator_spec(estimator).speed_band:
+            return {}
+    except UnknownEstimatorError:
         return {}
     try:
         ctrl = build_controller(scn, estimator)

@@ -180,7 +180,7 @@ def describe(scn: Scenario) -> dict[str, Any]:
 def catalogue() -> dict[str, Any]:
     """The shipped scenarios, presets, estimators and plant profiles."""
     from controller._registry import (
-        ESTIMATOR_NAMES,
+        SPECS,
         UnknownEstimatorError,
         entry_point_names,
         injection_family,
@@ -210,7 +210,18 @@ def catalogue() -> dict[str, Any]:
     return {
         "scenarios": scenarios,
         "presets": presets,
-        "estimators": {e: injection_family(e) for e in ESTIMATOR_NAMES},
+        "estimators": {name: s.family for name, s in SPECS.items()},
+        # the registry's entries (controller.EstimatorSpec), for ``bench list``
+        "estimator_specs": {
+            name: {
+                "family": s.family,
+                "summary": s.summary,
+                "options": list(s.declared() or {}),
+                "needs_truth": s.needs_truth,
+                "compiled": s.compiled_kind is not None,
+            }
+            for name, s in SPECS.items()
+        },
         "estimator_plugins": plugins,
         "plant_profiles": list(PROFILE_NAMES),
     }

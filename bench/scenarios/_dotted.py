@@ -80,9 +80,13 @@ def set_key(table: dict[str, Any], key: str, value: Any) -> None:
 
 
 def scenario_with(
-    base: tuple[dict[str, Any], str], changes: Mapping[str, Any], name: str | None = None
+    base: tuple[dict[str, Any], str],
+    changes: Mapping[str, Any],
+    name: str | None = None,
+    run_with: tuple[str, ...] = (),
 ) -> Scenario:
-    """The scenario of ``base`` (from :func:`scenario_table`) with ``changes`` applied."""
+    """The scenario of ``base`` (from :func:`scenario_table`) with ``changes`` applied;
+    ``run_with``: the estimators it is run with (``parse_scenario``'s ``also``)."""
     table, src = base
     t = copy.deepcopy(table)
     for k, v in changes.items():
@@ -90,4 +94,4 @@ def scenario_with(
     if name is not None:
         t["name"] = name
     what = ", ".join(f"{k}={v}" for k, v in changes.items())
-    return parse_scenario(t, f"{src} ({what})" if what else src)
+    return parse_scenario(t, f"{src} ({what})" if what else src, run_with)

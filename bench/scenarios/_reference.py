@@ -466,15 +466,15 @@ KEYS: dict[str, dict[str, Key]] = {
 
 def option_range(key: str) -> tuple[str, Any]:
     """An ``[estimator_options]`` key's range in words and a value the loader refuses, from
-    its declaration (:func:`bench.scenarios._schema.shipped_options`) and the scenario's checks
-    of amplitudes and frequencies."""
+    its declaration (:func:`bench.scenarios._schema.shipped_options`) with the scenario's bound
+    (:attr:`controller.Option.limit`)."""
     from bench.scenarios import _schema as sc
 
     opt = sc.shipped_options()[key]
     kind = opt.value_kind
-    if key in sc._OPTION_AMPLITUDES:
+    if opt.limit == "inverter_linear":
         return f"{opt.range_text()} and <= u_dc / sqrt(3) of the preset", 1000.0
-    if key in sc._OPTION_FREQUENCIES:
+    if opt.limit == "below_nyquist":
         return f"{opt.range_text()} and below half the PWM rate", 6000.0
     bad: Any = {"bool": 1, "str": "no-such-choice", "filter": [[1.0]], "int": 0}.get(kind)
     if bad is None:
@@ -580,21 +580,19 @@ def _show(v: Any) -> str:
 
 
 def estimator_options() -> dict[str, dict[str, tuple[str, str, str, str]]]:
-    """Per estimator: option -> (unit, default, range, meaning), from the estimators'
-    declarations (:func:`controller._registry.declared_options`)."""
-    from controller._registry import ESTIMATOR_NAMES, declared_options
+    """Per estimator: option -> (unit, default, range, meaning), from the registry's entries
+    (:data:`controller._registry.SPECS`, each one's options dataclass)."""
+    from controller._registry import SPECS
 
     out: dict[str, dict[str, tuple[str, str, str, str]]] = {}
-    for name in ESTIMATOR_NAMES:
+    for name, spec in SPECS.items():
         rows: dict[str, tuple[str, str, str, str]] = {}
-        for k, opt in (declared_options(name) or {}).items():
-            shown = (
+        for k, opt in (spec.declared() or {}).items():
+            shown = opt.default_doc or (
                 "derived (meta.json: controller_gains)"
                 if opt.default is None
                 else _show(opt.default)
             )
-            if k in ("bpf", "hpf", "lpf"):
-                shown = "Wen eqs. (11)-(13)"
             rows[k] = (opt.unit, shown, option_range(k)[0], opt.doc)
         out[name] = rows
     return out
@@ -706,7 +704,8 @@ def render() -> str:
         "(below) and leaves out the others, which a run names in a note (one line on stderr, "
         "and `estimator_options_left_out` in `meta.json`). A key no estimator declares is an "
         "error naming the file and the key; a plug-in's own options are accepted in a file "
-        "that names the plug-in in `estimator` or `estimators` (docs/ESTIMATORS.md). Each "
+        "that names the plug-in in `estimator` or `estimators`, or in a run of it with "
+        "`--estimator` (docs/ESTIMATORS.md). Each "
         "value is checked by its key. `meta.json` (`controller_gains`) records the values a "
         "run used, derived ones included.",
         "",
@@ -718,9 +717,7 @@ def render() -> str:
             shown = ", ".join(f"`{k}`" for k in opt_keys)
             lines.append(f"| {shown} | {unit} | {d} | {rng} | {meaning} |")
         lines.append("")
-    from controller._registry import ESTIMATOR_NAMES
-
-    bare = [n for n, rows in estimator_options().items() if not rows and n in ESTIMATOR_NAMES]
+    bare = [n for n, rows in estimator_options().items() if not rows]
     if bare:
         lines += [f"{', '.join(f'`{n}`' for n in bare)}: no options.", ""]
     return "\n".join(lines).rstrip("\n") + "\n"

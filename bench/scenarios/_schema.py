@@ -502,21 +502,15 @@ MOTOR_KEYS = (
 )  # fmt: skip
 
 
-#: ``[estimator_options]`` keys checked against the scenario beyond their declaration
-#: (:func:`controller._registry.declared_options`, which states each key's type and range).
-_OPTION_AMPLITUDES = ("V_h", "U_h")  # injection amplitude (V): (0, u_dc / sqrt(3)]
-_OPTION_FREQUENCIES = ("f_h",)  # injection frequency (Hz): (0, Nyquist)
-
-
 @functools.cache
 def shipped_options() -> dict[str, Any]:
     """Every built-in estimator's ``[estimator_options]`` key with its declaration
     (:class:`controller.Option`; the first estimator's where several declare one key)."""
-    from controller._registry import ESTIMATOR_NAMES, declared_options
+    from controller._registry import SPECS
 
     out: dict[str, Any] = {}
-    for name in ESTIMATOR_NAMES:
-        for k, opt in (declared_options(name) or {}).items():
+    for spec in SPECS.values():
+        for k, opt in (spec.declared() or {}).items():
             out.setdefault(k, opt)
     return out
 
@@ -525,19 +519,15 @@ def shipped_options() -> dict[str, Any]:
 def estimator_option_keys() -> dict[str, Any]:
     """Every ``[estimator_options]`` key of the built-in estimators with its default.
 
-    The estimators' declarations (:func:`controller._registry.declared_options`):
-    rotating injection (``sfhf``, ``tt-ab``, ``tt-dq``) the fields of
-    :class:`controller._rotating.RotatingInjectionPars`; square-wave the
-    keyword parameters of :class:`controller._square_wave.SquareWaveEstimator`;
-    the hybrids add the hand-over's own (``controller._hybrid``).  ``sensored``
-    takes none.
+    The estimators' declarations: the fields of each registry entry's options
+    dataclass (:attr:`controller.EstimatorSpec.options`).
     """
     return {k: opt.default for k, opt in shipped_options().items()}
 
 
 def estimator_keys(estimator: str) -> frozenset[str]:
-    """The ``[estimator_options]`` keys one estimator declares (``sensored``: none; a plug-in
-    without a declaration: the keywords its factory names, none for ``**options``)."""
+    """The ``[estimator_options]`` keys one estimator declares (a plug-in without a
+    declaration: the keywords its factory names, none for ``**options``)."""
     from controller._registry import declared_options, plugin
 
     decl = declared_options(estimator)
@@ -657,7 +647,7 @@ def saliency_error(
     load for the scenario's estimators and again when an estimator chosen on
     the command line is built.
     """
-    from controller._registry import injection_family
+    from controller._registry import SPECS, injection_family
     from plant_rt import PRESETS
 
     base = PRESETS[preset].motor
@@ -666,11 +656,12 @@ def saliency_error(
     if not hf or L_q > L_d:
         return None
     key = "L_q" if "L_q" in motor or "L_d" not in motor else "L_d"
+    plain = [n for n, s in SPECS.items() if s.family == "none"]
     return ScenarioError(
         f"{src}: field 'motor.{key}': the motor is not salient (L_q {L_q:.4g} H <= L_d "
         f"{L_d:.4g} H), and the HF-injection estimators asked for ({', '.join(hf)}) need "
-        "L_q > L_d; only 'sensored' runs without saliency "
-        '(estimator = "sensored", estimators = ["sensored"])'
+        f"L_q > L_d; only {', '.join(map(repr, plain))} runs without saliency "
+        f'(estimator = "{plain[0]}", estimators = ["{plain[0]}"])'
     )
 
 
@@ -896,7 +887,7 @@ def _parse_estimator_options(
                     ""
                     if any(is_plugin_name(n) for n in named)
                     else "; a plug-in's options are accepted in a file that names the plug-in in "
-                    "estimator or estimators"
+                    "estimator or estimators, or in a run of it with --estimator"
                 )
                 raise ScenarioError(
                     f"{r.src}: field 'estimator_options.{k}': unknown key (known: "
@@ -904,7 +895,6 @@ def _parse_estimator_options(
                 )
     eo = r.table("estimator_options")
     u_dc = PRESETS[preset].inverter.u_dc
-    u_lin = u_dc / math.sqrt(3.0)
     out: dict[str, Any] = {}
     for k in eo.t:
         if k not in keys:
@@ -912,28 +902,33 @@ def _parse_estimator_options(
             if opt is None:  # a plug-in without a declaration: its factory's own check
                 out[k] = eo.t[k]
                 continue
-            val, why = opt.check(eo.t[k])
-            if why is not None:
-                raise eo.fail(k, f"{why} (an option of {owner})")
-            out[k] = val
+            of = f" (an option of {owner})"
         else:
-            v, why = shipped_options()[k].check(eo.t[k])
-            if why is not None:
-                raise eo.fail(k, why)
-            if k in _OPTION_AMPLITUDES and v > u_lin:
-                raise eo.fail(
-                    k,
-                    f"injection amplitude {v:g} V is above the inverter's linear limit "
-                    f"u_dc/sqrt(3) = {u_lin:.4g} V (preset {preset}, u_dc = {u_dc:g} V)",
-                )
-            if k in _OPTION_FREQUENCIES and v >= f_s / 2.0:
-                raise eo.fail(
-                    k,
-                    f"injection frequency {v:g} Hz is not below the Nyquist frequency "
-                    f"{f_s / 2.0:g} Hz of the {f_s:g} Hz sample rate",
-                )
-            out[k] = v
+            opt, of = shipped_options()[k], ""
+        v, why = opt.check(eo.t[k])
+        if why is None and v is not None:
+            why = _limit_error(opt.limit, v, preset, u_dc, f_s)
+        if why is not None:
+            raise eo.fail(k, why + of)
+        out[k] = v
     return out
+
+
+def _limit_error(limit: str, v: float, preset: str, u_dc: float, f_s: float) -> str | None:
+    """Why the value ``v`` of an option with the scenario bound ``limit``
+    (:data:`controller._api.OPTION_LIMITS`) is out of it, or None."""
+    u_lin = u_dc / math.sqrt(3.0)
+    if limit == "inverter_linear" and v > u_lin:
+        return (
+            f"injection amplitude {v:g} V is above the inverter's linear limit "
+            f"u_dc/sqrt(3) = {u_lin:.4g} V (preset {preset}, u_dc = {u_dc:g} V)"
+        )
+    if limit == "below_nyquist" and v >= f_s / 2.0:
+        return (
+            f"injection frequency {v:g} Hz is not below the Nyquist frequency "
+            f"{f_s / 2.0:g} Hz of the {f_s:g} Hz sample rate"
+        )
+    return None
 
 
 def _shipped_names() -> tuple[str, ...]:
@@ -953,8 +948,16 @@ def _estimator_error(name: str) -> str | None:
     return None
 
 
-def parse_scenario(data: dict[str, Any], src: str) -> Scenario:
-    """Validate a scenario table (already parsed from TOML)."""
+def parse_scenario(data: dict[str, Any], src: str, also: tuple[str, ...] = ()) -> Scenario:
+    """Validate a scenario table (already parsed from TOML).
+
+    ``also``: the estimators a command runs on it besides the file's
+    (``--estimator``).  A plug-in among them that takes options is taken as
+    named in ``estimators``: the options it declares are accepted and checked
+    as the file's own, and the effective scenario of a run names it for the
+    node processes.
+    """
+    also = tuple(e for e in dict.fromkeys(also) if _takes_options(e))
     from plant_rt import PRESETS
 
     for k in data:
@@ -1029,7 +1032,7 @@ def parse_scenario(data: dict[str, Any], src: str) -> Scenario:
     _check_plausible(r.src, preset, motor, inverter)
     controller = _parse_controller(r, 1.0 / f_eff)
     _check_delay_us(r.src, latency, f_eff)
-    opts = _parse_estimator_options(r, preset, f_eff, (estimator, *ests))
+    opts = _parse_estimator_options(r, preset, f_eff, (estimator, *ests, *also))
     paper = r.table("paper_result").t
     duration = r.num("duration", lo=1e-3)
     # default: past the start-up transient (0.5 s), or the second half of a shorter run
@@ -1048,7 +1051,7 @@ def parse_scenario(data: dict[str, Any], src: str) -> Scenario:
         description=r.string("description", ""),
         paper=r.string("paper", ""),
         estimator=estimator,
-        estimators=tuple(ests),
+        estimators=tuple(dict.fromkeys((*ests, *also))),
         f_sw=None if f_sw == -1.0 else f_sw,
         seed=r.integer("seed", 1, lo=0),
         saturation=r.boolean("saturation", True),
@@ -1210,13 +1213,32 @@ def write_effective(scn: Scenario, path: Path) -> Path:
     return path
 
 
-def load_scenario(name_or_path: str) -> Scenario:
+def load_scenario(name_or_path: str, run_with: tuple[str, ...] = ()) -> Scenario:
     """Load a shipped scenario by name, or a user's TOML file by path.
 
     A ``.json`` file written by :func:`write_effective` (the effective
     scenario of a run, which ``bench run`` hands to its node processes) is
-    read too.
+    read too.  ``run_with``: the estimators a command runs on it
+    (``--estimator``), as :func:`parse_scenario`'s ``also``.
     """
+    return _load_scenario(name_or_path, run_with)
+
+
+def _takes_options(estimator: str) -> bool:
+    """A plug-in (not a shipped estimator) that declares or names options; False for a name
+    that does not resolve (the command checks its estimator and says why in one line)."""
+    from controller._registry import SPECS, UnknownEstimatorError, plugin
+
+    if estimator in SPECS:
+        return False
+    try:
+        p = plugin(estimator)
+    except UnknownEstimatorError:
+        return False  # said where the estimator is checked
+    return p is not None and (p.options is None or bool(p.options))
+
+
+def _load_scenario(name_or_path: str, also: tuple[str, ...]) -> Scenario:
     path = scenario_path(name_or_path)
     if path.suffix == ".json":
         try:
@@ -1227,7 +1249,7 @@ def load_scenario(name_or_path: str) -> Scenario:
             raise ScenarioError(f"{path}: not a scenario file")
         return scenario_from_dict(d, str(d.get("source", path)))
     src = name_or_path if not Path(name_or_path).exists() else str(path)
-    scn = parse_scenario(_resolved_toml(path, src, ()), src)
+    scn = parse_scenario(_resolved_toml(path, src, ()), src, also)
     own = _read_toml(path)
     if "extends" not in own:  # every value checked first: a wrong one is named before this
         _check_options_have_a_motor(src, own)

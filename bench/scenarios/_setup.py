@@ -21,7 +21,12 @@ from bench.scenarios._schema import (
 )
 from bench.wire._protocol import CMD_START, CMD_STOP, RPM_PER_RAD_S
 from controller import CompensationPars, Controller, ControllerPars, MotorModel
-from controller._registry import UnknownEstimatorError, check_estimator, injection_family
+from controller._registry import (
+    EstimatorSpec,
+    UnknownEstimatorError,
+    check_estimator,
+)
+from controller._registry import spec as _spec
 from plant_rt import ConstantLoad, Plant, PlantProfile, Preset, SensorPars, plant_profile, preset
 
 
@@ -216,6 +221,31 @@ def motor_model(p: Preset, errors: ModelErrors | None = None) -> MotorModel:
 ENGINE_ENV = "CAN_HIL_ENGINE"
 
 
+def estimator_spec(estimator: str) -> EstimatorSpec:
+    """The registry entry of ``estimator`` (:class:`controller.EstimatorSpec`); an unknown or
+    broken one is a :class:`ScenarioError` (one line)."""
+    try:
+        return _spec(estimator)
+    except UnknownEstimatorError as e:
+        raise ScenarioError(str(e)) from None
+
+
+def needs_truth(estimator: str) -> bool:
+    """The estimator reads the plant's truth (its spec's ``needs_truth``: the sensored
+    baseline); False for a name that no longer resolves (a recorded plug-in)."""
+    try:
+        return _spec(estimator).needs_truth
+    except UnknownEstimatorError:
+        return False
+
+
+def proposed_methods() -> dict[str, str]:
+    """Paper (``wen``, ``xue``) -> the estimator it proposes (its spec's ``proposed_in``)."""
+    from controller._registry import SPECS
+
+    return {s.proposed_in: name for name, s in SPECS.items() if s.proposed_in}
+
+
 def build_controller(scn: Scenario, estimator: str, engine: str | None = None) -> Controller:
     """The scenario's controller for ``estimator``.
 
@@ -224,13 +254,10 @@ def build_controller(scn: Scenario, estimator: str, engine: str | None = None) -
     :data:`ENGINE_ENV` (``--engine``), else ``"auto"``.
     """
     engine = engine or os.environ.get(ENGINE_ENV) or "auto"
-    try:
-        check_estimator(estimator)
-    except UnknownEstimatorError as e:
-        raise ScenarioError(str(e)) from None
+    spec = estimator_spec(estimator)
     p = get_preset(scn)
     kw: dict[str, Any] = {}
-    if estimator == "sensored":
+    if spec.needs_truth:  # it knows the angle: no start-up
         kw["startup"] = False
     elif scn.known_initial_angle:
         kw["startup"] = False
@@ -243,7 +270,7 @@ def build_controller(scn: Scenario, estimator: str, engine: str | None = None) -
         kw["current_feedback"] = scn.controller["current_feedback"]
     if err := saliency_error(scn.source, scn.preset, scn.motor, [estimator]):
         raise err
-    if injection_family(estimator) != "none" and not model.L_q > model.L_d:
+    if spec.family != "none" and not model.L_q > model.L_d:
         raise ScenarioError(
             f"{scn.source}: field 'controller_model': the factors L_d = {scn.controller_model.L_d} "
             f"and L_q = {scn.controller_model.L_q} leave the controller's model without "

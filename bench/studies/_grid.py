@@ -223,7 +223,9 @@ def build_tasks(plan: Plan) -> list[Point]:
     base = scenario_table(plan.scenario)
     tasks: list[Point] = []
     for n, vals in enumerate(plan.points()):
-        scn = scenario_with(base, {**plan.fixed, **vals}, name=f"{base[0]['name']}-p{n}")
+        scn = scenario_with(
+            base, {**plan.fixed, **vals}, f"{base[0]['name']}-p{n}", plan.estimators
+        )
         if plan.duration is not None:
             scn = scn.with_overrides(duration=plan.duration)
         for est in plan.estimators:

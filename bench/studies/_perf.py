@@ -194,10 +194,19 @@ def engines() -> tuple[str, ...]:
 # -- 1. in-process ------------------------------------------------------------------------
 
 
+def _on_xue(estimator: str) -> bool:
+    """The estimator's loop runs on Xue's scenario (1 kHz): a square-wave estimator without a
+    speed band (the hybrids run on wen-5.1)."""
+    from controller import estimator_spec
+
+    s = estimator_spec(estimator)
+    return s.family == "square" and not s.speed_band
+
+
 def _loop_scenario(estimator: str, profile: str = "ideal") -> Any:
     from bench.scenarios._schema import load_scenario
 
-    scn = load_scenario("xue-fig13" if estimator.startswith("square") else "wen-5.1")
+    scn = load_scenario("xue-fig13" if _on_xue(estimator) else "wen-5.1")
     return scn if profile == scn.plant_profile else replace(scn, plant_profile=profile)
 
 
@@ -212,7 +221,7 @@ def _closed_loop(
     With ``record``, each period's measurement and applied duty are appended
     to the two lists returned (the plant-alone and controller-alone figures).
     """
-    from bench.scenarios._setup import build_controller, build_plant
+    from bench.scenarios._setup import build_controller, build_plant, needs_truth
     from controller import Measurement
 
     scn = _loop_scenario(estimator, profile)
@@ -220,7 +229,7 @@ def _closed_loop(
     ctrl = build_controller(scn, estimator, engine)
     ctrl.set_enable(True)
     ctrl.set_speed_ref(SPEED_REF_RPM * 2.0 * math.pi / 60.0)
-    truth = estimator == "sensored"
+    truth = needs_truth(estimator)
     meas: list[Any] = []
     duties: list[Duty] = []
     d: Duty = (0.5, 0.5, 0.5, False)
@@ -377,7 +386,7 @@ def inprocess_section(quick: bool, repeats: int, n_steps: int) -> dict[str, Any]
     inproc: dict[str, Any] = {"engine_default": resolve_engine("auto")}
     for est in ESTIMATOR_NAMES:
         sec = _median_of(functools.partial(inprocess_loop, est, n_steps), repeats)
-        f = 1e3 if est.startswith("square") else F_10KHZ
+        f = 1e3 if _on_xue(est) else F_10KHZ
         ctrl_engine = build_controller(_loop_scenario(est), est, "auto").engine
         inproc[est] = {
             "us_per_step": 1e6 * sec,

@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from bench.runs._metrics import GOAL_DIP_PCT, GOAL_STEADY_DEG, GOAL_TRANSIENT_DEG
+from bench.scenarios._setup import needs_truth, proposed_methods
 from bench.studies._plants import PLANT_LABELS, PLANTS
 from bench.studies._sweep import FLAT_DEG, METHODS, SWEEPS
 
@@ -180,7 +181,7 @@ def _sweep_claim(summary: dict[str, Any], kinds: tuple[str, ...], what: str) -> 
             m = meths.get(est)
             if m is None or not math.isfinite(m.get("span_deg", math.nan)):
                 return _claim(cid, text, src, NOT_RUN, f"{k}: no fit for {est}")
-            want_flat = est == "tt-dq"
+            want_flat = est == PROPOSED["wen"]
             good = bool(m["flat"]) == want_flat
             ok &= good
             parts.append(
@@ -245,7 +246,7 @@ def _run_claims(summary: dict[str, Any], plant: str = "ideal") -> list[dict[str,
         if len(vals) < len(METHODS):
             continue
         best = min(vals, key=lambda e: vals[e])
-        ok &= best == "tt-dq"
+        ok &= best == PROPOSED["wen"]
         parts.append(f"{scn}: " + ", ".join(f"{e} {v:.2f}" for e, v in vals.items()))
     if not parts:
         claims.append(_claim("wen-ranking", text, src, NOT_RUN, "no Wen scenario with all three"))
@@ -499,7 +500,7 @@ def _wen_section(summary: dict[str, Any]) -> list[str]:
         )
         for r in runs:
             m = r["metrics"]
-            src = "bench" + (", zero line" if r["estimator"] == "sensored" else "")
+            src = "bench" + (", zero line" if needs_truth(r["estimator"]) else "")
             if not _ok(r):
                 rows.append(
                     [_method(r), src, "failed", "failed", "failed"]
@@ -559,8 +560,8 @@ def _xue_section(summary: dict[str, Any]) -> list[str]:
                 continue
             v = r["metrics"].get(key, math.nan)
             verdict = "within" if v <= pr[key] else "exceeds"
-            if r["estimator"] != "square-wave":
-                verdict += " (bound is for square-wave)"
+            if r["estimator"] != PROPOSED["xue"]:
+                verdict += f" (bound is for {PROPOSED['xue']})"
             rows.append(
                 [
                     r["scenario"],
@@ -586,8 +587,8 @@ def _xue_section(summary: dict[str, Any]) -> list[str]:
     return [*lines, ""]
 
 
-#: The proposed method of each paper's scenarios, compared across plants.
-PROPOSED = {"wen": "tt-dq", "xue": "square-wave"}
+#: The proposed method of each paper's scenarios (its spec's ``proposed_in``).
+PROPOSED = proposed_methods()
 
 
 def _plants_section(summary: dict[str, Any]) -> list[str]:
@@ -895,7 +896,7 @@ def _limits_section(summary: dict[str, Any]) -> list[str]:
         r
         for r in summary.get("runs", [])
         if r["scenario"] in ("xue-fig15", "xue-fig16")
-        and r["estimator"] == "square-wave"
+        and r["estimator"] == PROPOSED["xue"]
         and _ok(r)
     ]
     if xue_load:

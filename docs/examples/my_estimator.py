@@ -27,9 +27,10 @@ scenario's 42 rad/s electrical (100 rpm).
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import Any
 
-from controller import Option
+from controller import option_field
 
 #: The controller runs no HF start-up for this estimator (no injection).
 INJECTION_FAMILY = "none"
@@ -96,19 +97,32 @@ class FluxPLL:
         return {"alpha_o": self.alpha_o, "k_p": self.k_p, "k_i": self.k_i, "w_c": self.w_c}
 
 
-def create(motor: Any, T_s: float, alpha_o: float = 2 * math.pi * 20, w_c: float = 20.0) -> FluxPLL:
+@dataclass(frozen=True)
+class Options:
+    """The options, checked on load in a scenario that names this plug-in (docs/ESTIMATORS.md).
+
+    Parameters
+    ----------
+    alpha_o : float
+        PLL bandwidth, double pole (rad/s).
+    w_c : float
+        Corner between the current and the voltage model (rad/s).
+    """
+
+    alpha_o: float = option_field(2 * math.pi * 20, positive=True)
+    w_c: float = option_field(20.0, minimum=0.0)
+
+
+def create(motor: Any, T_s: float, **options: Any) -> FluxPLL:
     """The factory: ``bench run ... --estimator my_estimator:create``.
 
     It receives the options it declares (``create.options``) that the
     scenario's ``[estimator_options]`` sets; the others (``V_h``, ...) are left
     out with a note.
     """
-    return FluxPLL(motor, T_s, alpha_o, w_c)
+    o = Options(**options)
+    return FluxPLL(motor, T_s, o.alpha_o, o.w_c)
 
 
 create.injection_family = INJECTION_FAMILY  # type: ignore[attr-defined]
-#: The options, checked on load in a scenario that names this plug-in (docs/ESTIMATORS.md).
-create.options = {  # type: ignore[attr-defined]
-    "alpha_o": Option(2 * math.pi * 20, "rad/s", "PLL bandwidth (double pole).", positive=True),
-    "w_c": Option(20.0, "rad/s", "Corner between the current and the voltage model.", minimum=0.0),
-}
+create.options = Options  # type: ignore[attr-defined]
