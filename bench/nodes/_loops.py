@@ -17,6 +17,7 @@ from collections.abc import Callable
 import can
 
 from bench._errors import BenchError
+from bench.nodes._clock import RealTimeClock
 from bench.nodes._controller_node import ControllerNode
 from bench.nodes._counters import RejectionSummary, rejection_text
 from bench.nodes._plant_node import PlantNode, fault_name
@@ -34,7 +35,7 @@ from bench.scenarios._setup import (
 )
 from bench.wire._codec import Codec
 from bench.wire._protocol import CMD_NONE, STATE_IDLE
-from plant_rt import FAULT_WATCHDOG, ProtectionPars, RealTimeClock
+from plant_rt import FAULT_WATCHDOG, ProtectionPars
 
 #: ``PlantStatus.state`` of the plant's last frame: the run is over, the plant idle.
 STATE_DONE = STATE_IDLE
@@ -403,7 +404,7 @@ def _serve_realtime(
     Each instant's frames leave at that instant (the deadline), so the
     controller has one period to answer, as in a drive; the plant then runs
     the period with the newest duty meant for it.  A host stall resynchronises
-    the clock instead of a catch-up burst (:class:`plant_rt.RealTimeClock`).
+    the clock instead of a catch-up burst (:class:`bench.nodes._clock.RealTimeClock`).
     The clock's overruns, stalls and jitter statistics go to the node's report.
     """
     clock = RealTimeClock(node.plant.T_s)

@@ -296,7 +296,7 @@ def finish_run(
     if plant_r.get("jitter"):
         jit = plant_r["jitter"]
         m["jitter_us"] = jit
-        # host stalls, apart from the late periods (plant_rt/_clock.py): the
+        # host stalls, apart from the late periods (bench/nodes/_clock.py): the
         # periods that passed during a stall were skipped, not computed
         m["host_stalls"] = int(jit.get("stalls", 0))
         m["host_stall_ms_total"] = 1e-3 * float(jit.get("stall_total", 0.0))
