@@ -10,6 +10,7 @@ frames between the same nodes without any bus: the reference trace.
 from __future__ import annotations
 
 import math
+import os
 import sys
 import time
 from collections.abc import Callable
@@ -20,11 +21,13 @@ from bench._errors import BenchError
 from bench.nodes._clock import RealTimeClock
 from bench.nodes._controller_node import ControllerNode
 from bench.nodes._counters import RejectionSummary, rejection_text
+from bench.nodes._plan import RunPlan, needs_truth
 from bench.nodes._plant_node import PlantNode, fault_name
 from bench.nodes._rt import no_gc
 from bench.nodes._send import send_all
 from bench.scenarios._schema import Scenario
 from bench.scenarios._setup import (
+    ENGINE_ENV,
     PlannedCommand,
     build_controller,
     build_plant,
@@ -35,7 +38,8 @@ from bench.scenarios._setup import (
 )
 from bench.wire._codec import Codec
 from bench.wire._protocol import CMD_NONE, STATE_IDLE
-from plant_rt import FAULT_WATCHDOG, ProtectionPars
+from controller import Controller
+from plant_rt import FAULT_WATCHDOG, Plant, ProtectionPars
 
 #: ``PlantStatus.state`` of the plant's last frame: the run is over, the plant idle.
 STATE_DONE = STATE_IDLE
@@ -72,20 +76,44 @@ def make_plant_node(
     watchdog_rounds: int = WATCHDOG_ROUNDS,
     engine: str = "auto",
 ) -> PlantNode:
-    """The plant node of a scenario, with protection and watchdogs.
+    """The plant node of a scenario, with protection and watchdogs (:func:`plant_node`)."""
+    return plant_node(
+        build_plant(scn, engine),
+        n_steps(scn),
+        lockstep_delay(scn),
+        codec,
+        truth_every=truth_every,
+        protection=protection,
+        watchdog_s=watchdog_s,
+        watchdog_rounds=watchdog_rounds,
+    )
+
+
+def plant_node(
+    plant: Plant,
+    steps: int,
+    delay: int,
+    codec: Codec,
+    *,
+    truth_every: int = 1,
+    protection: ProtectionPars | None = None,
+    watchdog_s: float | None = None,
+    watchdog_rounds: int = WATCHDOG_ROUNDS,
+) -> PlantNode:
+    """The node of ``plant`` (a run's plan: ``plan.plant.build(engine)``), running
+    ``steps`` periods with ``delay`` periods of lockstep latency.
 
     ``protection`` defaults to :meth:`ProtectionPars.from_preset` of the
-    scenario's preset; ``watchdog_s`` to :func:`watchdog_periods`' default.
+    plant's motor and inverter; ``watchdog_s`` to :func:`watchdog_periods`' default.
     """
-    plant = build_plant(scn, engine)
     cycle_ms = codec.message("PlantStatus").cycle_time or 0
     if protection is None:
         protection = ProtectionPars.from_preset(plant.motor, plant.inverter)
     return PlantNode(
         codec,
         plant,
-        n_steps=n_steps(scn),
-        lockstep_delay=lockstep_delay(scn),
+        n_steps=steps,
+        lockstep_delay=delay,
         truth_every=truth_every,
         protection=protection,
         watchdog_periods=watchdog_periods(plant.T_s, watchdog_s),
@@ -96,8 +124,23 @@ def make_plant_node(
 
 def make_controller_node(scn: Scenario, estimator: str, codec: Codec) -> ControllerNode:
     return ControllerNode(
-        codec, build_controller(scn, estimator), needs_truth=estimator == "sensored"
+        codec, build_controller(scn, estimator), needs_truth=needs_truth(estimator)
     )
+
+
+def controller_node(plan: RunPlan, codec: Codec) -> ControllerNode:
+    """The controller node of a run's plan (its controller as built, :attr:`RunPlan.controller`).
+
+    The engine is :data:`bench.scenarios._setup.ENGINE_ENV`'s (``--engine``), else auto.
+    """
+    if plan.controller is None:
+        raise BenchError(f"plan of {plan.scenario}: it has no controller of the bench's")
+    engine = os.environ.get(ENGINE_ENV) or "auto"
+    try:
+        ctrl = Controller(plan.controller, engine)
+    except TypeError as e:
+        raise BenchError(f"plan of {plan.scenario}: estimator options: {e}") from None
+    return ControllerNode(codec, ctrl, needs_truth=plan.needs_truth)
 
 
 def command_frames(
