@@ -172,7 +172,10 @@ def test_a_run_writes_its_plan_and_records_the_nodes_design(tmp_path: Path) -> N
     spec = BusSpec("udp_multicast", "239.74.163.2", free_port())
     res = run_scenario(scn, "tt-dq", spec=spec, out_dir=tmp_path / "run", progress=False)
     plan = read_plan(tmp_path / "run" / PLAN_FILE)
-    assert plan.run_id == res.meta["run_id"] and plan.n_steps == res.metrics["steps"]
+    assert plan.run_id == res.meta["run_id"] and plan.n_steps == round(0.15 / plan.T_s)
+    # the plant ran the plan's periods, and every one has its row
+    assert res.meta["node_reports"]["plant"]["steps"] == plan.n_steps
+    assert res.metrics["steps_missing"] == 0
     report = json.loads((tmp_path / "run" / "controller.json").read_text())
     assert res.meta["controller_gains"] == report["design"]["gains"]
     assert report["design"]["gains"]["alpha_c"] > 0

@@ -13,7 +13,7 @@ import math
 import os
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 
 import can
 
@@ -144,9 +144,15 @@ def controller_node(plan: RunPlan, codec: Codec) -> ControllerNode:
 
 
 def command_frames(
-    scn: Scenario, codec: Codec, pace_every: int = 0
+    scn: Scenario,
+    codec: Codec,
+    pace_every: int = 0,
+    schedule: Sequence[PlannedCommand] | None = None,
 ) -> list[tuple[int, can.Message]]:
     """The scenario's bench commands as frames, with their apply steps.
+
+    ``schedule``: the commands as planned (a run's plan, :attr:`RunPlan.commands`);
+    None: :func:`bench.scenarios._setup.command_schedule` of ``scn``.
 
     ``pace_every > 0`` adds a keep-alive (``cmd`` 0, the references already
     in force, so nothing changes) at every multiple of ``pace_every`` that
@@ -154,7 +160,7 @@ def command_frames(
     (:attr:`bench.nodes._plant_node.PlantNode.pace_every`).
     """
     m = 1 << codec.step_bits("BenchCommand")
-    plan = command_schedule(scn)
+    plan = list(schedule) if schedule is not None else command_schedule(scn)
     if pace_every > 0:
         have = {c.apply_step for c in plan}
         extra = []

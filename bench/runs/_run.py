@@ -194,7 +194,9 @@ here once; ``node_args`` adds command-line options per role (``plant``,
             except BenchError as e:  # a node that never became ready: nothing to record
                 start_error = str(e)
             if start_error is None:
-                pacer = CommandPacer(scn, codec, mode=mode, pace_every=pace, external=external)
+                pacer = CommandPacer(
+                    scn, codec, mode=mode, pace_every=pace, external=external, schedule=plan.commands
+                )
                 plant = dict(procs).get("plant")
                 if plant is not None and not interrupted():
                     ended = _drive(
