@@ -3,7 +3,6 @@
 Never imports :mod:`controller`, never touches CAN.
 """
 
-from plant_rt._clock import JitterStats, RealTimeClock
 from plant_rt._engine import ENGINES, compiled_engine_missing, resolve_engine
 from plant_rt._inverter import InverterPars, device_drop_error
 from plant_rt._load import (
@@ -60,7 +59,6 @@ __all__ = [
     "CrossSaturationPars",
     "EnergyMeter",
     "InverterPars",
-    "JitterStats",
     "LoadProfile",
     "LoadSum",
     "MotorPars",
@@ -70,7 +68,6 @@ __all__ = [
     "Protection",
     "ProtectionPars",
     "RampLoad",
-    "RealTimeClock",
     "Sample",
     "SaturationPars",
     "SensorPars",

@@ -96,7 +96,7 @@ def test_argparse_mistakes_name_the_subcommands_help(capsys: pytest.CaptureFixtu
 
 def test_the_monitors_own_entry_point_uses_the_prefix() -> None:
     out = subprocess.run(
-        [sys.executable, "-m", "bench.monitor", "--interface", "no-such-interface"],
+        [sys.executable, "-m", "bench.cli.monitor", "--interface", "no-such-interface"],
         cwd=ROOT, capture_output=True, text=True, timeout=60, stdin=subprocess.DEVNULL,
     )  # fmt: skip
     assert out.returncode == 2

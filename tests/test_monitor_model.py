@@ -392,7 +392,7 @@ def test_without_a_terminal_one_line_error() -> None:
     import sys
 
     out = subprocess.run(
-        [sys.executable, "-m", "bench.monitor", "-i", "udp_multicast", "--port", "9"],
+        [sys.executable, "-m", "bench.cli.monitor", "-i", "udp_multicast", "--port", "9"],
         stdin=subprocess.DEVNULL,
         capture_output=True,
         text=True,

@@ -1,6 +1,6 @@
 """The monitor in a real terminal: tmux runs it, the test types keys and reads the screen.
 
-Each test starts ``python -m bench.monitor`` (the code of ``bench monitor``)
+Each test starts ``python -m bench.cli.monitor`` (the code of ``bench monitor``)
 in a detached tmux session of fixed size, on a udp_multicast port of its own,
 sends frames of a known run (:mod:`tests.monitor_helpers`) from a thread,
 and polls ``tmux capture-pane`` until the screen shows what it must, with a
@@ -145,7 +145,7 @@ class Sender:
 
 def _monitor(port: int, *extra: str) -> str:
     args = [
-        sys.executable, "-m", "bench.monitor", "-i", "udp_multicast",
+        sys.executable, "-m", "bench.cli.monitor", "-i", "udp_multicast",
         "-c", udp_multicast_group(), "--port", str(port), *extra,
     ]  # fmt: skip
     return " ".join(shlex.quote(a) for a in args)

@@ -7,8 +7,7 @@ import time
 
 import pytest
 
-from plant_rt import RealTimeClock
-from plant_rt._clock import STALL_MIN_S, STALL_PERIODS, default_stall_s
+from bench.nodes._clock import STALL_MIN_S, STALL_PERIODS, RealTimeClock, default_stall_s
 
 
 def test_clock_counts_overruns_when_caller_is_late() -> None:

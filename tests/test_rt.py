@@ -13,8 +13,8 @@ from pathlib import Path
 import pytest
 
 from bench.cli import main
+from bench.nodes._clock import RealTimeClock
 from bench.nodes._rt import apply_rt, no_gc
-from plant_rt import RealTimeClock
 from tests.ports import free_port
 
 

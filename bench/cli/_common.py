@@ -17,7 +17,7 @@ import threading
 from pathlib import Path
 from typing import Any
 
-from bench._errors import BenchError, InterfaceError
+from bench._errors import BenchError
 
 MODES = ("lockstep", "realtime")
 #: ``--plant-profile`` choices: :data:`plant_rt.PROFILE_NAMES` (tested equal; not
@@ -171,6 +171,16 @@ def node_rt(args: argparse.Namespace, role: str) -> dict[str, object] | None:
     return apply_rt(args.rt_priority, args.cpu, role=role).as_dict()
 
 
+def add_plan(p: argparse.ArgumentParser) -> None:
+    """``--plan FILE``: a node serves a run's resolved plan (:mod:`bench.nodes._plan`)."""
+    p.add_argument(
+        "--plan",
+        metavar="FILE",
+        help="serve this run plan (a run folder's plan.json) instead of a SCENARIO and its "
+        "options (bench run starts its nodes so)",
+    )
+
+
 def add_scenario_overrides(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--mode",
@@ -218,75 +228,43 @@ def scenario_from_args(args: argparse.Namespace) -> Any:
 
 
 def bus_spec(args: argparse.Namespace, *, announce: bool, one_process: bool = False) -> Any:
-    """The bus of the command's options (or python-can's configuration, or the default).
+    """The bus of the command's options (:func:`bench.wire._bus.resolve_bus`: the options,
+    python-can's configuration, or the default transport with a port of the run's own).
 
     ``one_process``: the command's bus may be python-can's in-process
     ``virtual`` bus (replay); the bench's nodes are separate processes and
-    cannot meet on it.
+    cannot meet on it.  ``announce``: say on stderr which bus and why, when
+    the options did not name it.  The options python-can's configuration
+    fills in are written back to ``args``.
     """
-    from bench.wire._bus import (
-        BusSpec,
-        check_interface,
-        default_transport,
-        own_udp_port,
-        python_can_config,
+    from bench.wire._bus import FROM_CONFIG, UDP_DEFAULT_PORT, own_udp_port, resolve_bus
+
+    spec, why = resolve_bus(
+        args.interface,
+        args.channel,
+        getattr(args, "port", None),
+        getattr(args, "bitrate", None),
+        getattr(args, "data_bitrate", None),
+        # a port of its own per run: parallel runs must not hear each other
+        own_port=own_udp_port(os.getpid()),
+        virtual=None
+        if one_process
+        else (
+            "--interface virtual: python-can's virtual bus lives inside one process "
+            "and the bench's nodes are separate processes; use udp_multicast (the "
+            "default without vcan) or socketcan"
+        ),
     )
-
-    why: str | None = None
-    if args.interface is None and (cfg := python_can_config()) is not None:
-        # python-can's own configuration (~/.canrc, CAN_INTERFACE, ...) names the bus
-        args.interface = str(cfg.get("interface"))
-        args.channel = args.channel or cfg.get("channel")
-        for key in ("bitrate", "data_bitrate"):
-            if getattr(args, key, None) is None and cfg.get(key) is not None:
-                setattr(args, key, int(cfg[key]))
-        if getattr(args, "port", None) is None and cfg.get("port") is not None:
-            args.port = int(cfg["port"])
-        why = "python-can configuration"
-    if args.interface is not None:
-        check_interface(args.interface)
-        if args.interface == "virtual" and not one_process:
-            raise InterfaceError(
-                "--interface virtual: python-can's virtual bus lives inside one process "
-                "and the bench's nodes are separate processes; use udp_multicast (the "
-                "default without vcan) or socketcan"
-            )
-    if args.interface is None:
-        if args.channel is not None:
-            raise InterfaceError("--channel given without --interface")
-        iface, chan, reason = default_transport()
-        port = args.port
-        if iface == "udp_multicast" and port is None:
-            # a port of its own per run: parallel runs must not hear each other
-            port = own_udp_port(os.getpid())
-        spec = BusSpec(
-            iface, chan, port, getattr(args, "bitrate", None), getattr(args, "data_bitrate", None)
-        )
-        why = reason
-    else:
-        from bench.wire._bus import default_channel
-
-        channel: str | None = args.channel or default_channel(args.interface)
-        if channel is None:
-            raise InterfaceError(f"--interface {args.interface}: this adapter needs --channel")
-        spec = BusSpec(
-            args.interface,
-            channel,
-            args.port,
-            getattr(args, "bitrate", None),
-            getattr(args, "data_bitrate", None),
-        )
+    if why == FROM_CONFIG:
+        args.interface, args.channel, args.port = spec.interface, spec.channel, spec.port
+        args.bitrate, args.data_bitrate = spec.bitrate, spec.data_bitrate
     if announce and why is not None:
         where = spec.describe()
         if spec.interface == "udp_multicast" and spec.port is None:
-            where += f" port {DEFAULT_UDP_PORT}"
+            where += f" port {UDP_DEFAULT_PORT}"
             why += "; python-can's default port"
         print(f"transport: {where} ({why})", file=sys.stderr)
     return spec
-
-
-#: python-can's udp_multicast port when none is given.
-DEFAULT_UDP_PORT = 43113
 
 
 STOP = threading.Event()
@@ -316,7 +294,9 @@ def same_bus(a: Any, b: Any) -> bool:
     if a.interface != b.interface:
         return False
     if a.interface == "udp_multicast":
-        return (a.port or DEFAULT_UDP_PORT) == (b.port or DEFAULT_UDP_PORT)
+        from bench.wire._bus import UDP_DEFAULT_PORT
+
+        return (a.port or UDP_DEFAULT_PORT) == (b.port or UDP_DEFAULT_PORT)
     return bool(a.channel == b.channel)
 
 

@@ -1,4 +1,8 @@
-"""``bench controller``: the project's drive controller as one node on a bus."""
+"""``bench controller``: the project's drive controller as one node on a bus.
+
+As ``bench plant`` (:mod:`bench.cli.plant`): ``--plan FILE`` serves a run's plan,
+``SCENARIO [--estimator NAME] [options]`` makes one.
+"""
 
 from __future__ import annotations
 
@@ -10,37 +14,35 @@ from bench.cli._common import (
     POS_FLOAT,
     STOP,
     add_bus,
+    add_plan,
     add_rt,
     add_scenario_overrides,
-    bus_spec,
     ready,
     run_id_arg,
-    scenario_from_args,
     serve_node,
 )
 
 
 def cmd_controller(args: argparse.Namespace) -> int:
-    from bench.nodes._loops import controller_loop, make_controller_node
+    from bench.cli.plant import node_plan
+    from bench.nodes._loops import controller_loop, controller_node
     from bench.wire._codec import Codec
 
-    scn = scenario_from_args(args)
-    est = args.estimator or scn.estimator
-    spec = bus_spec(args, announce=False)
+    plan = node_plan(args, "controller")
     codec = Codec()
-    node = make_controller_node(scn, est, codec)
+    node = controller_node(plan, codec)
     if node.ctrl.engine_note:  # e.g. an estimator the compiled core lacks
         print(f"controller: {node.ctrl.engine_note}", file=sys.stderr)
-    node.run_id = args.run_id
+    node.run_id = plan.run_id
     return serve_node(
         args,
-        spec,
+        plan.bus("controller"),
         "controller",
         node,
         lambda bus: controller_loop(
             bus,
             node,
-            realtime=args.mode == "realtime",
+            realtime=plan.mode == "realtime",
             on_ready=ready,
             stop=STOP.is_set,
             sample_timeout_s=args.sample_timeout_ms * 1e-3,
@@ -50,7 +52,10 @@ def cmd_controller(args: argparse.Namespace) -> int:
 
 def register(sub: Any) -> None:
     p = sub.add_parser("controller", help="serve the drive controller on a bus (one node)")
-    p.add_argument("scenario")
+    p.add_argument(
+        "scenario", nargs="?", help="scenario name or file (or --plan FILE: a run's plan.json)"
+    )
+    add_plan(p)
     p.add_argument("--estimator", "-e")
     add_scenario_overrides(p)
     add_bus(p)
@@ -58,7 +63,6 @@ def register(sub: Any) -> None:
     p.add_argument(
         "--run-id",
         type=run_id_arg,
-        default=0,
         metavar="N",
         help="the run's nonce sent in CtrlTelemetry.run_id (bench run gives it; default 0: unknown)",
     )
@@ -69,4 +73,4 @@ def register(sub: Any) -> None:
         help="real time: disable the PWM after this long without a valid sample",
     )
     add_rt(p)
-    p.set_defaults(func=cmd_controller)
+    p.set_defaults(func=cmd_controller, mode=None)

@@ -21,11 +21,15 @@ from bench.cli._common import (
 
 
 def cmd_link(args: argparse.Namespace) -> int:
-    from bench.nodes._link import LockstepLink, RealtimeLink, link_loop
+    from bench.nodes._link import LockstepLink, RealtimeLink
     from bench.wire._bus import BusSpec
     from bench.wire._codec import Codec
 
     codec = Codec()
+    if args.plan:
+        return _serve(*_planned(args, codec))
+    if args.to is None:
+        raise BenchError("bench link: give --to INTERFACE:CHANNEL (or --plan FILE)")
     a = bus_spec(args, announce=False)
     iface, _, chan = args.to.partition(":")
     if not iface or not chan:
@@ -65,6 +69,47 @@ def cmd_link(args: argparse.Namespace) -> int:
             sample_drop_prob=args.sample_drop_prob,
             duty_drop_prob=args.duty_drop_prob,
         )
+    return _serve(a, b, logic, args.idle_s)
+
+
+def _planned(args: argparse.Namespace, codec: Any) -> tuple[Any, Any, Any, float]:
+    """The buses and the link of a run's plan (``--plan``): plant side, controller side."""
+    from bench.nodes._link import LockstepLink, RealtimeLink
+    from bench.nodes._plan import read_plan
+
+    plan = read_plan(args.plan)
+    lp = plan.link
+    if lp is None:
+        raise BenchError(f"--plan {args.plan}: the plan injects no latency (no link)")
+    logic: LockstepLink | RealtimeLink
+    if plan.mode == "lockstep":
+        logic = LockstepLink(
+            codec,
+            sample_delay=lp.sample_delay_steps,
+            duty_delay=lp.duty_delay_steps,
+            seed=lp.seed,
+            sample_drop_prob=lp.sample_drop_prob,
+            duty_drop_prob=lp.duty_drop_prob,
+        )
+    else:
+        logic = RealtimeLink(
+            codec,
+            sample_delay_us=lp.sample_delay_us,
+            duty_delay_us=lp.duty_delay_us,
+            jitter_dist=lp.jitter_dist,
+            seed=lp.seed,
+            sample_jitter_us=lp.sample_jitter_us,
+            duty_jitter_us=lp.duty_jitter_us,
+            sample_drop_prob=lp.sample_drop_prob,
+            duty_drop_prob=lp.duty_drop_prob,
+        )
+    return plan.bus("plant"), plan.bus("controller"), logic, args.idle_s
+
+
+def _serve(a: Any, b: Any, logic: Any, idle_s: float) -> int:
+    """Forward between the buses ``a`` and ``b`` through ``logic`` until stopped or idle."""
+    from bench.nodes._link import link_loop
+
     bus_a = a.open()
     try:
         bus_b = b.open()
@@ -76,13 +121,13 @@ def cmd_link(args: argparse.Namespace) -> int:
     why = "stopped"
     try:
         why = link_loop(
-            bus_a, bus_b, logic, on_ready=ready, idle_s=args.idle_s, stop=STOP.is_set, sent=sent
+            bus_a, bus_b, logic, on_ready=ready, idle_s=idle_s, stop=STOP.is_set, sent=sent
         )
     finally:
         bus_a.shutdown()
         bus_b.shutdown()
         if why == "idle":
-            print(f"link: no traffic for {args.idle_s:g} s: stopping", file=sys.stderr)
+            print(f"link: no traffic for {idle_s:g} s: stopping", file=sys.stderr)
         print(
             f"link: forwarded {sent.get('a_to_b', 0)} frames {a.describe()} -> {b.describe()}, "
             f"{sent.get('b_to_a', 0)} back; dropped {logic.dropped_samples} samples/truth and "
@@ -102,8 +147,12 @@ def register(sub: Any) -> None:
     p = sub.add_parser("link", help="latency link between two buses (delay, jitter, drop)")
     add_bus(p)
     p.add_argument(
-        "--to", required=True, help="the other bus, INTERFACE:CHANNEL (e.g. socketcan:vcan1)"
+        "--plan",
+        metavar="FILE",
+        help="forward as a run's plan says (its plan.json: buses, mode, latency); "
+        "the other options then do not apply",
     )
+    p.add_argument("--to", help="the other bus, INTERFACE:CHANNEL (e.g. socketcan:vcan1)")
     p.add_argument("--to-port", type=int, help="UDP port of the other bus (udp_multicast)")
     p.add_argument("--mode", choices=MODES, default="lockstep")
     p.add_argument(

@@ -1,10 +1,20 @@
-"""``bench plant``: the plant emulator as one node on a bus."""
+"""``bench plant``: the plant emulator as one node on a bus.
+
+It serves a run's plan (:mod:`bench.nodes._plan`): ``bench plant --plan FILE``
+reads one (``bench run`` starts its plant so, with the ``plan.json`` of its run
+folder), and ``bench plant SCENARIO [options]`` makes one from the scenario and
+the options, as ``bench run`` would.  The options of how this node serves the
+plan (``--engine``, ``--truth-every``, the watchdogs, ``--report``, the real-time
+ones) go with either; the run's own settings (:data:`PLAN_FIXES`) only with a
+SCENARIO.
+"""
 
 from __future__ import annotations
 
 import argparse
 from typing import Any
 
+from bench._errors import BenchError
 from bench.cli._common import (
     NONNEG_INT,
     POS_FLOAT,
@@ -12,6 +22,7 @@ from bench.cli._common import (
     STOP,
     add_bus,
     add_engine,
+    add_plan,
     add_plant_profile,
     add_rt,
     add_scenario_overrides,
@@ -23,39 +34,102 @@ from bench.cli._common import (
     serve_node,
 )
 
+#: The options of a run's settings: with ``--plan`` the plan fixes them (module docstring).
+PLAN_FIXES = (
+    ("scenario", "SCENARIO"),
+    ("mode", "--mode"),
+    ("duration", "--duration"),
+    ("delay_steps", "--delay-steps"),
+    ("sample_delay_steps", "--sample-delay-steps"),
+    ("seed", "--seed"),
+    ("plant_profile", "--plant-profile"),
+    ("run_id", "--run-id"),
+    ("pace_every", "--pace-every"),
+    ("dut_timeout", "--dut-timeout"),
+    ("estimator", "--estimator"),
+    ("interface", "--interface"),
+    ("channel", "--channel"),
+    ("port", "--port"),
+    ("bitrate", "--bitrate"),
+    ("data_bitrate", "--data-bitrate"),
+)
+
+
+def node_plan(args: argparse.Namespace, role: str) -> Any:
+    """The node's run plan: ``--plan FILE``, or made here from SCENARIO and the options.
+
+    With ``--plan`` none of the run's settings (:data:`PLAN_FIXES`) may be given:
+    the plan fixed them when it was made (one line naming them otherwise).
+    """
+    from bench.nodes._plan import make_plan, read_plan
+    from bench.scenarios._setup import with_position_sensor
+    from bench.wire._protocol import new_run_id
+
+    if args.plan:
+        given = [opt for dest, opt in PLAN_FIXES if getattr(args, dest, None) is not None]
+        if given:
+            raise BenchError(
+                f"--plan {args.plan}: the plan fixes the run's settings; "
+                f"{', '.join(given)} cannot change them (make a new plan, or run from SCENARIO)"
+            )
+        plan = read_plan(args.plan)
+        if role == "controller" and plan.controller is None:
+            raise BenchError(f"--plan {args.plan}: the plan has no controller of the bench's")
+    else:
+        if not args.scenario:
+            raise BenchError(f"bench {role}: give a SCENARIO or --plan FILE")
+        scn = scenario_from_args(args)
+        est = None
+        if role == "controller":
+            est = args.estimator or scn.estimator
+        elif args.dut_timeout:
+            # a controller under test reads PositionSensor (docs/PROTOCOL.md)
+            scn = with_position_sensor(scn)
+        run_id = args.run_id if args.run_id is not None else new_run_id()
+        if role == "controller":
+            run_id = args.run_id or 0  # unknown unless given
+        plan = make_plan(
+            scn,
+            est,
+            mode=args.mode or "lockstep",
+            plant_bus=bus_spec(args, announce=False),
+            run_id=run_id,
+            pace_every=getattr(args, "pace_every", None) or 0,
+            dut_timeout_s=getattr(args, "dut_timeout", None) or 0.0,
+        )
+    args.mode = plan.mode  # the node's real-time settings follow it (serve_node)
+    return plan
+
 
 def cmd_plant(args: argparse.Namespace) -> int:
     import sys
 
-    from bench.nodes._loops import make_plant_node, plant_loop
-    from bench.scenarios._setup import with_position_sensor
+    from bench.nodes._loops import plant_loop, plant_node
     from bench.wire._codec import Codec
-    from bench.wire._protocol import new_run_id
 
-    scn = scenario_from_args(args)
-    if args.dut_timeout:
-        # a controller under test reads PositionSensor (docs/PROTOCOL.md)
-        scn = with_position_sensor(scn)
-    spec = bus_spec(args, announce=False)
-    run_id = args.run_id or new_run_id()
+    plan = node_plan(args, "plant")
+    spec = plan.bus("plant")
     # a controller author needs to know where to listen (bench show SCENARIO says it too)
     print(
-        f"plant: {scn.name}, {args.mode}, on {spec.describe()}, run {run_id:#06x}",
+        f"plant: {plan.scenario}, {plan.mode}, on {spec.describe()}, run {plan.run_id:#06x}",
         file=sys.stderr,
         flush=True,
     )
     codec = Codec()
-    node = make_plant_node(
-        scn,
+    node = plant_node(
+        plan.plant.build(plant_engine(args)),
+        plan.n_steps,
+        plan.lockstep_delay,
         codec,
         truth_every=args.truth_every,
         watchdog_s=None if args.watchdog_ms is None else args.watchdog_ms * 1e-3,
         watchdog_rounds=args.watchdog_rounds,
-        engine=plant_engine(args),
+        faults=plan.faults,
+        seed=plan.seed,
     )
-    node.run_id = run_id
-    if args.mode == "lockstep":
-        node.pace_every = args.pace_every
+    node.run_id = plan.run_id
+    if plan.mode == "lockstep":
+        node.pace_every = plan.pace_every
     return serve_node(
         args,
         spec,
@@ -64,17 +138,20 @@ def cmd_plant(args: argparse.Namespace) -> int:
         lambda bus: plant_loop(
             bus,
             node,
-            realtime=args.mode == "realtime",
+            realtime=plan.mode == "realtime",
             on_ready=ready,
             stop=STOP.is_set,
-            dut_timeout_s=args.dut_timeout or 0.0,
+            dut_timeout_s=plan.dut_timeout_s,
         ),
     )
 
 
 def register(sub: Any) -> None:
     p = sub.add_parser("plant", help="serve the plant emulator on a bus (one node)")
-    p.add_argument("scenario")
+    p.add_argument(
+        "scenario", nargs="?", help="scenario name or file (or --plan FILE: a run's plan.json)"
+    )
+    add_plan(p)
     add_scenario_overrides(p)
     add_plant_profile(p)
     add_bus(p)
@@ -101,7 +178,6 @@ def register(sub: Any) -> None:
     p.add_argument(
         "--pace-every",
         type=NONNEG_INT,
-        default=0,
         metavar="N",
         help="lockstep: run period k only once a bench command for step k or later has come "
         "(the sender keeps one at least every N periods); 0: off (bench run sets it)",
@@ -116,4 +192,5 @@ def register(sub: Any) -> None:
     )
     add_engine(p)
     add_rt(p)
-    p.set_defaults(func=cmd_plant)
+    # None: not given (the plan's; the defaults are the plan's, lockstep and 0)
+    p.set_defaults(func=cmd_plant, mode=None)

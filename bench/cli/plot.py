@@ -79,7 +79,9 @@ def cmd_plot(args: argparse.Namespace) -> int:
         f_c = None
         scenario = _scenario(run, meta)
         if scenario is not None:
-            f_c = fundamental_corner_hz(scenario, str(meta.get("estimator", "")), part)
+            # the controller as the run's node reported it (none: built from the scenario)
+            design = ((meta.get("node_reports") or {}).get("controller") or {}).get("design")
+            f_c = fundamental_corner_hz(scenario, str(meta.get("estimator", "")), part, design)
         out = Path(args.out) if args.out else run / "run.png"
         t = part["t"]
         windowed = args.t_from is not None or args.t_to is not None

@@ -22,15 +22,15 @@ choice of library are in :mod:`bench.monitor._app`.
 
 Entry points:
 
-- :func:`add_arguments` and :func:`main`: the ``bench monitor`` subcommand
-  (``python -m bench.monitor`` runs it alone);
+- :func:`show_view`: the view over an open bus, until quit; the ``bench monitor``
+  command line (:mod:`bench.cli.monitor`, which ``python -m bench.cli.monitor``
+  runs alone) resolves the bus and the settings and calls it;
 - :func:`run_monitor`: the same view in a child process for ``bench run
   --monitor``, attached to the run's bus, closed when the run ends.
 """
 
 from __future__ import annotations
 
-import argparse
 import os
 import signal
 import subprocess
@@ -42,199 +42,23 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:
     from bench.monitor._model import MonitorPars
 
-# Only the entry points here, and no heavy import at the top: the bench's
-# command line builds its parser with add_arguments for every command, and
-# the model (numpy, cantools) and the view (Textual) load only when the
-# monitor runs. The model is bench.monitor._model, the view bench.monitor._app.
+# Only the entry points here, and no heavy import at the top: the model
+# (numpy, cantools) and the view (Textual) load only when the monitor runs.
+# The model is bench.monitor._model, the view bench.monitor._app.
 __all__ = [
-    "add_arguments",
-    "main",
-    "monitor_pars",
+    "DEFAULT_BITRATE",
+    "DEFAULT_DATA_BITRATE",
     "run_monitor",
+    "show_view",
 ]
 
 #: Reference bus of the load figures when the options give no bit rate (bit/s):
 #: the ``FD 1M/5M`` bus of ``bench busload``.
 DEFAULT_BITRATE = 1_000_000
 DEFAULT_DATA_BITRATE = 5_000_000
-#: The monitor runs at this much lower priority (``nice``): on a host where the
-#: bench's nodes keep the cores busy, the kernel gives them the CPU first (a
-#: nice-10 process weighs about a tenth of a nice-0 one), and a monitor that
-#: falls behind loses frames from its own socket, which it counts from the gaps
-#: of the plant's step counter, instead of slowing the bench.
-DEFAULT_NICE = 10
 
 
-def _positive(kind: type) -> Any:
-    def parse(text: str) -> Any:
-        try:
-            v = kind(text)
-        except ValueError:
-            v = None
-        if v is None or not v > 0:
-            raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}")
-        return v
-
-    return parse
-
-
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """The options of ``bench monitor`` (bus options as ``bench run`` has them)."""
-    g = parser.add_argument_group("bus")
-    g.add_argument(
-        "--interface",
-        "-i",
-        help="python-can interface (socketcan, udp_multicast, pcan, ...)",
-    )
-    g.add_argument(
-        "--channel", "-c", help="channel (vcan0, can0, PCAN_USBBUS1, a multicast group, ...)"
-    )
-    g.add_argument(
-        "--port",
-        type=int,
-        help="UDP port (udp_multicast only; bench run prints the port of its bus)",
-    )
-    g.add_argument(
-        "--bitrate",
-        type=int,
-        help="nominal bit rate: of a real adapter, and of the load figures "
-        f"(default {DEFAULT_BITRATE})",
-    )
-    g.add_argument(
-        "--data-bitrate",
-        type=int,
-        help="CAN FD data bit rate, as --bitrate "
-        f"(default {DEFAULT_DATA_BITRATE} when neither is given)",
-    )
-    parser.add_argument("--dbc", metavar="FILE", help="DBC file (default: the bench's own)")
-    parser.add_argument(
-        "--scenario",
-        help="scenario of the bench (name, .toml or a run's scenario.json): pole pairs, "
-        "PWM period and length of the run",
-    )
-    parser.add_argument(
-        "--pole-pairs",
-        type=_positive(int),
-        metavar="N",
-        help="pole pairs of the motor (default: the scenario's, else inferred from "
-        "estimated over true speed)",
-    )
-    parser.add_argument(
-        "--refresh", type=_positive(float), default=4.0, metavar="HZ", help="redraws per second"
-    )
-    parser.add_argument(
-        "--nice",
-        type=int,
-        default=DEFAULT_NICE,
-        metavar="N",
-        help=f"lower the monitor's scheduling priority by N (default {DEFAULT_NICE}; 0: as is)",
-    )
-    parser.add_argument("--title", help="text on the first line (default: the bus)")
-    parser.add_argument("--exit-with-parent", action="store_true", help=argparse.SUPPRESS)
-
-
-def _bus_spec(args: argparse.Namespace) -> Any:
-    """The bus of the options, as ``bench run`` resolves it (:func:`bench.cli._common.bus_spec`).
-
-    Without ``--port`` a udp_multicast bus is python-can's default port, not a
-    port of its own as ``bench run`` picks: the monitor joins a bus, it does
-    not make one.
-    """
-    from bench._errors import InterfaceError
-    from bench.wire._bus import (
-        BusSpec,
-        check_interface,
-        default_channel,
-        default_transport,
-        python_can_config,
-    )
-
-    interface, channel = args.interface, args.channel
-    if interface is None and (cfg := python_can_config()) is not None:
-        interface = str(cfg.get("interface"))
-        channel = channel or cfg.get("channel")
-        for key in ("bitrate", "data_bitrate"):
-            if getattr(args, key, None) is None and cfg.get(key) is not None:
-                setattr(args, key, int(cfg[key]))
-    if interface is None:
-        if channel is not None:
-            raise InterfaceError("--channel given without --interface")
-        interface, channel, _ = default_transport()
-    check_interface(interface)
-    if interface == "virtual":
-        raise InterfaceError(
-            "--interface virtual: python-can's virtual bus lives inside one process; "
-            "the monitor is a process of its own (use the bench's udp_multicast or socketcan bus)"
-        )
-    channel = channel or default_channel(interface)
-    if channel is None:
-        raise InterfaceError(f"--interface {interface}: this adapter needs --channel")
-    return BusSpec(interface, str(channel), args.port, args.bitrate, args.data_bitrate)
-
-
-def monitor_pars(args: argparse.Namespace) -> MonitorPars:
-    """Settings of the options: the scenario's motor and period, the load's bit rates."""
-    from bench.monitor._model import MonitorPars
-
-    n_p: int | None = None
-    T_s: float | None = None
-    n_steps: int | None = None
-    if args.scenario:
-        from bench.scenarios._schema import load_scenario
-        from bench.scenarios._setup import get_preset, sample_period
-        from bench.scenarios._setup import n_steps as scenario_steps
-
-        scn = load_scenario(args.scenario)
-        n_p = int(get_preset(scn).motor.n_p)
-        T_s = sample_period(scn)
-        n_steps = scenario_steps(scn)
-    if args.pole_pairs is not None:
-        n_p = int(args.pole_pairs)
-    if args.bitrate is None and args.data_bitrate is None:
-        bitrate = float(DEFAULT_BITRATE)
-        data_bitrate: float | None = float(DEFAULT_DATA_BITRATE)
-    else:
-        bitrate = float(args.bitrate or DEFAULT_BITRATE)
-        data_bitrate = None if args.data_bitrate is None else float(args.data_bitrate)
-    return MonitorPars(
-        bitrate=bitrate, data_bitrate=data_bitrate, n_p=n_p, T_s=T_s, n_steps=n_steps
-    )
-
-
-def main(args: argparse.Namespace) -> int:
-    """Run the view until quit: 0, or 130 when left with Ctrl-C.
-
-    Raises
-    ------
-    BenchError
-        No terminal, a bad option, an unreadable DBC or scenario, a bus that
-        cannot be opened (one line).
-    """
-    from bench._errors import BenchError
-    from bench.wire._codec import Codec
-
-    # Textual draws on standard error and reads keys from standard input
-    if not (sys.stdin.isatty() and sys.stdout.isatty() and sys.stderr.isatty()):
-        raise BenchError("monitor: needs a terminal (standard input, output and error)")
-    if args.nice < 0:
-        raise BenchError(f"--nice: the monitor only lowers its priority (N >= 0), got {args.nice}")
-    if args.nice:
-        os.nice(args.nice)
-    codec = Codec(args.dbc)
-    pars = monitor_pars(args)
-    spec = _bus_spec(args)
-    title = f"bench monitor  {spec.describe()}" + (f"  {args.title}" if args.title else "")
-    stop = None
-    if args.exit_with_parent:
-        parent = os.getppid()
-
-        def stop() -> bool:
-            return os.getppid() != parent
-
-    return _run_view(spec.open(), codec, pars, title, refresh_hz=args.refresh, stop=stop)
-
-
-def _run_view(
+def show_view(
     bus: Any,
     codec: Any,
     pars: MonitorPars,
@@ -279,7 +103,7 @@ def run_monitor(
     """Show the view of the bus ``spec`` in this terminal until ``stop`` is set or it is quit.
 
     For ``bench run --monitor``: the view runs as a child process (``python
-    -m bench.monitor``) that opens a listening socket of its own on the run's
+    -m bench.cli.monitor``) that opens a listening socket of its own on the run's
     bus, so drawing never takes the run's interpreter (its recorder) and the
     run needs no change but to skip its progress line. Call it from a thread
     of its own while the run goes on in the main thread; set ``stop`` when
@@ -310,7 +134,7 @@ def run_monitor(
         The view's exit status: 0 (quit with q, or ``stop``), 130 (Ctrl-C),
         another value when it failed (its error is on the terminal).
     """
-    cmd = [sys.executable, "-m", "bench.monitor", *spec.args(), "--exit-with-parent"]
+    cmd = [sys.executable, "-m", "bench.cli.monitor", *spec.args(), "--exit-with-parent"]
     if dbc is not None:
         cmd += ["--dbc", str(dbc)]
     if title:

@@ -6,5 +6,6 @@
 - ``_loops``: the nodes' loops on a python-can bus (lockstep and real time),
   the in-process reference loop, the scenario's command frames.
 - ``_link``: the latency link between two buses (delay, jitter, loss).
-- ``_send``: sending with retries; ``_rt``: real-time settings of a process.
+- ``_send``: sending with retries; ``_rt``: real-time settings of a process;
+  ``_clock``: the real-time plant's clock (absolute deadlines, host stalls).
 """

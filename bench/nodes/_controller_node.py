@@ -7,6 +7,8 @@ step bookkeeping and the counters follow the plant node's rules
 
 from __future__ import annotations
 
+from typing import Any
+
 import can
 
 from bench.nodes._counters import (
@@ -26,7 +28,44 @@ from bench.wire._protocol import (
     RPM_PER_RAD_S,
     unwrap,
 )
-from controller import Controller, ControlOutput, Measurement
+from controller import Controller, ControlOutput, HybridEstimator, Measurement
+
+
+def controller_design(ctrl: Controller) -> dict[str, Any]:
+    """What a run's scoring needs of the controller as its node built it (the node's report,
+    ``design``), so that the run never builds the controller again:
+
+    - ``gains``: every gain, bandwidth, filter corner and delay (:meth:`Controller.gains`,
+      ``meta.json``'s ``controller_gains``);
+    - ``injection``: the HF injection's ``w_h`` (rad/s, rotating) or ``R`` (PWM periods
+      per square-wave period), both None for an estimator that injects nothing;
+    - ``band_edges``: a hybrid estimator's band on the true speed (rad/s,
+      :attr:`controller.TransitionBand.edges`), else None;
+    - ``speed_loop``: the speed PI's ``k_t``, ``k_p``, ``k_i``, the speed filter ``w_f``
+      and the bandwidth ``alpha_s`` (a hybrid run's expected hand-over speed).
+    """
+    est = ctrl.estimator
+    edges: list[float] | None = None
+    hf: object = est
+    if isinstance(est, HybridEstimator):
+        edges, hf = [float(e) for e in est.band.edges], est.hf
+    w_h, R = getattr(hf, "w_h", None), getattr(hf, "R", None)
+    pi = ctrl.pi_w
+    return {
+        "gains": ctrl.gains(),
+        "injection": {
+            "w_h": None if w_h is None else float(w_h),
+            "R": int(R) if R else None,
+        },
+        "band_edges": edges,
+        "speed_loop": {
+            "k_t": float(pi.k_t),
+            "k_p": float(pi.k_p),
+            "k_i": float(pi.k_i),
+            "w_f": float(ctrl.w_f),
+            "alpha_s": float(ctrl.alpha_s),
+        },
+    }
 
 
 class ControllerNode:
@@ -184,10 +223,12 @@ class ControllerNode:
 
     def report(self) -> dict[str, object]:
         """Counters, for the node's JSON report; the controller's ``engine`` and, when it runs
-        in Python although the compiled engine was asked for, why (``engine_note``)."""
+        in Python although the compiled engine was asked for, why (``engine_note``); its
+        design as built (``design``, :func:`controller_design`)."""
         out = self.counters.as_dict()
         out.update(steps=self.next_k, sample_timeouts=self.sample_timeouts)
         out.update(engine=self.ctrl.engine, engine_note=self.ctrl.engine_note)
+        out["design"] = controller_design(self.ctrl)
         return out
 
     def _telemetry(self, o: ControlOutput) -> can.Message:

@@ -10,20 +10,25 @@ frames between the same nodes without any bus: the reference trace.
 from __future__ import annotations
 
 import math
+import os
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 
 import can
 
 from bench._errors import BenchError
+from bench.nodes._clock import RealTimeClock
 from bench.nodes._controller_node import ControllerNode
 from bench.nodes._counters import RejectionSummary, rejection_text
+from bench.nodes._plan import RunPlan
 from bench.nodes._plant_node import PlantNode, fault_name
 from bench.nodes._rt import no_gc
 from bench.nodes._send import send_all
+from bench.scenarios._faults import Fault
 from bench.scenarios._schema import Scenario
 from bench.scenarios._setup import (
+    ENGINE_ENV,
     PlannedCommand,
     build_controller,
     build_plant,
@@ -35,7 +40,8 @@ from bench.scenarios._setup import (
 )
 from bench.wire._codec import Codec
 from bench.wire._protocol import CMD_NONE, STATE_IDLE
-from plant_rt import FAULT_WATCHDOG, ProtectionPars, RealTimeClock
+from controller import Controller
+from plant_rt import FAULT_WATCHDOG, Plant, ProtectionPars
 
 #: ``PlantStatus.state`` of the plant's last frame: the run is over, the plant idle.
 STATE_DONE = STATE_IDLE
@@ -72,30 +78,58 @@ def make_plant_node(
     watchdog_rounds: int = WATCHDOG_ROUNDS,
     engine: str = "auto",
 ) -> PlantNode:
-    """The plant node of a scenario, with protection and watchdogs.
+    """The plant node of a scenario, with protection and watchdogs (:func:`plant_node`)."""
+    return plant_node(
+        build_plant(scn, engine),
+        n_steps(scn),
+        lockstep_delay(scn),
+        codec,
+        truth_every=truth_every,
+        protection=protection,
+        watchdog_s=watchdog_s,
+        watchdog_rounds=watchdog_rounds,
+        faults=tuple(scn.faults),
+        seed=scn.seed,
+    )
+
+
+def plant_node(
+    plant: Plant,
+    steps: int,
+    delay: int,
+    codec: Codec,
+    *,
+    truth_every: int = 1,
+    protection: ProtectionPars | None = None,
+    watchdog_s: float | None = None,
+    watchdog_rounds: int = WATCHDOG_ROUNDS,
+    faults: tuple[Fault, ...] = (),
+    seed: int = 0,
+) -> PlantNode:
+    """The node of ``plant`` (a run's plan: ``plan.plant.build(engine)``), running
+    ``steps`` periods with ``delay`` periods of lockstep latency.
 
     ``protection`` defaults to :meth:`ProtectionPars.from_preset` of the
-    scenario's preset; ``watchdog_s`` to :func:`watchdog_periods`' default.
+    plant's motor and inverter; ``watchdog_s`` to :func:`watchdog_periods`' default.
     """
-    plant = build_plant(scn, engine)
     cycle_ms = codec.message("PlantStatus").cycle_time or 0
     if protection is None:
         protection = ProtectionPars.from_preset(plant.motor, plant.inverter)
     node = PlantNode(
         codec,
         plant,
-        n_steps=n_steps(scn),
-        lockstep_delay=lockstep_delay(scn),
+        n_steps=steps,
+        lockstep_delay=delay,
         truth_every=truth_every,
         protection=protection,
         watchdog_periods=watchdog_periods(plant.T_s, watchdog_s),
         watchdog_rounds=watchdog_rounds,
         status_every=max(1, round(cycle_ms * 1e-3 / plant.T_s)) if cycle_ms else 0,
     )
-    if scn.faults:
+    if faults:  # the scenario's [[faults]]; ``seed`` seeds their random streams
         from bench.nodes._fault_bus import NodeFaults
 
-        node.faults = NodeFaults(scn.faults, plant, scn.seed)
+        node.faults = NodeFaults(faults, plant, seed)
     return node
 
 
@@ -105,10 +139,31 @@ def make_controller_node(scn: Scenario, estimator: str, codec: Codec) -> Control
     )
 
 
+def controller_node(plan: RunPlan, codec: Codec) -> ControllerNode:
+    """The controller node of a run's plan (its controller as built, :attr:`RunPlan.controller`).
+
+    The engine is :data:`bench.scenarios._setup.ENGINE_ENV`'s (``--engine``), else auto.
+    """
+    if plan.controller is None:
+        raise BenchError(f"plan of {plan.scenario}: it has no controller of the bench's")
+    engine = os.environ.get(ENGINE_ENV) or "auto"
+    try:
+        ctrl = Controller(plan.controller, engine)
+    except TypeError as e:
+        raise BenchError(f"plan of {plan.scenario}: estimator options: {e}") from None
+    return ControllerNode(codec, ctrl, needs_truth=plan.needs_truth)
+
+
 def command_frames(
-    scn: Scenario, codec: Codec, pace_every: int = 0
+    scn: Scenario,
+    codec: Codec,
+    pace_every: int = 0,
+    schedule: Sequence[PlannedCommand] | None = None,
 ) -> list[tuple[int, can.Message]]:
     """The scenario's bench commands as frames, with their apply steps.
+
+    ``schedule``: the commands as planned (a run's plan, :attr:`RunPlan.commands`);
+    None: :func:`bench.scenarios._setup.command_schedule` of ``scn``.
 
     ``pace_every > 0`` adds a keep-alive (``cmd`` 0, the references already
     in force, so nothing changes) at every multiple of ``pace_every`` that
@@ -116,7 +171,7 @@ def command_frames(
     (:attr:`bench.nodes._plant_node.PlantNode.pace_every`).
     """
     m = 1 << codec.step_bits("BenchCommand")
-    plan = command_schedule(scn)
+    plan = list(schedule) if schedule is not None else command_schedule(scn)
     if pace_every > 0:
         have = {c.apply_step for c in plan}
         extra = []
@@ -412,7 +467,7 @@ def _serve_realtime(
     Each instant's frames leave at that instant (the deadline), so the
     controller has one period to answer, as in a drive; the plant then runs
     the period with the newest duty meant for it.  A host stall resynchronises
-    the clock instead of a catch-up burst (:class:`plant_rt.RealTimeClock`).
+    the clock instead of a catch-up burst (:class:`bench.nodes._clock.RealTimeClock`).
     The clock's overruns, stalls and jitter statistics go to the node's report.
     """
     clock = RealTimeClock(node.plant.T_s)

@@ -39,12 +39,13 @@ verified: :meth:`CommandPacer.verification_line` says so.
 from __future__ import annotations
 
 import bisect
+from collections.abc import Sequence
 
 import can
 
 from bench.nodes._loops import command_frames
 from bench.scenarios._schema import Scenario
-from bench.scenarios._setup import sample_period
+from bench.scenarios._setup import PlannedCommand, sample_period
 from bench.wire._codec import Codec
 from bench.wire._protocol import ACK_WINDOW, SEQ_MODULUS
 
@@ -112,6 +113,9 @@ class CommandPacer:
         also at most that many beyond the plant's step (else :data:`COMMAND_BURST`),
         the bound the plant's acknowledgement gate needs to compare 4-bit seq
         (:meth:`bench.nodes._plant_node.PlantNode.acked`).
+    schedule : sequence of PlannedCommand, optional
+        The commands (a run's plan: :attr:`bench.nodes._plan.RunPlan.commands`);
+        default: the scenario's.
     """
 
     def __init__(
@@ -122,12 +126,15 @@ class CommandPacer:
         mode: str,
         pace_every: int | None = None,
         external: bool = False,
+        schedule: Sequence[PlannedCommand] | None = None,
     ) -> None:
         if pace_every is None:
             pace_every = PACE_EVERY if mode == "lockstep" else 0
         self.pace_every = pace_every
         #: (apply step, frame) of every command, in order; the last one is the stop.
-        self.frames: list[tuple[int, can.Message]] = command_frames(scn, codec, pace_every)
+        self.frames: list[tuple[int, can.Message]] = command_frames(
+            scn, codec, pace_every, schedule
+        )
         #: Periods ahead of the plant's step a command is sent (:func:`command_lead`).
         self.lead = command_lead(sample_period(scn), mode)
         #: How many of :attr:`frames` have been sent.

@@ -1,8 +1,9 @@
 """The node processes of a run: command lines, start-up handshake, and how they end.
 
 ``bench run`` starts ``bench plant``, ``bench controller`` and, when latency
-is injected, ``bench link`` as OS processes, each with its stderr in
-``ROLE.log`` and its counters in ``ROLE.json`` of the run folder.  A node is
+is injected, ``bench link`` as OS processes, each on the run's plan
+(``plan.json``, :mod:`bench.nodes._plan`), with its stderr in ``ROLE.log``
+and its counters in ``ROLE.json`` of the run folder.  A node is
 started only once the previous one has printed ``READY``.
 
 Each node runs in a session (process group) of its own, so that a Ctrl-C
@@ -32,8 +33,7 @@ from pathlib import Path
 from typing import Any
 
 from bench._errors import BenchError
-from bench.scenarios._schema import Scenario
-from bench.wire._bus import BusSpec
+from bench.nodes._plan import RunPlan
 
 #: ``prctl`` option that sets the signal a process gets when its parent dies (linux/prctl.h).
 PR_SET_PDEATHSIG = 1
@@ -69,23 +69,6 @@ def die_with_parent(parent: int, sig: int = signal.SIGKILL) -> None:
     prctl(PR_SET_PDEATHSIG, int(sig), 0, 0, 0)
     if os.getppid() != parent:
         os._exit(1)
-
-
-def _node_cmd(role: str, scenario_file: Path, spec: BusSpec, extra: list[str]) -> list[str]:
-    return [sys.executable, "-m", "bench", role, str(scenario_file), *spec.args(), *extra]
-
-
-def _scenario_args(scn: Scenario, mode: str) -> list[str]:
-    return [
-        "--mode",
-        mode,
-        "--duration",
-        repr(scn.duration),
-        "--delay-steps",
-        str(scn.latency.duty_delay_steps),
-        "--sample-delay-steps",
-        str(scn.latency.sample_delay_steps),
-    ]
 
 
 def _wait_ready(
@@ -154,78 +137,52 @@ def last_line(out_dir: Path, role: str) -> str:
     return lines[-1] if lines else "no output"
 
 
-def _peer_args(spec: BusSpec) -> list[str]:
-    a = [f"{spec.interface}:{spec.channel}"]
-    if spec.port is not None:
-        a.append(f"--to-port={spec.port}")
-    return a
-
-
 def node_roles(
-    scn: Scenario,
-    estimator: str,
-    spec: BusSpec,
-    spec_b: BusSpec,
-    *,
-    mode: str,
-    pace: int,
-    node_args: dict[str, list[str]] | None,
-) -> list[tuple[str, BusSpec, list[str]]]:
-    """The processes of a run in start order: (role, its bus, its options).
+    plan: RunPlan, node_args: dict[str, list[str]] | None
+) -> list[tuple[str, list[str]]]:
+    """The processes of a run in start order: (role, its options besides the plan).
 
-    The link (when latency is injected) starts first, then the controller,
-    then the plant, which keeps the clock.  ``node_args`` adds options per
-    role; ``pace`` is the plant's ``--pace-every`` (0: off).
+    The link (when latency is injected) starts first, then the controller
+    (none when the plan has none: a controller under test), then the plant,
+    which keeps the clock.  ``node_args`` adds options per role: how a node
+    serves the plan (``--engine``, ``--rt-priority``, ...), never the run's
+    settings, which are the plan's alone.
     """
-    scn_args = _scenario_args(scn, mode)
     extra = node_args or {}
-    pace_args = ["--pace-every", str(pace)] if pace else []
-    roles: list[tuple[str, BusSpec, list[str]]] = [
-        ("controller", spec_b, ["--estimator", estimator, *scn_args, *extra.get("controller", [])]),
-        ("plant", spec, [*scn_args, *pace_args, *extra.get("plant", [])]),
-    ]
-    if scn.latency.any:
-        lt = scn.latency
-        link_args = [
-            "--to", *_peer_args(spec_b), "--seed", str(scn.seed), "--mode", mode,
-            "--delay-steps", str(lt.duty_delay_steps),
-            "--sample-delay-steps", str(lt.sample_delay_steps),
-            "--duty-delay-us", repr(lt.duty_delay_us),
-            "--sample-delay-us", repr(lt.sample_delay_us),
-            "--duty-jitter-us", repr(lt.duty.jitter_us),
-            "--sample-jitter-us", repr(lt.sample.jitter_us),
-            "--jitter-dist", lt.jitter_dist,
-            "--duty-drop-prob", repr(lt.duty.drop_prob),
-            "--sample-drop-prob", repr(lt.sample.drop_prob),
-        ]  # fmt: skip
-        roles.insert(0, ("link", spec, link_args))
+    roles: list[tuple[str, list[str]]] = []
+    if plan.link is not None:
+        roles.append(("link", list(extra.get("link", []))))
+    if plan.controller is not None:
+        roles.append(("controller", list(extra.get("controller", []))))
+    roles.append(("plant", list(extra.get("plant", []))))
     return roles
 
 
 def start_nodes(
-    roles: list[tuple[str, BusSpec, list[str]]],
-    scenario_file: Path,
+    roles: list[tuple[str, list[str]]],
+    plan_file: Path,
     out_dir: Path,
     env: dict[str, str],
     procs: list[tuple[str, subprocess.Popen[str]]],
     *,
     stop: Any,
 ) -> None:
-    """Start each role's process and wait for its ``READY``; appended to ``procs`` as started.
+    """Start each role's process on the run's plan and wait for its ``READY``; appended to
+    ``procs`` as started.
 
+    Every node reads ``plan_file`` (``bench ROLE --plan FILE``) and nothing else of
+    the run; the plant and the controller write their report to ``ROLE.json``.
     ``procs`` is filled in place so that the caller can kill what was started
     when a later node fails to start.  ``stop()`` (a signal came) ends the
     start-up early.
     """
-    for role, sp, extra in roles:
+    for role, extra in roles:
         if stop():
             return
         log = out_dir / f"{role}.log"
-        cmd = (
-            _node_cmd(role, scenario_file, sp, [*extra, "--report", str(out_dir / f"{role}.json")])
-            if role != "link"
-            else [sys.executable, "-m", "bench", "link", *sp.args(), *extra]
-        )
+        cmd = [sys.executable, "-m", "bench", role, "--plan", str(plan_file), *extra]
+        if role != "link":
+            cmd += ["--report", str(out_dir / f"{role}.json")]
         _prctl()  # resolved here, not between fork and exec
         p = subprocess.Popen(
             cmd,

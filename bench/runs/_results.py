@@ -71,8 +71,21 @@ def _versions() -> dict[str, str]:
 
 
 def run_metadata(
-    scn: Scenario, estimator: str, *, mode: str, transport: str, link: bool
+    scn: Scenario,
+    estimator: str,
+    *,
+    mode: str,
+    transport: str,
+    link: bool,
+    design: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
+    """The run's ``meta.json`` before its results (docs/RUNS.md).
+
+    ``design``: the controller as its node built it (the node's report,
+    :func:`bench.nodes._controller_node.controller_design`); its gains are
+    recorded as they are.  None (an in-process run, a test): the controller is
+    built here to learn them.
+    """
     return {
         "scenario": scn.to_dict(),
         "estimator": estimator,
@@ -85,7 +98,9 @@ def run_metadata(
         # every gain, bandwidth, filter corner and delay the controller uses
         # (controller.Controller.gains); none for an external controller
         "controller": "external" if estimator == "external" else "bench",
-        "controller_gains": {} if estimator == "external" else _controller_gains(scn, estimator),
+        "controller_gains": {}
+        if estimator == "external"
+        else _controller_gains(scn, estimator, design),
         # the scenario's [estimator_options] this estimator does not take, and the note on them
         "estimator_options_left_out": [] if estimator == "external" else _left_out(scn, estimator),
         # the drive's countermeasures the bench's controller runs (None: a controller under test)
@@ -167,9 +182,13 @@ def _left_out(scn: Scenario, estimator: str) -> list[str]:
         return []
 
 
-def _controller_gains(scn: Scenario, estimator: str) -> dict[str, float]:
+def _controller_gains(
+    scn: Scenario, estimator: str, design: dict[str, Any] | None
+) -> dict[str, float]:
     from bench.scenarios._setup import build_controller
 
+    if design is not None:
+        return dict(design.get("gains") or {})
     try:
         return build_controller(scn, estimator).gains()
     except (ValueError, TypeError):  # an estimator that does not fit: said elsewhere
@@ -225,8 +244,10 @@ def finish_run(
         thd_window_s=scn.thd_window_s,
         overshoot="speed_overshoot_rpm" in scn.paper_result,
     )
-    m.update(hybrid_band_metrics(cap.table, scn, str(meta.get("estimator", ""))))
     reports = meta.get("node_reports", {})
+    # the controller as its node built it (its report), when the run had one
+    design = (reports.get("controller") or {}).get("design")
+    m.update(hybrid_band_metrics(cap.table, scn, str(meta.get("estimator", "")), design))
     plant_r = reports.get("plant", {})
     ctrl_r = reports.get("controller", {})
     m["wall_s"] = wall_s
@@ -298,7 +319,7 @@ def finish_run(
     if plant_r.get("jitter"):
         jit = plant_r["jitter"]
         m["jitter_us"] = jit
-        # host stalls, apart from the late periods (plant_rt/_clock.py): the
+        # host stalls, apart from the late periods (bench/nodes/_clock.py): the
         # periods that passed during a stall were skipped, not computed
         m["host_stalls"] = int(jit.get("stalls", 0))
         m["host_stall_ms_total"] = 1e-3 * float(jit.get("stall_total", 0.0))
@@ -347,24 +368,48 @@ def finish_run(
             meta=meta,  # title, paper, its bound and the run's variations
             metrics=m,
             scored_from_s=scn.score_from_s,
-            f_split_hz=fundamental_corner_hz(scn, str(meta.get("estimator", "")), cap.table),
+            f_split_hz=fundamental_corner_hz(
+                scn, str(meta.get("estimator", "")), cap.table, design
+            ),
             n_p=n_p,
         )
     return RunResult(out_dir=out_dir, metrics=m, capture=capture or out_dir, meta=meta)
 
 
-def fundamental_corner_hz(scn: Scenario, estimator: str, table: dict[str, Any]) -> float | None:
+@dataclass(frozen=True, slots=True)
+class Injection:
+    """An estimator's HF injection as a node reports it (``design.injection``):
+    ``w_h`` (rad/s, rotating) or ``R`` (PWM periods per square-wave period)."""
+
+    w_h: float | None = None
+    R: int | None = None
+
+
+def fundamental_corner_hz(
+    scn: Scenario,
+    estimator: str,
+    table: dict[str, Any],
+    design: dict[str, Any] | None = None,
+) -> float | None:
     """Corner (Hz) of the low-pass that gives ``run.png`` the fundamental current:
     :func:`bench.runs._metrics.split_corner_hz` of the estimator's injection up to the
     run's top speed; None when the estimator injects nothing (the raw current is the
-    fundamental) or is not a built-in one."""
+    fundamental) or is not a built-in one.
+
+    ``design``: the controller as its node reported it (``injection``); None
+    (a capture without the report): the controller is built to learn it.
+    """
     from bench.scenarios._setup import build_controller
 
-    try:
-        est = build_controller(scn, estimator).estimator
-    except Exception:  # an external or unfitting controller: no injection known
-        return None
-    hf = getattr(est, "hf", est)
+    hf: Any
+    if design is not None:
+        hf = Injection(**(design.get("injection") or {}))
+    else:
+        try:
+            est = build_controller(scn, estimator).estimator
+        except Exception:  # an external or unfitting controller: no injection known
+            return None
+        hf = getattr(est, "hf", est)
     n_p = get_preset(scn).motor.n_p
     w_top = float(np.max(np.abs(table["w_m_rpm"]))) * math.pi / 30.0 * n_p if len(table["t"]) else 0.0
     try:
@@ -393,11 +438,18 @@ def injection_floor_hz(hf: Any, T_s: float, w_top: float) -> float:
     )
 
 
-def hybrid_band_metrics(table: dict[str, Any], scn: Scenario, estimator: str) -> dict[str, Any]:
+def hybrid_band_metrics(
+    table: dict[str, Any],
+    scn: Scenario,
+    estimator: str,
+    design: dict[str, Any] | None = None,
+) -> dict[str, Any]:
     """The per-band metrics of a hybrid estimator's run (:func:`bench.runs._metrics.band_metrics`);
     ``{}`` for any other estimator.
 
-    Everything comes from the controller the run used, built again from the
+    Everything comes from the controller the run used: as its node reported it
+    (``design``, :func:`bench.nodes._controller_node.controller_design`), or,
+    without that report (a capture, an in-process sweep), built again from the
     scenario (:func:`bench.scenarios._setup.build_controller`): the band's
     edges on the true speed (:attr:`controller.TransitionBand.edges`), the
     injection's lowest rotor-frame frequency (:func:`injection_floor_hz`, up to
@@ -407,27 +459,30 @@ def hybrid_band_metrics(table: dict[str, Any], scn: Scenario, estimator: str) ->
     controller's model of them.
     """
     from bench._errors import BenchError
-    from bench.scenarios._setup import build_controller
-    from controller import HybridEstimator, UnknownEstimatorError, estimator_spec
+    from bench.nodes._controller_node import controller_design
+    from controller import UnknownEstimatorError, estimator_spec
 
     try:
         if not estimator_spec(estimator).speed_band:
             return {}
     except UnknownEstimatorError:
         return {}
-    try:
-        ctrl = build_controller(scn, estimator)
-    except (BenchError, ValueError, TypeError):  # an estimator that does not fit: said elsewhere
-        return {}
-    est = ctrl.estimator
-    if not isinstance(est, HybridEstimator):
+    if design is None:
+        from bench.scenarios._setup import build_controller
+
+        try:
+            design = controller_design(build_controller(scn, estimator))
+        except (BenchError, ValueError, TypeError):  # an estimator that does not fit
+            return {}
+    if not design.get("band_edges"):
         return {}
     T_s = sample_period(scn)
-    edges = est.band.edges
-    f_c = split_corner_hz(injection_floor_hz(est.hf, T_s, edges[1]))
+    lo, hi = (float(e) for e in design["band_edges"])
+    f_c = split_corner_hz(injection_floor_hz(Injection(**design["injection"]), T_s, hi))
     motor = plant_setup(scn)[0].motor
-    pi = ctrl.pi_w
-    loop = SpeedLoop(pi.k_t, pi.k_p, pi.k_i, ctrl.w_f, motor.J, motor.b, ctrl.alpha_s)
+    sl = design["speed_loop"]
+    loop = SpeedLoop(sl["k_t"], sl["k_p"], sl["k_i"], sl["w_f"], motor.J, motor.b, sl["alpha_s"])
+    edges = (lo, hi)
     return band_metrics(
         table,
         T_s=T_s,

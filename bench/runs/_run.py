@@ -40,6 +40,7 @@ from bench import _jsonio as jsonio
 from bench._errors import BenchError, CommandsLost
 from bench.nodes._counters import RejectionSummary, rejection_text
 from bench.nodes._loops import STALL_S, trip_text
+from bench.nodes._plan import PLAN_FILE, make_plan
 from bench.runs._analysis import NoRowsError
 from bench.runs._busfit import check_bus_rate
 from bench.runs._pacing import PACE_EVERY, CommandPacer
@@ -56,7 +57,7 @@ from bench.runs._recorder import Recording
 from bench.runs._results import RunResult, finish_run, run_metadata, scoring_scenario
 from bench.scenarios._faults import lockstep_error
 from bench.scenarios._schema import Scenario, write_effective
-from bench.scenarios._setup import n_steps, sample_period, with_position_sensor
+from bench.scenarios._setup import sample_period, with_position_sensor
 from bench.wire._bus import BusSpec
 from bench.wire._codec import Codec
 from bench.wire._protocol import SHARED_RUN_FRAMES, new_run_id, unwrap
@@ -130,7 +131,10 @@ def run_scenario(
 ) -> RunResult:
     """Run ``scn`` with ``estimator`` between two processes on ``spec``'s bus.
 
-    ``node_args`` adds command-line options per role (``plant``, ``controller``).
+    The nodes read the run's plan (``plan.json``, :mod:`bench.nodes._plan`), made
+here once; ``node_args`` adds command-line options per role (``plant``,
+``controller``, ``link``) on how a node serves it (``--engine``,
+``--rt-priority``, ``--truth-every``, ...), never the run's settings.
     ``controller="external"``: no controller process; the controller under test
     (named ``dut_name`` in the labels) must send its first valid duty within
     ``dut_timeout`` seconds, else the run ends with a :class:`BenchError`
@@ -155,27 +159,28 @@ def run_scenario(
         # a drive under test reads its angle from its sensor, never from the
         # recorder's PlantTruth: the plant sends PositionSensor (docs/PROTOCOL.md)
         scn = with_position_sensor(scn)
-    # the nodes get the exact scenario of this run (every override included)
-    scn_file = write_effective(scn, out_dir / "scenario.json")
+    # the exact scenario of this run (every override included), for its user
+    write_effective(scn, out_dir / "scenario.json")
     # Lockstep: the plant runs no further than the commands this process has
     # sent, which follow what the recorder has seen: the recording never
     # falls so far behind that its socket overflows on a loaded machine.
     pace = PACE_EVERY if mode == "lockstep" else 0
-    node_args = dict(node_args or {})
-    if external:
-        # the plant gives up a little after this process would (which says why)
-        node_args["plant"] = [
-            *node_args.get("plant", []),
-            "--dut-timeout",
-            repr(dut_timeout + 10.0),
-        ]
     # the run's nonce (PlantTruth.run_id, CtrlTelemetry.run_id): another run's frames are told apart
     run_id = new_run_id()
-    node_args["plant"] = [*node_args.get("plant", []), "--run-id", str(run_id)]
-    node_args["controller"] = [*node_args.get("controller", []), "--run-id", str(run_id)]
-    roles = node_roles(scn, estimator, spec, spec_b, mode=mode, pace=pace, node_args=node_args)
-    if external:
-        roles = [r for r in roles if r[0] != "controller"]
+    # the one plan every node reads (bench.nodes._plan); with a controller under
+    # test the plant gives up a little after this process would (which says why)
+    plan = make_plan(
+        scn,
+        None if external else estimator,
+        mode=mode,
+        plant_bus=spec,
+        controller_bus=spec_b,
+        run_id=run_id,
+        pace_every=pace,
+        dut_timeout_s=dut_timeout + 10.0 if external else 0.0,
+    )
+    plan_file = plan.write(out_dir / PLAN_FILE)
+    roles = node_roles(plan, node_args)
     env = dict(os.environ, PYTHONUNBUFFERED="1")
     procs: list[tuple[str, subprocess.Popen[str]]] = []
     ended: str | None = None
@@ -191,11 +196,13 @@ def run_scenario(
             rec.expect_run(run_id)
             try:
                 if start_error is None:
-                    start_nodes(roles, scn_file, out_dir, env, procs, stop=interrupted)
+                    start_nodes(roles, plan_file, out_dir, env, procs, stop=interrupted)
             except BenchError as e:  # a node that never became ready: nothing to record
                 start_error = str(e)
             if start_error is None:
-                pacer = CommandPacer(scn, codec, mode=mode, pace_every=pace, external=external)
+                pacer = CommandPacer(
+                    scn, codec, mode=mode, pace_every=pace, external=external, schedule=plan.commands
+                )
                 plant = dict(procs).get("plant")
                 if plant is not None and not interrupted():
                     ended = _drive(
@@ -203,7 +210,7 @@ def run_scenario(
                         pacer,
                         procs,
                         plant,
-                        scn,
+                        plan.n_steps,
                         progress,
                         interrupted,
                         dut,
@@ -249,7 +256,12 @@ def run_scenario(
         raise failed_before_recording(out_dir, start_error)
     wall = time.perf_counter() - t_wall0
     failures = node_failures(procs, asked)
-    meta = run_metadata(scn, estimator, mode=mode, transport=spec.describe(), link=link)
+    reports = _node_reports(out_dir)
+    # the controller as its node built it: gains, band edges, filter corners (its report)
+    design = None if external else (reports.get("controller") or {}).get("design", {})
+    meta = run_metadata(
+        scn, estimator, mode=mode, transport=spec.describe(), link=link, design=design
+    )
     if external:
         meta["controller"] = EXTERNAL
         meta["controller_name"] = dut_name or EXTERNAL
@@ -257,7 +269,7 @@ def run_scenario(
         if dut is not None:
             meta["dut_first_duty_s"] = dut.first_duty_s
     meta["run_id"] = run_id
-    meta["node_reports"] = _node_reports(out_dir)
+    meta["node_reports"] = reports
     meta["engine"] = (meta["node_reports"].get("plant") or {}).get("engine")  # the plant's
     meta["exit_codes"] = {role: p.returncode for role, p in procs}
     if interrupted():
@@ -283,12 +295,14 @@ def run_scenario(
         raise failed_before_recording(out_dir, why)
     # a plant that ended before the scenario's last period (a lockstep watchdog
     # trip with a controller under test) leaves a shorter run: scored as far as it went
-    short = int((meta["node_reports"].get("plant") or {}).get("steps", n_steps(scn))) < n_steps(scn)
+    short = int((reports.get("plant") or {}).get("steps", plan.n_steps)) < plan.n_steps
     shared = rec.foreign
     partial = bool(interrupted() or failures or ended or short or shared)
     # a node that died: the numbers at once, the plots left to bench analyze (seconds of matplotlib)
     plots = not ended or bool(interrupted())
-    result = _score(frames, codec, scn, out_dir, meta, wall, capture, partial=partial, plots=plots)
+    result = _score(
+        frames, codec, scn, out_dir, meta, wall, capture, partial=partial, plots=plots, T_s=plan.T_s
+    )
     if dut is not None:
         dut.check(rec.plant_step)  # a trip the drive loop ended before printing
         dut.plant_story(out_dir)
@@ -327,6 +341,7 @@ def run_scenario(
 #: The files a run writes into its folder (besides the nodes' ``*.log``).
 RUN_FILES = (
     "scenario.json",
+    "plan.json",
     "capture.blf",
     "capture.asc",
     "capture.log",
@@ -423,13 +438,14 @@ def _drive(
     pacer: CommandPacer,
     procs: list[tuple[str, subprocess.Popen[str]]],
     plant: subprocess.Popen[str],
-    scn: Scenario,
+    steps: int,
     progress: bool,
     interrupted: _Interrupt,
     dut: DutWatch | None,
     lockstep: bool = True,
 ) -> str | None:
-    """Send the bench commands ahead of the plant until it is done; what ended the run early.
+    """Send the bench commands ahead of the plant (``steps`` periods) until it is done; what
+    ended the run early.
 
     The commands go out as :class:`CommandPacer` paces them, after the
     recorder's view of the plant's step.  With a controller under test
@@ -437,7 +453,7 @@ def _drive(
     ends (``"dut"``) when it has not answered in time.
     """
     bus = rec.plant_bus
-    bar = _Progress(n_steps(scn)) if progress else None
+    bar = _Progress(steps) if progress else None
     t_moved, seen_step = time.monotonic(), -1
     # when the start command went out, and when the recorder last saw the step move
     # (or the controller under test answered first: the plant waited for it until then)
@@ -648,7 +664,7 @@ def _node_reports(out_dir: Path) -> dict[str, Any]:
 
 
 def _partial_scoring(
-    frames: list[can.Message], codec: Codec, scn: Scenario, meta: dict[str, Any]
+    frames: list[can.Message], codec: Codec, scn: Scenario, T_s: float, meta: dict[str, Any]
 ) -> Scenario:
     """The scenario a partial run is scored with: ``bench analyze``'s rule on its span."""
     from bench.runs._analysis import analyze_frames
@@ -657,7 +673,6 @@ def _partial_scoring(
         steps = analyze_frames(frames, codec, T_s=1.0, n_p=1).table["step"]
     except ValueError:
         return scn  # no complete step: nothing to score
-    T_s = sample_period(scn)
     scored, moved = scoring_scenario(scn, float(steps[0]) * T_s, float(steps[-1]) * T_s)
     if moved:
         meta["scoring"] = moved
@@ -675,6 +690,7 @@ def _score(
     *,
     partial: bool,
     plots: bool = True,
+    T_s: float | None = None,
 ) -> RunResult:
     """The run's files from its frames; a ``partial`` run (interrupted, a node died) too.
 
@@ -684,10 +700,11 @@ def _score(
     the steps it recorded, so the run and a later analysis of its capture
     give the same numbers.  One that ended before its first complete step
     keeps its capture (none without a single frame: no reader takes an
-    empty log) and a ``metrics.json`` that says so.
+    empty log) and a ``metrics.json`` that says so.  ``T_s``: the plan's period
+    (None: the scenario's).
     """
     if partial:
-        scn = _partial_scoring(frames, codec, scn, meta)
+        scn = _partial_scoring(frames, codec, scn, T_s or sample_period(scn), meta)
     try:
         return finish_run(
             frames, codec, scn, out_dir, meta=meta, wall_s=wall, capture=capture, plots=plots

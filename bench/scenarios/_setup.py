@@ -21,13 +21,19 @@ from bench.scenarios._schema import (
 )
 from bench.wire._protocol import CMD_START, CMD_STOP, RPM_PER_RAD_S
 from controller import CompensationPars, Controller, ControllerPars, MotorModel
-from controller._registry import (
-    EstimatorSpec,
-    UnknownEstimatorError,
-    check_estimator,
-)
+from controller._registry import EstimatorSpec, UnknownEstimatorError, check_estimator
 from controller._registry import spec as _spec
-from plant_rt import ConstantLoad, Plant, PlantProfile, Preset, SensorPars, plant_profile, preset
+from plant_rt import (
+    ConstantLoad,
+    InverterPars,
+    MotorPars,
+    Plant,
+    PlantProfile,
+    Preset,
+    SensorPars,
+    plant_profile,
+    preset,
+)
 
 
 @dataclass(frozen=True, slots=True)
@@ -173,21 +179,53 @@ def _plant_setup(scn: Scenario, p: Preset, mg: dict[str, Any]) -> tuple[Preset, 
     )
 
 
-def build_plant(scn: Scenario, engine: str = "auto") -> Plant:
-    """The scenario's plant; ``engine`` as :class:`plant_rt.Plant`'s (``--engine``)."""
+@dataclass(frozen=True, slots=True)
+class PlantBuild:
+    """The arguments of a scenario's :class:`plant_rt.Plant`, as built (:func:`plant_build`):
+    what a run's plan hands the plant node (:mod:`bench.nodes._plan`)."""
+
+    motor: MotorPars
+    inverter: InverterPars
+    T_s: float
+    sensors: SensorPars
+    load_nm0: float
+    saturation: bool
+    cross_saturation: bool
+    theta_m0: float
+
+    def build(self, engine: str = "auto") -> Plant:
+        """The plant; ``engine`` as :class:`plant_rt.Plant`'s (``--engine``)."""
+        return Plant(
+            self.motor,
+            self.inverter,
+            self.T_s,
+            sensors=self.sensors,
+            load=ConstantLoad(self.load_nm0),
+            saturation=self.saturation,
+            cross_saturation=self.cross_saturation,
+            theta_m0=self.theta_m0,
+            engine=engine,
+        )
+
+
+def plant_build(scn: Scenario) -> PlantBuild:
+    """The scenario's plant as built: preset, profile and tables in place."""
     p, prof = plant_setup(scn)
-    theta_m0 = math.radians(scn.theta_e0_deg) / p.motor.n_p
-    return Plant(
+    return PlantBuild(
         p.motor,
         prof.inverter,
         sample_period(scn),
-        sensors=prof.sensors,
-        load=ConstantLoad(scn.load_nm(0.0)),
-        saturation=prof.saturation,
-        cross_saturation=prof.cross_saturation,
-        theta_m0=theta_m0,
-        engine=engine,
+        prof.sensors,
+        scn.load_nm(0.0),
+        prof.saturation,
+        prof.cross_saturation,
+        math.radians(scn.theta_e0_deg) / p.motor.n_p,
     )
+
+
+def build_plant(scn: Scenario, engine: str = "auto") -> Plant:
+    """The scenario's plant; ``engine`` as :class:`plant_rt.Plant`'s (``--engine``)."""
+    return plant_build(scn).build(engine)
 
 
 def motor_model(p: Preset, errors: ModelErrors | None = None) -> MotorModel:
@@ -247,13 +285,26 @@ def proposed_methods() -> dict[str, str]:
 
 
 def build_controller(scn: Scenario, estimator: str, engine: str | None = None) -> Controller:
-    """The scenario's controller for ``estimator``.
+    """The scenario's controller for ``estimator`` (:func:`controller_pars`).
 
     ``engine`` as :class:`controller.Controller`'s (compiled where the
     compiled controller covers the estimator, else Python); None takes
     :data:`ENGINE_ENV` (``--engine``), else ``"auto"``.
     """
-    engine = engine or os.environ.get(ENGINE_ENV) or "auto"
+    pars = controller_pars(scn, estimator)
+    try:
+        return Controller(pars, engine or os.environ.get(ENGINE_ENV) or "auto")
+    except TypeError as e:
+        raise ScenarioError(f"{scn.source}: field 'estimator_options': {e}") from None
+
+
+def controller_pars(scn: Scenario, estimator: str) -> ControllerPars:
+    """The settings of the scenario's controller for ``estimator``, as built: what a
+    run's plan hands the controller node (:mod:`bench.nodes._plan`)."""
+    try:
+        check_estimator(estimator)
+    except UnknownEstimatorError as e:
+        raise ScenarioError(str(e)) from None
     spec = estimator_spec(estimator)
     p = get_preset(scn)
     kw: dict[str, Any] = {}
@@ -280,7 +331,7 @@ def build_controller(scn: Scenario, estimator: str, engine: str | None = None) -
     # estimators (options_note says so)
     options, _ = split_options(scn.estimator_options, estimator)
     try:
-        pars = ControllerPars(
+        return ControllerPars(
             motor=model,
             T_s=sample_period(scn),
             estimator=estimator,
@@ -288,7 +339,6 @@ def build_controller(scn: Scenario, estimator: str, engine: str | None = None) -
             compensation=comp,
             **kw,
         )
-        return Controller(pars, engine)
     except TypeError as e:
         raise ScenarioError(f"{scn.source}: field 'estimator_options': {e}") from None
 

@@ -16,7 +16,7 @@ single absolute numbers across runs):
    the round trip sample -> duty on the bus;
 3. real-time mode at 1, 4 and 10 kHz, with normal scheduling and under
    ``SCHED_FIFO`` (``--rt-priority``): late periods, the host stalls apart
-   (number, total, longest, periods skipped; :class:`plant_rt.RealTimeClock`),
+   (number, total, longest, periods skipped; :class:`bench.nodes._clock.RealTimeClock`),
    wake-up lateness and the plant's computation per period;
 4. the codec (the hot path compiled from the DBC and cantools' own) and
    ``bench analyze`` on a capture of at least 200,000 frames, written once
@@ -1302,7 +1302,7 @@ measured in the same run.
 """
 
 _DOC_DEFINITIONS = """\
-Real-time terms (`plant_rt/_clock.py`): a period is *late* when the plant woke up after
+Real-time terms (`bench/nodes/_clock.py`): a period is *late* when the plant woke up after
 its deadline; a wake-up later than the stall threshold is a *host stall*: the clock
 resynchronises instead of running the missed periods back to back, and those periods are
 *skipped* (never computed).  *Missed* counts every period not computed on time, late or

@@ -3,7 +3,7 @@
 Two measurements, then a verdict per PWM rate:
 
 - Wake-up latency, as ``cyclictest`` measures it: a process sleeps to
-  absolute deadlines (:class:`plant_rt.RealTimeClock`, the plant's own clock)
+  absolute deadlines (:class:`bench.nodes._clock.RealTimeClock`, the plant's own clock)
   at the period of each rate, doing no work, for ``seconds``; the lateness
   of every wake-up is kept (median, p99, p99.9, max), and host stalls
   (wake-ups later than the clock's stall threshold) are counted.  Once with
@@ -63,8 +63,8 @@ def _quantile(xs: list[float], q: float) -> float:
 
 def _measure_wakeups(T_s: float, seconds: float, fifo: bool, out: Any) -> None:
     """Child process: sleep to absolute deadlines for ``seconds``; the lateness to ``out``."""
+    from bench.nodes._clock import RealTimeClock
     from bench.nodes._rt import apply_rt, no_gc
-    from plant_rt import RealTimeClock
 
     rt = apply_rt(FIFO_PRIORITY if fifo else None, None, role="rtcheck")
     compute = plant_compute_us()

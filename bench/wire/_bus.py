@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import functools
 import gc
+import inspect
 import logging
 import socket
 import sys
@@ -39,6 +40,7 @@ __all__ = [
     "default_channel",
     "default_transport",
     "open_bus",
+    "resolve_bus",
     "udp_multicast_group",
 ]
 
@@ -46,8 +48,9 @@ UDP_GROUP_IPV6: str = UdpMulticastBus.DEFAULT_GROUP_IPv6
 """python-can's default IPv6 multicast group (link scope of one hop)."""
 UDP_GROUP_IPV4: str = UdpMulticastBus.DEFAULT_GROUP_IPv4
 """python-can's fallback IPv4 multicast group."""
-UDP_DEFAULT_PORT = 43113
-"""python-can's default udp_multicast port (``bench run --controller external`` uses it)."""
+UDP_DEFAULT_PORT: int = int(inspect.signature(UdpMulticastBus.__init__).parameters["port"].default)
+"""python-can's default udp_multicast port, 43113 (the default of its ``port``, read from
+python-can itself; ``bench run --controller external`` and ``bench monitor`` use it)."""
 
 VIRTUAL_CHANNEL = "bench"
 """Default channel of the in-process ``virtual`` bus."""
@@ -199,22 +202,11 @@ def open_bus(
         driver while opening, as one line.
     """
     if interface is None:
-        config: dict[str, Any] = {}
-        if _python_can_config_names_interface():
-            try:
-                config = dict(can.util.load_config())
-            except Exception as e:
-                raise InterfaceError(f"python-can configuration: {_one_line(e)}") from None
-        if config.get("interface"):
-            interface = str(config["interface"])
-            if channel is None and config.get("channel") is not None:
-                channel = str(config["channel"])
-            for key in ("bitrate", "data_bitrate"):
-                if key in config and key not in kwargs:
-                    kwargs[key] = config[key]
-        else:
-            interface, transport_channel, _ = default_transport()
-            channel = channel if channel is not None else transport_channel
+        spec, _ = resolve_bus(None, channel, kwargs.pop("port", None), bitrate, data_bitrate)
+        interface, channel = spec.interface, spec.channel
+        bitrate, data_bitrate = spec.bitrate, spec.data_bitrate
+        if spec.port is not None:
+            kwargs["port"] = spec.port
 
     check_interface(interface)
 
@@ -313,6 +305,69 @@ def check_interface(interface: str) -> None:
             "use udp_multicast (the default here), or tools/vcan-tests for vcan "
             "inside User-Mode Linux"
         )
+
+
+#: How :func:`resolve_bus` names python-can's configuration as the reason for its bus.
+FROM_CONFIG = "python-can configuration"
+
+
+def resolve_bus(
+    interface: str | None,
+    channel: str | None,
+    port: int | None = None,
+    bitrate: int | None = None,
+    data_bitrate: int | None = None,
+    *,
+    own_port: int | None = None,
+    virtual: str | None = None,
+) -> tuple[BusSpec, str | None]:
+    """The bus the options name: the one place the bench resolves a bus.
+
+    An ``interface`` given is taken with its ``channel`` (or
+    :func:`default_channel`); none given, python-can's own configuration
+    (:func:`python_can_config`: interface, channel, bit rates and port, each
+    only where the options leave it open), else :func:`default_transport`,
+    whose udp_multicast bus gets ``own_port`` when no ``port`` is given (a
+    run's own, :func:`own_udp_port`; None: python-can's
+    :data:`UDP_DEFAULT_PORT`, to join a bus rather than make one).
+    ``virtual``: the one-line refusal of python-can's in-process ``virtual`` bus
+    (for a caller whose bus must reach other processes); None takes it.
+
+    Returns the bus and why it was chosen (None when the options named it;
+    :data:`FROM_CONFIG`, or :func:`default_transport`'s reason).
+
+    Raises
+    ------
+    InterfaceError
+        An unknown interface or a missing driver, ``virtual`` refused, a
+        channel without an interface, an adapter without a channel (one line).
+    """
+    why: str | None = None
+    if interface is None and (cfg := python_can_config()) is not None:
+        interface = str(cfg.get("interface"))
+        channel = channel or cfg.get("channel")
+        bitrate = (
+            bitrate if bitrate is not None or cfg.get("bitrate") is None else int(cfg["bitrate"])
+        )
+        if data_bitrate is None and cfg.get("data_bitrate") is not None:
+            data_bitrate = int(cfg["data_bitrate"])
+        if port is None and cfg.get("port") is not None:
+            port = int(cfg["port"])
+        why = FROM_CONFIG
+    if interface is None:
+        if channel is not None:
+            raise InterfaceError("--channel given without --interface")
+        interface, channel, why = default_transport()
+        if interface == "udp_multicast" and port is None:
+            port = own_port
+    else:
+        check_interface(interface)
+        if interface == "virtual" and virtual is not None:
+            raise InterfaceError(virtual)
+        channel = channel or default_channel(interface)
+        if channel is None:
+            raise InterfaceError(f"--interface {interface}: this adapter needs --channel")
+    return BusSpec(interface, str(channel), port, bitrate, data_bitrate), why
 
 
 def python_can_config() -> dict[str, Any] | None:
