@@ -5,6 +5,12 @@ The paper suite and ``bench sweep`` keep a partial summary on a signal
 study that finished is whole (with its figure), the one under way holds its
 finished points (no figure), no point is invented, and the same command
 again runs only the missing points.
+
+The stop took 1.2 to 4.3 s at a load of 11 to 15 on the two cores and 9.7 s
+at a load of 28 to 34: the command's own part is under 0.2 s (profiled),
+the rest the exit of a Python process that drew the finished study's
+figure with matplotlib, at a fifteenth of a core.  :data:`LIMIT_S`, three
+times the slowest, catches a hang, not a slow machine.
 """
 
 from __future__ import annotations
@@ -17,7 +23,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.test_signals_studies import LIMIT_S, MARGIN_S, _left, _signal_and_time, _wait_for
+from tests.test_signals_studies import _left, _signal_and_time, _wait_for
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -26,6 +32,8 @@ pytestmark = pytest.mark.skipif(sys.platform != "linux", reason="reads /proc")
 #: Xue's two estimators on R_s (3 values) then on the current noise (7 values).
 FIRST, SECOND = "model-resistance", "current-noise"
 PLANNED = 2 * (3 + 7)
+#: The bound on the stop (module docstring): 3 x 9.7 s, the slowest at load 34.
+LIMIT_S = 30.0
 
 
 def _lines(path: Path) -> int:
@@ -48,7 +56,7 @@ def test_robustness_ends_on_a_signal_and_keeps_a_summary(tmp_path: Path) -> None
     err = err_file.read_text()
     assert proc.returncode == 130, err
     assert "Traceback" not in err, err
-    assert took < LIMIT_S + MARGIN_S, f"{took:.2f} s"
+    assert took < LIMIT_S, f"{took:.2f} s"
     assert len(kids) >= 2, kids
     assert _left(kids) == {}
     done_second = _lines(second)

@@ -9,7 +9,16 @@ marked ``interrupted``).
 Before the nannies were told not to restart their killed workers
 (:func:`bench.studies._executors._end_dask`), the stop took about 11 s and
 printed Dask's cancellation tracebacks; it now takes 0.7 to 0.8 s on a
-machine at load 5.
+machine at load 5, 1.3 s at load 14, and 8.9 to 9.7 s at a load of 28 to 34
+on the two cores (two busy loops beside other test runs), where the command
+gets a fifteenth of a core: its own part after the signal (noticing it,
+ending the cluster, writing the files) is under 0.3 s at load 14, the rest
+is the exit of a Python process that holds Dask, numpy and tornado.
+
+:data:`LIMIT_S` is three times the slowest stop measured at load 34: it
+catches a hang, not a slow machine.  The fault this test was written for,
+nannies that restart the killed workers, is caught by the assertion on
+stderr (their tracebacks and ``ERROR`` lines) at any load.
 """
 
 from __future__ import annotations
@@ -23,7 +32,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.test_signals_studies import LIMIT_S, MARGIN_S, _left, _signal_and_time, _wait_for
+from tests.test_signals_studies import _left, _signal_and_time, _wait_for
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -31,6 +40,8 @@ pytestmark = pytest.mark.skipif(sys.platform != "linux", reason="reads /proc")
 
 #: Points of the sweep: far more than finish before the signal.
 POINTS = 40
+#: The bound on the stop (module docstring): 3 x 9.7 s, the slowest at load 34.
+LIMIT_S = 30.0
 
 
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["sigint", "sigterm"])
@@ -57,7 +68,7 @@ def test_dask_sweep_ends_on_a_signal_and_keeps_the_finished_points(
     # the local executor's lines, once each
     assert err.count(f"bench: {sig.name}: stopping, keeping what finished") == 1, err
     assert err.rstrip().endswith("bench: interrupted"), err
-    assert took < LIMIT_S + MARGIN_S, f"{took:.2f} s"
+    assert took < LIMIT_S, f"{took:.2f} s"
     # the cluster's worker processes (and the multiprocessing helper) were there, and are gone
     assert len(kids) >= 2, kids
     assert _left(kids) == {}

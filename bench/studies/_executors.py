@@ -65,9 +65,11 @@ MAX_ATTEMPTS = 3
 LOST = "lost"
 
 #: How often the parent looks at the signal flag while it waits for results (s).
-#: The target: a study ends within 3 s of SIGINT/SIGTERM on a loaded 2-core machine;
-#: ending the workers and writing the finished part's files takes most of that,
-#: so the wait for the flag is kept to a tenth of a second.
+#: The target: a study ends within 3 s of SIGINT/SIGTERM on a loaded 2-core machine.
+#: Measured at a load of 11 to 15 (docs/SCALING.md): killing and reaping the workers
+#: 0.1 to 0.2 s, the finished part's files milliseconds, Python's own exit (tearing
+#: down numpy, matplotlib, scipy) 0.1 to 1.8 s; the wait for the flag is kept to a
+#: tenth of a second.
 STOP_POLL_S = 0.1
 #: How long the parent waits for its killed workers to be reaped (s; SIGKILL cannot be held up).
 REAP_S = 1.0
