@@ -13,12 +13,16 @@ in process groups of their own), takes the whole process tree from
   written for the finished part.
 
 The requirement is 3 s.  :data:`MARGIN_S` is added for a machine whose two
-cores are taken by other work: the command's own work after the signal
-(killing the workers, writing ``summary.json`` and ``report.md``, the
-interpreter's exit) took 0.3 to 0.6 s of wall time on the development
-machine when it had a core to spare, but 2.5 to 4.9 s at a load average of
-8 to 12 on its two cores (two busy loops beside the tests of other work),
-where the command gets a fifth of a core.
+cores are taken by other work.  Where the time goes (profiled at a load of
+11 to 15, docs/SCALING.md): noticing the signal, under 0.1 s; killing and
+reaping the workers, 0.1 to 0.2 s; writing ``summary.json`` and
+``report.md``, milliseconds; the interpreter's exit, 0.1 s for the suite's
+process (numpy and python-can), more where matplotlib or scipy were loaded.
+The suite's process used to downscale each finished run's plot and read
+its signal table itself, and a signal that came meanwhile waited for it
+(0.5 to 0.8 s at that load); the workers do that now.  The suite stops in
+0.55 s at a load of 11 and took 4.7 s at a load of 28 to 34 (two busy loops
+beside other test runs), where the command gets a fifteenth of a core.
 """
 
 from __future__ import annotations

@@ -105,3 +105,27 @@ def test_collect_reports_slopes_in_their_units() -> None:
     assert sw["methods"]["tt-dq"]["errors"] == {"400": "RuntimeError: stalled"}
     assert sw["methods"]["tt-dq"]["fit_points"] == 3
     assert sw["values"] == [50.0, 100.0, 300.0, 400.0]
+
+
+def test_a_sweep_point_is_the_public_runs_metrics_with_the_overshoot(tmp_path: Any) -> None:
+    """A sweep point runs through the function of ``bench.run`` (issue 32): its metrics are
+    every key of that run's ``metrics.json`` with the same values, the speed overshoot
+    added; only the wall-clock figures differ."""
+    import json
+
+    import bench
+    from bench.studies._sweep import run_point
+
+    scn = load_scenario("xue-fig13").with_overrides(duration=0.4, score_from_s=0.2)
+    point = run_point(scn, "square-wave")
+    run = bench.run(scn, estimator="square-wave", out=tmp_path / "run")
+    written = json.loads((tmp_path / "run" / "metrics.json").read_text())
+    assert "speed_overshoot_rpm" not in written  # xue-fig13's paper reports none
+    assert "speed_overshoot_rpm" in point  # NaN here: no reference step in the scored window
+    point.pop("speed_overshoot_rpm")
+    clock = {"wall_s", "realtime_factor"}
+    assert set(point) == set(written)
+    # through JSON, as metrics.json and points.jsonl hold them (nan as null)
+    same = json.loads(json.dumps({k: v for k, v in point.items() if k not in clock}))
+    assert same == {k: v for k, v in written.items() if k not in clock}
+    assert point["theta_err_abs_max_deg"] == run.metrics["theta_err_abs_max_deg"]

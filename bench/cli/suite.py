@@ -154,6 +154,7 @@ def _finish(summary: dict[str, Any], out: Path) -> int:
 
 
 def cmd_robustness(args: argparse.Namespace) -> int:
+    from bench.studies._executors import catch_signals
     from bench.studies._robustness import DURATION_S, PAPERS, STUDIES, run_robustness
 
     papers = _csv(args.papers) or tuple(PAPERS)
@@ -165,16 +166,26 @@ def cmd_robustness(args: argparse.Namespace) -> int:
     if args.jobs < 1:
         raise BenchError(f"--jobs must be >= 1, got {args.jobs}")
     out = Path(args.out) if args.out else Path("runs") / "robustness"
-    summary = run_robustness(
-        out,
-        papers=tuple(papers),
-        studies=tuple(studies),
-        duration=args.duration or DURATION_S,
-        executor=args.executor,
-        workers=args.jobs,
-        scheduler=args.scheduler,
-        progress=not args.quiet,
-    )
+    with catch_signals():
+        summary = run_robustness(
+            out,
+            papers=tuple(papers),
+            studies=tuple(studies),
+            duration=args.duration or DURATION_S,
+            executor=args.executor,
+            workers=args.jobs,
+            scheduler=args.scheduler,
+            progress=not args.quiet,
+        )
+    fin = summary.get("finished")
+    if summary.get("interrupted") and fin:
+        print(
+            f"bench: interrupted: {fin['points']} of {fin['points_planned']} points finished, "
+            f"kept in {out} (report.md, summary.json); run the same command again to finish "
+            "the others",
+            file=sys.stderr,
+        )
+        return EXIT_INTERRUPTED
     for pname, p in summary["papers"].items():
         for sname, st in p["studies"].items():
             cells = ", ".join(f"{e} {r['ok']}/{r['points']}" for e, r in st["regions"].items())

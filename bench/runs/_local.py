@@ -4,8 +4,9 @@
 between the same node objects as two processes over a bus
 (:func:`bench.nodes._loops.run_inprocess`, the reference trace), scored by
 the one path from frames to files (:func:`bench.runs._results.finish_run`).
-The paper suite's quick runs and the Python API (``bench.run`` without a
-transport) take it.
+The paper suite's in-process runs, the sweeps' points
+(:func:`bench.studies._sweep.run_point`) and the Python API (``bench.run``
+without a transport) take it.
 
 :func:`exit_status` is the status ``bench run`` and ``bench analyze`` exit
 with and ``bench.run(...).exit_status`` holds: one function, so the command
@@ -36,12 +37,14 @@ def run_local(
     engine: str = "auto",
     plots: bool = True,
     codec: Codec | None = None,
+    overshoot: bool | None = None,
 ) -> RunResult:
     """Run ``scn`` with ``estimator`` in lockstep in this process; the run's files in ``out_dir``.
 
     ``engine`` is the plant's (:class:`plant_rt.Plant`); the controller's
     follows :data:`bench.scenarios._setup.ENGINE_ENV` as in a controller
     process.  ``plots=False`` leaves out ``run.png`` (seconds of matplotlib).
+    ``overshoot`` is :func:`~bench.runs._results.finish_run`'s.
     """
     from bench.nodes._loops import run_inprocess
     from bench.runs._run import clear_run_files
@@ -61,6 +64,7 @@ def run_local(
         wall_s=time.perf_counter() - t0,
         capture=None,
         plots=plots,
+        overshoot=overshoot,
     )
 
 

@@ -227,8 +227,13 @@ def finish_run(
     wall_s: float,
     capture: Path | None,
     plots: bool = True,
+    overshoot: bool | None = None,
 ) -> RunResult:
-    """Table, metrics, metadata and plots from a run's frames."""
+    """Table, metrics, metadata and plots from a run's frames.
+
+    ``overshoot``: whether the metrics hold ``speed_overshoot_rpm`` (None: where
+    the scenario's paper reports one; a sweep asks for it at every point).
+    """
     T_s = sample_period(scn)
     n_p = get_preset(scn).motor.n_p
     run_id = meta.get("run_id")
@@ -242,7 +247,7 @@ def finish_run(
         n_p=n_p,
         score_from_s=scn.score_from_s,
         thd_window_s=scn.thd_window_s,
-        overshoot="speed_overshoot_rpm" in scn.paper_result,
+        overshoot=("speed_overshoot_rpm" in scn.paper_result) if overshoot is None else overshoot,
     )
     reports = meta.get("node_reports", {})
     # the controller as its node built it (its report), when the run had one

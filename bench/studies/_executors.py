@@ -23,13 +23,15 @@ whatever happens to the workers afterwards.
 Signals.  A command that runs a study holds :func:`catch_signals` around
 it: SIGINT or SIGTERM (a second one alike) sets a flag, and :func:`execute`
 then stops at once, within :data:`STOP_POLL_S`: no further point starts, the
-local worker processes are killed (:func:`end_workers`) and the Dask
-futures cancelled, the points under way are dropped (they run again on a
+local worker processes are killed (:func:`end_workers`), the Dask
+futures cancelled and a local Dask cluster's workers killed with no restart
+(:func:`_end_dask`), the points under way are dropped (they run again on a
 resume), and :func:`execute` returns with ``interrupted`` set, so the
-command writes what finished and exits with status 130.  The local workers
-ignore SIGINT and SIGTERM themselves (a Ctrl-C on the terminal reaches the
-whole process group): the parent alone decides, so a worker never turns a
-signal into a half-finished result.  Each worker dies with the parent
+command writes what finished and exits with status 130.  The local workers,
+a local Dask cluster's included (:func:`dask_setup`), ignore SIGINT and
+SIGTERM themselves (a Ctrl-C on the terminal reaches the whole process
+group): the parent alone decides, so a worker never turns a signal into a
+half-finished result.  Each worker dies with the parent
 (``PR_SET_PDEATHSIG``, :func:`bench.runs._processes.die_with_parent`), and
 the node processes of a run a worker started die with that worker, so no
 process of the tree outlives the command, whatever ends it.
@@ -63,9 +65,11 @@ MAX_ATTEMPTS = 3
 LOST = "lost"
 
 #: How often the parent looks at the signal flag while it waits for results (s).
-#: The target: a study ends within 3 s of SIGINT/SIGTERM on a loaded 2-core machine;
-#: ending the workers and writing the finished part's files takes most of that,
-#: so the wait for the flag is kept to a tenth of a second.
+#: The target: a study ends within 3 s of SIGINT/SIGTERM on a loaded 2-core machine.
+#: Measured at a load of 11 to 15 (docs/SCALING.md): killing and reaping the workers
+#: 0.1 to 0.2 s, the finished part's files milliseconds, Python's own exit (tearing
+#: down numpy, matplotlib, scipy) 0.1 to 1.8 s; the wait for the flag is kept to a
+#: tenth of a second.
 STOP_POLL_S = 0.1
 #: How long the parent waits for its killed workers to be reaped (s; SIGKILL cannot be held up).
 REAP_S = 1.0
@@ -385,6 +389,7 @@ def _dask(
                 processes=True,
                 dashboard_address=None,
                 silence_logs=logging.ERROR,
+                preload=[__name__],  # dask_setup: the workers leave signals to this process
             )
             client = Client(cluster)
         futs = [
@@ -425,18 +430,43 @@ def _dask(
 
 
 #: How long an interrupted study waits for Dask to close its client and local cluster (s).
-DASK_CLOSE_S = 0.5
+#: With the nannies told not to restart (:func:`_end_dask`) and their worker processes
+#: killed, closing is a few messages over loopback: milliseconds on an idle machine,
+#: a fraction of a second at a load of 10 on two cores.  Past this bound what is left
+#: (the scheduler's comms) is abandoned: the cluster is marked closed, so that Dask's
+#: exit hook does not wait for it again (10 s), and its processes are killed.
+DASK_CLOSE_S = 1.0
+
+
+def dask_setup(worker: Any) -> None:
+    """A local cluster's worker process (Dask preload, :func:`_dask`): the parent alone
+    reacts to SIGINT and SIGTERM, as a local worker does (:func:`_worker_init`).
+
+    A Ctrl-C on the terminal reaches the whole process group; a Dask worker
+    would otherwise die of it with a traceback, and its nanny (in the parent)
+    would start a new one while the command is stopping.
+    """
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
 
 
 def _end_dask(client: Any, cluster: Any) -> None:
-    """End a Dask batch at once: the local cluster's worker processes killed, the client
-    and the cluster closed within :data:`DASK_CLOSE_S` each, whatever is left killed.
+    """End a Dask batch at once: a local cluster's nannies told not to restart their
+    workers, the worker processes killed, the client and the cluster closed within
+    :data:`DASK_CLOSE_S` each, whatever is left killed.
 
-    A nanny restarts a worker process that dies, until the cluster closes:
-    hence the second kill.  A remote cluster's workers are not this
-    machine's: their futures are cancelled and the client closed.
+    A nanny restarts a worker process that dies, unless it is closing: killed
+    without that, each worker was started again while the cluster closed, and
+    the close waited for the new processes (seconds, then 10 s more in Dask's
+    exit hook), with the restarts' cancellation tracebacks on stderr.  A
+    remote cluster's workers are not this machine's: the futures are
+    cancelled and the client closed.
     """
     if cluster is not None:
+        for nanny in list(getattr(cluster, "workers", {}).values()):
+            close_gracefully = getattr(nanny, "close_gracefully", None)
+            if close_gracefully is not None:  # a Nanny (processes=True): no restart
+                close_gracefully(reason="bench: interrupted")
         end_workers(mp.active_children())  # the local cluster's processes are this one's
     for part in (client, cluster):
         if part is None:
@@ -446,4 +476,8 @@ def _end_dask(client: Any, cluster: Any) -> None:
         except Exception:  # a timeout or a closed comm: what is left is killed below
             pass
     if cluster is not None:
+        if getattr(cluster, "status", None) is not None and cluster.status.name != "closed":
+            from distributed.core import Status
+
+            cluster.status = Status.closed  # Dask's exit hook would wait 10 s for it again
         end_workers(mp.active_children())

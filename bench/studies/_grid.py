@@ -5,8 +5,9 @@ A sweep changes dotted keys of one scenario (:mod:`bench.scenarios._dotted`:
 ``seed``, ...) on a grid (``--grid KEY=V1,V2,...``, every combination) and/or
 at random (``--random KEY=SPEC --samples N --seed S``, each sample combined
 with every grid point), and runs every point with every estimator
-in-process (:func:`bench.studies._sweep.run_point`: the same frames between
-the same node objects as a run over CAN).
+in-process (:func:`bench.studies._sweep.run_point`, through
+:func:`bench.runs._local.run_local`, the function of ``bench.run``: the same
+frames between the same node objects as a run over CAN).
 
 Files in ``--out``:
 

@@ -26,17 +26,20 @@ Every point is built from the shipped scenario ``wen-5.1`` (start-up with an
 unknown initial angle, ramp to the speed, hold) with
 :meth:`~bench.scenarios._schema.Scenario.with_overrides`; only the swept quantity
 changes, and the same values hold for every method.  The points run
-in-process (:func:`bench.nodes._loops.run_inprocess`): the same DBC frames between
-the same node objects as the two-process run, whose equality with the
-in-process trace is tested in ``tests/test_bench_loop.py``.
+in-process (:func:`run_point`, through :func:`bench.runs._local.run_local`,
+the route of ``bench.run``): the same DBC frames between the same node
+objects as the two-process run, whose equality with the in-process trace is
+tested in ``tests/test_bench_loop.py``.
 """
 
 from __future__ import annotations
 
 import math
+import tempfile
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -239,37 +242,21 @@ def sweep_scenario(base: Scenario, kind: str, x: float, *, quick: bool = False) 
 def run_point(scn: Scenario, estimator: str) -> dict[str, Any]:
     """Run one sweep point in-process; the metrics of ``metrics.json``, or the error as text.
 
-    The metrics are those :func:`bench.runs._metrics.compute_metrics` gives a
-    run (the speed overshoot, the THD where the scenario asks for it, a
-    hybrid estimator's per-band figures), plus ``wall_s``, the seconds the
-    point took.
+    The run is :func:`bench.runs._local.run_local`'s, the route of ``bench
+    run``'s in-process runs, the paper suite's and ``bench.run``: its files go
+    to a temporary folder, without the plot.  The metrics are those of its
+    ``metrics.json`` with the speed overshoot at every point, plus ``wall_s``,
+    the seconds the point took (the run and its scoring).
     """
-    from bench.nodes._loops import run_inprocess
-    from bench.runs._analysis import analyze_frames
-    from bench.runs._metrics import compute_metrics
-    from bench.runs._results import hybrid_band_metrics
-    from bench.scenarios._setup import get_preset, sample_period
-    from bench.wire._codec import Codec
+    from bench.runs._local import run_local
 
     t0 = time.perf_counter()
     try:
-        codec = Codec()
-        frames = run_inprocess(scn, estimator, codec)
-        T_s = sample_period(scn)
-        n_p = get_preset(scn).motor.n_p
-        cap = analyze_frames(frames, codec, T_s=T_s, n_p=n_p)
-        m = compute_metrics(
-            cap.table,
-            T_s=T_s,
-            n_p=n_p,
-            score_from_s=scn.score_from_s,
-            thd_window_s=scn.thd_window_s,
-            overshoot=True,
-        )
-        m.update(hybrid_band_metrics(cap.table, scn, estimator))
+        with tempfile.TemporaryDirectory(prefix="bench-point-") as tmp:
+            res = run_local(scn, estimator, Path(tmp), plots=False, overshoot=True)
     except Exception as e:  # a diverging or failing point is a result of the sweep
         return {"error": f"{type(e).__name__}: {e}", "wall_s": time.perf_counter() - t0}
-    return {**m, "wall_s": time.perf_counter() - t0}
+    return {**res.metrics, "wall_s": time.perf_counter() - t0}
 
 
 @dataclass(frozen=True, slots=True)
