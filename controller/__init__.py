@@ -36,11 +36,13 @@ from controller._registry import (
 )
 from controller._rotating import RotatingInjectionPars, hf_amplitudes
 from controller._startup import PolarityTest
+from controller._supervision import DETECTION_MODES, SupervisionPars, Supervisor
 from controller._svpwm import svpwm
 from controller._transforms import clarke, inv_clarke, inv_park, park, wrap_2pi, wrap_pi
 
 __all__ = [
     "BPF_WEN",
+    "DETECTION_MODES",
     "ENGINES",
     "ENTRY_POINT_GROUP",
     "ESTIMATOR_NAMES",
@@ -69,6 +71,8 @@ __all__ = [
     "PolarityTest",
     "PositionObserver",
     "RotatingInjectionPars",
+    "SupervisionPars",
+    "Supervisor",
     "TransitionBand",
     "UnknownEstimatorError",
     "check_estimator",
