@@ -285,3 +285,20 @@ def test_a_stuck_sensor_is_detected_in_a_run(tmp_path: Path) -> None:
     mode = np.asarray(r.signals["mode"]).astype(int)
     t = np.asarray(r.signals["t"])
     assert np.all(mode[t >= 0.6 + 2 * T_STUCK_DETECT] == MODE_CURRENT_SENSOR)
+
+
+def test_the_same_detection_on_both_controller_engines(tmp_path: Path) -> None:
+    from controller import compiled_controller_missing
+
+    if compiled_controller_missing():
+        pytest.skip("the compiled controller engine is not built")
+    f = tmp_path / "f.toml"
+    f.write_text(
+        'extends = "xue-fig13"\nduration = 1.2\n[[faults]]\nat_s = 0.6\n'
+        'kind = "current_stuck"\nphase = "b"\n'
+    )
+    py = bench.run(str(f), estimator="square-wave", engine="python")
+    cc = bench.run(str(f), estimator="square-wave", engine="compiled")
+    assert py.metrics["faults"] == cc.metrics["faults"]
+    assert py.metrics["faults"][0]["detected_by"] == "controller_current_sensor"
+    assert np.array_equal(py.signals["mode"], cc.signals["mode"])
