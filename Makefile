@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test lint unit vcan suite reference perf docs docs-site rtcheck reliability clean
+.PHONY: demo test lint unit vcan suite reference perf docs docs-site rtcheck reliability faults clean
 
 # pip builds the compiled plant and controller engines (setup.py); tools/need-cc
 # installs their compiler and headers first when it may, and the last lines say
@@ -72,6 +72,11 @@ rtcheck: $(STAMP)
 reliability: $(STAMP)
 	mkdir -p docs/reliability
 	$(BIN)/bench soak --processes --out docs/reliability/soak.json --doc docs/RELIABILITY.md
+
+# Fault study: every fault kind for every shipped estimator on the drive plant (in-process,
+# about 30 min on 2 cores); docs/faults/faults.json, docs/FAULTS.md and the README's block.
+faults: $(STAMP)
+	$(BIN)/bench suite faults --out docs/faults --doc docs/FAULTS.md --readme README.md
 
 clean:
 	rm -rf $(VENV) runs .pytest_cache .mypy_cache .ruff_cache

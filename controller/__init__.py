@@ -39,11 +39,13 @@ from controller._registry import (
 from controller._registry import spec as estimator_spec
 from controller._rotating import RotatingInjectionPars, hf_amplitudes
 from controller._startup import PolarityTest
+from controller._supervision import DETECTION_MODES, SupervisionPars, Supervisor
 from controller._svpwm import svpwm
 from controller._transforms import clarke, inv_clarke, inv_park, park, wrap_2pi, wrap_pi
 
 __all__ = [
     "BPF_WEN",
+    "DETECTION_MODES",
     "ENGINES",
     "ENTRY_POINT_GROUP",
     "ESTIMATOR_NAMES",
@@ -73,6 +75,8 @@ __all__ = [
     "PolarityTest",
     "PositionObserver",
     "RotatingInjectionPars",
+    "SupervisionPars",
+    "Supervisor",
     "TransitionBand",
     "UnknownEstimatorError",
     "check_estimator",

@@ -109,7 +109,7 @@ class CompiledController(Controller):
         # the step is the core's run(), called directly (no Python frame per period); it
         # hands the periods it leaves to the Python step on the same states
         core.bind(self.__dict__, super().step)
-        self.__dict__["step"] = core.run
+        self.__dict__["step"] = self._supervised(core.run)
 
 
 for _name in _STATE_VALUES:

@@ -118,6 +118,7 @@ from controller._params import MotorModel
 from controller._pi import PIController
 from controller._registry import estimator_family, injection_family, make_estimator
 from controller._startup import PolarityTest
+from controller._supervision import SupervisionPars, Supervisor
 from controller._svpwm import svpwm
 
 _TWO_PI = 2.0 * math.pi
@@ -179,6 +180,8 @@ class ControllerPars:
     current_feedback : str
         ``"filtered"`` (HF removed, default) or ``"raw"`` (Wen Sec. 3.3: the
         current PIs see the HF current).
+    supervision : SupervisionPars, optional
+        The drive's fault detection (:mod:`controller._supervision`); None: off.
     """
 
     motor: MotorModel
@@ -198,6 +201,7 @@ class ControllerPars:
     i_pulse: float | None = None
     compensation: CompensationPars = field(default_factory=CompensationPars)
     current_feedback: str = "filtered"
+    supervision: SupervisionPars | None = None
 
     def __post_init__(self) -> None:
         if not self.T_s > 0.0:
@@ -369,6 +373,14 @@ class Controller:
         self._settled = False
         self._i_ref: tuple[float, float] | None = None
         self._theta_pol = 0.0
+        # the supervision hook: the step with controller._supervision after it
+        self.supervisor = None if pars.supervision is None else Supervisor(pars.supervision)
+        self.__dict__["step"] = self._supervised(self.step)
+
+    def _supervised(self, step: Callable[[Measurement], ControlOutput]) -> Any:
+        """``step`` with the supervision after it, or ``step`` without one."""
+        sup = self.supervisor
+        return step if sup is None else sup.wrap(step, lambda: self.set_enable(False))
 
     # -- commands ---------------------------------------------------------------
     def set_speed_ref(self, w_m_ref: float) -> None:
@@ -634,6 +646,9 @@ class Controller:
             "comp.offset_calibration": 1.0 if self.calibration is not None else 0.0,
             "comp.offset_periods": float(self.calibration.n) if self.calibration else 0.0,
         }
+        if self.supervisor is not None:
+            for key, v in self.supervisor.gains().items():
+                out["supervision." + key] = v
         g = getattr(self.estimator, "gains", None)
         est_gains: dict[str, float] = g() if callable(g) else {}
         for key, v in est_gains.items():

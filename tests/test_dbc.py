@@ -105,7 +105,8 @@ def test_protocol_version_attribute(db):
 
     assert db.version == str(db.dbc.attributes["ProtocolVersion"].value) == Codec().version
     assert int(db.version.split(".")[0]) >= 2  # 2.0: duty scale and PwmDuty data ID changed
-    assert db.version == "2.2"  # 2.1: crc and run_id in PlantTruth and CtrlTelemetry; 2.2: cmd_ack
+    assert db.version == "2.3"  # 2.1: crc and run_id in PlantTruth and CtrlTelemetry; 2.2: cmd_ack;
+    # 2.3: the supervision's CtrlTelemetry.mode values
 
 
 def test_duty_one_encodes_strictly_and_above_one_is_out_of_range(db):

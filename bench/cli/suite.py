@@ -8,7 +8,8 @@ signal tables) go to ``--runs-dir``.  ``bench suite sweep`` runs only the
 sweeps.  ``bench suite report DIR`` rewrites ``DIR/report.md`` from
 ``DIR/summary.json`` (claims re-evaluated, nothing re-run).  ``bench suite
 robustness`` runs each paper's estimators under model errors, current noise,
-dead time and ADC resolution (:mod:`bench.studies._robustness`).  ``make suite`` is ``bench suite paper --out docs/results``.
+dead time and ADC resolution (:mod:`bench.studies._robustness`); ``bench suite
+faults`` every fault kind for every estimator (:mod:`bench.cli._suite_faults`).  ``make suite`` is ``bench suite paper --out docs/results``.
 """
 
 from __future__ import annotations
@@ -292,6 +293,10 @@ def register(sub: Any) -> None:
     q.add_argument("--scheduler", help="Dask scheduler address (default: a local cluster)")
     _common(q)
     q.set_defaults(func=cmd_robustness)
+
+    from bench.cli._suite_faults import add_parser as add_faults_parser
+
+    add_faults_parser(ss)
 
     q = ss.add_parser(
         "report", help="re-evaluate the claims of a suite folder's summary.json, rewrite report.md"

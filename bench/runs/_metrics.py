@@ -602,6 +602,17 @@ FAULT_KEYS = (
 CONTROLLER_FAULT_MODE = 4
 
 
+def controller_detections() -> dict[int, str]:
+    """``detected_by`` of each controller mode that reports a detection: 4 ``fault`` is
+    ``controller_fault_mode``, the supervision's (DBC 2.3, :data:`controller.DETECTION_MODES`)
+    ``controller_<name>``."""
+    from controller import DETECTION_MODES
+
+    out = {CONTROLLER_FAULT_MODE: "controller_fault_mode"}
+    out.update({m: f"controller_{name}" for m, name in DETECTION_MODES.items()})
+    return out
+
+
 def fault_metrics(
     table: Mapping[str, Array],
     faults: list[tuple[str, float, float, str | None]],
@@ -615,9 +626,9 @@ def fault_metrics(
     ``faults`` holds ``(kind, at_s, end_s, expect)`` (``end_s`` the end of the
     fault, or of the run).  A fault is detected when a plant protection
     tripped in ``[at_s, end_s]`` (``detected_by`` its name, ``reaction_ms``
-    the time from ``at_s``) or a controller reported its fault mode
-    (``CtrlTelemetry.mode`` :data:`CONTROLLER_FAULT_MODE`;
-    ``controller_fault_mode``), whichever came first.  ``theta_err_abs_max_deg`` and
+    the time from ``at_s``) or a controller reported a detection in its mode
+    (``CtrlTelemetry.mode``, :func:`controller_detections` names it), whichever
+    came first.  ``theta_err_abs_max_deg`` and
     ``speed_err_max_rpm`` are taken over the rows of ``[at_s, end_s)`` with an
     estimate (null without one), ``lock_kept`` is :func:`lock_lost`'s rule
     over those rows.  ``met`` follows ``expect``: ``trip`` a protection
@@ -632,16 +643,17 @@ def fault_metrics(
     )
     out: list[dict[str, Any]] = []
     mode = table.get("mode")
+    names = controller_detections()
     for kind, at_s, end_s, expect in faults:
         by = at = None
         if trip_at is not None and at_s - 1e-9 <= trip_at <= end_s + 1e-9:
             by, at = plant_fault, trip_at
         if mode is not None:  # a controller that reports a fault mode while it lasts
             hit = np.flatnonzero(
-                (t >= at_s - 1e-9) & (t <= end_s + 1e-9) & (mode == CONTROLLER_FAULT_MODE)
+                (t >= at_s - 1e-9) & (t <= end_s + 1e-9) & np.isin(mode, list(names))
             )
             if len(hit) and (at is None or float(t[hit[0]]) < at):
-                by, at = "controller_fault_mode", float(t[hit[0]])
+                by, at = names[int(mode[hit[0]])], float(t[hit[0]])
         win = (t >= at_s - 1e-9) & (t < end_s - 1e-9)
         est = win & np.isfinite(table["theta_hat"])
         err_max = w_max = None

@@ -460,6 +460,14 @@ KEYS: dict[str, dict[str, Key]] = {
             "filtered",
             "hf",
         ),
+        "supervision": Key(
+            "",
+            "Detect current-sensor, open-phase and DC-link faults from the samples and stop "
+            "switching, each reported as a CtrlTelemetry.mode (docs/PROTECTION.md).",
+            "true, false",
+            "true where the scenario has a [[faults]] timeline, else false",
+            1,
+        ),
     },
 }
 

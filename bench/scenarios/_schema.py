@@ -92,6 +92,9 @@ this module and :mod:`bench.scenarios._reference`)::
     offset_periods = 200             # its length (default: derived from the sensors' noise and LSB)
     current_feedback = "filtered"    # "filtered" | "raw" (the current PI sees the HF current,
                                      # as Wen Sec. 3.3 assumes)
+    supervision = false              # detect current-sensor, open-phase and DC-link faults
+                                     # and stop switching (docs/PROTECTION.md; default: on
+                                     # where the scenario has a [[faults]] timeline)
     [noise]                          # older form of [sensors] (kept; [sensors] wins)
     current_std_a = 0.0              # white noise on each phase current, A rms
     adc_bits = 0                     # 0: no quantization
@@ -494,6 +497,7 @@ CONTROLLER_KEYS = (
     "offset_calibration",
     "offset_periods",
     "current_feedback",
+    "supervision",
 )
 
 #: Keys of the ``[motor]`` table: the fields of :class:`plant_rt.MotorPars`.
@@ -1184,7 +1188,12 @@ def _parse_controller(r: _Reader, T_s: float) -> dict[str, Any]:
     for k in CONTROLLER_KEYS:
         if k not in ct.t:
             continue
-        if k in ("dead_time_compensation", "cross_saturation_compensation", "offset_calibration"):
+        if k in (
+            "dead_time_compensation",
+            "cross_saturation_compensation",
+            "offset_calibration",
+            "supervision",
+        ):
             out[k] = ct.boolean(k, False)
         elif k == "t_dead":
             out[k] = ct.num(k, lo=0.0, hi=0.5 * T_s)

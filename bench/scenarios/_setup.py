@@ -20,7 +20,7 @@ from bench.scenarios._schema import (
     split_options,
 )
 from bench.wire._protocol import CMD_START, CMD_STOP, RPM_PER_RAD_S
-from controller import CompensationPars, Controller, ControllerPars, MotorModel
+from controller import CompensationPars, Controller, ControllerPars, MotorModel, SupervisionPars
 from controller._registry import EstimatorSpec, UnknownEstimatorError, check_estimator
 from controller._registry import spec as _spec
 from plant_rt import (
@@ -337,10 +337,60 @@ def controller_pars(scn: Scenario, estimator: str) -> ControllerPars:
             estimator=estimator,
             estimator_options=options,
             compensation=comp,
+            supervision=supervision_pars(scn, model),
             **kw,
         )
     except TypeError as e:
         raise ScenarioError(f"{scn.source}: field 'estimator_options': {e}") from None
+
+
+def supervision_on(scn: Scenario) -> bool:
+    """Whether the scenario's controller runs the supervision (:mod:`controller._supervision`).
+
+    ``[controller] supervision`` when the scenario sets it; else on where
+    the scenario has a ``[[faults]]`` timeline. Off otherwise, so the paper
+    scenarios keep the compiled engine's speed (the supervision is Python).
+    """
+    return bool(scn.controller.get("supervision", bool(scn.faults)))
+
+
+def supervision_pars(scn: Scenario, model: MotorModel) -> SupervisionPars | None:
+    """The supervision's thresholds for the scenario's drive, or None when it is off.
+
+    The ratings and sensors are the plant's as built, as a drive's firmware is
+    configured for its own bridge, sensors and supply: the inverter's nominal
+    ``u_dc``, the power stage's over-voltage trip
+    (:meth:`plant_rt.ProtectionPars.from_preset`), the current converter's full
+    scale, LSB, noise and offsets, the DC-link converter's LSB and noise; the
+    wire's resolution and range (``PhaseSamples``) where they are coarser.
+    """
+    if not supervision_on(scn):
+        return None
+    from bench.wire._codec import default_codec
+    from plant_rt import ProtectionPars
+
+    p, prof = plant_setup(scn)
+    inv, sens = prof.inverter, prof.sensors
+    msg = default_codec().message("PhaseSamples")
+    sig_i = msg.get_signal_by_name("i_a")
+    sig_u = msg.get_signal_by_name("u_dc")
+    i_fs = min(float(sig_i.maximum or 0.0), sens.i_fs) if sens.bits else float(sig_i.maximum or 0.0)
+    i_lsb = max(float(sig_i.scale), 2.0 * sens.i_fs / (1 << sens.bits) if sens.bits else 0.0)
+    u_lsb = max(float(sig_u.scale), sens.u_fs / (1 << sens.bits) if sens.bits else 0.0)
+    prot = ProtectionPars.from_preset(p.motor, inv)
+    return SupervisionPars.design(
+        T_s=sample_period(scn),
+        L_q=model.L_q,
+        u_dc=inv.u_dc,
+        u_dc_trip=prot.u_dc_trip,
+        i_max=model.i_max,
+        i_fs=i_fs,
+        i_lsb=i_lsb,
+        i_noise=float(sens.noise_i),
+        i_offset=max(abs(float(o)) for o in sens.offset_abc),
+        u_lsb=u_lsb,
+        u_noise=float(sens.noise_u),
+    )
 
 
 #: The ``[controller]`` switches of the drive's countermeasures, in the order they are named.

@@ -1,0 +1,345 @@
+"""``bench suite faults``: what each shipped estimator's drive does for each fault kind.
+
+Every fault kind a lockstep run applies (:data:`bench.scenarios._faults.KINDS`)
+is inserted once, at :data:`AT_S`, into a short in-process run
+(:data:`DURATION_S`) of the ``drive`` plant, for every shipped estimator
+(``controller.ESTIMATOR_NAMES``): the square-wave family from ``xue-fig13``
+(1 kHz), every other estimator from ``wen-5.1`` (10 kHz), each from
+standstill with the scenario's start-up. The controller runs its
+supervision (:mod:`controller._supervision`; on in every scenario with a
+``[[faults]]`` timeline). Each run's ``metrics.json`` ``faults`` entry is
+classified (:func:`outcome`):
+
+- ``detected``: the controller reported a detection in its mode
+  (``detected_by`` ``controller_*``) before any plant protection tripped;
+- ``tripped``: a plant protection tripped first (``watchdog``, ``over_voltage``, ...);
+- ``ridden through``: nothing detected it and the estimator kept the rotor angle;
+- ``lock lost``: nothing detected it and the estimator lost the angle;
+- ``failed``: the run did not complete (its one line is kept): a result, not a crash.
+
+The catalogue (:func:`catalogue`) gives each kind one setting a drive must
+survive or see: a DC-link sag to 60 % and a surge to 118 % of the nominal
+voltage (the plant's own trip is at 120 %), 30 % demagnetisation, 50 %
+resistance rise, sensor faults on phase a (the wire carries ``i_a`` and
+``i_b``: the controller computes ``i_c``), a 50 ms burst of lost or corrupt
+duties, 5 periods of extra duty delay, a babbling node. ``silence`` and the
+loss of ``PhaseSamples`` are refused in lockstep, and ``open_phase`` and
+``open_switch`` are not implemented in the plant yet: the study lists them as
+not run. The JSON (``faults.json``) is the result; :func:`render_doc` writes
+docs/FAULTS.md from it and :func:`readme_block` the README's block.
+"""
+
+from __future__ import annotations
+
+import json
+import tempfile
+from collections.abc import Callable, Sequence
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+from typing import Any
+
+#: Simulated seconds of every run, and when its fault starts (s).
+DURATION_S = 1.5
+AT_S = 0.5
+#: Length of the bus bursts (drop, corrupt) (s): longer than the plant's duty watchdog.
+BURST_S = 0.05
+#: The plant profile of the study.
+PLANT_PROFILE = "drive"
+#: The outcomes, in the order the headline counts them.
+OUTCOMES = ("detected", "tripped", "ridden through", "lock lost", "failed")
+
+README_BEGIN = "<!-- fault-study:begin (bench suite faults --readme) -->"
+README_END = "<!-- fault-study:end -->"
+
+
+def scenario_for(estimator: str) -> str:
+    """The scenario an estimator is studied from (module docstring)."""
+    from controller._registry import injection_family
+
+    return "xue-fig13" if injection_family(estimator) == "square" else "wen-5.1"
+
+
+def catalogue(u_dc: float) -> list[tuple[str, dict[str, Any]]]:
+    """``(label, [[faults]] entry)`` of every case, for a drive of nominal DC link ``u_dc`` (V).
+
+    One case a kind (two for ``dc_link_step``: a sag and a surge); every
+    entry starts at :data:`AT_S` and lasts to the end of the run, but the bus
+    bursts (:data:`BURST_S`).
+    """
+    at: dict[str, Any] = {"at_s": AT_S}
+    burst = {"at_s": AT_S, "duration_s": BURST_S}
+    return [
+        ("dc_link_step: sag to 60 %", {**at, "kind": "dc_link_step", "u_dc_v": 0.6 * u_dc}),
+        ("dc_link_step: surge to 118 %", {**at, "kind": "dc_link_step", "u_dc_v": 1.18 * u_dc}),
+        ("demagnetisation: psi_f x0.7", {**at, "kind": "demagnetisation", "psi_f_factor": 0.7}),
+        ("resistance_drift: R_s x1.5", {**at, "kind": "resistance_drift", "R_s_factor": 1.5}),
+        ("current_offset: a +1 A", {**at, "kind": "current_offset", "phase": "a", "a": 1.0}),
+        ("current_gain: a x0.5", {**at, "kind": "current_gain", "phase": "a", "factor": 0.5}),
+        ("current_stuck: a", {**at, "kind": "current_stuck", "phase": "a"}),
+        ("current_lost: a", {**at, "kind": "current_lost", "phase": "a"}),
+        (
+            "dc_voltage_offset: -30 % of u_dc",
+            {**at, "kind": "dc_voltage_offset", "v": -0.3 * u_dc},
+        ),
+        ("position_sensor_lost", {**at, "kind": "position_sensor_lost"}),
+        (
+            f"drop: PwmDuty for {1e3 * BURST_S:g} ms",
+            {**burst, "kind": "drop", "message": "PwmDuty", "prob": 1.0},
+        ),
+        ("delay: PwmDuty +5 periods", {**at, "kind": "delay", "message": "PwmDuty", "steps": 5}),
+        (
+            f"corrupt: PwmDuty for {1e3 * BURST_S:g} ms",
+            {**burst, "kind": "corrupt", "message": "PwmDuty"},
+        ),
+        ("babble: 100 Hz", {**at, "kind": "babble", "rate_hz": 100.0}),
+    ]
+
+
+def not_run() -> dict[str, str]:
+    """The kinds the study cannot run, with why (module docstring)."""
+    from bench.scenarios._faults import KINDS
+
+    out = {k.name: str(k.refused) for k in KINDS.values() if k.refused}
+    out["silence"] = "refused in lockstep (bench faults)"
+    return out
+
+
+def _toml_value(v: Any) -> str:
+    if isinstance(v, str):
+        return json.dumps(v)
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    return repr(v)
+
+
+def case_toml(scenario: str, fault: dict[str, Any], duration: float) -> str:
+    """The scenario file of one case: ``scenario`` with one ``[[faults]]`` entry."""
+    lines = [
+        f"extends = {json.dumps(scenario)}",
+        f"duration = {duration!r}",
+        f"plant_profile = {json.dumps(PLANT_PROFILE)}",
+        "",
+        "[[faults]]",
+    ]
+    lines += [f"{k} = {_toml_value(v)}" for k, v in fault.items()]
+    return "\n".join(lines) + "\n"
+
+
+def run_case(estimator: str, label: str, fault: dict[str, Any], duration: float) -> dict[str, Any]:
+    """One run of the study: its ``faults`` entry, exit status and :func:`outcome`.
+
+    Never raises for a run that fails: the record says ``failed`` with its one line.
+    """
+    from bench.runs._local import exit_status, run_local
+    from bench.scenarios._schema import load_scenario
+
+    scenario = scenario_for(estimator)
+    rec: dict[str, Any] = {"estimator": estimator, "fault": label, "kind": fault["kind"]}
+    try:
+        with tempfile.TemporaryDirectory() as d:
+            path = Path(d) / "case.toml"
+            path.write_text(case_toml(scenario, fault, duration), encoding="utf-8")
+            res = run_local(load_scenario(str(path)), estimator, Path(d) / "run", plots=False)
+            status = exit_status(res)[0]
+            metrics = json.loads((Path(d) / "run" / "metrics.json").read_text())
+        f = metrics["faults"][0] if metrics.get("faults") else {}
+        rec.update(
+            exit_status=status,
+            detected_by=f.get("detected_by"),
+            reaction_ms=f.get("reaction_ms"),
+            lock_kept=f.get("lock_kept"),
+            theta_err_abs_max_deg=f.get("theta_err_abs_max_deg"),
+            error=None,
+        )
+    except Exception as e:  # a failed case is a result of the study, never its end
+        rec.update(
+            exit_status=None,
+            detected_by=None,
+            reaction_ms=None,
+            lock_kept=None,
+            theta_err_abs_max_deg=None,
+            error=(str(e).strip().splitlines() or [type(e).__name__])[0],
+        )
+    rec["outcome"] = outcome(rec)
+    return rec
+
+
+def outcome(rec: dict[str, Any]) -> str:
+    """One of :data:`OUTCOMES` for a record (module docstring)."""
+    if rec.get("error"):
+        return "failed"
+    by = rec.get("detected_by")
+    if by is not None:
+        return "detected" if str(by).startswith("controller_") else "tripped"
+    return "ridden through" if rec.get("lock_kept") is not False else "lock lost"
+
+
+def shortest_duration() -> float:
+    """The shortest run the study takes (s): past the fault's start and the scenarios'
+    scoring start (a run must score something)."""
+    from bench.scenarios._schema import load_scenario
+
+    return max(AT_S, *(load_scenario(s).score_from_s for s in ("wen-5.1", "xue-fig13")))
+
+
+def _u_dc(scenario: str) -> float:
+    from bench.scenarios._schema import load_scenario
+    from bench.scenarios._setup import plant_setup
+
+    scn = load_scenario(scenario).with_overrides(plant_profile=PLANT_PROFILE)
+    return float(plant_setup(scn)[1].inverter.u_dc)
+
+
+def run_fault_study(
+    out: Path,
+    *,
+    estimators: Sequence[str],
+    kinds: Sequence[str] | None = None,
+    duration: float = DURATION_S,
+    jobs: int = 1,
+    progress: Callable[[str], None] | None = None,
+) -> dict[str, Any]:
+    """Run the catalogue for ``estimators`` (only the ``kinds`` given, None: all) and write
+    ``out/faults.json`` and ``out/report.md``; return the summary."""
+    from bench.wire._codec import default_codec
+
+    cases: list[tuple[str, str, dict[str, Any]]] = []
+    for est in estimators:
+        for label, fault in catalogue(_u_dc(scenario_for(est))):
+            if kinds is None or fault["kind"] in kinds:
+                cases.append((est, label, fault))
+    records: list[dict[str, Any]] = []
+    if jobs > 1:
+        with ProcessPoolExecutor(max_workers=jobs) as ex:
+            futs = [ex.submit(run_case, e, lab, f, duration) for e, lab, f in cases]
+            for fut in futs:
+                records.append(fut.result())
+                if progress:
+                    progress(_line(records[-1]))
+    else:
+        for e, lab, f in cases:
+            records.append(run_case(e, lab, f, duration))
+            if progress:
+                progress(_line(records[-1]))
+    summary = {
+        "study": "faults",
+        "duration_s": duration,
+        "at_s": AT_S,
+        "plant_profile": PLANT_PROFILE,
+        "dbc_version": default_codec().version,
+        "scenarios": {e: scenario_for(e) for e in estimators},
+        "not_run": not_run(),
+        "records": records,
+    }
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "faults.json").write_text(json.dumps(summary, indent=1, sort_keys=True) + "\n")
+    (out / "report.md").write_text(render_doc(summary), encoding="utf-8")
+    return summary
+
+
+def _line(rec: dict[str, Any]) -> str:
+    return f"{rec['estimator']:>18}  {rec['fault']:<34} {cell(rec)}"
+
+
+def cell(rec: dict[str, Any]) -> str:
+    """One record as a table cell."""
+    o = rec["outcome"]
+    if o == "failed":
+        return f"failed: {rec['error']}"
+    if o in ("detected", "tripped"):
+        by = str(rec["detected_by"]).removeprefix("controller_")
+        return f"{o}: {by}, {rec['reaction_ms']:.1f} ms"
+    if o == "ridden through":
+        err = rec.get("theta_err_abs_max_deg")
+        return "not detected, ridden through" + ("" if err is None else f" ({err:.1f} deg)")
+    return "not detected, lock lost"
+
+
+def headline(summary: dict[str, Any]) -> dict[str, dict[str, int]]:
+    """Per estimator, how many cases had each outcome."""
+    out: dict[str, dict[str, int]] = {}
+    for r in summary["records"]:
+        c = out.setdefault(r["estimator"], dict.fromkeys(OUTCOMES, 0))
+        c[r["outcome"]] += 1
+    return out
+
+
+def _headline_table(summary: dict[str, Any]) -> list[str]:
+    lines = [
+        "| estimator | scenario | cases | " + " | ".join(OUTCOMES) + " |",
+        "|---|---|---|" + "---|" * len(OUTCOMES),
+    ]
+    for est, c in headline(summary).items():
+        n = sum(c.values())
+        lines.append(
+            f"| `{est}` | {summary['scenarios'][est]} | {n} | "
+            + " | ".join(str(c[o]) for o in OUTCOMES)
+            + " |"
+        )
+    return lines
+
+
+def render_doc(summary: dict[str, Any]) -> str:
+    """docs/FAULTS.md from the study's JSON."""
+    recs = summary["records"]
+    ests = list(dict.fromkeys(r["estimator"] for r in recs))
+    faults = list(dict.fromkeys(r["fault"] for r in recs))
+    by = {(r["fault"], r["estimator"]): r for r in recs}
+    lines = [
+        "# Fault study",
+        "",
+        "<!-- written by `bench suite faults --out docs/faults --doc docs/FAULTS.md` from "
+        "docs/faults/faults.json; do not edit -->",
+        "",
+        f"Every fault kind a lockstep run applies, inserted at {summary['at_s']:g} s into a "
+        f"{summary['duration_s']:g} s in-process run of the `{summary['plant_profile']}` plant, "
+        "for every shipped estimator (the square-wave family from `xue-fig13`, the others from "
+        "`wen-5.1`, each from standstill), with the controller's supervision on "
+        "(docs/PROTECTION.md). `detected`: the controller reported the fault in its "
+        "`CtrlTelemetry.mode` (DBC " + str(summary["dbc_version"]) + ") before any plant "
+        "protection tripped; `tripped`: a plant protection tripped first; reaction times are "
+        "from the fault's start (`metrics.json` `faults`, docs/RUNS.md). A run that fails is "
+        "listed as `failed`. The angle in parentheses is the largest |dtheta| while the fault "
+        "lasted (electrical degrees).",
+        "",
+        "## Headline",
+        "",
+        *_headline_table(summary),
+        "",
+        "## Every case",
+        "",
+        "| fault | " + " | ".join(f"`{e}`" for e in ests) + " |",
+        "|---|" + "---|" * len(ests),
+    ]
+    for f in faults:
+        cells = [cell(by[(f, e)]) if (f, e) in by else "-" for e in ests]
+        lines.append(f"| {f} | " + " | ".join(cells) + " |")
+    lines += ["", "## Not run", ""]
+    lines += [f"- `{k}`: {why}" for k, why in summary["not_run"].items()]
+    lines.append("")
+    return "\n".join(lines)
+
+
+def readme_block(summary: dict[str, Any]) -> str:
+    """The README's block: the headline table and a link to docs/FAULTS.md."""
+    return "\n".join(
+        [
+            README_BEGIN,
+            "",
+            *_headline_table(summary),
+            "",
+            "Every case with its reaction time: [docs/FAULTS.md](docs/FAULTS.md).",
+            "",
+            README_END,
+        ]
+    )
+
+
+def update_readme(text: str, summary: dict[str, Any]) -> str:
+    """``text`` (README.md) with its fault-study block from ``summary``; unchanged without
+    markers."""
+    if README_BEGIN not in text or README_END not in text:
+        return text
+    head, _, rest = text.partition(README_BEGIN)
+    _, _, tail = rest.partition(README_END)
+    return head + readme_block(summary) + tail
