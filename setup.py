@@ -13,6 +13,7 @@ rounds as the Python step does and the two engines agree bit for bit.
 from __future__ import annotations
 
 import sys
+from pathlib import Path
 
 from setuptools import Extension, setup
 from setuptools.command.build_ext import build_ext
@@ -52,7 +53,9 @@ setup(
     ext_modules=[
         Extension(
             "plant_rt._cplant",
-            ["plant_rt/_cplant.c"],
+            # the binding and the portable core (plant_rt/core/, plain C99)
+            ["plant_rt/_cplant.c", *sorted(str(p) for p in Path("plant_rt/core").glob("*.c"))],
+            depends=sorted(str(p) for p in Path("plant_rt/core").glob("*.h")),
             extra_compile_args=["-O2", "-ffp-contract=off", "-fno-fast-math"],
         ),
         Extension(

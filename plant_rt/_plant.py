@@ -351,12 +351,14 @@ class Plant:
         self._sat_sigma = float(motor.sat.sigma)
         self._sat_i_sat = float(motor.sat.i_sat)
         self._core = (
-            _cplant.Core(self, _constant_tau(self._load))
+            _cplant.Core(*self._core_pars())
             if self.engine == "compiled" and _cplant is not None
             else None
         )
         if self._core is not None:
             self._core.set_sensors(*self._sensors.constants())
+            self._core.set_load(self._load.tau, _constant_tau(self._load))
+            self._state_to_core()
 
     # ------------------------------------------------------------------ API
     @property
@@ -373,7 +375,7 @@ class Plant:
         """Replace the load profile (times in the profile are absolute, s)."""
         self._load = profile
         if self._core is not None:
-            self._core.set_load(profile, _constant_tau(profile))
+            self._core.set_load(profile.tau, _constant_tau(profile))
 
     def impose_speed(self, w_m: float | None) -> None:
         """Hold the mechanical speed at ``w_m`` (rad/s) like a dynamometer; None releases it."""
@@ -567,6 +569,37 @@ class Plant:
             self._state_to_core()
             if self._switching:
                 core.pwm_disable()
+
+    def _core_pars(self) -> tuple[float | int | bool, ...]:
+        """The design parameters in the order of ``plant_pars`` (``plant_rt/core/plant.h``)."""
+        m = self.motor
+        inv = self.inverter
+        return (
+            float(m.n_p),
+            float(m.R_s),
+            float(m.L_d),
+            float(m.L_q),
+            float(m.psi_f),
+            float(m.J),
+            float(m.b),
+            float(m.i_max),
+            float(m.sat.sigma),
+            float(m.sat.i_sat),
+            float(m.cross.c_dq),
+            self.saturation,
+            self.cross_saturation,
+            self.T_s,
+            self.substeps,
+            float(self.sensor_pars.t_delay),
+            self._switching,
+            self._pwm_peak,
+            float(inv.u_dc),
+            float(inv.t_dead),
+            float(inv.v_ce),
+            float(inv.v_f),
+            float(inv.r_dc),
+            float(inv.c_dc),
+        )
 
     def _state_to_core(self) -> None:
         """Hand the states changed on the Python side to the compiled core."""

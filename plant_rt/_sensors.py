@@ -16,6 +16,7 @@ import math
 import random
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 
 @dataclass(frozen=True, slots=True)
@@ -256,7 +257,7 @@ class Sensors:
         self._code_max = 2 ** (bits - 1) - 1
         self._ucode_max = 2**bits - 1
 
-    def constants(self) -> tuple[float | int | random.Random, ...]:
+    def constants(self) -> tuple[Any, ...]:
         """What the compiled engine's sensors need (``plant_rt/_cplant.c``, ``set_sensors``)."""
         p = self.pars
         return (
@@ -270,7 +271,7 @@ class Sensors:
             self._lsb_u,
             self._ucode_max,
             p.noise_u,
-            self._rng,
+            self._rng.gauss,
         )
 
     def _quant_i(self, x: float) -> float:
