@@ -32,6 +32,8 @@ interval adds one (class notes).
 from __future__ import annotations
 
 import math
+from array import array
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
 from plant_rt._engine import _cplant, resolve_engine
@@ -295,40 +297,18 @@ class Plant:
         self._w_m = float(w_m0)
         self._th_m = float(theta_m0) % TWO_PI
         self._w_imp: float | None = None
-        # Constants for the per-step code (Python floats).
-        self._n_p = float(motor.n_p)
-        self._R = float(motor.R_s)
-        self._L_d = float(motor.L_d)
-        self._L_q = float(motor.L_q)
-        self._psi_f = float(motor.psi_f)
-        self._b = float(motor.b)
-        self._inv_J = 1.0 / motor.J
-        self._k_tau = 1.5 * motor.n_p
-        self._sig = float(motor.sat.sigma)
-        self._inv_i_sat = 1.0 / motor.sat.i_sat
-        self._sig_isat = motor.sat.sigma * motor.sat.i_sat
         self._u_dc = float(inverter.u_dc)
         self._h = self.T_s / self.substeps
-        self._i_eps = 1e-9 * max(1.0, motor.i_max)
         self.meter: EnergyMeter | None = EnergyMeter() if meter else None
         self._sample: Sample | None = None
         # Mean stator voltage in alpha-beta over the last period (V).
         self.u_s_ab = (0.0, 0.0)
-        # Cross-saturation constants.
-        self._c_dq = float(motor.cross.c_dq)
-        self._i_0 = motor.psi_f / motor.L_d
-        # Inverter: switching timeline, device drops, DC link.
+        # Inverter: switching timeline.
         self._switching = inverter.model == "switching"
+        self._pwm_peak = inverter.sample_at == "peak"
         self._pwm = (
             PwmTimeline(self.T_s, inverter.t_dead, inverter.sample_at) if self._switching else None
         )
-        self._v_ce = float(inverter.v_ce)
-        self._v_f = float(inverter.v_f)
-        self._drops = inverter.v_ce > 0.0 or inverter.v_f > 0.0
-        self._u_src = float(inverter.u_dc)
-        self._r_dc = float(inverter.r_dc)
-        self._c_dc = float(inverter.c_dc)
-        self._dc_dyn = inverter.r_dc > 0.0
         # Sensor delay: the state at T_s - t_delay of each period, sampled at the next.
         self._t_meas = self.T_s - sens.t_delay if sens.t_delay > 0.0 else 0.0
         self._meas: tuple[int, float, float, float, float] | None = None
@@ -341,15 +321,11 @@ class Plant:
             cuts.add(self._t_meas)
         self._cuts = tuple(sorted(cuts))
         self._segs = self._segments()
-        # Average model on the legacy per-period path unless a feature needs substeps.
-        self._avg_general = self._dc_dyn or self._t_meas > 0.0
-        # Engine: the compiled core reads the constants above and keeps the
-        # states of the enabled periods; step() copies them back each period.
+        self._set_constants(motor, inverter)
+        # Engine: the compiled core (plant_rt/core) makes its constants from
+        # the design parameters and keeps the states of the enabled periods;
+        # step() copies them back each period.
         self.engine = resolve_engine(engine, meter)
-        self._t_dead = float(inverter.t_dead)
-        self._pwm_peak = inverter.sample_at == "peak"
-        self._sat_sigma = float(motor.sat.sigma)
-        self._sat_i_sat = float(motor.sat.i_sat)
         self._core = (
             _cplant.Core(*self._core_pars())
             if self.engine == "compiled" and _cplant is not None
@@ -358,6 +334,87 @@ class Plant:
         if self._core is not None:
             self._core.set_sensors(*self._sensors.constants())
             self._core.set_load(self._load.tau, _constant_tau(self._load))
+            self._state_to_core()
+
+    def _set_constants(self, motor: MotorPars, inverter: InverterPars) -> None:
+        """The constants of the per-step code (Python floats) from the motor and the inverter."""
+        self.motor = motor
+        self.inverter = inverter
+        self._n_p = float(motor.n_p)
+        self._R = float(motor.R_s)
+        self._L_d = float(motor.L_d)
+        self._L_q = float(motor.L_q)
+        self._psi_f = float(motor.psi_f)
+        self._b = float(motor.b)
+        self._inv_J = 1.0 / motor.J
+        self._k_tau = 1.5 * motor.n_p
+        self._sig = float(motor.sat.sigma)
+        self._inv_i_sat = 1.0 / motor.sat.i_sat
+        self._sig_isat = motor.sat.sigma * motor.sat.i_sat
+        self._i_eps = 1e-9 * max(1.0, motor.i_max)
+        # Cross-saturation constants.
+        self._c_dq = float(motor.cross.c_dq)
+        self._i_0 = motor.psi_f / motor.L_d
+        # Inverter: dead time, device drops, DC link.
+        self._t_dead = float(inverter.t_dead)
+        if self._pwm is not None:
+            self._pwm.t_dead = self._t_dead
+        self._v_ce = float(inverter.v_ce)
+        self._v_f = float(inverter.v_f)
+        self._drops = inverter.v_ce > 0.0 or inverter.v_f > 0.0
+        self._u_src = float(inverter.u_dc)
+        self._r_dc = float(inverter.r_dc)
+        self._c_dc = float(inverter.c_dc)
+        self._dc_dyn = inverter.r_dc > 0.0
+        # Average model on the legacy per-period path unless a feature needs substeps.
+        self._avg_general = self._dc_dyn or self._t_meas > 0.0
+
+    def set_parameters(
+        self, motor: MotorPars | None = None, inverter: InverterPars | None = None
+    ) -> None:
+        """Change the motor's or the inverter's parameters between two periods.
+
+        The states (currents, speed, angle, DC-link capacitor voltage, the
+        PWM timeline's dead intervals) are kept; the next :meth:`step` runs
+        on the new parameters. This is how a fault or a drift is inserted
+        (e.g. ``plant.set_parameters(motor=replace(plant.motor, R_s=1.2 *
+        plant.motor.R_s))``, a weaker magnet through ``psi_f``, a sagging
+        supply through ``InverterPars.u_dc``). Without a dynamic DC link
+        (``r_dc = 0``) the link voltage follows the new ``u_dc`` at once.
+
+        Parameters
+        ----------
+        motor : MotorPars, optional
+            New machine parameters; None keeps the present ones.
+        inverter : InverterPars, optional
+            New inverter parameters; None keeps the present ones. Its
+            ``model`` and ``sample_at`` cannot change.
+
+        Raises
+        ------
+        ValueError
+            For an inverter of another model or carrier alignment, a dead
+            time of ``T_s / 2`` or more, or a cross-saturation map the new
+            motor makes non-physical (:func:`cross_saturation_check`).
+        """
+        m = motor if motor is not None else self.motor
+        inv = inverter if inverter is not None else self.inverter
+        if inv.model != self.inverter.model or inv.sample_at != self.inverter.sample_at:
+            raise ValueError(
+                "set_parameters: the inverter's model and sample_at cannot change "
+                f"({self.inverter.model}/{self.inverter.sample_at} -> {inv.model}/{inv.sample_at})"
+            )
+        if not 0.0 <= inv.t_dead < 0.5 * self.T_s:
+            raise ValueError(
+                f"set_parameters: dead time must be in [0, T_s / 2), got {inv.t_dead} s"
+            )
+        if self.cross_saturation:
+            cross_saturation_check(m, self.saturation, 2.0 * m.i_max)
+        self._set_constants(m, inv)
+        if not self._dc_dyn:
+            self._u_dc = self._u_src
+        if self._core is not None:
+            self._core.set_pars(*self._core_pars())
             self._state_to_core()
 
     # ------------------------------------------------------------------ API
@@ -600,6 +657,49 @@ class Plant:
             float(inv.r_dc),
             float(inv.c_dc),
         )
+
+    def step_n(self, duties: Iterable[Sequence[float]]) -> array:
+        """Apply the duties of ``n`` enabled periods in one call and advance to ``k + n``.
+
+        The periods are those of ``n`` calls of :meth:`step` (the same
+        trace bit for bit) without a :meth:`sample` between them: the
+        compiled core steps them in one C call (``plant_step_n``,
+        ``plant_rt/core/plant.h``).
+
+        Parameters
+        ----------
+        duties : iterable of (d_a, d_b, d_c)
+            Duty cycles per period; clamped to [0, 1].
+
+        Returns
+        -------
+        array.array of float
+            Seven values per period, after it: ``i_d, i_q, w_m, theta_m,
+            u_dc`` and the period's mean stator voltage ``u_alpha, u_beta``.
+        """
+        flat = array("d")
+        for d in duties:
+            if len(d) != 3:
+                raise ValueError(f"step_n: three duties per period, got {len(d)}")
+            flat.extend(d)
+        n = len(flat) // 3
+        out = array("d")
+        core = self._core
+        if core is None:
+            for j in range(n):
+                self.step(flat[3 * j], flat[3 * j + 1], flat[3 * j + 2])
+                out.extend((self._i_d, self._i_q, self._w_m, self._th_m, self._u_dc, *self.u_s_ab))
+            return out
+        if n == 0:
+            return out
+        out.frombytes(core.step_n(self.k, flat))
+        (self._i_d, self._i_q, self._w_m, self._th_m, self._u_dc, u_al, u_be) = out[-7:]
+        self.u_s_ab = (u_al, u_be)
+        self.k += n
+        if self._t_meas > 0.0:
+            i_a, i_b, i_c, u_dc = core.meas()
+            self._meas = (self.k, i_a, i_b, i_c, u_dc)
+        return out
 
     def _state_to_core(self) -> None:
         """Hand the states changed on the Python side to the compiled core."""

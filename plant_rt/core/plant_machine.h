@@ -18,6 +18,8 @@
 #ifndef PLANT_MACHINE_H
 #define PLANT_MACHINE_H
 
+#include <math.h>
+
 /* Design parameters (plant_rt.MotorPars). */
 typedef struct {
     double n_p;       /* pole pairs */
@@ -56,8 +58,16 @@ void plant_machine_init(plant_machine *m, const plant_machine_pars *p);
 
 /* The saturated d-axis flux (the one home of the equation above); x is the
  * normalised current i_d / i_sat, formed by the caller (by the reciprocal on
- * the integration stages, by division in plant_flux_d). */
-void plant_flux_d_sat(const plant_machine *m, double i_d, double x, double *psi_d, double *L_dd);
+ * the integration stages, by division in plant_flux_d), inline on the hot
+ * path. SaturationPars: psi_d = psi_f + L_d (i_d - sigma i_sat (sqrt(1 + x^2) - 1)),
+ * L_dd = d psi_d / d i_d = L_d (1 - sigma x / sqrt(1 + x^2)). */
+static inline void plant_flux_d_sat(const plant_machine *m, double i_d, double x, double *psi_d, double *L_dd)
+{
+    double r = sqrt(1.0 + x * x);
+    *psi_d = m->psi_f + m->L_d * (i_d - m->sig_isat * (r - 1.0));
+    *L_dd = m->L_d * (1.0 - m->sig * x / r);
+}
+
 
 /* psi_d and L_dd of the d-axis model in use (x = i_d / i_sat). */
 void plant_flux_d(const plant_machine *m, double i_d, double *psi_d, double *L_dd);
@@ -65,11 +75,6 @@ void plant_flux_d(const plant_machine *m, double i_d, double *psi_d, double *L_d
 /* flux_dq with cross = 1: out = (psi_d, psi_q, L_dd, L_dq, L_qq). */
 void plant_flux_dq(const plant_machine *m, double i_d, double i_q, double out[5]);
 
-/* The state derivative of one RK4 stage for a voltage fixed in alpha-beta,
- * variant m->variant: d = (di_d, di_q, dw). */
-void plant_machine_stage(const plant_machine *m, double i_d, double i_q, double w, double c,
-                         double sn, double u_al, double u_be, double tau_L, int free_,
-                         double d[3]);
 
 /* Plant._f: out = (di_d, di_q, dw, tau_e). */
 void plant_machine_f(const plant_machine *m, int imposed, double i_d, double i_q, double w_m,
@@ -85,5 +90,50 @@ void plant_currents_abc(const plant_machine *m, const plant_state *s, double out
 
 /* Remove phase x's current by projecting i_dq onto its null line. */
 void plant_zero_phase(const plant_machine *m, plant_state *s, int x);
+
+/* The state derivative of one RK4 stage for a voltage fixed in alpha-beta
+ * (the hot path, inline): eq. (1) with the voltage rotated into d-q at the
+ * stage's own angle (c, sn the cosine and sine of theta_e); with
+ * cross-saturation the 2x2 incremental inductance matrix is solved,
+ * L_inc d i_dq / dt = u_dq - R i_dq - w_e J psi_dq. d = (di_d, di_q, dw). */
+static inline void plant_machine_stage(const plant_machine *m, double i_d, double i_q, double w, double c,
+                         double sn, double u_al, double u_be, double tau_L, int free_,
+                         double d[3])
+{
+    double R = m->R, L_q = m->L_q;
+    double w_e = m->n_p * w;
+    double psi_d, L_dd;
+    if (m->sat) {
+        plant_flux_d_sat(m, i_d, i_d * m->inv_i_sat, &psi_d, &L_dd);
+    } else {
+        psi_d = m->psi_f + m->L_d * i_d;
+        L_dd = m->L_d;
+    }
+    switch (m->variant) {
+    case PLANT_FLUX_CROSS: {
+        double c_dq = m->c_dq, i_0 = m->i_0;
+        double mm = i_d + i_0;
+        double hq = 0.5 * c_dq * i_q;
+        double L_qq = L_q - 0.5 * c_dq * i_d * (i_d + 2.0 * i_0);
+        psi_d -= hq * mm * i_q;
+        double psi_q = L_qq * i_q;
+        L_dd -= hq * i_q;
+        double L_dq = -c_dq * mm * i_q;
+        double e_d = c * u_al + sn * u_be - R * i_d + w_e * psi_q;
+        double e_q = c * u_be - sn * u_al - R * i_q - w_e * psi_d;
+        double inv_det = 1.0 / (L_dd * L_qq - L_dq * L_dq);
+        d[0] = (L_qq * e_d - L_dq * e_q) * inv_det;
+        d[1] = (L_dd * e_q - L_dq * e_d) * inv_det;
+        d[2] = free_ ? (m->k_tau * (psi_d * i_q - psi_q * i_d) - tau_L - m->b * w) * m->inv_J
+                     : 0.0;
+        break;
+    }
+    default:
+        d[0] = (c * u_al + sn * u_be - R * i_d + w_e * L_q * i_q) / L_dd;
+        d[1] = (c * u_be - sn * u_al - R * i_q - w_e * psi_d) / L_q;
+        d[2] = free_ ? (m->k_tau * (psi_d - L_q * i_d) * i_q - tau_L - m->b * w) * m->inv_J : 0.0;
+        break;
+    }
+}
 
 #endif
