@@ -11,6 +11,7 @@
 
 #include "core/plant.h"
 #include "core/plant_protection.h"
+#include "core/plant_pwm.h" /* dead_time_error, device_drop_error */
 #include "core/plant_sensors.h"
 
 typedef struct {
@@ -121,6 +122,48 @@ static PyObject *Core_step(Core *s, PyObject *const *args, Py_ssize_t nargs)
     return state_tuple(&s->pl);
 }
 
+static PyObject *Core_step_off(Core *s, PyObject *arg)
+{
+    double t0 = PyFloat_AsDouble(arg);
+    if (t0 == -1.0 && PyErr_Occurred()) return NULL;
+    if (plant_step_off(&s->pl, t0) != PLANT_OK) return NULL;
+    return state_tuple(&s->pl);
+}
+
+static PyObject *Core_set_metering(Core *s, PyObject *arg)
+{
+    int on = PyObject_IsTrue(arg);
+    if (on < 0) return NULL;
+    s->pl.metering = on;
+    Py_RETURN_NONE;
+}
+
+static PyObject *Core_meter(Core *s, PyObject *unused)
+{
+    const plant_meter *e = &s->pl.meter;
+    return Py_BuildValue("(dddddddd)", e->e_in, e->e_cu, e->e_em, e->e_fric, e->e_load, e->q_a,
+                         e->q_b, e->q_c);
+}
+
+static PyObject *Core_currents(Core *s, PyObject *unused)
+{
+    double i[3];
+    plant_currents(&s->pl, i);
+    return Py_BuildValue("(ddd)", i[0], i[1], i[2]);
+}
+
+static PyObject *Core_back_emf(Core *s, PyObject *unused)
+{
+    double e[3];
+    plant_back_emf(&s->pl, e);
+    return Py_BuildValue("(ddd)", e[0], e[1], e[2]);
+}
+
+static PyObject *Core_torque(Core *s, PyObject *unused)
+{
+    return PyFloat_FromDouble(plant_machine_torque(&s->pl.m, s->pl.x.i_d, s->pl.x.i_q));
+}
+
 static PyObject *Core_step_n(Core *s, PyObject *args)
 {
     long k0;
@@ -197,12 +240,6 @@ static PyObject *Core_meas(Core *s, PyObject *unused)
     return Py_BuildValue("(dddd)", m[0], m[1], m[2], m[3]);
 }
 
-static PyObject *Core_pwm_disable(Core *s, PyObject *unused)
-{
-    plant_pwm_disable(&s->pl.pwm);
-    Py_RETURN_NONE;
-}
-
 static PyObject *Core_set_sensors(Core *s, PyObject *args)
 {
     plant_sensors *q = &s->pl.sens;
@@ -260,6 +297,15 @@ static void Core_dealloc(Core *s)
 static PyMethodDef Core_methods[] = {
     {"step", (PyCFunction)(void (*)(void))Core_step, METH_FASTCALL,
      "step(d_a, d_b, d_c, t0) -> (i_d, i_q, w_m, th_m, u_dc, u_al, u_be): one enabled period"},
+    {"step_off", (PyCFunction)Core_step_off, METH_O,
+     "step_off(t0) -> (i_d, i_q, w_m, th_m, u_dc, u_al, u_be): one period, all switches open"},
+    {"set_metering", (PyCFunction)Core_set_metering, METH_O,
+     "set_metering(on): integrate the energy flows with the states"},
+    {"meter", (PyCFunction)Core_meter, METH_NOARGS,
+     "meter() -> (e_in, e_cu, e_em, e_fric, e_load, q_a, q_b, q_c)"},
+    {"currents", (PyCFunction)Core_currents, METH_NOARGS, "currents() -> (i_a, i_b, i_c) now"},
+    {"torque", (PyCFunction)Core_torque, METH_NOARGS, "torque() -> tau_e now (N m)"},
+    {"back_emf", (PyCFunction)Core_back_emf, METH_NOARGS, "back_emf() -> (e_a, e_b, e_c) now (V)"},
     {"step_n", (PyCFunction)Core_step_n, METH_VARARGS,
      "step_n(k0, duties) -> bytes: periods k0.. with 3 doubles of duties each; the states "
      "(i_d, i_q, w_m, th_m, u_dc, u_al, u_be) after each, 7 doubles a period"},
@@ -278,8 +324,6 @@ static PyMethodDef Core_methods[] = {
      "gauss(mu, sigma)"},
     {"measure", (PyCFunction)(void (*)(void))Core_measure, METH_FASTCALL,
      "measure([i_a, i_b, i_c, u_dc]) -> measured (i_a, i_b, i_c, u_dc)"},
-    {"pwm_disable", (PyCFunction)Core_pwm_disable, METH_NOARGS,
-     "all switches were opened for a period"},
     {NULL, NULL, 0, NULL},
 };
 
@@ -317,7 +361,60 @@ static PyObject *mod_encoder_angle(PyObject *unused, PyObject *args)
     return PyFloat_FromDouble(plant_encoder_angle(th, w, delay, counts));
 }
 
+/* machine(n_p, L_d, L_q, psi_f, sigma, i_sat, c_dq, saturation, cross, i_d, i_q) */
+static PyObject *mod_machine(PyObject *unused, PyObject *args)
+{
+    plant_machine_pars p = {0};
+    double i_d, i_q;
+    if (!PyArg_ParseTuple(args, "dddddddppdd", &p.n_p, &p.L_d, &p.L_q, &p.psi_f, &p.sat_sigma,
+                          &p.sat_i_sat, &p.c_dq, &p.saturation, &p.cross, &i_d, &i_q))
+        return NULL;
+    p.J = 1.0;
+    plant_machine m;
+    plant_machine_init(&m, &p);
+    double out[5];
+    if (m.cross) {
+        plant_flux_dq(&m, i_d, i_q, out);
+    } else {
+        plant_flux_d(&m, i_d, &out[0], &out[2]);
+        out[1] = m.L_q * i_q;
+        out[3] = 0.0;
+        out[4] = m.L_q;
+    }
+    return Py_BuildValue("(dddddd)", out[0], out[1], out[2], out[3], out[4],
+                         plant_machine_torque(&m, i_d, i_q));
+}
+
+static PyObject *mod_dead_time_error(PyObject *unused, PyObject *const *args, Py_ssize_t nargs)
+{
+    double v[4];
+    if (nargs != 4) {
+        PyErr_SetString(PyExc_TypeError, "dead_time_error(i_x, u_dc, t_dead, T_s)");
+        return NULL;
+    }
+    if (get_doubles(args, 4, v) < 0) return NULL;
+    return PyFloat_FromDouble(plant_dead_time_error(v[0], v[1], v[2], v[3]));
+}
+
+static PyObject *mod_device_drop_error(PyObject *unused, PyObject *const *args, Py_ssize_t nargs)
+{
+    double v[4];
+    if (nargs != 4) {
+        PyErr_SetString(PyExc_TypeError, "device_drop_error(i_x, d_x, v_ce, v_f)");
+        return NULL;
+    }
+    if (get_doubles(args, 4, v) < 0) return NULL;
+    return PyFloat_FromDouble(plant_device_drop_error(v[0], v[1], v[2], v[3]));
+}
+
 static PyMethodDef module_methods[] = {
+    {"machine", (PyCFunction)mod_machine, METH_VARARGS,
+     "machine(n_p, L_d, L_q, psi_f, sigma, i_sat, c_dq, saturation, cross, i_d, i_q) -> "
+     "(psi_d, psi_q, L_dd, L_dq, L_qq, tau_e): the flux map and the torque"},
+    {"dead_time_error", (PyCFunction)(void (*)(void))mod_dead_time_error, METH_FASTCALL,
+     "dead_time_error(i_x, u_dc, t_dead, T_s) -> the period-mean pole-voltage error (V)"},
+    {"device_drop_error", (PyCFunction)(void (*)(void))mod_device_drop_error, METH_FASTCALL,
+     "device_drop_error(i_x, d_x, v_ce, v_f) -> the period-mean device drop (V)"},
     {"protection_check", (PyCFunction)(void (*)(void))mod_protection_check, METH_FASTCALL,
      "protection_check(i_trip, u_dc_trip, w_m_trip, i_a, i_b, i_c, u_dc, w_m) -> fault code"},
     {"encoder_angle", (PyCFunction)mod_encoder_angle, METH_VARARGS,

@@ -134,7 +134,12 @@ static void rk4_const(plant *pl, double h, const double v[3], double tau_L, doub
 {
     double u_al = alpha(v[0], v[1], v[2]);
     double u_be = beta(v[1], v[2]);
-    plant_rk4(&pl->m, &pl->x, pl->imposed, PLANT_STAGE_HOT, -1, h, u_al, u_be, tau_L, ua, ub);
+    if (pl->metering)
+        plant_rk4(&pl->m, &pl->x, pl->imposed, PLANT_STAGE_GENERAL, -1, h, u_al, u_be, tau_L, ua,
+                  ub, &pl->meter, v);
+    else
+        plant_rk4(&pl->m, &pl->x, pl->imposed, PLANT_STAGE_HOT, -1, h, u_al, u_be, tau_L, ua, ub,
+                  NULL, NULL);
 }
 
 /* One RK4 step with phase fx floating: its pole voltage solved at each stage. */
@@ -145,7 +150,8 @@ static void rk4_float(plant *pl, double h, const double v[3], int fx, double tau
     vs[fx] = 0.0;
     double u_al = alpha(vs[0], vs[1], vs[2]);
     double u_be = beta(vs[1], vs[2]);
-    plant_rk4(&pl->m, &pl->x, pl->imposed, PLANT_STAGE_FLOAT, fx, h, u_al, u_be, tau_L, ua, ub);
+    plant_rk4(&pl->m, &pl->x, pl->imposed, PLANT_STAGE_FLOAT, fx, h, u_al, u_be, tau_L, ua, ub,
+              pl->metering ? &pl->meter : NULL, v);
 }
 
 static double dw_open(const plant *pl, double tau_L, double w)
@@ -168,6 +174,17 @@ static void open_circuit(plant *pl, double h, double tau_L, double *ua_out, doub
         w1 = w0;
     }
     double th1 = th0 + 0.5 * h * (w0 + w1);
+    if (pl->metering) {
+        plant_meter *e = &pl->meter;
+        double w_mid = 0.5 * (w0 + w1);
+        if (!pl->imposed) {
+            e->e_load += h * tau_L * w_mid;
+            e->e_fric += h * pl->m.b * w_mid * w_mid;
+        } else {
+            e->e_load -= h * pl->m.b * w0 * w0;
+            e->e_fric += h * pl->m.b * w0 * w0;
+        }
+    }
     double psi0, L0;
     plant_flux_d(&pl->m, 0.0, &psi0, &L0);
     double n_p = pl->m.n_p;
@@ -221,10 +238,17 @@ static void step_fast(plant *pl, double d_a, double d_b, double d_c, double t0)
     double u_al = alpha(v_a, v_b, v_c);
     double u_be = beta(v_b, v_c);
     double h = pl->h;
+    double v[3] = {v_a, v_b, v_c};
     for (int j = 0; j < pl->substeps; j++) {
         double tau_L = tau_load(pl, t0 + j * h);
-        plant_rk4(&pl->m, &pl->x, pl->imposed, PLANT_STAGE_HOT, -1, h, u_al, u_be, tau_L, NULL,
-                  NULL);
+        if (pl->metering) {
+            double ua, ub;
+            plant_rk4(&pl->m, &pl->x, pl->imposed, PLANT_STAGE_GENERAL, -1, h, u_al, u_be, tau_L,
+                      &ua, &ub, &pl->meter, v);
+        } else {
+            plant_rk4(&pl->m, &pl->x, pl->imposed, PLANT_STAGE_HOT, -1, h, u_al, u_be, tau_L, NULL,
+                      NULL, NULL, NULL);
+        }
     }
     pl->u_al = u_al;
     pl->u_be = u_be;
@@ -269,8 +293,10 @@ static void step_average_general(plant *pl, double d_a, double d_b, double d_c, 
         }
         double u_dc = pl->u_dc;
         double v[3] = {d_a * u_dc + e_a, d_b * u_dc + e_b, d_c * u_dc + e_c};
-        double u_al, u_be;
-        rk4_const(pl, h, v, tau_L, &u_al, &u_be);
+        double u_al = alpha(v[0], v[1], v[2]);
+        double u_be = beta(v[1], v[2]);
+        double ua, ub;
+        rk4_const(pl, h, v, tau_L, &ua, &ub);
         s_al += h * u_al;
         s_be += h * u_be;
         plant_currents(pl, i);
@@ -294,6 +320,7 @@ static void dead_with_clamp(plant *pl, double h, const double v[3], const int co
                             double i_out[3])
 {
     plant_state saved = pl->x;
+    plant_meter saved_meter = pl->meter;
     double ua, ub;
     rk4_const(pl, h, v, tau_L, &ua, &ub);
     double i_new[3];
@@ -317,6 +344,7 @@ static void dead_with_clamp(plant *pl, double h, const double v[3], const int co
         return;
     }
     pl->x = saved;
+    pl->meter = saved_meter;
     double h1 = frac * h;
     double ua1 = ua, ub1 = ub;
     if (h1 > 0.0) rk4_const(pl, h1, v, tau_L, &ua1, &ub1);
@@ -474,10 +502,171 @@ static void step_switching(plant *pl, double d_a, double d_b, double d_c, double
     pl->u_be = s_be / T;
 }
 
+/* -------------------------------------------------- the disabled bridge */
+void plant_back_emf(const plant *pl, double e[3])
+{
+    double psi0, L0;
+    plant_flux_d(&pl->m, 0.0, &psi0, &L0);
+    double th_e = pl->m.n_p * pl->x.th_m;
+    double amp = -pl->m.n_p * pl->x.w_m * psi0;
+    e[0] = amp * sin(th_e);
+    e[1] = amp * sin(th_e - PLANT_TWO_PI / 3.0);
+    e[2] = amp * sin(th_e + PLANT_TWO_PI / 3.0);
+}
+
+/* One RK4 step of the diode bridge: general stage, or phase fx floating. */
+static void rk4_bridge(plant *pl, double h, const double vs[3], int fx, double tau_L, double *ua,
+                       double *ub)
+{
+    if (fx >= 0) {
+        rk4_float(pl, h, vs, fx, tau_L, ua, ub);
+        return;
+    }
+    plant_rk4(&pl->m, &pl->x, pl->imposed, PLANT_STAGE_GENERAL, -1, h, alpha(vs[0], vs[1], vs[2]),
+              beta(vs[1], vs[2]), tau_L, ua, ub, pl->metering ? &pl->meter : NULL, vs);
+}
+
+/* One substep with all switches open; the mean stator voltage in alpha-beta. */
+static void substep_off(plant *pl, double h, double tau_L, double *ua, double *ub)
+{
+    double u_dc = pl->u_dc, eps = pl->i_eps;
+    double i[3];
+    plant_currents(pl, i);
+    int sgn[3] = {0, 0, 0};
+    for (int x = 0; x < 3; x++) {
+        if (i[x] > eps)
+            sgn[x] = 1;
+        else if (i[x] < -eps)
+            sgn[x] = -1;
+    }
+    int n_cond = (sgn[0] != 0) + (sgn[1] != 0) + (sgn[2] != 0);
+    int fx = -1;
+    if (n_cond < 2) {
+        /* all currents zero: open circuit unless the line back-EMF exceeds u_dc */
+        pl->x.i_d = 0.0;
+        pl->x.i_q = 0.0;
+        double e[3];
+        plant_back_emf(pl, e);
+        int hi = 0, lo = 0;
+        for (int x = 1; x < 3; x++) {
+            if (e[x] > e[hi]) hi = x;
+            if (e[x] < e[lo]) lo = x;
+        }
+        if (e[hi] - e[lo] <= u_dc) {
+            open_circuit(pl, h, tau_L, ua, ub);
+            return;
+        }
+        sgn[0] = sgn[1] = sgn[2] = 0;
+        sgn[hi] = -1;
+        sgn[lo] = 1;
+        fx = 3 - hi - lo;
+    } else if (n_cond == 2) {
+        fx = sgn[0] == 0 ? 0 : (sgn[1] == 0 ? 1 : 2);
+    }
+    double vs[3];
+    for (int x = 0; x < 3; x++) vs[x] = sgn[x] > 0 ? 0.0 : u_dc;
+    if (fx >= 0 && n_cond == 2) {
+        /* is the floating phase's pole voltage inside the rails? */
+        double vf[3] = {vs[0], vs[1], vs[2]};
+        vf[fx] = 0.0;
+        double d[5];
+        plant_machine_f_float(&pl->m, pl->imposed, pl->x.i_d, pl->x.i_q, pl->x.w_m, pl->x.th_m,
+                              alpha(vf[0], vf[1], vf[2]), beta(vf[1], vf[2]), fx, tau_L, d);
+        double v_x = d[4];
+        if (v_x > u_dc) {
+            sgn[fx] = -1;
+            fx = -1;
+        } else if (v_x < 0.0) {
+            sgn[fx] = 1;
+            fx = -1;
+        }
+        for (int x = 0; x < 3; x++) vs[x] = sgn[x] > 0 ? 0.0 : u_dc;
+    }
+    rk4_bridge(pl, h, vs, fx, tau_L, ua, ub);
+    /* current zeros within the substep */
+    double i_new[3];
+    plant_currents(pl, i_new);
+    int flipped[3], n_flip = 0, n_sgn = 0;
+    for (int x = 0; x < 3; x++) {
+        if (sgn[x] != 0) {
+            n_sgn++;
+            if (i_new[x] * sgn[x] <= 0.0) flipped[n_flip++] = x;
+        }
+    }
+    if (n_sgn - n_flip < 2) {
+        pl->x.i_d = 0.0;
+        pl->x.i_q = 0.0;
+    } else {
+        for (int k = 0; k < n_flip; k++) plant_zero_phase(&pl->m, &pl->x, flipped[k]);
+        if (fx >= 0) plant_zero_phase(&pl->m, &pl->x, fx);
+    }
+}
+
+static double neg_part(double x)
+{
+    return 0.0 < x ? 0.0 : x; /* Python's min(x, 0.0) */
+}
+
+/* The DC link receives i_dc = sum_x min(i_x, 0) (negative: it charges). */
+static void step_off_general(plant *pl, double t0)
+{
+    double T = pl->T_s, h_grid = pl->h, s_al = 0.0, s_be = 0.0, tau_L = 0.0;
+    long j_load = -1;
+    double i[3];
+    plant_currents(pl, i);
+    for (int n = 0; n < pl->n_segs; n++) {
+        double ta = pl->seg_a[n], tb = pl->seg_b[n];
+        long j = pl->seg_j[n];
+        if (j != j_load) {
+            tau_L = tau_load(pl, t0 + j * h_grid);
+            j_load = j;
+        }
+        double h = tb - ta;
+        double i0 = neg_part(i[0]) + neg_part(i[1]) + neg_part(i[2]);
+        if (pl->dc.dynamic && pl->dc.c_dc == 0.0) pl->u_dc = plant_dclink_algebraic(&pl->dc, i0);
+        double ua, ub;
+        substep_off(pl, h, tau_L, &ua, &ub);
+        s_al += h * ua;
+        s_be += h * ub;
+        plant_currents(pl, i);
+        if (pl->dc.dynamic) {
+            double i1 = neg_part(i[0]) + neg_part(i[1]) + neg_part(i[2]);
+            dc_update(pl, h, 0.5 * (i0 + i1), i1);
+        }
+        if (tb == pl->t_meas) record_meas(pl, i);
+    }
+    pl->u_al = s_al / T;
+    pl->u_be = s_be / T;
+}
+
+int plant_step_off(plant *pl, double t0)
+{
+    pl->err = 0;
+    pl->meter.q_a = pl->meter.q_b = pl->meter.q_c = 0.0;
+    plant_pwm_disable(&pl->pwm);
+    if (!(pl->dc.dynamic || pl->t_meas > 0.0)) {
+        double h = pl->h, sa = 0.0, sb = 0.0;
+        for (int j = 0; j < pl->substeps; j++) {
+            double ua, ub;
+            substep_off(pl, h, tau_load(pl, t0 + j * h), &ua, &ub);
+            sa += ua;
+            sb += ub;
+        }
+        pl->u_al = sa / pl->substeps;
+        pl->u_be = sb / pl->substeps;
+    } else {
+        step_off_general(pl, t0);
+    }
+    if (pl->err) return PLANT_ERR_LOAD;
+    pl->x.th_m = plant_py_mod(pl->x.th_m, PLANT_TWO_PI);
+    return PLANT_OK;
+}
+
 /* ---------------------------------------------------------- the period */
 int plant_step(plant *pl, double d_a, double d_b, double d_c, double t0)
 {
     pl->err = 0;
+    pl->meter.q_a = pl->meter.q_b = pl->meter.q_c = 0.0;
     if (pl->switching)
         step_switching(pl, d_a, d_b, d_c, t0);
     else if (pl->avg_general)

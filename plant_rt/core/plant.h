@@ -24,6 +24,7 @@
 #include "plant_dclink.h"
 #include "plant_machine.h"
 #include "plant_pwm.h"
+#include "plant_rk4.h"
 #include "plant_sensors.h"
 
 #define PLANT_MAX_SUBSTEPS 64
@@ -78,6 +79,9 @@ typedef struct {
     int load_const;
     double tau_const;
     int err; /* the load callback failed in this period */
+    /* energy meter (off unless metering is set) */
+    int metering;
+    plant_meter meter;
 } plant;
 
 /* Errors. */
@@ -98,6 +102,16 @@ int plant_set_pars(plant *pl, const plant_pars *p);
 /* One enabled period from t0 (s) with duties clamped to [0, 1]. */
 int plant_step(plant *pl, double d_a, double d_b, double d_c, double t0);
 
+/* One period from t0 (s) with all switches open: the legs are a diode
+ * bridge. A conducting phase sits on the negative rail when its current
+ * flows into the machine and on the positive rail otherwise; a phase whose
+ * current is zero floats (its pole voltage solved from d i_x / dt = 0) and
+ * conducts once that voltage leaves [0, u_dc]; with all currents zero the
+ * bridge rectifies when the line back-EMF exceeds u_dc. Ideal diodes; the
+ * conduction state is decided at the start of each substep and a current
+ * that changes sign inside one is set to zero at its end. */
+int plant_step_off(plant *pl, double t0);
+
 /* Per-period output of plant_step_n. */
 typedef struct {
     double i_d, i_q, w_m, th_m, u_dc, u_al, u_be;
@@ -107,6 +121,9 @@ typedef struct {
  * out (may be NULL) receives the states after each. Stops at an error and
  * returns it; *done receives the periods completed. */
 int plant_step_n(plant *pl, long k0, long n, const double *duties, plant_out *out, long *done);
+
+/* Phase back-EMF -w_e psi_d(0) sin(theta_e - phi_x) now (V). */
+void plant_back_emf(const plant *pl, double e[3]);
 
 /* The true phase currents now. */
 void plant_currents(const plant *pl, double i[3]);

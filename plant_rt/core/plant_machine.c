@@ -159,6 +159,18 @@ void plant_machine_f_float(const plant_machine *m, int imposed, double i_d, doub
     out[4] = v_x;
 }
 
+double plant_machine_torque(const plant_machine *m, double i_d, double i_q)
+{
+    if (m->cross) {
+        double fl[5];
+        plant_flux_dq(m, i_d, i_q, fl);
+        return m->k_tau * (fl[0] * i_q - fl[1] * i_d);
+    }
+    double psi_d, L_dd;
+    plant_flux_d(m, i_d, &psi_d, &L_dd);
+    return m->k_tau * (psi_d - m->L_q * i_d) * i_q;
+}
+
 /* Inverse Park and Clarke (amplitude invariant). */
 void plant_currents_abc(const plant_machine *m, const plant_state *s, double out[3])
 {

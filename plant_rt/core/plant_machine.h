@@ -85,6 +85,9 @@ void plant_machine_f_float(const plant_machine *m, int imposed, double i_d, doub
                            double w_m, double th_m, double u_al0, double u_be0, int x,
                            double tau_L, double out[5]);
 
+/* Electromagnetic torque 1.5 n_p (psi_d i_q - psi_q i_d) (N m). */
+double plant_machine_torque(const plant_machine *m, double i_d, double i_q);
+
 /* Phase currents from the d-q currents at the rotor angle. */
 void plant_currents_abc(const plant_machine *m, const plant_state *s, double out[3]);
 

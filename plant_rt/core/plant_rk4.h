@@ -12,6 +12,13 @@
 
 #include "plant_machine.h"
 
+/* Energy integrals (J) and the charge of each phase in the last period
+ * (A s), integrated with the states (plant_rt.EnergyMeter). */
+typedef struct {
+    double e_in, e_cu, e_em, e_fric, e_load;
+    double q_a, q_b, q_c;
+} plant_meter;
+
 /* Stage kinds: the hot stage (plant_machine_stage), the general stage
  * (plant_machine_f) and the stage with one phase floating
  * (plant_machine_f_float). */
@@ -19,8 +26,12 @@ enum { PLANT_STAGE_HOT = 0, PLANT_STAGE_GENERAL = 1, PLANT_STAGE_FLOAT = 2 };
 
 /* One step of length h. kind PLANT_STAGE_FLOAT needs the floating phase fx
  * (0..2) and the voltage (u_al, u_be) of the other legs; *ua, *ub (may be
- * NULL for the hot stage) receive the RK4-weighted mean stator voltage. */
+ * NULL for the hot stage) receive the RK4-weighted mean stator voltage.
+ * With a meter (general and floating stages only) the energy flows are
+ * integrated with the stages' weights from the pole voltages v (v[fx]
+ * replaced by the floating leg's voltage at each stage). */
 void plant_rk4(const plant_machine *m, plant_state *s, int imposed, int kind, int fx, double h,
-               double u_al, double u_be, double tau_L, double *ua, double *ub);
+               double u_al, double u_be, double tau_L, double *ua, double *ub, plant_meter *meter,
+               const double v[3]);
 
 #endif
