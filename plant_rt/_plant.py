@@ -167,7 +167,8 @@ class Plant:
     load : LoadProfile, optional
         Load-torque profile; no load by default.
     substeps : int, optional
-        RK4 steps per PWM period (average model); the switching model cuts
+        RK4 steps per PWM period (average model), 1 to 64 (the core's
+        ``PLANT_MAX_SUBSTEPS``, its fixed-size grid); the switching model cuts
         its sub-intervals at the same grid, so none is longer than
         ``T_s / substeps``, and evaluates the load torque at each grid point.
     saturation : bool, optional
@@ -260,8 +261,10 @@ class Plant:
     ) -> None:
         if not T_s > 0.0:
             raise ValueError(f"T_s must be > 0, got {T_s}")
-        if int(substeps) != substeps or substeps < 1:
-            raise ValueError(f"substeps must be a positive integer, got {substeps}")
+        if int(substeps) != substeps or not 1 <= substeps <= _cplant.MAX_SUBSTEPS:
+            raise ValueError(
+                f"substeps must be an integer in 1..{_cplant.MAX_SUBSTEPS}, got {substeps}"
+            )
         sens = sensors if sensors is not None else SensorPars()
         if not sens.t_delay < T_s:
             raise ValueError(f"SensorPars.t_delay must be below T_s = {T_s} s, got {sens.t_delay}")

@@ -224,3 +224,13 @@ def test_set_parameters_between_two_steps(engine: str) -> None:
     assert a.truth().w_m != unchanged.truth().w_m
     with pytest.raises(ValueError, match="model and sample_at"):
         a.set_parameters(inverter=replace(a.inverter, model="average"))
+
+
+def test_substeps_beyond_the_core_grid_is_one_clear_error() -> None:
+    """The core's grid is fixed-size (no allocation): 64 substeps run, 65 are refused."""
+    pre = preset("wen2023")
+    plant = Plant(pre.motor, pre.inverter, pre.T_s, substeps=64, w_m0=10.0)
+    plant.step(0.6, 0.4, 0.5)
+    assert plant.truth().i_d != 0.0
+    with pytest.raises(ValueError, match=r"substeps must be an integer in 1\.\.64, got 65"):
+        Plant(pre.motor, pre.inverter, pre.T_s, substeps=65)
