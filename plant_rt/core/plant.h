@@ -7,7 +7,7 @@
  * two periods and keeps the states, plant_step advances one enabled period,
  * plant_step_n advances n periods with an array of duties.
  *
- * Average model (Holmes and Lipo 2003, sec. 4.4): the period-mean pole
+ * Average model (Holmes and Lipo 2003): the period-mean pole
  * voltages d_x u_dc plus the dead-time and device-drop errors
  * (plant_pwm.h), constant in alpha-beta over the period, integrated by
  * RK4 in substeps (plant_rk4.h). Switching model: the period is cut at every

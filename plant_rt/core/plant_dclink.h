@@ -2,8 +2,8 @@
  *
  *     c_dc d u_dc / dt = (u_src - u_dc) / r_dc - i_dc
  *
- * (Mohan, Undeland and Robbins, Power Electronics (2003), sec. 8.7, the
- * DC-side current of a three-phase inverter), advanced exactly over a step
+ * (i_dc the current the legs on the positive rail draw), advanced exactly
+ * over a step
  * of length h for a constant i_dc:
  *
  *     u_dc(h) = u_inf + (u_dc(0) - u_inf) exp(-h / (r_dc c_dc)),  u_inf = u_src - r_dc i_dc

@@ -2,8 +2,7 @@
  * current beyond +-i_trip, a DC-link voltage above u_dc_trip or a speed
  * beyond +-w_m_trip trips, checked in that order; NaN trips (a comparator
  * cannot be fooled by it). The latch, the first fault winning until a
- * reset (IEC 61800-5-2 sec. 4.2.2, safe torque off on a detected fault), is
- * plant_protection_check's caller's.
+ * reset, is the caller's (plant_rt.Protection).
  */
 #ifndef PLANT_PROTECTION_H
 #define PLANT_PROTECTION_H

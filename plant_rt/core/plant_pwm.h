@@ -6,11 +6,11 @@
  * and the carrier's peak on the boundary a leg is low on [0, (1 - d) T/2),
  * high to (1 + d) T/2, low to T; with the valley on the boundary it is high
  * on [0, d T/2), low to T - d T/2, high to T. Each edge is followed by a
- * dead interval of t_dead in which both switches are open (Holmes and Lipo,
- * Pulse Width Modulation for Power Converters (2003), sec. 4.4, and the
- * dead-time voltage error of sec. 11.2: dv = -sign(i) u_dc t_dead / T_s).
- * Device drops: Mohan, Undeland and Robbins, Power Electronics (2003),
- * sec. 8.6 (v_ce on a conducting transistor, v_f on a diode).
+ * dead interval of t_dead in which both switches are open (regular-sampled
+ * symmetric PWM and its dead-time voltage error dv = -sign(i) u_dc t_dead /
+ * T_s, Holmes and Lipo, Pulse Width Modulation for Power Converters, 2003).
+ * Device drops: v_ce on a conducting transistor, v_f on a diode, weighted
+ * by the leg's time on each rail.
  */
 #ifndef PLANT_PWM_H
 #define PLANT_PWM_H

@@ -1,4 +1,4 @@
-/* Classic RK4 (Butcher 2016, eq. (235a)) on the states of plant_machine.h. */
+/* Classic RK4 (Kutta 1901; Butcher 2016) on the states of plant_machine.h. */
 #include "plant_rk4.h"
 
 #include <math.h>

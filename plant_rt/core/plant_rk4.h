@@ -1,8 +1,8 @@
 /* Classic fourth-order Runge-Kutta step of the machine's states.
  *
- * Butcher, Numerical Methods for Ordinary Differential Equations (2016),
- * eq. (235a) (the classic RK4 tableau): stage offsets 0, h/2, h/2, h and
- * weights 1, 2, 2, 1 over 6. The states are (i_d, i_q, w_m, theta_m); the
+ * The classic fourth-order method of Kutta (1901), as tabulated in Butcher,
+ * Numerical Methods for Ordinary Differential Equations (Wiley, 2016): stage
+ * offsets 0, h/2, h/2, h and weights 1, 2, 2, 1 over 6. The states are (i_d, i_q, w_m, theta_m); the
  * stator voltage is constant in alpha-beta over the step, so each stage
  * rotates it into d-q at its own rotor angle. One kernel for every flux map
  * and every stage kind: the stage derivative is chosen by a switch.

@@ -2,10 +2,9 @@
  *
  * ADC (plant_rt._sensors.SensorPars): measured = gain x true + offset +
  * noise, quantised to the nearest code of a mid-tread converter,
- * code = floor(x / lsb + 1/2) clamped to the converter's range (Kester,
- * The Data Conversion Handbook (2005), sec. 2.1: bipolar codes
- * [-2^(bits-1), 2^(bits-1) - 1] for the currents, unipolar [0, 2^bits - 1]
- * for the voltage).
+ * code = floor(x / lsb + 1/2) clamped to the converter's range: bipolar
+ * codes [-2^(bits-1), 2^(bits-1) - 1] for the currents, unipolar
+ * [0, 2^bits - 1] for the voltage.
  * Encoder: the angle encoder_delay_s earlier at the present speed, reported
  * as the whole count reached of N per revolution.
  */
