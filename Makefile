@@ -6,15 +6,15 @@ STAMP := $(VENV)/.installed
 
 .PHONY: demo test lint unit vcan suite reference perf docs docs-site rtcheck reliability faults clean
 
-# pip builds the compiled plant and controller engines (setup.py); tools/need-cc
-# installs their compiler and headers first when it may, and the last lines say
-# when the plant or the controller runs in pure Python instead.
-$(STAMP): pyproject.toml setup.py plant_rt/_cplant.c controller/_cctl.c
+# pip builds the plant's core and the compiled controller (setup.py); tools/need-cc
+# installs their compiler and headers first when it may. The plant's core is
+# required; the last line says when the controller runs in pure Python instead.
+$(STAMP): pyproject.toml setup.py plant_rt/_cplant.c $(wildcard plant_rt/core/*.[ch]) controller/_cctl.c
 	test -x $(BIN)/pip || tools/make-venv $(PYTHON) $(VENV)
 	tools/need-cc $(BIN)/python
 	$(BIN)/python -m pip install -q --upgrade pip
 	$(BIN)/python -m pip install -q -e '.[dev,dask,docs,mf4,parquet]'
-	$(BIN)/python -c 'import plant_rt; w = plant_rt.compiled_engine_missing(); w and print(w)'
+	$(BIN)/python -c 'import plant_rt'
 	$(BIN)/python -c 'import controller; w = controller.compiled_controller_missing(); w and print(w)'
 	touch $(STAMP)
 

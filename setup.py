@@ -1,10 +1,11 @@
-"""Build of the compiled engines, ``plant_rt/_cplant.c`` and ``controller/_cctl.c``
-(the rest is in pyproject.toml).
+"""Build of the compiled engines, ``plant_rt/_cplant.c`` with the plant's core
+(``plant_rt/core/*.c``) and ``controller/_cctl.c`` (the rest is in pyproject.toml).
 
-The extensions are optional: on a machine without a C compiler or Python's
-headers the project installs all the same, one line per engine says that it
-was not built, and the plant and the controller run in pure Python
-(:mod:`plant_rt._engine`, :mod:`controller._engine`).
+The plant's core is required: the plant's equations exist only in C, so an
+install without a C compiler or Python's headers stops with one line saying
+so (``tools/need-cc`` installs them). The controller's extension is optional:
+without it one line says that it was not built and the controller runs in
+pure Python (:mod:`controller._engine`).
 ``-ffp-contract=off`` keeps the compiler from fusing a multiply and an add
 (one rounding instead of two, as on aarch64 by default), so that the C step
 rounds as the Python step does and the two engines agree bit for bit.
@@ -13,10 +14,12 @@ rounds as the Python step does and the two engines agree bit for bit.
 from __future__ import annotations
 
 import sys
+from pathlib import Path
 
 from setuptools import Extension, setup
 from setuptools.command.build_ext import build_ext
 
+_REQUIRED = {"plant_rt._cplant"}
 _WHAT = {
     "plant_rt._cplant": ("plant_rt", "plant"),
     "controller._cctl": ("controller", "controller"),
@@ -38,13 +41,27 @@ class OptionalBuildExt(build_ext):
     def run(self) -> None:
         try:
             super().run()
+        except SystemExit:
+            raise
         except Exception as e:
+            if _REQUIRED:
+                raise SystemExit(
+                    f"can-hil-bench: the plant core cannot be built ({type(e).__name__}: {e}); "
+                    "it needs a C compiler and Python's headers: run tools/need-cc, then "
+                    "install again"
+                ) from None
             _not_built(e)
 
     def build_extension(self, ext: Extension) -> None:
         try:
             super().build_extension(ext)
         except Exception as e:
+            if ext.name in _REQUIRED:
+                raise SystemExit(
+                    f"can-hil-bench: the plant core ({ext.name}) cannot be built "
+                    f"({type(e).__name__}: {e}); it needs a C compiler and Python's headers: "
+                    "run tools/need-cc, then install again"
+                ) from None
             _not_built(e, ext.name)
 
 
@@ -52,7 +69,9 @@ setup(
     ext_modules=[
         Extension(
             "plant_rt._cplant",
-            ["plant_rt/_cplant.c"],
+            # the binding and the portable core (plant_rt/core/, plain C99)
+            ["plant_rt/_cplant.c", *sorted(str(p) for p in Path("plant_rt/core").glob("*.c"))],
+            depends=sorted(str(p) for p in Path("plant_rt/core").glob("*.h")),
             extra_compile_args=["-O2", "-ffp-contract=off", "-fno-fast-math"],
         ),
         Extension(

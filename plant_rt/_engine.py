@@ -1,83 +1,68 @@
-"""The plant's engines: the per-period step in pure Python or compiled.
+"""The plant's engine: the portable C core (``plant_rt/core/``) through its binding.
 
-``"python"``: :class:`plant_rt.Plant` as written in :mod:`plant_rt._plant`.
-``"compiled"``: the same step in C (``plant_rt/_cplant.c``, built by
-``pip install`` when the machine has a C compiler and Python's headers), a
-second implementation that mirrors the Python one operation for operation
-and gives the same trace bit for bit (``tests/test_plant_engine.py``). It
-covers the enabled periods of the average and the switching model; the
-disabled bridge, the energy meter and the sensors stay in Python on the
-same state. ``"auto"``: compiled when it is built, else Python.
+Every per-period equation of the plant lives once, in C99 (``plant_rt/core/``:
+machine and flux map, RK4, PWM timeline and dead time, DC link, sensors,
+protection, the period step), with no Python in it, so that the bench's
+native node and a drive's own firmware can link the same code
+(``gcc -std=c99 -c plant_rt/core/*.c``). ``plant_rt/_cplant.c`` hands the
+parameters and states across. The package therefore needs a C compiler and
+Python's headers when it is installed (``tools/need-cc`` installs them;
+``make .venv/.installed`` runs it first): without the built core
+``import plant_rt`` fails with one line saying so.
 
 Why C. Measured on the average model's period (wen2023, 10 kHz, the
 duties of a closed loop replayed, median of 7 runs, one process): the
 Python step 5.5 us; the same ``.py`` files compiled by Cython in
-pure-Python mode 6.4 us (no gain without rewriting them in Cython's
-types); by mypyc 1.2 us (4.5x, and 20 us for the switching model's
-sample and step); a numba kernel 0.47 us per call, after 0.28 s to import
-numba and a JIT compile at the first start of every node process unless
-its cache is kept; a C extension 0.19 us; Rust through PyO3 0.21 us, with
-a Rust toolchain and crates to fetch on every machine. C needs only what
-any compiled option needs (gcc and Python's headers, which
-``tools/need-cc`` installs), builds in under a second, imports in a
-millisecond, and lets both engines live in one process, so that the test
-compares them directly; its cost is the second implementation, which the
-bit-for-bit tests keep equal to this one.
+pure-Python mode 6.4 us; by mypyc 1.2 us; a numba kernel 0.47 us per call,
+after 0.28 s to import numba and a JIT compile at every node start; a C
+extension 0.19 us; Rust through PyO3 0.21 us, with a Rust toolchain on every
+machine. C needs only gcc and Python's headers, builds in under a second,
+imports in a millisecond, and is what a microcontroller runs.
+
+The ``engine`` choice of :class:`plant_rt.Plant` (and ``bench run
+--engine``) is kept for the controller and for compatibility: the plant
+has one engine, the core, whatever the choice (``"compiled"``).
 """
 
 from __future__ import annotations
 
-from types import ModuleType
 from typing import Literal
+
+__all__ = ["ENGINES", "EngineName", "_cplant", "compiled_engine_missing", "resolve_engine"]
 
 EngineName = Literal["auto", "compiled", "python"]
 ENGINES: tuple[str, ...] = ("auto", "compiled", "python")
-"""The engine choices of :class:`plant_rt.Plant` (``engine=``)."""
+"""The engine choices of :class:`plant_rt.Plant` (``engine=``); the plant runs its C core for each."""
 
-_cplant: ModuleType | None
-_why_not: str | None
 try:
-    import plant_rt._cplant as _built
+    import plant_rt._cplant as _cplant
 except ImportError as e:  # not built on this machine
-    _cplant = None
-    _why_not = (
-        f"the compiled plant engine is not built ({e}; it needs a C compiler and Python's "
-        "headers when the project is installed): the plant runs in pure Python"
-    )
-else:
-    _cplant = _built
-    _why_not = None
+    raise ImportError(
+        f"plant_rt: the plant core (plant_rt/core, C) is not built ({e}): install a C compiler "
+        "and Python's headers (tools/need-cc) and reinstall the project (pip install -e .)"
+    ) from None
 
 
 def compiled_engine_missing() -> str | None:
-    """None when the compiled engine is built, else one line saying why the plant runs in Python."""
-    return _why_not
+    """None: the plant's core is always built (``import plant_rt`` fails without it)."""
+    return None
 
 
 def resolve_engine(engine: str, meter: bool = False) -> str:
-    """The engine a plant runs on, ``"compiled"`` or ``"python"``.
+    """The engine a plant runs on: ``"compiled"`` (its C core) for every known choice.
 
     Parameters
     ----------
     engine : {"auto", "compiled", "python"}
-        The choice; ``"auto"`` takes the compiled engine when it is built.
+        The choice (kept for the controller's engines and for compatibility).
     meter : bool
-        The plant integrates its energy flows (only the Python engine does).
+        The plant integrates its energy flows (the core does that too).
 
     Raises
     ------
     ValueError
-        For an unknown name, or ``"compiled"`` when it is not built or with
-        the energy meter.
+        For an unknown name.
     """
     if engine not in ENGINES:
         raise ValueError(f"unknown plant engine {engine!r} (known: {', '.join(ENGINES)})")
-    if engine == "python":
-        return "python"
-    if engine == "compiled":
-        if _why_not is not None:
-            raise ValueError(_why_not)
-        if meter:
-            raise ValueError("the energy meter (meter=True) runs on the python engine only")
-        return "compiled"
-    return "compiled" if _why_not is None and not meter else "python"
+    return "compiled"

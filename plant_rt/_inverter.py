@@ -12,7 +12,9 @@ point floats, so only the differential part reaches the windings::
 
 The switching model (``InverterPars.model = "switching"``) resolves the
 carrier, the dead time and the device drops edge by edge; its timeline is
-:mod:`plant_rt._pwm`, its integration :class:`plant_rt.Plant`.
+``plant_rt/core/plant_pwm.c``, its integration ``plant_rt/core/plant.c``.
+:func:`dead_time_error` and :func:`device_drop_error` are the core's
+(``plant_pwm.c``), called through its binding.
 """
 
 from __future__ import annotations
@@ -21,8 +23,7 @@ import math
 from dataclasses import dataclass
 from typing import Literal
 
-SQRT3 = math.sqrt(3.0)
-INV_SQRT3 = 1.0 / SQRT3
+from plant_rt._engine import _cplant
 
 InverterModel = Literal["average", "switching"]
 SampleAt = Literal["peak", "valley"]
@@ -106,20 +107,6 @@ class InverterPars:
         return self.r_dc > 0.0
 
 
-def clamp_duty(d: float) -> float:
-    """Clamp a duty cycle to [0, 1]; NaN becomes 0."""
-    if d > 1.0:
-        return 1.0
-    if d >= 0.0:
-        return d
-    return 0.0
-
-
-def pole_to_ab(v_a: float, v_b: float, v_c: float) -> tuple[float, float]:
-    """Pole voltages (V, referred to the negative rail) to the stator voltage in alpha-beta (V)."""
-    return (2.0 * v_a - v_b - v_c) / 3.0, (v_b - v_c) * INV_SQRT3
-
-
 def dead_time_error(i_x: float, u_dc: float, t_dead: float, T_s: float) -> float:
     """Mean pole-voltage error of one leg caused by dead time (V).
 
@@ -143,11 +130,7 @@ def dead_time_error(i_x: float, u_dc: float, t_dead: float, T_s: float) -> float
     T_s : float
         PWM period (s).
     """
-    if i_x > 0.0:
-        return -u_dc * t_dead / T_s
-    if i_x < 0.0:
-        return u_dc * t_dead / T_s
-    return 0.0
+    return _cplant.dead_time_error(i_x, u_dc, t_dead, T_s)
 
 
 def device_drop_error(i_x: float, d_x: float, v_ce: float, v_f: float) -> float:
@@ -172,8 +155,4 @@ def device_drop_error(i_x: float, d_x: float, v_ce: float, v_f: float) -> float:
     v_ce, v_f : float
         Transistor on-state and diode forward voltages (V).
     """
-    if i_x > 0.0:
-        return -(d_x * v_ce + (1.0 - d_x) * v_f)
-    if i_x < 0.0:
-        return d_x * v_f + (1.0 - d_x) * v_ce
-    return 0.0
+    return _cplant.device_drop_error(i_x, d_x, v_ce, v_f)

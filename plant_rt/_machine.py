@@ -23,6 +23,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+from plant_rt._engine import _cplant
+
 
 @dataclass(frozen=True, slots=True)
 class SaturationPars:
@@ -208,13 +210,27 @@ def flux_d(motor: MotorPars, i_d: float, saturation: bool) -> tuple[float, float
     L_dd : float
         Incremental d-axis inductance (H).
     """
-    if not saturation:
-        return motor.psi_f + motor.L_d * i_d, motor.L_d
-    sat = motor.sat
-    x = i_d / sat.i_sat
-    r = math.sqrt(1.0 + x * x)
-    psi_d = motor.psi_f + motor.L_d * (i_d - sat.sigma * sat.i_sat * (r - 1.0))
-    return psi_d, motor.L_d * (1.0 - sat.sigma * x / r)
+    out = _machine(motor, i_d, 0.0, saturation, False)
+    return out[0], out[2]
+
+
+def _machine(
+    motor: MotorPars, i_d: float, i_q: float, saturation: bool, cross: bool
+) -> tuple[float, float, float, float, float, float]:
+    """The core's flux map and torque (``plant_rt/core/plant_machine.c``, its one home)."""
+    return _cplant.machine(
+        float(motor.n_p),
+        float(motor.L_d),
+        float(motor.L_q),
+        float(motor.psi_f),
+        float(motor.sat.sigma),
+        float(motor.sat.i_sat),
+        float(motor.cross.c_dq),
+        saturation,
+        cross,
+        float(i_d),
+        float(i_q),
+    )
 
 
 def magnetic_energy(
@@ -273,11 +289,7 @@ def torque(
 
     Linear case: ``1.5 n_p (psi_f i_q + (L_d - L_q) i_d i_q)``.
     """
-    if cross:
-        psi_d, psi_q, _, _, _ = flux_dq(motor, i_d, i_q, saturation, True)
-        return 1.5 * motor.n_p * (psi_d * i_q - psi_q * i_d)
-    psi_d, _ = flux_d(motor, i_d, saturation)
-    return 1.5 * motor.n_p * (psi_d - motor.L_q * i_d) * i_q
+    return _machine(motor, i_d, i_q, saturation, cross)[5]
 
 
 def flux_dq(
@@ -307,21 +319,7 @@ def flux_dq(
         Incremental inductances ``d psi_d / d i_d``, ``d psi_d / d i_q =
         d psi_q / d i_d`` and ``d psi_q / d i_q`` (H).
     """
-    psi_d, L_dd = flux_d(motor, i_d, saturation)
-    L_q = motor.L_q
-    if not cross:
-        return psi_d, L_q * i_q, L_dd, 0.0, L_q
-    c = motor.cross.c_dq
-    i_0 = motor.psi_f / motor.L_d
-    m = i_d + i_0
-    g = i_d * (i_d + 2.0 * i_0)  # m^2 - i_0^2
-    return (
-        psi_d - 0.5 * c * m * i_q * i_q,
-        (L_q - 0.5 * c * g) * i_q,
-        L_dd - 0.5 * c * i_q * i_q,
-        -c * m * i_q,
-        L_q - 0.5 * c * g,
-    )
+    return _machine(motor, i_d, i_q, saturation, cross)[:5]
 
 
 def cross_saturation_check(motor: MotorPars, saturation: bool, i_max: float) -> None:

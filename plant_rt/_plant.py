@@ -6,6 +6,12 @@ at ``t = k T_s`` (symmetric PWM: the carrier peak falls on the period
 boundary of the average model), :meth:`Plant.step` applies duties for period
 ``k`` and advances to ``k + 1``.
 
+The arithmetic of every period is the portable C core's
+(``plant_rt/core/``, one file per block: machine and flux map, RK4, PWM
+timeline and dead time, DC link, sensors, protection, the period step);
+this class holds the parameters, the states between periods and the
+public API, and hands them to the core through ``plant_rt/_cplant.c``.
+
 Integration: classic RK4 with ``substeps`` fixed steps per period on the
 states ``(i_d, i_q, w_m, theta_m)``. The average inverter voltage is constant
 over the period in the stationary alpha-beta frame, not in d-q, so every RK4
@@ -14,7 +20,7 @@ stage rotates it into d-q with the stage's own rotor angle (at 1 kHz and
 evaluated once per substep, at its start.
 
 Switching inverter (``InverterPars.model = "switching"``): the period is cut
-at every switching edge, every end of a dead interval (:mod:`plant_rt._pwm`),
+at every switching edge, every end of a dead interval (``plant_rt/core/plant_pwm.h``),
 the substep grid ``j T_s / substeps`` and the sensor instant, and each
 sub-interval, over which every pole voltage is constant, is one RK4 step with
 the rotor angle moving inside it. Exact sub-interval solutions (matrix
@@ -32,34 +38,17 @@ interval adds one (class notes).
 from __future__ import annotations
 
 import math
+from array import array
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
 from plant_rt._engine import _cplant, resolve_engine
-from plant_rt._inverter import (
-    INV_SQRT3,
-    SQRT3,
-    InverterPars,
-    clamp_duty,
-    dead_time_error,
-    device_drop_error,
-)
+from plant_rt._inverter import InverterPars
 from plant_rt._load import ConstantLoad, LoadProfile
-from plant_rt._machine import (
-    MotorPars,
-    cross_saturation_check,
-    flux_d,
-    flux_dq,
-    magnetic_energy,
-)
-from plant_rt._pwm import DEAD, HIGH, PwmTimeline
+from plant_rt._machine import MotorPars, cross_saturation_check, magnetic_energy
 from plant_rt._sensors import SensorPars, Sensors
 
 TWO_PI = 2.0 * math.pi
-# Phase axes a, b, c at 0, +120 and -120 degrees.
-_COS_PHI = (1.0, -0.5, -0.5)
-_SIN_PHI = (0.0, 0.5 * SQRT3, -0.5 * SQRT3)
-# RK4 stages: (offset as a fraction of the step, weight).
-_RK4_STAGES = ((0.0, 1.0), (0.5, 2.0), (0.5, 2.0), (1.0, 1.0))
 
 
 @dataclass(frozen=True, slots=True)
@@ -178,7 +167,8 @@ class Plant:
     load : LoadProfile, optional
         Load-torque profile; no load by default.
     substeps : int, optional
-        RK4 steps per PWM period (average model); the switching model cuts
+        RK4 steps per PWM period (average model), 1 to 64 (the core's
+        ``PLANT_MAX_SUBSTEPS``, its fixed-size grid); the switching model cuts
         its sub-intervals at the same grid, so none is longer than
         ``T_s / substeps``, and evaluates the load torque at each grid point.
     saturation : bool, optional
@@ -193,15 +183,14 @@ class Plant:
     i_d0, i_q0 : float, optional
         Initial d- and q-axis currents (A).
     engine : {"auto", "compiled", "python"}, optional
-        Which implementation runs the enabled periods (:mod:`plant_rt._engine`):
-        the compiled step gives the Python step's trace bit for bit, several
-        times faster; ``"auto"`` takes it when it is built and the energy
-        meter is off. The engine in use is :attr:`engine`.
+        Kept for compatibility (``bench run --engine`` chooses the
+        controller's engine): the plant runs its C core for every choice
+        (:mod:`plant_rt._engine`); :attr:`engine` is ``"compiled"``.
 
     Notes
     -----
     Switching inverter. Each leg's pole voltage over a sub-interval follows
-    its gate state (:mod:`plant_rt._pwm`) and the direction of its phase
+    its gate state (``plant_rt/core/plant_pwm.h``) and the direction of its phase
     current at the start of the sub-interval (a conducting device's drop
     does not change sign inside one)::
 
@@ -272,8 +261,10 @@ class Plant:
     ) -> None:
         if not T_s > 0.0:
             raise ValueError(f"T_s must be > 0, got {T_s}")
-        if int(substeps) != substeps or substeps < 1:
-            raise ValueError(f"substeps must be a positive integer, got {substeps}")
+        if int(substeps) != substeps or not 1 <= substeps <= _cplant.MAX_SUBSTEPS:
+            raise ValueError(
+                f"substeps must be an integer in 1..{_cplant.MAX_SUBSTEPS}, got {substeps}"
+            )
         sens = sensors if sensors is not None else SensorPars()
         if not sens.t_delay < T_s:
             raise ValueError(f"SensorPars.t_delay must be below T_s = {T_s} s, got {sens.t_delay}")
@@ -295,68 +286,78 @@ class Plant:
         self._w_m = float(w_m0)
         self._th_m = float(theta_m0) % TWO_PI
         self._w_imp: float | None = None
-        # Constants for the per-step code (Python floats).
-        self._n_p = float(motor.n_p)
-        self._R = float(motor.R_s)
-        self._L_d = float(motor.L_d)
-        self._L_q = float(motor.L_q)
-        self._psi_f = float(motor.psi_f)
-        self._b = float(motor.b)
-        self._inv_J = 1.0 / motor.J
-        self._k_tau = 1.5 * motor.n_p
-        self._sig = float(motor.sat.sigma)
-        self._inv_i_sat = 1.0 / motor.sat.i_sat
-        self._sig_isat = motor.sat.sigma * motor.sat.i_sat
         self._u_dc = float(inverter.u_dc)
-        self._h = self.T_s / self.substeps
-        self._i_eps = 1e-9 * max(1.0, motor.i_max)
         self.meter: EnergyMeter | None = EnergyMeter() if meter else None
         self._sample: Sample | None = None
         # Mean stator voltage in alpha-beta over the last period (V).
         self.u_s_ab = (0.0, 0.0)
-        # Cross-saturation constants.
-        self._c_dq = float(motor.cross.c_dq)
-        self._i_0 = motor.psi_f / motor.L_d
-        # Inverter: switching timeline, device drops, DC link.
         self._switching = inverter.model == "switching"
-        self._pwm = (
-            PwmTimeline(self.T_s, inverter.t_dead, inverter.sample_at) if self._switching else None
-        )
-        self._v_ce = float(inverter.v_ce)
-        self._v_f = float(inverter.v_f)
-        self._drops = inverter.v_ce > 0.0 or inverter.v_f > 0.0
-        self._u_src = float(inverter.u_dc)
-        self._r_dc = float(inverter.r_dc)
-        self._c_dc = float(inverter.c_dc)
-        self._dc_dyn = inverter.r_dc > 0.0
+        self._pwm_peak = inverter.sample_at == "peak"
         # Sensor delay: the state at T_s - t_delay of each period, sampled at the next.
         self._t_meas = self.T_s - sens.t_delay if sens.t_delay > 0.0 else 0.0
         self._meas: tuple[int, float, float, float, float] | None = None
-        # Cut points of the switching model's sub-intervals: the substep grid
-        # (load evaluated at each) and the sensor instant.
-        grid = [j * self._h for j in range(1, self.substeps)]
-        self._grid = (0.0, *grid)
-        cuts = set(grid)
-        if self._t_meas > 0.0:
-            cuts.add(self._t_meas)
-        self._cuts = tuple(sorted(cuts))
-        self._segs = self._segments()
-        # Average model on the legacy per-period path unless a feature needs substeps.
-        self._avg_general = self._dc_dyn or self._t_meas > 0.0
-        # Engine: the compiled core reads the constants above and keeps the
-        # states of the enabled periods; step() copies them back each period.
         self.engine = resolve_engine(engine, meter)
-        self._t_dead = float(inverter.t_dead)
-        self._pwm_peak = inverter.sample_at == "peak"
-        self._sat_sigma = float(motor.sat.sigma)
-        self._sat_i_sat = float(motor.sat.i_sat)
-        self._core = (
-            _cplant.Core(self, _constant_tau(self._load))
-            if self.engine == "compiled" and _cplant is not None
-            else None
-        )
-        if self._core is not None:
-            self._core.set_sensors(*self._sensors.constants())
+        if not 0.0 <= inverter.t_dead < 0.5 * self.T_s:
+            raise ValueError(
+                f"dead time must be in [0, T_s / 2), got {inverter.t_dead} s at T_s = {self.T_s} s"
+            )
+        self.motor = motor
+        self.inverter = inverter
+        # The core (plant_rt/core) makes its constants from the design
+        # parameters and keeps the states; step() copies them back each period.
+        self._core = _cplant.Core(*self._core_pars())
+        self._core.set_sensors(*self._sensors.constants())
+        self._core.set_load(self._load.tau, _constant_tau(self._load))
+        self._core.set_metering(meter)
+        self._state_to_core()
+
+    def set_parameters(
+        self, motor: MotorPars | None = None, inverter: InverterPars | None = None
+    ) -> None:
+        """Change the motor's or the inverter's parameters between two periods.
+
+        The states (currents, speed, angle, DC-link capacitor voltage, the
+        PWM timeline's dead intervals) are kept; the next :meth:`step` runs
+        on the new parameters. This is how a fault or a drift is inserted
+        (e.g. ``plant.set_parameters(motor=replace(plant.motor, R_s=1.2 *
+        plant.motor.R_s))``, a weaker magnet through ``psi_f``, a sagging
+        supply through ``InverterPars.u_dc``). Without a dynamic DC link
+        (``r_dc = 0``) the link voltage follows the new ``u_dc`` at once.
+
+        Parameters
+        ----------
+        motor : MotorPars, optional
+            New machine parameters; None keeps the present ones.
+        inverter : InverterPars, optional
+            New inverter parameters; None keeps the present ones. Its
+            ``model`` and ``sample_at`` cannot change.
+
+        Raises
+        ------
+        ValueError
+            For an inverter of another model or carrier alignment, a dead
+            time of ``T_s / 2`` or more, or a cross-saturation map the new
+            motor makes non-physical (:func:`cross_saturation_check`).
+        """
+        m = motor if motor is not None else self.motor
+        inv = inverter if inverter is not None else self.inverter
+        if inv.model != self.inverter.model or inv.sample_at != self.inverter.sample_at:
+            raise ValueError(
+                "set_parameters: the inverter's model and sample_at cannot change "
+                f"({self.inverter.model}/{self.inverter.sample_at} -> {inv.model}/{inv.sample_at})"
+            )
+        if not 0.0 <= inv.t_dead < 0.5 * self.T_s:
+            raise ValueError(
+                f"set_parameters: dead time must be in [0, T_s / 2), got {inv.t_dead} s"
+            )
+        if self.cross_saturation:
+            cross_saturation_check(m, self.saturation, 2.0 * m.i_max)
+        self.motor = m
+        self.inverter = inv
+        if not inv.r_dc > 0.0:
+            self._u_dc = float(inv.u_dc)
+        self._core.set_pars(*self._core_pars())
+        self._state_to_core()
 
     # ------------------------------------------------------------------ API
     @property
@@ -372,8 +373,7 @@ class Plant:
     def set_load(self, profile: LoadProfile) -> None:
         """Replace the load profile (times in the profile are absolute, s)."""
         self._load = profile
-        if self._core is not None:
-            self._core.set_load(profile, _constant_tau(profile))
+        self._core.set_load(profile.tau, _constant_tau(profile))
 
     def impose_speed(self, w_m: float | None) -> None:
         """Hold the mechanical speed at ``w_m`` (rad/s) like a dynamometer; None releases it."""
@@ -427,12 +427,7 @@ class Plant:
 
     def currents_abc(self) -> tuple[float, float, float]:
         """True phase currents at ``t = k T_s`` (A)."""
-        th_e = self._n_p * self._th_m
-        c = math.cos(th_e)
-        s = math.sin(th_e)
-        i_al = c * self._i_d - s * self._i_q
-        i_be = s * self._i_d + c * self._i_q
-        return i_al, -0.5 * i_al + 0.5 * SQRT3 * i_be, -0.5 * i_al - 0.5 * SQRT3 * i_be
+        return self._core.currents()
 
     def sample(self) -> Sample:
         """Measurement at ``t = k T_s``; repeated calls within a period return the same one.
@@ -445,23 +440,11 @@ class Plant:
         if smp is not None and smp.k == self.k:
             return smp
         meas = self._meas
-        core = self._core
-        if core is not None:  # the same sensors, compiled
-            if meas is not None and meas[0] == self.k:
-                m_a, m_b, m_c, m_u = core.measure(meas[1], meas[2], meas[3], meas[4])
-            else:
-                m_a, m_b, m_c, m_u = core.measure()
-            smp = Sample(self.k, m_a, m_b, m_c, m_u)
-            self._sample = smp
-            return smp
         if meas is not None and meas[0] == self.k:
-            _, i_a, i_b, i_c, u_dc = meas
+            m_a, m_b, m_c, m_u = self._core.measure(meas[1], meas[2], meas[3], meas[4])
         else:
-            i_a, i_b, i_c = self.currents_abc()
-            u_dc = self._u_dc
-        sens = self._sensors
-        m_a, m_b, m_c = sens.currents(i_a, i_b, i_c)
-        smp = Sample(self.k, m_a, m_b, m_c, sens.voltage(u_dc))
+            m_a, m_b, m_c, m_u = self._core.measure()
+        smp = Sample(self.k, m_a, m_b, m_c, m_u)
         self._sample = smp
         return smp
 
@@ -480,25 +463,20 @@ class Plant:
 
     def torque(self) -> float:
         """Electromagnetic torque at ``t = k T_s`` (N m)."""
-        if self.cross_saturation:
-            i_d = self._i_d
-            i_q = self._i_q
-            psi_d, psi_q, _, _, _ = flux_dq(self.motor, i_d, i_q, self.saturation, True)
-            return self._k_tau * (psi_d * i_q - psi_q * i_d)
-        psi_d, _ = flux_d(self.motor, self._i_d, self.saturation)
-        return self._k_tau * (psi_d - self._L_q * self._i_d) * self._i_q
+        return self._core.torque()
 
     def truth(self) -> Truth:
         """Plant truth at ``t = k T_s``."""
         tau_e = self.torque()
         w_m = self._w_m
         imposed = self._w_imp is not None
-        tau_L = tau_e - self._b * w_m if imposed else self._load.tau(self.t, w_m)
+        n_p = float(self.motor.n_p)
+        tau_L = tau_e - float(self.motor.b) * w_m if imposed else self._load.tau(self.t, w_m)
         return Truth(
             k=self.k,
             t=self.t,
-            theta_e=(self._n_p * self._th_m) % TWO_PI,
-            w_e=self._n_p * w_m,
+            theta_e=(n_p * self._th_m) % TWO_PI,
+            w_e=n_p * w_m,
             theta_m=self._th_m,
             w_m=w_m,
             tau_e=tau_e,
@@ -517,14 +495,7 @@ class Plant:
 
     def back_emf_abc(self) -> tuple[float, float, float]:
         """Phase back-EMF ``-w_e psi_d(0) sin(theta_e - phi_x)`` at ``t = k T_s`` (V)."""
-        psi0 = flux_d(self.motor, 0.0, self.saturation)[0]
-        th_e = self._n_p * self._th_m
-        amp = -self._n_p * self._w_m * psi0
-        return (
-            amp * math.sin(th_e),
-            amp * math.sin(th_e - 2.0 * math.pi / 3.0),
-            amp * math.sin(th_e + 2.0 * math.pi / 3.0),
-        )
+        return self._core.back_emf()
 
     def step(self, d_a: float, d_b: float, d_c: float, enable: bool = True) -> None:
         """Apply duties for period ``k`` and advance to ``k + 1``.
@@ -537,882 +508,92 @@ class Plant:
             False opens all switches (diode bridge, see class notes).
         """
         core = self._core
-        if core is not None and enable:
-            (self._i_d, self._i_q, self._w_m, self._th_m, self._u_dc, u_al, u_be) = core.step(
-                d_a, d_b, d_c, self.k * self.T_s
-            )
-            self.u_s_ab = (u_al, u_be)
-            if self._t_meas > 0.0:
-                i_a, i_b, i_c, u_dc = core.meas()
-                self._meas = (self.k + 1, i_a, i_b, i_c, u_dc)
-            self.k += 1
-            return
-        h = self._h
         t0 = self.k * self.T_s
-        meter = self.meter
-        if meter is not None:
-            meter.q_a = meter.q_b = meter.q_c = 0.0
-        if enable and self._switching:
-            self._step_switching(d_a, d_b, d_c, t0)
-        elif enable and self._avg_general:
-            self._step_average_general(d_a, d_b, d_c, t0)
-        elif enable:
-            u_dc = self._u_dc
-            v_a = clamp_duty(d_a) * u_dc
-            v_b = clamp_duty(d_b) * u_dc
-            v_c = clamp_duty(d_c) * u_dc
-            t_dead = self.inverter.t_dead
-            if t_dead > 0.0:
-                # only a switching leg has dead time: one held at a rail
-                # (duty 0 or 1) keeps its switch on the whole period
-                i_a, i_b, i_c = self.currents_abc()
-                if 0.0 < v_a < u_dc:
-                    v_a += dead_time_error(i_a, u_dc, t_dead, self.T_s)
-                if 0.0 < v_b < u_dc:
-                    v_b += dead_time_error(i_b, u_dc, t_dead, self.T_s)
-                if 0.0 < v_c < u_dc:
-                    v_c += dead_time_error(i_c, u_dc, t_dead, self.T_s)
-            if self._drops:
-                v_a, v_b, v_c = self._add_drops(v_a, v_b, v_c, u_dc)
-            u_al = (2.0 * v_a - v_b - v_c) / 3.0
-            u_be = (v_b - v_c) * INV_SQRT3
-            cross = self.cross_saturation
-            for j in range(self.substeps):
-                tau_L = self._tau_load(t0 + j * h)
-                if meter is not None:
-                    self._rk4(h, v_a, v_b, v_c, -1, tau_L)
-                elif cross:
-                    self._rk4_cross(h, u_al, u_be, tau_L)
-                else:
-                    self._rk4_fast(h, u_al, u_be, tau_L)
-            self.u_s_ab = (u_al, u_be)
-        elif not (self._dc_dyn or self._t_meas > 0.0):
-            if self._pwm is not None:
-                self._pwm.disable()
-            sa = sb = 0.0
-            for j in range(self.substeps):
-                ua, ub = self._substep_off(h, self._tau_load(t0 + j * h))
-                sa += ua
-                sb += ub
-            self.u_s_ab = (sa / self.substeps, sb / self.substeps)
-        else:
-            self._step_off_general(t0)
-        self._th_m %= TWO_PI
+        st = core.step(d_a, d_b, d_c, t0) if enable else core.step_off(t0)
+        (self._i_d, self._i_q, self._w_m, self._th_m, self._u_dc, u_al, u_be) = st
+        self.u_s_ab = (u_al, u_be)
         self.k += 1
-        if core is not None:  # the disabled bridge ran here: the core takes the state over
-            self._state_to_core()
-            if self._switching:
-                core.pwm_disable()
+        if self._t_meas > 0.0:
+            i_a, i_b, i_c, u_dc = core.meas()
+            self._meas = (self.k, i_a, i_b, i_c, u_dc)
+        if self.meter is not None:
+            m = self.meter
+            (m.e_in, m.e_cu, m.e_em, m.e_fric, m.e_load, m.q_a, m.q_b, m.q_c) = core.meter()
 
-    def _state_to_core(self) -> None:
-        """Hand the states changed on the Python side to the compiled core."""
-        if self._core is not None:
-            self._core.set_state(
-                self._i_d, self._i_q, self._w_m, self._th_m, self._u_dc, self._w_imp is not None
-            )
-
-    # ------------------------------------------------------- inverter models
-    def _add_drops(
-        self, v_a: float, v_b: float, v_c: float, u_dc: float
-    ) -> tuple[float, float, float]:
-        """Average model: the period-mean device drops (:func:`device_drop_error`).
-
-        ``v_x / u_dc`` is the leg's time on the positive rail after dead time;
-        the current direction is the one at the start of the period.
-        """
-        i_a, i_b, i_c = self.currents_abc()
-        v_ce = self._v_ce
-        v_f = self._v_f
+    def _core_pars(self) -> tuple[float | int | bool, ...]:
+        """The design parameters in the order of ``plant_pars`` (``plant_rt/core/plant.h``)."""
+        m = self.motor
+        inv = self.inverter
         return (
-            v_a + device_drop_error(i_a, v_a / u_dc, v_ce, v_f),
-            v_b + device_drop_error(i_b, v_b / u_dc, v_ce, v_f),
-            v_c + device_drop_error(i_c, v_c / u_dc, v_ce, v_f),
+            float(m.n_p),
+            float(m.R_s),
+            float(m.L_d),
+            float(m.L_q),
+            float(m.psi_f),
+            float(m.J),
+            float(m.b),
+            float(m.i_max),
+            float(m.sat.sigma),
+            float(m.sat.i_sat),
+            float(m.cross.c_dq),
+            self.saturation,
+            self.cross_saturation,
+            self.T_s,
+            self.substeps,
+            float(self.sensor_pars.t_delay),
+            self._switching,
+            self._pwm_peak,
+            float(inv.u_dc),
+            float(inv.t_dead),
+            float(inv.v_ce),
+            float(inv.v_f),
+            float(inv.r_dc),
+            float(inv.c_dc),
         )
 
-    def _segments(self) -> list[tuple[float, float, int]]:
-        """The substep grid cut at the sensor instant: ``(t_start, t_end, grid index)``."""
-        T = self.T_s
-        grid = self._grid
-        out: list[tuple[float, float, int]] = []
-        t0 = 0.0
-        j = 0
-        for t1 in (*self._cuts, T):
-            while j + 1 < len(grid) and t0 >= grid[j + 1]:
-                j += 1
-            out.append((t0, t1, j))
-            t0 = t1
+    def step_n(self, duties: Iterable[Sequence[float]]) -> array:
+        """Apply the duties of ``n`` enabled periods in one call and advance to ``k + n``.
+
+        The periods are those of ``n`` calls of :meth:`step` (the same
+        trace bit for bit) without a :meth:`sample` between them: the
+        compiled core steps them in one C call (``plant_step_n``,
+        ``plant_rt/core/plant.h``).
+
+        Parameters
+        ----------
+        duties : iterable of (d_a, d_b, d_c)
+            Duty cycles per period; clamped to [0, 1].
+
+        Returns
+        -------
+        array.array of float
+            Seven values per period, after it: ``i_d, i_q, w_m, theta_m,
+            u_dc`` and the period's mean stator voltage ``u_alpha, u_beta``.
+        """
+        flat = array("d")
+        for d in duties:
+            if len(d) != 3:
+                raise ValueError(f"step_n: three duties per period, got {len(d)}")
+            flat.extend(d)
+        n = len(flat) // 3
+        out = array("d")
+        core = self._core
+        if n == 0:
+            return out
+        out.frombytes(core.step_n(self.k, flat))
+        (self._i_d, self._i_q, self._w_m, self._th_m, self._u_dc, u_al, u_be) = out[-7:]
+        self.u_s_ab = (u_al, u_be)
+        self.k += n
+        if self._t_meas > 0.0:
+            i_a, i_b, i_c, u_dc = core.meas()
+            self._meas = (self.k, i_a, i_b, i_c, u_dc)
+        if self.meter is not None:
+            m = self.meter
+            (m.e_in, m.e_cu, m.e_em, m.e_fric, m.e_load, m.q_a, m.q_b, m.q_c) = core.meter()
         return out
 
-    def _step_average_general(self, d_a: float, d_b: float, d_c: float, t0: float) -> None:
-        """Average model with a dynamic DC link or a sensor delay: one RK4 step per segment.
-
-        The duties' mean pole voltages are recomputed on each segment from the
-        DC-link voltage at its start; the dead-time and drop errors take the
-        current directions at the start of the period, as on the fast path.
-        """
-        d_a = clamp_duty(d_a)
-        d_b = clamp_duty(d_b)
-        d_c = clamp_duty(d_c)
-        t_dead = self.inverter.t_dead
-        T = self.T_s
-        i_a, i_b, i_c = self.currents_abc()
-        # effective fractions on the positive rail after dead time
-        if t_dead > 0.0:
-            r = t_dead / T
-            if 0.0 < d_a < 1.0:
-                d_a += dead_time_error(i_a, 1.0, r, 1.0)
-            if 0.0 < d_b < 1.0:
-                d_b += dead_time_error(i_b, 1.0, r, 1.0)
-            if 0.0 < d_c < 1.0:
-                d_c += dead_time_error(i_c, 1.0, r, 1.0)
-        if self._drops:
-            v_ce = self._v_ce
-            v_f = self._v_f
-            e_a = device_drop_error(i_a, d_a, v_ce, v_f)
-            e_b = device_drop_error(i_b, d_b, v_ce, v_f)
-            e_c = device_drop_error(i_c, d_c, v_ce, v_f)
-        else:
-            e_a = e_b = e_c = 0.0
-        meter = self.meter
-        cross = self.cross_saturation
-        h_grid = self._h
-        s_al = s_be = 0.0
-        j_load = -1
-        tau_L = 0.0
-        for ta, tb, j in self._segs:
-            if j != j_load:
-                tau_L = self._tau_load(t0 + j * h_grid)
-                j_load = j
-            h = tb - ta
-            if self._dc_dyn:
-                i0 = d_a * i_a + d_b * i_b + d_c * i_c
-                if self._c_dc == 0.0:
-                    self._u_dc = self._u_src - self._r_dc * i0
-            u_dc = self._u_dc
-            v_a = d_a * u_dc + e_a
-            v_b = d_b * u_dc + e_b
-            v_c = d_c * u_dc + e_c
-            u_al = (2.0 * v_a - v_b - v_c) / 3.0
-            u_be = (v_b - v_c) * INV_SQRT3
-            if meter is not None:
-                self._rk4(h, v_a, v_b, v_c, -1, tau_L)
-            elif cross:
-                self._rk4_cross(h, u_al, u_be, tau_L)
-            else:
-                self._rk4_fast(h, u_al, u_be, tau_L)
-            s_al += h * u_al
-            s_be += h * u_be
-            i_a, i_b, i_c = self.currents_abc()
-            if self._dc_dyn:
-                i1 = d_a * i_a + d_b * i_b + d_c * i_c
-                self._dc_update(h, 0.5 * (i0 + i1), i1)
-            if tb == self._t_meas:
-                self._record_meas(i_a, i_b, i_c)
-        self.u_s_ab = (s_al / T, s_be / T)
-
-    def _step_off_general(self, t0: float) -> None:
-        """Disabled bridge with a dynamic DC link or a sensor delay.
-
-        A conducting phase whose current flows out of the machine (``i_x <
-        0``) sits on the positive rail through its upper diode, so the DC
-        link receives ``i_dc = sum_x min(i_x, 0)`` (negative: it charges).
-        """
-        if self._pwm is not None:
-            self._pwm.disable()
-        T = self.T_s
-        h_grid = self._h
-        s_al = s_be = 0.0
-        j_load = -1
-        tau_L = 0.0
-        i_a, i_b, i_c = self.currents_abc()
-        for ta, tb, j in self._segs:
-            if j != j_load:
-                tau_L = self._tau_load(t0 + j * h_grid)
-                j_load = j
-            h = tb - ta
-            i0 = min(i_a, 0.0) + min(i_b, 0.0) + min(i_c, 0.0)
-            if self._dc_dyn and self._c_dc == 0.0:
-                self._u_dc = self._u_src - self._r_dc * i0
-            ua, ub = self._substep_off(h, tau_L)
-            s_al += h * ua
-            s_be += h * ub
-            i_a, i_b, i_c = self.currents_abc()
-            if self._dc_dyn:
-                i1 = min(i_a, 0.0) + min(i_b, 0.0) + min(i_c, 0.0)
-                self._dc_update(h, 0.5 * (i0 + i1), i1)
-            if tb == self._t_meas:
-                self._record_meas(i_a, i_b, i_c)
-        self.u_s_ab = (s_al / T, s_be / T)
-
-    def _dc_update(self, h: float, i_dc: float, i_dc_end: float) -> None:
-        """Advance the DC link over ``h``: mean inverter current ``i_dc``, ``i_dc_end`` at the end (A).
-
-        With a capacitor its voltage moves exactly for a constant ``i_dc``;
-        without one the link is algebraic, ``u_src - r_dc i_dc`` with the
-        current at hand (the callers set it from the current at the start of
-        each step, this sets it from the one at its end).
-        """
-        r = self._r_dc
-        if self._c_dc > 0.0:
-            u_inf = self._u_src - r * i_dc
-            self._u_dc = u_inf + (self._u_dc - u_inf) * math.exp(-h / (r * self._c_dc))
-        else:
-            self._u_dc = self._u_src - r * i_dc_end
-
-    def _record_meas(self, i_a: float, i_b: float, i_c: float) -> None:
-        """Keep the currents and DC-link voltage for the next period's (delayed) sample."""
-        self._meas = (self.k + 1, i_a, i_b, i_c, self._u_dc)
-
-    def _step_switching(self, d_a: float, d_b: float, d_c: float, t0: float) -> None:
-        """Switching model: one period, sub-interval by sub-interval (class notes)."""
-        pwm = self._pwm
-        assert pwm is not None
-        T = self.T_s
-        segs = pwm.period(clamp_duty(d_a), clamp_duty(d_b), clamp_duty(d_c), self._cuts)
-        grid = self._grid
-        n_grid = len(grid)
-        j = 0
-        tau_L = self._tau_load(t0)
-        t_meas = self._t_meas
-        i_abc = self.currents_abc()
-        s_al = s_be = 0.0
-        for ta, tb, sa, sb, sc in segs:
-            while j + 1 < n_grid and ta >= grid[j + 1]:
-                j += 1
-                tau_L = self._tau_load(t0 + grid[j])
-            h = tb - ta
-            ua, ub, i_abc = self._sw_interval(h, sa, sb, sc, tau_L, i_abc)
-            s_al += h * ua
-            s_be += h * ub
-            if tb == t_meas:
-                self._record_meas(*i_abc)
-        self.u_s_ab = (s_al / T, s_be / T)
-
-    def _sw_interval(
-        self,
-        h: float,
-        sa: int,
-        sb: int,
-        sc: int,
-        tau_L: float,
-        i_abc: tuple[float, float, float],
-    ) -> tuple[float, float, tuple[float, float, float]]:
-        """Integrate one sub-interval with constant gate states.
-
-        Returns the mean stator voltage in alpha-beta over it and the phase
-        currents at its end.
-        """
-        v_ce = self._v_ce
-        v_f = self._v_f
-        eps = self._i_eps
-        states = (sa, sb, sc)
-        i_dc0 = 0.0
-        if self._dc_dyn:
-            # legs on the positive rail: upper switch on, or dead with the upper diode conducting
-            for x in range(3):
-                if states[x] == HIGH or (states[x] == DEAD and i_abc[x] < -eps):
-                    i_dc0 += i_abc[x]
-            if self._c_dc == 0.0:
-                self._u_dc = self._u_src - self._r_dc * i_dc0
-        u_dc = self._u_dc
-        v = [0.0, 0.0, 0.0]
-        # direction of a dead leg's diode current: +1 lower diode, -1 upper diode
-        cond = [0, 0, 0]
-        upper = [False, False, False]  # pole on the positive rail (DC-link current)
-        floating: list[int] = []
-        for x in range(3):
-            s = states[x]
-            i = i_abc[x]
-            if s == HIGH:
-                upper[x] = True
-                v[x] = u_dc - v_ce if i > eps else (u_dc + v_f if i < -eps else u_dc)
-            elif s == DEAD:
-                if i > eps:
-                    v[x] = -v_f
-                    cond[x] = 1
-                elif i < -eps:
-                    v[x] = u_dc + v_f
-                    cond[x] = -1
-                    upper[x] = True
-                else:
-                    floating.append(x)
-            else:
-                v[x] = -v_f if i > eps else (v_ce if i < -eps else 0.0)
-        if len(floating) >= 2:
-            # no current path: the currents stay zero for the rest of the dead interval
-            self._i_d = 0.0
-            self._i_q = 0.0
-            ua, ub = self._open_circuit(h, tau_L)
-            if self._dc_dyn:
-                self._dc_update(h, 0.0, 0.0)
-            return ua, ub, (0.0, 0.0, 0.0)
-        fx = -1
-        if floating:
-            x = floating[0]
-            u_al0 = (2.0 * v[0] - v[1] - v[2]) / 3.0
-            u_be0 = (v[1] - v[2]) * INV_SQRT3
-            v_x = self._f_float(
-                self._i_d, self._i_q, self._w_m, self._th_m, u_al0, u_be0, x, tau_L
-            )[4]
-            if v_x > u_dc + v_f:  # the upper diode takes the current
-                v[x] = u_dc + v_f
-                cond[x] = -1
-                upper[x] = True
-            elif v_x < -v_f:  # the lower diode takes it
-                v[x] = -v_f
-                cond[x] = 1
-            else:
-                fx = x
-        if fx >= 0:
-            ua, ub = self._rk4(h, v[0], v[1], v[2], fx, tau_L)
-            self._zero_phase(fx)
-            i_new = self.currents_abc()
-        elif cond[0] == 0 and cond[1] == 0 and cond[2] == 0:
-            ua, ub = self._rk4_const(h, v[0], v[1], v[2], tau_L)
-            i_new = self.currents_abc()
-        else:
-            ua, ub, i_new = self._dead_with_clamp(h, v, cond, tau_L, i_abc)
-        if self._dc_dyn:
-            i_dc1 = sum(i_new[x] for x in range(3) if upper[x])
-            self._dc_update(h, 0.5 * (i_dc0 + i_dc1), i_dc1)
-        return ua, ub, i_new
-
-    def _rk4_const(
-        self, h: float, v_a: float, v_b: float, v_c: float, tau_L: float
-    ) -> tuple[float, float]:
-        """One RK4 step with constant pole voltages; returns the stator voltage in alpha-beta."""
-        if self.meter is not None:
-            return self._rk4(h, v_a, v_b, v_c, -1, tau_L)
-        u_al = (2.0 * v_a - v_b - v_c) / 3.0
-        u_be = (v_b - v_c) * INV_SQRT3
-        if self.cross_saturation:
-            self._rk4_cross(h, u_al, u_be, tau_L)
-        else:
-            self._rk4_fast(h, u_al, u_be, tau_L)
-        return u_al, u_be
-
-    def _dead_with_clamp(
-        self,
-        h: float,
-        v: list[float],
-        cond: list[int],
-        tau_L: float,
-        i_abc: tuple[float, float, float],
-    ) -> tuple[float, float, tuple[float, float, float]]:
-        """A sub-interval with diode-conducting dead legs: stop a diode at its current zero.
-
-        Integrates the whole sub-interval; if a diode's current has reversed,
-        redoes the step up to the (linearly interpolated) zero of the first
-        such phase, clamps that phase to zero and integrates the rest with it
-        floating. Returns the mean stator voltage in alpha-beta and the phase
-        currents at the end.
-        """
-        saved = self._save()
-        ua, ub = self._rk4_const(h, v[0], v[1], v[2], tau_L)
-        i_new = self.currents_abc()
-        first = -1
-        frac = 1.0
-        for x in range(3):
-            c = cond[x]
-            if c != 0 and i_new[x] * c < 0.0:
-                f = i_abc[x] / (i_abc[x] - i_new[x])
-                if f < frac:
-                    frac = f
-                    first = x
-        if first < 0:
-            return ua, ub, i_new
-        self._restore(saved)
-        h1 = frac * h
-        ua1, ub1 = self._rk4_const(h1, v[0], v[1], v[2], tau_L) if h1 > 0.0 else (ua, ub)
-        self._zero_phase(first)
-        h2 = h - h1
-        ua2, ub2 = self._rk4(h2, v[0], v[1], v[2], first, tau_L)
-        self._zero_phase(first)
-        return (h1 * ua1 + h2 * ua2) / h, (h1 * ub1 + h2 * ub2) / h, self.currents_abc()
-
-    def _save(self) -> tuple[float, ...]:
-        m = self.meter
-        st = (self._i_d, self._i_q, self._w_m, self._th_m)
-        if m is None:
-            return st
-        return (*st, m.e_in, m.e_cu, m.e_em, m.e_fric, m.e_load, m.q_a, m.q_b, m.q_c)
-
-    def _restore(self, st: tuple[float, ...]) -> None:
-        self._i_d, self._i_q, self._w_m, self._th_m = st[0], st[1], st[2], st[3]
-        m = self.meter
-        if m is not None:
-            m.e_in, m.e_cu, m.e_em, m.e_fric, m.e_load = st[4], st[5], st[6], st[7], st[8]
-            m.q_a, m.q_b, m.q_c = st[9], st[10], st[11]
-
-    # ------------------------------------------------------------ internals
-    def _tau_load(self, t: float) -> float:
-        if self._w_imp is not None:
-            return 0.0  # not used: the speed is held
-        return self._load.tau(t, self._w_m)
-
-    def _f(
-        self,
-        i_d: float,
-        i_q: float,
-        w_m: float,
-        th_m: float,
-        u_al: float,
-        u_be: float,
-        tau_L: float,
-    ) -> tuple[float, float, float, float]:
-        """State derivatives (di_d, di_q, dw_m) and tau_e for a voltage fixed in alpha-beta.
-
-        Wen eq. (1) / Xue eq. (1), written on flux linkages so that the
-        saturated model stays energy-consistent.
-        """
-        n_p = self._n_p
-        th_e = n_p * th_m
-        c = math.cos(th_e)
-        s = math.sin(th_e)
-        u_d = c * u_al + s * u_be
-        u_q = c * u_be - s * u_al
-        w_e = n_p * w_m
-        if self.cross_saturation:
-            psi_d, psi_q, L_dd, L_dq, L_qq = flux_dq(self.motor, i_d, i_q, self.saturation, True)
-            e_d = u_d - self._R * i_d + w_e * psi_q
-            e_q = u_q - self._R * i_q - w_e * psi_d
-            det = L_dd * L_qq - L_dq * L_dq
-            tau_e = self._k_tau * (psi_d * i_q - psi_q * i_d)
-            dw = 0.0 if self._w_imp is not None else (tau_e - tau_L - self._b * w_m) * self._inv_J
-            return (L_qq * e_d - L_dq * e_q) / det, (L_dd * e_q - L_dq * e_d) / det, dw, tau_e
-        L_q = self._L_q
-        if self.saturation:
-            x = i_d * self._inv_i_sat
-            r = math.sqrt(1.0 + x * x)
-            psi_d = self._psi_f + self._L_d * (i_d - self._sig_isat * (r - 1.0))
-            L_dd = self._L_d * (1.0 - self._sig * x / r)
-        else:
-            psi_d = self._psi_f + self._L_d * i_d
-            L_dd = self._L_d
-        R = self._R
-        tau_e = self._k_tau * (psi_d - L_q * i_d) * i_q
-        dw = 0.0 if self._w_imp is not None else (tau_e - tau_L - self._b * w_m) * self._inv_J
-        return (
-            (u_d - R * i_d + w_e * L_q * i_q) / L_dd,
-            (u_q - R * i_q - w_e * psi_d) / L_q,
-            dw,
-            tau_e,
+    def _state_to_core(self) -> None:
+        """Hand the states changed on the Python side to the core."""
+        self._core.set_state(
+            self._i_d, self._i_q, self._w_m, self._th_m, self._u_dc, self._w_imp is not None
         )
-
-    def _f_float(
-        self,
-        i_d: float,
-        i_q: float,
-        w_m: float,
-        th_m: float,
-        u_al0: float,
-        u_be0: float,
-        x: int,
-        tau_L: float,
-    ) -> tuple[float, float, float, float, float]:
-        """Derivatives with phase ``x`` floating (current held at zero).
-
-        ``u_al0, u_be0`` is the stator voltage from the other two legs with
-        ``v_x = 0``. Leg ``x`` adds ``(2/3) v_x e^{j phi_x}``; ``v_x`` is
-        solved from ``d i_x/dt = 0`` with ``i_x = i_d cos(theta_e - phi_x)
-        - i_q sin(theta_e - phi_x)``. Returns the derivatives, tau_e and v_x.
-        """
-        n_p = self._n_p
-        th_e = n_p * th_m
-        c = math.cos(th_e)
-        s = math.sin(th_e)
-        u_d = c * u_al0 + s * u_be0
-        u_q = c * u_be0 - s * u_al0
-        w_e = n_p * w_m
-        if self.cross_saturation:
-            return self._f_float_cross(i_d, i_q, w_m, c, s, u_d, u_q, x, tau_L)
-        L_q = self._L_q
-        psi_d, L_dd = flux_d(self.motor, i_d, self.saturation)
-        R = self._R
-        f_d = (u_d - R * i_d + w_e * L_q * i_q) / L_dd
-        f_q = (u_q - R * i_q - w_e * psi_d) / L_q
-        c_x = c * _COS_PHI[x] + s * _SIN_PHI[x]
-        s_x = s * _COS_PHI[x] - c * _SIN_PHI[x]
-        a = c_x * f_d - s_x * f_q - w_e * (i_d * s_x + i_q * c_x)
-        g = (2.0 / 3.0) * (c_x * c_x / L_dd + s_x * s_x / L_q)
-        v_x = -a / g
-        tau_e = self._k_tau * (psi_d - L_q * i_d) * i_q
-        dw = 0.0 if self._w_imp is not None else (tau_e - tau_L - self._b * w_m) * self._inv_J
-        return (
-            f_d + (2.0 / 3.0) * v_x * c_x / L_dd,
-            f_q - (2.0 / 3.0) * v_x * s_x / L_q,
-            dw,
-            tau_e,
-            v_x,
-        )
-
-    def _f_float_cross(
-        self,
-        i_d: float,
-        i_q: float,
-        w_m: float,
-        c: float,
-        s: float,
-        u_d: float,
-        u_q: float,
-        x: int,
-        tau_L: float,
-    ) -> tuple[float, float, float, float, float]:
-        """:meth:`_f_float` with the cross-saturated flux map (full inductance matrix).
-
-        ``d i / dt = Y (e + (2/3) v_x e_x)`` with ``Y`` the inverse of the
-        incremental inductance matrix and ``e_x = (c_x, -s_x)`` phase x's axis
-        in d-q; ``v_x`` makes ``d i_x / dt = 0``.
-        """
-        w_e = self._n_p * w_m
-        psi_d, psi_q, L_dd, L_dq, L_qq = flux_dq(self.motor, i_d, i_q, self.saturation, True)
-        R = self._R
-        e_d = u_d - R * i_d + w_e * psi_q
-        e_q = u_q - R * i_q - w_e * psi_d
-        det = L_dd * L_qq - L_dq * L_dq
-        f_d = (L_qq * e_d - L_dq * e_q) / det
-        f_q = (L_dd * e_q - L_dq * e_d) / det
-        c_x = c * _COS_PHI[x] + s * _SIN_PHI[x]
-        s_x = s * _COS_PHI[x] - c * _SIN_PHI[x]
-        y_d = (L_qq * c_x + L_dq * s_x) / det
-        y_q = (-L_dq * c_x - L_dd * s_x) / det
-        a = c_x * f_d - s_x * f_q - w_e * (i_d * s_x + i_q * c_x)
-        g = (2.0 / 3.0) * (c_x * y_d - s_x * y_q)
-        v_x = -a / g
-        tau_e = self._k_tau * (psi_d * i_q - psi_q * i_d)
-        dw = 0.0 if self._w_imp is not None else (tau_e - tau_L - self._b * w_m) * self._inv_J
-        return (
-            f_d + (2.0 / 3.0) * v_x * y_d,
-            f_q + (2.0 / 3.0) * v_x * y_q,
-            dw,
-            tau_e,
-            v_x,
-        )
-
-    def _rk4_cross(self, h: float, u_al: float, u_be: float, tau_L: float) -> None:
-        """:meth:`_rk4_fast` with the cross-saturated flux map (:class:`CrossSaturationPars`).
-
-        ``L_inc d i_dq / dt = u_dq - R i_dq - w_e J psi_dq``, solved with the
-        2x2 incremental inductance matrix at every stage.
-        """
-        cos = math.cos
-        sin = math.sin
-        n_p = self._n_p
-        R = self._R
-        L_d = self._L_d
-        L_q = self._L_q
-        psi_f = self._psi_f
-        k_tau = self._k_tau
-        sat = self.saturation
-        free = self._w_imp is None
-        b = self._b
-        inv_J = self._inv_J
-        c_dq = self._c_dq
-        i_0 = self._i_0
-        i_d0 = self._i_d
-        i_q0 = self._i_q
-        w0 = self._w_m
-        th0 = self._th_m
-        i_d = i_d0
-        i_q = i_q0
-        w = w0
-        th = th0
-        s_d = s_q = s_w = s_th = 0.0
-        di_d = di_q = dw = 0.0
-        for o, wgt in _RK4_STAGES:
-            if o != 0.0:
-                i_d = i_d0 + o * h * di_d
-                i_q = i_q0 + o * h * di_q
-                th = th0 + o * h * w
-                w = w0 + o * h * dw
-            th_e = n_p * th
-            c = cos(th_e)
-            s = sin(th_e)
-            w_e = n_p * w
-            if sat:
-                x = i_d * self._inv_i_sat
-                r = math.sqrt(1.0 + x * x)
-                psi_d = psi_f + L_d * (i_d - self._sig_isat * (r - 1.0))
-                L_dd = L_d * (1.0 - self._sig * x / r)
-            else:
-                psi_d = psi_f + L_d * i_d
-                L_dd = L_d
-            m = i_d + i_0
-            hq = 0.5 * c_dq * i_q
-            L_qq = L_q - 0.5 * c_dq * i_d * (i_d + 2.0 * i_0)
-            psi_d -= hq * m * i_q
-            psi_q = L_qq * i_q
-            L_dd -= hq * i_q
-            L_dq = -c_dq * m * i_q
-            e_d = c * u_al + s * u_be - R * i_d + w_e * psi_q
-            e_q = c * u_be - s * u_al - R * i_q - w_e * psi_d
-            inv_det = 1.0 / (L_dd * L_qq - L_dq * L_dq)
-            di_d = (L_qq * e_d - L_dq * e_q) * inv_det
-            di_q = (L_dd * e_q - L_dq * e_d) * inv_det
-            dw = (k_tau * (psi_d * i_q - psi_q * i_d) - tau_L - b * w) * inv_J if free else 0.0
-            s_d += wgt * di_d
-            s_q += wgt * di_q
-            s_w += wgt * dw
-            s_th += wgt * w
-        h6 = h / 6.0
-        self._i_d = i_d0 + h6 * s_d
-        self._i_q = i_q0 + h6 * s_q
-        self._w_m = w0 + h6 * s_w
-        self._th_m = th0 + h6 * s_th
-
-    def _rk4_fast(self, h: float, u_al: float, u_be: float, tau_L: float) -> None:
-        """One RK4 step with a stator voltage constant in alpha-beta.
-
-        Same equations as :meth:`_f`, inlined: this is the per-period hot path.
-        """
-        cos = math.cos
-        sin = math.sin
-        n_p = self._n_p
-        R = self._R
-        L_d = self._L_d
-        L_q = self._L_q
-        psi_f = self._psi_f
-        k_tau = self._k_tau
-        sat = self.saturation
-        free = self._w_imp is None
-        b = self._b
-        inv_J = self._inv_J
-        i_d0 = self._i_d
-        i_q0 = self._i_q
-        w0 = self._w_m
-        th0 = self._th_m
-        i_d = i_d0
-        i_q = i_q0
-        w = w0
-        th = th0
-        s_d = s_q = s_w = s_th = 0.0
-        di_d = di_q = dw = 0.0
-        for o, wgt in _RK4_STAGES:
-            if o != 0.0:
-                i_d = i_d0 + o * h * di_d
-                i_q = i_q0 + o * h * di_q
-                th = th0 + o * h * w
-                w = w0 + o * h * dw
-            th_e = n_p * th
-            c = cos(th_e)
-            s = sin(th_e)
-            w_e = n_p * w
-            if sat:
-                x = i_d * self._inv_i_sat
-                r = math.sqrt(1.0 + x * x)
-                psi_d = psi_f + L_d * (i_d - self._sig_isat * (r - 1.0))
-                L_dd = L_d * (1.0 - self._sig * x / r)
-            else:
-                psi_d = psi_f + L_d * i_d
-                L_dd = L_d
-            di_d = (c * u_al + s * u_be - R * i_d + w_e * L_q * i_q) / L_dd
-            di_q = (c * u_be - s * u_al - R * i_q - w_e * psi_d) / L_q
-            dw = (k_tau * (psi_d - L_q * i_d) * i_q - tau_L - b * w) * inv_J if free else 0.0
-            s_d += wgt * di_d
-            s_q += wgt * di_q
-            s_w += wgt * dw
-            s_th += wgt * w
-        h6 = h / 6.0
-        self._i_d = i_d0 + h6 * s_d
-        self._i_q = i_q0 + h6 * s_q
-        self._w_m = w0 + h6 * s_w
-        self._th_m = th0 + h6 * s_th
-
-    def _rk4(
-        self, h: float, v_a: float, v_b: float, v_c: float, fx: int, tau_L: float
-    ) -> tuple[float, float]:
-        """General RK4 step: optional floating phase ``fx`` and energy metering.
-
-        Returns the RK4-weighted mean stator voltage in alpha-beta over the step.
-        """
-        vs = [v_a, v_b, v_c]
-        if fx >= 0:
-            vs[fx] = 0.0
-        u_al = (2.0 * vs[0] - vs[1] - vs[2]) / 3.0
-        u_be = (vs[1] - vs[2]) * INV_SQRT3
-        x0 = (self._i_d, self._i_q, self._w_m, self._th_m)
-        weights = (1.0, 2.0, 2.0, 1.0)
-        offsets = (0.0, 0.5 * h, 0.5 * h, h)
-        k_prev: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
-        acc = [0.0, 0.0, 0.0, 0.0]
-        meter = self.meter
-        ua_sum = 0.0
-        ub_sum = 0.0
-        for n in range(4):
-            o = offsets[n]
-            xs = (
-                x0[0] + o * k_prev[0],
-                x0[1] + o * k_prev[1],
-                x0[2] + o * k_prev[2],
-                x0[3] + o * k_prev[3],
-            )
-            if fx >= 0:
-                di_d, di_q, dw, tau_e, v_x = self._f_float(*xs, u_al, u_be, fx, tau_L)
-                vs[fx] = v_x
-                ua_n = u_al + (2.0 / 3.0) * v_x * _COS_PHI[fx]
-                ub_n = u_be + (2.0 / 3.0) * v_x * _SIN_PHI[fx]
-            else:
-                di_d, di_q, dw, tau_e = self._f(*xs, u_al, u_be, tau_L)
-                ua_n = u_al
-                ub_n = u_be
-            wgt = weights[n]
-            ua_sum += wgt * ua_n
-            ub_sum += wgt * ub_n
-            k_prev = (di_d, di_q, dw, xs[2])
-            for m in range(4):
-                acc[m] += wgt * k_prev[m]
-            if meter is not None:
-                self._meter_stage(meter, xs, vs, tau_e, tau_L, wgt * h / 6.0)
-        h6 = h / 6.0
-        self._i_d = x0[0] + h6 * acc[0]
-        self._i_q = x0[1] + h6 * acc[1]
-        self._w_m = x0[2] + h6 * acc[2]
-        self._th_m = x0[3] + h6 * acc[3]
-        return ua_sum / 6.0, ub_sum / 6.0
-
-    def _meter_stage(
-        self,
-        meter: EnergyMeter,
-        xs: tuple[float, float, float, float],
-        vs: list[float],
-        tau_e: float,
-        tau_L: float,
-        dt: float,
-    ) -> None:
-        i_d, i_q, w_m, th_m = xs
-        th_e = self._n_p * th_m
-        c = math.cos(th_e)
-        s = math.sin(th_e)
-        i_al = c * i_d - s * i_q
-        i_be = s * i_d + c * i_q
-        i_a = i_al
-        i_b = -0.5 * i_al + 0.5 * SQRT3 * i_be
-        i_c = -0.5 * i_al - 0.5 * SQRT3 * i_be
-        meter.e_in += dt * (vs[0] * i_a + vs[1] * i_b + vs[2] * i_c)
-        meter.e_cu += dt * self._R * (i_a * i_a + i_b * i_b + i_c * i_c)
-        meter.e_em += dt * tau_e * w_m
-        meter.e_fric += dt * self._b * w_m * w_m
-        if self._w_imp is not None:
-            tau_L = tau_e - self._b * w_m
-        meter.e_load += dt * tau_L * w_m
-        meter.q_a += dt * i_a
-        meter.q_b += dt * i_b
-        meter.q_c += dt * i_c
-
-    def _phase_currents(self) -> list[float]:
-        return list(self.currents_abc())
-
-    def _substep_off(self, h: float, tau_L: float) -> tuple[float, float]:
-        """One substep with all switches open (diode bridge). Returns mean u_s_ab."""
-        u_dc = self._u_dc
-        i_abc = self._phase_currents()
-        eps = self._i_eps
-        sgn = [0, 0, 0]
-        for x in range(3):
-            if i_abc[x] > eps:
-                sgn[x] = 1
-            elif i_abc[x] < -eps:
-                sgn[x] = -1
-        n_cond = sum(1 for x in range(3) if sgn[x] != 0)
-        fx = -1
-        if n_cond < 2:
-            # All currents zero: open circuit unless the line back-EMF exceeds u_dc.
-            self._i_d = 0.0
-            self._i_q = 0.0
-            e = self.back_emf_abc()
-            hi = max(range(3), key=lambda x: e[x])
-            lo = min(range(3), key=lambda x: e[x])
-            if e[hi] - e[lo] <= u_dc:
-                return self._open_circuit(h, tau_L)
-            sgn = [0, 0, 0]
-            sgn[hi] = -1
-            sgn[lo] = 1
-            fx = 3 - hi - lo
-        elif n_cond == 2:
-            fx = sgn.index(0)
-        vs = [0.0 if sgn[x] > 0 else u_dc for x in range(3)]
-        if fx >= 0 and n_cond == 2:
-            # Is the floating phase's pole voltage inside the rails?
-            vs_f = list(vs)
-            vs_f[fx] = 0.0
-            u_al = (2.0 * vs_f[0] - vs_f[1] - vs_f[2]) / 3.0
-            u_be = (vs_f[1] - vs_f[2]) * INV_SQRT3
-            v_x = self._f_float(self._i_d, self._i_q, self._w_m, self._th_m, u_al, u_be, fx, tau_L)[
-                4
-            ]
-            if v_x > u_dc:
-                sgn[fx] = -1
-                fx = -1
-            elif v_x < 0.0:
-                sgn[fx] = 1
-                fx = -1
-            vs = [0.0 if sgn[x] > 0 else u_dc for x in range(3)]
-        u_mean = self._rk4(h, vs[0], vs[1], vs[2], fx, tau_L)
-        # Current zeros within the substep.
-        i_new = self._phase_currents()
-        flipped = [x for x in range(3) if sgn[x] != 0 and i_new[x] * sgn[x] <= 0.0]
-        remaining = sum(1 for x in range(3) if sgn[x] != 0) - len(flipped)
-        if remaining < 2:
-            self._i_d = 0.0
-            self._i_q = 0.0
-        else:
-            for x in [*flipped, fx]:
-                if x >= 0:
-                    self._zero_phase(x)
-        return u_mean
-
-    def _zero_phase(self, x: int) -> None:
-        """Remove phase ``x``'s current by projecting i_dq onto its null line."""
-        th_e = self._n_p * self._th_m
-        c = math.cos(th_e)
-        s = math.sin(th_e)
-        c_x = c * _COS_PHI[x] + s * _SIN_PHI[x]
-        s_x = s * _COS_PHI[x] - c * _SIN_PHI[x]
-        i_x = self._i_d * c_x - self._i_q * s_x
-        self._i_d -= i_x * c_x
-        self._i_q += i_x * s_x
-
-    def _open_circuit(self, h: float, tau_L: float) -> tuple[float, float]:
-        """Substep with all currents zero: mechanics only; returns the mean terminal voltage."""
-        w0 = self._w_m
-        th0 = self._th_m
-        if self._w_imp is None:
-            inv_J = self._inv_J
-            b = self._b
-
-            def dw(w: float) -> float:
-                return (-tau_L - b * w) * inv_J
-
-            k1 = dw(w0)
-            k2 = dw(w0 + 0.5 * h * k1)
-            k3 = dw(w0 + 0.5 * h * k2)
-            k4 = dw(w0 + h * k3)
-            w1 = w0 + h / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
-        else:
-            w1 = w0
-        th1 = th0 + 0.5 * h * (w0 + w1)
-        meter = self.meter
-        if meter is not None:
-            w_mid = 0.5 * (w0 + w1)
-            if self._w_imp is None:
-                meter.e_load += h * tau_L * w_mid
-                meter.e_fric += h * self._b * w_mid * w_mid
-            else:
-                meter.e_load -= h * self._b * w0 * w0
-                meter.e_fric += h * self._b * w0 * w0
-        # Terminal voltage = back-EMF j w_e psi_f e^{j theta_e}; Simpson mean over the substep.
-        psi0 = flux_d(self.motor, 0.0, self.saturation)[0]
-        n_p = self._n_p
-        ua = 0.0
-        ub = 0.0
-        for wgt, th, w in (
-            (1.0, th0, w0),
-            (4.0, 0.5 * (th0 + th1), 0.5 * (w0 + w1)),
-            (1.0, th1, w1),
-        ):
-            amp = n_p * w * psi0
-            ua -= wgt * amp * math.sin(n_p * th)
-            ub += wgt * amp * math.cos(n_p * th)
-        self._w_m = w1
-        self._th_m = th1
-        return ua / 6.0, ub / 6.0

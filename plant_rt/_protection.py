@@ -14,6 +14,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from plant_rt._engine import _cplant
 from plant_rt._inverter import InverterPars
 from plant_rt._machine import MotorPars
 
@@ -28,16 +29,17 @@ __all__ = [
     "ProtectionPars",
 ]
 
+# The codes are the core's (plant_rt/core/plant_protection.h).
 #: Fault code (``PlantStatus.fault_code``): no fault.
-FAULT_NONE = 0
+FAULT_NONE: int = _cplant.FAULT_NONE
 #: Fault code: the duty frames stopped (the plant's duty watchdog).
-FAULT_WATCHDOG = 1
+FAULT_WATCHDOG: int = _cplant.FAULT_WATCHDOG
 #: Fault code: a phase current above the limit.
-FAULT_OVER_CURRENT = 2
+FAULT_OVER_CURRENT: int = _cplant.FAULT_OVER_CURRENT
 #: Fault code: the DC-link voltage above the limit.
-FAULT_OVER_VOLTAGE = 3
+FAULT_OVER_VOLTAGE: int = _cplant.FAULT_OVER_VOLTAGE
 #: Fault code: the mechanical speed above the limit.
-FAULT_OVER_SPEED = 4
+FAULT_OVER_SPEED: int = _cplant.FAULT_OVER_SPEED
 FAULT_NAMES: dict[int, str] = {
     FAULT_NONE: "none",
     FAULT_WATCHDOG: "watchdog",
@@ -152,14 +154,8 @@ class Protection:
         """
         if self.fault != FAULT_NONE:
             return self.fault
-        i = self._i
-        if not (-i <= i_a <= i and -i <= i_b <= i and -i <= i_c <= i):
-            return self.trip(FAULT_OVER_CURRENT)
-        if not u_dc <= self._u:
-            return self.trip(FAULT_OVER_VOLTAGE)
-        if not -self._w <= w_m <= self._w:
-            return self.trip(FAULT_OVER_SPEED)
-        return FAULT_NONE
+        code = _cplant.protection_check(self._i, self._u, self._w, i_a, i_b, i_c, u_dc, w_m)
+        return FAULT_NONE if code == FAULT_NONE else self.trip(code)
 
     def trip(self, code: int) -> int:
         """Latch fault ``code`` (e.g. the watchdog, which is outside this class) unless one is."""

@@ -16,6 +16,9 @@ import math
 import random
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
+
+from plant_rt._engine import _cplant
 
 
 @dataclass(frozen=True, slots=True)
@@ -213,15 +216,9 @@ def encoder_angle(theta_m: float, w_m: float, pars: SensorPars) -> float:
     pi)`` of ``N = encoder_counts`` per revolution, as the angle of that count.
     Without a sensor (``encoder_counts`` 0) the angle itself.
     """
-    th = theta_m - w_m * pars.encoder_delay_s
-    n = pars.encoder_counts
-    if n <= 0:
-        return th % TWO_PI
-    count = math.floor(th * n / TWO_PI) % n
-    return count * TWO_PI / n
-
-
-TWO_PI = 2.0 * math.pi
+    return _cplant.encoder_angle(
+        float(theta_m), float(w_m), float(pars.encoder_delay_s), int(pars.encoder_counts)
+    )
 
 
 def _three(v: float | Sequence[float], name: str, add: float = 0.0) -> tuple[float, float, float]:
@@ -256,8 +253,8 @@ class Sensors:
         self._code_max = 2 ** (bits - 1) - 1
         self._ucode_max = 2**bits - 1
 
-    def constants(self) -> tuple[float | int | random.Random, ...]:
-        """What the compiled engine's sensors need (``plant_rt/_cplant.c``, ``set_sensors``)."""
+    def constants(self) -> tuple[Any, ...]:
+        """What the core's sensors need (``plant_sensors``, ``plant_rt/core/plant_sensors.h``)."""
         p = self.pars
         return (
             *self._g,
@@ -270,40 +267,5 @@ class Sensors:
             self._lsb_u,
             self._ucode_max,
             p.noise_u,
-            self._rng,
+            self._rng.gauss,
         )
-
-    def _quant_i(self, x: float) -> float:
-        lsb = self._lsb_i
-        if lsb == 0.0:
-            return x
-        code = math.floor(x / lsb + 0.5)
-        code = max(-self._code_max - 1, min(self._code_max, code))
-        return code * lsb
-
-    def currents(self, i_a: float, i_b: float, i_c: float) -> tuple[float, float, float]:
-        """Measured phase currents (A)."""
-        g = self._g
-        o = self._o
-        m_a = g[0] * i_a + o[0]
-        m_b = g[1] * i_b + o[1]
-        m_c = g[2] * i_c + o[2]
-        sd = self.pars.noise_i
-        if sd > 0.0:
-            gauss = self._rng.gauss
-            m_a += gauss(0.0, sd)
-            m_b += gauss(0.0, sd)
-            m_c += gauss(0.0, sd)
-        return self._quant_i(m_a), self._quant_i(m_b), self._quant_i(m_c)
-
-    def voltage(self, u_dc: float) -> float:
-        """Measured DC-link voltage (V)."""
-        p = self.pars
-        m = p.gain_u_dc * u_dc + p.offset_u_dc
-        if p.noise_u > 0.0:
-            m += self._rng.gauss(0.0, p.noise_u)
-        lsb = self._lsb_u
-        if lsb == 0.0:
-            return m
-        code = max(0, min(self._ucode_max, math.floor(m / lsb + 0.5)))
-        return code * lsb

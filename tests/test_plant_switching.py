@@ -22,7 +22,7 @@ from dataclasses import replace
 import pytest
 
 from plant_rt import InverterPars, Plant, SensorPars, preset
-from plant_rt._pwm import DEAD, HIGH, LOW, PwmTimeline
+from tests.plant_reference import DEAD, HIGH, LOW, PwmTimeline
 
 PRE = preset("wen2023")
 M = PRE.motor
