@@ -109,17 +109,10 @@ class PlantFaults:
         now = self.parameters(plant.k)
         if now != self._state:
             R, psi, u = now
-            old_R, old_psi, old_u = self._state
-            changed = {
-                name: new
-                for name, new, old in (
-                    ("R_s", R, old_R),
-                    ("psi_f", psi, old_psi),
-                    ("u_dc", u, old_u),
-                )
-                if new != old
-            }
-            plant.set_parameters(**changed)
+            plant.set_parameters(
+                motor=replace(plant.motor, R_s=R, psi_f=psi),
+                inverter=replace(plant.inverter, u_dc=u),
+            )
             self._state = now
 
     def sample(self, s: Sample) -> Sample:

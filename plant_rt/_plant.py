@@ -358,6 +358,7 @@ class Plant:
             self._u_dc = float(inv.u_dc)
         self._core.set_pars(*self._core_pars())
         self._state_to_core()
+        self._sample = None  # a measurement of this instant taken before reads the new u_dc
 
     # ------------------------------------------------------------------ API
     @property
@@ -384,43 +385,6 @@ class Plant:
             self._w_m = self._w_imp
         self._state_to_core()
 
-    def set_parameters(
-        self, *, R_s: float | None = None, psi_f: float | None = None, u_dc: float | None = None
-    ) -> None:
-        """Change the stator resistance (Ohm), the magnet flux linkage (Wb, peak) or the
-        DC-link source voltage (V) from the present period on (a fault's timeline).
-
-        ``self.motor`` and ``self.inverter`` become the changed parameters (so
-        :meth:`torque`, :meth:`back_emf_abc` and the energy meter follow).
-        Without ``r_dc`` the DC-link voltage is the source's at once; with it,
-        the link follows through ``r_dc`` (and ``c_dc``) as for any change of
-        the current.  The compiled core is rebuilt from the plant's constants
-        and state; in the switching model a dead interval carried across this
-        period boundary (an edge within ``t_dead`` of the period's start) is
-        dropped once, at most ``t_dead`` of one leg.
-        """
-        from dataclasses import replace
-
-        if R_s is not None or psi_f is not None:
-            self.motor = replace(
-                self.motor,
-                R_s=self.motor.R_s if R_s is None else float(R_s),
-                psi_f=self.motor.psi_f if psi_f is None else float(psi_f),
-            )
-            self._R = float(self.motor.R_s)
-            self._psi_f = float(self.motor.psi_f)
-            self._i_0 = self.motor.psi_f / self.motor.L_d
-        if u_dc is not None:
-            self.inverter = replace(self.inverter, u_dc=float(u_dc))
-            self._u_src = float(u_dc)
-            if not self._dc_dyn:
-                self._u_dc = float(u_dc)
-        self._sample = None  # a measurement of this instant taken before reads the new u_dc
-        if self._core is not None and _cplant is not None:
-            self._core = _cplant.Core(self, _constant_tau(self._load))
-            self._core.set_sensors(*self._sensors.constants())
-
-    @property
     def imposed_speed(self) -> float | None:
         """The speed the dynamometer holds (rad/s), or None."""
         return self._w_imp
