@@ -9,7 +9,7 @@ STAMP := $(VENV)/.installed
 # pip builds the compiled plant and controller engines (setup.py); tools/need-cc
 # installs their compiler and headers first when it may, and the last lines say
 # when the plant or the controller runs in pure Python instead.
-$(STAMP): pyproject.toml setup.py plant_rt/_cplant.c controller/_cctl.c
+$(STAMP): pyproject.toml setup.py plant_rt/_cplant.c controller/_cctl.c $(wildcard controller/core/*.[ch])
 	test -x $(BIN)/pip || tools/make-venv $(PYTHON) $(VENV)
 	tools/need-cc $(BIN)/python
 	$(BIN)/python -m pip install -q --upgrade pip

@@ -1,4 +1,5 @@
-"""Build of the compiled engines, ``plant_rt/_cplant.c`` and ``controller/_cctl.c``
+"""Build of the compiled engines, ``plant_rt/_cplant.c`` and ``controller/_cctl.c`` (the binding
+of the portable controller core, ``controller/core/*.c``)
 (the rest is in pyproject.toml).
 
 The extensions are optional: on a machine without a C compiler or Python's
@@ -12,6 +13,7 @@ rounds as the Python step does and the two engines agree bit for bit.
 
 from __future__ import annotations
 
+import glob
 import sys
 
 from setuptools import Extension, setup
@@ -57,8 +59,9 @@ setup(
         ),
         Extension(
             "controller._cctl",
-            ["controller/_cctl.c"],
-            extra_compile_args=["-O2", "-ffp-contract=off", "-fno-fast-math"],
+            ["controller/_cctl.c", *sorted(glob.glob("controller/core/*.c"))],
+            depends=sorted(glob.glob("controller/core/*.h")),
+            extra_compile_args=["-O2", "-std=c99", "-ffp-contract=off", "-fno-fast-math"],
         ),
     ],
     cmdclass={"build_ext": OptionalBuildExt},

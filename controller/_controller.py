@@ -113,6 +113,8 @@ from controller._compensation import (
     cross_saturation_offset,
     offset_periods,
 )
+from controller._compiled import build_core
+from controller._engine import resolve_controller_engine
 from controller._filters import lpf_first_order
 from controller._params import MotorModel
 from controller._pi import PIController
@@ -122,6 +124,24 @@ from controller._svpwm import svpwm
 
 _TWO_PI = 2.0 * math.pi
 _SQRT3_INV = 1.0 / math.sqrt(3.0)
+
+#: The states :meth:`Controller.states` reports (the compiled core's readable members).
+STATE_NAMES = (
+    "mode",
+    "w_m_ref",
+    "w_m_hat",
+    "i_d_ref",
+    "i_q_ref",
+    "tau_ref",
+    "u_d",
+    "u_q",
+    "pi_d_u_i",
+    "pi_q_u_i",
+    "pi_w_u_i",
+    "theta_hat",
+    "w_hat",
+    "err",
+)
 
 #: Least phase margin of the speed loop, estimator included (deg); module docstring.
 SPEED_PM_MIN_DEG = 30.0
@@ -291,18 +311,6 @@ class Controller:
     #: Why the controller runs in Python although the compiled engine was asked for.
     engine_note: str | None = None
 
-    def __new__(cls, pars: ControllerPars, engine: str = "auto") -> Controller:
-        from controller._engine import resolve_controller_engine
-
-        used, why = resolve_controller_engine(engine, pars)
-        if cls is Controller and used == "compiled":
-            from controller._compiled import CompiledController
-
-            return object.__new__(CompiledController)
-        obj = object.__new__(cls)
-        obj.engine_note = why
-        return obj
-
     def __init__(self, pars: ControllerPars, engine: str = "auto") -> None:
         self.pars = pars
         m = pars.motor
@@ -369,20 +377,38 @@ class Controller:
         self._settled = False
         self._i_ref: tuple[float, float] | None = None
         self._theta_pol = 0.0
+        # the engine: the controller core (controller/core/, by composition) where it
+        # covers this controller, else the Python step below
+        self._core: Any = None
+        used, why = resolve_controller_engine(engine, pars)
+        if used == "compiled":
+            self._core, why = build_core(self)
+        self.engine_note = why
+        if self._core is not None:
+            self.engine = "compiled"
+            # the core's step is called directly (no Python frame per period)
+            self.step = self._core.step  # type: ignore[method-assign]
 
     # -- commands ---------------------------------------------------------------
     def set_speed_ref(self, w_m_ref: float) -> None:
         """Mechanical speed reference (rad/s)."""
         self.w_m_ref = float(w_m_ref)
+        if self._core is not None:
+            self._core.set_speed_ref(self.w_m_ref)
 
     def set_current_ref(self, i_dq_ref: tuple[float, float] | None) -> None:
         """Current control: hold ``(i_d, i_q)`` references (A) in ``MODE_RUN``, bypassing
         the speed loop; ``None`` returns to speed control."""
         self._i_ref = None if i_dq_ref is None else (float(i_dq_ref[0]), float(i_dq_ref[1]))
         self.pi_w.reset()
+        if self._core is not None:
+            self._core.set_current_ref(self._i_ref)
 
     def set_enable(self, enable: bool) -> None:
         """Enable (start-up sequence, then speed control) or disable the inverter."""
+        if self._core is not None:
+            self._core.set_enable(bool(enable))
+            return
         if enable and self.mode == MODE_DISABLED:
             self._restart()
         elif not enable:
@@ -639,6 +665,32 @@ class Controller:
         for key, v in est_gains.items():
             out["estimator." + key] = float(v)
         return out
+
+    def states(self) -> dict[str, float]:
+        """The controller's present states, from whichever engine keeps them: ``mode``,
+        ``w_m_ref``, ``w_m_hat``, the references ``i_d_ref``, ``i_q_ref``, ``tau_ref``,
+        the realised voltage ``u_d``, ``u_q``, the PI integrators ``pi_d_u_i``,
+        ``pi_q_u_i``, ``pi_w_u_i`` and the estimate ``theta_hat``, ``w_hat``, ``err``."""
+        c = self._core
+        if c is not None:
+            return {name: getattr(c, name) for name in STATE_NAMES}
+        est = self.estimator
+        return {
+            "mode": self.mode,
+            "w_m_ref": self.w_m_ref,
+            "w_m_hat": self.w_m_hat,
+            "i_d_ref": self.i_d_ref,
+            "i_q_ref": self.i_q_ref,
+            "tau_ref": self.tau_ref,
+            "u_d": self.u_d,
+            "u_q": self.u_q,
+            "pi_d_u_i": self.pi_d.u_i,
+            "pi_q_u_i": self.pi_q.u_i,
+            "pi_w_u_i": self.pi_w.u_i,
+            "theta_hat": est.theta_hat,
+            "w_hat": est.w_hat,
+            "err": est.err,
+        }
 
     def _advance_mode(self, i_alpha: float, i_beta: float, u_dc: float) -> None:
         if self.mode != MODE_ALIGN:

@@ -1,4 +1,5 @@
-"""The layers of ``bench/`` (docs/ARCHITECTURE.md): no import circle, no upward import.
+"""The layers of ``bench/`` (docs/ARCHITECTURE.md): no import circle, no upward import;
+no import circle in ``controller/`` and ``plant_rt/`` either.
 
 Every import inside ``bench/`` counts, also one inside a function (a lazy
 import is still a dependency).  The layers, lowest first, are
@@ -154,6 +155,18 @@ def test_a_lazy_import_counts(tmp_path: Path) -> None:
 
 def test_bench_has_no_import_circle() -> None:
     assert cycles(graph("bench")) == []
+
+
+def test_the_pure_packages_have_no_import_circle() -> None:
+    """``controller`` holds its compiled core by composition (``Controller._core``) as the
+    plant does (``Plant._core``): no module of either package imports one that imports it
+    back.  The packages' ``__init__`` re-exports are left out: a submodule imports its
+    siblings, never the package."""
+    for package in ("controller", "plant_rt"):
+        g = graph(package)
+        assert len(g) > 5, f"{package}'s modules were not found"
+        g = {n: {d for d in deps if d != package} for n, deps in g.items() if n != package}
+        assert cycles(g) == [], package
 
 
 def test_no_layer_imports_a_layer_above_it() -> None:
