@@ -741,3 +741,21 @@ class Controller:
         self._u_a1 = u_a
         self._u_b1 = u_b
         return ControlOutput(k, d_a, d_b, d_c, True, th, 0.0, 0.0, MODE_POLARITY, i_d, i_q)
+
+
+def _state(name: str) -> property:
+    """The controller's state ``name``: the compiled core's when it runs the periods, else
+    the Python step's."""
+
+    def get(self: Controller) -> Any:
+        core = self.__dict__.get("_core")
+        return getattr(core, name) if core is not None else self.__dict__[name]
+
+    def put(self: Controller, value: Any) -> None:
+        self.__dict__[name] = value
+
+    return property(get, put, doc=f"``{name}`` (read from the compiled core when it runs)")
+
+
+for _name in STATE_NAMES[:8]:
+    setattr(Controller, _name, _state(_name))

@@ -48,6 +48,7 @@ called without a Python frame.
 
 from __future__ import annotations
 
+from pathlib import Path
 from types import ModuleType
 from typing import Any
 
@@ -84,6 +85,12 @@ _KINDS = {
 #: The estimators the compiled core covers, by name; any other (a shipped one without a C
 #: twin, a plug-in) runs in Python and :func:`compiled_cover` says so.
 COMPILED_ESTIMATORS: tuple[str, ...] = tuple(_KINDS)
+
+
+def core_sources() -> list[Path]:
+    """The portable controller core's files (``controller/core/*.h``, ``*.c``): plain C99,
+    no Python, the code ``firmware/`` builds on and ``bench codegen`` ships."""
+    return sorted((Path(__file__).parent / "core").glob("cc_*.[ch]"))
 
 
 def compiled_controller_missing() -> str | None:
