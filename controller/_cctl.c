@@ -231,6 +231,13 @@ static PyObject *Core_set_enable(Core *self, PyObject *v)
     Py_RETURN_NONE;
 }
 
+static PyObject *Core_injection(Core *self, PyObject *Py_UNUSED(ignored))
+{
+    double u_a, u_b;
+    cc_estim_injection(&self->c.est, &u_a, &u_b);
+    return Py_BuildValue("(dd)", u_a, u_b);
+}
+
 /* ---------------------------------------------------------------- the period */
 static PyObject *slot(PyObject *o, Py_ssize_t off)
 {
@@ -334,6 +341,8 @@ static PyMethodDef Core_methods[] = {
     {"set_current_ref", (PyCFunction)Core_set_current_ref, METH_O, "(i_d, i_q) or None"},
     {"set_enable", (PyCFunction)Core_set_enable, METH_O, "enable or disable"},
     {"step", (PyCFunction)Core_step, METH_O, "Controller.step(meas): one period"},
+    {"injection", (PyCFunction)Core_injection, METH_NOARGS,
+     "the HF voltage (alpha, beta) (V) for the next period"},
     {NULL, NULL, 0, NULL},
 };
 
@@ -357,6 +366,12 @@ static PyMemberDef Core_members[] = {
     E_("w_hat", w_hat),
     E_("err", err),
     M_("weight", est.hyb.weight, T_DOUBLE),
+    M_("gain", est.hyb.gain, T_DOUBLE),
+    M_("y", est.hyb.y, T_DOUBLE),
+    M_("hf_theta_hat", est.hyb.hf.theta_hat, T_DOUBLE),
+    M_("hf_w_hat", est.hyb.hf.w_hat, T_DOUBLE),
+    M_("obs_theta_hat", est.hyb.obs.theta_hat, T_DOUBLE),
+    M_("obs_w_hat", est.hyb.obs.w_hat, T_DOUBLE),
     {NULL, 0, 0, 0, NULL},
 };
 #undef M_

@@ -26,6 +26,12 @@ class Core:
     w_hat: float
     err: float
     weight: float
+    gain: float
+    y: float
+    hf_theta_hat: float
+    hf_w_hat: float
+    obs_theta_hat: float
+    obs_w_hat: float
     def __init__(
         self,
         kind: int,
@@ -84,3 +90,4 @@ class Core:
     def set_current_ref(self, i_dq: tuple[float, float] | None) -> None: ...
     def set_enable(self, enable: bool) -> None: ...
     def step(self, meas: Any) -> Any: ...
+    def injection(self) -> tuple[float, float]: ...

@@ -116,6 +116,7 @@ from controller._compensation import (
 from controller._compiled import build_core
 from controller._engine import resolve_controller_engine
 from controller._filters import lpf_first_order
+from controller._hybrid import HybridEstimator
 from controller._params import MotorModel
 from controller._pi import PIController
 from controller._registry import estimator_family, injection_family, make_estimator
@@ -141,6 +142,19 @@ STATE_NAMES = (
     "theta_hat",
     "w_hat",
     "err",
+)
+
+#: The hybrid estimators' own states :meth:`Controller.states` adds for them: the observer's
+#: weight, the injection's gain, the schedule speed, and the injection estimator's and the
+#: flux observer's angles and speeds (:class:`controller.HybridEstimator`).
+HYBRID_STATE_NAMES = (
+    "weight",
+    "gain",
+    "y",
+    "hf_theta_hat",
+    "hf_w_hat",
+    "obs_theta_hat",
+    "obs_w_hat",
 )
 
 #: Least phase margin of the speed loop, estimator included (deg); module docstring.
@@ -392,9 +406,10 @@ class Controller:
     # -- commands ---------------------------------------------------------------
     def set_speed_ref(self, w_m_ref: float) -> None:
         """Mechanical speed reference (rad/s)."""
-        self.w_m_ref = float(w_m_ref)
+        w = float(w_m_ref)
+        self.w_m_ref = w
         if self._core is not None:
-            self._core.set_speed_ref(self.w_m_ref)
+            self._core.set_speed_ref(w)
 
     def set_current_ref(self, i_dq_ref: tuple[float, float] | None) -> None:
         """Current control: hold ``(i_d, i_q)`` references (A) in ``MODE_RUN``, bypassing
@@ -670,12 +685,20 @@ class Controller:
         """The controller's present states, from whichever engine keeps them: ``mode``,
         ``w_m_ref``, ``w_m_hat``, the references ``i_d_ref``, ``i_q_ref``, ``tau_ref``,
         the realised voltage ``u_d``, ``u_q``, the PI integrators ``pi_d_u_i``,
-        ``pi_q_u_i``, ``pi_w_u_i`` and the estimate ``theta_hat``, ``w_hat``, ``err``."""
+        ``pi_q_u_i``, ``pi_w_u_i``, the estimate ``theta_hat``, ``w_hat``, ``err``, the
+        HF voltage for the next period ``u_h_alpha``, ``u_h_beta``
+        (:meth:`injection`) and, for a hybrid estimator, :data:`HYBRID_STATE_NAMES`."""
         c = self._core
+        hybrid = isinstance(self.estimator, HybridEstimator)
+        u_h = self.injection()
         if c is not None:
-            return {name: getattr(c, name) for name in STATE_NAMES}
+            out = {name: getattr(c, name) for name in STATE_NAMES}
+            out["u_h_alpha"], out["u_h_beta"] = u_h
+            if hybrid:
+                out.update({name: getattr(c, name) for name in HYBRID_STATE_NAMES})
+            return out
         est = self.estimator
-        return {
+        out = {
             "mode": self.mode,
             "w_m_ref": self.w_m_ref,
             "w_m_hat": self.w_m_hat,
@@ -690,7 +713,30 @@ class Controller:
             "theta_hat": est.theta_hat,
             "w_hat": est.w_hat,
             "err": est.err,
+            "u_h_alpha": u_h[0],
+            "u_h_beta": u_h[1],
         }
+        if isinstance(est, HybridEstimator):
+            out.update(
+                weight=est.weight,
+                gain=est.gain,
+                y=est.y,
+                hf_theta_hat=est.hf.theta_hat,
+                hf_w_hat=est.hf.w_hat,
+                obs_theta_hat=est.observer.theta_hat,
+                obs_w_hat=est.observer.w_hat,
+            )
+        return out
+
+    def injection(self) -> tuple[float, float]:
+        """The HF voltage (alpha, beta) (V) the estimator adds to the command of the next
+        period, from whichever engine runs the periods."""
+        c = self._core
+        if c is not None:
+            u_a, u_b = c.injection()
+            return float(u_a), float(u_b)
+        u_a, u_b = self.estimator.injection()
+        return float(u_a), float(u_b)
 
     def _advance_mode(self, i_alpha: float, i_beta: float, u_dc: float) -> None:
         if self.mode != MODE_ALIGN:

@@ -1,8 +1,9 @@
 """The controller's two engines give the same trace bit for bit.
 
-The compiled step (``controller/_cctl.c``) is a second implementation of
-:meth:`controller.Controller.step` and of the estimators it covers; these
-tests keep the two equal. Equal means equal bits (not 1e-9 rad or A): the
+The controller's step is the portable C core (``controller/core/``, bound by
+``controller/_cctl.c``); the Python step of :mod:`controller._controller` and
+the estimators' modules is the readable reference it is checked against,
+the oracle of these tests, for every estimator the core covers. Equal means equal bits (not 1e-9 rad or A): the
 C functions repeat the Python operations in the same order, built without
 fused multiply-adds, and call the same ``libm`` ``sin``/``cos``/``sqrt``.
 Every shipped scenario's first second, each of its estimators, in the

@@ -88,7 +88,7 @@ static void estim_step(cc_estim_t *e, const cc_meas_t *m, double i_alpha, double
     }
 }
 
-static void estim_injection(const cc_estim_t *e, double *u_a, double *u_b)
+void cc_estim_injection(const cc_estim_t *e, double *u_a, double *u_b)
 {
     switch (e->kind) {
     case CC_EST_TT_DQ:
@@ -276,7 +276,7 @@ int cc_foc_step(cc_foc_t *c, const cc_meas_t *m, cc_out_t *o)
     double u_d = cc_pi_output(&c->pi_d, i_d_ref, i_d_pi, -w_e * c->L_q * i_q);
     double u_q = cc_pi_output(&c->pi_q, i_q_ref, i_q_pi, w_e * (c->L_d * i_d + c->psi_f));
     double u_ah, u_bh;
-    estim_injection(&c->est, &u_ah, &u_bh);
+    cc_estim_injection(&c->est, &u_ah, &u_bh);
     double u_lim = u_dc * CC_SQRT3_INV - sqrt(u_ah * u_ah + u_bh * u_bh);
     double mag2 = u_d * u_d + u_q * u_q;
     double u_dl, u_ql;

@@ -92,6 +92,8 @@ void cc_foc_init(cc_foc_t *c, double n_p, double L_d, double L_q, double psi_f, 
 /* the estimator's kind and its links (a hybrid's injection estimator); -1: unknown */
 int cc_estim_init(cc_estim_t *e, int kind);
 void cc_estim_reset(cc_estim_t *e, double theta0);
+/* the HF voltage (alpha, beta) (V) the estimator adds to the command for the next period */
+void cc_estim_injection(const cc_estim_t *e, double *u_a, double *u_b);
 
 void cc_foc_set_speed_ref(cc_foc_t *c, double w_m_ref);
 /* hold (i_d, i_q) references in MODE_RUN (on != 0), or return to speed control */
