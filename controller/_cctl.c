@@ -362,6 +362,7 @@ static PyMemberDef Core_members[] = {
     M_("pi_d_u_i", pi_d.u_i, T_DOUBLE),
     M_("pi_q_u_i", pi_q.u_i, T_DOUBLE),
     M_("pi_w_u_i", pi_w.u_i, T_DOUBLE),
+    M_("polarity_flip", polarity.flip, T_INT),
     E_("theta_hat", theta_hat),
     E_("w_hat", w_hat),
     E_("err", err),

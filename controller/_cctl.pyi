@@ -22,6 +22,7 @@ class Core:
     pi_d_u_i: float
     pi_q_u_i: float
     pi_w_u_i: float
+    polarity_flip: int
     theta_hat: float
     w_hat: float
     err: float

@@ -139,6 +139,7 @@ STATE_NAMES = (
     "pi_d_u_i",
     "pi_q_u_i",
     "pi_w_u_i",
+    "polarity_flip",
     "theta_hat",
     "w_hat",
     "err",
@@ -685,7 +686,8 @@ class Controller:
         """The controller's present states, from whichever engine keeps them: ``mode``,
         ``w_m_ref``, ``w_m_hat``, the references ``i_d_ref``, ``i_q_ref``, ``tau_ref``,
         the realised voltage ``u_d``, ``u_q``, the PI integrators ``pi_d_u_i``,
-        ``pi_q_u_i``, ``pi_w_u_i``, the estimate ``theta_hat``, ``w_hat``, ``err``, the
+        ``pi_q_u_i``, ``pi_w_u_i``, the last polarity test's outcome ``polarity_flip``
+        (1: the estimate was turned by pi), the estimate ``theta_hat``, ``w_hat``, ``err``, the
         HF voltage for the next period ``u_h_alpha``, ``u_h_beta``
         (:meth:`injection`) and, for a hybrid estimator, :data:`HYBRID_STATE_NAMES`."""
         c = self._core
@@ -710,6 +712,7 @@ class Controller:
             "pi_d_u_i": self.pi_d.u_i,
             "pi_q_u_i": self.pi_q.u_i,
             "pi_w_u_i": self.pi_w.u_i,
+            "polarity_flip": int(self.polarity.flip),
             "theta_hat": est.theta_hat,
             "w_hat": est.w_hat,
             "err": est.err,
