@@ -6,10 +6,10 @@ STAMP := $(VENV)/.installed
 
 .PHONY: demo test lint unit vcan suite reference perf docs docs-site rtcheck reliability faults clean
 
-# pip builds the plant's core and the compiled controller (setup.py); tools/need-cc
-# installs their compiler and headers first when it may. The plant's core is
+# pip builds the plant's core and the controller's core with their bindings (setup.py);
+# tools/need-cc installs their compiler and headers first when it may. The plant's core is
 # required; the last line says when the controller runs in pure Python instead.
-$(STAMP): pyproject.toml setup.py plant_rt/_cplant.c $(wildcard plant_rt/core/*.[ch]) controller/_cctl.c
+$(STAMP): pyproject.toml setup.py plant_rt/_cplant.c $(wildcard plant_rt/core/*.[ch]) controller/_cctl.c $(wildcard controller/core/*.[ch])
 	test -x $(BIN)/pip || tools/make-venv $(PYTHON) $(VENV)
 	tools/need-cc $(BIN)/python
 	$(BIN)/python -m pip install -q --upgrade pip

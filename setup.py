@@ -1,5 +1,6 @@
 """Build of the compiled engines, ``plant_rt/_cplant.c`` with the plant's core
-(``plant_rt/core/*.c``) and ``controller/_cctl.c`` (the rest is in pyproject.toml).
+(``plant_rt/core/*.c``) and ``controller/_cctl.c`` with the controller's core
+(``controller/core/*.c``) (the rest is in pyproject.toml).
 
 The plant's core is required: the plant's equations exist only in C, so an
 install without a C compiler or Python's headers stops with one line saying
@@ -13,6 +14,7 @@ rounds as the Python step does and the two engines agree bit for bit.
 
 from __future__ import annotations
 
+import glob
 import sys
 from pathlib import Path
 
@@ -76,8 +78,9 @@ setup(
         ),
         Extension(
             "controller._cctl",
-            ["controller/_cctl.c"],
-            extra_compile_args=["-O2", "-ffp-contract=off", "-fno-fast-math"],
+            ["controller/_cctl.c", *sorted(glob.glob("controller/core/*.c"))],
+            depends=sorted(glob.glob("controller/core/*.h")),
+            extra_compile_args=["-O2", "-std=c99", "-ffp-contract=off", "-fno-fast-math"],
         ),
     ],
     cmdclass={"build_ext": OptionalBuildExt},

@@ -19,7 +19,12 @@ from controller._api import (
 from controller._compensation import CompensationPars
 from controller._controller import Controller, ControllerPars
 from controller._design import PM_TARGET_DEG
-from controller._engine import ENGINES, compiled_controller_missing, resolve_controller_engine
+from controller._engine import (
+    ENGINES,
+    compiled_controller_missing,
+    core_sources,
+    resolve_controller_engine,
+)
 from controller._filters import BPF_WEN, HPF_WEN, LPF_WEN, discretize
 from controller._flux_observer import FluxObserver, pll_gains
 from controller._hybrid import HybridDesign, HybridEstimator, TransitionBand, design
@@ -82,6 +87,7 @@ __all__ = [
     "check_estimator",
     "clarke",
     "compiled_controller_missing",
+    "core_sources",
     "declared_options",
     "design",
     "discretize",

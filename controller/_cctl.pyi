@@ -1,4 +1,4 @@
-"""Types of the compiled controller engine (controller/_cctl.c)."""
+"""Types of the binding of the controller core (controller/_cctl.c, controller/core/)."""
 
 from typing import Any
 
@@ -11,8 +11,84 @@ KIND_HYB_TTDQ: int
 KIND_HYB_SQW: int
 
 class Core:
-    dirty: bool
-    def __init__(self, kind: int, measurement: type, output: type) -> None: ...
-    def load(self, state: dict[str, Any]) -> None: ...
-    def store(self, state: dict[str, Any]) -> None: ...
+    mode: int
+    w_m_ref: float
+    w_m_hat: float
+    i_d_ref: float
+    i_q_ref: float
+    tau_ref: float
+    u_d: float
+    u_q: float
+    pi_d_u_i: float
+    pi_q_u_i: float
+    pi_w_u_i: float
+    polarity_flip: int
+    theta_hat: float
+    w_hat: float
+    err: float
+    weight: float
+    gain: float
+    y: float
+    hf_theta_hat: float
+    hf_w_hat: float
+    obs_theta_hat: float
+    obs_w_hat: float
+    def __init__(
+        self,
+        kind: int,
+        measurement: type,
+        measurement_slots: tuple[Any, ...],
+        output: type,
+        output_slots: tuple[Any, ...],
+    ) -> None: ...
+    def foc(
+        self,
+        n_p: float,
+        L_d: float,
+        L_q: float,
+        psi_f: float,
+        i_max: float,
+        tau_max: float,
+        t_delay: float,
+        n_align: int,
+        n_settle: int,
+        theta0: float,
+        raw: bool,
+        align: bool,
+    ) -> None: ...
+    def pi(self, which: int, k_p: float, k_i: float, T_s: float, k_t: float) -> None: ...
+    def speed_filter(self, b0: float, b1: float, a1: float) -> None: ...
+    def polarity(self, L_d: float, T_s: float, i_pulse: float, u_frac: float) -> None: ...
+    def rotating(
+        self,
+        V_h: float,
+        wT: float,
+        inv_norm: float,
+        pll: tuple[float, float, float],
+        bpf: tuple[float, float, float, float, float],
+        lpf: tuple[float, float, float],
+        hpf: tuple[float, float, float] | None,
+        tracking: tuple[float, float, float, float] | None,
+    ) -> None: ...
+    def square_wave(
+        self,
+        cic: bool,
+        M: int,
+        U_h: float,
+        t_comp: float,
+        k_err: float,
+        observer: tuple[float, float, float, float, float],
+    ) -> None: ...
+    def hybrid(
+        self,
+        observer: tuple[float, ...],
+        band: tuple[float, float, float, float],
+        T_s: float,
+        n_p: float,
+        J: float,
+    ) -> None: ...
+    def set_speed_ref(self, w_m_ref: float) -> None: ...
+    def set_current_ref(self, i_dq: tuple[float, float] | None) -> None: ...
+    def set_enable(self, enable: bool) -> None: ...
     def step(self, meas: Any) -> Any: ...
+    def injection(self) -> tuple[float, float]: ...

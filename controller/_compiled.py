@@ -1,118 +1,145 @@
-"""The controller on the compiled engine: :class:`controller.Controller` with its step in C.
+"""The controller on the compiled engine: the controller core (``controller/core/``) built
+from a designed :class:`controller.Controller`.
 
-The compiled core (``controller/_cctl.c``, :mod:`controller._engine`) keeps
-the states while it steps; the Python objects (the estimator, the PIs, the
-speed filter and the controller's own state attributes) hold them whenever
-Python reads or changes them. Each state attribute is a property here:
-
-- reading one brings the Python objects up to date from the core (once per
-  period at most);
-- writing one, or taking one of the objects (``estimator``, ``pi_d``,
-  ``pi_q``, ``pi_w``, ``lpf_w``, which the caller may change), hands the
-  states over to Python: the next compiled period reads them all again.
-
-So every command (:meth:`set_speed_ref`, :meth:`set_enable`, ...) and every
-period the core leaves to Python (it returns None before it changes
-anything) runs the Python code on the present states. An object taken
-before a run and read after it is not kept up to date: take it again.
+Python designs every gain, filter and threshold (each with its derivation, in
+:mod:`controller._controller` and the estimators' modules); :func:`build_core`
+hands those values, by position, to the core's ``_init`` functions through the
+binding ``controller/_cctl.c``. From then on the core runs every period, the
+start-up (alignment, polarity test, settling) included, and keeps every state;
+the controller forwards its commands to it. The Python objects stay the design
+(:meth:`controller.Controller.gains` reads them); the states a caller may read
+are :meth:`controller.Controller.states`.
 """
 
 from __future__ import annotations
 
+from dataclasses import fields
 from typing import Any
 
 from controller._api import ControlOutput, Measurement
-from controller._controller import Controller, ControllerPars
 from controller._engine import _cctl, compiled_cover
+from controller._filters import Biquad2, FirstOrder, FirstOrder2
+from controller._hybrid import HybridEstimator
+from controller._pll import PositionObserver
+from controller._rotating import RotatingHFEstimator
+from controller._sensored import SensoredEstimator
+from controller._square_wave import SquareWaveEstimator
+from controller._tt_dq import TTDQEstimator
 
-#: The states the core keeps (read and written by Core.load and Core.store).
-_STATE_VALUES = (
-    "mode",
-    "_n_mode",
-    "_settled",
-    "_i_ref",
-    "w_m_ref",
-    "i_d_ref",
-    "i_q_ref",
-    "tau_ref",
-    "w_m_hat",
-    "u_d",
-    "u_q",
-    "_u_a1",
-    "_u_b1",
-    "_u_a2",
-    "_u_b2",
-)
-_STATE_OBJECTS = ("estimator", "pi_d", "pi_q", "pi_w", "lpf_w")
-#: The module of the estimator class each kind of the core mirrors.
-_MODULES = {
-    1: "controller._tt_dq",
-    2: "controller._tt_ab",
-    3: "controller._sfhf",
-    4: "controller._square_wave",
-    5: "controller._sensored",
-    6: "controller._hybrid",
-    7: "controller._hybrid",
+#: The estimator class each kind of the core mirrors (kinds 2 and 3: by module).
+_KIND_CLASS: dict[int, type] = {
+    1: TTDQEstimator,
+    4: SquareWaveEstimator,
+    5: SensoredEstimator,
+    6: HybridEstimator,
+    7: HybridEstimator,
 }
-#: The module of a hybrid's injection estimator.
-_HF_MODULES = {6: "controller._tt_dq", 7: "controller._square_wave"}
 
 
-def _state(name: str, handed: bool) -> property:
-    """Property of the state ``name``: read from the core when it has stepped since; a write
-    (or, with ``handed``, a read) hands the states over to Python."""
-
-    def get(self: CompiledController) -> Any:
-        core = self._core
-        if core is not None and core.holds:
-            if core.dirty:
-                core.store(self.__dict__)
-            if handed:
-                core.holds = False
-        return self.__dict__[name]
-
-    def put(self: CompiledController, value: Any) -> None:
-        core = self._core
-        if core is not None and core.holds:
-            if core.dirty:
-                core.store(self.__dict__)
-            core.holds = False
-        self.__dict__[name] = value
-
-    return property(get, put, doc=f"``{name}`` (kept by the compiled core while it steps)")
+def _fo(f: FirstOrder | FirstOrder2) -> tuple[float, float, float]:
+    return (f.b0, f.b1, f.a1)
 
 
-class CompiledController(Controller):
-    """A :class:`controller.Controller` whose periods run in C where the core covers them.
-
-    Built by ``Controller(pars, engine)`` when the engine resolves to
-    ``"compiled"``; the same trace as the Python engine, bit for bit.
-    """
-
-    _core: Any = None
-
-    def __init__(self, pars: ControllerPars, engine: str = "auto") -> None:
-        super().__init__(pars, engine)
-        kind, why = compiled_cover(pars)
-        est = self.__dict__["estimator"]
-        est_mod = type(est).__module__
-        if kind in _HF_MODULES and type(getattr(est, "hf", None)).__module__ != _HF_MODULES[kind]:
-            est_mod = type(getattr(est, "hf", None)).__module__
-        if _cctl is None or not kind or est_mod != _MODULES.get(kind):
-            # not built, not covered, or an estimator registered under a compiled one's name
-            self.engine_note = why or f"the estimator of {est_mod} is not compiled: Python"
-            return
-        core = _cctl.Core(kind, Measurement, ControlOutput)
-        self._core = core
-        self.engine = "compiled"
-        self.engine_note = None
-        # the step is the core's run(), called directly (no Python frame per period); it
-        # hands the periods it leaves to the Python step on the same states
-        core.bind(self.__dict__, super().step)
-        self.__dict__["step"] = self._supervised(core.run)
+def _bq(f: Biquad2) -> tuple[float, float, float, float, float]:
+    return (f.b0, f.b1, f.b2, f.a1, f.a2)
 
 
-for _name in _STATE_VALUES:
-    setattr(CompiledController, _name, _state(_name, False))
-for _name in _STATE_OBJECTS:
-    setattr(CompiledController, _name, _state(_name, True))
+def _rotating(core: Any, est: RotatingHFEstimator, tracking: bool) -> None:
+    pll = est.pll
+    assert isinstance(pll, PositionObserver)
+    e: Any = est
+    hpf = getattr(e, "_hpf", None)
+    core.rotating(
+        est.V_h,
+        est.wT,
+        e._inv_norm,
+        (pll.k_p, pll.k_i, pll.T_s),
+        _bq(e._bpf),
+        _fo(e._lpf),
+        None if hpf is None else _fo(hpf),
+        (est.w_h, est.T_s, est.bpf_B, e._w0_min) if tracking and est.bpf_tracking else None,
+    )
+
+
+def _square_wave(core: Any, est: SquareWaveEstimator) -> None:
+    o: Any = est.observer
+    e: Any = est
+    core.square_wave(
+        est.cic, est.M, est.U_h, e._t_comp, e._k_err, (o.T_s, o._g1, o._g2, o._g3, o._gt)
+    )
+
+
+def _kind_of(kind: int, est: object) -> bool:
+    """The estimator built is the class the core's kind mirrors (a plug-in registered under
+    a compiled estimator's name is not)."""
+    mod = {2: "controller._tt_ab", 3: "controller._sfhf"}.get(kind)
+    if mod is not None:
+        return type(est).__module__ == mod
+    if kind in (6, 7):
+        hf = getattr(est, "hf", None)
+        want = TTDQEstimator if kind == 6 else SquareWaveEstimator
+        return type(est) is HybridEstimator and type(hf) is want
+    return type(est) is _KIND_CLASS[kind]
+
+
+def _slots(cls: type) -> tuple[Any, ...]:
+    """The slot descriptors of a slotted dataclass, in the order of its fields (the layout
+    the binding reads and fills, as a struct's)."""
+    return tuple(vars(cls)[f.name] for f in fields(cls))
+
+
+def build_core(ctrl: Any) -> tuple[Any, str | None]:
+    """The core for the designed controller ``ctrl`` (a :class:`controller.Controller`),
+    or ``(None, why)`` when the core does not cover it."""
+    pars = ctrl.pars
+    kind, why = compiled_cover(pars)
+    est = ctrl.estimator
+    if _cctl is None or not kind:
+        return None, why
+    if not _kind_of(kind, est):
+        return None, f"the estimator of {type(est).__module__} is not compiled: Python"
+    core = _cctl.Core(kind, Measurement, _slots(Measurement), ControlOutput, _slots(ControlOutput))
+    m = ctrl.motor
+    core.foc(
+        float(m.n_p),
+        m.L_d,
+        m.L_q,
+        m.psi_f,
+        ctrl.i_max,
+        ctrl.tau_max,
+        ctrl.t_delay,
+        ctrl.n_align,
+        ctrl.n_settle,
+        pars.theta0,
+        ctrl.raw_feedback,
+        ctrl.family != "none" and pars.startup,
+    )
+    for which, pi in enumerate((ctrl.pi_d, ctrl.pi_q, ctrl.pi_w)):
+        core.pi(which, pi.k_p, pi.k_i, pi.T_s, pi.k_t)
+    core.speed_filter(*_fo(ctrl.lpf_w))
+    pt = ctrl.polarity
+    core.polarity(pt.L_d, pt.T_s, pt.i_pulse, pt.u_frac)
+    if kind in (1, 2, 3):
+        _rotating(core, est, kind == 1)
+    elif kind == 4:
+        _square_wave(core, est)
+    elif kind in (6, 7):
+        hf = est.hf
+        if kind == 6:
+            _rotating(core, hf, True)
+            tr_T_s = est.tracker.T_s
+            n_p, J = 0.0, 1.0
+        else:
+            _square_wave(core, hf)
+            tr_T_s = hf.T_s
+            n_p, J = float(hf.observer.n_p), hf.observer.J
+        o = est.observer
+        b = est.band
+        core.hybrid(
+            (o.R_s, o.L_d, o.L_q, o.psi_f, o.T_s, o.zeta_f, o.w_min, o.k_p, o.k_i),
+            (b.w_lo, b.w_mid, b.w_hi, b.h),
+            tr_T_s,
+            n_p,
+            J,
+        )
+    return core, None

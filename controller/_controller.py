@@ -113,7 +113,10 @@ from controller._compensation import (
     cross_saturation_offset,
     offset_periods,
 )
+from controller._compiled import build_core
+from controller._engine import resolve_controller_engine
 from controller._filters import lpf_first_order
+from controller._hybrid import HybridEstimator
 from controller._params import MotorModel
 from controller._pi import PIController
 from controller._registry import estimator_family, injection_family, make_estimator
@@ -123,6 +126,38 @@ from controller._svpwm import svpwm
 
 _TWO_PI = 2.0 * math.pi
 _SQRT3_INV = 1.0 / math.sqrt(3.0)
+
+#: The states :meth:`Controller.states` reports (the compiled core's readable members).
+STATE_NAMES = (
+    "mode",
+    "w_m_ref",
+    "w_m_hat",
+    "i_d_ref",
+    "i_q_ref",
+    "tau_ref",
+    "u_d",
+    "u_q",
+    "pi_d_u_i",
+    "pi_q_u_i",
+    "pi_w_u_i",
+    "polarity_flip",
+    "theta_hat",
+    "w_hat",
+    "err",
+)
+
+#: The hybrid estimators' own states :meth:`Controller.states` adds for them: the observer's
+#: weight, the injection's gain, the schedule speed, and the injection estimator's and the
+#: flux observer's angles and speeds (:class:`controller.HybridEstimator`).
+HYBRID_STATE_NAMES = (
+    "weight",
+    "gain",
+    "y",
+    "hf_theta_hat",
+    "hf_w_hat",
+    "obs_theta_hat",
+    "obs_w_hat",
+)
 
 #: Least phase margin of the speed loop, estimator included (deg); module docstring.
 SPEED_PM_MIN_DEG = 30.0
@@ -295,18 +330,6 @@ class Controller:
     #: Why the controller runs in Python although the compiled engine was asked for.
     engine_note: str | None = None
 
-    def __new__(cls, pars: ControllerPars, engine: str = "auto") -> Controller:
-        from controller._engine import resolve_controller_engine
-
-        used, why = resolve_controller_engine(engine, pars)
-        if cls is Controller and used == "compiled":
-            from controller._compiled import CompiledController
-
-            return object.__new__(CompiledController)
-        obj = object.__new__(cls)
-        obj.engine_note = why
-        return obj
-
     def __init__(self, pars: ControllerPars, engine: str = "auto") -> None:
         self.pars = pars
         m = pars.motor
@@ -373,7 +396,19 @@ class Controller:
         self._settled = False
         self._i_ref: tuple[float, float] | None = None
         self._theta_pol = 0.0
-        # the supervision hook: the step with controller._supervision after it
+        # the engine: the controller core (controller/core/, by composition) where it
+        # covers this controller, else the Python step below
+        self._core: Any = None
+        used, why = resolve_controller_engine(engine, pars)
+        if used == "compiled":
+            self._core, why = build_core(self)
+        self.engine_note = why
+        if self._core is not None:
+            self.engine = "compiled"
+            # the core's step is called directly (no Python frame per period)
+            self.step = self._core.step  # type: ignore[method-assign]
+        # the supervision hook: the step (the core's or Python's) with
+        # controller._supervision after it
         self.supervisor = None if pars.supervision is None else Supervisor(pars.supervision)
         self.__dict__["step"] = self._supervised(self.step)
 
@@ -385,16 +420,24 @@ class Controller:
     # -- commands ---------------------------------------------------------------
     def set_speed_ref(self, w_m_ref: float) -> None:
         """Mechanical speed reference (rad/s)."""
-        self.w_m_ref = float(w_m_ref)
+        w = float(w_m_ref)
+        self.w_m_ref = w
+        if self._core is not None:
+            self._core.set_speed_ref(w)
 
     def set_current_ref(self, i_dq_ref: tuple[float, float] | None) -> None:
         """Current control: hold ``(i_d, i_q)`` references (A) in ``MODE_RUN``, bypassing
         the speed loop; ``None`` returns to speed control."""
         self._i_ref = None if i_dq_ref is None else (float(i_dq_ref[0]), float(i_dq_ref[1]))
         self.pi_w.reset()
+        if self._core is not None:
+            self._core.set_current_ref(self._i_ref)
 
     def set_enable(self, enable: bool) -> None:
         """Enable (start-up sequence, then speed control) or disable the inverter."""
+        if self._core is not None:
+            self._core.set_enable(bool(enable))
+            return
         if enable and self.mode == MODE_DISABLED:
             self._restart()
         elif not enable:
@@ -655,6 +698,65 @@ class Controller:
             out["estimator." + key] = float(v)
         return out
 
+    def states(self) -> dict[str, float]:
+        """The controller's present states, from whichever engine keeps them: ``mode``,
+        ``w_m_ref``, ``w_m_hat``, the references ``i_d_ref``, ``i_q_ref``, ``tau_ref``,
+        the realised voltage ``u_d``, ``u_q``, the PI integrators ``pi_d_u_i``,
+        ``pi_q_u_i``, ``pi_w_u_i``, the last polarity test's outcome ``polarity_flip``
+        (1: the estimate was turned by pi), the estimate ``theta_hat``, ``w_hat``, ``err``, the
+        HF voltage for the next period ``u_h_alpha``, ``u_h_beta``
+        (:meth:`injection`) and, for a hybrid estimator, :data:`HYBRID_STATE_NAMES`."""
+        c = self._core
+        hybrid = isinstance(self.estimator, HybridEstimator)
+        u_h = self.injection()
+        if c is not None:
+            out = {name: getattr(c, name) for name in STATE_NAMES}
+            out["u_h_alpha"], out["u_h_beta"] = u_h
+            if hybrid:
+                out.update({name: getattr(c, name) for name in HYBRID_STATE_NAMES})
+            return out
+        est = self.estimator
+        out = {
+            "mode": self.mode,
+            "w_m_ref": self.w_m_ref,
+            "w_m_hat": self.w_m_hat,
+            "i_d_ref": self.i_d_ref,
+            "i_q_ref": self.i_q_ref,
+            "tau_ref": self.tau_ref,
+            "u_d": self.u_d,
+            "u_q": self.u_q,
+            "pi_d_u_i": self.pi_d.u_i,
+            "pi_q_u_i": self.pi_q.u_i,
+            "pi_w_u_i": self.pi_w.u_i,
+            "polarity_flip": int(self.polarity.flip),
+            "theta_hat": est.theta_hat,
+            "w_hat": est.w_hat,
+            "err": est.err,
+            "u_h_alpha": u_h[0],
+            "u_h_beta": u_h[1],
+        }
+        if isinstance(est, HybridEstimator):
+            out.update(
+                weight=est.weight,
+                gain=est.gain,
+                y=est.y,
+                hf_theta_hat=est.hf.theta_hat,
+                hf_w_hat=est.hf.w_hat,
+                obs_theta_hat=est.observer.theta_hat,
+                obs_w_hat=est.observer.w_hat,
+            )
+        return out
+
+    def injection(self) -> tuple[float, float]:
+        """The HF voltage (alpha, beta) (V) the estimator adds to the command of the next
+        period, from whichever engine runs the periods."""
+        c = self._core
+        if c is not None:
+            u_a, u_b = c.injection()
+            return float(u_a), float(u_b)
+        u_a, u_b = self.estimator.injection()
+        return float(u_a), float(u_b)
+
     def _advance_mode(self, i_alpha: float, i_beta: float, u_dc: float) -> None:
         if self.mode != MODE_ALIGN:
             return
@@ -704,3 +806,21 @@ class Controller:
         self._u_a1 = u_a
         self._u_b1 = u_b
         return ControlOutput(k, d_a, d_b, d_c, True, th, 0.0, 0.0, MODE_POLARITY, i_d, i_q)
+
+
+def _state(name: str) -> property:
+    """The controller's state ``name``: the compiled core's when it runs the periods, else
+    the Python step's."""
+
+    def get(self: Controller) -> Any:
+        core = self.__dict__.get("_core")
+        return getattr(core, name) if core is not None else self.__dict__[name]
+
+    def put(self: Controller, value: Any) -> None:
+        self.__dict__[name] = value
+
+    return property(get, put, doc=f"``{name}`` (read from the compiled core when it runs)")
+
+
+for _name in STATE_NAMES[:8]:
+    setattr(Controller, _name, _state(_name))

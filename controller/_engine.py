@@ -2,11 +2,13 @@
 
 ``"python"``: :meth:`controller.Controller.step` as written in
 :mod:`controller._controller` and the estimators' modules. ``"compiled"``:
-the same step in C (``controller/_cctl.c``, built by ``pip install`` beside
-the plant's engine when the machine has a C compiler and Python's headers),
-a second implementation that mirrors the Python one block for block (one C
-function per Python filter, PI, PLL, observer and estimator update) and
-gives the same trace bit for bit (``tests/test_controller_engine.py``).
+the same step in the portable C core ``controller/core/`` (C99, no
+``Python.h``, one file per block: PI, filters, PLL, Luenberger, CIC, each
+demodulator, the flux observer, the hybrid band, the polarity test, FOC),
+bound to Python by ``controller/_cctl.c`` and built by ``pip install``
+beside the plant's engine when the machine has a C compiler and Python's
+headers. It repeats the Python blocks operation for operation and gives the
+same trace bit for bit (``tests/test_controller_engine.py``).
 ``"auto"``: compiled when it is built and covers the controller, else Python.
 
 What it covers (:func:`compiled_cover`): the speed and current control of
@@ -23,15 +25,15 @@ estimator the core does not know (``self-demod`` and ``epf``, Wen's
 references [27] and [25], and every plug-in), the measured normalisation, the
 mechanical position observer (``observer = "mechanical"``) and
 the drive countermeasures (dead-time feed-forward, cross-saturation
-correction, offset calibration). Inside it,
-the few periods the core leaves to Python (the polarity test, the
-hand-overs between modes, the CIC's periodic re-anchoring) run on the same
-states (:mod:`controller._compiled`).
+correction, offset calibration). Inside it the core runs every period,
+the start-up included, and keeps every state; the
+:class:`controller.Controller` holds it by composition and forwards its
+commands (:mod:`controller._compiled`).
 
 Equal means equal bits, not a tolerance: the C functions repeat the Python
 operations in the same order (Python's float ``%`` included), without fused
-multiply-adds, and call the same ``libm``; the one Python operation with no
-C twin here, the CIC's re-anchoring ``sum``, is left to Python. Purity is
+multiply-adds, and call the same ``libm``; the CIC's re-anchoring sums its
+delay line left to right as Python 3.11's ``sum`` does. Purity is
 kept: the core reads a measurement's ``theta_e`` and ``w_e`` only for the
 sensored baseline.
 
@@ -46,13 +48,11 @@ called without a Python frame.
 
 from __future__ import annotations
 
+from pathlib import Path
 from types import ModuleType
-from typing import TYPE_CHECKING
+from typing import Any
 
 from controller._registry import SPECS
-
-if TYPE_CHECKING:
-    from controller._controller import ControllerPars
 
 ENGINES: tuple[str, ...] = ("auto", "compiled", "python")
 """The engine choices of :class:`controller.Controller` (``engine=``)."""
@@ -80,13 +80,19 @@ _KINDS = {s.name: s.compiled_kind for s in SPECS.values() if s.compiled_kind is 
 COMPILED_ESTIMATORS: tuple[str, ...] = tuple(_KINDS)
 
 
+def core_sources() -> list[Path]:
+    """The portable controller core's files (``controller/core/*.h``, ``*.c``): plain C99,
+    no Python, the code ``firmware/`` builds on and ``bench codegen`` ships."""
+    return sorted((Path(__file__).parent / "core").glob("cc_*.[ch]"))
+
+
 def compiled_controller_missing() -> str | None:
     """None when the compiled engine is built, else one line saying why the controller runs
     in Python."""
     return _why_not
 
 
-def compiled_cover(pars: ControllerPars) -> tuple[int, str | None]:
+def compiled_cover(pars: Any) -> tuple[int, str | None]:
     """``(kind, None)`` when the compiled core covers the controller ``pars`` describes,
     else ``(0, why)``: the one line saying what keeps it in Python."""
     name = pars.estimator
@@ -115,7 +121,7 @@ def compiled_cover(pars: ControllerPars) -> tuple[int, str | None]:
     return kind, None
 
 
-def resolve_controller_engine(engine: str, pars: ControllerPars) -> tuple[str, str | None]:
+def resolve_controller_engine(engine: str, pars: Any) -> tuple[str, str | None]:
     """The engine a controller runs on, ``"compiled"`` or ``"python"``, and why not compiled.
 
     Parameters

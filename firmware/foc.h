@@ -1,5 +1,13 @@
 /*
- * Sensored field-oriented speed control of a PMSM: the control law only.
+ * Sensored field-oriented speed control of a PMSM for the reference firmware:
+ * the bench's own controller core (controller/core/, shipped by `bench codegen`
+ * in core/), run with its sensored estimator.
+ *
+ * This file adds no control arithmetic: the Clarke and Park transforms, the
+ * PIs, the limits, the decoupling, the delay compensation and the SVPWM are
+ * cc_foc_step()'s, the code the bench's in-process and node controllers run.
+ * What is the firmware's own is the gain design from two bandwidths (foc.c)
+ * and the mapping of an encoder reading to the core's measurement.
  *
  * No I/O, no dynamic allocation, no global state: one foc_t per drive, one
  * foc_step() per PWM period.  ref_controller.c feeds it from CAN frames; a
@@ -10,38 +18,12 @@
 
 #include <stdbool.h>
 
-/* Two-degree-of-freedom PI controller with anti-windup:
- *     u   = k_t r - k_p y + u_i                      (output, before limiting)
- *     u_i = u_i + T_s k_i [ (r - y) + (u_lim - u) / k_t ]
- * where u_lim is the output actually applied (after limiting). */
-typedef struct {
-    double k_p;  /* proportional gain on the measurement */
-    double k_i;  /* integral gain */
-    double k_t;  /* reference gain */
-    double T_s;  /* sampling period [s] */
-    double u_i;  /* integral state */
-    double e;    /* last error r - y */
-    double u;    /* last unlimited output */
-} pi_ctrl_t;
+#include "cc_foc.h"
 
-/* Controller parameters and state. */
+/* The core's controller and the period it runs at. */
 typedef struct {
-    /* motor model and period */
-    double T_s;     /* control period [s] */
-    double n_p;     /* pole pairs */
-    double R_s;     /* stator resistance [ohm] */
-    double L_d;     /* d inductance [H] */
-    double L_q;     /* q inductance [H] */
-    double psi_f;   /* PM flux linkage [V s] */
-    double i_max;   /* current limit, peak [A] */
-    double tau_max; /* torque limit [N m] */
-    double k_tau;   /* torque constant 1.5 n_p psi_f [N m / A] */
-    /* loops */
-    pi_ctrl_t pi_d; /* d current [A -> V] */
-    pi_ctrl_t pi_q; /* q current [A -> V] */
-    pi_ctrl_t pi_w; /* mechanical speed [rad/s -> N m] */
-    /* commands */
-    double w_m_ref; /* mechanical speed reference [rad/s] */
+    cc_foc_t core;
+    double T_s; /* control period [s] */
     bool enabled;
 } foc_t;
 
@@ -74,8 +56,5 @@ void foc_enable(foc_t *f, bool enable);
 
 /* Duties for period k + 1 from the measurements of period k. */
 void foc_step(foc_t *f, const foc_input_t *in, foc_output_t *out);
-
-/* Min-max (space-vector) PWM: duties 0..1 for the voltage (u_alpha, u_beta). */
-void svpwm(double u_alpha, double u_beta, double u_dc, double *d_a, double *d_b, double *d_c);
 
 #endif /* FOC_H */

@@ -57,9 +57,8 @@ def run_profiles(
     load_nm: Sequence[tuple[float, float]] = ((0.0, 0.0),),
 ) -> HybridTrace:
     """Run ``duration`` s with piecewise-linear speed (rpm) and load (N m) profiles."""
-    est = ctrl.estimator
     sensored = ctrl.family == "none"
-    hyb = est if isinstance(est, HybridEstimator) else None
+    hybrid = isinstance(ctrl.estimator, HybridEstimator)
     T = plant.T_s
     n = int(round(duration / T))
     ts, vs = profile(speed_rpm)
@@ -69,6 +68,9 @@ def run_profiles(
     d_a = d_b = d_c = 0.5
     en = False
     load = math.nan
+    # the states are read from the controller (Controller.states), whichever engine runs
+    # the periods: the Python estimator object keeps its start values on the compiled one
+    st = ctrl.states()
     for k in range(n):
         s = plant.sample()
         tr = plant.truth()
@@ -79,37 +81,37 @@ def run_profiles(
         if tau != load:
             plant.set_load(ConstantLoad(tau))
             load = tau
-        w_used = hyb.weight if hyb is not None else 0.0
+        w_used = st["weight"] if hybrid else 0.0
         if sensored:
             out = ctrl.step(Measurement(s.k, s.i_a, s.i_b, s.i_c, s.u_dc, tr.theta_e, tr.w_e))
         else:
             out = ctrl.step(Measurement(s.k, s.i_a, s.i_b, s.i_c, s.u_dc))
-        u_a, u_b = est.injection()
+        st = ctrl.states()
         plant.step(d_a, d_b, d_c, en)
         d_a, d_b, d_c, en = out.d_a, out.d_b, out.d_c, out.enable
         rec["t"][k] = t
         rec["err"][k] = tr.theta_e - out.theta_hat
         rec["theta_hat"][k] = out.theta_hat
         rec["w_e"][k] = tr.w_e
-        rec["w_hat"][k] = est.w_hat
+        rec["w_hat"][k] = st["w_hat"]
         rec["w_m"][k] = tr.w_m
         rec["w_m_ref"][k] = ref
-        rec["w_m_hat"][k] = ctrl.w_m_hat
+        rec["w_m_hat"][k] = st["w_m_hat"]
         rec["weight"][k] = w_used
-        rec["gain"][k] = hyb.gain if hyb is not None else 1.0
-        rec["y"][k] = hyb.y if hyb is not None else 0.0
-        rec["u_h"][k] = math.hypot(u_a, u_b)
-        if hyb is not None:
-            rec["th_hf"][k] = hyb.hf.theta_hat
-            rec["th_obs"][k] = hyb.observer.theta_hat
-            rec["w_hf"][k] = hyb.hf.w_hat
-            rec["w_obs"][k] = hyb.observer.w_hat
+        rec["gain"][k] = st["gain"] if hybrid else 1.0
+        rec["y"][k] = st["y"] if hybrid else 0.0
+        rec["u_h"][k] = math.hypot(st["u_h_alpha"], st["u_h_beta"])
+        if hybrid:
+            rec["th_hf"][k] = st["hf_theta_hat"]
+            rec["th_obs"][k] = st["obs_theta_hat"]
+            rec["w_hf"][k] = st["hf_w_hat"]
+            rec["w_obs"][k] = st["obs_w_hat"]
         else:
             rec["th_hf"][k] = rec["th_obs"][k] = out.theta_hat
-            rec["w_hf"][k] = rec["w_obs"][k] = est.w_hat
+            rec["w_hf"][k] = rec["w_obs"][k] = st["w_hat"]
         rec["i_d"][k] = tr.i_d
         rec["i_q"][k] = tr.i_q
-        rec["u_s"][k] = math.hypot(ctrl.u_d, ctrl.u_q)
+        rec["u_s"][k] = math.hypot(st["u_d"], st["u_q"])
         mode[k] = out.mode
     rec["err"] = wrap(rec["err"])
     return HybridTrace(mode=mode, **rec)

@@ -174,6 +174,18 @@ def test_bench_has_no_import_circle() -> None:
     assert cycles(graph("bench")) == []
 
 
+def test_the_pure_packages_have_no_import_circle() -> None:
+    """``controller`` holds its compiled core by composition (``Controller._core``) as the
+    plant does (``Plant._core``): no module of either package imports one that imports it
+    back.  The packages' ``__init__`` re-exports are left out: a submodule imports its
+    siblings, never the package."""
+    for package in ("controller", "plant_rt"):
+        g = graph(package)
+        assert len(g) > 5, f"{package}'s modules were not found"
+        g = {n: {d for d in deps if d != package} for n, deps in g.items() if n != package}
+        assert cycles(g) == [], package
+
+
 def test_no_layer_imports_a_layer_above_it() -> None:
     assert upward(graph("bench")) == []
 
@@ -191,14 +203,11 @@ def test_every_bench_module_is_in_a_layer() -> None:
 
 
 #: Import circles known and being removed, each named with why it is there, so that
-#: the test guards every other module now.  ``controller/_controller.py`` <->
-#: ``_compiled.py`` <-> ``_engine.py``: ``Controller.__new__`` returns its own
-#: C-backed subclass (issue 28, item 1, removes it by composition, as the
-#: plant's ``Plant`` delegates to ``self._core``).  Delete an entry once its
-#: circle is gone: the test then fails if it comes back.
-KNOWN_CIRCLES: dict[str, list[list[str]]] = {
-    "controller": [["controller._compiled", "controller._controller", "controller._engine"]],
-}
+#: the test guards every other module now.  Delete an entry once its circle is
+#: gone: the test then fails if it comes back.  (None today: the controller's
+#: ``_controller``/``_compiled``/``_engine`` circle ended with the core held by
+#: composition.)
+KNOWN_CIRCLES: dict[str, list[list[str]]] = {}
 
 
 @pytest.mark.parametrize("package", ["plant_rt", "controller"])

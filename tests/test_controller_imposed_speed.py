@@ -41,8 +41,9 @@ def _arg(z: tuple[tuple[float, ...], tuple[float, ...]], w: float) -> float:
 
 def _settled_error_deg(name: str, rpm: float) -> tuple[float, float, object]:
     theta0 = 1.3
-    plant, ctrl = make_loop(P, name, theta_e0=theta0, startup=False)
-    ctrl.estimator.reset(theta0 - math.radians(30.0))
+    plant, ctrl = make_loop(
+        P, name, theta_e0=theta0, startup=False, theta0=theta0 - math.radians(30.0)
+    )
     ctrl.set_current_ref((0.0, 0.0))
     plant.impose_speed(rpm * RPM)
     tr = run(plant, ctrl, 5000)

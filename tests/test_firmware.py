@@ -20,6 +20,7 @@ from bench.cli import main
 from bench.wire._ccodec import iter_vectors
 from bench.wire._codec import Codec
 from bench.wire._e2e import crc8_j1850, e2e_crc, e2e_start
+from controller import core_sources
 from controller._svpwm import svpwm
 from plant_rt import preset
 
@@ -56,7 +57,13 @@ def test_codegen_writes_dbc_code_and_e2e_helper(tmp_path: Path, capsys) -> None:
     out = tmp_path / "gen"
     assert main(["codegen", str(out)]) == 0
     names = sorted(p.name for p in out.iterdir())
-    assert names == ["bench_dbc.c", "bench_dbc.h", "bench_e2e.c", "bench_e2e.h"]
+    assert names == ["bench_dbc.c", "bench_dbc.h", "bench_e2e.c", "bench_e2e.h", "core"]
+    # the controller core a firmware builds on, byte for byte the bench's own
+    core = sorted((out / "core").iterdir())
+    assert [p.name for p in core] == [p.name for p in core_sources()]
+    assert {p.name for p in core} >= {"cc_foc.h", "cc_foc.c", "cc_pi.c", "cc_svpwm.c"}
+    for shipped, src in zip(core, core_sources(), strict=True):
+        assert shipped.read_bytes() == src.read_bytes(), src.name
     header = (out / "bench_e2e.h").read_text()
     codec = Codec()
     for name, ident in [("PwmDuty", "PWM_DUTY"), ("PhaseSamples", "PHASE_SAMPLES")]:
@@ -175,38 +182,69 @@ def test_firmware_params_are_the_wen2023_preset() -> None:
 
 _FOC_HARNESS = r"""
 #include <stdio.h>
+#include "cc_svpwm.h"
 #include "foc.h"
 #include "motor_params.h"
-/* Prints the PI gains of foc_init, then the SVPWM duties of each stdin line
- * "u_alpha u_beta u_dc". */
+/* Prints the PI gains foc_init gives the core, then the core's SVPWM duties of each
+ * stdin line "u_alpha u_beta u_dc". */
 int main(void)
 {
     foc_t f;
     foc_init(&f, 1.0 / PWM_FREQ_HZ, MOTOR_N_P, MOTOR_R_S, MOTOR_L_D, MOTOR_L_Q, MOTOR_PSI_F,
              MOTOR_J, MOTOR_I_MAX, MOTOR_TAU_MAX, ALPHA_C, ALPHA_S);
-    const pi_ctrl_t *pis[3] = {&f.pi_d, &f.pi_q, &f.pi_w};
+    const cc_pi_t *pis[3] = {&f.core.pi_d, &f.core.pi_q, &f.core.pi_w};
     for (int i = 0; i < 3; i++) {
         printf("%.17g %.17g %.17g\n", pis[i]->k_p, pis[i]->k_i, pis[i]->k_t);
     }
     double a, b, u;
     while (scanf("%lf %lf %lf", &a, &b, &u) == 3) {
-        double d_a, d_b, d_c;
-        svpwm(a, b, u, &d_a, &d_b, &d_c);
-        printf("%.17g %.17g %.17g\n", d_a, d_b, d_c);
+        double d[3];
+        cc_svpwm(a, b, u, d);
+        printf("%.17g %.17g %.17g\n", d[0], d[1], d[2]);
     }
     return 0;
 }
 """
 
 
+def test_the_controller_core_compiles_standalone(tmp_path: Path) -> None:
+    """The core (controller/core/) is plain C99: every file compiles on its own, without
+    Python's headers, with every warning an error."""
+    srcs = [str(p) for p in core_sources() if p.suffix == ".c"]
+    assert len(srcs) > 10
+    res = subprocess.run(
+        [CC or "cc", "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-c", *srcs],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        cwd=tmp_path,
+    )
+    assert res.returncode == 0, res.stderr
+    assert len(list(tmp_path.glob("cc_*.o"))) == len(srcs)
+    for p in core_sources():
+        assert not re.search(r'#\s*include\s*[<"]Python\.h', p.read_text()), p.name
+
+
+def test_the_firmware_has_no_control_law_of_its_own() -> None:
+    """firmware/foc.c runs the core's cc_foc_step: no PI, SVPWM, Clarke or Park of its own
+    (no sin/cos, no PI integrator, no duty arithmetic), comments left out."""
+    code = re.sub(r"/\*.*?\*/|//[^\n]*", "", (FIRMWARE / "foc.c").read_text(), flags=re.S)
+    assert "cc_foc_step(" in code
+    for own in ("sin(", "cos(", "u_i", "fmax(", "fmin(", "sqrt("):
+        assert own not in code, own
+
+
 def test_c_control_law_gains_and_svpwm(tmp_path: Path) -> None:
-    """The C gains follow the bandwidth formulas; C SVPWM equals the Python SVPWM."""
+    """The gains the firmware gives the core follow the bandwidth formulas; the core's
+    SVPWM equals the Python SVPWM."""
     src = tmp_path / "foc_check.c"
     src.write_text(_FOC_HARNESS)
     exe = tmp_path / "foc_check"
+    core = REPO / "controller" / "core"
     res = subprocess.run(
-        [CC or "cc", *CFLAGS, f"-I{FIRMWARE}", "-o", str(exe), str(src),
-         str(FIRMWARE / "foc.c"), "-lm"],
+        [CC or "cc", *CFLAGS, f"-I{FIRMWARE}", f"-I{core}", "-o", str(exe), str(src),
+         str(FIRMWARE / "foc.c"), *[str(p) for p in core_sources() if p.suffix == ".c"],
+         "-lm"],
         capture_output=True,
         text=True,
         timeout=120,
@@ -250,7 +288,7 @@ def test_the_firmware_reads_no_plant_truth() -> None:
 def test_firmware_builds_with_the_makefile(build: Path) -> None:
     """firmware/Makefile runs `bench codegen` and compiles with -Wall -Wextra -Werror."""
     assert (build / "ref_controller").is_file()
-    for f in ("bench_dbc.h", "bench_dbc.c", "bench_e2e.h", "bench_e2e.c"):
+    for f in ("bench_dbc.h", "bench_dbc.c", "bench_e2e.h", "bench_e2e.c", "core/cc_foc.c"):
         assert (build / "gen" / f).is_file()
     res = subprocess.run(
         [str(build / "ref_controller"), "-e", "0"], capture_output=True, text=True, timeout=30

@@ -50,8 +50,14 @@ W_H = 2.0 * math.pi * 500.0
 def _settled(name: str, rpm: float, feedback: str) -> float:
     """Mean position error (deg) at an imposed speed, current references zero."""
     theta0 = 1.3
-    plant, ctrl = make_loop(P, name, theta_e0=theta0, startup=False, current_feedback=feedback)
-    ctrl.estimator.reset(theta0 - math.radians(10.0))
+    plant, ctrl = make_loop(
+        P,
+        name,
+        theta_e0=theta0,
+        startup=False,
+        theta0=theta0 - math.radians(10.0),
+        current_feedback=feedback,
+    )
     ctrl.set_current_ref((0.0, 0.0))
     plant.impose_speed(rpm * RPM)
     tr = run(plant, ctrl, 8000)

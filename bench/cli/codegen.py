@@ -32,6 +32,20 @@ from bench._errors import BenchError
 __all__ = ["register"]
 
 
+def _ship_core(out: Path) -> list[Path]:
+    """The controller core (``controller/core/``) copied beside the codec, in ``core/``:
+    the code a drive firmware builds its control law on (``firmware/``)."""
+    from controller import core_sources
+
+    (out / "core").mkdir(parents=True, exist_ok=True)
+    paths = []
+    for src in core_sources():
+        dst = out / "core" / src.name
+        dst.write_bytes(src.read_bytes())
+        paths.append(dst)
+    return paths
+
+
 def cmd_codegen(args: argparse.Namespace) -> int:
     from bench.wire._ccodec import generate_c
     from bench.wire._cgen import generate_e2e, generate_scenario_header
@@ -42,7 +56,7 @@ def cmd_codegen(args: argparse.Namespace) -> int:
         raise BenchError(f"OUT_DIR {out}: exists and is not a folder")
     codec = Codec(args.dbc) if args.dbc else Codec()
     try:
-        files = [*generate_c(out, codec), *generate_e2e(out, codec)]
+        files = [*generate_c(out, codec), *generate_e2e(out, codec), *_ship_core(out)]
         if args.scenario:
             from bench.scenarios._describe import describe, schedule_lines
             from bench.scenarios._schema import load_scenario

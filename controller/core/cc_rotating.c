@@ -1,0 +1,55 @@
+/* Rotating HF injection, Wen eq. (3), and the PLL hand-off (cc_rotating.h). */
+#include "cc_math.h"
+#include "cc_rotating.h"
+
+void cc_rot_init(cc_rot_t *r, double V_h, double wT, double inv_norm)
+{
+    r->V_h = V_h;
+    r->wT = wT;
+    r->inv_norm = inv_norm;
+    r->f = 0.0;
+    r->k = 0;
+    r->track = 0;
+    r->w_h = r->T_s = r->B = r->w0_min = 0.0;
+}
+
+void cc_rot_tracking(cc_rot_t *r, double w_h, double T_s, double B, double w0_min)
+{
+    r->track = 1;
+    r->w_h = w_h;
+    r->T_s = T_s;
+    r->B = B;
+    r->w0_min = w0_min;
+}
+
+void cc_rot_reset(cc_est_t *e, cc_rot_t *r, double theta0)
+{
+    cc_pll_reset(&r->pll, theta0, 0.0);
+    e->theta_hat = r->pll.theta_hat;
+    e->w_hat = 0.0;
+    e->err = 0.0;
+    r->f = 0.0;
+    cc_bq2_reset(&r->bpf);
+    cc_fo_reset(&r->lpf);
+    cc_fo2_reset(&r->lpf_ab);
+    cc_fo2_reset(&r->hpf);
+}
+
+void cc_rot_publish(cc_est_t *e, cc_rot_t *r, double th, double f, double err, double i_af,
+                    double i_bf)
+{
+    e->i_alpha_f = i_af;
+    e->i_beta_f = i_bf;
+    e->theta_hat = th;
+    r->f = f;
+    e->err = err;
+    cc_pll_step(&r->pll, err);
+    e->w_hat = r->pll.w_hat;
+}
+
+void cc_rot_injection(const cc_rot_t *r, double *u_a, double *u_b)
+{
+    double ph = ((double)r->k + 1.5) * r->wT;
+    *u_a = r->V_h * cos(ph);
+    *u_b = r->V_h * sin(ph);
+}

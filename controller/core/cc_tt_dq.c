@@ -1,0 +1,33 @@
+/* tt-dq: triangular-transform self-demodulation in the estimated d-q axes,
+ * Wen eqs. (31)-(34): i_dh i_qh = I_p I_n sin(2 theta - 2 theta_hat) + HF terms (33),
+ * the LPF of eq. (13) leaves the position error (34). */
+#include "cc_math.h"
+#include "cc_rotating.h"
+
+void cc_tt_dq_step(cc_est_t *e, cc_rot_t *r, long long k, double i_a, double i_b)
+{
+    r->k = k;
+    double th = r->pll.theta_hat;
+    double c = cos(th);
+    double s = sin(th);
+    double i_d = c * i_a + s * i_b;
+    double i_q = c * i_b - s * i_a;
+    double i_dh, i_qh;
+    if (r->track) {
+        double w_0 = r->w_h - r->pll.w_i;
+        if (w_0 < 0.0)
+            w_0 = -w_0;
+        if (w_0 < r->w0_min)
+            w_0 = r->w0_min;
+        double b0;
+        cc_bandpass_coefficients(w_0, r->B, r->T_s, &b0, &r->bpf.a1, &r->bpf.a2);
+        r->bpf.b0 = b0;
+        r->bpf.b2 = -b0;
+    }
+    cc_bq2_step(&r->bpf, i_d, i_q, &i_dh, &i_qh);
+    double f = cc_fo_step(&r->lpf, i_dh * i_qh);
+    double err = f * r->inv_norm;
+    double i_df = i_d - i_dh;
+    double i_qf = i_q - i_qh;
+    cc_rot_publish(e, r, th, f, err, c * i_df - s * i_qf, s * i_df + c * i_qf);
+}
