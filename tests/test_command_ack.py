@@ -79,6 +79,44 @@ def test_reports_received_after_the_plant_ended_still_count() -> None:
     assert p.unacknowledged == 0 and p.reports == 2 and p.verification_line() is None
 
 
+def test_a_stop_never_acknowledged_changes_no_period_and_is_named_apart() -> None:
+    """The stop applies after the plant's last period: not acknowledging it is not a lost
+    command (no exit 5), and ``stop_unacknowledged`` says so; a command before it is."""
+    from tests.trace_helpers import short
+
+    p = CommandPacer(short("wen-5.1", 0.05), Codec(), mode="realtime", external=True)
+    n = len(p.frames)
+    p.sent = n  # every command sent
+    p.acked = n - 2  # all but the stop acknowledged
+    assert p.unacknowledged == 0 and p.stop_unacknowledged and p.verification_line() is None
+    p.acked = n - 3  # the last command before the stop too
+    assert p.unacknowledged == 1 and p.verification_line() is not None
+
+
+def test_commands_are_resent_until_the_controller_first_reports() -> None:
+    """A controller that opened its bus after the first commands gets them again every
+    RESEND_S until its first reporting telemetry; none once it reports."""
+    from bench.runs._pacing import RESEND_S
+    from tests.trace_helpers import short
+
+    p = CommandPacer(short("wen-5.1", 0.05), Codec(), mode="realtime", external=True)
+    sent: list[object] = []
+
+    class Sink:
+        def send(self, m: object) -> None:
+            sent.append(m)
+
+    p.send_due(Sink(), 0, 100.0)  # type: ignore[arg-type]
+    first = len(sent)
+    assert first == 2 * ACK_WINDOW
+    p.send_due(Sink(), 0, 100.0 + 2 * RESEND_S)  # type: ignore[arg-type]  # starts the clock
+    p.send_due(Sink(), 0, 100.0 + 4 * RESEND_S)  # type: ignore[arg-type]
+    assert len(sent) == first + ACK_WINDOW and p.resends == 1
+    p.take([(0, 1, ACK_WINDOW - 1)], 100.0 + 4 * RESEND_S)  # every one held
+    p.send_due(Sink(), 0, 100.0 + 4.5 * RESEND_S)  # type: ignore[arg-type]
+    assert p.resends == 1
+
+
 def _signals(run_dir: Path) -> str:
     return (run_dir / "signals.csv").read_text()
 

@@ -206,6 +206,14 @@ class CommandPacer:
         if self.acked is None:
             if self.external and self.silent_reports < SILENT_REPORTS:
                 cap = min(cap, ACK_WINDOW)  # until it says whether it acknowledges
+                if now is not None and self.sent and now - self._t_ack > RESEND_S:
+                    # a controller under test that opened its bus after the first
+                    # commands (a slow start) gets them before it answers
+                    if self._t_ack:
+                        for _, m in self.frames[: self.sent]:
+                            bus.send(m)
+                        self.resends += 1
+                    self._t_ack = now
         else:
             cap = min(cap, self.acked + 1 + ACK_WINDOW)
             if now is not None and self.sent > self.acked + 1 and now - self._t_ack > RESEND_S:
@@ -231,8 +239,26 @@ class CommandPacer:
 
     @property
     def unacknowledged(self) -> int:
-        """Commands sent that the controller never acknowledged (0 when it does not report)."""
-        return 0 if self.acked is None else self.sent - 1 - self.acked
+        """Commands sent that the controller never acknowledged (0 when it does not report).
+
+        The stop, which applies after the plant's last period, changes no period
+        of the run: a controller that ends before its acknowledgement reaches the
+        recorder is not counted here (:attr:`stop_unacknowledged` says so).
+        """
+        if self.acked is None or not self.frames:
+            return 0
+        end = self.frames[-1][0]
+        return sum(1 for k, _ in self.frames[self.acked + 1 : self.sent] if k < end)
+
+    @property
+    def stop_unacknowledged(self) -> bool:
+        """The stop was sent and the controller's reports never acknowledged it."""
+        return (
+            self.acked is not None
+            and bool(self.frames)
+            and self.sent == len(self.frames)
+            and self.acked < self.sent - 1
+        )
 
     def verification_line(self) -> str | None:
         """The line on what could not be verified or went wrong; None when all is well."""
@@ -257,6 +283,7 @@ class CommandPacer:
             "commands_late": len(self.late),
             "commands_unacknowledged": self.unacknowledged,
             "command_resends": self.resends,
+            "stop_unacknowledged": self.stop_unacknowledged,
         }
 
     def resend_recent(self, bus: can.BusABC, n: int = 8) -> None:
