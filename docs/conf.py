@@ -35,7 +35,7 @@ extensions = [
 source_suffix = {".rst": "restructuredtext", ".md": "markdown"}
 root_doc = "index"
 # data, examples and reports beside the guides are not pages of the site
-exclude_patterns = ["_build", "examples", "perf", "realtime", "reliability", "results"]
+exclude_patterns = ["_build", "examples", "faults", "perf", "realtime", "reliability", "results"]
 
 myst_heading_anchors = 3  # the guides link to their sections as GitHub does (#the-papers-...)
 myst_enable_extensions = ["colon_fence"]
@@ -83,6 +83,8 @@ def _doc_comment(name: str) -> list[str]:
     obj = getattr(sys.modules[package], attr)
     for modname, mod in sorted(sys.modules.items()):
         if modname.startswith(package + ".") and getattr(mod, attr, None) is obj:
+            if not str(getattr(mod, "__file__", "")).endswith(".py"):
+                continue  # an extension module (the core's binding) re-exporting the value
             docs = ModuleAnalyzer.for_module(modname).find_attr_docs()
             if ("", attr) in docs:
                 return list(docs[("", attr)])
