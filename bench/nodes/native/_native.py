@@ -160,10 +160,10 @@ def timing_run(
     """The clock alone for ``periods`` periods of ``period_s`` (``bn_timing_run``).
 
     ``work_s`` of spinning per period stands in for the loop's work;
-    ``stall_s`` defaults to the Python clock's (:func:`plant_rt._clock.default_stall_s`).
+    ``stall_s`` defaults to the Python clock's (:func:`bench.nodes._clock.default_stall_s`).
     The calling thread gets its scheduling class, affinity and memory lock back.
     """
-    from plant_rt._clock import default_stall_s
+    from bench.nodes._clock import default_stall_s
 
     stall = default_stall_s(period_s) if stall_s is None else stall_s
     cfg = TimingCfg(

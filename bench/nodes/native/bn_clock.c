@@ -7,7 +7,7 @@
  * work ends after its deadline is missed and the next period starts at once;
  * the schedule stays where it is (the loop catches up), unless the wake-up is
  * more than stall_ns late: then the whole periods that passed are skipped, as
- * the Python clock does (plant_rt/_clock.py, default_stall_s gives the value).
+ * the Python clock does (bench/nodes/_clock.py, default_stall_s gives the value).
  */
 #include <errno.h>
 #include <sched.h>
