@@ -34,8 +34,9 @@ def test_units_and_descriptions_come_from_the_columns() -> None:
     assert units["t"] == "s" and units["theta_e"] == "rad" and units["theta_err_deg"] == "deg"
     assert units["w_hat_rpm"] == "rpm" and units["tau_L"] == "N m" and units["i_q"] == "A"
     assert units["u_dc"] == "V" and units["d_a"] == "1" and units["duty_age"] == "periods"
-    # a column whose description ends in no unit has none, rather than a guessed one
-    assert {n for n, u in units.items() if not u} == {"step", "enable", "mode"}
+    # a column whose description ends in no unit (a counter or a flag) has none, rather
+    # than a guessed one
+    assert {n for n, u in units.items() if not u} == {"step", "enable", "mode", "fault_active"}
 
 
 def _same(a: np.ndarray, b: np.ndarray) -> None:
