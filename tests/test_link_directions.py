@@ -364,6 +364,27 @@ def test_repeated_sample_recovers_a_dropped_duty() -> None:
     assert link.dropped_duties == 1 and link.dropped_samples == 0
 
 
+def test_a_sample_whose_first_copy_the_link_lost_is_forwarded_when_repeated() -> None:
+    """The link never saw sample 1 (lost on its way in, as a busy receive buffer loses
+    it) and saw sample 2: the plant's repeat of sample 1 is a new sample to the link,
+    released in its place, not a repeat of something released (before, it was taken
+    for one and never reached the controller: the run stalled).  Repeats of released
+    samples are sent again, as before."""
+    link = LockstepLink(CODEC, sample_delay=0, duty_delay=0)
+    link.from_a(_samples(0))
+    to_b, _ = link.from_a(_samples(2))  # sample 1 never reached the link
+    assert [_step(m) for m in to_b] == [2]
+    to_b, _ = link.from_a(_samples(1))  # the plant repeats its recent samples
+    assert [_step(m) for m in to_b] == [1]
+    to_b, _ = link.from_a(_samples(1))  # now a repeat of a released sample
+    assert [_step(m) for m in to_b] == [1] and 1 in link.released_b  # sent again
+    with_delay = LockstepLink(CODEC, sample_delay=2, duty_delay=0)
+    for k in (0, 1, 3, 4):  # sample 2 lost; 0 and 1 released by 2 periods of delay
+        with_delay.from_a(_samples(k))
+    to_b, _ = with_delay.from_a(_samples(2))
+    assert [_step(m) for m in to_b] == [2]  # held in its place, released at once (4 - 2)
+
+
 # --- through the processes -------------------------------------------------------------
 
 

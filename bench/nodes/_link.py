@@ -151,6 +151,20 @@ class LockstepLink:
         j = unwrap(int(d.signals["step"]) % self.m, max(self.latest_a, 0), self.m)
         if fid == self.id_samples:
             if j <= self.latest_a:
+                unseen = (
+                    j > self.latest_a - 8  # the window released_b keeps
+                    and j not in self.released_b
+                    and not any(s == j and m.arbitration_id == fid for s, m in self.held_b)
+                )
+                if unseen:
+                    # the sample of a period this link never saw (its first copy was lost
+                    # on the way in, and a later one moved latest_a on): it is new, held in
+                    # its place; without it the controller, which takes its samples in
+                    # order, would wait for it while the plant repeats it for ever
+                    held = sorted([*self.held_b, (j, msg)], key=lambda x: x[0])
+                    self.held_b = deque(held)
+                    to_b, to_a = self._release()
+                    return to_b, [*to_a, *self.released_a]
                 # the plant repeats itself: a frame was lost somewhere; repeat what was released
                 again_b = list(self.released_b.get(j, [])) if j <= self.latest_a - self.n_s else []
                 return again_b, list(self.released_a)
