@@ -111,10 +111,36 @@ def test_commands_are_resent_until_the_controller_first_reports() -> None:
     assert first == 2 * ACK_WINDOW
     p.send_due(Sink(), 0, 100.0 + 2 * RESEND_S)  # type: ignore[arg-type]  # starts the clock
     p.send_due(Sink(), 0, 100.0 + 4 * RESEND_S)  # type: ignore[arg-type]
-    assert len(sent) == first + ACK_WINDOW and p.resends == 1
+    # the third copy of each (AGAIN_S) and one round of resends
+    assert len(sent) == first + 2 * ACK_WINDOW and p.resends == 1
     p.take([(0, 1, ACK_WINDOW - 1)], 100.0 + 4 * RESEND_S)  # every one held
     p.send_due(Sink(), 0, 100.0 + 4.5 * RESEND_S)  # type: ignore[arg-type]
     assert p.resends == 1
+
+
+def test_each_command_goes_out_a_third_time_a_resend_interval_later() -> None:
+    """Two copies at once and one AGAIN_S later: a burst lost by a full receive buffer
+    takes both copies of one sending, not the third (a controller that does not
+    acknowledge has no other way to get it back)."""
+    from bench.runs._pacing import AGAIN_S
+    from tests.trace_helpers import short
+
+    p = CommandPacer(short("wen-5.1", 0.05), Codec(), mode="lockstep")
+    sent: list[object] = []
+
+    class Sink:
+        def send(self, m: object) -> None:
+            sent.append(m)
+
+    p.send_due(Sink(), 0, 10.0)  # type: ignore[arg-type]
+    n = p.sent
+    assert n > 0 and len(sent) == 2 * n
+    p.send_due(Sink(), 0, 10.0 + 0.5 * AGAIN_S)  # type: ignore[arg-type]
+    assert len(sent) == 2 * n
+    p.send_due(Sink(), 0, 10.0 + AGAIN_S)  # type: ignore[arg-type]
+    assert len(sent) == 3 * n and sent[2 * n :] == sent[0 : 2 * n : 2]
+    p.send_due(Sink(), 0, 10.0 + 3 * AGAIN_S)  # type: ignore[arg-type]
+    assert len(sent) == 3 * n  # once only
 
 
 def _signals(run_dir: Path) -> str:

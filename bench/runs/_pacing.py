@@ -39,6 +39,7 @@ verified: :meth:`CommandPacer.verification_line` says so.
 from __future__ import annotations
 
 import bisect
+import collections
 from collections.abc import Sequence
 
 import can
@@ -49,7 +50,7 @@ from bench.scenarios._setup import PlannedCommand, sample_period
 from bench.wire._codec import Codec
 from bench.wire._protocol import ACK_WINDOW, SEQ_MODULUS
 
-__all__ = ["COMMAND_BURST", "PACE_EVERY", "RESEND_S", "CommandPacer", "command_lead"]
+__all__ = ["AGAIN_S", "COMMAND_BURST", "PACE_EVERY", "RESEND_S", "CommandPacer", "command_lead"]
 
 #: Lockstep pacing: a bench command (a keep-alive when nothing changes) at
 #: least every this many periods; see :attr:`bench.nodes._plant_node.PlantNode.pace_every`.
@@ -78,6 +79,13 @@ SILENT_REPORTS = 10
 #: not moved for this long (s): the plant's own resend interval
 #: (:data:`bench.nodes._loops.RETRANSMIT_S`), so a lost command costs one round.
 RESEND_S = 0.05
+#: Each command goes out twice at once and a third time this long after (s): a
+#: node whose receive buffer overflowed (a process descheduled on a loaded host
+#: misses a burst of frames) loses both copies of one sending together, while a
+#: copy a resend interval later finds its socket drained.  A controller that does
+#: not acknowledge (the bench's own, a 2.1 one) has no other way to get a lost
+#: command back; the nodes take the copies as repeats (same ``seq``).
+AGAIN_S = RESEND_S
 
 
 def command_lead(T_s: float, mode: str) -> int:
@@ -157,6 +165,8 @@ class CommandPacer:
         self.resends = 0
         self._t_ack = 0.0
         self._n_taken = 0
+        #: (when, index) of the commands to send a third time (:data:`AGAIN_S`).
+        self._again: collections.deque[tuple[float, int]] = collections.deque()
 
     def take(self, acks: list[tuple[int, int, int]], now: float) -> None:
         """Take the ``CtrlTelemetry`` reports of ``acks`` not taken yet (a recorder's
@@ -221,12 +231,16 @@ class CommandPacer:
                     bus.send(m)
                 self.resends += 1
                 self._t_ack = now
+        while self._again and now is not None and self._again[0][0] <= now:
+            bus.send(self.frames[self._again.popleft()[1]][1])
         while (
             self.sent < len(self.frames) and self.frames[self.sent][0] <= limit and self.sent < cap
         ):
             msg = self.frames[self.sent][1]
             bus.send(msg)
             bus.send(msg)
+            if now is not None:
+                self._again.append((now + AGAIN_S, self.sent))
             self.sent += 1
             n += 1
         if n and now is not None and self.acked is not None and self.sent == self.acked + 1 + n:
