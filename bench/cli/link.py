@@ -20,8 +20,14 @@ from bench.cli._common import (
 )
 
 
+def _own(own: float | None, shared: float) -> float:
+    """A direction's own option, or the option of both directions."""
+    return shared if own is None else own
+
+
 def cmd_link(args: argparse.Namespace) -> int:
-    from bench.nodes._link import LockstepLink, RealtimeLink
+    from bench.nodes._link import link_logic
+    from bench.nodes._plan import LinkPlan
     from bench.wire._bus import BusSpec
     from bench.wire._codec import Codec
 
@@ -44,65 +50,32 @@ def cmd_link(args: argparse.Namespace) -> int:
             f"--to {b.describe()}: the same bus as the link's input ({a.describe()}); "
             "a link forwards between two buses"
         )
-    logic: LockstepLink | RealtimeLink
-    if args.mode == "lockstep":
-        logic = LockstepLink(
-            codec,
-            sample_delay=args.sample_delay_steps or 0,
-            duty_delay=args.delay_steps or 0,
-            drop_prob=args.drop_prob,
-            seed=args.seed or 0,
-            sample_drop_prob=args.sample_drop_prob,
-            duty_drop_prob=args.duty_drop_prob,
-        )
-    else:
-        logic = RealtimeLink(
-            codec,
-            sample_delay_us=args.sample_delay_us,
-            duty_delay_us=args.duty_delay_us,
-            jitter_us=args.jitter_us,
-            jitter_dist=args.jitter_dist,
-            drop_prob=args.drop_prob,
-            seed=args.seed or 0,
-            sample_jitter_us=args.sample_jitter_us,
-            duty_jitter_us=args.duty_jitter_us,
-            sample_drop_prob=args.sample_drop_prob,
-            duty_drop_prob=args.duty_drop_prob,
-        )
+    lp = LinkPlan(
+        seed=args.seed or 0,
+        duty_delay_steps=args.delay_steps or 0,
+        sample_delay_steps=args.sample_delay_steps or 0,
+        duty_delay_us=args.duty_delay_us,
+        sample_delay_us=args.sample_delay_us,
+        duty_jitter_us=_own(args.duty_jitter_us, args.jitter_us),
+        sample_jitter_us=_own(args.sample_jitter_us, args.jitter_us),
+        jitter_dist=args.jitter_dist,
+        duty_drop_prob=_own(args.duty_drop_prob, args.drop_prob),
+        sample_drop_prob=_own(args.sample_drop_prob, args.drop_prob),
+    )
+    logic = link_logic(lp, args.mode, codec)
     return _serve(a, b, logic, args.idle_s)
 
 
 def _planned(args: argparse.Namespace, codec: Any) -> tuple[Any, Any, Any, float]:
     """The buses and the link of a run's plan (``--plan``): plant side, controller side."""
-    from bench.nodes._link import LockstepLink, RealtimeLink
+    from bench.nodes._link import link_logic
     from bench.nodes._plan import read_plan
 
     plan = read_plan(args.plan)
     lp = plan.link
     if lp is None:
         raise BenchError(f"--plan {args.plan}: the plan injects no latency (no link)")
-    logic: LockstepLink | RealtimeLink
-    if plan.mode == "lockstep":
-        logic = LockstepLink(
-            codec,
-            sample_delay=lp.sample_delay_steps,
-            duty_delay=lp.duty_delay_steps,
-            seed=lp.seed,
-            sample_drop_prob=lp.sample_drop_prob,
-            duty_drop_prob=lp.duty_drop_prob,
-        )
-    else:
-        logic = RealtimeLink(
-            codec,
-            sample_delay_us=lp.sample_delay_us,
-            duty_delay_us=lp.duty_delay_us,
-            jitter_dist=lp.jitter_dist,
-            seed=lp.seed,
-            sample_jitter_us=lp.sample_jitter_us,
-            duty_jitter_us=lp.duty_jitter_us,
-            sample_drop_prob=lp.sample_drop_prob,
-            duty_drop_prob=lp.duty_drop_prob,
-        )
+    logic = link_logic(lp, plan.mode, codec)
     return plan.bus("plant"), plan.bus("controller"), logic, args.idle_s
 
 

@@ -40,12 +40,16 @@ import select
 import time
 from collections import deque
 from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 import can
 
 from bench.nodes._send import send_all
 from bench.wire._codec import Codec
 from bench.wire._protocol import unwrap
+
+if TYPE_CHECKING:
+    from bench.nodes._plan import LinkPlan
 
 
 def direction_rng(seed: int, direction: str, kind: str) -> random.Random:
@@ -61,6 +65,31 @@ def direction_rng(seed: int, direction: str, kind: str) -> random.Random:
 
 def _resolve(shared: float, own: float | None) -> float:
     return shared if own is None else own
+
+
+def link_logic(lp: LinkPlan, mode: str, codec: Codec) -> LockstepLink | RealtimeLink:
+    """The link logic of ``mode`` (``"lockstep"`` or ``"realtime"``) that injects ``lp``:
+    the one construction ``bench link`` makes from its options and from a run's plan."""
+    if mode == "lockstep":
+        return LockstepLink(
+            codec,
+            sample_delay=lp.sample_delay_steps,
+            duty_delay=lp.duty_delay_steps,
+            seed=lp.seed,
+            sample_drop_prob=lp.sample_drop_prob,
+            duty_drop_prob=lp.duty_drop_prob,
+        )
+    return RealtimeLink(
+        codec,
+        sample_delay_us=lp.sample_delay_us,
+        duty_delay_us=lp.duty_delay_us,
+        jitter_dist=lp.jitter_dist,
+        seed=lp.seed,
+        sample_jitter_us=lp.sample_jitter_us,
+        duty_jitter_us=lp.duty_jitter_us,
+        sample_drop_prob=lp.sample_drop_prob,
+        duty_drop_prob=lp.duty_drop_prob,
+    )
 
 
 class LockstepLink:
