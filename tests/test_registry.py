@@ -352,3 +352,27 @@ def test_the_controller_node_takes_the_truth_when_the_spec_says_so(
     assert not make_controller_node(scn, "toy-flux", codec).needs_truth
     monkeypatch.setitem(reg.SPECS, "toy-flux", dataclasses.replace(toy_spec, needs_truth=True))
     assert make_controller_node(scn, "toy-flux", codec).needs_truth
+
+
+@pytest.mark.parametrize("command", ["run", "rerun"])
+def test_the_estimator_help_lists_the_registry(
+    command: str, toy_spec: EstimatorSpec, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``--estimator``'s help is the registry's list: a new entry appears in it with no edit
+    of the command line (the help once named six of the ten estimators)."""
+    import argparse
+
+    from bench.cli import _common
+
+    monkeypatch.setitem(reg.SPECS, "toy-flux", toy_spec)
+    monkeypatch.setattr(reg, "ESTIMATOR_NAMES", tuple(reg.SPECS))
+    monkeypatch.setattr("controller.ESTIMATOR_NAMES", tuple(reg.SPECS))
+    text = _common.estimator_help("required")
+    assert all(name in text for name in reg.SPECS) and "toy-flux" in text
+    module = __import__(f"bench.cli.{command}", fromlist=["register"])
+    parser = argparse.ArgumentParser()
+    subs = parser.add_subparsers()
+    module.register(subs)
+    sub = subs.choices[command]
+    helps = [a.help or "" for a in sub._actions if "--estimator" in a.option_strings]
+    assert helps and "toy-flux" in helps[0]

@@ -125,6 +125,17 @@ def add_rt(p: argparse.ArgumentParser, *, cpu: bool = True) -> None:
         g.add_argument("--cpu", type=int, metavar="N", help="real time: pin the node to CPU N")
 
 
+def estimator_help(default: str) -> str:
+    """``--estimator``'s help: the registry's estimators (one list, the registry's), a
+    plug-in, and ``default`` (what applies when the option is not given)."""
+    from controller import ESTIMATOR_NAMES
+
+    return (
+        f"{', '.join(ESTIMATOR_NAMES)}, or a plug-in: package.module:factory "
+        f"(docs/ESTIMATORS.md) ({default}; bench list)"
+    )
+
+
 def add_engine(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--engine",

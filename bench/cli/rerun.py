@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from bench.cli._common import LOG_HELP, files_line
+from bench.cli._common import LOG_HELP, estimator_help, files_line
 
 
 def cmd_rerun(args: argparse.Namespace) -> int:
@@ -55,7 +55,7 @@ def register(sub: Any) -> None:
         "--estimator",
         "-e",
         required=True,
-        help="sfhf, tt-ab, tt-dq, square-wave, square-wave-nocic, sensored",
+        help=estimator_help("required"),
     )
     p.add_argument("--scenario", help="scenario of the capture (default: from meta.json beside it)")
     p.add_argument(

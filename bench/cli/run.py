@@ -17,6 +17,7 @@ from bench.cli._common import (
     add_rt,
     add_scenario_overrides,
     bus_spec,
+    estimator_help,
     plant_engine,
     scenario_from_args,
     writable_dir,
@@ -180,9 +181,7 @@ def register(sub: Any) -> None:
     p.add_argument(
         "--estimator",
         "-e",
-        help="sfhf, tt-ab, tt-dq, square-wave, square-wave-nocic, hybrid-tt-dq, "
-        "hybrid-square-wave, sensored, or a plug-in: package.module:factory "
-        "(docs/ESTIMATORS.md) (default: the scenario's estimator; bench list)",
+        help=estimator_help("default: the scenario's estimator"),
     )
     add_scenario_overrides(p)
     add_plant_profile(p)
