@@ -206,4 +206,11 @@ def test_an_open_phase_in_a_lockstep_run_holds_its_current_at_zero_from_its_peri
     assert np.count_nonzero(on) >= 5
     assert np.all(np.abs(s["i_b"][on]) <= lsb)
     assert np.max(np.abs(s["i_a"][on])) > 0.3
+    # the true currents (PlantCurrents): phase b exactly zero from the first sample after
+    # the opening while the fault lasts, a and c carry i and -i; the exact sensors of the
+    # ideal plant read them to the bit
+    open_ = (kk >= 1001) & (kk < 1100)
+    assert np.all(s["i_b_true"][open_] == 0.0)
+    np.testing.assert_array_equal(s["i_c_true"][open_], -s["i_a_true"][open_])
+    np.testing.assert_array_equal(s["i_a_true"], s["i_a"])
     assert np.all(s["fault_active"][(kk >= 1000) & (kk < 1100)] == 1)

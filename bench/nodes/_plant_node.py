@@ -503,6 +503,13 @@ class PlantNode:
                     },
                 )
             )
+            i_a, i_b, _ = p.currents_abc()  # the true ones (DBC 2.4): an open phase shows
+            frames.append(
+                self.codec.encode(
+                    "PlantCurrents",
+                    {"i_a": i_a, "i_b": i_b, "step": s.k % self.m_truth, "run_id": self.run_id},
+                )
+            )
         if nf is not None:
             if not nf.sends("PhaseSamples", s.k):
                 frames = [m for m in frames if m.arbitration_id != self.id_samples]
