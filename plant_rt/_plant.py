@@ -246,6 +246,15 @@ class Plant:
     substep; a phase whose current changes sign within a substep is set to
     zero at its end (projection), so the current-zero instant is resolved
     to one substep.
+
+    Open legs (:meth:`set_leg_faults`, ``plant_rt/core/plant_leg.h``): an
+    open phase's leg is a dead leg whose diodes carry its current to zero
+    (the zero-current clamp above) and which then floats for good, its
+    voltage never clamped to a rail; an open switch turns the gate's
+    on-intervals of that device into dead intervals. The average model
+    takes the period means of the same rules: a leg whose current the open
+    device would carry sits on the diode's rail, one at zero current floats
+    between the diode's rail and its PWM mean.
     """
 
     def __init__(

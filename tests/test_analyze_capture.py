@@ -408,22 +408,15 @@ def test_a_different_frame_for_a_step_already_seen_is_a_duplicate(run: Path) -> 
     np.testing.assert_array_equal(twice.table["i_a"], base.table["i_a"])
 
 
-def test_true_currents_come_from_plant_currents_and_a_2_3_capture_has_them_nan(
+def test_a_run_without_faults_sends_no_plant_currents_and_its_true_currents_are_nan(
     run: Path,
 ) -> None:
-    """``i_a_true``, ``i_b_true``, ``i_c_true`` are the plant's ``PlantCurrents`` (DBC 2.4) of
-    each period: with exact sensors (the recorded run's ideal plant) they equal the samples
-    to the bit, ``i_c_true = -i_a_true - i_b_true``; a capture without the frame (recorded
-    under 2.3) gives every other column unchanged and those three NaN."""
+    """The recorded run has no ``[[faults]]``: its plant sends the 2.3 frames only (no
+    ``PlantCurrents``, DBC 2.4), and ``i_a_true``, ``i_b_true``, ``i_c_true`` are NaN."""
     frames, _ = read_capture(run / "capture.blf")
     cur = CODEC.frame_id("PlantCurrents")
-    assert sum(m.arbitration_id == cur for m in frames) >= 2001
-    full = analyze_frames(frames, CODEC, T_s=1e-4, n_p=4).table
-    np.testing.assert_array_equal(full["i_a_true"], full["i_a"])
-    np.testing.assert_array_equal(full["i_b_true"], full["i_b"])
-    np.testing.assert_array_equal(full["i_c_true"], -full["i_a_true"] - full["i_b_true"])
-    old = analyze_frames([m for m in frames if m.arbitration_id != cur], CODEC, T_s=1e-4, n_p=4)
+    assert not any(m.arbitration_id == cur for m in frames)
+    table = analyze_frames(frames, CODEC, T_s=1e-4, n_p=4).table
     for c in ("i_a_true", "i_b_true", "i_c_true"):
-        assert np.all(np.isnan(old.table[c]))
-    for c in ("theta_e", "theta_hat", "i_a", "i_b", "d_a", "mode"):
-        np.testing.assert_array_equal(old.table[c], full[c], err_msg=c)
+        assert np.all(np.isnan(table[c]))
+    assert np.all(np.isfinite(table["i_a"]))

@@ -112,12 +112,10 @@ def test_loads_scale_with_rate(table):
 def test_recorder_frames_cost_and_fd_helps(table):
     classic = _row(table, "control+recorder", "classic 1M")
     # On a classic bus each FD frame is split into 8-byte frames plus the rest:
-    # PlantTruth and CtrlTelemetry (16 bytes each since DBC 2.1) = 8 + 8, PlantCurrents
-    # (12 bytes, DBC 2.4) = 8 + 4.
+    # PlantTruth and CtrlTelemetry (16 bytes each since DBC 2.1) = 8 + 8.
     truth = 2 * classic_frame_bits(8)[1]
     tele = 2 * classic_frame_bits(8)[1]
-    currents = classic_frame_bits(8)[1] + classic_frame_bits(4)[1]
-    assert classic["period_us_max"] == pytest.approx(270 + truth + tele + currents)
+    assert classic["period_us_max"] == pytest.approx(270 + truth + tele)
     fd = _row(table, "control+recorder", "FD 1M/5M")
     assert fd["period_us_max"] < classic["period_us_max"]
     # The DBC's classic frames stay classic on an FD bus: same control time as classic 1M.

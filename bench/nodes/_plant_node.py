@@ -503,7 +503,10 @@ class PlantNode:
                     },
                 )
             )
-            i_a, i_b, _ = p.currents_abc()  # the true ones (DBC 2.4): an open phase shows
+        if nf is not None and s.k % self.truth_every == 0:
+            # the true phase currents (DBC 2.4), in a run with a fault timeline only: an
+            # open phase shows, and every other run keeps the 2.3 traffic frame for frame
+            i_a, i_b, _ = p.currents_abc()
             frames.append(
                 self.codec.encode(
                     "PlantCurrents",

@@ -59,7 +59,7 @@ COLUMNS: tuple[tuple[str, str], ...] = (
     ("mode", "controller mode: 0 disabled, 1 align, 2 polarity test, 3 run, 4 fault (DBC)"),
     ("duty_age", "age of the duty applied in the previous period, PWM periods (255: none)"),
     ("fault_active", "faults of the scenario's [[faults]] timeline active in period k, count"),
-    ("i_a_true", "true phase-A current (PlantCurrents, DBC 2.4; nan without it), A"),
+    ("i_a_true", "true phase-A current (PlantCurrents, DBC 2.4: a run with faults; else nan), A"),
     ("i_b_true", "true phase-B current, A"),
     ("i_c_true", "true phase-C current (-i_a_true - i_b_true: star connection), A"),
 )

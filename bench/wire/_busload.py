@@ -70,7 +70,7 @@ lower-priority frames grow without bound as the load approaches 100 %)."""
 LAYOUTS: dict[str, tuple[str, ...]] = {
     "control": ("PwmDuty", "PhaseSamples"),
     "control+sensor": ("PwmDuty", "PhaseSamples", "PositionSensor"),
-    "control+recorder": ("PwmDuty", "PhaseSamples", "PlantTruth", "PlantCurrents", "CtrlTelemetry"),
+    "control+recorder": ("PwmDuty", "PhaseSamples", "PlantTruth", "CtrlTelemetry"),
 }
 """Frames sent every PWM period, by layout name. ``control+sensor`` is a
 sensored controller's loop (``PositionSensor`` every period, as
