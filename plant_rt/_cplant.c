@@ -130,6 +130,17 @@ static PyObject *Core_step_off(Core *s, PyObject *arg)
     return state_tuple(&s->pl);
 }
 
+static PyObject *Core_set_legs(Core *s, PyObject *args)
+{
+    int leg[3];
+    if (!PyArg_ParseTuple(args, "iii", &leg[0], &leg[1], &leg[2])) return NULL;
+    if (plant_set_legs(&s->pl, leg) != PLANT_OK) {
+        PyErr_SetString(PyExc_ValueError, "set_legs: each leg's fault is 0 to 3 (PLANT_LEG_*)");
+        return NULL;
+    }
+    Py_RETURN_NONE;
+}
+
 static PyObject *Core_set_metering(Core *s, PyObject *arg)
 {
     int on = PyObject_IsTrue(arg);
@@ -299,6 +310,9 @@ static PyMethodDef Core_methods[] = {
      "step(d_a, d_b, d_c, t0) -> (i_d, i_q, w_m, th_m, u_dc, u_al, u_be): one enabled period"},
     {"step_off", (PyCFunction)Core_step_off, METH_O,
      "step_off(t0) -> (i_d, i_q, w_m, th_m, u_dc, u_al, u_be): one period, all switches open"},
+    {"set_legs", (PyCFunction)Core_set_legs, METH_VARARGS,
+     "set_legs(a, b, c): the open-leg fault of each leg from the next period (plant_leg.h: "
+     "0 none, 1 open phase, 2 open upper switch, 3 open lower switch)"},
     {"set_metering", (PyCFunction)Core_set_metering, METH_O,
      "set_metering(on): integrate the energy flows with the states"},
     {"meter", (PyCFunction)Core_meter, METH_NOARGS,

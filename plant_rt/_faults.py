@@ -7,6 +7,11 @@ ones of the machine and the power stage through the plant's public API
 (:meth:`plant_rt.Plant.set_parameters`) before each period, and those of the
 sensors to each :class:`plant_rt.Sample`:
 
+- ``open_phase``: the leg of ``phase`` is open (:meth:`plant_rt.Plant.set_leg_faults`
+  ``"open_phase"``: its current freewheels to zero through the leg's diodes and is
+  then held at zero; the equations in ``plant_rt/core/plant_leg.h``);
+- ``open_switch``: the ``device`` (``upper`` or ``lower``) of the leg of ``phase``
+  never conducts, its antiparallel diode does (``"open_upper"``, ``"open_lower"``);
 - ``dc_link_step``: the DC-link source voltage is ``u_dc_v`` in ``[k0, k1)``;
 - ``demagnetisation``: ``psi_f`` is ``psi_f_factor`` times the nominal;
 - ``resistance_drift``: ``R_s`` is ``R_s_factor`` times the nominal;
@@ -37,6 +42,8 @@ from plant_rt._plant import Plant, Sample
 
 #: Kinds applied by :class:`PlantFaults` to the plant between periods.
 MACHINE_KINDS = ("dc_link_step", "demagnetisation", "resistance_drift")
+#: Kinds that open a leg (:meth:`plant_rt.Plant.set_leg_faults`) between periods.
+LEG_KINDS = ("open_phase", "open_switch")
 #: Kinds applied to the measured sample (and the position sensor).
 SENSOR_KINDS = (
     "current_offset",
@@ -71,8 +78,10 @@ class PlantFaults:
     plant : Plant
         The plant; its parameters at construction are the nominal ones.
     windows : sequence of FaultWindow
-        The timeline; kinds other than :data:`MACHINE_KINDS` and
-        :data:`SENSOR_KINDS` (the bus's) are ignored here.
+        The timeline; kinds other than :data:`MACHINE_KINDS`, :data:`LEG_KINDS`
+        and :data:`SENSOR_KINDS` (the bus's) are ignored here.  Two leg faults
+        on one leg: an open phase wins over an open switch, and both switches
+        open are an open phase.
     """
 
     def __init__(self, plant: Plant, windows: Sequence[FaultWindow]) -> None:
@@ -81,7 +90,9 @@ class PlantFaults:
         self.u_dc = float(plant.inverter.u_dc)
         self.machine = [w for w in windows if w.kind in MACHINE_KINDS]
         self.sensor = [w for w in windows if w.kind in SENSOR_KINDS]
-        self.windows = [*self.machine, *self.sensor]
+        self.legs = [w for w in windows if w.kind in LEG_KINDS]
+        self.windows = [*self.machine, *self.legs, *self.sensor]
+        self._leg_state = ("none", "none", "none")
         self._state = (self.R_s, self.psi_f, self.u_dc)
         #: current_stuck: the held value per window (index in ``sensor``).
         self._held: dict[int, float] = {}
@@ -101,9 +112,28 @@ class PlantFaults:
                 u = float(w.params["u_dc_v"])
         return R, psi, u
 
+    def leg_faults(self, k: int) -> tuple[str, str, str]:
+        """The open-leg fault of each leg in period ``k`` (:data:`plant_rt._plant.LEG_FAULTS`)."""
+        legs = ["none", "none", "none"]
+        for w in self.legs:
+            if not w.active(k):
+                continue
+            x = _PHASE_INDEX[str(w.params["phase"])]
+            if w.kind == "open_phase":
+                legs[x] = "open_phase"
+            elif legs[x] != "open_phase":
+                mine = "open_upper" if w.params["device"] == "upper" else "open_lower"
+                legs[x] = mine if legs[x] in ("none", mine) else "open_phase"
+        return legs[0], legs[1], legs[2]
+
     def before_period(self, plant: Plant) -> None:
         """Set the plant's parameters for period ``plant.k`` (call before its step and
         before its sample: a DC-link step is measured from its first instant)."""
+        if self.legs:
+            legs = self.leg_faults(plant.k)
+            if legs != self._leg_state:
+                plant.set_leg_faults(*legs)
+                self._leg_state = legs
         if not self.machine:
             return
         now = self.parameters(plant.k)

@@ -146,6 +146,12 @@ class EnergyMeter:
     q_c: float = 0.0
 
 
+#: The open-leg faults of a leg (:meth:`Plant.set_leg_faults`), in the order of the
+#: core's ``PLANT_LEG_*`` (``plant_rt/core/plant_leg.h``, where their equations are):
+#: healthy, the phase's connection open, the upper switch open, the lower switch open.
+LEG_FAULTS = ("none", "open_phase", "open_upper", "open_lower")
+
+
 def _constant_tau(load: LoadProfile) -> float | None:
     """The torque of a :class:`ConstantLoad` (the compiled core then needs no call), else None."""
     return float(load.tau_L) if type(load) is ConstantLoad else None
@@ -240,6 +246,15 @@ class Plant:
     substep; a phase whose current changes sign within a substep is set to
     zero at its end (projection), so the current-zero instant is resolved
     to one substep.
+
+    Open legs (:meth:`set_leg_faults`, ``plant_rt/core/plant_leg.h``): an
+    open phase's leg is a dead leg whose diodes carry its current to zero
+    (the zero-current clamp above) and which then floats for good, its
+    voltage never clamped to a rail; an open switch turns the gate's
+    on-intervals of that device into dead intervals. The average model
+    takes the period means of the same rules: a leg whose current the open
+    device would carry sits on the diode's rail, one at zero current floats
+    between the diode's rail and its PWM mean.
     """
 
     def __init__(
@@ -309,6 +324,7 @@ class Plant:
         self._core.set_sensors(*self._sensors.constants())
         self._core.set_load(self._load.tau, _constant_tau(self._load))
         self._core.set_metering(meter)
+        self._legs: tuple[str, str, str] = ("none", "none", "none")
         self._state_to_core()
 
     def set_parameters(
@@ -359,6 +375,34 @@ class Plant:
         self._core.set_pars(*self._core_pars())
         self._state_to_core()
         self._sample = None  # a measurement of this instant taken before reads the new u_dc
+
+    def set_leg_faults(self, a: str = "none", b: str = "none", c: str = "none") -> None:
+        """Open a phase or one switch of a leg from the next period on (a fault).
+
+        Each leg is one of :data:`LEG_FAULTS`: ``"none"``; ``"open_phase"``
+        (both switches off and the phase's connection open once its current,
+        freewheeling through the leg's diodes, reaches zero; then held at
+        zero); ``"open_upper"`` or ``"open_lower"`` (that switch never
+        conducts, its antiparallel diode does). The equations, and the
+        textbook they follow, are in ``plant_rt/core/plant_leg.h``; with
+        every leg ``"none"`` the plant is the healthy one, bit for bit.
+
+        Raises
+        ------
+        ValueError
+            For a name not in :data:`LEG_FAULTS`.
+        """
+        legs = (a, b, c)
+        for x, f in zip("abc", legs, strict=True):
+            if f not in LEG_FAULTS:
+                raise ValueError(f"set_leg_faults: leg {x}: {f!r} is not one of {LEG_FAULTS}")
+        self._core.set_legs(*(LEG_FAULTS.index(f) for f in legs))
+        self._legs = legs
+
+    @property
+    def leg_faults(self) -> tuple[str, str, str]:
+        """The open-leg fault of each leg (:meth:`set_leg_faults`)."""
+        return self._legs
 
     # ------------------------------------------------------------------ API
     @property

@@ -78,7 +78,7 @@ def test_round_trip_counts(codec):
     # Every message and every non-crc signal is covered by the parametrized test above.
     covered = {(n, s) for n, s, *_ in CASES}
     expected = {(n, s) for n in codec.names for s in codec.signal_names(n)}
-    assert covered == expected and len(codec.names) == 7
+    assert covered == expected and len(codec.names) == 8
 
 
 @settings(max_examples=200, deadline=None)

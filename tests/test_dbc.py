@@ -15,6 +15,7 @@ EXPECTED = {
     "PwmDuty": {"duty_a", "duty_b", "duty_c", "enable", "step", "crc"},
     "PhaseSamples": {"i_a", "i_b", "u_dc", "step", "status", "crc"},
     "PlantTruth": {"theta_e", "w_m", "tau_e", "tau_L", "step", "duty_age", "run_id", "crc"},
+    "PlantCurrents": {"i_a", "i_b", "step", "run_id", "crc"},
     "CtrlTelemetry": {
         "theta_hat",
         "w_hat",
@@ -61,13 +62,15 @@ def test_priorities(db):
     fid = {m.name: m.frame_id for m in db.messages}
     per_period = max(fid["PwmDuty"], fid["PhaseSamples"])
     assert per_period < fid["BenchCommand"]
-    assert fid["BenchCommand"] < min(fid["PlantStatus"], fid["PlantTruth"], fid["CtrlTelemetry"])
+    assert fid["BenchCommand"] < min(
+        fid["PlantStatus"], fid["PlantTruth"], fid["CtrlTelemetry"], fid["PlantCurrents"]
+    )
     assert all(not m.is_extended_frame for m in db.messages)
 
 
 def test_frame_formats(db):
     for m in db.messages:
-        if m.name in ("PlantTruth", "CtrlTelemetry"):
+        if m.name in ("PlantTruth", "CtrlTelemetry", "PlantCurrents"):
             assert m.is_fd and 8 < m.length <= 64
         else:
             assert not m.is_fd and m.length == 8
@@ -91,7 +94,7 @@ def test_crc_and_e2e_data_ids(db):
         assert crc, m.name
         assert crc[0].length == 8 and crc[0].start == 0
         ids.append(m.dbc.attributes["E2EDataId"].value)
-    assert len(ids) == 7 and len(set(ids)) == 7
+    assert len(ids) == 8 and len(set(ids)) == 8
     # a data ID fed in the wrong byte order must fail the check: its two bytes
     # differ, and swapped it is no other message's data ID
     swapped = {(i >> 8) | ((i & 0xFF) << 8) for i in ids}
@@ -105,8 +108,8 @@ def test_protocol_version_attribute(db):
 
     assert db.version == str(db.dbc.attributes["ProtocolVersion"].value) == Codec().version
     assert int(db.version.split(".")[0]) >= 2  # 2.0: duty scale and PwmDuty data ID changed
-    assert db.version == "2.3"  # 2.1: crc and run_id in PlantTruth and CtrlTelemetry; 2.2: cmd_ack;
-    # 2.3: the supervision's CtrlTelemetry.mode values
+    assert db.version == "2.4"  # 2.1: crc and run_id in PlantTruth and CtrlTelemetry; 2.2: cmd_ack;
+    # 2.3: the supervision's CtrlTelemetry.mode values; 2.4: PlantCurrents
 
 
 def test_duty_one_encodes_strictly_and_above_one_is_out_of_range(db):

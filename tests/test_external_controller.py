@@ -214,7 +214,7 @@ def test_external_controller_is_run_and_scored(good_run: dict[str, Any]) -> None
     # the IMC-tuned speed loop holds the 100 rpm reference after the 50 ms ramp
     assert m["speed_err_max_rpm"] < 5.0
     assert meta["controller"] == "external" and meta["controller_name"] == "ext-py"
-    assert meta["controller_gains"] == {} and meta["dbc_version"] == "2.3"
+    assert meta["controller_gains"] == {} and meta["dbc_version"] == "2.4"
     assert (run_dir / "run.png").is_file() and not (run_dir / "controller.log").exists()
     # PlantStatus every 100 ms of plant time (0.3 s: at 1000 and 2000) and at the end
     assert json.loads((run_dir / "plant.json").read_text())["late_frames"] == 0
@@ -286,7 +286,7 @@ def test_analyze_duration_warning_status_counters_and_name(
     assert m["plant_status_late_frames"] == 0 and m["plant_status_overruns"] == 0
     assert "external controller fw-1.2" in res.stdout
     meta = json.loads((tmp_path / "a4" / "meta.json").read_text())
-    assert meta["controller_name"] == "fw-1.2" and meta["dbc_version"] == "2.3"
+    assert meta["controller_name"] == "fw-1.2" and meta["dbc_version"] == "2.4"
 
 
 def test_external_controller_in_real_time(tmp_path: Path) -> None:

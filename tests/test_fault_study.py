@@ -50,8 +50,8 @@ def test_catalogue_covers_every_kind_a_lockstep_run_applies() -> None:
 
 
 def test_a_case_that_fails_is_a_record_not_a_crash() -> None:
-    rec = run_case("square-wave", "open", {"at_s": AT_S, "kind": "open_phase", "phase": "a"}, 1.5)
-    assert rec["outcome"] == "failed" and "not implemented" in rec["error"]
+    rec = run_case("square-wave", "silence", {"at_s": AT_S, "kind": "silence"}, 1.5)
+    assert rec["outcome"] == "failed" and "not implemented in lockstep" in rec["error"]
 
 
 def test_study_runs_and_renders(tmp_path: Path) -> None:

@@ -46,9 +46,10 @@ def _scenario(tmp_path: Path, faults: list[dict[str, Any]], duration: float = 1.
         ({"at_s": 1.0, "kind": "delay", "message": "PwmDuty"}, "faults[0].steps", "steps"),
         ({"at_s": 1.0, "kind": "babble", "rate_hz": 5000.0}, "faults[0].rate_hz", "one foreign"),
         ({"at_s": 1.0, "kind": "silence", "expect": "survive"}, "faults[0].expect", "one of"),
-        ({"at_s": 1.0, "kind": "open_phase", "phase": "b"}, "faults[0].kind", "not implemented yet"),
-        ({"at_s": 1.0, "kind": "open_switch", "phase": "b", "device": "upper"}, "faults[0].kind",
-         "not implemented yet"),
+        ({"at_s": 1.0, "kind": "open_phase"}, "faults[0].phase", "required"),
+        ({"at_s": 1.0, "kind": "open_switch", "phase": "b", "device": "top"}, "faults[0].device",
+         '"upper" or "lower"'),
+        ({"at_s": 1.0, "kind": "open_switch", "phase": "b"}, "faults[0].device", "required"),
     ],
 )  # fmt: skip
 def test_a_wrong_fault_entry_is_one_line_naming_file_field_and_reason(
@@ -171,3 +172,45 @@ def test_silence_is_refused_in_lockstep_with_one_line(tmp_path: Path) -> None:
     src = _scenario(tmp_path, [{"at_s": 1.0, "kind": "silence"}])
     with pytest.raises(ScenarioError, match=r"faults\[0\]\.kind.*not implemented in lockstep"):
         bench.run(src, estimator="sensored", out=tmp_path / "run")
+
+
+def test_an_open_phase_in_a_lockstep_run_holds_its_current_at_zero_from_its_period(
+    tmp_path: Path,
+) -> None:
+    """open_phase b at 1.0 s (sensored, xue-fig13 with 3 N m of load): the trace up to
+    period 1000 is the healthy one; phase b carries current before, and from the opening
+    its current freewheels to zero within the first period (L i / u_dc is far below 1 ms)
+    and then reads zero (an ideal sensor, within the wire's LSB) while phases a and c
+    carry i and -i, until the controller stops the switching; metrics.json scores it."""
+    load = "load_nm = [[0.0, 0.0], [0.8, 3.0]]\n"  # 3 N m: i_q about 2.5 A
+
+    def scenario(faults: list[dict[str, Any]], name: str) -> str:
+        src = Path(_scenario(tmp_path, faults))
+        text = src.read_text().replace("\n", "\n" + load, 1)
+        out = tmp_path / name
+        out.write_text(text)
+        return str(out)
+
+    fault = {"at_s": 1.0, "duration_s": 0.1, "kind": "open_phase", "phase": "b"}
+    run = bench.run(scenario([fault], "f.toml"), estimator="sensored", out=tmp_path / "run")
+    base = bench.run(scenario([], "b.toml"), estimator="sensored", out=tmp_path / "base")
+    s, b = run.signals, base.signals
+    kk = np.rint(s["t"] / T_S)
+    np.testing.assert_array_equal(s["i_b"][kk <= 1000], b["i_b"][np.rint(b["t"] / T_S) <= 1000])
+    assert np.max(np.abs(s["i_b"][(kk > 950) & (kk <= 1000)])) > 1.0
+    (f,) = run.metrics["faults"]
+    assert f["kind"] == "open_phase" and f["at_s"] == 1.0
+    end = 1100 if f["detected_at_s"] is None else round(f["detected_at_s"] / T_S)
+    on = (kk >= 1001) & (kk < end)
+    lsb = 2.0**-9  # PhaseSamples current LSB, 1.95 mA
+    assert np.count_nonzero(on) >= 5
+    assert np.all(np.abs(s["i_b"][on]) <= lsb)
+    assert np.max(np.abs(s["i_a"][on])) > 0.3
+    # the true currents (PlantCurrents): phase b exactly zero from the first sample after
+    # the opening while the fault lasts, a and c carry i and -i; the exact sensors of the
+    # ideal plant read them to the bit
+    open_ = (kk >= 1001) & (kk < 1100)
+    assert np.all(s["i_b_true"][open_] == 0.0)
+    np.testing.assert_array_equal(s["i_c_true"][open_], -s["i_a_true"][open_])
+    np.testing.assert_array_equal(s["i_a_true"], s["i_a"])
+    assert np.all(s["fault_active"][(kk >= 1000) & (kk < 1100)] == 1)

@@ -55,6 +55,19 @@ def test_the_run_frames_are_the_busload_layout(scn) -> None:
     assert fit.max_rate_hz_practical == pytest.approx(row["max_rate_hz_practical"], rel=1e-12)
 
 
+def test_a_run_with_faults_counts_the_true_currents_frame(scn, tmp_path: Path) -> None:
+    """A scenario with a [[faults]] timeline makes the plant send PlantCurrents (DBC 2.4)
+    with each PlantTruth: the bus-rate check counts it, and it costs load."""
+    src = tmp_path / "f.toml"
+    src.write_text(f'extends = "{SCN}"\n[[faults]]\nat_s = 1.0\nkind = "open_phase"\nphase = "b"\n')
+    faulted = run_frames(load_scenario(str(src)), external=False)
+    assert faulted == {**run_frames(scn, external=False), "PlantCurrents": 1.0}
+    f_sw = 1 / sample_period(scn)
+    bus = bus_of(1_000_000, 5_000_000)
+    more = rate_fit(Codec(), faulted, bus, f_sw).load
+    assert more > rate_fit(Codec(), run_frames(scn, external=False), bus, f_sw).load
+
+
 def test_a_controller_under_test_gets_the_position_sensor_not_telemetry(scn) -> None:
     frames = run_frames(scn, external=True)
     assert frames["PositionSensor"] == 1.0 and "CtrlTelemetry" not in frames

@@ -165,7 +165,7 @@ def test_show_gives_transport_port_and_dbc_version() -> None:
     )  # fmt: skip
     d = json.loads(out.stdout)
     assert d["transport"]["port"] == 43113 and d["transport"]["channel"]
-    assert d["dbc_version"] == CODEC.version == "2.3"
+    assert d["dbc_version"] == CODEC.version == "2.4"
 
 
 @pytest.mark.skipif(shutil.which("cc") is None, reason="needs a C compiler")

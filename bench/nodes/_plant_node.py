@@ -503,6 +503,16 @@ class PlantNode:
                     },
                 )
             )
+        if nf is not None and s.k % self.truth_every == 0:
+            # the true phase currents (DBC 2.4), in a run with a fault timeline only: an
+            # open phase shows, and every other run keeps the 2.3 traffic frame for frame
+            i_a, i_b, _ = p.currents_abc()
+            frames.append(
+                self.codec.encode(
+                    "PlantCurrents",
+                    {"i_a": i_a, "i_b": i_b, "step": s.k % self.m_truth, "run_id": self.run_id},
+                )
+            )
         if nf is not None:
             if not nf.sends("PhaseSamples", s.k):
                 frames = [m for m in frames if m.arbitration_id != self.id_samples]

@@ -31,6 +31,7 @@ Array = npt.NDArray[np.float64]
 class NoRowsError(ValueError):
     """A capture without a single plant period (samples and truth of one step)."""
 
+
 #: Columns of the per-step table, in CSV order, with units.
 COLUMNS: tuple[tuple[str, str], ...] = (
     ("step", "PWM period index k (sample instant t = k T_s)"),
@@ -58,6 +59,9 @@ COLUMNS: tuple[tuple[str, str], ...] = (
     ("mode", "controller mode: 0 disabled, 1 align, 2 polarity test, 3 run, 4 fault (DBC)"),
     ("duty_age", "age of the duty applied in the previous period, PWM periods (255: none)"),
     ("fault_active", "faults of the scenario's [[faults]] timeline active in period k, count"),
+    ("i_a_true", "true phase-A current (PlantCurrents, DBC 2.4: a run with faults; else nan), A"),
+    ("i_b_true", "true phase-B current, A"),
+    ("i_c_true", "true phase-C current (-i_a_true - i_b_true: star connection), A"),
 )
 
 
@@ -130,6 +134,7 @@ _TABLE_MESSAGES: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("CtrlTelemetry", ("theta_hat", "w_hat", "err", "mode")),
     ("PwmDuty", ("duty_a", "duty_b", "duty_c", "enable")),
     ("BenchCommand", ("speed_ref", "load_torque")),
+    ("PlantCurrents", ("i_a", "i_b")),
 )
 
 
@@ -187,7 +192,11 @@ def _own_run(dec: Any, run_id: int | None, cap: Capture) -> None:
         ids, counts = np.unique(truth.signals["run_id"].astype(np.int64), return_counts=True)
         run_id = int(ids[np.argmax(counts)])
     cap.run_id = run_id
-    for name, allow_zero in (("PlantTruth", False), ("CtrlTelemetry", True)):
+    for name, allow_zero in (
+        ("PlantTruth", False),
+        ("PlantCurrents", False),
+        ("CtrlTelemetry", True),
+    ):
         b = dec.messages.get(name)
         if b is None or "run_id" not in b.signals:
             continue
@@ -329,6 +338,8 @@ def analyze_frames(
 
     cols["i_a"], cols["i_b"], cols["u_dc"] = (take(stores["PhaseSamples"], j) for j in range(3))
     cols["i_c"] = -cols["i_a"] - cols["i_b"]
+    cols["i_a_true"], cols["i_b_true"] = (take(stores["PlantCurrents"], j) for j in range(2))
+    cols["i_c_true"] = -cols["i_a_true"] - cols["i_b_true"]
     cols["theta_e"], cols["w_m_rpm"], cols["tau_e"], cols["tau_L"], cols["duty_age"] = (
         take(stores["PlantTruth"], j) for j in range(5)
     )

@@ -31,12 +31,15 @@ def run_frames(scn: Scenario, *, external: bool) -> dict[str, float]:
     """Frames per PWM period of a ``bench run`` of ``scn`` (message name to count).
 
     Every period: ``PwmDuty``, ``PhaseSamples``, ``PlantTruth`` (the recorder's,
-    every period in a run) and the bench controller's ``CtrlTelemetry``; a
+    every period in a run; with ``PlantCurrents`` when the scenario has a
+    ``[[faults]]`` timeline) and the bench controller's ``CtrlTelemetry``; a
     controller under test's telemetry is its own choice and is not counted.
     ``PositionSensor`` every ``encoder_every`` periods when the plant has a
     position sensor (always for a controller under test).
     """
     frames = {"PwmDuty": 1.0, "PhaseSamples": 1.0, "PlantTruth": 1.0}
+    if scn.faults:
+        frames["PlantCurrents"] = 1.0
     if not external:
         frames["CtrlTelemetry"] = 1.0
     sensors = plant_setup(with_position_sensor(scn) if external else scn)[1].sensors

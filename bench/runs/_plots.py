@@ -451,6 +451,16 @@ def run_figure(
         ax_cur.plot(t, fundamental_a(table, T_s, float(f_split_hz or 0.0)), lw=0.9,
                     color="tab:blue",
                     label=f"fundamental (d-q low-pass {f_split_hz:.0f} Hz)")  # fmt: skip
+    # with a fault timeline, every phase's true current (PlantCurrents): an open phase shows
+    trues = ("i_a_true", "i_b_true", "i_c_true")
+    with_true = bool(
+        "fault_active" in table
+        and np.any(table["fault_active"] > 0)
+        and all(c in table and np.any(np.isfinite(table[c])) for c in trues)
+    )
+    if with_true:
+        for c, colour in zip(trues, ("tab:cyan", "tab:green", "tab:red"), strict=True):
+            ax_cur.plot(t, table[c], lw=0.5, color=colour, alpha=0.8, label=f"true $i_{c[2]}$")
     _markers(ax_cur, t, table, m_run, T_s, scored_from_s, legend=False, loads=loads)
     running = np.ones(len(t), dtype=bool)
     if "mode" in table:
@@ -461,10 +471,15 @@ def run_figure(
     if not np.any(running):
         running = np.ones(len(t), dtype=bool)
     r = _nanrange(np.abs(table["i_a"][running]))
+    if with_true and r is not None:
+        r_true = _nanrange(np.abs(np.concatenate([table[c][running] for c in trues])))
+        if r_true is not None:
+            r = (r[0], max(r[1], r_true[1]))
     if r is not None and r[1] > 0.0:
         ax_cur.set_ylim(-1.2 * r[1], 1.2 * r[1])
-    ax_cur.set_ylabel(r"$i_a$ (A)")
-    ax_cur.set_title("phase-A current, scaled outside the start-up pulses", fontsize=9,
+    ax_cur.set_ylabel(r"$i_a$ (A)" if not with_true else "phase currents (A)")
+    ax_cur.set_title("phase-A current" + (" and every phase's true current" if with_true else "")
+                     + ", scaled outside the start-up pulses", fontsize=9,
                      loc="left")  # fmt: skip
     ax_cur.legend(**outside)
 

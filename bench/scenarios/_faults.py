@@ -77,20 +77,24 @@ KINDS: dict[str, Kind] = {
             "open_phase",
             "power stage and machine",
             (_PHASE,),
-            "The phase's connection opens: its current is forced to zero.",
-            "-",
-            "-",
-            refused="not implemented yet (needs the open-leg machine equations)",
+            "The phase's connection opens: the leg's switches turn off, the current that "
+            "was flowing freewheels through the leg's diodes to zero (within about "
+            "L i / u_dc), and the phase's current is then held at zero; the other two "
+            "phases carry i and -i (plant_rt/core/plant_leg.h). Closing it (duration_s) "
+            "gives the leg back to the PWM.",
+            "from the first period at or after at_s",
+            "the same",
         ),
         Kind(
             "open_switch",
             "power stage and machine",
             (_PHASE, Param("device", "", "upper, lower", "the switch that stays open")),
-            "One switch of the leg stays open: the leg conducts through the other "
-            "device's diode only.",
-            "-",
-            "-",
-            refused="not implemented yet (needs the open-leg machine equations)",
+            "One switch of the leg stays open: when the gate calls for it the leg conducts "
+            "through a diode only, its voltage following the current's sign, so an open "
+            "upper switch lets the phase carry no positive current (an open lower one no "
+            "negative) (plant_rt/core/plant_leg.h).",
+            "from the first period at or after at_s",
+            "the same",
         ),
         Kind(
             "dc_link_step",

@@ -22,10 +22,11 @@ survive or see: a DC-link sag to 60 % and a surge to 118 % of the nominal
 voltage (the plant's own trip is at 120 %), 30 % demagnetisation, 50 %
 resistance rise, sensor faults on phase a (the wire carries ``i_a`` and
 ``i_b``: the controller computes ``i_c``), a 50 ms burst of lost or corrupt
-duties, 5 periods of extra duty delay, a babbling node. ``silence`` and the
-loss of ``PhaseSamples`` are refused in lockstep, and ``open_phase`` and
-``open_switch`` are not implemented in the plant yet: the study lists them as
-not run. The JSON (``faults.json``) is the result; :func:`render_doc` writes
+duties, 5 periods of extra duty delay, a babbling node, phase a open and
+phase a's upper switch open (the phase of the sensor faults, so that the
+table sets an open phase beside a lost sensor: the controller reads both as
+a phase without current). ``silence`` and the loss of ``PhaseSamples`` are
+refused in lockstep: the study lists ``silence`` as not run. The JSON (``faults.json``) is the result; :func:`render_doc` writes
 docs/FAULTS.md from it and :func:`readme_block` the README's block.
 """
 
@@ -62,13 +63,19 @@ def scenario_for(estimator: str) -> str:
 def catalogue(u_dc: float) -> list[tuple[str, dict[str, Any]]]:
     """``(label, [[faults]] entry)`` of every case, for a drive of nominal DC link ``u_dc`` (V).
 
-    One case a kind (two for ``dc_link_step``: a sag and a surge); every
+    One case a kind (two for ``dc_link_step``: a sag and a surge), in the order of
+    :data:`bench.scenarios._faults.KINDS`; every
     entry starts at :data:`AT_S` and lasts to the end of the run, but the bus
     bursts (:data:`BURST_S`).
     """
     at: dict[str, Any] = {"at_s": AT_S}
     burst = {"at_s": AT_S, "duration_s": BURST_S}
     return [
+        ("open_phase: a", {**at, "kind": "open_phase", "phase": "a"}),
+        (
+            "open_switch: a upper",
+            {**at, "kind": "open_switch", "phase": "a", "device": "upper"},
+        ),
         ("dc_link_step: sag to 60 %", {**at, "kind": "dc_link_step", "u_dc_v": 0.6 * u_dc}),
         ("dc_link_step: surge to 118 %", {**at, "kind": "dc_link_step", "u_dc_v": 1.18 * u_dc}),
         ("demagnetisation: psi_f x0.7", {**at, "kind": "demagnetisation", "psi_f_factor": 0.7}),

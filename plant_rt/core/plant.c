@@ -91,6 +91,18 @@ int plant_set_pars(plant *pl, const plant_pars *p)
     return PLANT_OK;
 }
 
+int plant_set_legs(plant *pl, const int leg[3])
+{
+    for (int x = 0; x < 3; x++)
+        if (leg[x] < PLANT_LEG_OK || leg[x] > PLANT_LEG_OPEN_LOWER) return PLANT_ERR_PARS;
+    pl->any_leg = 0;
+    for (int x = 0; x < 3; x++) {
+        pl->leg[x] = leg[x];
+        pl->any_leg |= leg[x] != PLANT_LEG_OK;
+    }
+    return PLANT_OK;
+}
+
 void plant_currents(const plant *pl, double i[3])
 {
     plant_currents_abc(&pl->m, &pl->x, i);
@@ -310,6 +322,118 @@ static void step_average_general(plant *pl, double d_a, double d_b, double d_c, 
     pl->u_be = s_be / T;
 }
 
+/* ------------------------------------------- average model, open legs */
+static void dead_with_clamp(plant *pl, double h, const double v[3], const int cond[3],
+                            double tau_L, const double i_abc[3], double *ua_out, double *ub_out,
+                            double i_out[3]);
+
+/* The pole voltages of one average-model interval with open-leg faults
+ * (plant_leg.h): healthy legs at de u_dc + e, faulted legs by
+ * plant_leg_average. */
+static void legs_average(const plant *pl, const double de[3], const double e[3],
+                         const double i[3], double u_dc, plant_leg_avg la[3])
+{
+    for (int x = 0; x < 3; x++) {
+        double v_norm = de[x] * u_dc + e[x];
+        if (pl->leg[x] == PLANT_LEG_OK) {
+            la[x].v = v_norm;
+            la[x].cond = 0;
+            la[x].flt = 0;
+            la[x].pos = de[x];
+        } else {
+            plant_leg_average(pl->leg[x], i[x], pl->i_eps, v_norm, de[x], u_dc, pl->v_f, &la[x]);
+        }
+    }
+}
+
+/* The average model with an open-leg fault: one RK4 step per segment of
+ * the general grid; a faulted leg whose current reaches zero inside a
+ * segment is clamped there (dead_with_clamp) and floats for its rest; a
+ * floating leg whose solved voltage leaves [lo, hi] conducts at that bound
+ * (plant_leg_average); two floating legs leave no current path. */
+static void step_average_legs(plant *pl, double d_a, double d_b, double d_c, double t0)
+{
+    double de[3] = {plant_clamp_duty(d_a), plant_clamp_duty(d_b), plant_clamp_duty(d_c)};
+    double t_dead = pl->t_dead, T = pl->T_s;
+    double i[3], e[3] = {0.0, 0.0, 0.0};
+    plant_currents(pl, i);
+    for (int x = 0; x < 3; x++) {
+        if (t_dead > 0.0 && 0.0 < de[x] && de[x] < 1.0)
+            de[x] += plant_dead_time_error(i[x], 1.0, t_dead / T, 1.0);
+        if (pl->drops) e[x] = plant_device_drop_error(i[x], de[x], pl->v_ce, pl->v_f);
+    }
+    double h_grid = pl->h, s_al = 0.0, s_be = 0.0, tau_L = 0.0;
+    long j_load = -1;
+    for (int n = 0; n < pl->n_segs; n++) {
+        double ta = pl->seg_a[n], tb = pl->seg_b[n];
+        long j = pl->seg_j[n];
+        if (j != j_load) {
+            tau_L = tau_load(pl, t0 + j * h_grid);
+            j_load = j;
+        }
+        double h = tb - ta;
+        plant_leg_avg la[3];
+        legs_average(pl, de, e, i, pl->u_dc, la);
+        double i0 = la[0].pos * i[0] + la[1].pos * i[1] + la[2].pos * i[2];
+        if (pl->dc.dynamic && pl->dc.c_dc == 0.0) {
+            pl->u_dc = plant_dclink_algebraic(&pl->dc, i0);
+            legs_average(pl, de, e, i, pl->u_dc, la);
+        }
+        double v[3] = {la[0].v, la[1].v, la[2].v};
+        int cond[3] = {la[0].cond, la[1].cond, la[2].cond};
+        int fl[3], n_float = 0;
+        for (int x = 0; x < 3; x++)
+            if (la[x].flt) fl[n_float++] = x;
+        double ua, ub, i_new[3];
+        if (n_float >= 2) {
+            /* no current path: the currents stay zero over the segment */
+            pl->x.i_d = 0.0;
+            pl->x.i_q = 0.0;
+            open_circuit(pl, h, tau_L, &ua, &ub);
+            i_new[0] = i_new[1] = i_new[2] = 0.0;
+        } else {
+            int fx = -1;
+            if (n_float == 1) {
+                int x = fl[0];
+                double vf[3] = {v[0], v[1], v[2]}, d[5];
+                vf[x] = 0.0;
+                plant_machine_f_float(&pl->m, pl->imposed, pl->x.i_d, pl->x.i_q, pl->x.w_m,
+                                      pl->x.th_m, alpha(vf[0], vf[1], vf[2]), beta(vf[1], vf[2]),
+                                      x, tau_L, d);
+                if (d[4] < la[x].lo) {
+                    v[x] = la[x].lo;
+                    la[x].pos = la[x].pos_lo;
+                } else if (d[4] > la[x].hi) {
+                    v[x] = la[x].hi;
+                    la[x].pos = la[x].pos_hi;
+                } else {
+                    fx = x;
+                }
+            }
+            if (fx >= 0) {
+                rk4_float(pl, h, v, fx, tau_L, &ua, &ub);
+                plant_zero_phase(&pl->m, &pl->x, fx);
+                plant_currents(pl, i_new);
+            } else if (cond[0] == 0 && cond[1] == 0 && cond[2] == 0) {
+                rk4_const(pl, h, v, tau_L, &ua, &ub);
+                plant_currents(pl, i_new);
+            } else {
+                dead_with_clamp(pl, h, v, cond, tau_L, i, &ua, &ub, i_new);
+            }
+        }
+        s_al += h * ua;
+        s_be += h * ub;
+        if (pl->dc.dynamic) {
+            double i1 = la[0].pos * i_new[0] + la[1].pos * i_new[1] + la[2].pos * i_new[2];
+            dc_update(pl, h, 0.5 * (i0 + i1), i1);
+        }
+        memcpy(i, i_new, sizeof i_new);
+        if (tb == pl->t_meas) record_meas(pl, i);
+    }
+    pl->u_al = s_al / T;
+    pl->u_be = s_be / T;
+}
+
 /* ------------------------------------------------------ switching model */
 /* A sub-interval with diode-conducting dead legs: integrate it; if a
  * diode's current has reversed, redo the step up to the (linearly
@@ -418,7 +542,9 @@ static void sw_interval(plant *pl, double h, const int states[3], double tau_L, 
         plant_machine_f_float(&pl->m, pl->imposed, pl->x.i_d, pl->x.i_q, pl->x.w_m, pl->x.th_m,
                               alpha(v[0], v[1], v[2]), beta(v[1], v[2]), x, tau_L, d);
         double v_x = d[4];
-        if (v_x > u_dc + v_f) { /* the upper diode takes the current */
+        if (pl->leg[x] == PLANT_LEG_OPEN_PHASE) { /* open: no diode takes it again */
+            fx = x;
+        } else if (v_x > u_dc + v_f) { /* the upper diode takes the current */
             v[x] = u_dc + v_f;
             cond[x] = -1;
             upper[x] = 1;
@@ -493,7 +619,13 @@ static void step_switching(plant *pl, double d_a, double d_b, double d_c, double
             tau_L = tau_load(pl, t0 + pl->grid[j]);
         }
         double h = tb - ta, ua, ub;
-        sw_interval(pl, h, st, tau_L, i_abc, &ua, &ub);
+        if (pl->any_leg) {
+            int sg[3];
+            for (int x = 0; x < 3; x++) sg[x] = plant_leg_gate(pl->leg[x], st[x]);
+            sw_interval(pl, h, sg, tau_L, i_abc, &ua, &ub);
+        } else {
+            sw_interval(pl, h, st, tau_L, i_abc, &ua, &ub);
+        }
         s_al += h * ua;
         s_be += h * ub;
         if (tb == pl->t_meas) record_meas(pl, i_abc);
@@ -547,12 +679,14 @@ static void substep_off(plant *pl, double h, double tau_L, double *ua, double *u
         pl->x.i_q = 0.0;
         double e[3];
         plant_back_emf(pl, e);
-        int hi = 0, lo = 0;
-        for (int x = 1; x < 3; x++) {
-            if (e[x] > e[hi]) hi = x;
-            if (e[x] < e[lo]) lo = x;
+        /* an open phase takes no part in the bridge */
+        int hi = -1, lo = -1;
+        for (int x = 0; x < 3; x++) {
+            if (pl->leg[x] == PLANT_LEG_OPEN_PHASE) continue;
+            if (hi < 0 || e[x] > e[hi]) hi = x;
+            if (lo < 0 || e[x] < e[lo]) lo = x;
         }
-        if (e[hi] - e[lo] <= u_dc) {
+        if (hi < 0 || hi == lo || e[hi] - e[lo] <= u_dc) {
             open_circuit(pl, h, tau_L, ua, ub);
             return;
         }
@@ -565,7 +699,7 @@ static void substep_off(plant *pl, double h, double tau_L, double *ua, double *u
     }
     double vs[3];
     for (int x = 0; x < 3; x++) vs[x] = sgn[x] > 0 ? 0.0 : u_dc;
-    if (fx >= 0 && n_cond == 2) {
+    if (fx >= 0 && n_cond == 2 && pl->leg[fx] != PLANT_LEG_OPEN_PHASE) {
         /* is the floating phase's pole voltage inside the rails? */
         double vf[3] = {vs[0], vs[1], vs[2]};
         vf[fx] = 0.0;
@@ -669,6 +803,8 @@ int plant_step(plant *pl, double d_a, double d_b, double d_c, double t0)
     pl->meter.q_a = pl->meter.q_b = pl->meter.q_c = 0.0;
     if (pl->switching)
         step_switching(pl, d_a, d_b, d_c, t0);
+    else if (pl->any_leg)
+        step_average_legs(pl, d_a, d_b, d_c, t0);
     else if (pl->avg_general)
         step_average_general(pl, d_a, d_b, d_c, t0);
     else

@@ -16,12 +16,15 @@
  * every pole voltage is constant, is one RK4 step. A diode that stops
  * conducting inside a dead interval clamps its phase to zero current (the
  * phase floats, plant_machine_f_float). The DC link (plant_dclink.h) takes
- * the current of the legs on the positive rail.
+ * the current of the legs on the positive rail. A leg with an open-leg fault
+ * (plant_leg.h, plant_set_legs) runs the same models with its devices
+ * constrained; without one every result is unchanged.
  */
 #ifndef PLANT_H
 #define PLANT_H
 
 #include "plant_dclink.h"
+#include "plant_leg.h"
 #include "plant_machine.h"
 #include "plant_pwm.h"
 #include "plant_rk4.h"
@@ -79,6 +82,9 @@ typedef struct {
     int load_const;
     double tau_const;
     int err; /* the load callback failed in this period */
+    /* open-leg faults (plant_leg.h): PLANT_LEG_* per leg, and whether any is set */
+    int leg[3];
+    int any_leg;
     /* energy meter (off unless metering is set) */
     int metering;
     plant_meter meter;
@@ -99,6 +105,10 @@ int plant_init(plant *pl, const plant_pars *p);
  * link u_dc follows the new source voltage. */
 int plant_set_pars(plant *pl, const plant_pars *p);
 
+/* The open-leg faults of legs a, b, c (PLANT_LEG_*, plant_leg.h) from the
+ * next period on; PLANT_ERR_PARS for a value out of range. */
+int plant_set_legs(plant *pl, const int leg[3]);
+
 /* One enabled period from t0 (s) with duties clamped to [0, 1]. */
 int plant_step(plant *pl, double d_a, double d_b, double d_c, double t0);
 
@@ -109,7 +119,9 @@ int plant_step(plant *pl, double d_a, double d_b, double d_c, double t0);
  * conducts once that voltage leaves [0, u_dc]; with all currents zero the
  * bridge rectifies when the line back-EMF exceeds u_dc. Ideal diodes; the
  * conduction state is decided at the start of each substep and a current
- * that changes sign inside one is set to zero at its end. */
+ * that changes sign inside one is set to zero at its end. An open phase
+ * (plant_leg.h) conducts through its diodes until its current is zero and
+ * then never again. */
 int plant_step_off(plant *pl, double t0);
 
 /* Per-period output of plant_step_n. */
