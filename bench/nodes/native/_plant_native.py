@@ -225,6 +225,7 @@ class Loop(ctypes.Structure):
         ("stall_s", _D),
         ("first_s", _D),
         ("poll_s", _D),
+        ("last_answer_s", _D),
         ("period_ns", _I64),
         ("busy_tail_ns", _I64),
         ("stall_ns", _I64),
@@ -237,6 +238,8 @@ class Loop(ctypes.Structure):
         ("t_progress", _I64),
         ("t_quiet", _I64),
         ("t_poll", _I64),
+        ("last_phase", _I32),
+        ("t_last_end", _I64),
         ("ev_frame", Frame),
         ("err", _I32),
     ]
@@ -588,7 +591,13 @@ def plant_loop_native(
     not read; every frame of the run is the native loop's.
     """
     from bench.nodes._clock import default_stall_s
-    from bench.nodes._loops import STATE_DONE, PlantDiagnostics, stall_text, trip_text
+    from bench.nodes._loops import (
+        LAST_ANSWER_S,
+        STATE_DONE,
+        PlantDiagnostics,
+        stall_text,
+        trip_text,
+    )
 
     dll = _lib()
     node.realtime = realtime
@@ -628,6 +637,7 @@ def plant_loop_native(
         loop.stall_s = watchdog_s
         loop.first_s = dut_timeout_s
         loop.poll_s = 0.2
+        loop.last_answer_s = LAST_ANSWER_S
         busy: ctypes.Array[ctypes.c_uint32] | None = None
         if realtime:
             T = node.plant.T_s

@@ -150,10 +150,12 @@ static int64_t unwrap(int64_t raw, int64_t expected, int64_t modulus)
     return expected + d - half;
 }
 
-static int has_duty(const bn_plant_t *u, int64_t t)
+int bn_plant_has_duty(const bn_plant_t *u, int64_t t)
 {
     return t >= 0 && u->duties[t & (BN_PLANT_RING - 1)].tag == t;
 }
+
+#define has_duty bn_plant_has_duty
 
 static void reject_duty(bn_plant_t *u, int reason)
 {

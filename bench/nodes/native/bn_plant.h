@@ -128,6 +128,8 @@ void bn_plant_frames_now(bn_plant_t *u);
 
 /* Lockstep: the duty of the present period is here (PlantNode.ready). */
 int bn_plant_ready(const bn_plant_t *u);
+/* A duty for step t is held. */
+int bn_plant_has_duty(const bn_plant_t *u, int64_t t);
 /* Lockstep: pacing lets the present period run (PlantNode.paced). */
 int bn_plant_paced(const bn_plant_t *u);
 /* Lockstep: the controller acknowledged the commands the next sample needs. */
@@ -166,6 +168,7 @@ typedef struct {
     uint32_t ids[4];            /* frames taken (PwmDuty first); 0: unused */
     uint32_t event_ids[4];      /* of those, the ones returned to Python */
     double retransmit_s, stall_s, first_s, poll_s;
+    double last_answer_s;       /* lockstep, a controller under test: the wait for the last answer */
     /* real time: the clock's period, busy tail and stall (ns), and the busy buffer */
     int64_t period_ns, busy_tail_ns, stall_ns;
     uint32_t *busy;
@@ -176,6 +179,8 @@ typedef struct {
     int32_t phase;              /* 0: first frames not sent yet */
     int32_t stall_what;
     int64_t t_progress, t_quiet, t_poll;
+    int32_t last_phase;         /* 0, 1: waiting for the last answer, 2: done */
+    int64_t t_last_end;
     bn_frame_t ev_frame;
     int32_t err;
 } bn_plant_loop_t;
