@@ -590,7 +590,7 @@ def plant_loop_native(
     The node's own bus (python-can) stays open beside the native one and is
     not read; every frame of the run is the native loop's.
     """
-    from bench.nodes._clock import default_stall_s
+    from bench.nodes._clock import DEFAULT_SPIN_S, default_stall_s
     from bench.nodes._loops import (
         LAST_ANSWER_S,
         STATE_DONE,
@@ -644,7 +644,7 @@ def plant_loop_native(
             n = max(1, node.n_steps if node.n_steps > 0 else 1_000_000)
             busy = (ctypes.c_uint32 * n)()
             loop.period_ns = round(T * 1e9)
-            loop.busy_tail_ns = 0
+            loop.busy_tail_ns = round(DEFAULT_SPIN_S * 1e9)
             loop.stall_ns = round(default_stall_s(T) * 1e9)
             loop.busy = ctypes.cast(busy, ctypes.POINTER(ctypes.c_uint32))
             loop.busy_cap = n
