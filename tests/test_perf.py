@@ -67,6 +67,14 @@ def test_perf_quick_writes_every_figure_and_renders_the_docs(
     for name in RATES:
         assert res["realtime_fifo"][name]["overrun_pct"] >= 0
         assert res["realtime_fifo"][name]["busy_us_median"] > 0
+    # the native plant node beside the Python one, in the same run
+    assert res["lockstep_native"]["steps_per_s"] > 0
+    assert res["lockstep_native"]["node_engines"]["plant"] == "native"
+    assert res["lockstep"]["node_engines"]["plant"] == "python"
+    for name in RATES:
+        r = res["realtime_native"][name]
+        assert r["node_engines"]["plant"] == "native" and "controller" in r["note"]
+        assert 0 <= r["missed_pct"] <= 100 and r["busy_us_median"] > 0
     assert res["codec"]["analyze_frames"] >= 20_000
     assert res["codec"]["analyze_frames_per_s"] > 0
     # both engines (the compiled one where it is built), in the same run

@@ -231,6 +231,9 @@ class Loop(ctypes.Structure):
         ("stall_ns", _I64),
         ("busy", ctypes.POINTER(ctypes.c_uint32)),
         ("busy_cap", _U64),
+        ("late", ctypes.POINTER(ctypes.c_uint32)),
+        ("late_cap", _U64),
+        ("n_late", _U64),
         ("clock", Clock),
         ("rt_started", _I32),
         ("phase", _I32),
@@ -574,6 +577,43 @@ def _fill_config(dll: ctypes.CDLL, node: Any, u: Unit, realtime: bool, external:
         u.msg_flags[j] = (2 if fd else 0) | (4 if brs else 0)
 
 
+def _jitter(
+    dll: ctypes.CDLL,
+    loop: Loop,
+    busy: ctypes.Array[ctypes.c_uint32],
+    late: ctypes.Array[ctypes.c_uint32],
+) -> dict[str, float]:
+    """The Python node's ``jitter`` (:class:`bench.nodes._clock.JitterStats`, us) of the run."""
+    import numpy as np
+
+    st = Stats()
+    dll.bn_clock_stats(ctypes.byref(loop.clock), ctypes.byref(st))  # sorts the busy buffer
+    n_busy = int(min(st.periods, loop.busy_cap))
+    b = np.frombuffer(memoryview(busy), dtype=np.uint32, count=n_busy).astype(float) * 1e-3
+    lt = (
+        np.frombuffer(memoryview(late), dtype=np.uint32, count=int(loop.n_late)).astype(float)
+        * 1e-3
+    )
+    stall = lt[lt > 1e-3 * loop.stall_ns]
+
+    def q(x: Any, p: float) -> float:
+        return float(np.quantile(x, p)) if len(x) else 0.0
+
+    return {
+        "n": float(st.periods),
+        "median": q(lt, 0.5),
+        "p99": q(lt, 0.99),
+        "max": float(lt.max()) if len(lt) else 0.0,
+        "busy_median": q(b, 0.5),
+        "busy_p99": q(b, 0.99),
+        "busy_max": float(b.max()) if len(b) else 0.0,
+        "stalls": float(st.stalls),
+        "stall_total": float(stall.sum()),
+        "stall_max": float(stall.max()) if len(stall) else 0.0,
+        "skipped": float(st.skipped),
+    }
+
+
 def plant_loop_native(
     spec: Any,
     node: Any,
@@ -639,6 +679,7 @@ def plant_loop_native(
         loop.poll_s = 0.2
         loop.last_answer_s = LAST_ANSWER_S
         busy: ctypes.Array[ctypes.c_uint32] | None = None
+        late: ctypes.Array[ctypes.c_uint32] | None = None
         if realtime:
             T = node.plant.T_s
             n = max(1, node.n_steps if node.n_steps > 0 else 1_000_000)
@@ -648,6 +689,9 @@ def plant_loop_native(
             loop.stall_ns = round(default_stall_s(T) * 1e9)
             loop.busy = ctypes.cast(busy, ctypes.POINTER(ctypes.c_uint32))
             loop.busy_cap = n
+            late = (ctypes.c_uint32 * n)()
+            loop.late = ctypes.cast(late, ctypes.POINTER(ctypes.c_uint32))
+            loop.late_cap = n
         diag = PlantDiagnostics(node)
         t_loop = time.perf_counter()
         said_fault = node.fault
@@ -697,18 +741,8 @@ def plant_loop_native(
                     raise BenchError(f"plant: native loop: {os.strerror(-loop.err)}")
         finally:
             node.loop_s = time.perf_counter() - t_loop
-            if realtime and loop.rt_started:
-                st = Stats()
-                dll.bn_clock_stats(ctypes.byref(loop.clock), ctypes.byref(st))
-                node.jitter = {
-                    "n": float(st.periods),
-                    "max": 1e-3 * st.late_max_ns,
-                    "busy_median": 1e-3 * st.busy_median_ns,
-                    "busy_max": 1e-3 * st.busy_max_ns,
-                    "stalls": float(st.stalls),
-                    "skipped": float(st.skipped),
-                    "late_half": float(st.late_half),
-                }
+            if realtime and loop.rt_started and busy is not None and late is not None:
+                node.jitter = _jitter(dll, loop, busy, late)
             diag.poll(force=True)
         final = to_frame(node.status_frame(STATE_DONE, node.fault))
         dll.bn_plant_send(ctypes.byref(u), bus.ptr, ctypes.byref(final))

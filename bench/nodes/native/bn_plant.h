@@ -173,6 +173,8 @@ typedef struct {
     int64_t period_ns, busy_tail_ns, stall_ns;
     uint32_t *busy;
     uint64_t busy_cap;
+    uint32_t *late;             /* caller's buffer: each wake-up's lateness (ns, saturated) */
+    uint64_t late_cap, n_late;
     bn_clock_t clock;
     int32_t rt_started;
     /* loop state (kept across returns) */

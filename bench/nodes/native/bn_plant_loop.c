@@ -172,7 +172,9 @@ static int loop_realtime(bn_plant_loop_t *L)
             bn_plant_advance(u);
             L->phase = 3;
         }
-        bn_clock_wait(&L->clock);
+        int64_t late = bn_clock_wait(&L->clock);
+        if (L->late != NULL && L->n_late < L->late_cap)
+            L->late[L->n_late++] = (uint32_t)(late > (int64_t)UINT32_MAX ? UINT32_MAX : late);
         L->phase = 1;
         int64_t now = bn_now_ns();
         if (now >= L->t_poll) {
