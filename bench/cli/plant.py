@@ -134,8 +134,9 @@ def cmd_plant(args: argparse.Namespace) -> int:
     node.node_engine = node_engine(args, node, spec.interface, plan.dut_timeout_s > 0)
     if node.node_engine == "native":
         from bench.nodes._loops import RETRANSMIT_S, STALL_S
-        from bench.nodes.native._plant_native import plant_loop_native
+        from bench.nodes.native._plant_native import open_native_bus, plant_loop_native
 
+        nbus = open_native_bus(spec)  # where the Python node opens its bus: no frame missed
         return serve_node(
             args,
             spec,
@@ -150,6 +151,7 @@ def cmd_plant(args: argparse.Namespace) -> int:
                 watchdog_s=STALL_S,
                 dut_timeout_s=plan.dut_timeout_s,
                 retransmit_s=RETRANSMIT_S,
+                bus=nbus,
             ),
         )
     return serve_node(

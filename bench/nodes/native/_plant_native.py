@@ -39,6 +39,7 @@ __all__ = [
     "build_plant_lib",
     "load_plant_lib",
     "native_missing",
+    "open_native_bus",
     "plant_lib",
     "plant_loop_native",
 ]
@@ -417,6 +418,11 @@ class NativeBus:
             self.open = False
 
 
+def open_native_bus(spec: Any) -> NativeBus:
+    """The native loop's bus on ``spec`` (:class:`bench.wire._bus.BusSpec`)."""
+    return NativeBus(_lib(), spec)
+
+
 def to_message(f: Frame) -> can.Message:
     return can.Message(
         arbitration_id=f.id,
@@ -624,11 +630,14 @@ def plant_loop_native(
     watchdog_s: float,
     dut_timeout_s: float = 0.0,
     retransmit_s: float,
+    bus: NativeBus | None = None,
 ) -> None:
     """:func:`bench.nodes._loops.plant_loop` with the loop in C (module docstring).
 
-    The node's own bus (python-can) stays open beside the native one and is
-    not read; every frame of the run is the native loop's.
+    ``bus``: the native bus, opened by the caller (:func:`open_native_bus`)
+    where the Python node opens its own, so that it holds every frame sent
+    from then on (a command sent before the node is ready included); closed
+    here.  The node's python-can bus stays open beside it and is not read.
     """
     from bench.nodes._clock import DEFAULT_SPIN_S, default_stall_s
     from bench.nodes._loops import (
@@ -647,7 +656,8 @@ def plant_loop_native(
     if node.external and not realtime:
         names.append("CtrlTelemetry")
     ids = {codec.frame_id(n) for n in names}
-    bus = NativeBus(dll, spec)
+    if bus is None:
+        bus = NativeBus(dll, spec)
     try:
         if on_ready:
             on_ready()
@@ -742,10 +752,12 @@ def plant_loop_native(
         finally:
             node.loop_s = time.perf_counter() - t_loop
             if realtime and loop.rt_started and busy is not None and late is not None:
+                u.overruns = loop.clock.st.missed  # also when a stop ended the loop
                 node.jitter = _jitter(dll, loop, busy, late)
+            sync.pull()
             diag.poll(force=True)
         final = to_frame(node.status_frame(STATE_DONE, node.fault))
         dll.bn_plant_send(ctypes.byref(u), bus.ptr, ctypes.byref(final))
-        sync.pull()
+        sync.pull()  # its send errors
     finally:
         bus.close()
