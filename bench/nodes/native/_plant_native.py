@@ -475,6 +475,12 @@ class _Sync:
         u.overruns = 0
         for j in range(RING):
             u.duties[j].tag = -1
+        # status frames the node queued before the loop (a trip while it waited for the start)
+        queued = node._outbox[: len(u.outbox)]
+        for j, m in enumerate(queued):
+            u.outbox[j] = to_frame(m)
+        u.n_outbox = len(queued)
+        node._outbox = []
         for t, (a, b, c, e) in node.duties.items():
             slot = u.duties[t % RING]
             slot.d[0], slot.d[1], slot.d[2], slot.en, slot.tag = a, b, c, int(e), t
