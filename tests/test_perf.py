@@ -191,3 +191,24 @@ def test_late_figures_count_skipped_periods_as_missed() -> None:
     assert f["missed_pct"] == pytest.approx(100.0 * 53 / 1040)
     assert f["late_outside_stalls_pct"] == pytest.approx(1.1)
     assert late_figures(500, 0, 0, 0)["missed_pct"] == 0.0
+
+
+def test_the_native_plant_figures_are_rendered_when_measured() -> None:
+    """BENCHMARKS.md gains the native plant's rows from perf.json's ``realtime_native`` and
+    ``lockstep_native``; a perf.json without them renders as before."""
+    from bench.studies._perf import NATIVE_NOTE
+
+    res = _committed()
+    plain = render_benchmarks(res)
+    assert "native plant" not in plain
+    res = copy.deepcopy(res)
+    res["realtime_native"] = {
+        k: {**v, "note": NATIVE_NOTE} for k, v in copy.deepcopy(res["realtime_fifo"]).items()
+    }
+    res["lockstep_native"] = {**res["lockstep"], "note": NATIVE_NOTE}
+    text = render_benchmarks(res)
+    rows = [ln for ln in text.splitlines() if "SCHED_FIFO, native plant" in ln]
+    assert len(rows) == len(RATES)
+    refused = sum(res["realtime_native"][r].get("policy") != "fifo" for r in RATES)
+    assert sum("native plant refused" in ln for ln in rows) == refused
+    assert f"The native plant node ({NATIVE_NOTE})" in text

@@ -1035,12 +1035,22 @@ def figures_sections(res: dict[str, Any]) -> list[str]:
         "Periods/s: the plant's stepping loop, from the start command to its last period; "
         "the whole run adds the processes' start and stop.",
     ]
+    if (lsn := res.get("lockstep_native")) is not None:
+        lines += [
+            "",
+            f"The native plant node ({lsn['note']}): {_num(lsn['steps_per_s'])} periods/s, "
+            f"round trip p50 {_num(lsn['rtt_us_p50'], 'us')}.",
+        ]
     lines += ["", "### 3. Real time (plant on its wall clock, sensored controller)", ""]
     rows = []
-    for label, sec in (("normal", res["realtime"]), ("SCHED_FIFO", res["realtime_fifo"])):
+    sections = [("normal", res["realtime"]), ("SCHED_FIFO", res["realtime_fifo"])]
+    if "realtime_native" in res:  # the native plant node (measured since it exists)
+        sections.append(("SCHED_FIFO, native plant", res["realtime_native"]))
+    for label, sec in sections:
         for name, r in sec.items():
             got = r.get("policy", "normal")
-            tag = label if (got == "fifo") == (label == "SCHED_FIFO") else f"{label} refused"
+            want_fifo = label.startswith("SCHED_FIFO")
+            tag = label if (got == "fifo") == want_fifo else f"{label} refused"
             rows.append(
                 [
                     name,
