@@ -298,6 +298,22 @@ static PyObject *Core_measure(Core *s, PyObject *const *args, Py_ssize_t nargs)
     }
 }
 
+static PyObject *Core_address(Core *s, PyObject *unused)
+{
+    return PyLong_FromVoidPtr(&s->pl);
+}
+
+static PyObject *Core_state(Core *s, PyObject *unused)
+{
+    return state_tuple(&s->pl);
+}
+
+static PyObject *Core_load_const(Core *s, PyObject *unused)
+{
+    if (!s->pl.load_const) Py_RETURN_NONE;
+    return PyFloat_FromDouble(s->pl.tau_const);
+}
+
 static void Core_dealloc(Core *s)
 {
     Py_XDECREF(s->load_tau);
@@ -338,6 +354,13 @@ static PyMethodDef Core_methods[] = {
      "gauss(mu, sigma)"},
     {"measure", (PyCFunction)(void (*)(void))Core_measure, METH_FASTCALL,
      "measure([i_a, i_b, i_c, u_dc]) -> measured (i_a, i_b, i_c, u_dc)"},
+    {"address", (PyCFunction)Core_address, METH_NOARGS,
+     "address() -> the address of the instance (plant *), for a C caller that steps it "
+     "(the native plant node); valid while this object lives"},
+    {"state", (PyCFunction)Core_state, METH_NOARGS,
+     "state() -> (i_d, i_q, w_m, th_m, u_dc, u_al, u_be) now"},
+    {"load_const", (PyCFunction)Core_load_const, METH_NOARGS,
+     "load_const() -> the constant load torque (N m), or None for a load profile"},
     {NULL, NULL, 0, NULL},
 };
 

@@ -600,6 +600,37 @@ class Plant:
             (m.e_in, m.e_cu, m.e_em, m.e_fric, m.e_load, m.q_a, m.q_b, m.q_c) = core.meter()
         return out
 
+    def core_address(self) -> int:
+        """The address of the core's instance (``plant *``, ``plant_rt/core/plant.h``).
+
+        For a C caller that steps this plant itself (the native plant node,
+        ``bench/nodes/native/bn_plant.h``); valid while this plant lives.
+        After it stepped, :meth:`adopt_core` takes the states back.
+        """
+        return self._core.address()
+
+    def meas_step(self) -> int:
+        """The period whose sample the sensor-instant record holds (-1: none)."""
+        return self._meas[0] if self._meas is not None else -1
+
+    def adopt_core(self, k: int, meas_k: int) -> None:
+        """Take the core's states after a C caller stepped it to period ``k``.
+
+        ``meas_k``: the step of the core's sensor-instant record (``meas()``),
+        -1 for none. A constant load the caller set becomes :attr:`load`.
+        """
+        core = self._core
+        (self._i_d, self._i_q, self._w_m, self._th_m, self._u_dc, u_al, u_be) = core.state()
+        self.u_s_ab = (u_al, u_be)
+        self.k = int(k)
+        self._sample = None
+        if meas_k >= 0 and self._t_meas > 0.0:
+            i_a, i_b, i_c, u_dc = core.meas()
+            self._meas = (int(meas_k), i_a, i_b, i_c, u_dc)
+        tau = core.load_const()
+        if tau is not None and _constant_tau(self._load) != tau:
+            self._load = ConstantLoad(tau)
+
     def _state_to_core(self) -> None:
         """Hand the states changed on the Python side to the core."""
         self._core.set_state(

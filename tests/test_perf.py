@@ -67,6 +67,14 @@ def test_perf_quick_writes_every_figure_and_renders_the_docs(
     for name in RATES:
         assert res["realtime_fifo"][name]["overrun_pct"] >= 0
         assert res["realtime_fifo"][name]["busy_us_median"] > 0
+    # the native plant node beside the Python one, in the same run
+    assert res["lockstep_native"]["steps_per_s"] > 0
+    assert res["lockstep_native"]["node_engines"]["plant"] == "native"
+    assert res["lockstep"]["node_engines"]["plant"] == "python"
+    for name in RATES:
+        r = res["realtime_native"][name]
+        assert r["node_engines"]["plant"] == "native" and "controller" in r["note"]
+        assert 0 <= r["missed_pct"] <= 100 and r["busy_us_median"] > 0
     assert res["codec"]["analyze_frames"] >= 20_000
     assert res["codec"]["analyze_frames_per_s"] > 0
     # both engines (the compiled one where it is built), in the same run
@@ -183,3 +191,24 @@ def test_late_figures_count_skipped_periods_as_missed() -> None:
     assert f["missed_pct"] == pytest.approx(100.0 * 53 / 1040)
     assert f["late_outside_stalls_pct"] == pytest.approx(1.1)
     assert late_figures(500, 0, 0, 0)["missed_pct"] == 0.0
+
+
+def test_the_native_plant_figures_are_rendered_when_measured() -> None:
+    """BENCHMARKS.md gains the native plant's rows from perf.json's ``realtime_native`` and
+    ``lockstep_native``; a perf.json without them renders as before."""
+    from bench.studies._perf import NATIVE_NOTE
+
+    res = _committed()
+    plain = render_benchmarks(res)
+    assert "native plant" not in plain
+    res = copy.deepcopy(res)
+    res["realtime_native"] = {
+        k: {**v, "note": NATIVE_NOTE} for k, v in copy.deepcopy(res["realtime_fifo"]).items()
+    }
+    res["lockstep_native"] = {**res["lockstep"], "note": NATIVE_NOTE}
+    text = render_benchmarks(res)
+    rows = [ln for ln in text.splitlines() if "SCHED_FIFO, native plant" in ln]
+    assert len(rows) == len(RATES)
+    refused = sum(res["realtime_native"][r].get("policy") != "fifo" for r in RATES)
+    assert sum("native plant refused" in ln for ln in rows) == refused
+    assert f"The native plant node ({NATIVE_NOTE})" in text

@@ -26,6 +26,9 @@ PLANT_PROFILES = ("ideal", "drive")
 #: The engines of the plant and the controller, as ``plant_rt.ENGINES`` and ``controller.ENGINES``
 #: (not imported here: the CLI starts without them).
 ENGINES = ("auto", "compiled", "python")
+#: ``--engine`` choices: :data:`ENGINES`, and ``native``: the plant node's whole loop in C
+#: (:mod:`bench.nodes.native._plant_native`), which ``auto`` also picks where it can run.
+ENGINE_CHOICES = (*ENGINES, "native")
 #: Help of the LOG argument of the capture commands.
 LOG_HELP = "a capture python-can reads (.blf, .asc, .log, .trc, .csv, .mf4) or a run folder"
 
@@ -139,11 +142,13 @@ def estimator_help(default: str) -> str:
 def add_engine(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--engine",
-        choices=ENGINES,
+        choices=ENGINE_CHOICES,
         default="auto",
         help="the engine of the plant and the controller: compiled (C, built when the project "
-        "is installed; the controller's where it covers the estimator), python, or auto "
-        "(compiled when it is built; default)",
+        "is installed; the controller's where it covers the estimator), python, native (the "
+        "plant node's whole loop in C, on udp_multicast and socketcan), or auto (compiled, "
+        "and the native plant node where the build, the transport and the scenario allow; "
+        "default)",
     )
 
 
@@ -157,20 +162,42 @@ def plant_engine(args: argparse.Namespace) -> str:
     from controller import compiled_controller_missing
     from plant_rt import compiled_engine_missing, resolve_engine
 
+    core = "auto" if args.engine == "native" else str(args.engine)
     try:
-        resolve_engine(args.engine)
+        resolve_engine(core)
     except ValueError as e:
         raise BenchError(f"--engine {args.engine}: {e}") from None
     c_why = compiled_controller_missing()
-    if args.engine == "compiled" and c_why:
+    if core == "compiled" and c_why:
         raise BenchError(f"--engine {args.engine}: {c_why}")
     why = compiled_engine_missing()
-    if args.engine == "auto":
+    if core == "auto":
         for line in (why, c_why):
             if line:
                 print(line, file=sys.stderr)
-    os.environ[ENGINE_ENV] = str(args.engine)
-    return str(args.engine)
+    os.environ[ENGINE_ENV] = core
+    return core
+
+
+def node_engine(args: argparse.Namespace, node: Any, interface: str, external: bool) -> str:
+    """The plant node's loop for ``--engine``: ``native`` or ``python``.
+
+    ``native`` when asked for (or ``auto``) and
+    :func:`bench.nodes.native._plant_native.native_missing` finds nothing
+    against it; ``auto`` otherwise says why in one line and takes the Python
+    node, ``--engine native`` is refused with that line.
+    """
+    if args.engine not in ("auto", "native"):
+        return "python"
+    from bench.nodes.native._plant_native import native_missing
+
+    why = native_missing(node, interface, realtime=args.mode == "realtime", external=external)
+    if why is None:
+        return "native"
+    if args.engine == "native":
+        raise BenchError(f"--engine native: {why}")
+    print(f"plant: the Python node serves this run: {why}", file=sys.stderr, flush=True)
+    return "python"
 
 
 def node_rt(args: argparse.Namespace, role: str) -> dict[str, object] | None:

@@ -27,6 +27,7 @@ from bench.cli._common import (
     add_rt,
     add_scenario_overrides,
     bus_spec,
+    node_engine,
     plant_engine,
     ready,
     run_id_arg,
@@ -130,6 +131,29 @@ def cmd_plant(args: argparse.Namespace) -> int:
     node.run_id = plan.run_id
     if plan.mode == "lockstep":
         node.pace_every = plan.pace_every
+    node.node_engine = node_engine(args, node, spec.interface, plan.dut_timeout_s > 0)
+    if node.node_engine == "native":
+        from bench.nodes._loops import RETRANSMIT_S, STALL_S
+        from bench.nodes.native._plant_native import open_native_bus, plant_loop_native
+
+        nbus = open_native_bus(spec)  # where the Python node opens its bus: no frame missed
+        return serve_node(
+            args,
+            spec,
+            "plant",
+            node,
+            lambda bus: plant_loop_native(
+                spec,
+                node,
+                realtime=plan.mode == "realtime",
+                on_ready=ready,
+                stop=STOP.is_set,
+                watchdog_s=STALL_S,
+                dut_timeout_s=plan.dut_timeout_s,
+                retransmit_s=RETRANSMIT_S,
+                bus=nbus,
+            ),
+        )
     return serve_node(
         args,
         spec,

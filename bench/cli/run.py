@@ -138,6 +138,8 @@ def cmd_run(args: argparse.Namespace) -> int:
         print(f"controller: {note}", file=sys.stderr)  # e.g. an estimator the core lacks
     print(format_metrics(res.metrics, scn.paper_result, scn.estimator, est))
     print(f"countermeasures: {countermeasures_text(res.meta.get('countermeasures'))}")
+    if engines := res.meta.get("node_engines"):  # which loop served each node
+        print("node engines: " + ", ".join(f"{r} {e}" for r, e in sorted(engines.items())))
     if args.mode == "realtime" and (warn := realtime_warning(res.metrics)):
         print(warn, file=sys.stderr)
     if warn := frames_warning(res.metrics):

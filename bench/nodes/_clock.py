@@ -80,6 +80,11 @@ class JitterStats:
     skipped: int = 0
 
 
+#: Busy-wait margin before each deadline (s): the OS wakes a sleeping thread tens to
+#: hundreds of microseconds late; the native loop's clock takes the same (bn_clock_t).
+DEFAULT_SPIN_S = 200e-6
+
+
 class RealTimeClock:
     """Absolute-deadline clock with overrun counting and jitter statistics.
 
@@ -105,7 +110,11 @@ class RealTimeClock:
     """
 
     def __init__(
-        self, T_s: float, spin: float = 200e-6, keep: int = 100_000, stall_s: float | None = None
+        self,
+        T_s: float,
+        spin: float = DEFAULT_SPIN_S,
+        keep: int = 100_000,
+        stall_s: float | None = None,
     ) -> None:
         if not T_s > 0.0:
             raise ValueError(f"T_s must be > 0, got {T_s}")

@@ -224,6 +224,9 @@ class PlantNode:
         self._outbox: list[can.Message] = []
         #: The scenario's fault timeline (``[[faults]]``; :mod:`bench.nodes._fault_bus`).
         self.faults: NodeFaults | None = None
+        #: Which loop served the node: ``python`` (:mod:`bench.nodes._loops`) or
+        #: ``native`` (:mod:`bench.nodes.native._plant_native`).
+        self.node_engine = "python"
 
     # -- receiving ---------------------------------------------------------
     def on_message(self, msg: can.Message) -> None:
@@ -657,6 +660,7 @@ class PlantNode:
         out.update(
             steps=self.plant.k,
             engine=self.plant.engine,
+            node_engine=self.node_engine,
             jitter=self.jitter,
             loop_s=self.loop_s,
             fault=fault_name(self.fault),

@@ -271,6 +271,12 @@ here once; ``node_args`` adds command-line options per role (``plant``,
     meta["run_id"] = run_id
     meta["node_reports"] = reports
     meta["engine"] = (meta["node_reports"].get("plant") or {}).get("engine")  # the plant's
+    # which loop served each node (python, or native: bench/nodes/native)
+    meta["node_engines"] = {
+        role: rep["node_engine"]
+        for role, rep in meta["node_reports"].items()
+        if isinstance(rep, dict) and "node_engine" in rep
+    }
     meta["exit_codes"] = {role: p.returncode for role, p in procs}
     if interrupted():
         meta["interrupted"] = True

@@ -54,6 +54,11 @@ RT_PRIORITY = 80
 ANALYZE_MIN_FRAMES = 200_000
 #: PWM rate of the 10 kHz figures.
 F_10KHZ = 10e3
+#: What ran in the ``lockstep_native`` and ``realtime_native`` figures.
+NATIVE_NOTE = (
+    "the native plant node (--engine native: its loop in C, bench/nodes/native) with the "
+    "bench's Python controller node on its compiled core, sensored"
+)
 #: Speed reference of the in-process loops (rpm), and the periods run before timing.
 SPEED_REF_RPM = 100.0
 SETTLE_STEPS = 2000
@@ -423,8 +428,14 @@ def inprocess_section(quick: bool, repeats: int, n_steps: int) -> dict[str, Any]
 # -- 2. lockstep ----------------------------------------------------------------------------
 
 
-def lockstep_two_process(duration: float, out: Path) -> dict[str, Any]:
+def lockstep_two_process(
+    duration: float, out: Path, plant_engine: str = "compiled"
+) -> dict[str, Any]:
     """Two processes in lockstep over the default transport (sensored, 10 kHz).
+
+    ``plant_engine``: the plant process's ``--engine``: ``compiled`` the Python
+    node (the ``lockstep`` figures), ``native`` its loop in C (``lockstep_native``);
+    the controller is the bench's Python node on its compiled core in both.
 
     ``steps_per_s``: periods per second of the plant's stepping loop (from the
     start command to the last period); ``wall_steps_per_s``: the same over the
@@ -446,7 +457,12 @@ def lockstep_two_process(duration: float, out: Path) -> dict[str, Any]:
         scn, duration=duration, score_from_s=0.0, speed_rpm=Profile(((0.0, 0.0), (0.05, 100.0)))
     )
     res = run_scenario(
-        scn, "sensored", spec=BusSpec(iface, chan, port), out_dir=out, progress=False
+        scn,
+        "sensored",
+        spec=BusSpec(iface, chan, port),
+        out_dir=out,
+        progress=False,
+        node_args={"plant": ["--engine", plant_engine], "controller": []},
     )
     m = res.metrics
     codec = Codec()
@@ -473,6 +489,7 @@ def lockstep_two_process(duration: float, out: Path) -> dict[str, Any]:
     return {
         "transport": f"{iface}",
         "engine": str(res.meta.get("engine") or "?"),
+        "node_engines": dict(res.meta.get("node_engines") or {}),
         "steps_per_s": steps_per_s,
         "wall_steps_per_s": m["steps"] / m["wall_s"],
         "rtf_10khz": steps_per_s / F_10KHZ,
@@ -509,9 +526,15 @@ def late_figures(computed: int, late: int, stalls: int, skipped: int) -> dict[st
 
 
 def realtime_run(
-    f_sw: float, duration: float, out: Path, priority: int | None = None
+    f_sw: float,
+    duration: float,
+    out: Path,
+    priority: int | None = None,
+    plant_engine: str = "compiled",
 ) -> dict[str, Any]:
     """The plant on its wall clock at ``f_sw`` (sensored controller, default transport).
+
+    ``plant_engine`` as for :func:`lockstep_two_process` (``realtime_native``: ``native``).
 
     ``priority``: run both nodes under ``SCHED_FIFO`` (``--rt-priority``);
     the result's ``policy`` says what the system granted.  ``overrun_pct``:
@@ -542,10 +565,10 @@ def realtime_run(
         out_dir=out,
         mode="realtime",
         progress=False,
-        node_args=None
+        node_args={"plant": ["--engine", plant_engine], "controller": []}
         if priority is None
         else {
-            "plant": ["--rt-priority", str(priority)],
+            "plant": ["--engine", plant_engine, "--rt-priority", str(priority)],
             "controller": ["--rt-priority", str(max(1, priority - 1))],
         },
     )
@@ -558,6 +581,7 @@ def realtime_run(
     return {
         "f_sw": f_sw,
         "engine": str(res.meta.get("engine") or "?"),
+        "node_engines": dict(res.meta.get("node_engines") or {}),
         "steps": float(n),
         **late_figures(
             n,
@@ -757,6 +781,20 @@ def run_perf(
         res["realtime"] = rt
         # the same with both nodes under SCHED_FIFO (bench run --rt-priority)
         res["realtime_fifo"] = fifo
+        say("3b. the native plant node: lockstep, and real time with SCHED_FIFO")
+        res["lockstep_native"] = {
+            **lockstep_two_process(0.2 if quick else 1.0, tmpd / "lsn", plant_engine="native"),
+            "note": NATIVE_NOTE,
+        }
+        nat: dict[str, Any] = {}
+        for f in (1e3, 4e3, 10e3):
+            dur = 0.3 if quick else {1e3: 5.0, 4e3: 3.0, 10e3: 2.0}[f]
+            name = f"{f / 1e3:g}kHz"
+            r = realtime_run(
+                f, dur, tmpd / f"rtn{int(f)}", priority=RT_PRIORITY, plant_engine="native"
+            )
+            nat[name] = {**r, "note": NATIVE_NOTE}
+        res["realtime_native"] = nat
         say("4. codec, and bench analyze on a large capture")
         res["codec"] = {
             **codec_figures(repeats),
@@ -997,12 +1035,22 @@ def figures_sections(res: dict[str, Any]) -> list[str]:
         "Periods/s: the plant's stepping loop, from the start command to its last period; "
         "the whole run adds the processes' start and stop.",
     ]
+    if (lsn := res.get("lockstep_native")) is not None:
+        lines += [
+            "",
+            f"The native plant node ({lsn['note']}): {_num(lsn['steps_per_s'])} periods/s, "
+            f"round trip p50 {_num(lsn['rtt_us_p50'], 'us')}.",
+        ]
     lines += ["", "### 3. Real time (plant on its wall clock, sensored controller)", ""]
     rows = []
-    for label, sec in (("normal", res["realtime"]), ("SCHED_FIFO", res["realtime_fifo"])):
+    sections = [("normal", res["realtime"]), ("SCHED_FIFO", res["realtime_fifo"])]
+    if "realtime_native" in res:  # the native plant node (measured since it exists)
+        sections.append(("SCHED_FIFO, native plant", res["realtime_native"]))
+    for label, sec in sections:
         for name, r in sec.items():
             got = r.get("policy", "normal")
-            tag = label if (got == "fifo") == (label == "SCHED_FIFO") else f"{label} refused"
+            want_fifo = label.startswith("SCHED_FIFO")
+            tag = label if (got == "fifo") == want_fifo else f"{label} refused"
             rows.append(
                 [
                     name,

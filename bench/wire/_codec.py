@@ -426,6 +426,34 @@ class Codec:
             check=False,
         )
 
+    def signal_table(self, name: str) -> dict[str, tuple[float, ...]]:
+        """How :meth:`encode` and :meth:`decode` treat each signal of message ``name``.
+
+        By signal name: ``(lo, hi, scale, offset, modulus, chk_lo, chk_hi)``:
+        the clip range of :meth:`encode` (``modulus`` > 0: the raw value is
+        wrapped instead), and the range a decoded value must lie in
+        (``chk_lo > chk_hi``: not checked).  A C encoder (the native plant
+        node) takes the same arithmetic from here.
+        """
+        spec = self._spec(name)
+        checked = {n: (lo, hi) for n, lo, hi in spec.checked}
+        return {
+            s.name: (
+                s.lo,
+                s.hi,
+                s.scale,
+                s.offset,
+                float(s.modulus),
+                *checked.get(s.name, (math.inf, -math.inf)),
+            )
+            for s in spec.sigs
+        }
+
+    def frame_kind(self, name: str) -> tuple[bool, bool]:
+        """``(is_fd, bitrate_switch)`` of the frames :meth:`encode` makes for ``name``."""
+        spec = self._spec(name)
+        return spec.is_fd, spec.brs
+
     def with_crc(self, name: str, data: bytes | bytearray) -> bytes:
         """``data`` with the E2E CRC of message ``name`` filled in (unchanged if none)."""
         spec = self._spec(name)

@@ -21,6 +21,10 @@ calls) and a test program:
   host stalls, busy time per period (median); ``bn_rt_apply``: SCHED_FIFO,
   ``mlockall``, CPU pin, with what was granted.  The counters are one struct
   (``bn_stats_t``) that Python reads with ctypes (:class:`._native.Stats`).
+- ``bn_plant.h``, ``bn_plant.c``, ``bn_plant_loop.c``: the plant node's
+  per-period logic on the plant core (transport-free: frames in, frames out)
+  and its loop on a bus, lockstep and real time; built and driven by
+  :mod:`._plant_native` (``--engine native``).
 - ``echo.c``: answers each PhaseSamples with a PwmDuty (same step, E2E CRC),
   or pings (round-trip times): the transports, the codec and the E2E check
   end to end, from python-can or from itself.

@@ -1,0 +1,769 @@
+"""The native plant node: the plant's per-period loop in C, set up and reported by Python.
+
+``bench plant`` keeps everything but the loop: the plan, the :class:`plant_rt.Plant`
+as built, the :class:`~bench.nodes._plant_node.PlantNode` with its command queue,
+the report.  :func:`plant_loop_native` hands the loop to one ctypes call into
+the library built here (``bn_plant_loop``, ``bn_plant.h``; the GIL is released
+while it runs), which steps the same plant core instance
+(:meth:`plant_rt.Plant.core_address`) and returns only on an event it does
+not handle: a ``BenchCommand`` or ``CtrlTelemetry`` frame (the node's
+:class:`~bench.nodes._counters.CommandQueue` takes it, and the pending
+commands go back to C), a poll (a signal, or a while without one), a stall,
+the end.  The node's state and counters are taken back at every event, so
+its report, its stderr lines and its last ``PlantStatus`` are those of the
+Python node.
+
+:func:`native_missing` says why a plant cannot run natively (one line), or None.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import hashlib
+import os
+import shutil
+import sys
+import tempfile
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import can
+
+from bench._errors import BenchError
+from bench.nodes.native._native import CFLAGS, HERE, LIB_SOURCES, Stats, _run, compiler
+
+__all__ = [
+    "PLANT_SOURCES",
+    "build_plant_lib",
+    "load_plant_lib",
+    "native_missing",
+    "open_native_bus",
+    "plant_lib",
+    "plant_loop_native",
+]
+
+#: The native plant node's own sources (beside :data:`LIB_SOURCES`).
+PLANT_SOURCES = ("bn_plant.c", "bn_plant_loop.c")
+#: The plant core's sources (the ones ``plant_rt._cplant`` is built from).
+CORE_DIR = HERE.parents[2] / "plant_rt" / "core"
+#: The flags of the core's own build (setup.py): the same arithmetic as the Plant's.
+CORE_FLAGS = ("-ffp-contract=off", "-fno-fast-math")
+#: Transports the native loop speaks (``bn_udp_open``, ``bn_can_open``).
+NATIVE_INTERFACES = ("udp_multicast", "socketcan")
+
+RING = 64
+CMDS = 256
+OUT = 8
+SENT = 16
+N_REJECT = 8
+
+EV_DONE, EV_FRAME, EV_POLL, EV_STALL, EV_CMDS, EV_TRIPPED, EV_ERROR = range(7)
+WAIT_DUTY, WAIT_COMMAND, WAIT_ACK = 1, 2, 3
+
+
+class Frame(ctypes.Structure):
+    """``bn_frame_t``."""
+
+    _fields_ = [
+        ("id", ctypes.c_uint32),
+        ("len", ctypes.c_uint8),
+        ("flags", ctypes.c_uint8),
+        ("data", ctypes.c_uint8 * 64),
+        ("t_ns", ctypes.c_int64),
+    ]
+
+
+class Sig(ctypes.Structure):
+    """``bn_sig_t``: :meth:`bench.wire._codec.Codec.signal_table` of one signal."""
+
+    _fields_ = [
+        ("lo", ctypes.c_double),
+        ("hi", ctypes.c_double),
+        ("scale", ctypes.c_double),
+        ("offset", ctypes.c_double),
+        ("modulus", ctypes.c_int64),
+        ("chk_lo", ctypes.c_double),
+        ("chk_hi", ctypes.c_double),
+    ]
+
+
+class Cmd(ctypes.Structure):
+    _fields_ = [
+        ("step", ctypes.c_int64),
+        ("cmd", ctypes.c_int32),
+        ("seq", ctypes.c_int32),
+        ("load_nm", ctypes.c_double),
+    ]
+
+
+class Duty(ctypes.Structure):
+    _fields_ = [
+        ("d", ctypes.c_double * 3),
+        ("en", ctypes.c_int32),
+        ("pad", ctypes.c_int32),
+        ("tag", ctypes.c_int64),
+    ]
+
+
+class Prot(ctypes.Structure):
+    _fields_ = [
+        ("i_trip", ctypes.c_double),
+        ("u_dc_trip", ctypes.c_double),
+        ("w_m_trip", ctypes.c_double),
+    ]
+
+
+_I32, _I64, _U64, _D = ctypes.c_int32, ctypes.c_int64, ctypes.c_uint64, ctypes.c_double
+
+#: The counters of ``bn_plant_t`` that grow (taken back as differences at every event).
+_COUNTERS = (
+    "accepted",
+    "late_duties",
+    "retransmits",
+    "overruns",
+    "send_errors",
+    "frames_lost_on_send",
+    "resets",
+)
+
+
+class Unit(ctypes.Structure):
+    """``bn_plant_t`` (``bn_plant.h``), field for field."""
+
+    _fields_ = [
+        ("pl", ctypes.c_void_p),
+        ("n_steps", _I64),
+        ("delay", _I32),
+        ("truth_every", _I32),
+        ("status_every", _I32),
+        ("encoder_every", _I32),
+        ("encoder_delay_s", _D),
+        ("encoder_counts", _I64),
+        ("prot", Prot),
+        ("has_prot", _I32),
+        ("watchdog_periods", _I32),
+        ("watchdog_rounds", _I32),
+        ("realtime", _I32),
+        ("external", _I32),
+        ("run_id", _I32),
+        ("m_samples", _I64),
+        ("m_truth", _I64),
+        ("m_status", _I64),
+        ("m_step", _I64),
+        ("sig", Sig * 24),
+        ("msg_flags", _I32 * 4),
+        ("k", _I64),
+        ("meas_k", _I64),
+        ("started", _I32),
+        ("stopped", _I32),
+        ("fault", _I32),
+        ("dut_answered", _I32),
+        ("fault_step", _I64),
+        ("last_duty_k", _I64),
+        ("rounds_waiting", _I64),
+        ("latest_duty_step", _I64),
+        ("latest", _D * 3),
+        ("latest_en", _I32),
+        ("duty_age", _I32),
+        ("load_changed", _I32),
+        ("ctrl_ack", _I32),
+        ("cmd_horizon", _I64),
+        ("applied_upto", _I64),
+        ("applied_seq", _I32),
+        ("n_cmds", _I32),
+        ("cmds_more", _I32),
+        ("pace_every", _I32),
+        ("cmds", Cmd * CMDS),
+        ("duties", Duty * RING),
+        ("accepted", _U64),
+        ("rejected", _U64 * N_REJECT),
+        ("duty_rejected", _U64 * N_REJECT),
+        ("late_duties", _U64),
+        ("retransmits", _U64),
+        ("overruns", _U64),
+        ("send_errors", _U64),
+        ("frames_lost_on_send", _U64),
+        ("trips", _U64 * 8),
+        ("resets", _U64),
+        ("late_frames_base", _U64),
+        ("out", Frame * OUT),
+        ("n_out", _I32),
+        ("n_outbox", _I32),
+        ("outbox", Frame * 4),
+        ("sent", (Frame * OUT) * SENT),
+        ("n_sent", _I32 * SENT),
+        ("sent_head", _I64),
+    ]
+
+
+class Clock(ctypes.Structure):
+    """``bn_clock_t`` (``bn.h``)."""
+
+    _fields_ = [
+        ("period_ns", _I64),
+        ("busy_tail_ns", _I64),
+        ("stall_ns", _I64),
+        ("t0_ns", _I64),
+        ("woke_ns", _I64),
+        ("n", _U64),
+        ("st", Stats),
+        ("busy", ctypes.POINTER(ctypes.c_uint32)),
+        ("busy_cap", ctypes.c_size_t),
+    ]
+
+
+class Loop(ctypes.Structure):
+    """``bn_plant_loop_t`` (``bn_plant.h``)."""
+
+    _fields_ = [
+        ("u", ctypes.POINTER(Unit)),
+        ("bus", ctypes.c_void_p),
+        ("ids", ctypes.c_uint32 * 4),
+        ("event_ids", ctypes.c_uint32 * 4),
+        ("retransmit_s", _D),
+        ("stall_s", _D),
+        ("first_s", _D),
+        ("poll_s", _D),
+        ("last_answer_s", _D),
+        ("period_ns", _I64),
+        ("busy_tail_ns", _I64),
+        ("stall_ns", _I64),
+        ("busy", ctypes.POINTER(ctypes.c_uint32)),
+        ("busy_cap", _U64),
+        ("late", ctypes.POINTER(ctypes.c_uint32)),
+        ("late_cap", _U64),
+        ("n_late", _U64),
+        ("clock", Clock),
+        ("rt_started", _I32),
+        ("phase", _I32),
+        ("stall_what", _I32),
+        ("t_progress", _I64),
+        ("t_quiet", _I64),
+        ("t_poll", _I64),
+        ("last_phase", _I32),
+        ("t_last_end", _I64),
+        ("ev_frame", Frame),
+        ("err", _I32),
+    ]
+
+
+# ------------------------------------------------------------------ build
+
+
+def _source_files() -> list[Path]:
+    from bench.wire._codec import default_codec
+
+    files = [HERE / s for s in (*LIB_SOURCES, *PLANT_SOURCES, "bn.h", "bn_plant.h")]
+    files += sorted(CORE_DIR.glob("*.[ch]"))
+    files.append(Path(default_codec().path))
+    files.append(HERE.parents[1] / "wire" / "_cgen.py")
+    return files
+
+
+def build_plant_lib(out_dir: Path) -> Path:
+    """Generate the DBC's C code and compile ``libbench_plant.so`` into ``out_dir``."""
+    cc = compiler()
+    out_dir.mkdir(parents=True, exist_ok=True)
+    gen = out_dir / "gen"
+    _run([sys.executable, "-m", "bench", "codegen", str(gen)], "bench codegen")
+    src = [str(HERE / s) for s in (*LIB_SOURCES, *PLANT_SOURCES)]
+    src += [str(gen / "bench_dbc.c"), str(gen / "bench_e2e.c")]
+    src += sorted(str(p) for p in CORE_DIR.glob("*.c"))
+    lib = out_dir / "libbench_plant.so"
+    inc = [f"-I{HERE}", f"-I{gen}", f"-I{CORE_DIR}"]
+    _run(
+        [cc, *CFLAGS, *CORE_FLAGS, "-fPIC", "-shared", *inc, "-o", str(lib), *src, "-lm"], "compile"
+    )
+    return lib
+
+
+def _cache_root() -> Path:
+    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
+    return Path(base) / "can-hil-bench" / "native"
+
+
+def plant_lib() -> Path:
+    """The built library for the present sources (built once, kept in the user's cache).
+
+    :class:`BenchError` with one line when it cannot be built (no C compiler, a
+    compile error).
+    """
+    h = hashlib.sha256()
+    for f in _source_files():
+        h.update(f.name.encode())
+        h.update(f.read_bytes())
+    h.update(" ".join((*CFLAGS, *CORE_FLAGS)).encode())
+    final = _cache_root() / f"plant-{h.hexdigest()[:16]}"
+    lib = final / "libbench_plant.so"
+    if lib.exists():
+        return lib
+    final.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix="build-", dir=final.parent))
+    try:
+        build_plant_lib(tmp)
+        try:
+            tmp.rename(final)  # atomic: another process may have built it meanwhile
+        except OSError:
+            if not lib.exists():
+                raise
+    finally:
+        if tmp.exists():
+            shutil.rmtree(tmp, ignore_errors=True)
+    return lib
+
+
+def load_plant_lib(path: Path) -> ctypes.CDLL:
+    """The library with the argument types of the calls made here; checks the struct layouts."""
+    dll = ctypes.CDLL(str(path), use_errno=True)
+    dll.bn_plant_sizeof.restype = ctypes.c_size_t
+    dll.bn_plant_loop_sizeof.restype = ctypes.c_size_t
+    dll.bn_plant_signal_names.restype = ctypes.c_char_p
+    dll.bn_plant_reject_names.restype = ctypes.c_char_p
+    for name, want in (("bn_plant_sizeof", Unit), ("bn_plant_loop_sizeof", Loop)):
+        if getattr(dll, name)() != ctypes.sizeof(want):
+            raise BenchError(f"native plant: {path}: {name} differs from {want.__name__}")
+    dll.bn_plant_loop.argtypes = [ctypes.POINTER(Loop)]
+    dll.bn_plant_loop.restype = ctypes.c_int
+    dll.bn_udp_open.argtypes = [
+        ctypes.c_void_p,
+        ctypes.c_char_p,
+        ctypes.c_uint16,
+        ctypes.c_int,
+        ctypes.c_int,
+    ]
+    dll.bn_can_open.argtypes = [ctypes.c_void_p, ctypes.c_char_p, ctypes.c_bool]
+    dll.bn_recv.argtypes = [ctypes.c_void_p, ctypes.POINTER(Frame), ctypes.c_int64]
+    dll.bn_send.argtypes = [ctypes.c_void_p, ctypes.POINTER(Frame)]
+    dll.bn_plant_send.argtypes = [ctypes.POINTER(Unit), ctypes.c_void_p, ctypes.POINTER(Frame)]
+    dll.bn_close.argtypes = [ctypes.c_void_p]
+    dll.bn_clock_stats.argtypes = [ctypes.POINTER(Clock), ctypes.POINTER(Stats)]
+    return dll
+
+
+_LIB: ctypes.CDLL | None = None
+
+
+def _lib() -> ctypes.CDLL:
+    global _LIB
+    if _LIB is None:
+        _LIB = load_plant_lib(plant_lib())
+    return _LIB
+
+
+# ------------------------------------------------------------ eligibility
+
+
+def native_missing(node: Any, interface: str, *, realtime: bool, external: bool) -> str | None:
+    """Why ``node`` cannot run on the native loop (one line), or None when it can.
+
+    Building the library (once per source change) is part of the answer: no C
+    compiler, or a failed build, is a reason.
+    """
+    from plant_rt import ConstantLoad
+
+    plant = node.plant
+    if interface not in NATIVE_INTERFACES:
+        return f"the native loop speaks {' and '.join(NATIVE_INTERFACES)}, not {interface}"
+    if node.faults is not None:
+        return "the scenario's [[faults]] are applied by the Python node only"
+    if type(plant.load) is not ConstantLoad:
+        return f"the load profile {type(plant.load).__name__} is not in the plant core yet"
+    sp = plant.sensor_pars
+    if sp.noise_i > 0.0 or sp.noise_u > 0.0:
+        return "sensor noise is drawn by Python (the plant core has no generator yet)"
+    if plant.meter is not None:
+        return "the energy meter is read by the Python node only"
+    if external and realtime:
+        return "a controller under test in real time is served by the Python node only"
+    try:
+        _lib()
+    except BenchError as e:
+        return str(e)
+    return None
+
+
+# ------------------------------------------------------------------- loop
+
+
+class NativeBus:
+    """A ``bn_bus_t`` on the node's bus (python-can's udp_multicast wire format, or SocketCAN)."""
+
+    def __init__(self, dll: ctypes.CDLL, spec: Any) -> None:
+        from bench.wire._bus import RECEIVE_BUFFER, UDP_DEFAULT_PORT
+
+        self.dll = dll
+        self.buf = (ctypes.c_uint64 * 1024)()  # room for bn_bus_t
+        self.ptr = ctypes.cast(self.buf, ctypes.c_void_p)
+        if spec.interface == "udp_multicast":
+            port = spec.port if spec.port is not None else UDP_DEFAULT_PORT
+            rc = dll.bn_udp_open(self.ptr, spec.channel.encode(), port, 1, RECEIVE_BUFFER)
+        else:
+            rc = dll.bn_can_open(self.ptr, spec.channel.encode(), True)
+        if rc != 0:
+            raise BenchError(f"native plant: {spec.interface} {spec.channel}: {os.strerror(-rc)}")
+        self.open = True
+
+    def recv(self, timeout_s: float) -> Frame | None:
+        f = Frame()
+        r = self.dll.bn_recv(self.ptr, ctypes.byref(f), int(timeout_s * 1e9))
+        if r < 0:
+            raise BenchError(f"native plant: receive: {os.strerror(-r)}")
+        return f if r > 0 else None
+
+    def close(self) -> None:
+        if self.open:
+            self.dll.bn_close(self.ptr)
+            self.open = False
+
+
+def open_native_bus(spec: Any) -> NativeBus:
+    """The native loop's bus on ``spec`` (:class:`bench.wire._bus.BusSpec`)."""
+    return NativeBus(_lib(), spec)
+
+
+def to_message(f: Frame) -> can.Message:
+    return can.Message(
+        arbitration_id=f.id,
+        is_extended_id=bool(f.flags & 1),
+        is_fd=bool(f.flags & 2),
+        bitrate_switch=bool(f.flags & 4),
+        data=bytes(f.data[: f.len]),
+        check=False,
+    )
+
+
+def to_frame(m: can.Message) -> Frame:
+    f = Frame()
+    f.id = m.arbitration_id
+    f.len = len(m.data)
+    f.flags = (
+        (1 if m.is_extended_id else 0) | (2 if m.is_fd else 0) | (4 if m.bitrate_switch else 0)
+    )
+    for i, b in enumerate(m.data):
+        f.data[i] = b
+    return f
+
+
+class _Sync:
+    """The node's state handed to C and taken back, and C's counters added to the node's."""
+
+    def __init__(self, node: Any, u: Unit, reasons: list[str]) -> None:
+        self.node = node
+        self.u = u
+        self.reasons = reasons
+        self.seen = {name: 0 for name in _COUNTERS}
+        self.seen_rej = [0] * N_REJECT
+        self.seen_duty_rej = [0] * N_REJECT
+        self.seen_trips = [0] * 8
+
+    def push_all(self) -> None:
+        node, u = self.node, self.u
+        p = node.plant
+        u.k = p.k
+        u.meas_k = p.meas_step()
+        u.started, u.stopped = int(node.started), int(node.stopped)
+        u.fault, u.fault_step = node.fault, node.fault_step
+        u.dut_answered = int(node.dut_answered)
+        u.last_duty_k, u.rounds_waiting = node.last_duty_k, node.rounds_waiting
+        u.latest_duty_step = node.latest_duty_step
+        d_a, d_b, d_c, en = node.latest_duty
+        u.latest[0], u.latest[1], u.latest[2], u.latest_en = d_a, d_b, d_c, int(en)
+        u.duty_age = node.duty_age
+        u.late_frames_base = node.late_frames
+        u.overruns = 0
+        for j in range(RING):
+            u.duties[j].tag = -1
+        # status frames the node queued before the loop (a trip while it waited for the start)
+        queued = node._outbox[: len(u.outbox)]
+        for j, m in enumerate(queued):
+            u.outbox[j] = to_frame(m)
+        u.n_outbox = len(queued)
+        node._outbox = []
+        for t, (a, b, c, e) in node.duties.items():
+            slot = u.duties[t % RING]
+            slot.d[0], slot.d[1], slot.d[2], slot.en, slot.tag = a, b, c, int(e), t
+        self.push_commands()
+
+    def push_commands(self) -> None:
+        node, u = self.node, self.u
+        q = node.commands
+        pending = sorted(q.pending.items())
+        for j, (s, c) in enumerate(pending[:CMDS]):
+            u.cmds[j].step, u.cmds[j].cmd, u.cmds[j].seq = s, c.cmd, c.seq
+            u.cmds[j].load_nm = c.load_nm
+        u.n_cmds = min(len(pending), CMDS)
+        u.cmds_more = int(len(pending) > CMDS)
+        u.applied_seq = q.applied_seq
+        u.applied_upto = q.applied_upto
+        u.cmd_horizon = node.cmd_horizon
+        u.ctrl_ack = -1 if node.ctrl_ack is None else node.ctrl_ack
+
+    def pull(self) -> None:
+        from bench.nodes._plant_node import fault_name
+
+        node, u = self.node, self.u
+        node.plant.adopt_core(u.k, u.meas_k)
+        if u.applied_upto >= 0:
+            node.commands.due(u.applied_upto)  # the ones C applied
+        node.started, node.stopped = bool(u.started), bool(u.stopped)
+        node.fault, node.fault_step = u.fault, u.fault_step
+        node.dut_answered = bool(u.dut_answered)
+        node.last_duty_k, node.rounds_waiting = u.last_duty_k, u.rounds_waiting
+        node.latest_duty_step = u.latest_duty_step
+        node.latest_duty = (u.latest[0], u.latest[1], u.latest[2], bool(u.latest_en))
+        node.duty_age = u.duty_age
+        node.duties = {
+            int(s.tag): (s.d[0], s.d[1], s.d[2], bool(s.en)) for s in u.duties if s.tag >= 0
+        }
+        c = node.counters
+        delta = {}
+        for name in _COUNTERS:
+            v = int(getattr(u, name))
+            delta[name] = v - self.seen[name]
+            self.seen[name] = v
+        c.frames_accepted += delta["accepted"]
+        c.late_duties += delta["late_duties"]
+        c.retransmits += delta["retransmits"]
+        c.overruns += delta["overruns"]
+        c.send_errors += delta["send_errors"]
+        c.frames_lost_on_send += delta["frames_lost_on_send"]
+        node.resets += delta["resets"]
+        for j, reason in enumerate(self.reasons):
+            n = int(u.rejected[j]) - self.seen_rej[j]
+            self.seen_rej[j] += n
+            for _ in range(n):
+                c.reject(reason)
+            n = int(u.duty_rejected[j]) - self.seen_duty_rej[j]
+            self.seen_duty_rej[j] += n
+            if n:
+                node.duty_rejected[reason] = node.duty_rejected.get(reason, 0) + n
+        for code in range(8):
+            n = int(u.trips[code]) - self.seen_trips[code]
+            self.seen_trips[code] += n
+            if n:
+                name = fault_name(code)
+                node.trips[name] = node.trips.get(name, 0) + n
+
+
+def _fill_config(dll: ctypes.CDLL, node: Any, u: Unit, realtime: bool, external: bool) -> None:
+    codec = node.codec
+    plant = node.plant
+    u.pl = plant.core_address()
+    u.n_steps = node.n_steps
+    u.delay = node.delay
+    u.truth_every = node.truth_every
+    u.status_every = node.status_every
+    u.encoder_every = node.encoder_every
+    u.encoder_delay_s = float(plant.sensor_pars.encoder_delay_s)
+    u.encoder_counts = int(plant.sensor_pars.encoder_counts)
+    if node.protection is not None:
+        pp = node.protection.pars
+        u.prot.i_trip, u.prot.u_dc_trip, u.prot.w_m_trip = pp.i_trip, pp.u_dc_trip, pp.w_m_trip
+        u.has_prot = 1
+    u.watchdog_periods = node.watchdog_periods
+    u.watchdog_rounds = node.watchdog_rounds
+    u.realtime = int(realtime)
+    u.external = int(external)
+    u.run_id = node.run_id
+    u.m_samples, u.m_truth, u.m_status, u.m_step = (
+        node.m_samples,
+        node.m_truth,
+        node.m_status,
+        node.m_step,
+    )
+    u.pace_every = node.pace_every
+    tables: dict[str, dict[str, tuple[float, ...]]] = {}
+    names = dll.bn_plant_signal_names().decode().split(",")
+    for j, full in enumerate(names):
+        msg, sig = full.split(".")
+        if msg not in tables:
+            tables[msg] = codec.signal_table(msg)
+        lo, hi, scale, offset, mod, chk_lo, chk_hi = tables[msg][sig]
+        s = u.sig[j]
+        s.lo, s.hi, s.scale, s.offset = lo, hi, scale, offset
+        s.modulus, s.chk_lo, s.chk_hi = int(mod), chk_lo, chk_hi
+    for j, msg in enumerate(("PhaseSamples", "PositionSensor", "PlantTruth", "PlantStatus")):
+        fd, brs = codec.frame_kind(msg)
+        u.msg_flags[j] = (2 if fd else 0) | (4 if brs else 0)
+
+
+def _jitter(
+    dll: ctypes.CDLL,
+    loop: Loop,
+    busy: ctypes.Array[ctypes.c_uint32],
+    late: ctypes.Array[ctypes.c_uint32],
+) -> dict[str, float]:
+    """The Python node's ``jitter`` (:class:`bench.nodes._clock.JitterStats`, us) of the run."""
+    import numpy as np
+
+    st = Stats()
+    dll.bn_clock_stats(ctypes.byref(loop.clock), ctypes.byref(st))  # sorts the busy buffer
+    n_busy = int(min(st.periods, loop.busy_cap))
+    b = np.frombuffer(memoryview(busy), dtype=np.uint32, count=n_busy).astype(float) * 1e-3
+    lt = (
+        np.frombuffer(memoryview(late), dtype=np.uint32, count=int(loop.n_late)).astype(float)
+        * 1e-3
+    )
+    stall = lt[lt > 1e-3 * loop.stall_ns]
+
+    def q(x: Any, p: float) -> float:
+        return float(np.quantile(x, p)) if len(x) else 0.0
+
+    return {
+        "n": float(st.periods),
+        "median": q(lt, 0.5),
+        "p99": q(lt, 0.99),
+        "max": float(lt.max()) if len(lt) else 0.0,
+        "busy_median": q(b, 0.5),
+        "busy_p99": q(b, 0.99),
+        "busy_max": float(b.max()) if len(b) else 0.0,
+        "stalls": float(st.stalls),
+        "stall_total": float(stall.sum()),
+        "stall_max": float(stall.max()) if len(stall) else 0.0,
+        "skipped": float(st.skipped),
+    }
+
+
+def plant_loop_native(
+    spec: Any,
+    node: Any,
+    *,
+    realtime: bool,
+    on_ready: Callable[[], None] | None = None,
+    stop: Callable[[], bool] = lambda: False,
+    watchdog_s: float,
+    dut_timeout_s: float = 0.0,
+    retransmit_s: float,
+    bus: NativeBus | None = None,
+) -> None:
+    """:func:`bench.nodes._loops.plant_loop` with the loop in C (module docstring).
+
+    ``bus``: the native bus, opened by the caller (:func:`open_native_bus`)
+    where the Python node opens its own, so that it holds every frame sent
+    from then on (a command sent before the node is ready included); closed
+    here.  The node's python-can bus stays open beside it and is not read.
+    """
+    from bench.nodes._clock import DEFAULT_SPIN_S, default_stall_s
+    from bench.nodes._loops import (
+        LAST_ANSWER_S,
+        STATE_DONE,
+        PlantDiagnostics,
+        stall_text,
+        trip_text,
+    )
+
+    dll = _lib()
+    node.realtime = realtime
+    node.external = dut_timeout_s > 0
+    codec = node.codec
+    names = ["PwmDuty", "BenchCommand"]
+    if node.external and not realtime:
+        names.append("CtrlTelemetry")
+    ids = {codec.frame_id(n) for n in names}
+    if bus is None:
+        bus = NativeBus(dll, spec)
+    try:
+        if on_ready:
+            on_ready()
+        t_idle = time.monotonic()
+        while not node.started:  # _wait_for_start, on the native bus
+            if stop():
+                return
+            f = bus.recv(0.05)
+            if f is not None and f.id in ids and not f.flags & 1:
+                node.on_message(to_message(f))
+                node.apply_commands()
+            if time.monotonic() - t_idle > 3600.0:
+                raise BenchError("plant: no start command within an hour")
+        u = Unit()
+        _fill_config(dll, node, u, realtime, node.external)
+        reasons = dll.bn_plant_reject_names().decode().split(",")
+        sync = _Sync(node, u, reasons)
+        sync.push_all()
+        loop = Loop()
+        loop.u = ctypes.pointer(u)
+        loop.bus = bus.ptr
+        loop.ids[0] = codec.frame_id("PwmDuty")
+        for j, name in enumerate(names[1:]):
+            loop.ids[j + 1] = codec.frame_id(name)
+            loop.event_ids[j] = codec.frame_id(name)
+        loop.retransmit_s = retransmit_s
+        loop.stall_s = watchdog_s
+        loop.first_s = dut_timeout_s
+        loop.poll_s = 0.2
+        loop.last_answer_s = LAST_ANSWER_S
+        busy: ctypes.Array[ctypes.c_uint32] | None = None
+        late: ctypes.Array[ctypes.c_uint32] | None = None
+        if realtime:
+            T = node.plant.T_s
+            n = max(1, node.n_steps if node.n_steps > 0 else 1_000_000)
+            busy = (ctypes.c_uint32 * n)()
+            loop.period_ns = round(T * 1e9)
+            loop.busy_tail_ns = round(DEFAULT_SPIN_S * 1e9)
+            loop.stall_ns = round(default_stall_s(T) * 1e9)
+            loop.busy = ctypes.cast(busy, ctypes.POINTER(ctypes.c_uint32))
+            loop.busy_cap = n
+            late = (ctypes.c_uint32 * n)()
+            loop.late = ctypes.cast(late, ctypes.POINTER(ctypes.c_uint32))
+            loop.late_cap = n
+        diag = PlantDiagnostics(node)
+        t_loop = time.perf_counter()
+        said_fault = node.fault
+        try:
+            while True:
+                ev = dll.bn_plant_loop(ctypes.byref(loop))
+                sync.pull()
+                if node.fault != said_fault:
+                    said_fault = node.fault
+                    if node.fault:
+                        print(f"plant: {trip_text(node.fault, node.fault_step)}", file=sys.stderr)
+                        diag.fault = node.fault
+                if ev == EV_DONE:
+                    break
+                if ev == EV_FRAME:
+                    node.on_message(to_message(loop.ev_frame))
+                    sync.push_commands()
+                elif ev == EV_CMDS:
+                    sync.push_commands()
+                elif ev == EV_POLL:
+                    diag.poll()
+                    if stop():
+                        break
+                elif ev == EV_STALL:
+                    what = loop.stall_what
+                    if what == WAIT_DUTY:
+                        limit = (
+                            dut_timeout_s
+                            if dut_timeout_s > 0 and not node.dut_answered
+                            else watchdog_s
+                        )
+                        raise BenchError(f"plant: {stall_text(node, limit)}")
+                    if what == WAIT_COMMAND:
+                        raise BenchError(
+                            f"plant: no bench command for step {node.plant.k} in {watchdog_s:.0f} s "
+                            "(paced by bench run: has its recorder stopped?)"
+                        )
+                    raise BenchError(
+                        f"plant: the controller has not acknowledged BenchCommand seq "
+                        f"{node.needed_ack()} (needed for sample {node.plant.k + 1}) in "
+                        f"{watchdog_s:.0f} s; its newest CtrlTelemetry.cmd_ack is {node.ctrl_ack}"
+                    )
+                elif ev == EV_TRIPPED:
+                    print(f"plant: {stall_text(node, watchdog_s)}", file=sys.stderr)
+                    break
+                else:
+                    raise BenchError(f"plant: native loop: {os.strerror(-loop.err)}")
+        finally:
+            node.loop_s = time.perf_counter() - t_loop
+            if realtime and loop.rt_started and busy is not None and late is not None:
+                u.overruns = loop.clock.st.missed  # also when a stop ended the loop
+                node.jitter = _jitter(dll, loop, busy, late)
+            sync.pull()
+            diag.poll(force=True)
+        final = to_frame(node.status_frame(STATE_DONE, node.fault))
+        dll.bn_plant_send(ctypes.byref(u), bus.ptr, ctypes.byref(final))
+        sync.pull()  # its send errors
+    finally:
+        bus.close()

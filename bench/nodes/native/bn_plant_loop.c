@@ -1,0 +1,200 @@
+/* The plant node's loop on a bus (bn_plant.h): bench.nodes._loops._serve_lockstep
+ * and _serve_realtime around the unit of bn_plant.c, without Python.  It
+ * returns to Python only on an event (BN_EV_*) and is re-entered after it:
+ * its state is in bn_plant_loop_t. */
+#include <errno.h>
+#include <string.h>
+#include <time.h>
+
+#include "bn_plant.h"
+
+void bn_plant_send(bn_plant_t *u, bn_bus_t *bus, const bn_frame_t *f)
+{
+    for (int attempt = 0; attempt < 5; attempt++) { /* bench.nodes._send.SEND_ATTEMPTS */
+        if (bn_send(bus, f) == 0) return;
+        u->send_errors++;
+        if (attempt == 4) {
+            u->frames_lost_on_send++;
+        } else {
+            struct timespec ts = {0, 500000L * (attempt + 1)};
+            nanosleep(&ts, NULL);
+        }
+    }
+}
+
+static void send_out(bn_plant_loop_t *L)
+{
+    for (int j = 0; j < L->u->n_out; j++) bn_plant_send(L->u, L->bus, &L->u->out[j]);
+    L->u->n_out = 0;
+}
+
+/* PlantNode.retransmit */
+static void retransmit(bn_plant_loop_t *L)
+{
+    bn_plant_t *u = L->u;
+    int64_t keep = u->delay + 3, n = u->sent_head < keep ? u->sent_head : keep;
+    u->retransmits++;
+    for (int64_t p = u->sent_head - n; p < u->sent_head; p++) {
+        int64_t s = p % BN_PLANT_SENT;
+        for (int j = 0; j < u->n_sent[s]; j++) bn_plant_send(u, L->bus, &u->sent[s][j]);
+    }
+}
+
+static int done(const bn_plant_t *u) { return u->stopped || (u->n_steps > 0 && u->k >= u->n_steps); }
+
+/* A received frame: 1 when it is an event for Python (in L->ev_frame). */
+static int take(bn_plant_loop_t *L, const bn_frame_t *f)
+{
+    if (f->flags & BN_EXT) return 0;
+    if (f->id == L->ids[0]) {
+        bn_plant_on_duty(L->u, f);
+        return 0;
+    }
+    for (int j = 0; j < 4; j++) {
+        if (L->event_ids[j] && f->id == L->event_ids[j]) {
+            L->ev_frame = *f;
+            return 1;
+        }
+    }
+    return 0;
+}
+
+static int64_t ns(double s) { return (int64_t)(s * 1e9); }
+
+static int loop_lockstep(bn_plant_loop_t *L)
+{
+    bn_plant_t *u = L->u;
+    bn_frame_t f;
+    int64_t rt = ns(L->retransmit_s);
+    for (;;) {
+        if (done(u)) {
+            /* bench.nodes._loops._last_answer: a controller under test may have lost
+             * the last sample; resend until its answer came, or a while */
+            if (!u->external || u->stopped || L->last_phase == 2) return BN_EV_DONE;
+            int64_t now = bn_now_ns();
+            if (L->last_phase == 0) {
+                L->last_phase = 1;
+                L->t_last_end = now + ns(L->last_answer_s);
+                L->t_quiet = now;
+            }
+            if (bn_plant_has_duty(u, u->k + 1 - u->delay) || now > L->t_last_end) {
+                L->last_phase = 2;
+                return BN_EV_DONE;
+            }
+            int64_t until = L->t_quiet + rt < L->t_last_end ? L->t_quiet + rt : L->t_last_end;
+            int r = bn_recv_until(L->bus, &f, until);
+            if (r < 0) {
+                L->err = r;
+                return BN_EV_ERROR;
+            }
+            if (r > 0 && take(L, &f)) return BN_EV_FRAME;
+            if (bn_now_ns() - L->t_quiet >= rt) {
+                retransmit(L);
+                L->t_quiet = bn_now_ns();
+            }
+            continue;
+        }
+        if (u->n_cmds == 0 && u->cmds_more) return BN_EV_CMDS;
+        int what = !bn_plant_ready(u)    ? BN_WAIT_DUTY
+                   : !bn_plant_paced(u)  ? BN_WAIT_COMMAND
+                   : !bn_plant_acked(u)  ? BN_WAIT_ACK
+                                         : 0;
+        int64_t now = bn_now_ns();
+        if (what == 0) {
+            bn_plant_advance(u);
+            send_out(L);
+            L->t_progress = L->t_quiet = bn_now_ns();
+            continue;
+        }
+        double limit = what == BN_WAIT_DUTY && L->first_s > 0 && !u->dut_answered ? L->first_s
+                                                                                   : L->stall_s;
+        if (now - L->t_progress > ns(limit)) {
+            L->stall_what = what;
+            return BN_EV_STALL;
+        }
+        int64_t until = L->t_quiet + rt < L->t_poll ? L->t_quiet + rt : L->t_poll;
+        int r = bn_recv_until(L->bus, &f, until);
+        if (r < 0) {
+            L->err = r;
+            return BN_EV_ERROR;
+        }
+        now = bn_now_ns();
+        if (r > 0 && take(L, &f)) return BN_EV_FRAME;
+        if (now - L->t_quiet >= rt) {
+            if (what == BN_WAIT_DUTY) { /* _serve_lockstep's no_duty */
+                bn_plant_duty_timeout(u);
+                send_out(L);
+                if (u->external && u->fault == PLANT_FAULT_WATCHDOG) return BN_EV_TRIPPED;
+                retransmit(L);
+            } else if (what == BN_WAIT_ACK) {
+                retransmit(L);
+            }
+            L->t_quiet = now;
+        }
+        if (now >= L->t_poll) {
+            L->t_poll = now + ns(L->poll_s);
+            return BN_EV_POLL;
+        }
+    }
+}
+
+static int loop_realtime(bn_plant_loop_t *L)
+{
+    bn_plant_t *u = L->u;
+    bn_frame_t f;
+    if (!L->rt_started) {
+        bn_clock_init(&L->clock, L->period_ns, L->busy_tail_ns, L->stall_ns, L->busy,
+                      (size_t)L->busy_cap);
+        bn_clock_start(&L->clock);
+        L->rt_started = 1;
+        L->phase = 1;
+    }
+    for (;;) {
+        if (L->phase == 1) {
+            send_out(L); /* this instant's frames leave at its deadline */
+            if (done(u)) {
+                u->overruns = L->clock.st.missed;
+                return BN_EV_DONE;
+            }
+            L->phase = 2;
+        }
+        if (L->phase == 2) {
+            for (;;) {
+                int r = bn_recv_until(L->bus, &f, 0);
+                if (r < 0) {
+                    L->err = r;
+                    return BN_EV_ERROR;
+                }
+                if (r == 0) break;
+                if (take(L, &f)) return BN_EV_FRAME;
+            }
+            if (u->n_cmds == 0 && u->cmds_more) return BN_EV_CMDS;
+            bn_plant_advance(u);
+            L->phase = 3;
+        }
+        int64_t late = bn_clock_wait(&L->clock);
+        if (L->late != NULL && L->n_late < L->late_cap)
+            L->late[L->n_late++] = (uint32_t)(late > (int64_t)UINT32_MAX ? UINT32_MAX : late);
+        L->phase = 1;
+        int64_t now = bn_now_ns();
+        if (now >= L->t_poll) {
+            L->t_poll = now + ns(L->poll_s);
+            return BN_EV_POLL;
+        }
+    }
+}
+
+int bn_plant_loop(bn_plant_loop_t *L)
+{
+    bn_plant_t *u = L->u;
+    if (L->phase == 0) {
+        L->t_progress = L->t_quiet = bn_now_ns();
+        L->t_poll = L->t_progress + ns(L->poll_s);
+        bn_plant_frames_now(u);
+        if (!u->realtime) {
+            send_out(L);
+            L->phase = 1;
+        }
+    }
+    return u->realtime ? loop_realtime(L) : loop_lockstep(L);
+}

@@ -1,0 +1,220 @@
+"""The native plant node (``bench/nodes/native/bn_plant*.c``, ``--engine native``).
+
+Its loop is C on the plant core instance the Python plant built; these tests
+hold it to the Python node: the same lockstep frames as the in-process
+reference (the Python node's), bit for bit, on udp_multicast and on vcan; a
+real-time run that completes and reports its counters; the encoder's
+arithmetic against :meth:`bench.wire._codec.Codec.encode`; and the fallback
+line where the native loop cannot serve.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import json
+import math
+import random
+import subprocess
+import sys
+from pathlib import Path
+
+import can
+import pytest
+
+from bench.nodes._loops import run_inprocess
+from bench.nodes.native import _plant_native
+from bench.runs._run import run_scenario
+from bench.scenarios._schema import Scenario
+from bench.wire._bus import BusSpec
+from bench.wire._protocol import unwrap
+from tests.ports import free_port
+from tests.trace_helpers import CODEC, assert_same_trace, short, trace
+
+ROOT = Path(__file__).resolve().parents[1]
+GROUP = "239.74.163.2"
+NATIVE = {"plant": ["--engine", "native"], "controller": []}
+#: PwmDuty, PhaseSamples, PositionSensor, PlantTruth: one frame per step each.
+PER_STEP = {0x10: "PwmDuty", 0x11: "PhaseSamples", 0x12: "PositionSensor", 0x100: "PlantTruth"}
+
+
+@pytest.fixture(scope="module")
+def lib() -> ctypes.CDLL:
+    return _plant_native.load_plant_lib(_plant_native.plant_lib())
+
+
+def _by_step(frames: list[can.Message]) -> dict[tuple[int, int], bytes]:
+    """Each per-step frame by (identifier, step unwrapped); PlantTruth without its run_id."""
+    out: dict[tuple[int, int], bytes] = {}
+    last: dict[int, int] = {}
+    for m in frames:
+        name = PER_STEP.get(m.arbitration_id)
+        if name is None:
+            continue
+        d = CODEC.decode(m)
+        assert d is not None and d.reason is None, (name, d)
+        data = bytes(m.data)
+        if name == "PlantTruth":  # the run's nonce differs between two runs
+            s = dict(d.signals)
+            s["run_id"] = 0
+            data = bytes(CODEC.encode(name, s).data)
+        bits = CODEC.step_bits(name)
+        step = unwrap(int(d.signals["step"]), last.get(m.arbitration_id, 0), 1 << bits)
+        last[m.arbitration_id] = step
+        key = (m.arbitration_id, step)
+        assert out.setdefault(key, data) == data, f"two {name} frames for step {key[1]}"
+    return out
+
+
+def _native_run(
+    scn: Scenario, est: str, spec: BusSpec, out: Path
+) -> tuple[list[can.Message], dict]:
+    res = run_scenario(scn, est, spec=spec, out_dir=out, progress=False, node_args=NATIVE)
+    meta = json.loads((out / "meta.json").read_text())
+    return list(can.LogReader(str(res.capture))), meta
+
+
+def _assert_native_equals_python(scn: Scenario, est: str, spec: BusSpec, out: Path) -> None:
+    ref = run_inprocess(scn, est, CODEC)
+    frames, meta = _native_run(scn, est, spec, out)
+    assert meta["node_engines"]["plant"] == "native"
+    assert meta["node_reports"]["plant"]["node_engine"] == "native"
+    got, want = _by_step(frames), _by_step(ref)
+    assert len(want) > 3 * 1000
+    assert got.keys() == want.keys()
+    diff = [k for k in want if got[k] != want[k]]
+    assert not diff, f"{len(diff)} frames differ, the first {diff[:3]}"
+    assert_same_trace(trace(ref, scn), trace(frames, scn))
+
+
+def test_native_plant_gives_the_python_nodes_lockstep_frames_udp(tmp_path: Path) -> None:
+    """tt-dq on wen-5.1: every PhaseSamples, PlantTruth and PwmDuty of the reference."""
+    scn = short("wen-5.1", 0.12)
+    spec = BusSpec("udp_multicast", GROUP, free_port())
+    _assert_native_equals_python(scn, "tt-dq", spec, tmp_path / "run")
+
+
+def test_native_plant_with_latency_and_a_position_sensor(tmp_path: Path) -> None:
+    """Injected latency (the duty ring, duty_age) and the sensored baseline's encoder frames."""
+    from dataclasses import replace
+
+    from bench.scenarios._schema import Latency
+    from bench.scenarios._setup import with_position_sensor
+
+    scn = with_position_sensor(short("wen-5.1", 0.08))
+    scn = replace(scn, latency=Latency(sample_delay_steps=1, duty_delay_steps=2))
+    spec = BusSpec("udp_multicast", GROUP, free_port())
+    ref = run_inprocess(scn, "sensored", CODEC)
+    frames, meta = _native_run(scn, "sensored", spec, tmp_path / "lat")
+    assert meta["node_engines"]["plant"] == "native"
+    got, want = _by_step(frames), _by_step(ref)
+    assert any(k[0] == 0x12 for k in want)  # PositionSensor frames are compared too
+    assert {k: v for k, v in got.items() if k in want} == want
+
+
+@pytest.mark.socketcan
+def test_native_plant_gives_the_python_nodes_lockstep_frames_vcan(tmp_path: Path) -> None:
+    scn = short("wen-5.1", 0.12)
+    _assert_native_equals_python(scn, "tt-dq", BusSpec("socketcan", "vcan0"), tmp_path / "vcan")
+
+
+def test_native_plant_in_real_time_completes_and_reports_its_counters(tmp_path: Path) -> None:
+    """1 kHz real time: every period run and counted; what holds on a busy host."""
+    scn = short("wen-5.1", 0.2)
+    from dataclasses import replace
+
+    scn = replace(scn, f_sw=1000.0)
+    spec = BusSpec("udp_multicast", GROUP, free_port())
+    res = run_scenario(
+        scn,
+        "sensored",
+        spec=spec,
+        out_dir=tmp_path / "rt",
+        mode="realtime",
+        progress=False,
+        node_args=NATIVE,
+    )
+    meta = json.loads((tmp_path / "rt" / "meta.json").read_text())
+    rep = meta["node_reports"]["plant"]
+    assert rep["node_engine"] == "native"
+    n = round(0.2 * 1000)
+    assert rep["steps"] == n
+    jit = rep["jitter"]
+    assert jit["n"] == n  # one clock period per plant period
+    assert 0 <= rep["overruns"] <= n
+    assert jit["busy_max"] >= jit["busy_p99"] >= jit["busy_median"] > 0
+    assert jit["max"] >= jit["p99"] >= jit["median"] >= 0  # the Python node's statistics
+    assert res.metrics["jitter_us"]["max"] == pytest.approx(jit["max"])
+    # every valid duty frame ends in exactly one counter
+    assert rep["frames_accepted"] > 0
+    assert res.metrics["steps"] + res.metrics.get("steps_missing", 0) == n + 1
+
+
+def test_raw_values_are_the_codecs(lib: ctypes.CDLL) -> None:
+    """``bn_plant_raw`` against :meth:`Codec.encode` on every signal the unit encodes,
+    at random values, at the clip limits and on exact half-LSB ties (half to even)."""
+    lib.bn_plant_raw.argtypes = [ctypes.POINTER(_plant_native.Sig), ctypes.c_double]
+    lib.bn_plant_raw.restype = ctypes.c_int64
+    rng = random.Random(7)
+    names = lib.bn_plant_signal_names().decode().split(",")
+    checked = 0
+    for full in names:
+        msg, sig = full.split(".")
+        lo, hi, scale, offset, mod, chk_lo, chk_hi = CODEC.signal_table(msg)[sig]
+        s = _plant_native.Sig(lo, hi, scale, offset, int(mod), chk_lo, chk_hi)
+        spec = CODEC.message(msg).get_signal_by_name(sig)
+        values = [rng.uniform(lo - 0.1 * (hi - lo), hi + 0.1 * (hi - lo)) for _ in range(300)]
+        values += [lo, hi, 0.0 if lo <= 0 <= hi else lo]
+        values += [(math.floor(v / scale) + 0.5) * scale for v in values[:50]]  # ties
+        for v in values:
+            want = {n: 0.0 for n in CODEC.signal_names(msg)}
+            want[sig] = v
+            m = CODEC.encode(msg, want)
+            raw = int.from_bytes(m.data, "little") >> spec.start & ((1 << spec.length) - 1)
+            got = lib.bn_plant_raw(ctypes.byref(s), v) & ((1 << spec.length) - 1)
+            assert got == raw, (full, v)
+            checked += 1
+    assert checked > 20 * 300
+
+
+def test_auto_says_why_the_python_node_serves(tmp_path: Path) -> None:
+    """A scenario with [[faults]]: auto takes the Python node with one line; native is refused."""
+    scn = tmp_path / "faulty.toml"
+    scn.write_text(
+        'extends = "xue-fig13"\nduration = 1.3\n[[faults]]\nat_s = 1.1\nkind = "current_lost"\n'
+        'phase = "a"\n'
+    )
+    base = [sys.executable, "-m", "bench", "plant", str(scn), "--interface", "udp_multicast",
+            "--channel", GROUP, "--port", str(free_port())]  # fmt: skip
+    res = subprocess.run(
+        [*base, "--engine", "native"], cwd=ROOT, capture_output=True, text=True, timeout=60
+    )
+    assert res.returncode == 2
+    lines = res.stderr.strip().splitlines()
+    assert lines[-1].startswith("bench: error: --engine native: ") and "[[faults]]" in lines[-1]
+    assert "Traceback" not in res.stderr
+    # auto: the one line, then the Python node serves (stopped here by the signal)
+    proc = subprocess.Popen(
+        base, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+    )
+    try:
+        assert proc.stdout is not None and proc.stdout.readline().strip() == "READY"
+    finally:
+        proc.terminate()
+        _, err = proc.communicate(timeout=30)
+    why = [ln for ln in err.splitlines() if "the Python node serves this run" in ln]
+    assert len(why) == 1 and "[[faults]]" in why[0]
+
+
+def test_native_plant_serves_an_external_controller(tmp_path: Path) -> None:
+    """``--controller external`` in lockstep: the test controller of docs/PROTOCOL.md
+    (tests/ext_controller.py) on the native plant, every period run and scored."""
+    from tests.test_external_controller import _run
+
+    res, run_dir = _run(tmp_path, "--engine", "native")
+    assert res.returncode == 0, res.stderr[-3000:]
+    meta = json.loads((run_dir / "meta.json").read_text())
+    m = json.loads((run_dir / "metrics.json").read_text())
+    assert meta["node_engines"] == {"plant": "native"}
+    assert m["steps"] == 3001 and m["steps_missing"] == 0
+    assert m["frames_rejected"] == 0 and m["plant_fault"] == "none"
+    assert json.loads((run_dir / "plant.json").read_text())["late_frames"] == 0
