@@ -349,7 +349,7 @@ def supervision_on(scn: Scenario) -> bool:
 
     ``[controller] supervision`` when the scenario sets it; else on where
     the scenario has a ``[[faults]]`` timeline. Off otherwise, so the paper
-    scenarios keep the compiled engine's speed (the supervision is Python).
+    scenarios keep their traces and speed.
     """
     return bool(scn.controller.get("supervision", bool(scn.faults)))
 
