@@ -257,6 +257,8 @@ def motor_model(p: Preset, errors: ModelErrors | None = None) -> MotorModel:
 #: The environment variable that holds ``--engine`` for the controllers built without an
 #: engine: the CLI sets it, and the controller processes a run starts inherit it.
 ENGINE_ENV = "CAN_HIL_ENGINE"
+#: The engine value of a node whose whole per-period loop runs in C (bench/nodes/native).
+NATIVE = "native"
 
 
 def estimator_spec(estimator: str) -> EstimatorSpec:
