@@ -24,9 +24,9 @@ from typing import Any
 import can
 import pytest
 
+from bench import load_scenario
 from bench.nodes._controller_node import ControllerNode
 from bench.nodes._loops import make_controller_node
-from bench.scenarios._schema import load_scenario
 from bench.wire._codec import Codec
 from bench.wire._protocol import CMD_START, CMD_STOP
 from controller import Controller, compiled_controller_missing
