@@ -1,10 +1,10 @@
-"""The native node loop (issue 29): the parts in C that do not depend on the cores.
+"""The native node loop (issue 29): a node's per-period loop in C.
 
 A node's whole per-period loop is to run in C, without Python or the GIL:
-wait, receive, check E2E, decode, step, encode, send.  This folder holds the
-parts of that loop that need neither the plant's nor the controller's
-portable core, as a small C library (no allocation after the open and init
-calls) and a test program:
+wait, receive, check E2E, decode, step, encode, send.  This folder holds
+that loop's parts and the controller node's loop on the controller core, as
+a small C library (no allocation after the open and init calls) and a test
+program:
 
 - ``bn.h``: the one header (frames, transports, clock, counters).
 - ``bn_bus.c``: the transports.  SocketCAN raw sockets, classic and CAN FD
@@ -21,6 +21,13 @@ calls) and a test program:
   host stalls, busy time per period (median); ``bn_rt_apply``: SCHED_FIFO,
   ``mlockall``, CPU pin, with what was granted.  The counters are one struct
   (``bn_stats_t``) that Python reads with ctypes (:class:`._native.Stats`).
+- ``bn_ctl.h``, ``bn_ctl.c``: the controller node's per-period logic
+  (:class:`bench.nodes._controller_node.ControllerNode` on frames in and
+  out, no transport: ``bn_ctl_on_frame``) and its loop on a bus
+  (``bn_ctl_serve``), stepping the controller core Python built (its
+  ``cc_foc_t`` and ``cc_sup_t`` by address); ``controller_node.py``: the
+  Python side (set-up, the bench commands, the report) and ``bench
+  controller --engine native``.
 - ``echo.c``: answers each PhaseSamples with a PwmDuty (same step, E2E CRC),
   or pings (round-trip times): the transports, the codec and the E2E check
   end to end, from python-can or from itself.
@@ -34,14 +41,14 @@ the same two.  :func:`._native.build` generates them and compiles the library
 What is left for the loop of issue 29, once the portable cores are merged
 (``plant_rt/core``, ``controller/core``):
 
-- the node programs: the plant's and the controller's per-period step from
-  the cores between ``bn_recv_until`` and ``bn_send``, in lockstep and on
+- the plant node's program: the plant's per-period step from its core
+  between ``bn_recv_until`` and ``bn_send``, in lockstep and on
   ``bn_clock_t``, with every counter the Python node reports
   (:class:`bench.nodes._counters.Counters`) in a block beside ``bn_stats_t``;
-- ``--engine native`` on ``bench plant``, ``bench controller`` and
-  ``bench run`` (the default where the build and the transport allow, else
-  the Python node with one line saying why), and ``meta.json`` and the
-  printed table saying which one ran;
+- ``--engine native`` on ``bench plant`` and ``bench run`` (the default
+  where the build and the transport allow), and ``meta.json`` and the
+  printed table saying which one ran (the controller's ``--report`` says it,
+  ``node_engine``);
 - the in-process native runs and the ``bench perf`` keys
   (``realtime_native.*``, ``lockstep_native.steps_per_s``,
   ``inprocess_native.us_per_step_tt_dq``).
