@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+from collections.abc import Callable
 from typing import Any
 
 from bench.cli._common import (
@@ -19,9 +20,12 @@ from bench.cli._common import (
     add_plan,
     add_rt,
     add_scenario_overrides,
+    node_rt,
     ready,
     run_id_arg,
     serve_node,
+    stop_on_signals,
+    write_report,
 )
 
 
@@ -40,7 +44,7 @@ def cmd_controller(args: argparse.Namespace) -> int:
         print(f"controller: {node.ctrl.engine_note}", file=sys.stderr)
     node.run_id = plan.run_id
     if os.environ.get(ENGINE_ENV) == NATIVE:
-        from bench.nodes.native.controller_node import native_unavailable, serve_native
+        from bench.nodes.native.controller_node import native_unavailable
 
         spec = plan.bus("controller")
         why = native_unavailable(node, spec.interface)
@@ -69,6 +73,37 @@ def cmd_controller(args: argparse.Namespace) -> int:
             sample_timeout_s=args.sample_timeout_ms * 1e-3,
         ),
     )
+
+
+def serve_native(
+    args: argparse.Namespace,
+    spec: Any,
+    node: Any,
+    *,
+    realtime: bool,
+    on_ready: Callable[[], None] | None,
+    stop: Callable[[], bool],
+    sample_timeout_s: float,
+) -> int:
+    """:func:`serve_node` for the native loop (bench/nodes/native/controller_node.py): the
+    real-time settings, the loop until it ends or a signal stops it, the node's report
+    whatever ends it."""
+    from bench.nodes.native.controller_node import native_controller_loop
+
+    stop_on_signals()
+    rt = node_rt(args, "controller")
+    try:
+        native_controller_loop(
+            spec,
+            node,
+            realtime=realtime,
+            on_ready=on_ready,
+            stop=stop,
+            sample_timeout_s=sample_timeout_s,
+        )
+    finally:
+        write_report(args.report, {**node.report(), "rt": rt})
+    return 0
 
 
 def register(sub: Any) -> None:

@@ -56,7 +56,6 @@ __all__ = [
     "native_controller_loop",
     "native_library",
     "native_unavailable",
-    "serve_native",
 ]
 
 #: The longest a ``bn_ctl_serve`` call runs before Python looks at its stop flag (s): a
@@ -456,33 +455,3 @@ def native_controller_loop(
         native.serve(bus, stop=stop, idle_s=idle_s, sample_timeout_s=sample_timeout_s)
     finally:
         native.dll.bn_close(bus)
-
-
-def serve_native(
-    args: Any,
-    spec: Any,
-    node: ControllerNode,
-    *,
-    realtime: bool,
-    on_ready: Callable[[], None] | None,
-    stop: Callable[[], bool],
-    sample_timeout_s: float,
-) -> int:
-    """:func:`bench.cli._common.serve_node` for the native loop: the real-time settings,
-    the loop until it ends or a signal stops it, the node's report whatever ends it."""
-    from bench.cli._common import node_rt, stop_on_signals, write_report
-
-    stop_on_signals()
-    rt = node_rt(args, "controller")
-    try:
-        native_controller_loop(
-            spec,
-            node,
-            realtime=realtime,
-            on_ready=on_ready,
-            stop=stop,
-            sample_timeout_s=sample_timeout_s,
-        )
-    finally:
-        write_report(args.report, {**node.report(), "rt": rt})
-    return 0
