@@ -411,3 +411,18 @@ def test_the_compiled_check_is_the_python_check_bit_for_bit(fault: str, mode: in
     else:
         assert modes[-1] == mode
     assert c_ctl._core.sup_detected_k == py_sup.detected_k >= 0
+
+
+@pytest.mark.parametrize("label", ["demagnetisation: psi_f x0.7", "current_offset: a +1 A"])
+def test_the_fault_studys_false_detections_on_sensored_are_gone(label: str) -> None:
+    """The two cases of the fault study (docs/FAULTS.md, ``sensored`` column) that reported
+    a healthy sensor: a demagnetisation as ``current_sensor`` (the back-EMF swing with still
+    currents) and a sensor offset as ``open_phase`` (the offset taken for current). Both
+    are ridden through, and a stuck sensor on the same drive is still detected."""
+    from bench.studies._faults import _u_dc, catalogue, run_case, scenario_for
+
+    cat = dict(catalogue(_u_dc(scenario_for("sensored"))))
+    r = run_case("sensored", label, cat[label], 1.5)
+    assert r["detected_by"] is None and r["outcome"] == "ridden through", r
+    stuck = run_case("sensored", "current_stuck: a", cat["current_stuck: a"], 1.5)
+    assert stuck["detected_by"] == "controller_current_sensor", stuck
