@@ -12,9 +12,11 @@
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
 #include <stddef.h>
+#include <stdint.h>
 #include <structmember.h>
 
 #include "core/cc_foc.h"
+#include "core/cc_supervision.h"
 
 #define N_MEAS 7 /* k, i_a, i_b, i_c, u_dc, theta_e, w_e */
 #define N_OUT 11 /* k, d_a, d_b, d_c, enable, theta_hat, w_hat, err, mode, i_d, i_q */
@@ -22,6 +24,8 @@
 typedef struct {
     PyObject_HEAD
     cc_foc_t c;
+    cc_sup_t sup; /* the supervision after the step, when sup_on */
+    int sup_on;
     PyTypeObject *meas_t, *out_t;
     Py_ssize_t meas_off[N_MEAS], out_off[N_OUT];
 } Core;
@@ -203,6 +207,30 @@ static PyObject *Core_hybrid(Core *self, PyObject *args)
     Py_RETURN_NONE;
 }
 
+/* supervision(T_s, i_rail, n_range, i_res, du_stuck, n_stuck, i_min, rho_open, n_open_min,
+ *             n_open_max, u_uv, u_ov, u_hyst, n_dc): Supervisor.args() */
+static PyObject *Core_supervision(Core *self, PyObject *args)
+{
+    double T_s, i_rail, i_res, du_stuck, i_min, rho_open, u_uv, u_ov, u_hyst;
+    long long n_range, n_stuck, n_open_min, n_open_max, n_dc;
+    if (!PyArg_ParseTuple(args, "ddLddLddLLdddL", &T_s, &i_rail, &n_range, &i_res, &du_stuck,
+                          &n_stuck, &i_min, &rho_open, &n_open_min, &n_open_max, &u_uv, &u_ov,
+                          &u_hyst, &n_dc))
+        return NULL;
+    cc_sup_init(&self->sup, T_s, i_rail, n_range, i_res, du_stuck, n_stuck, i_min, rho_open,
+                n_open_min, n_open_max, u_uv, u_ov, u_hyst, n_dc);
+    self->sup_on = 1;
+    Py_RETURN_NONE;
+}
+
+/* the addresses of the core's cc_foc_t and cc_sup_t (NULL: no supervision), for a caller
+ * that runs the periods in C on this same core (bench/nodes/native/bn_ctl.h) */
+static PyObject *Core_address(Core *self, PyObject *Py_UNUSED(ignored))
+{
+    return Py_BuildValue("(KK)", (unsigned long long)(uintptr_t)&self->c,
+                         (unsigned long long)(self->sup_on ? (uintptr_t)&self->sup : 0));
+}
+
 /* ---------------------------------------------------------------- commands */
 static PyObject *Core_set_speed_ref(Core *self, PyObject *v)
 {
@@ -297,6 +325,8 @@ static PyObject *Core_step(Core *self, PyObject *meas)
                         "the sensored estimator needs Measurement.theta_e and w_e");
         return NULL;
     }
+    if (self->sup_on)
+        cc_sup_after(&self->sup, &self->c, &m, &o);
     PyObject *v[N_OUT];
     Py_INCREF(k);
     v[0] = k; /* the measurement's own k */
@@ -341,6 +371,10 @@ static PyMethodDef Core_methods[] = {
     {"set_current_ref", (PyCFunction)Core_set_current_ref, METH_O, "(i_d, i_q) or None"},
     {"set_enable", (PyCFunction)Core_set_enable, METH_O, "enable or disable"},
     {"step", (PyCFunction)Core_step, METH_O, "Controller.step(meas): one period"},
+    {"supervision", (PyCFunction)Core_supervision, METH_VARARGS,
+     "supervision(*Supervisor.args()): the supervision after each step"},
+    {"address", (PyCFunction)Core_address, METH_NOARGS,
+     "(address of the cc_foc_t, of the cc_sup_t or 0)"},
     {"injection", (PyCFunction)Core_injection, METH_NOARGS,
      "the HF voltage (alpha, beta) (V) for the next period"},
     {NULL, NULL, 0, NULL},
@@ -373,6 +407,8 @@ static PyMemberDef Core_members[] = {
     M_("hf_w_hat", est.hyb.hf.w_hat, T_DOUBLE),
     M_("obs_theta_hat", est.hyb.obs.theta_hat, T_DOUBLE),
     M_("obs_w_hat", est.hyb.obs.w_hat, T_DOUBLE),
+    {"sup_latched", T_LONGLONG, offsetof(Core, sup.latched), READONLY, NULL},
+    {"sup_detected_k", T_LONGLONG, offsetof(Core, sup.detected_k), READONLY, NULL},
     {NULL, 0, 0, 0, NULL},
 };
 #undef M_

@@ -413,8 +413,12 @@ class Controller:
         self.__dict__["step"] = self._supervised(self.step)
 
     def _supervised(self, step: Callable[[Measurement], ControlOutput]) -> Any:
-        """``step`` with the supervision after it, or ``step`` without one."""
+        """``step`` with the supervision after it, or ``step`` without one (the compiled
+        core runs it in C, controller/core/cc_supervision.c, after its own step)."""
         sup = self.supervisor
+        if sup is not None and self._core is not None:
+            self._core.supervision(*sup.args())
+            return step
         return step if sup is None else sup.wrap(step, lambda: self.set_enable(False))
 
     # -- commands ---------------------------------------------------------------

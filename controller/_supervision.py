@@ -6,6 +6,10 @@ i_b`` as the DBC computes it, the DC-link sample ``u_dc``) against what it
 commanded (the duties of its :class:`controller.ControlOutput`). It never
 reads plant truth. Each detection is a controller mode (``CtrlTelemetry.mode``,
 dbc/bench.dbc) and stops the switching; docs/PROTECTION.md is its prose.
+Python designs the thresholds (:meth:`SupervisionPars.design`); the compiled
+controller runs the per-period check in C (``controller/core/cc_supervision.c``,
+:meth:`Supervisor.args` hands it the thresholds), operation for operation as
+:meth:`Supervisor.check` and :meth:`Supervisor.wrap` do here.
 
 Checks, each with its threshold derived in :meth:`SupervisionPars.design`:
 
@@ -20,12 +24,22 @@ Checks, each with its threshold derived in :meth:`SupervisionPars.design`:
   - *stuck*: a reading that does not move by more than ``i_res`` over
     :attr:`SupervisionPars.n_stuck` periods while the phase's commanded
     voltage swung by enough (``du_stuck``) to move a healthy current by many
-    resolution steps.
+    resolution steps, and while the other sensor's reading moved by more than
+    ``i_res``. The last condition is what keeps a voltage swing that the
+    back-EMF takes up out of it: at no load a drive without injection
+    commands the rotating back-EMF (a swing of twice its amplitude within one
+    window) and its currents hold still, every one of them; with a current
+    flowing or an injection the other phase moves, and so would this one
+    (``i_c = -i_a - i_b`` moves with it). A stuck sensor on a drive whose
+    currents all hold is not seen: a healthy one reads the same.
 
 - **open phase** (:data:`MODE_OPEN_PHASE`): over a block of one electrical
-  period of the estimated speed, the mean square of one phase's current is
-  below ``rho_open^2`` times the mean of the other two, which carry current
-  (``i_min``). Only over a whole period does a healthy drive give every
+  period of the estimated speed, the mean square of one phase's current
+  about its block mean is below ``rho_open^2`` times the mean of the other
+  two, which carry current (``i_min``). About the mean: a current-sensor
+  offset is a constant on one reading (and, through ``i_c``, on another),
+  which a phase that carries nothing would otherwise show as current; over
+  a whole period a healthy phase's current has no mean. Only over a whole period does a healthy drive give every
   phase the same RMS: a pulsating injection (square wave, along the
   estimated d axis) or a standing current leaves the phase at right angles
   to it without current. So the check runs only where a period is at most
@@ -273,6 +287,7 @@ class Supervisor:
         self._blk_len = self.pars.n_open_min
         self._blk_scored = False
         self._ms = [0.0, 0.0, 0.0]
+        self._s = [0.0, 0.0, 0.0]
         self._u_sum = 0.0
         self._u_n = 0
 
@@ -299,6 +314,7 @@ class Supervisor:
             self._stuck_n = 0
             self._blk_n = 0
             self._ms = [0.0, 0.0, 0.0]
+            self._s = [0.0, 0.0, 0.0]
             return 0
         # out of range
         for j, i in enumerate((i_a, i_b)):
@@ -315,9 +331,11 @@ class Supervisor:
             self._du_hi[j] = max(self._du_hi[j], u)
         self._stuck_n += 1
         if self._stuck_n >= p.n_stuck:
+            lo, hi = self._stuck_lo, self._stuck_hi
             hit = any(
-                self._stuck_hi[j] - self._stuck_lo[j] <= p.i_res
+                hi[j] - lo[j] <= p.i_res
                 and self._du_hi[j] - self._du_lo[j] >= p.du_stuck
+                and hi[1 - j] - lo[1 - j] > p.i_res
                 for j in (0, 1)
             )
             self._stuck_n = 0
@@ -327,7 +345,8 @@ class Supervisor:
             self._du_hi = [-math.inf, -math.inf]
             if hit:
                 return MODE_CURRENT_SENSOR
-        # open phase: mean squares over one electrical period of the estimated speed
+        # open phase: mean squares about the block's mean over one electrical period of
+        # the estimated speed
         if self._blk_n == 0:
             w = abs(out.w_hat) * p.T_s  # electrical angle per period
             # below one electrical period per n_open_max the block is not scored (0)
@@ -335,24 +354,49 @@ class Supervisor:
             self._blk_len = max(p.n_open_min, n)
             self._blk_scored = n > 0
         i_c = -i_a - i_b
-        ms = self._ms
+        ms, sm = self._ms, self._s
         ms[0] += i_a * i_a
         ms[1] += i_b * i_b
         ms[2] += i_c * i_c
+        sm[0] += i_a
+        sm[1] += i_b
+        sm[2] += i_c
         self._blk_n += 1
         if self._blk_n >= self._blk_len:
             n = self._blk_n
             self._blk_n = 0
+            ac = [ms[j] - sm[j] * sm[j] / n for j in range(3)]
             self._ms = [0.0, 0.0, 0.0]
+            self._s = [0.0, 0.0, 0.0]
             if not self._blk_scored:
                 return 0
             floor2 = p.i_min * p.i_min * n
             r2 = p.rho_open * p.rho_open
             for j in range(3):
-                others = 0.5 * (ms[(j + 1) % 3] + ms[(j + 2) % 3])
-                if others >= floor2 and ms[j] <= r2 * others:
+                others = 0.5 * (ac[(j + 1) % 3] + ac[(j + 2) % 3])
+                if others >= floor2 and ac[j] <= r2 * others:
                     return MODE_OPEN_PHASE
         return 0
+
+    def args(self) -> tuple[float | int, ...]:
+        """The thresholds in the order of ``cc_sup_init`` (controller/core/cc_supervision.h)."""
+        p = self.pars
+        return (
+            p.T_s,
+            p.i_rail,
+            p.n_range,
+            p.i_res,
+            p.du_stuck,
+            p.n_stuck,
+            p.i_min,
+            p.rho_open,
+            p.n_open_min,
+            p.n_open_max,
+            p.u_uv,
+            p.u_ov,
+            p.u_hyst,
+            p.n_dc,
+        )
 
     def gains(self) -> dict[str, float]:
         """Every threshold (for the controller's ``gains``, ``meta.json``)."""

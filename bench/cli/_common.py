@@ -152,6 +152,20 @@ def add_engine(p: argparse.ArgumentParser) -> None:
     )
 
 
+def add_controller_engine(p: argparse.ArgumentParser) -> None:
+    """``bench controller --engine``: the controller's engine, or ``native`` (the node's
+    whole loop in C, bench/nodes/native/controller_node.py). Default: the engine the
+    process inherits (``bench run``'s), else auto."""
+    p.add_argument(
+        "--engine",
+        choices=(*ENGINES, "native"),
+        default=None,
+        help="the controller's engine: compiled, python, auto, or native (the node's whole "
+        "per-period loop in C on the compiled controller, over udp_multicast or socketcan; "
+        "else the Python node, with one line saying why). Default: auto",
+    )
+
+
 def plant_engine(args: argparse.Namespace) -> str:
     """``--engine``, checked: one line when auto falls back to Python, an error when compiled
     cannot run. It also becomes the controller's (``ENGINE_ENV``, which the controller

@@ -7,33 +7,58 @@ As ``bench plant`` (:mod:`bench.cli.plant`): ``--plan FILE`` serves a run's plan
 from __future__ import annotations
 
 import argparse
+import os
 import sys
+from collections.abc import Callable
 from typing import Any
 
 from bench.cli._common import (
     POS_FLOAT,
     STOP,
     add_bus,
+    add_controller_engine,
     add_plan,
     add_rt,
     add_scenario_overrides,
+    node_rt,
     ready,
     run_id_arg,
     serve_node,
+    stop_on_signals,
+    write_report,
 )
 
 
 def cmd_controller(args: argparse.Namespace) -> int:
     from bench.cli.plant import node_plan
     from bench.nodes._loops import controller_loop, controller_node
+    from bench.scenarios._setup import ENGINE_ENV, NATIVE
     from bench.wire._codec import Codec
 
+    if args.engine is not None:
+        os.environ[ENGINE_ENV] = args.engine
     plan = node_plan(args, "controller")
     codec = Codec()
     node = controller_node(plan, codec)
     if node.ctrl.engine_note:  # e.g. an estimator the compiled core lacks
         print(f"controller: {node.ctrl.engine_note}", file=sys.stderr)
     node.run_id = plan.run_id
+    if os.environ.get(ENGINE_ENV) == NATIVE:
+        from bench.nodes.native.controller_node import native_unavailable
+
+        spec = plan.bus("controller")
+        why = native_unavailable(node, spec.interface)
+        if why is None:
+            return serve_native(
+                args,
+                spec,
+                node,
+                realtime=plan.mode == "realtime",
+                on_ready=ready,
+                stop=STOP.is_set,
+                sample_timeout_s=args.sample_timeout_ms * 1e-3,
+            )
+        print(why, file=sys.stderr)
     return serve_node(
         args,
         plan.bus("controller"),
@@ -48,6 +73,37 @@ def cmd_controller(args: argparse.Namespace) -> int:
             sample_timeout_s=args.sample_timeout_ms * 1e-3,
         ),
     )
+
+
+def serve_native(
+    args: argparse.Namespace,
+    spec: Any,
+    node: Any,
+    *,
+    realtime: bool,
+    on_ready: Callable[[], None] | None,
+    stop: Callable[[], bool],
+    sample_timeout_s: float,
+) -> int:
+    """:func:`serve_node` for the native loop (bench/nodes/native/controller_node.py): the
+    real-time settings, the loop until it ends or a signal stops it, the node's report
+    whatever ends it."""
+    from bench.nodes.native.controller_node import native_controller_loop
+
+    stop_on_signals()
+    rt = node_rt(args, "controller")
+    try:
+        native_controller_loop(
+            spec,
+            node,
+            realtime=realtime,
+            on_ready=on_ready,
+            stop=stop,
+            sample_timeout_s=sample_timeout_s,
+        )
+    finally:
+        write_report(args.report, {**node.report(), "rt": rt})
+    return 0
 
 
 def register(sub: Any) -> None:
@@ -72,5 +128,6 @@ def register(sub: Any) -> None:
         default=50.0,
         help="real time: disable the PWM after this long without a valid sample",
     )
+    add_controller_engine(p)
     add_rt(p)
     p.set_defaults(func=cmd_controller, mode=None)

@@ -105,6 +105,9 @@ class ControllerNode:
         self.sample_timeouts = 0
         #: True from a sample timeout until a reset/enable command.
         self.faulted = False
+        #: Which loop ran the periods: "python" (:func:`bench.nodes._loops.controller_loop`)
+        #: or "native" (:mod:`bench.nodes.native.controller_node`).
+        self.node_engine = "python"
         #: The newest output, whose telemetry is sent again when the command
         #: acknowledgement moves (``CtrlTelemetry.cmd_ack``, DBC 2.2).
         self.last_output: ControlOutput | None = None
@@ -223,11 +226,13 @@ class ControllerNode:
 
     def report(self) -> dict[str, object]:
         """Counters, for the node's JSON report; the controller's ``engine`` and, when it runs
-        in Python although the compiled engine was asked for, why (``engine_note``); its
+        in Python although the compiled engine was asked for, why (``engine_note``); the
+        loop that ran the periods (``node_engine``: ``python`` or ``native``); its
         design as built (``design``, :func:`controller_design`)."""
         out = self.counters.as_dict()
         out.update(steps=self.next_k, sample_timeouts=self.sample_timeouts)
         out.update(engine=self.ctrl.engine, engine_note=self.ctrl.engine_note)
+        out["node_engine"] = self.node_engine
         out["design"] = controller_design(self.ctrl)
         return out
 

@@ -29,6 +29,7 @@ from bench.scenarios._faults import Fault
 from bench.scenarios._schema import Scenario
 from bench.scenarios._setup import (
     ENGINE_ENV,
+    NATIVE,
     PlannedCommand,
     build_controller,
     build_plant,
@@ -142,11 +143,14 @@ def make_controller_node(scn: Scenario, estimator: str, codec: Codec) -> Control
 def controller_node(plan: RunPlan, codec: Codec) -> ControllerNode:
     """The controller node of a run's plan (its controller as built, :attr:`RunPlan.controller`).
 
-    The engine is :data:`bench.scenarios._setup.ENGINE_ENV`'s (``--engine``), else auto.
+    The engine is :data:`bench.scenarios._setup.ENGINE_ENV`'s (``--engine``), else auto;
+    ``native`` (the node's loop in C) builds the controller as auto does.
     """
     if plan.controller is None:
         raise BenchError(f"plan of {plan.scenario}: it has no controller of the bench's")
     engine = os.environ.get(ENGINE_ENV) or "auto"
+    if engine == NATIVE:
+        engine = "auto"
     try:
         ctrl = Controller(plan.controller, engine)
     except TypeError as e:

@@ -257,6 +257,8 @@ def motor_model(p: Preset, errors: ModelErrors | None = None) -> MotorModel:
 #: The environment variable that holds ``--engine`` for the controllers built without an
 #: engine: the CLI sets it, and the controller processes a run starts inherit it.
 ENGINE_ENV = "CAN_HIL_ENGINE"
+#: The engine value of a node whose whole per-period loop runs in C (bench/nodes/native).
+NATIVE = "native"
 
 
 def estimator_spec(estimator: str) -> EstimatorSpec:
@@ -349,7 +351,7 @@ def supervision_on(scn: Scenario) -> bool:
 
     ``[controller] supervision`` when the scenario sets it; else on where
     the scenario has a ``[[faults]]`` timeline. Off otherwise, so the paper
-    scenarios keep the compiled engine's speed (the supervision is Python).
+    scenarios keep their traces and speed.
     """
     return bool(scn.controller.get("supervision", bool(scn.faults)))
 

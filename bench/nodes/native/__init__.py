@@ -1,10 +1,10 @@
-"""The native node loop (issue 29): the parts in C that do not depend on the cores.
+"""The native node loop (issue 29): a node's per-period loop in C.
 
 A node's whole per-period loop is to run in C, without Python or the GIL:
-wait, receive, check E2E, decode, step, encode, send.  This folder holds the
-parts of that loop that need neither the plant's nor the controller's
-portable core, as a small C library (no allocation after the open and init
-calls) and a test program:
+wait, receive, check E2E, decode, step, encode, send.  This folder holds
+that loop's parts and the controller node's loop on the controller core, as
+a small C library (no allocation after the open and init calls) and a test
+program:
 
 - ``bn.h``: the one header (frames, transports, clock, counters).
 - ``bn_bus.c``: the transports.  SocketCAN raw sockets, classic and CAN FD
@@ -25,6 +25,13 @@ calls) and a test program:
   per-period logic on the plant core (transport-free: frames in, frames out)
   and its loop on a bus, lockstep and real time; built and driven by
   :mod:`._plant_native` (``--engine native``).
+- ``bn_ctl.h``, ``bn_ctl.c``: the controller node's per-period logic
+  (:class:`bench.nodes._controller_node.ControllerNode` on frames in and
+  out, no transport: ``bn_ctl_on_frame``) and its loop on a bus
+  (``bn_ctl_serve``), stepping the controller core Python built (its
+  ``cc_foc_t`` and ``cc_sup_t`` by address); ``controller_node.py``: the
+  Python side (set-up, the bench commands, the report) and ``bench
+  controller --engine native``.
 - ``echo.c``: answers each PhaseSamples with a PwmDuty (same step, E2E CRC),
   or pings (round-trip times): the transports, the codec and the E2E check
   end to end, from python-can or from itself.
@@ -35,18 +42,12 @@ with its E2E helper (:func:`bench.cli.codegen.generate_e2e`); firmware/ uses
 the same two.  :func:`._native.build` generates them and compiles the library
 (``libbench_native.so``) and the programs with the system's C compiler.
 
-What is left for the loop of issue 29, once the portable cores are merged
-(``plant_rt/core``, ``controller/core``):
+What is left for the loop of issue 29:
 
-- the node programs: the plant's and the controller's per-period step from
-  the cores between ``bn_recv_until`` and ``bn_send``, in lockstep and on
-  ``bn_clock_t``, with every counter the Python node reports
-  (:class:`bench.nodes._counters.Counters`) in a block beside ``bn_stats_t``;
-- ``--engine native`` on ``bench plant``, ``bench controller`` and
-  ``bench run`` (the default where the build and the transport allow, else
-  the Python node with one line saying why), and ``meta.json`` and the
-  printed table saying which one ran;
-- the in-process native runs and the ``bench perf`` keys
-  (``realtime_native.*``, ``lockstep_native.steps_per_s``,
-  ``inprocess_native.us_per_step_tt_dq``).
+- the in-process native runs (the plant unit and the controller unit paired
+  in one C call, no transport) and ``inprocess_native.us_per_step_tt_dq``;
+- the plant faults, sensor noise and load profiles in the plant core, so the
+  native plant serves the runs that have them (today: the Python node, with
+  a line saying why);
+- the recorder's throughput at 10 kHz beside a native pair.
 """

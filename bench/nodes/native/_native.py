@@ -24,8 +24,12 @@ __all__ = ["HERE", "LIB_SOURCES", "NativeBuild", "Stats", "build", "load", "timi
 HERE = Path(__file__).resolve().parent
 #: The library's sources (beside this file).
 LIB_SOURCES = ("bn_bus.c", "bn_msgpack.c", "bn_clock.c")
-#: Flags of every compile: C99 (with the POSIX and Linux calls), warnings as errors.
-CFLAGS = ("-std=c99", "-D_GNU_SOURCE", "-O2", "-Wall", "-Wextra", "-Werror")
+#: The controller node's sources (beside this file); the library links them with the DBC's
+#: C code and the controller core that ``bench codegen`` writes (``gen/``, ``gen/core/``).
+CTL_SOURCES = ("bn_ctl.c",)
+#: Flags of every compile: C99 (with the POSIX and Linux calls), warnings as errors; no
+#: fused multiply-add, as the controller core's own build (controller/core/cc_math.h).
+CFLAGS = ("-std=c99", "-D_GNU_SOURCE", "-O2", "-Wall", "-Wextra", "-Werror", "-ffp-contract=off")
 
 
 @dataclass(frozen=True, slots=True)
@@ -52,11 +56,28 @@ def build(out_dir: Path) -> NativeBuild:
     gen = out_dir / "gen"
     _run([sys.executable, "-m", "bench", "codegen", str(gen)], "bench codegen")
     lib_src = [str(HERE / s) for s in LIB_SOURCES]
-    lib = out_dir / "libbench_native.so"
-    _run([cc, *CFLAGS, "-fPIC", "-shared", f"-I{HERE}", "-o", str(lib), *lib_src], "compile")
-    echo = out_dir / "echo"
     gen_src = [str(gen / "bench_dbc.c"), str(gen / "bench_e2e.c")]
     includes = [f"-I{HERE}", f"-I{gen}"]
+    ctl_src = [str(HERE / s) for s in CTL_SOURCES] + sorted(str(p) for p in gen.glob("core/*.c"))
+    lib = out_dir / "libbench_native.so"
+    _run(
+        [
+            cc,
+            *CFLAGS,
+            "-fPIC",
+            "-shared",
+            *includes,
+            f"-I{gen / 'core'}",
+            "-o",
+            str(lib),
+            *lib_src,
+            *gen_src,
+            *ctl_src,
+            "-lm",
+        ],
+        "compile",
+    )
+    echo = out_dir / "echo"
     _run(
         [cc, *CFLAGS, *includes, "-o", str(echo), str(HERE / "echo.c"), *lib_src, *gen_src, "-lm"],
         "compile",

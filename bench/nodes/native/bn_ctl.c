@@ -1,0 +1,342 @@
+/* The controller node's per-period logic (bn_ctl.h): ControllerNode.on_message
+ * and controller_loop of bench/nodes/_controller_node.py and _loops.py, in C. */
+#include "bn_ctl.h"
+
+#include <errno.h>
+#include <math.h>
+#include <stddef.h>
+#include <string.h>
+
+#include "bench_dbc.h"
+#include "bench_e2e.h"
+
+size_t bn_ctl_bus_size(void) { return sizeof(bn_bus_t); }
+size_t bn_ctl_size(void) { return sizeof(bn_ctl_t); }
+size_t bn_ctl_prefix_size(void) { return offsetof(bn_ctl_t, t_last); }
+
+void bn_ctl_reset(bn_ctl_t *ctl)
+{
+    for (int j = 0; j < BN_CTL_RING; j++)
+        ctl->s_k[j] = ctl->t_k[j] = -1;
+    for (int j = 0; j < BN_CTL_ANSWERS; j++)
+        ctl->a_k[j] = -1;
+    memset(&ctl->c, 0, sizeof ctl->c);
+    ctl->next_k = 0;
+    ctl->due_k = -1;
+    ctl->error = 0;
+    ctl->has_last = 0;
+    ctl->send_ack = 0;
+    ctl->stopped = 0;
+    ctl->t_last = ctl->t_sample = 0;
+    ctl->seen = 0;
+}
+
+/* bench/wire/_protocol.py unwrap: the step nearest expected whose value mod m is raw */
+static int64_t unwrap(int64_t raw, int64_t expected, int64_t m)
+{
+    int64_t half = m / 2;
+    int64_t d = ((raw - expected + half) % m + m) % m - half;
+    return expected + d;
+}
+
+static size_t slot(int64_t k) { return (size_t)(((k % BN_CTL_RING) + BN_CTL_RING) % BN_CTL_RING); }
+
+/* a signal's raw value as Codec.encode gives it (clipped or wrapped, half to even) */
+static int64_t raw_of(const bn_ctl_sig_t *s, double v)
+{
+    if (s->modulus > 0) {
+        int64_t r = (int64_t)nearbyint((v - s->offset) / s->scale) % s->modulus;
+        return r < 0 ? r + s->modulus : r;
+    }
+    if (v < s->lo)
+        v = s->lo;
+    else if (v > s->hi)
+        v = s->hi;
+    return (int64_t)nearbyint((v - s->offset) / s->scale);
+}
+
+static int64_t raw(const bn_ctl_t *ctl, int j, double v) { return raw_of(&ctl->sig[j], v); }
+
+static void duty_frame(const bn_ctl_t *ctl, const cc_out_t *o, bn_frame_t *f)
+{
+    struct bench_dbc_pwm_duty_t d;
+    bench_dbc_pwm_duty_init(&d);
+    d.duty_a = (uint16_t)raw(ctl, BN_CTL_DUTY_A, o->d_a);
+    d.duty_b = (uint16_t)raw(ctl, BN_CTL_DUTY_B, o->d_b);
+    d.duty_c = (uint16_t)raw(ctl, BN_CTL_DUTY_C, o->d_c);
+    d.enable = (uint8_t)raw(ctl, BN_CTL_ENABLE, o->enable ? 1.0 : 0.0);
+    d.step = (uint16_t)raw(ctl, BN_CTL_DUTY_STEP, (double)((o->k + 1) % ctl->m_step));
+    memset(f, 0, sizeof *f);
+    f->id = BENCH_DBC_PWM_DUTY_FRAME_ID;
+    f->flags = ctl->duty_flags;
+    f->len = (uint8_t)bench_dbc_pwm_duty_pack(f->data, &d, sizeof f->data);
+    bench_e2e_protect(BENCH_E2E_PWM_DUTY_DATA_ID, f->data, f->len, BENCH_E2E_PWM_DUTY_CRC_INDEX);
+}
+
+static void tel_frame(const bn_ctl_t *ctl, const cc_out_t *o, bn_frame_t *f)
+{
+    struct bench_dbc_ctrl_telemetry_t t;
+    int32_t ack = ctl->ack_seq;
+    bench_dbc_ctrl_telemetry_init(&t);
+    t.theta_hat = (uint16_t)raw(ctl, BN_CTL_THETA_HAT, o->theta_hat);
+    t.w_hat = (int32_t)raw(ctl, BN_CTL_W_HAT, o->w_hat);
+    t.err = (int16_t)raw(ctl, BN_CTL_ERR, o->err);
+    t.mode = (uint8_t)raw(ctl, BN_CTL_MODE, (double)o->mode);
+    t.step = (uint32_t)raw(ctl, BN_CTL_TEL_STEP, (double)(o->k % ctl->m_tel));
+    t.run_id = (uint16_t)raw(ctl, BN_CTL_RUN_ID, (double)ctl->run_id);
+    t.cmd_ack_valid = (uint8_t)raw(ctl, BN_CTL_ACK_VALID, ack >= 0 ? 1.0 : 0.0);
+    t.cmd_ack = (uint8_t)raw(ctl, BN_CTL_ACK, ack > 0 ? (double)ack : 0.0);
+    memset(f, 0, sizeof *f);
+    f->id = BENCH_DBC_CTRL_TELEMETRY_FRAME_ID;
+    f->flags = ctl->tel_flags;
+    f->len = (uint8_t)bench_dbc_ctrl_telemetry_pack(f->data, &t, sizeof f->data);
+    bench_e2e_protect(BENCH_E2E_CTRL_TELEMETRY_DATA_ID, f->data, f->len,
+                      BENCH_E2E_CTRL_TELEMETRY_CRC_INDEX);
+}
+
+static void emit(bn_ctl_t *ctl, bn_ctl_sink_t sink, void *ctx, const bn_frame_t *f)
+{
+    if (sink(ctx, f) != 0) {
+        ctl->c.send_errors++;
+        ctl->c.frames_lost_on_send++;
+    }
+}
+
+static void reject(bn_ctl_t *ctl, int reason) { ctl->c.reasons[reason]++; }
+
+/* ControllerNode._run_ready: the steps whose sample (and truth) are here, in order */
+static int run_ready(bn_ctl_t *ctl, bn_ctl_sink_t sink, void *ctx)
+{
+    for (;;) {
+        int64_t k = ctl->next_k;
+        size_t s = slot(k);
+        if (ctl->s_k[s] != k || (ctl->needs_truth && ctl->t_k[s] != k))
+            return BN_CTL_EV_NONE;
+        if (k >= ctl->cmd_next_step && ctl->due_k != k) {
+            ctl->due_k = k; /* Python applies the commands due at k, then resumes */
+            return BN_CTL_EV_DUE;
+        }
+        cc_meas_t m;
+        m.k = k;
+        m.i_a = ctl->s_i_a[s];
+        m.i_b = ctl->s_i_b[s];
+        m.i_c = -m.i_a - m.i_b;
+        m.u_dc = ctl->s_u_dc[s];
+        m.has_truth = 0;
+        m.theta_e = m.w_e = 0.0;
+        if (ctl->needs_truth) {
+            m.has_truth = 1;
+            m.theta_e = ctl->t_theta[s];
+            m.w_e = ctl->t_w_m[s] * ctl->n_p;
+        }
+        cc_out_t o;
+        int rc = cc_foc_step(ctl->foc, &m, &o);
+        if (rc != CC_OK) {
+            ctl->error = rc;
+            return BN_CTL_EV_ERROR;
+        }
+        if (ctl->sup != NULL)
+            cc_sup_after(ctl->sup, ctl->foc, &m, &o);
+        ctl->s_k[s] = -1;
+        ctl->t_k[s] = -1;
+        ctl->last = o;
+        ctl->has_last = 1;
+        size_t a = (size_t)(k % BN_CTL_ANSWERS);
+        ctl->a_k[a] = k;
+        duty_frame(ctl, &o, &ctl->a_duty[a]);
+        tel_frame(ctl, &o, &ctl->a_tel[a]);
+        emit(ctl, sink, ctx, &ctl->a_duty[a]);
+        emit(ctl, sink, ctx, &ctl->a_tel[a]);
+        ctl->next_k = k + 1;
+        ctl->c.steps++;
+    }
+}
+
+int bn_ctl_resume(bn_ctl_t *ctl, bn_ctl_sink_t sink, void *ctx)
+{
+    if (ctl->send_ack) {
+        ctl->send_ack = 0;
+        if (ctl->has_last) {
+            bn_frame_t f;
+            tel_frame(ctl, &ctl->last, &f);
+            emit(ctl, sink, ctx, &f);
+        }
+    }
+    return run_ready(ctl, sink, ctx);
+}
+
+static int on_sample(bn_ctl_t *ctl, const bn_frame_t *in, bn_ctl_sink_t sink, void *ctx)
+{
+    struct bench_dbc_phase_samples_t s;
+    if (in->len != BENCH_DBC_PHASE_SAMPLES_LENGTH) {
+        reject(ctl, BN_CTL_R_BAD_LENGTH);
+        return BN_CTL_EV_NONE;
+    }
+    if (bench_dbc_phase_samples_unpack(&s, in->data, in->len) != 0) {
+        reject(ctl, BN_CTL_R_DECODE_ERROR);
+        return BN_CTL_EV_NONE;
+    }
+    if (!bench_e2e_check(BENCH_E2E_PHASE_SAMPLES_DATA_ID, in->data, in->len,
+                         BENCH_E2E_PHASE_SAMPLES_CRC_INDEX)) {
+        reject(ctl, BN_CTL_R_BAD_CRC);
+        return BN_CTL_EV_NONE;
+    }
+    if (!(bench_dbc_phase_samples_i_a_is_in_range(s.i_a)
+          && bench_dbc_phase_samples_i_b_is_in_range(s.i_b)
+          && bench_dbc_phase_samples_u_dc_is_in_range(s.u_dc)
+          && bench_dbc_phase_samples_status_is_in_range(s.status)
+          && bench_dbc_phase_samples_step_is_in_range(s.step))) {
+        reject(ctl, BN_CTL_R_OUT_OF_RANGE);
+        return BN_CTL_EV_NONE;
+    }
+    int64_t k = unwrap((int64_t)s.step, ctl->next_k, ctl->m_step);
+    if (k < ctl->next_k) {
+        size_t a = (size_t)(((k % BN_CTL_ANSWERS) + BN_CTL_ANSWERS) % BN_CTL_ANSWERS);
+        if (ctl->a_k[a] != k) {
+            reject(ctl, BN_CTL_R_STALE);
+            return BN_CTL_EV_NONE;
+        }
+        reject(ctl, BN_CTL_R_REPEATED);
+        emit(ctl, sink, ctx, &ctl->a_duty[a]);
+        if (ctl->has_last && ctl->last.k == k) {
+            bn_frame_t f; /* the telemetry with the acknowledgement held now */
+            tel_frame(ctl, &ctl->last, &f);
+            emit(ctl, sink, ctx, &f);
+        } else {
+            emit(ctl, sink, ctx, &ctl->a_tel[a]);
+        }
+        return BN_CTL_EV_NONE;
+    }
+    size_t j = slot(k);
+    if (ctl->s_k[j] == k) {
+        reject(ctl, BN_CTL_R_REPEATED);
+        return BN_CTL_EV_NONE;
+    }
+    ctl->c.frames_accepted++;
+    ctl->c.samples_accepted++;
+    if (ctl->realtime && k > ctl->next_k)
+        ctl->next_k = k; /* real time: never wait for the past, skip to the newest */
+    ctl->s_k[j] = k;
+    ctl->s_i_a[j] = bench_dbc_phase_samples_i_a_decode(s.i_a);
+    ctl->s_i_b[j] = bench_dbc_phase_samples_i_b_decode(s.i_b);
+    ctl->s_u_dc[j] = bench_dbc_phase_samples_u_dc_decode(s.u_dc);
+    return run_ready(ctl, sink, ctx);
+}
+
+static int on_truth(bn_ctl_t *ctl, const bn_frame_t *in, bn_ctl_sink_t sink, void *ctx)
+{
+    struct bench_dbc_plant_truth_t t;
+    if (in->len != BENCH_DBC_PLANT_TRUTH_LENGTH) {
+        reject(ctl, BN_CTL_R_BAD_LENGTH);
+        return BN_CTL_EV_NONE;
+    }
+    if (bench_dbc_plant_truth_unpack(&t, in->data, in->len) != 0) {
+        reject(ctl, BN_CTL_R_DECODE_ERROR);
+        return BN_CTL_EV_NONE;
+    }
+    if (!bench_e2e_check(BENCH_E2E_PLANT_TRUTH_DATA_ID, in->data, in->len,
+                         BENCH_E2E_PLANT_TRUTH_CRC_INDEX)) {
+        reject(ctl, BN_CTL_R_BAD_CRC);
+        return BN_CTL_EV_NONE;
+    }
+    if (!(bench_dbc_plant_truth_theta_e_is_in_range(t.theta_e)
+          && bench_dbc_plant_truth_w_m_is_in_range(t.w_m)
+          && bench_dbc_plant_truth_tau_e_is_in_range(t.tau_e)
+          && bench_dbc_plant_truth_tau_l_is_in_range(t.tau_l)
+          && bench_dbc_plant_truth_step_is_in_range(t.step)
+          && bench_dbc_plant_truth_duty_age_is_in_range(t.duty_age)
+          && bench_dbc_plant_truth_run_id_is_in_range(t.run_id))) {
+        reject(ctl, BN_CTL_R_OUT_OF_RANGE);
+        return BN_CTL_EV_NONE;
+    }
+    int64_t k = unwrap((int64_t)t.step, ctl->next_k, ctl->m_truth);
+    size_t j = slot(k);
+    if (k < ctl->next_k || ctl->t_k[j] == k) {
+        reject(ctl, BN_CTL_R_REPEATED);
+        return BN_CTL_EV_NONE;
+    }
+    if (k > ctl->next_k + ctl->m_step) {
+        reject(ctl, BN_CTL_R_FUTURE);
+        return BN_CTL_EV_NONE;
+    }
+    ctl->c.frames_accepted++;
+    ctl->t_k[j] = k;
+    ctl->t_theta[j] = bench_dbc_plant_truth_theta_e_decode(t.theta_e);
+    ctl->t_w_m[j] = bench_dbc_plant_truth_w_m_decode(t.w_m);
+    return run_ready(ctl, sink, ctx);
+}
+
+int bn_ctl_on_frame(bn_ctl_t *ctl, const bn_frame_t *in, bn_ctl_sink_t sink, void *ctx)
+{
+    if (in->flags & BN_EXT) {
+        ctl->c.frames_unknown++; /* not in the DBC: its identifiers are 11-bit */
+        return BN_CTL_EV_NONE;
+    }
+    int cmd = in->id == BENCH_DBC_BENCH_COMMAND_FRAME_ID;
+    if (!cmd && (in->flags & (BN_RTR | BN_ERR))) {
+        reject(ctl, BN_CTL_R_DECODE_ERROR);
+        return BN_CTL_EV_NONE;
+    }
+    if (cmd) {
+        ctl->cmd_frame = *in;
+        return BN_CTL_EV_COMMAND;
+    }
+    if (in->id == BENCH_DBC_PHASE_SAMPLES_FRAME_ID)
+        return on_sample(ctl, in, sink, ctx);
+    if (in->id == BENCH_DBC_PLANT_TRUTH_FRAME_ID && ctl->needs_truth)
+        return on_truth(ctl, in, sink, ctx);
+    return BN_CTL_EV_NONE; /* the loop listens to no other frame */
+}
+
+static int bus_sink(void *ctx, const bn_frame_t *f) { return bn_send((bn_bus_t *)ctx, f); }
+
+/* controller_loop: frames until an event; real time: the sample timeout */
+int bn_ctl_serve(bn_ctl_t *ctl, bn_bus_t *bus)
+{
+    int64_t now = bn_now_ns();
+    int64_t t_return = now + ctl->return_ns;
+    if (ctl->t_last == 0)
+        ctl->t_last = ctl->t_sample = now;
+    int ev = bn_ctl_resume(ctl, bus_sink, bus);
+    if (ev != BN_CTL_EV_NONE)
+        return ev;
+    for (;;) {
+        if (ctl->stopped)
+            return BN_CTL_EV_STOPPED;
+        bn_frame_t in;
+        int64_t deadline = bn_now_ns() + ctl->poll_ns;
+        if (deadline > t_return)
+            deadline = t_return;
+        int r = bn_recv_until(bus, &in, deadline);
+        now = bn_now_ns();
+        if (r < 0) {
+            ctl->error = -r;
+            return BN_CTL_EV_ERROR;
+        }
+        if (ctl->realtime) {
+            if (ctl->c.samples_accepted != ctl->seen) {
+                ctl->seen = ctl->c.samples_accepted;
+                ctl->t_sample = now;
+            } else if (ctl->seen && now - ctl->t_sample > ctl->sample_timeout_ns) {
+                /* again after one more poll while no sample comes, as the Python loop */
+                ctl->t_sample = now - ctl->sample_timeout_ns + ctl->poll_ns;
+                return BN_CTL_EV_TIMEOUT;
+            }
+        }
+        if (r == 0) {
+            if (now - ctl->t_last > ctl->idle_ns)
+                return BN_CTL_EV_IDLE;
+            if (now < deadline || now >= t_return)
+                return BN_CTL_EV_POLL; /* a signal, or time for Python to look */
+            continue;
+        }
+        uint32_t id = in.id; /* the loop listens to these identifiers (extended or not) */
+        if (id != BENCH_DBC_PHASE_SAMPLES_FRAME_ID && id != BENCH_DBC_BENCH_COMMAND_FRAME_ID
+            && !(ctl->needs_truth && id == BENCH_DBC_PLANT_TRUTH_FRAME_ID))
+            continue;
+        ctl->t_last = now;
+        ev = bn_ctl_on_frame(ctl, &in, bus_sink, bus);
+        if (ev != BN_CTL_EV_NONE)
+            return ev;
+    }
+}

@@ -1,0 +1,457 @@
+"""The native controller node: the per-period loop of :class:`ControllerNode` in C.
+
+Python keeps the set-up and the report: it builds the node (the plan's
+:class:`controller.Controller` on the compiled engine), then hands the loop to
+one ctypes call, ``bn_ctl_serve`` (``bn_ctl.c``, GIL released), which receives,
+checks, steps the controller core Python built (the same ``cc_foc_t`` and
+supervision, by address), encodes and sends, period after period.  It returns
+only for what stays Python's:
+
+- a ``BenchCommand`` frame (the rules of :class:`bench.nodes._counters.CommandQueue`
+  have one home), and a step at which a command is due: Python applies it to
+  the core through the controller, as the Python node does, and calls again;
+- a real-time sample timeout (:meth:`ControllerNode.sample_timeout`);
+- the end: a stop command ran, ``idle_s`` without a frame, or a stop of the
+  process. Python's signal handlers run between two calls: a signal ends the
+  C wait (``EINTR``), and the call returns at the latest every
+  :data:`RETURN_S` for Python to look at its stop flag.
+
+After the run the C counters join the Python node's, so :meth:`ControllerNode.report`
+reports what it reports for the Python loop, with ``node_engine = "native"``.
+:func:`native_unavailable` says why a node cannot run native (the Python node
+then runs, with that one line).
+"""
+
+from __future__ import annotations
+
+import ctypes
+import hashlib
+import os
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import can
+
+from bench._errors import BenchError
+from bench.nodes._controller_node import ControllerNode
+from bench.nodes._counters import (
+    REJECT_FUTURE_COUNTER,
+    REJECT_STALE_COUNTER,
+    REPEATED_COUNTER,
+)
+from bench.nodes.native import _native
+from bench.wire._codec import (
+    REJECT_BAD_CRC,
+    REJECT_BAD_LENGTH,
+    REJECT_DECODE_ERROR,
+    REJECT_OUT_OF_RANGE,
+)
+
+__all__ = [
+    "RETURN_S",
+    "CtlBlock",
+    "Frame",
+    "NativeController",
+    "native_controller_loop",
+    "native_library",
+    "native_unavailable",
+]
+
+#: The longest a ``bn_ctl_serve`` call runs before Python looks at its stop flag (s): a
+#: stop asked from another thread (no signal) is seen within it, as the Python loop's
+#: 50 ms receive poll does.
+RETURN_S = 0.05
+#: The transports the native loop speaks (python-can's interface names).
+NATIVE_INTERFACES = ("udp_multicast", "socketcan")
+_INT64_MAX = (1 << 63) - 1
+
+# events (bn_ctl.h)
+EV_NONE, EV_COMMAND, EV_DUE, EV_STOPPED, EV_IDLE, EV_TIMEOUT, EV_POLL, EV_ERROR = range(8)
+# bn_frame_t flags (bn.h)
+BN_EXT, BN_FD, BN_BRS, BN_ESI, BN_RTR, BN_ERR = 1, 2, 4, 8, 16, 32
+#: The rejection reasons, in the order of bn_ctl.h's BN_CTL_R_*.
+REASONS = (
+    REJECT_BAD_LENGTH,
+    REJECT_DECODE_ERROR,
+    REJECT_BAD_CRC,
+    REJECT_OUT_OF_RANGE,
+    REJECT_STALE_COUNTER,
+    REJECT_FUTURE_COUNTER,
+    REPEATED_COUNTER,
+)
+#: The output signals, in the order of bn_ctl.h's BN_CTL_* (message, signal).
+SIGNALS = (
+    ("PwmDuty", "duty_a"),
+    ("PwmDuty", "duty_b"),
+    ("PwmDuty", "duty_c"),
+    ("PwmDuty", "enable"),
+    ("PwmDuty", "step"),
+    ("CtrlTelemetry", "theta_hat"),
+    ("CtrlTelemetry", "w_hat"),
+    ("CtrlTelemetry", "err"),
+    ("CtrlTelemetry", "mode"),
+    ("CtrlTelemetry", "step"),
+    ("CtrlTelemetry", "run_id"),
+    ("CtrlTelemetry", "cmd_ack_valid"),
+    ("CtrlTelemetry", "cmd_ack"),
+)
+
+
+class Frame(ctypes.Structure):
+    """``bn_frame_t`` (bn.h)."""
+
+    _fields_ = [
+        ("id", ctypes.c_uint32),
+        ("len", ctypes.c_uint8),
+        ("flags", ctypes.c_uint8),
+        ("data", ctypes.c_uint8 * 64),
+        ("t_ns", ctypes.c_int64),
+    ]
+
+
+class Out(ctypes.Structure):
+    """``cc_out_t`` (controller/core/cc_foc.h)."""
+
+    _fields_ = [
+        ("k", ctypes.c_longlong),
+        ("d_a", ctypes.c_double),
+        ("d_b", ctypes.c_double),
+        ("d_c", ctypes.c_double),
+        ("enable", ctypes.c_int),
+        ("theta_hat", ctypes.c_double),
+        ("w_hat", ctypes.c_double),
+        ("err", ctypes.c_double),
+        ("mode", ctypes.c_longlong),
+        ("i_d", ctypes.c_double),
+        ("i_q", ctypes.c_double),
+    ]
+
+
+class Sig(ctypes.Structure):
+    """``bn_ctl_sig_t``."""
+
+    _fields_ = [
+        ("lo", ctypes.c_double),
+        ("hi", ctypes.c_double),
+        ("scale", ctypes.c_double),
+        ("offset", ctypes.c_double),
+        ("modulus", ctypes.c_int64),
+    ]
+
+
+class Counts(ctypes.Structure):
+    """``bn_ctl_counts_t``."""
+
+    _fields_ = [
+        ("frames_accepted", ctypes.c_uint64),
+        ("frames_unknown", ctypes.c_uint64),
+        ("reasons", ctypes.c_uint64 * len(REASONS)),
+        ("samples_accepted", ctypes.c_uint64),
+        ("send_errors", ctypes.c_uint64),
+        ("frames_lost_on_send", ctypes.c_uint64),
+        ("steps", ctypes.c_uint64),
+    ]
+
+
+class CtlBlock(ctypes.Structure):
+    """The head of ``bn_ctl_t`` up to its counters (bn_ctl.h, field by field); the rest
+    (the loop's state and rings) is C's alone. ``bn_ctl_prefix_size`` checks the layout."""
+
+    _fields_ = [
+        ("foc", ctypes.c_void_p),
+        ("sup", ctypes.c_void_p),
+        ("needs_truth", ctypes.c_int32),
+        ("realtime", ctypes.c_int32),
+        ("n_p", ctypes.c_double),
+        ("m_step", ctypes.c_int64),
+        ("m_truth", ctypes.c_int64),
+        ("m_tel", ctypes.c_int64),
+        ("sig", Sig * len(SIGNALS)),
+        ("duty_flags", ctypes.c_uint8),
+        ("tel_flags", ctypes.c_uint8),
+        ("run_id", ctypes.c_uint32),
+        ("cmd_next_step", ctypes.c_int64),
+        ("ack_seq", ctypes.c_int32),
+        ("send_ack", ctypes.c_int32),
+        ("stopped", ctypes.c_int32),
+        ("idle_ns", ctypes.c_int64),
+        ("sample_timeout_ns", ctypes.c_int64),
+        ("poll_ns", ctypes.c_int64),
+        ("return_ns", ctypes.c_int64),
+        ("next_k", ctypes.c_int64),
+        ("due_k", ctypes.c_int64),
+        ("error", ctypes.c_int32),
+        ("has_last", ctypes.c_int32),
+        ("last", Out),
+        ("cmd_frame", Frame),
+        ("c", Counts),
+    ]
+
+
+SINK = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, ctypes.POINTER(Frame))
+
+
+def _sources_digest() -> str:
+    """A digest of everything the library is built from (C sources, DBC, controller core)."""
+    from bench.wire._codec import default_codec
+    from controller import core_sources
+
+    h = hashlib.sha256()
+    files = sorted(_native.HERE.glob("*.[ch]")) + list(core_sources())
+    files.append(Path(default_codec().path))
+    for f in files:
+        h.update(f.name.encode())
+        h.update(f.read_bytes())
+    h.update(" ".join(_native.CFLAGS).encode())
+    return h.hexdigest()[:16]
+
+
+_LIB: dict[str, ctypes.CDLL] = {}
+
+
+def native_library(cache: Path | None = None) -> ctypes.CDLL:
+    """``libbench_native.so`` with the controller node, built once per source digest into
+    the user's cache (``$XDG_CACHE_HOME/can-hil-bench``); :class:`BenchError` when it
+    cannot be built."""
+    digest = _sources_digest()
+    if digest in _LIB:
+        return _LIB[digest]
+    root = cache or Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
+    out = root / "can-hil-bench" / f"native-{digest}"
+    lib = out / "libbench_native.so"
+    if not lib.exists():
+        tmp = out.with_name(f"{out.name}.{os.getpid()}")
+        built = _native.build(tmp)
+        try:
+            tmp.rename(out)
+        except OSError:  # another process built it first
+            pass
+        lib = out / "libbench_native.so" if out.exists() else built.lib
+    dll = _native.load(lib)
+    _declare(dll)
+    _LIB[digest] = dll
+    return dll
+
+
+def _declare(dll: ctypes.CDLL) -> None:
+    vp = ctypes.c_void_p
+    dll.bn_ctl_size.restype = ctypes.c_size_t
+    dll.bn_ctl_bus_size.restype = ctypes.c_size_t
+    dll.bn_ctl_prefix_size.restype = ctypes.c_size_t
+    dll.bn_ctl_reset.argtypes = [vp]
+    dll.bn_ctl_reset.restype = None
+    dll.bn_ctl_on_frame.argtypes = [vp, ctypes.POINTER(Frame), SINK, vp]
+    dll.bn_ctl_on_frame.restype = ctypes.c_int
+    dll.bn_ctl_resume.argtypes = [vp, SINK, vp]
+    dll.bn_ctl_resume.restype = ctypes.c_int
+    dll.bn_ctl_serve.argtypes = [vp, vp]
+    dll.bn_ctl_serve.restype = ctypes.c_int
+    dll.bn_udp_open.argtypes = [vp, ctypes.c_char_p, ctypes.c_uint16, ctypes.c_int, ctypes.c_int]
+    dll.bn_udp_open.restype = ctypes.c_int
+    dll.bn_can_open.argtypes = [vp, ctypes.c_char_p, ctypes.c_bool]
+    dll.bn_can_open.restype = ctypes.c_int
+    dll.bn_close.argtypes = [vp]
+    dll.bn_close.restype = None
+
+
+def native_unavailable(node: ControllerNode, interface: str | None) -> str | None:
+    """None when ``node`` can run native on ``interface`` (None: no transport, in-process),
+    else one line saying why not (the Python node runs instead)."""
+    ctrl = node.ctrl
+    if ctrl._core is None:
+        why = ctrl.engine_note or "the controller runs on the Python engine"
+        return f"native controller node: not for this controller ({why}); the Python node runs"
+    if interface is not None and interface not in NATIVE_INTERFACES:
+        return (
+            f"native controller node: --interface {interface}: the native loop speaks "
+            f"{' and '.join(NATIVE_INTERFACES)}; the Python node runs"
+        )
+    try:
+        native_library()
+    except BenchError as e:
+        return f"{e}; the Python node runs"
+    return None
+
+
+class NativeController:
+    """The C block of one :class:`ControllerNode` (module docstring)."""
+
+    def __init__(self, node: ControllerNode, *, realtime: bool) -> None:
+        if node.ctrl._core is None:
+            raise BenchError("native controller node: the controller has no compiled core")
+        self.node = node
+        self.dll = dll = native_library()
+        self._mem = ctypes.create_string_buffer(int(dll.bn_ctl_size()))
+        if ctypes.sizeof(CtlBlock) != dll.bn_ctl_prefix_size():
+            raise BenchError("native controller node: bn_ctl_t and its Python mirror differ")
+        self.ctl = CtlBlock.from_buffer(self._mem)
+        self.addr = ctypes.addressof(self._mem)
+        dll.bn_ctl_reset(self.addr)
+        c = self.ctl
+        foc, sup = node.ctrl._core.address()
+        c.foc, c.sup = foc, sup or None
+        c.needs_truth = int(node.needs_truth)
+        c.realtime = int(realtime)
+        node.realtime = realtime
+        c.n_p = float(node.ctrl.pars.motor.n_p)
+        c.m_step, c.m_truth, c.m_tel = node.m_step, node.m_truth, node.m_tel
+        codec = node.codec
+        for j, (msg, name) in enumerate(SIGNALS):
+            s = next(s for s in codec._spec(msg).sigs if s.name == name)
+            c.sig[j] = Sig(s.lo, s.hi, s.scale, s.offset, s.modulus)
+        for attr, msg in (("duty_flags", "PwmDuty"), ("tel_flags", "CtrlTelemetry")):
+            spec = codec._spec(msg)
+            setattr(c, attr, (BN_FD if spec.is_fd else 0) | (BN_BRS if spec.brs else 0))
+        c.run_id = node.run_id
+        self._sync_commands()
+
+    # -- what stays Python's --------------------------------------------------
+    def _sync_commands(self) -> None:
+        q = self.node.commands
+        self.ctl.cmd_next_step = min(q.next_step, _INT64_MAX)
+        self.ctl.ack_seq = q.ack_seq
+        self.ctl.stopped = int(self.node.stopped)
+
+    def _command(self) -> None:
+        """A BenchCommand frame: ControllerNode.on_message's command branch."""
+        node, c = self.node, self.ctl
+        f = c.cmd_frame
+        node.next_k = c.next_k
+        if c.next_k > 0:  # the steps C ran count as applied (CommandQueue.due)
+            node.commands.applied_upto = max(node.commands.applied_upto, c.next_k - 1)
+        msg = can.Message(
+            arbitration_id=f.id,
+            is_extended_id=bool(f.flags & BN_EXT),
+            is_remote_frame=bool(f.flags & BN_RTR),
+            is_error_frame=bool(f.flags & BN_ERR),
+            is_fd=bool(f.flags & BN_FD),
+            bitrate_switch=bool(f.flags & BN_BRS),
+            data=bytes(f.data[: f.len]),
+            check=False,
+        )
+        before = node.commands.ack_seq
+        node.last_output = None  # the telemetry is C's (send_ack)
+        node.on_message(msg)
+        if node.commands.ack_seq != before and c.has_last:
+            c.send_ack = 1
+        self._sync_commands()
+
+    def _due(self) -> None:
+        node, c = self.node, self.ctl
+        node.next_k = c.due_k
+        node._apply_commands(c.due_k)
+        self._sync_commands()
+
+    def _timeout(self) -> None:
+        node = self.node
+        node.next_k = self.ctl.next_k
+        node.sample_timeout()
+        self._sync_commands()
+
+    def handle(self, ev: int) -> None:
+        """Hand event ``ev`` (not an end) to Python's node."""
+        if ev == EV_COMMAND:
+            self._command()
+        elif ev == EV_DUE:
+            self._due()
+        elif ev == EV_TIMEOUT:
+            self._timeout()
+        elif ev == EV_ERROR:
+            err = self.ctl.error
+            if err == -2:  # CC_ERR_U_DC: as the Python step raises
+                raise ZeroDivisionError("float division by zero (u_dc = 0)")
+            if err < 0:
+                raise BenchError(f"native controller node: the core's step failed ({err})")
+            raise OSError(err, f"native controller node: bus: {os.strerror(err)}")
+
+    # -- the loop ---------------------------------------------------------------
+    def serve(
+        self,
+        bus: Any,
+        *,
+        stop: Callable[[], bool],
+        idle_s: float,
+        sample_timeout_s: float,
+    ) -> None:
+        """``controller_loop`` on the C bus ``bus`` (a ``bn_bus_t`` block)."""
+        c = self.ctl
+        c.idle_ns = round(min(idle_s, 1e9) * 1e9)
+        c.sample_timeout_ns = round(sample_timeout_s * 1e9)
+        poll = min(0.05, sample_timeout_s / 4) if c.realtime else 0.05
+        c.poll_ns = round(poll * 1e9)
+        c.return_ns = round(RETURN_S * 1e9)
+        try:
+            while True:
+                ev = self.dll.bn_ctl_serve(self.addr, ctypes.addressof(bus))
+                if ev in (EV_STOPPED, EV_IDLE):
+                    return
+                if ev == EV_POLL:
+                    if stop():
+                        return
+                    continue
+                self.handle(ev)
+        finally:
+            self.merge()
+
+    def merge(self) -> None:
+        """The C counters into the Python node's (its report), once, after the loop."""
+        node, c = self.node, self.ctl
+        n = node.counters
+        n.frames_accepted += c.c.frames_accepted
+        n.frames_unknown += c.c.frames_unknown
+        for reason, count in zip(REASONS, c.c.reasons, strict=True):
+            if count:  # as NodeCounters.reject, count times
+                n.reject_reasons[reason] = n.reject_reasons.get(reason, 0) + count
+                if reason == REPEATED_COUNTER:
+                    n.duplicates += count
+                else:
+                    n.frames_rejected += count
+        n.send_errors += c.c.send_errors
+        n.frames_lost_on_send += c.c.frames_lost_on_send
+        node.samples_accepted += c.c.samples_accepted
+        node.next_k = c.next_k
+        node.node_engine = "native"
+        c.c = Counts()
+
+
+def open_bus(dll: ctypes.CDLL, spec: Any) -> ctypes.Array[ctypes.c_char]:
+    """The C transport of bus ``spec`` (:class:`bench.wire._bus.BusSpec`): a ``bn_bus_t``
+    block; :class:`BenchError` with one line when it cannot be opened."""
+    from bench.wire._bus import UDP_DEFAULT_PORT
+
+    bus = ctypes.create_string_buffer(int(dll.bn_ctl_bus_size()))
+    if spec.interface == "udp_multicast":
+        port = spec.port or UDP_DEFAULT_PORT
+        rc = dll.bn_udp_open(bus, spec.channel.encode(), port, 1, 4 << 20)
+    elif spec.interface == "socketcan":
+        rc = dll.bn_can_open(bus, spec.channel.encode(), True)
+    else:
+        raise BenchError(f"native controller node: --interface {spec.interface}: not spoken")
+    if rc != 0:
+        raise BenchError(
+            f"native controller node: {spec.interface} {spec.channel}: {os.strerror(-rc)}"
+        )
+    return bus
+
+
+def native_controller_loop(
+    spec: Any,
+    node: ControllerNode,
+    *,
+    realtime: bool,
+    on_ready: Callable[[], None] | None = None,
+    stop: Callable[[], bool] = lambda: False,
+    idle_s: float = 3600.0,
+    sample_timeout_s: float = 0.05,
+) -> None:
+    """:func:`bench.nodes._loops.controller_loop` with the per-period loop in C, on the bus
+    ``spec`` names (opened here by the C transport)."""
+    native = NativeController(node, realtime=realtime)
+    bus = open_bus(native.dll, spec)
+    try:
+        if on_ready:
+            on_ready()
+        native.serve(bus, stop=stop, idle_s=idle_s, sample_timeout_s=sample_timeout_s)
+    finally:
+        native.dll.bn_close(bus)
