@@ -7,6 +7,8 @@
   (``bench run --controller external``) in lockstep: the same trace, row for row, on
   udp_multicast and (``socketcan``) on vcan; a supervision detection (a DC-link sag) at
   the same step with the same mode.
+- ``bench run`` on its defaults runs a native pair (plant and controller nodes), and
+  gives the trace of a Python pair (``--engine compiled``) row for row.
 - The fallback: one line saying why the Python node runs.
 """
 
@@ -187,7 +189,7 @@ def _pair(
 
 def _same_trace(tmp: Path, scenario: str, bus: list[str]) -> list[list[str]]:
     rows_n, rep_n, err_n = _pair(tmp, scenario, "native", bus, "native")
-    rows_p, rep_p, _ = _pair(tmp, scenario, None, bus, "python")
+    rows_p, rep_p, _ = _pair(tmp, scenario, "compiled", bus, "python")
     assert rep_n["node_engine"] == "native" and rep_p["node_engine"] == "python", err_n
     assert rep_n["engine"] == "compiled" and rep_n["steps"] == rep_p["steps"] > 4000
     assert len(rows_n) == len(rows_p) > 4000
@@ -210,6 +212,32 @@ def test_a_dc_link_sag_is_detected_at_the_same_step(tmp_path: Path) -> None:
     t = [float(r[head.index("t")]) for r in rows[1:]]
     first = mode.index(7)  # dc_undervoltage (controller/_supervision.py)
     assert 0.3 < t[first] < 0.3 + 5e-3 and all(m == 7 for m in mode[first:])
+
+
+def test_bench_run_defaults_to_a_native_pair_with_the_python_pairs_trace(
+    tmp_path: Path,
+) -> None:
+    """The default engine (auto) puts both nodes of ``bench run`` on the native loop where
+    they can serve, and the pair gives the Python pair's lockstep trace, every column of
+    every period (the same cores stepped, the same codec, the same order)."""
+    bus = ["--interface", "udp_multicast", "--channel", GROUP]
+    rows: dict[str, list[list[str]]] = {}
+    metas: dict[str, dict[str, Any]] = {}
+    for engine in ("auto", "compiled"):
+        out = tmp_path / engine
+        res = subprocess.run(
+            [sys.executable, "-m", "bench", "run", "wen-5.1", "-e", "tt-dq", *bus,
+             "--port", str(free_port()), "--duration", "0.5", "--engine", engine,
+             "--out", str(out), "-q"],
+            cwd=ROOT, capture_output=True, text=True, timeout=300,
+        )  # fmt: skip
+        assert res.returncode == 0, res.stderr
+        metas[engine] = json.loads((out / "meta.json").read_text())
+        with (out / "signals.csv").open() as f:
+            rows[engine] = list(csv.reader(f))
+    assert metas["auto"]["node_engines"] == {"plant": "native", "controller": "native"}
+    assert metas["compiled"]["node_engines"] == {"plant": "python", "controller": "python"}
+    assert len(rows["auto"]) > 4000 and rows["auto"] == rows["compiled"]
 
 
 @pytest.mark.socketcan

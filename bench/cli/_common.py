@@ -145,24 +145,26 @@ def add_engine(p: argparse.ArgumentParser) -> None:
         choices=ENGINE_CHOICES,
         default="auto",
         help="the engine of the plant and the controller: compiled (C, built when the project "
-        "is installed; the controller's where it covers the estimator), python, native (the "
-        "plant node's whole loop in C, on udp_multicast and socketcan), or auto (compiled, "
-        "and the native plant node where the build, the transport and the scenario allow; "
-        "default)",
+        "is installed; the controller's where it covers the estimator), python, native (each "
+        "node's whole loop in C, on udp_multicast and socketcan), or auto (compiled, and the "
+        "native plant and controller nodes where the build, the transport, the scenario and "
+        "the estimator allow, else the Python node with one line why; default)",
     )
 
 
 def add_controller_engine(p: argparse.ArgumentParser) -> None:
     """``bench controller --engine``: the controller's engine, or ``native`` (the node's
     whole loop in C, bench/nodes/native/controller_node.py). Default: the engine the
-    process inherits (``bench run``'s), else auto."""
+    process inherits (``bench run``'s), else auto; auto and native run the native node
+    where it can serve."""
     p.add_argument(
         "--engine",
         choices=(*ENGINES, "native"),
         default=None,
         help="the controller's engine: compiled, python, auto, or native (the node's whole "
         "per-period loop in C on the compiled controller, over udp_multicast or socketcan; "
-        "else the Python node, with one line saying why). Default: auto",
+        "else the Python node, with one line saying why). Default: auto (native where it "
+        "can serve, on the compiled engine)",
     )
 
 

@@ -43,7 +43,9 @@ def cmd_controller(args: argparse.Namespace) -> int:
     if node.ctrl.engine_note:  # e.g. an estimator the compiled core lacks
         print(f"controller: {node.ctrl.engine_note}", file=sys.stderr)
     node.run_id = plan.run_id
-    if os.environ.get(ENGINE_ENV) == NATIVE:
+    # native where it can serve: asked for (--engine native, or bench run --engine native),
+    # or by default (auto, as the plant node); else the Python node, with one line why
+    if os.environ.get(ENGINE_ENV, "auto") in ("auto", NATIVE):
         from bench.nodes.native.controller_node import native_unavailable
 
         spec = plan.bus("controller")

@@ -28,6 +28,8 @@ from bench.scenarios._setup import check_estimator_fits, check_estimator_name
 def run_node_args(args: argparse.Namespace) -> dict[str, list[str]]:
     """Options ``bench run`` passes on to its plant and controller processes."""
     out: dict[str, list[str]] = {"plant": ["--engine", args.engine], "controller": []}
+    if args.engine == "native":  # the controller's engine is else the one it inherits
+        out["controller"] += ["--engine", "native"]
     if args.watchdog_ms is not None:
         out["plant"] += ["--watchdog-ms", repr(args.watchdog_ms)]
     if args.rt_priority is not None:
