@@ -432,7 +432,8 @@ def test_bench_run_says_in_one_line_that_the_controller_runs_in_python(
     out = tmp_path / "run"
     src = Path(loops.__file__).parents[1] / "scenarios" / "wen-5.1.toml"
     scn = tmp_path / "measured.toml"
-    scn.write_text(src.read_text() + '\n[estimator_options]\nnormalise = "measured"\n')
+    # an empty [motor]: the preset's motor, which the injection settings are for
+    scn.write_text(src.read_text() + '\n[motor]\n\n[estimator_options]\nnormalise = "measured"\n')
     argv = ["run", str(scn), "-e", "tt-dq", "--engine", "compiled", "--duration", "0.05"]
     argv += ["--port", str(free_port()), "--out", str(out), "--quiet"]
     assert main(argv) == 0
