@@ -142,13 +142,14 @@ static PyObject *Core_polarity(Core *self, PyObject *args)
 }
 
 /* rotating(V_h, wT, inv_norm, (pll k_p, k_i, T_s), (bpf b0, b1, b2, a1, a2), (lpf b0, b1, a1),
- *          (hpf b0, b1, a1) or None, (tracking w_h, T_s, B, w0_min) or None) */
+ *          (hpf b0, b1, a1) or None, (tracking w_h, T_s, B, w0_min) or None
+ *          [, (quadrature twin b0, b1, b2, a1, a2) or None]) */
 static PyObject *Core_rotating(Core *self, PyObject *args)
 {
     double V_h, wT, inv_norm, pk, pi, pT, b0, b1, b2, a1, a2, l0, l1, la;
-    PyObject *hpf, *track;
-    if (!PyArg_ParseTuple(args, "ddd(ddd)(ddddd)(ddd)OO", &V_h, &wT, &inv_norm, &pk, &pi, &pT,
-                          &b0, &b1, &b2, &a1, &a2, &l0, &l1, &la, &hpf, &track))
+    PyObject *hpf, *track, *quad = Py_None;
+    if (!PyArg_ParseTuple(args, "ddd(ddd)(ddddd)(ddd)OO|O", &V_h, &wT, &inv_norm, &pk, &pi, &pT,
+                          &b0, &b1, &b2, &a1, &a2, &l0, &l1, &la, &hpf, &track, &quad))
         return NULL;
     cc_rot_t *r = &self->c.est.rot;
     cc_rot_init(r, V_h, wT, inv_norm);
@@ -156,6 +157,13 @@ static PyObject *Core_rotating(Core *self, PyObject *args)
     cc_bq2_init(&r->bpf, b0, b1, b2, a1, a2);
     cc_fo_init(&r->lpf, l0, l1, la);
     cc_fo2_init(&r->lpf_ab, l0, l1, la);
+    cc_fo2_init(&r->lpf_n, l0, l1, la);
+    cc_bq2_init(&r->quad, 0.0, 0.0, 0.0, 0.0, 0.0);
+    if (quad != Py_None) {
+        if (!PyArg_ParseTuple(quad, "ddddd", &b0, &b1, &b2, &a1, &a2))
+            return NULL;
+        cc_bq2_init(&r->quad, b0, b1, b2, a1, a2);
+    }
     cc_fo2_init(&r->hpf, 0.0, 0.0, 0.0);
     if (hpf != Py_None) {
         if (!PyArg_ParseTuple(hpf, "ddd", &l0, &l1, &la))
@@ -229,6 +237,48 @@ static PyObject *Core_address(Core *self, PyObject *Py_UNUSED(ignored))
 {
     return Py_BuildValue("(KK)", (unsigned long long)(uintptr_t)&self->c,
                          (unsigned long long)(self->sup_on ? (uintptr_t)&self->sup : 0));
+}
+
+/* compensation((T_s, t_dead, v_ce, v_f, i_band, sine, hf_next) or None, (k_dq, sal_own) or
+ *              None, offset periods or None, (I_p, I_n) or None): the countermeasures
+ *              switched on, and the rotating injection's model HF amplitudes */
+static PyObject *Core_compensation(Core *self, PyObject *args)
+{
+    PyObject *dt, *cross, *cal, *hf;
+    if (!PyArg_ParseTuple(args, "OOOO", &dt, &cross, &cal, &hf))
+        return NULL;
+    if (dt != Py_None) {
+        double T_s, t_dead, v_ce, v_f, i_band;
+        int sine, hf_next;
+        if (!PyArg_ParseTuple(dt, "dddddpp", &T_s, &t_dead, &v_ce, &v_f, &i_band, &sine,
+                              &hf_next))
+            return NULL;
+        cc_foc_dead_time(&self->c, T_s, t_dead, v_ce, v_f, i_band, sine, hf_next);
+    }
+    if (cross != Py_None) {
+        double k_dq;
+        int sal_own;
+        if (!PyArg_ParseTuple(cross, "dp", &k_dq, &sal_own))
+            return NULL;
+        cc_foc_cross_saturation(&self->c, k_dq, sal_own);
+    }
+    if (cal != Py_None) {
+        long long n = PyLong_AsLongLong(cal);
+        if (n == -1 && PyErr_Occurred())
+            return NULL;
+        if (n < 1) {
+            PyErr_Format(PyExc_ValueError, "compiled controller: %lld offset periods", n);
+            return NULL;
+        }
+        cc_foc_offset_calibration(&self->c, n);
+    }
+    if (hf != Py_None) {
+        double I_p, I_n;
+        if (!PyArg_ParseTuple(hf, "dd", &I_p, &I_n))
+            return NULL;
+        cc_rot_hf_model(&self->c.est.rot, I_p, I_n);
+    }
+    Py_RETURN_NONE;
 }
 
 /* ---------------------------------------------------------------- commands */
@@ -362,11 +412,14 @@ static PyMethodDef Core_methods[] = {
     {"speed_filter", (PyCFunction)Core_speed_filter, METH_VARARGS, "speed_filter(b0, b1, a1)"},
     {"polarity", (PyCFunction)Core_polarity, METH_VARARGS, "polarity(L_d, T_s, i_pulse, u_frac)"},
     {"rotating", (PyCFunction)Core_rotating, METH_VARARGS,
-     "rotating(V_h, wT, inv_norm, pll, bpf, lpf, hpf or None, tracking or None)"},
+     "rotating(V_h, wT, inv_norm, pll, bpf, lpf, hpf or None, tracking or None[, quad])"},
     {"square_wave", (PyCFunction)Core_square_wave, METH_VARARGS,
      "square_wave(cic, M, U_h, t_comp, k_err, (T_s, g1, g2, g3, gt))"},
     {"hybrid", (PyCFunction)Core_hybrid, METH_VARARGS,
      "hybrid(flux observer, band, T_s, n_p, J)"},
+    {"compensation", (PyCFunction)Core_compensation, METH_VARARGS,
+     "compensation(dead time or None, cross-saturation or None, offset periods or None, "
+     "(I_p, I_n) or None)"},
     {"set_speed_ref", (PyCFunction)Core_set_speed_ref, METH_O, "mechanical speed (rad/s)"},
     {"set_current_ref", (PyCFunction)Core_set_current_ref, METH_O, "(i_d, i_q) or None"},
     {"set_enable", (PyCFunction)Core_set_enable, METH_O, "enable or disable"},
@@ -454,5 +507,7 @@ PyMODINIT_FUNC PyInit__cctl(void)
     PyModule_AddIntConstant(m, "KIND_SENSORED", CC_EST_SENSORED);
     PyModule_AddIntConstant(m, "KIND_HYB_TTDQ", CC_EST_HYBRID_TT_DQ);
     PyModule_AddIntConstant(m, "KIND_HYB_SQW", CC_EST_HYBRID_SQUARE_WAVE);
+    PyModule_AddIntConstant(m, "KIND_SELF_DEMOD", CC_EST_SELF_DEMOD);
+    PyModule_AddIntConstant(m, "KIND_EPF", CC_EST_EPF);
     return m;
 }

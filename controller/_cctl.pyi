@@ -9,6 +9,8 @@ KIND_SQW: int
 KIND_SENSORED: int
 KIND_HYB_TTDQ: int
 KIND_HYB_SQW: int
+KIND_SELF_DEMOD: int
+KIND_EPF: int
 
 class Core:
     mode: int
@@ -71,6 +73,7 @@ class Core:
         lpf: tuple[float, float, float],
         hpf: tuple[float, float, float] | None,
         tracking: tuple[float, float, float, float] | None,
+        quad: tuple[float, float, float, float, float] | None = None,
     ) -> None: ...
     def square_wave(
         self,
@@ -88,6 +91,13 @@ class Core:
         T_s: float,
         n_p: float,
         J: float,
+    ) -> None: ...
+    def compensation(
+        self,
+        dead_time: tuple[float, float, float, float, float, bool, bool] | None,
+        cross_saturation: tuple[float, bool] | None,
+        offset_periods: int | None,
+        hf_model: tuple[float, float] | None,
     ) -> None: ...
     def set_speed_ref(self, w_m_ref: float) -> None: ...
     def set_current_ref(self, i_dq: tuple[float, float] | None) -> None: ...

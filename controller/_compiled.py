@@ -18,10 +18,12 @@ from typing import Any
 
 from controller._api import ControlOutput, Measurement
 from controller._engine import _cctl, compiled_cover
+from controller._epf import EPFEstimator
 from controller._filters import Biquad2, FirstOrder, FirstOrder2
 from controller._hybrid import HybridEstimator
 from controller._pll import PositionObserver
 from controller._rotating import RotatingHFEstimator
+from controller._self_demod import SelfDemodEstimator
 from controller._sensored import SensoredEstimator
 from controller._square_wave import SquareWaveEstimator
 from controller._tt_dq import TTDQEstimator
@@ -33,6 +35,8 @@ _KIND_CLASS: dict[int, type] = {
     5: SensoredEstimator,
     6: HybridEstimator,
     7: HybridEstimator,
+    8: SelfDemodEstimator,
+    9: EPFEstimator,
 }
 
 
@@ -49,15 +53,19 @@ def _rotating(core: Any, est: RotatingHFEstimator, tracking: bool) -> None:
     assert isinstance(pll, PositionObserver)
     e: Any = est
     hpf = getattr(e, "_hpf", None)
+    quad = getattr(e, "_quad", None)
+    # the LPF of eq. (13); epf's two sequences each have one, with the same coefficients
+    lpf = e._lpf_p if isinstance(est, EPFEstimator) else e._lpf
     core.rotating(
         est.V_h,
         est.wT,
         e._inv_norm,
         (pll.k_p, pll.k_i, pll.T_s),
         _bq(e._bpf),
-        _fo(e._lpf),
+        _fo(lpf),
         None if hpf is None else _fo(hpf),
         (est.w_h, est.T_s, est.bpf_B, e._w0_min) if tracking and est.bpf_tracking else None,
+        None if quad is None else _bq(quad),
     )
 
 
@@ -119,7 +127,7 @@ def build_core(ctrl: Any) -> tuple[Any, str | None]:
     core.speed_filter(*_fo(ctrl.lpf_w))
     pt = ctrl.polarity
     core.polarity(pt.L_d, pt.T_s, pt.i_pulse, pt.u_frac)
-    if kind in (1, 2, 3):
+    if kind in (1, 2, 3, 8, 9):
         _rotating(core, est, kind == 1)
     elif kind == 4:
         _square_wave(core, est)
@@ -142,4 +150,22 @@ def build_core(ctrl: Any) -> tuple[Any, str | None]:
             n_p,
             J,
         )
+    _compensation(core, ctrl, est)
     return core, None
+
+
+def _compensation(core: Any, ctrl: Any, est: Any) -> None:
+    """The countermeasures the controller designed (:mod:`controller._compensation`),
+    switched on in the core as in the Python step."""
+    dt = ctrl.dead_time
+    cal = ctrl.calibration
+    hf: Any = est.hf if isinstance(est, HybridEstimator) else est
+    rot = isinstance(hf, RotatingHFEstimator)
+    core.compensation(
+        None
+        if dt is None
+        else (dt.T_s, dt.t_dead, dt.v_ce, dt.v_f, dt.i_band, dt.sine, ctrl._hf_next is not None),
+        (ctrl.motor.k_dq, ctrl._sal_own) if ctrl.cross_sat else None,
+        None if cal is None else cal.n,
+        (hf.I_p, hf.I_n) if rot else None,
+    )

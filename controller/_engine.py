@@ -14,18 +14,19 @@ same trace bit for bit (``tests/test_controller_engine.py``).
 What it covers (:func:`compiled_cover`): the speed and current control of
 the alignment and run modes with the shipped estimators of
 :data:`COMPILED_ESTIMATORS`: ``tt-dq``,
-``tt-ab`` and ``sfhf`` (model normalisation), ``square-wave``,
+``tt-ab``, ``sfhf``, ``self-demod`` and ``epf`` (Wen's references [27] and
+[25]; model normalisation), ``square-wave``,
 ``square-wave-nocic``, ``sensored``, and the hybrids ``hybrid-tt-dq`` and
 ``hybrid-square-wave`` (flux observer, hand-over band, trackers), with the
-current fed to the PIs filtered or raw. A controller outside it runs in
+current fed to the PIs filtered or raw, and the drive countermeasures of
+:mod:`controller._compensation` (dead-time feed-forward, cross-saturation
+correction, offset calibration: ``controller/core/cc_compensation.c``). A
+controller outside it runs in
 Python whatever the choice, and says why in one line
 (:attr:`controller.Controller.engine_note`; ``bench run`` and ``bench
 controller`` print it, and the controller node's report keeps it): an
-estimator the core does not know (``self-demod`` and ``epf``, Wen's
-references [27] and [25], and every plug-in), the measured normalisation, the
-mechanical position observer (``observer = "mechanical"``) and
-the drive countermeasures (dead-time feed-forward, cross-saturation
-correction, offset calibration). Inside it the core runs every period,
+estimator the core does not know (every plug-in), the measured normalisation and the
+mechanical position observer (``observer = "mechanical"``). Inside it the core runs every period,
 the start-up included, and keeps every state; the
 :class:`controller.Controller` holds it by composition and forwards its
 commands (:mod:`controller._compiled`).
@@ -100,24 +101,12 @@ def compiled_cover(pars: Any) -> tuple[int, str | None]:
     if kind == 0:
         return 0, f"the {name} estimator is not compiled: the controller runs in Python"
     opts = dict(pars.estimator_options)
-    if kind in (1, 2, 3, 6) and opts.get("normalise", "model") != "model":
+    if kind in (1, 2, 3, 6, 8, 9) and opts.get("normalise", "model") != "model":
         return 0, f"{name} with normalise={opts['normalise']!r} is not compiled: Python"
-    if kind in (1, 2, 3, 6) and opts.get("observer", "pll") != "pll":
+    if kind in (1, 2, 3, 6, 8, 9) and opts.get("observer", "pll") != "pll":
         return 0, f"{name} with observer={opts['observer']!r} is not compiled: Python"
     if kind in (4, 7) and int(opts.get("M", 2)) > 64:
         return 0, f"{name} with a CIC delay M > 64 is not compiled: Python"
-    cp = pars.compensation
-    off = [
-        what
-        for what, on in (
-            ("dead-time feed-forward", cp.dead_time),
-            ("cross-saturation correction", cp.cross_saturation),
-            ("offset calibration", cp.offset_calibration),
-        )
-        if on
-    ]
-    if off:
-        return 0, f"the {', '.join(off)} is not compiled: the controller runs in Python"
     return kind, None
 
 

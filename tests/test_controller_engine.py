@@ -7,8 +7,10 @@ the oracle of these tests, for every estimator the core covers. Equal means equa
 C functions repeat the Python operations in the same order, built without
 fused multiply-adds, and call the same ``libm`` ``sin``/``cos``/``sqrt``.
 Every shipped scenario's first second, each of its estimators, in the
-in-process loop (alignment, polarity test, speed steps): the same
-:class:`controller.ControlOutput` in every period. Then commands in the
+in-process loop (alignment, polarity test, speed steps), on the papers' plant
+and on the suite's ``drive`` plant with the drive's countermeasures on
+(dead-time feed-forward, cross-saturation correction, offset calibration):
+the same :class:`controller.ControlOutput` in every period. Then commands in the
 middle of a run, the states read back, the CIC's re-anchoring, the seam's
 records as structs, and the cover: what runs compiled and what says why it
 runs in Python.
@@ -30,6 +32,7 @@ import bench.nodes._loops as loops
 from bench.cli._common import ENGINES as CLI_ENGINES
 from bench.scenarios._schema import load_scenario
 from bench.scenarios._setup import ENGINE_ENV, build_controller, build_plant, sample_period
+from bench.studies._plants import plant_variant
 from bench.wire._codec import Codec
 from controller import (
     ENGINES,
@@ -41,6 +44,7 @@ from controller import (
     compiled_controller_missing,
     resolve_controller_engine,
 )
+from controller._registry import SPECS
 
 SCENARIOS = sorted(p.stem for p in (Path(loops.__file__).parents[1] / "scenarios").glob("*.toml"))
 COMPILED = (
@@ -52,6 +56,8 @@ COMPILED = (
     "sensored",
     "hybrid-tt-dq",
     "hybrid-square-wave",
+    "self-demod",
+    "epf",
 )
 
 
@@ -73,25 +79,40 @@ def _bits(o: ControlOutput) -> bytes:
     return types.encode() + struct.pack(f"{len(vals)}d", *(float(v) for v in vals))
 
 
-def _pairs() -> list[tuple[str, str]]:
+#: The plants the parity runs on: the shipped scenario's, and the suite's drive plant with
+#: every countermeasure on (bench.studies._plants).
+PLANTS = ("shipped", "drive")
+#: The countermeasures' flags in Controller.gains()
+COMP_KEYS = ("comp.dead_time", "comp.cross_saturation", "comp.offset_calibration")
+
+
+def _scenario(name: str, plant: str = "shipped") -> Any:
+    scn = load_scenario(name)
+    return scn if plant == "shipped" else plant_variant(scn, plant)
+
+
+def _pairs() -> list[tuple[str, str, str]]:
     out = []
-    for name in SCENARIOS:
-        scn = load_scenario(name)
-        for est in dict.fromkeys((scn.estimator, *scn.estimators)):
-            out.append((name, est))
+    for plant in PLANTS:
+        for name in SCENARIOS:
+            scn = load_scenario(name)
+            for est in dict.fromkeys((scn.estimator, *scn.estimators)):
+                out.append((plant, name, est))
     return out
 
 
-@pytest.mark.parametrize(("name", "estimator"), _pairs())
+@pytest.mark.parametrize(("plant", "name", "estimator"), _pairs())
 def test_every_scenario_first_second_same_on_both_engines(
-    name: str, estimator: str, monkeypatch: pytest.MonkeyPatch
+    plant: str, name: str, estimator: str, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """Each shipped scenario's first second in the in-process loop with each of its
-    estimators: the same output in every period, bit for bit, and the same frames."""
-    scn = load_scenario(name).with_overrides(duration=1.0)
+    estimators, on its own plant and on the drive plant with the countermeasures on: the
+    same output in every period, bit for bit, and the same frames."""
+    scn = _scenario(name, plant).with_overrides(duration=1.0)
     codec = Codec()
     build = loops.build_controller
     runs: dict[str, tuple[list[bytes], list[tuple[int, bytes]], str]] = {}
+    comp: dict[str, float] = {}
     for engine in ("python", "compiled"):
         outs: list[bytes] = []
         used: list[str] = []
@@ -109,6 +130,7 @@ def test_every_scenario_first_second_same_on_both_engines(
 
             ctrl.step = recorded  # type: ignore[method-assign]
             used.append(ctrl.engine)
+            comp.update({k: ctrl.gains()[k] for k in COMP_KEYS})
             return ctrl
 
         monkeypatch.setattr(loops, "build_controller", build_recorded)
@@ -118,6 +140,11 @@ def test_every_scenario_first_second_same_on_both_engines(
     assert e_py == "python"
     assert e_cc == ("compiled" if estimator in COMPILED else "python")
     assert len(py) >= 0.99 / sample_period(scn)  # every period of the second
+    # on the drive plant the countermeasures ran (cross-saturation: the HF estimators)
+    on = 1.0 if plant == "drive" else 0.0
+    assert comp["comp.dead_time"] == comp["comp.offset_calibration"] == on
+    hf = SPECS[estimator].family != "none"  # an HF estimator: the offset is corrected
+    assert comp["comp.cross_saturation"] == (on if hf else 0.0)
     first = next((k for k in range(len(py)) if py[k] != cc[k]), None)
     assert first is None, f"the engines part at period {first}"
     assert len(py) == len(cc) and f_py == f_cc
@@ -130,10 +157,11 @@ def _loop(
     n: int,
     events: dict[int, Any] | None = None,
     speed_rpm: float = 200.0,
+    plant: str = "shipped",
 ) -> tuple[list[bytes], Controller]:
     """A closed loop on the compiled plant; ``events[k](ctrl)`` runs before period ``k``."""
-    scn = load_scenario(scn_name)
-    plant = build_plant(scn, "compiled")
+    scn = _scenario(scn_name, plant)
+    sim = build_plant(scn, "compiled")
     ctrl = build_controller(scn, estimator, engine)
     ctrl.set_enable(True)
     ctrl.set_speed_ref(speed_rpm * 2.0 * math.pi / 60.0)
@@ -143,13 +171,13 @@ def _loop(
     for k in range(n):
         if events and k in events:
             events[k](ctrl)
-        s = plant.sample()
-        tr = plant.truth() if truth else None
+        s = sim.sample()
+        tr = sim.truth() if truth else None
         m = Measurement(
             s.k, s.i_a, s.i_b, s.i_c, s.u_dc, tr.theta_e if tr else None, tr.w_e if tr else None
         )
         o = ctrl.step(m)
-        plant.step(*d)
+        sim.step(*d)
         out.append(_bits(o))
         d = (o.d_a, o.d_b, o.d_c, o.enable)
     return out, ctrl
@@ -170,35 +198,43 @@ def _events(n: int) -> dict[int, Any]:
 
 
 @pytest.mark.parametrize(
-    ("scn_name", "estimator", "n"),
+    ("scn_name", "estimator", "n", "plant"),
     [
-        ("wen-5.1", "tt-dq", 9000),
-        ("wen-5.1", "sfhf", 6000),
-        ("wen-5.1", "tt-ab", 6000),
-        ("wen-5.1", "sensored", 3000),
-        ("xue-fig13", "square-wave", 9000),  # past the CIC's re-anchoring at 4096
-        ("xue-fig13", "square-wave-nocic", 3000),
+        ("wen-5.1", "tt-dq", 9000, "shipped"),
+        ("wen-5.1", "sfhf", 6000, "shipped"),
+        ("wen-5.1", "tt-ab", 6000, "shipped"),
+        ("wen-5.1", "sensored", 3000, "shipped"),
+        ("wen-5.1", "self-demod", 6000, "shipped"),
+        ("wen-5.1", "epf", 6000, "shipped"),
+        ("xue-fig13", "square-wave", 9000, "shipped"),  # past the CIC's re-anchoring at 4096
+        ("xue-fig13", "square-wave-nocic", 3000, "shipped"),
+        # the countermeasures: the second start calibrates the offsets again
+        ("wen-5.1", "tt-dq", 9000, "drive"),
     ],
 )
 def test_commands_and_reads_between_engines_keep_the_trace(
-    scn_name: str, estimator: str, n: int
+    scn_name: str, estimator: str, n: int, plant: str
 ) -> None:
     """Commands, reads, a stop and a second start in the middle of a run: the same trace
-    on both engines (the core runs the start-up, the polarity test and the CIC's
-    re-anchoring itself), and the states read from the core are Python's."""
-    py, c_py = _loop(scn_name, estimator, "python", n, _events(n))
-    cc, c_cc = _loop(scn_name, estimator, "compiled", n, _events(n))
+    on both engines (the core runs the start-up, the polarity test, the CIC's
+    re-anchoring and the offset calibration itself), and the states read from the core
+    are Python's."""
+    py, c_py = _loop(scn_name, estimator, "python", n, _events(n), plant=plant)
+    cc, c_cc = _loop(scn_name, estimator, "compiled", n, _events(n), plant=plant)
     assert (c_py.engine, c_cc.engine) == ("python", "compiled")
     first = next((k for k in range(n) if py[k] != cc[k]), None)
     assert first is None, f"the engines part at period {first}"
     # the states after the run, read from the compiled core, are the same bits
     s_py, s_cc = c_py.states(), c_cc.states()
     assert s_cc == s_py
+    # one design for both engines: the same gains, bandwidths and corners
+    assert c_cc.gains() == c_py.gains()
     assert [type(v) for v in s_cc.values()] == [type(v) for v in s_py.values()]
     # and the run was a closed loop that ran: speed control reached, the estimate moved
     assert s_py["mode"] == 3 and s_py["w_hat"] != 0.0
 
 
+@pytest.mark.parametrize("plant", PLANTS)
 @pytest.mark.parametrize(
     ("scn_name", "estimator", "top_rpm", "t_ramp"),
     [
@@ -207,12 +243,14 @@ def test_commands_and_reads_between_engines_keep_the_trace(
     ],
 )
 def test_hybrids_through_their_band_and_back_same_on_both_engines(
-    scn_name: str, estimator: str, top_rpm: float, t_ramp: float
+    scn_name: str, estimator: str, top_rpm: float, t_ramp: float, plant: str
 ) -> None:
     """A hybrid from standstill up through its whole hand-over band (the flux observer
     slaved, blended, alone with the injection off and the injection estimator slaved)
-    and back into it, the reference a 100 Hz staircase: the same trace on both engines."""
-    scn = load_scenario(scn_name)
+    and back into it, the reference a 100 Hz staircase: the same trace on both engines,
+    on the drive plant with the cross-saturation offset taken from the injection estimate
+    alone and the dead-time sign from its faded HF current."""
+    scn = _scenario(scn_name, plant)
     T = sample_period(scn)
     n0, n_up, n_top = round(0.4 / T), round(t_ramp / T), round(0.3 / T)
     n = n0 + 2 * n_up + n_top
@@ -239,8 +277,8 @@ def test_hybrids_through_their_band_and_back_same_on_both_engines(
         return ev
 
     events = {k: set_ref(k) for k in range(0, n, every)}
-    py, c_py = _loop(scn_name, estimator, "python", n, events, speed_rpm=0.0)
-    cc, c_cc = _loop(scn_name, estimator, "compiled", n, events, speed_rpm=0.0)
+    py, c_py = _loop(scn_name, estimator, "python", n, events, speed_rpm=0.0, plant=plant)
+    cc, c_cc = _loop(scn_name, estimator, "compiled", n, events, speed_rpm=0.0, plant=plant)
     assert (c_py.engine, c_cc.engine) == ("python", "compiled")
     first = next((k for k in range(n) if py[k] != cc[k]), None)
     assert first is None, f"the engines part at period {first}"
@@ -271,10 +309,12 @@ def test_the_cover_and_the_reasons() -> None:
     mech = replace(pars, estimator_options={"observer": "mechanical"})
     used, why = resolve_controller_engine("auto", mech)
     assert used == "python" and "observer='mechanical'" in str(why)
-    dead = replace(pars, compensation=CompensationPars(dead_time=True))
-    used, why = resolve_controller_engine("compiled", dead)
-    assert used == "python" and "dead-time" in str(why)
-    assert Controller(dead, "compiled").engine == "python"
+    # the countermeasures are in the core
+    comp = CompensationPars(dead_time=True, cross_saturation=True, offset_calibration=True)
+    drive = replace(pars, compensation=comp)
+    assert resolve_controller_engine("compiled", drive) == ("compiled", None)
+    c = Controller(drive, "compiled")
+    assert (c.engine, c.engine_note) == ("compiled", None)
     with pytest.raises(ValueError, match="unknown controller engine"):
         resolve_controller_engine("fast", pars)
 
@@ -349,38 +389,34 @@ def test_a_compiled_controller_is_freed() -> None:
 def test_an_estimator_the_core_does_not_know_runs_in_python_and_says_so(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    """A shipped estimator without a C twin (Wen's [27] and [25]) and a plug-in, asked for on
-    the compiled engine: the controller runs in Python, says why in one line naming the
-    estimator, steps as the Python engine does (bit for bit), and the controller node's
-    report carries the line (``bench run`` prints it)."""
+    """Every shipped estimator has its kind in the core; a plug-in asked for on the compiled
+    engine runs in Python, says why in one line naming the estimator, steps as the Python
+    engine does (bit for bit), and the controller node's report carries the line (``bench
+    run`` prints it)."""
     from bench.nodes._controller_node import ControllerNode
     from controller import ESTIMATOR_NAMES
     from controller._engine import COMPILED_ESTIMATORS
 
     examples = Path(loops.__file__).parents[2] / "docs" / "examples"
     monkeypatch.syspath_prepend(str(examples))
-    scn = load_scenario("wen-5.1")
-    python_only = [e for e in ESTIMATOR_NAMES if e not in COMPILED_ESTIMATORS]
-    assert python_only  # the shipped estimators without a C twin
-    assert set(COMPILED) == set(COMPILED_ESTIMATORS)
-    for est in (*python_only, "my_estimator:create"):
-        if est == "my_estimator:create":
-            scn = load_scenario(str(examples / "flux-known-angle.toml"))
-        c = build_controller(scn, est, "compiled")
-        assert c.engine == "python", est
-        note = str(c.engine_note)
-        assert note == f"the {est} estimator is not compiled: the controller runs in Python"
-        assert "\n" not in note
-        ref = build_controller(scn, est, "python")
-        assert ref.engine_note is None
-        for ctrl in (c, ref):
-            ctrl.set_enable(True)
-            ctrl.set_speed_ref(10.0)
-        for k in range(300):
-            m = Measurement(k, 0.2 * math.sin(0.3 * k), -0.1, 0.1 - 0.2 * math.sin(0.3 * k), 300.0)
-            assert _bits(c.step(m)) == _bits(ref.step(m)), (est, k)
-        rep = ControllerNode(Codec(), c).report()
-        assert (rep["engine"], rep["engine_note"]) == ("python", note)
+    assert set(COMPILED) == set(COMPILED_ESTIMATORS) == set(ESTIMATOR_NAMES)
+    est = "my_estimator:create"
+    scn = load_scenario(str(examples / "flux-known-angle.toml"))
+    c = build_controller(scn, est, "compiled")
+    assert c.engine == "python", est
+    note = str(c.engine_note)
+    assert note == f"the {est} estimator is not compiled: the controller runs in Python"
+    assert "\n" not in note
+    ref = build_controller(scn, est, "python")
+    assert ref.engine_note is None
+    for ctrl in (c, ref):
+        ctrl.set_enable(True)
+        ctrl.set_speed_ref(10.0)
+    for k in range(300):
+        m = Measurement(k, 0.2 * math.sin(0.3 * k), -0.1, 0.1 - 0.2 * math.sin(0.3 * k), 300.0)
+        assert _bits(c.step(m)) == _bits(ref.step(m)), (est, k)
+    rep = ControllerNode(Codec(), c).report()
+    assert (rep["engine"], rep["engine_note"]) == ("python", note)
     rep = ControllerNode(Codec(), build_controller(scn, "tt-dq", "compiled")).report()
     assert (rep["engine"], rep["engine_note"]) == ("compiled", None)
 
@@ -388,18 +424,23 @@ def test_an_estimator_the_core_does_not_know_runs_in_python_and_says_so(
 def test_bench_run_says_in_one_line_that_the_controller_runs_in_python(
     tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    """``bench run -e self-demod --engine compiled``: the run completes (exit 0) on the
-    Python controller, and stderr has the one line saying why."""
+    """``bench run`` of tt-dq with ``normalise = "measured"`` (outside the core) on
+    ``--engine compiled``: the run completes (exit 0) on the Python controller, and stderr
+    has the one line saying why."""
     from bench.cli import main
     from tests.ports import free_port
 
     monkeypatch.setenv(ENGINE_ENV, "auto")  # restored after main() sets it to --engine
     out = tmp_path / "run"
-    argv = ["run", "wen-5.1", "-e", "self-demod", "--engine", "compiled", "--duration", "0.05"]
+    src = Path(loops.__file__).parents[1] / "scenarios" / "wen-5.1.toml"
+    scn = tmp_path / "measured.toml"
+    # an empty [motor]: the preset's motor, which the injection settings are for
+    scn.write_text(src.read_text() + '\n[motor]\n\n[estimator_options]\nnormalise = "measured"\n')
+    argv = ["run", str(scn), "-e", "tt-dq", "--engine", "compiled", "--duration", "0.05"]
     argv += ["--port", str(free_port()), "--out", str(out), "--quiet"]
     assert main(argv) == 0
     err = capsys.readouterr().err
-    line = "controller: the self-demod estimator is not compiled: the controller runs in Python"
+    line = "controller: tt-dq with normalise='measured' is not compiled: Python"
     assert line in err.splitlines()
     meta = json.loads((out / "meta.json").read_text())
     assert meta["node_reports"]["controller"]["engine"] == "python"

@@ -29,11 +29,34 @@ void cc_foc_init(cc_foc_t *c, double n_p, double L_d, double L_q, double psi_f, 
     c->w_m_ref = c->i_d_ref = c->i_q_ref = c->tau_ref = c->w_m_hat = 0.0;
     c->u_d = c->u_q = 0.0;
     c->u_a1 = c->u_b1 = c->u_a2 = c->u_b2 = 0.0;
+    c->dead_time = c->hf_next = c->cross_sat = c->sal_own = c->calibrate = 0;
+    c->k_dq = 0.0;
+}
+
+void cc_foc_dead_time(cc_foc_t *c, double T_s, double t_dead, double v_ce, double v_f,
+                      double i_band, int sine, int hf_next)
+{
+    cc_deadtime_init(&c->dt, T_s, t_dead, v_ce, v_f, i_band, sine);
+    c->dead_time = 1;
+    c->hf_next = hf_next;
+}
+
+void cc_foc_cross_saturation(cc_foc_t *c, double k_dq, int sal_own)
+{
+    c->cross_sat = 1;
+    c->k_dq = k_dq;
+    c->sal_own = sal_own;
+}
+
+void cc_foc_offset_calibration(cc_foc_t *c, long long n)
+{
+    cc_offset_cal_init(&c->cal, n);
+    c->calibrate = 1;
 }
 
 int cc_estim_init(cc_estim_t *e, int kind)
 {
-    if (kind < CC_EST_TT_DQ || kind > CC_EST_HYBRID_SQUARE_WAVE)
+    if (kind < CC_EST_TT_DQ || kind > CC_EST_EPF)
         return -1;
     e->kind = kind;
     e->out.theta_hat = e->out.w_hat = e->out.err = e->out.i_alpha_f = e->out.i_beta_f = 0.0;
@@ -49,6 +72,8 @@ void cc_estim_reset(cc_estim_t *e, double theta0)
     case CC_EST_TT_DQ:
     case CC_EST_TT_AB:
     case CC_EST_SFHF:
+    case CC_EST_SELF_DEMOD:
+    case CC_EST_EPF:
         cc_rot_reset(&e->out, &e->rot, theta0);
         break;
     case CC_EST_SQUARE_WAVE:
@@ -76,6 +101,12 @@ static void estim_step(cc_estim_t *e, const cc_meas_t *m, double i_alpha, double
     case CC_EST_SFHF:
         cc_sfhf_step(&e->out, &e->rot, m->k, i_alpha, i_beta);
         break;
+    case CC_EST_SELF_DEMOD:
+        cc_self_demod_step(&e->out, &e->rot, m->k, i_alpha, i_beta);
+        break;
+    case CC_EST_EPF:
+        cc_epf_step(&e->out, &e->rot, m->k, i_alpha, i_beta);
+        break;
     case CC_EST_SQUARE_WAVE:
         cc_sqw_step(&e->out, &e->sqw, i_alpha, i_beta, torque);
         break;
@@ -94,6 +125,8 @@ void cc_estim_injection(const cc_estim_t *e, double *u_a, double *u_b)
     case CC_EST_TT_DQ:
     case CC_EST_TT_AB:
     case CC_EST_SFHF:
+    case CC_EST_SELF_DEMOD:
+    case CC_EST_EPF:
         cc_rot_injection(&e->rot, u_a, u_b);
         break;
     case CC_EST_SQUARE_WAVE:
@@ -106,6 +139,26 @@ void cc_estim_injection(const cc_estim_t *e, double *u_a, double *u_b)
     default:
         *u_a = 0.0;
         *u_b = 0.0;
+    }
+}
+
+void cc_estim_hf_current_next(const cc_estim_t *e, double *i_a, double *i_b)
+{
+    switch (e->kind) {
+    case CC_EST_TT_DQ:
+    case CC_EST_TT_AB:
+    case CC_EST_SFHF:
+    case CC_EST_SELF_DEMOD:
+    case CC_EST_EPF:
+        cc_rot_hf_current_next(&e->rot, i_a, i_b);
+        break;
+    case CC_EST_HYBRID_TT_DQ:
+    case CC_EST_HYBRID_SQUARE_WAVE:
+        cc_hyb_hf_current_next(&e->hyb, i_a, i_b);
+        break;
+    default:
+        *i_a = 0.0;
+        *i_b = 0.0;
     }
 }
 
@@ -130,6 +183,8 @@ static void foc_restart(cc_foc_t *c)
     c->u_a1 = c->u_b1 = c->u_a2 = c->u_b2 = 0.0;
     c->n_mode = 0;
     c->settled = 0;
+    if (c->calibrate)
+        cc_offset_cal_restart(&c->cal);
     c->mode = c->align ? CC_MODE_ALIGN : CC_MODE_RUN;
 }
 
@@ -181,6 +236,13 @@ static void polarity_step(cc_foc_t *c, long long k, double i_alpha, double i_bet
     double u_b = si * u_d;
     double d[3];
     cc_svpwm(u_a, u_b, u_dc, d);
+    if (c->dead_time) {
+        /* the pulses get the same feed-forward as every other voltage, the sign the
+         * present pulse current's, along the pulse axis */
+        double i_a = co * i_d;
+        double h = CC_SQRT3_HALF * si * i_d;
+        cc_deadtime_duties(&c->dt, d, i_a, -0.5 * i_a + h, -0.5 * i_a - h, u_dc);
+    }
     c->u_a2 = c->u_a1;
     c->u_b2 = c->u_b1;
     c->u_a1 = u_a;
@@ -218,20 +280,41 @@ int cc_foc_step(cc_foc_t *c, const cc_meas_t *m, cc_out_t *o)
                 0.0);
         return CC_OK;
     }
+    double i_a = m->i_a;
+    double i_b = m->i_b;
+    double i_c = m->i_c;
+    if (c->calibrate) { /* the offsets, PWM disabled, then removed from every sample */
+        cc_offset_cal_t *cal = &c->cal;
+        if (cal->k < cal->n) {
+            static const double half[3] = {0.5, 0.5, 0.5};
+            cc_offset_cal_add(cal, i_a, i_b, i_c);
+            set_out(o, m->k, half, 0, cc_mod(e->theta_hat, CC_TWO_PI), 0.0, 0.0, CC_MODE_ALIGN,
+                    0.0, 0.0);
+            return CC_OK;
+        }
+        i_a -= cal->o_a;
+        i_b -= cal->o_b;
+        i_c -= cal->o_c;
+    }
     if (m->u_dc == 0.0)
         return CC_ERR_U_DC;
     if (c->est.kind == CC_EST_SENSORED && mode != CC_MODE_POLARITY && !m->has_truth)
         return CC_ERR_NO_TRUTH;
     /* measure (amplitude-invariant Clarke) */
-    double i_alpha = (2.0 * m->i_a - m->i_b - m->i_c) / 3.0;
-    double i_beta = (m->i_b - m->i_c) * CC_SQRT3_INV;
+    double i_alpha = (2.0 * i_a - i_b - i_c) / 3.0;
+    double i_beta = (i_b - i_c) * CC_SQRT3_INV;
     double u_dc = m->u_dc;
     if (mode == CC_MODE_POLARITY) {
         polarity_step(c, m->k, i_alpha, i_beta, u_dc, o);
         return CC_OK;
     }
+    if (c->sal_own) /* the hybrid corrects its injection estimate only */
+        c->est.hyb.saliency_offset =
+            cc_cross_saturation_offset(c->k_dq, c->i_q_ref, c->L_d, c->L_q);
     estim_step(&c->est, m, i_alpha, i_beta, c->tau_ref, c->u_a2, c->u_b2, mode == CC_MODE_RUN);
     double th = e->theta_hat;
+    if (c->cross_sat && !c->sal_own)
+        th -= cc_cross_saturation_offset(c->k_dq, c->i_q_ref, c->L_d, c->L_q);
     double w = e->w_hat;
     double co = cos(th);
     double si = sin(th);
@@ -300,6 +383,20 @@ int cc_foc_step(cc_foc_t *c, const cc_meas_t *m, cc_out_t *o)
     c->u_b2 = c->u_b1;
     c->u_a1 = u_a;
     c->u_b1 = u_b;
+    if (c->dead_time) {
+        /* phase currents expected at the mid-point of period k + 1: the reference, plus
+         * the injection's HF current where the estimator predicts it */
+        double i_ar = c_u * i_d_ref - s_u * i_q_ref;
+        double i_br = s_u * i_d_ref + c_u * i_q_ref;
+        if (c->hf_next) {
+            double h_a, h_b;
+            cc_estim_hf_current_next(&c->est, &h_a, &h_b);
+            i_ar += h_a;
+            i_br += h_b;
+        }
+        double h = CC_SQRT3_HALF * i_br;
+        cc_deadtime_duties(&c->dt, d, i_ar, -0.5 * i_ar + h, -0.5 * i_ar - h, u_dc);
+    }
     /* the speed reported is the filtered estimate the speed loop uses */
     set_out(o, m->k, d, 1, cc_mod(th, CC_TWO_PI), w_m * c->n_p, e->err, mode, i_d, i_q);
     /* update the states with the realised outputs */

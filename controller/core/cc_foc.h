@@ -5,14 +5,19 @@
  *            -> speed PI -> torque and current limits -> d-q current PI + decoupling
  *            -> voltage limit u_dc/sqrt(3) - |u_h| -> inverse Park(theta_hat + 1.5 T_s w_hat)
  *            + HF injection (Wen eq. (3) or Xue eq. (3)) -> SVPWM duties for period k + 1
+ *            -> dead-time feed-forward on the duties (when on, cc_compensation.h)
  *            -> PI integrators updated with the realised outputs
  *
+ * with the drive's countermeasures, each off unless switched on: the current offsets
+ * measured at each start with the PWM disabled and removed from every sample, and the
+ * estimate corrected by the cross-saturation offset (a hybrid's injection estimate alone);
  * and the start-up: alignment (estimator converging at standstill), the polarity
  * test (cc_startup.h), settling, then the speed loop.
  */
 #ifndef CC_FOC_H
 #define CC_FOC_H
 
+#include "cc_compensation.h"
 #include "cc_estimator.h"
 #include "cc_filters.h"
 #include "cc_hybrid.h"
@@ -35,6 +40,8 @@
 #define CC_EST_SENSORED 5
 #define CC_EST_HYBRID_TT_DQ 6
 #define CC_EST_HYBRID_SQUARE_WAVE 7
+#define CC_EST_SELF_DEMOD 8
+#define CC_EST_EPF 9
 
 /* step results */
 #define CC_OK 0
@@ -44,7 +51,7 @@
 typedef struct {
     int kind;
     cc_est_t out;
-    cc_rot_t rot; /* tt-dq, tt-ab, sfhf, and the hybrid-tt-dq's injection */
+    cc_rot_t rot; /* tt-dq, tt-ab, sfhf, self-demod, epf, and the hybrid-tt-dq's injection */
     cc_sqw_t sqw; /* square-wave, and the hybrid-square-wave's injection */
     cc_hyb_t hyb; /* the hybrids' own */
 } cc_estim_t;
@@ -77,6 +84,11 @@ typedef struct {
     cc_fo_t lpf_w;
     cc_polarity_t polarity;
     cc_estim_t est;
+    /* the drive's countermeasures (cc_compensation.h), each off unless switched on */
+    int dead_time, hf_next, cross_sat, sal_own, calibrate;
+    double k_dq;
+    cc_deadtime_t dt;
+    cc_offset_cal_t cal;
     /* states */
     long long mode, n_mode;
     int settled, has_i_ref;
@@ -89,11 +101,22 @@ typedef struct {
 void cc_foc_init(cc_foc_t *c, double n_p, double L_d, double L_q, double psi_f, double i_max,
                  double tau_max, double t_delay, long long n_align, long long n_settle,
                  double theta0, int raw_feedback, int align);
+/* the countermeasures, after cc_foc_init: the dead-time feed-forward (hf_next: the phase
+ * currents expected include the estimator's predicted HF current), the cross-saturation
+ * correction (sal_own: the hybrid corrects its injection estimate itself), the offset
+ * calibration over n periods */
+void cc_foc_dead_time(cc_foc_t *c, double T_s, double t_dead, double v_ce, double v_f,
+                      double i_band, int sine, int hf_next);
+void cc_foc_cross_saturation(cc_foc_t *c, double k_dq, int sal_own);
+void cc_foc_offset_calibration(cc_foc_t *c, long long n);
 /* the estimator's kind and its links (a hybrid's injection estimator); -1: unknown */
 int cc_estim_init(cc_estim_t *e, int kind);
 void cc_estim_reset(cc_estim_t *e, double theta0);
 /* the HF voltage (alpha, beta) (V) the estimator adds to the command for the next period */
 void cc_estim_injection(const cc_estim_t *e, double *u_a, double *u_b);
+/* the HF current (alpha, beta) (A) the estimator predicts at the mid-point of period k + 1
+ * (0 where it predicts none) */
+void cc_estim_hf_current_next(const cc_estim_t *e, double *i_a, double *i_b);
 
 void cc_foc_set_speed_ref(cc_foc_t *c, double w_m_ref);
 /* hold (i_d, i_q) references in MODE_RUN (on != 0), or return to speed control */

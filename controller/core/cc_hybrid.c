@@ -41,6 +41,7 @@ void cc_hyb_init(cc_est_t *e, cc_hyb_t *h, int square, cc_rot_t *rot, cc_sqw_t *
     h->weight = 0.0;
     h->gain = 1.0;
     h->y = 0.0;
+    h->saliency_offset = 0.0;
 }
 
 void cc_hyb_reset(cc_est_t *e, cc_hyb_t *h, double theta0)
@@ -86,10 +87,11 @@ void cc_hyb_step(cc_est_t *e, cc_hyb_t *h, long long k, double i_alpha, double i
     else
         cc_tt_dq_step(hf, h->rot, k, i_alpha, i_beta);
     double lam = h->weight;
+    double off = h->saliency_offset;
     double th, w, w_s, err;
     if (lam == 0.0) {
         w_s = tracker_w_smooth(h);
-        th = hf->theta_hat;
+        th = off != 0.0 ? cc_mod(hf->theta_hat - off, CC_TWO_PI) : hf->theta_hat;
         cc_flux_step_slaved(obs, i_alpha, i_beta, u_alpha, u_beta, th, w_s);
         w = hf->w_hat;
         err = hf->err;
@@ -101,9 +103,9 @@ void cc_hyb_step(cc_est_t *e, cc_hyb_t *h, long long k, double i_alpha, double i
             w = w_o;
             w_s = w_o;
             err = obs->eps;
-            tracker_sync(h, th, w_o, obs->accel, torque);
+            tracker_sync(h, th + off, w_o, obs->accel, torque);
         } else {
-            double th_h = hf->theta_hat;
+            double th_h = hf->theta_hat - off;
             double d = cc_mod(obs->theta_hat - th_h + M_PI, CC_TWO_PI) - M_PI;
             th = cc_mod(th_h + lam * d, CC_TWO_PI);
             double w_h = hf->w_hat;
@@ -150,4 +152,17 @@ void cc_hyb_injection(const cc_hyb_t *h, double *u_a, double *u_b)
         *u_a = g * *u_a;
         *u_b = g * *u_b;
     }
+}
+
+void cc_hyb_hf_current_next(const cc_hyb_t *h, double *i_a, double *i_b)
+{
+    if (h->square) { /* the square wave predicts none */
+        *i_a = 0.0;
+        *i_b = 0.0;
+        return;
+    }
+    double h_a, h_b;
+    cc_rot_hf_current_next(h->rot, &h_a, &h_b);
+    *i_a = h->gain * h_a;
+    *i_b = h->gain * h_b;
 }

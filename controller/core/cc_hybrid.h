@@ -30,6 +30,10 @@ typedef struct {
     cc_band_t band;
     double tr_T_s, tr_k_x; /* the trackers' constants: T_s; -n_p / J */
     double weight, gain, y;
+    /* the angle (rad) by which the injection estimator's saliency axis leads the rotor's
+     * (cross-saturation, cc_compensation.h), set by the controller before each step and
+     * subtracted from the injection estimate alone */
+    double saliency_offset;
 } cc_hyb_t;
 
 /* hf: the injection estimator (initialised by the caller), obs and band by theirs */
@@ -39,5 +43,7 @@ void cc_hyb_reset(cc_est_t *e, cc_hyb_t *h, double theta0);
 void cc_hyb_step(cc_est_t *e, cc_hyb_t *h, long long k, double i_alpha, double i_beta,
                  double u_alpha, double u_beta, double torque, int running);
 void cc_hyb_injection(const cc_hyb_t *h, double *u_a, double *u_b);
+/* the injection estimator's predicted HF current scaled by g (0 for square-wave) */
+void cc_hyb_hf_current_next(const cc_hyb_t *h, double *i_a, double *i_b);
 
 #endif

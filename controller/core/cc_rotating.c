@@ -8,6 +8,7 @@ void cc_rot_init(cc_rot_t *r, double V_h, double wT, double inv_norm)
     r->wT = wT;
     r->inv_norm = inv_norm;
     r->f = 0.0;
+    r->I_p = r->I_n = 0.0;
     r->k = 0;
     r->track = 0;
     r->w_h = r->T_s = r->B = r->w0_min = 0.0;
@@ -33,6 +34,8 @@ void cc_rot_reset(cc_est_t *e, cc_rot_t *r, double theta0)
     cc_fo_reset(&r->lpf);
     cc_fo2_reset(&r->lpf_ab);
     cc_fo2_reset(&r->hpf);
+    cc_bq2_reset(&r->quad);
+    cc_fo2_reset(&r->lpf_n);
 }
 
 void cc_rot_publish(cc_est_t *e, cc_rot_t *r, double th, double f, double err, double i_af,
@@ -52,4 +55,18 @@ void cc_rot_injection(const cc_rot_t *r, double *u_a, double *u_b)
     double ph = ((double)r->k + 1.5) * r->wT;
     *u_a = r->V_h * cos(ph);
     *u_b = r->V_h * sin(ph);
+}
+
+void cc_rot_hf_model(cc_rot_t *r, double I_p, double I_n)
+{
+    r->I_p = I_p;
+    r->I_n = I_n;
+}
+
+void cc_rot_hf_current_next(const cc_rot_t *r, double *i_a, double *i_b)
+{
+    double ph = ((double)r->k + 1.5) * r->wT;
+    double ng = 2.0 * r->pll.theta_hat - ph;
+    *i_a = r->I_p * sin(ph) - r->I_n * sin(ng);
+    *i_b = -r->I_p * cos(ph) + r->I_n * cos(ng);
 }

@@ -4,7 +4,10 @@
  *                       sample of the period it acts in;
  *   tt-dq  (cc_tt_dq.c), eqs. (31)-(34): BPF in the estimated frame, i_dh i_qh, LPF;
  *   tt-ab  (cc_tt_ab.c), eqs. (23)-(28): BPF in alpha-beta, the heterodyne of sin/cos 2 theta;
- *   sfhf   (cc_sfhf.c),  eqs. (7)-(13): BPF, HPF of the positive sequence, heterodyne.
+ *   sfhf   (cc_sfhf.c),  eqs. (7)-(13): BPF, HPF of the positive sequence, heterodyne;
+ *   self-demod (cc_self_demod.c), Wen's [27]: sequences separated by the BPF's
+ *                       quadrature twin, the positive one demodulating the negative;
+ *   epf    (cc_epf.c),   Wen's [25]: two demodulation signals in the estimated frame.
  * Each gives err = f / norm (the model normalisation of controller/_rotating.py),
  * which drives the PLL (cc_pll.h).
  */
@@ -17,6 +20,7 @@
 
 typedef struct {
     double V_h, wT, inv_norm, f;
+    double I_p, I_n;            /* model HF current amplitudes (A), eqs. (5)-(6) */
     long long k;
     int track;                  /* tt-dq: the BPF follows the HF current's frequency */
     double w_h, T_s, B, w0_min; /* its centre, period, bandwidth, lowest centre */
@@ -25,6 +29,8 @@ typedef struct {
     cc_fo_t lpf;     /* tt-dq, sfhf */
     cc_fo2_t lpf_ab; /* tt-ab */
     cc_fo2_t hpf;    /* sfhf */
+    cc_bq2_t quad;   /* self-demod: the BPF's quadrature twin (s / w_h) H_B */
+    cc_fo2_t lpf_n;  /* epf: the negative sequence's LPF (lpf_ab: the positive's) */
 } cc_rot_t;
 
 /* constants; the caller initialises pll, bpf, lpf / lpf_ab, hpf with their _init */
@@ -33,10 +39,17 @@ void cc_rot_init(cc_rot_t *r, double V_h, double wT, double inv_norm);
 void cc_rot_tracking(cc_rot_t *r, double w_h, double T_s, double B, double w0_min);
 void cc_rot_reset(cc_est_t *e, cc_rot_t *r, double theta0);
 void cc_rot_injection(const cc_rot_t *r, double *u_a, double *u_b);
+/* the model amplitudes I_p, I_n (A) cc_rot_hf_current_next predicts with */
+void cc_rot_hf_model(cc_rot_t *r, double I_p, double I_n);
+/* the model HF current (alpha, beta) (A) at the mid-point of period k + 1, eqs. (4)/(7)
+ * with theta_hat: I_p e^{j(ph - pi/2)} + I_n e^{j(2 theta_hat - ph + pi/2)} */
+void cc_rot_hf_current_next(const cc_rot_t *r, double *i_a, double *i_b);
 
 void cc_tt_dq_step(cc_est_t *e, cc_rot_t *r, long long k, double i_a, double i_b);
 void cc_tt_ab_step(cc_est_t *e, cc_rot_t *r, long long k, double i_a, double i_b);
 void cc_sfhf_step(cc_est_t *e, cc_rot_t *r, long long k, double i_a, double i_b);
+void cc_self_demod_step(cc_est_t *e, cc_rot_t *r, long long k, double i_a, double i_b);
+void cc_epf_step(cc_est_t *e, cc_rot_t *r, long long k, double i_a, double i_b);
 
 /* shared by the demodulators: publish the estimate and step the PLL */
 void cc_rot_publish(cc_est_t *e, cc_rot_t *r, double th, double f, double err, double i_af,
