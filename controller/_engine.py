@@ -23,7 +23,8 @@ Python whatever the choice, and says why in one line
 controller`` print it, and the controller node's report keeps it): an
 estimator the core does not know (``self-demod`` and ``epf``, Wen's
 references [27] and [25], and every plug-in), the measured normalisation, the
-mechanical position observer (``observer = "mechanical"``) and
+mechanical position observer (``observer = "mechanical"``), tt-dq's
+acceleration feed-forward (``accel_ff``) and
 the drive countermeasures (dead-time feed-forward, cross-saturation
 correction, offset calibration). Inside it the core runs every period,
 the start-up included, and keeps every state; the
@@ -104,6 +105,8 @@ def compiled_cover(pars: Any) -> tuple[int, str | None]:
         return 0, f"{name} with normalise={opts['normalise']!r} is not compiled: Python"
     if kind in (1, 2, 3, 6) and opts.get("observer", "pll") != "pll":
         return 0, f"{name} with observer={opts['observer']!r} is not compiled: Python"
+    if opts.get("accel_ff", False):
+        return 0, f"{name} with accel_ff is not compiled: the controller runs in Python"
     if kind in (4, 7) and int(opts.get("M", 2)) > 64:
         return 0, f"{name} with a CIC delay M > 64 is not compiled: Python"
     cp = pars.compensation

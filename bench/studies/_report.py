@@ -149,12 +149,17 @@ def build_summary(
     sweeps: dict[str, Any],
     info: dict[str, Any],
     cic: dict[str, Any] | None = None,
+    accel_ff: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     """The whole summary: runs, sweeps, suite information, the quadrature-signal study of
-    Xue's CIC claim per plant (:mod:`bench.studies._cic`) and the claims' verdicts."""
+    Xue's CIC claim per plant (:mod:`bench.studies._cic`), Tables 6-8 with tt-dq's
+    ``accel_ff`` per plant and scenario (:mod:`bench.studies._accel_ff`) and the claims'
+    verdicts."""
     s: dict[str, Any] = {"suite": info, "runs": runs, "sweeps": sweeps}
     if cic:
         s["cic"] = cic
+    if accel_ff:
+        s["accel_ff"] = accel_ff
     s["claims"] = evaluate_claims(s)
     return s
 
@@ -323,6 +328,7 @@ def _run_claims(summary: dict[str, Any], plant: str = "ideal") -> list[dict[str,
     claims += _relative_claims(summary, plant)
     claims += _goal_claims(summary, plant)
     claims += _cic_signal_claims(summary, plant)
+    claims += _accel_ff_claims(summary, plant)
     # CIC interpolation reduces the error
     text = "CIC interpolation lowers the max |dtheta| (square-wave <= square-wave-nocic) in every Xue scenario"
     parts, ok = [], True
@@ -355,6 +361,80 @@ def _run_claims(summary: dict[str, Any], plant: str = "ideal") -> list[dict[str,
         )
     )
     return claims
+
+
+def _table_max(run: dict[str, Any] | None) -> float | None:
+    """The paper's bound on tt-dq's max |dtheta| (deg) in a Wen run's ``paper_result``: the
+    larger magnitude of its range, as the claims ``wen-5.x-numbers`` take it."""
+    pr = (run or {}).get("paper_result") or {}
+    if "theta_err_max_deg" not in pr:
+        return None
+    return float(max(abs(pr["theta_err_max_deg"]), abs(pr.get("theta_err_min_deg", 0.0))))
+
+
+def _accel_ff_claims(summary: dict[str, Any], plant: str) -> list[dict[str, str]]:
+    """tt-dq with ``accel_ff`` within the maxima of Tables 6-8 (:mod:`bench.studies._accel_ff`)."""
+    out = []
+    for scn, r in sorted(((summary.get("accel_ff") or {}).get(plant) or {}).items()):
+        base = _run(summary, scn, "tt-dq", plant)
+        bound = _table_max(base)
+        if bound is None:
+            continue
+        table = str(base.get("paper") or "").split(",")[-1].strip() if base else ""
+        text = (
+            f"tt-dq with the speed reference's acceleration fed forward (accel_ff) within "
+            f"{table}'s max |dtheta| (deg) <= {bound:g}"
+        )
+        cid = f"{scn}-max-accel-ff"
+        if "error" in r:
+            out.append(_claim(cid, text, f"Wen {table}", NOT_RUN, r["error"]))
+            continue
+        v = r["theta_err_abs_max_deg"]
+        ok = v <= bound and not r.get("lock_lost")
+        was = _f(base["metrics"]["theta_err_abs_max_deg"]) if base and _ok(base) else "n/a"
+        w = r.get("where_max") or {}
+        detail = f"max |dtheta| {_f(v)} deg (without accel_ff {was})"
+        if w and not ok:
+            detail += f" at t = {w['t_s']:.2f} s, {w['context']}"
+        out.append(_claim(cid, text, f"Wen {table}", REPRODUCED if ok else NOT_REPRODUCED, detail))
+    return out
+
+
+def _accel_ff_limits(summary: dict[str, Any]) -> str:
+    """What the acceleration feed-forward leaves of Tables 6-8's maxima, and why (measured)."""
+    ff = summary.get("accel_ff") or {}
+    if not ff:
+        return ""
+    met, missed = [], []
+    for plant, per in ff.items():
+        for scn, r in sorted(per.items()):
+            bound = _table_max(_run(summary, scn, "tt-dq", plant))
+            if "error" in r or bound is None:
+                continue
+            what = f"{scn} ({PLANT_LABELS.get(plant, plant)}) {_f(r['theta_err_abs_max_deg'])} deg"
+            if r["theta_err_abs_max_deg"] <= bound:
+                met.append(what)
+            else:
+                w = r.get("where_max") or {}
+                missed.append(what + (f", {w['context']}" if w else ""))
+    text = (
+        " The option `accel_ff` (controller/_rotating.py) feeds the acceleration the speed loop "
+        "is designed to give from the speed reference into the PLL, beside its loop, so the "
+        "margin and the noise gain stay the design's (claims `wen-5.x-max-accel-ff`)."
+    )
+    if met:
+        text += " It meets the paper's maximum in " + "; ".join(met) + "."
+    if missed:
+        text += (
+            " It cannot where the largest error follows a change of load the drive does not "
+            "know: " + "; ".join(missed) + ". The torque reference is no help there: the "
+            "speed loop makes it from the estimate, and fed forward through J it turns the "
+            "unknown load into an acceleration the PLL must absorb. Only a faster PLL follows "
+            "such a change more closely, and with eqs. (11)-(13) in its loop that spends the "
+            "margin and raises the noise gain (measured in bench/studies/_accel_ff.py): with "
+            "these filters the paper's maxima there are out of reach at 45 degrees."
+        )
+    return text
 
 
 def _cic_signal_claims(summary: dict[str, Any], plant: str) -> list[dict[str, str]]:
@@ -1101,7 +1181,7 @@ def _limits_section(summary: dict[str, Any]) -> list[str]:
             "until it settles, and a wider bandwidth would spend the margin its filters leave. "
             'The estimator option `observer = "mechanical"` feeds the commanded torque forward '
             "and takes the speed steps without that lag, but loses the rotor in the full-load "
-            "ramps (controller/_rotating.py).",
+            "ramps (controller/_rotating.py)." + _accel_ff_limits(summary),
         ]
     thd = {p: _run(summary, "wen-5.4", "tt-dq", p) for p in _plants(summary) if p != "ideal"}
     thd_txt = "; ".join(

@@ -53,6 +53,7 @@ from typing import Any, Protocol
 
 from bench._errors import BenchError
 from bench.scenarios._schema import SHIPPED, Scenario, load_scenario
+from bench.studies._accel_ff import AccelFfJob
 from bench.studies._cic import CicJob
 from bench.studies._extras import path_name, run_extras
 from bench.studies._plants import PLANTS, plant_variant
@@ -494,6 +495,7 @@ def run_suite(opt: SuiteOptions) -> dict[str, Any]:
     )
     sweeps = sweep_jobs(opt.sweeps, quick=opt.sweep_quick) if opt.sweeps else []
     cic = cic_jobs(opt)
+    ff = ff_jobs(opt)
     why = None if opt.estimators is None else unmatched_estimators(opt.scenarios, opt.estimators)
     if not (runs or sweeps):
         raise BenchError(
@@ -509,7 +511,7 @@ def run_suite(opt: SuiteOptions) -> dict[str, Any]:
             f"(in-process), {workers} worker(s); full runs in {opt.runs_dir}",
             file=sys.stderr,
         )
-    jobs: list[Job] = [*runs, *sweeps, *cic]
+    jobs: list[Job] = [*runs, *sweeps, *cic, *ff]
     finished: dict[int, dict[str, Any]] = {}  # id(run job) -> its summary record
 
     def on_done(job: Job, res: dict[str, Any]) -> None:
@@ -528,11 +530,16 @@ def run_suite(opt: SuiteOptions) -> dict[str, Any]:
         for job, res in zip(sweeps, results[len(runs) : len(runs) + len(sweeps)], strict=True)
         if res.get("error") != UNFINISHED
     ]
+    n0 = len(runs) + len(sweeps)
     cic_summary = {
         job.plant: res
-        for job, res in zip(cic, results[len(runs) + len(sweeps) :], strict=True)
+        for job, res in zip(cic, results[n0 : n0 + len(cic)], strict=True)
         if res.get("error") != UNFINISHED
     }
+    ff_summary: dict[str, dict[str, Any]] = {}
+    for fjob, res in zip(ff, results[n0 + len(cic) :], strict=True):
+        if res.get("error") != UNFINISHED:
+            ff_summary.setdefault(fjob.plant, {})[fjob.scenario] = res
     sweep_summary: dict[str, Any] = {}
     if done_sweeps:
         sweep_summary = collect(
@@ -561,7 +568,7 @@ def run_suite(opt: SuiteOptions) -> dict[str, Any]:
     if stopped:
         info["interrupted"] = True
         info["finished"] = fin
-    summary = build_summary(records, sweep_summary, info, cic_summary)
+    summary = build_summary(records, sweep_summary, info, cic_summary, ff_summary)
     write_report(summary, opt.out_dir)
     if stopped:
         _mark_interrupted(opt.out_dir / "report.md", fin)
@@ -579,6 +586,18 @@ def cic_jobs(opt: SuiteOptions) -> list[CicJob]:
     if opt.estimators is not None and not {WITH_CIC, WITHOUT_CIC} <= set(opt.estimators):
         return []
     return [CicJob(plant) for plant in opt.plants]
+
+
+def ff_jobs(opt: SuiteOptions) -> list[AccelFfJob]:
+    """Tables 6-8 with tt-dq's ``accel_ff`` (:mod:`bench.studies._accel_ff`) on the ideal and
+    the drive plant, when the suite runs those scenarios with tt-dq (not in ``--quick``)."""
+    from bench.studies._accel_ff import ESTIMATOR, SCENARIOS, accel_ff_jobs
+
+    if opt.quick or not set(SCENARIOS) <= set(opt.scenarios):
+        return []
+    if opt.estimators is not None and ESTIMATOR not in opt.estimators:
+        return []
+    return accel_ff_jobs(opt.runs_dir, opt.plants)
 
 
 def _mark_interrupted(report: Path, fin: dict[str, int]) -> None:
