@@ -128,6 +128,14 @@ class EstimatorInput:
         The speed loop is released (``MODE_RUN``); False during the start-up
         at standstill (alignment), where only the injection can see the
         angle and its estimator's transients are not a speed.
+    accel_ref : float
+        The electrical angular acceleration (rad/s^2) the speed loop is
+        designed to give the rotor from the speed reference alone: the slope
+        of its designed response ``alpha_s / (s + alpha_s)`` to ``w_m_ref``,
+        times ``n_p`` (:class:`controller._controller.ReferenceModel`). It
+        depends on the reference only, never on an estimate; tt-dq's
+        ``accel_ff`` option feeds it forward into its PLL. Zero outside the
+        speed loop.
     """
 
     k: int
@@ -139,6 +147,7 @@ class EstimatorInput:
     u_alpha: float = 0.0
     u_beta: float = 0.0
     running: bool = True
+    accel_ref: float = 0.0
 
 
 class Estimator(Protocol):

@@ -310,6 +310,48 @@ def speed_bandwidth(
     )
 
 
+class ReferenceModel:
+    """The speed loop's designed response to its reference, and the acceleration it implies.
+
+    The 2DOF speed PI is designed so that ``w_m / w_m,ref = alpha_s / (s +
+    alpha_s)`` for a rigid inertia (module docstring). This model runs that
+    response on the reference alone (forward Euler, the same step as the
+    PI's integrator): its state ``w`` is the speed the loop is designed to
+    reach, and :meth:`update` returns its slope times ``n_p``, the electrical
+    acceleration the loop is designed to give the rotor. Limited to what the
+    torque limit can give the model's inertia, ``n_p tau_max / J``, since the
+    loop cannot give more. It reads no estimate, so whatever takes it as a
+    feed-forward keeps its own loop as it was (tt-dq's ``accel_ff``,
+    :mod:`controller._rotating`).
+    """
+
+    __slots__ = ("T_s", "a_max", "alpha_s", "n_p", "w")
+
+    def __init__(self, alpha_s: float, n_p: int, J: float, tau_max: float, T_s: float) -> None:
+        self.alpha_s = alpha_s
+        self.n_p = n_p
+        self.a_max = n_p * tau_max / J if tau_max > 0.0 else math.inf
+        self.T_s = T_s
+        self.w = 0.0
+
+    def reset(self, w0: float = 0.0) -> None:
+        """Start from the speed ``w0`` (rad/s, mechanical)."""
+        self.w = w0
+
+    def update(self, w_ref: float) -> float:
+        """Advance one period with the reference ``w_ref`` (rad/s, mechanical); return the
+        designed electrical acceleration (rad/s^2) of the period."""
+        dw = self.alpha_s * (w_ref - self.w)
+        a = self.n_p * dw
+        a_max = self.a_max
+        if a > a_max:
+            a, dw = a_max, a_max / self.n_p
+        elif a < -a_max:
+            a, dw = -a_max, -a_max / self.n_p
+        self.w += self.T_s * dw
+        return a
+
+
 class Controller:
     """Speed-controlled FOC drive with a rotor-position estimator.
 
@@ -351,6 +393,8 @@ class Controller:
         self.k_tau = 1.5 * m.n_p * m.psi_f
         self.i_max = float(pars.i_max or 0.0)
         self.tau_max = float(pars.tau_max or 0.0)
+        #: The speed loop's designed response to the reference (EstimatorInput.accel_ref).
+        self.ref_model = ReferenceModel(a_s, m.n_p, m.J, self.tau_max, T_s)
         self.t_delay = pars.delay_periods * T_s
         self.polarity = PolarityTest(m.L_d, T_s, float(pars.i_pulse or 0.0))
         self.n_align = round(pars.t_align / T_s)
@@ -452,6 +496,7 @@ class Controller:
         self.pi_q.reset()
         self.pi_w.reset()
         self.lpf_w.reset()
+        self.ref_model.reset()
         self.estimator.reset(self.pars.theta0)
         self.i_d_ref = self.i_q_ref = self.tau_ref = 0.0
         self._u_a1 = self._u_b1 = self._u_a2 = self._u_b2 = 0.0
@@ -499,6 +544,7 @@ class Controller:
             est.saliency_offset = cross_saturation_offset(  # type: ignore[attr-defined]
                 m.k_dq, self.i_q_ref, m.L_d, m.L_q
             )
+        speed_loop = mode == MODE_RUN and self._i_ref is None
         est.update(
             EstimatorInput(
                 k,
@@ -510,6 +556,7 @@ class Controller:
                 self._u_a2,
                 self._u_b2,
                 mode == MODE_RUN,
+                self.ref_model.update(self.w_m_ref) if speed_loop else 0.0,
             )
         )
         th = est.theta_hat

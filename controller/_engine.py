@@ -25,8 +25,9 @@ controller outside it runs in
 Python whatever the choice, and says why in one line
 (:attr:`controller.Controller.engine_note`; ``bench run`` and ``bench
 controller`` print it, and the controller node's report keeps it): an
-estimator the core does not know (every plug-in), the measured normalisation and the
-mechanical position observer (``observer = "mechanical"``). Inside it the core runs every period,
+estimator the core does not know (every plug-in), the measured normalisation, the
+mechanical position observer (``observer = "mechanical"``) and tt-dq's acceleration
+feed-forward (``accel_ff``). Inside it the core runs every period,
 the start-up included, and keeps every state; the
 :class:`controller.Controller` holds it by composition and forwards its
 commands (:mod:`controller._compiled`).
@@ -105,6 +106,8 @@ def compiled_cover(pars: Any) -> tuple[int, str | None]:
         return 0, f"{name} with normalise={opts['normalise']!r} is not compiled: Python"
     if kind in (1, 2, 3, 6, 8, 9) and opts.get("observer", "pll") != "pll":
         return 0, f"{name} with observer={opts['observer']!r} is not compiled: Python"
+    if opts.get("accel_ff", False):
+        return 0, f"{name} with accel_ff is not compiled: the controller runs in Python"
     if kind in (4, 7) and int(opts.get("M", 2)) > 64:
         return 0, f"{name} with a CIC delay M > 64 is not compiled: Python"
     return kind, None

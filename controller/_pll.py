@@ -46,9 +46,17 @@ class PositionObserver:
         self.w_hat = 0.0
         self.w_i = 0.0
 
-    def update(self, err: float) -> None:
-        """Take the error of sample ``k``; advance ``theta_hat`` to ``(k+1) T_s``."""
+    def update(self, err: float, accel: float = 0.0) -> None:
+        """Take the error of sample ``k``; advance ``theta_hat`` to ``(k+1) T_s``.
+
+        ``accel`` (rad/s^2): a known acceleration fed forward into the integral, so
+        that the speed follows it without the error ``accel / w_o^2`` the loop
+        needs otherwise. It is an input beside the loop, not in it: the transfer
+        function from ``err`` to the angle (:func:`open_loop`) stays what it is.
+        """
         self.w_i += self.T_s * self.k_i * err
+        if accel != 0.0:
+            self.w_i += self.T_s * accel
         self.w_hat = self.k_p * err + self.w_i
         self.theta_hat = (self.theta_hat + self.T_s * self.w_hat) % _TWO_PI
 

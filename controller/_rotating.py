@@ -167,6 +167,29 @@ class RotatingInjectionPars:
         of eq. (11), ``B s / (s^2 + B s + w_0^2)``; its centre is replaced by
         ``w_h`` at standstill (Wen's eq. 11 has 3140 rad/s for the 3141.6 of
         500 Hz), and the PLL is designed with that filter.
+    accel_ff : bool
+        tt-dq with the PLL only (the other demodulators and the mechanical
+        observer raise ``ValueError``). False (the paper's). True: the
+        acceleration the speed loop is designed to give from the speed
+        reference (``EstimatorInput.accel_ref``,
+        :class:`controller._controller.ReferenceModel`: the slope of
+        ``alpha_s / (s + alpha_s)`` applied to ``w_m_ref``, times ``n_p``) is
+        fed into the PLL's integral (:meth:`controller._pll.PositionObserver.update`).
+        What a drive knows of its own acceleration without an estimate: it
+        never reads ``theta_hat`` or ``w_hat``, so it is an input beside the
+        loop, and the loop from the error to the angle, hence the phase
+        margin (45 degrees) and the noise gain (the peak of ``|L / (1 + L)|``,
+        1.35), are exactly the PLL's without it (tests/test_accel_ff.py). The
+        PLL's lag ``a / w_o^2`` then remains only for the acceleration the
+        reference does not explain: an unknown load change, and the speed
+        loop's departure from its design. The torque reference is no such
+        input: the speed PI makes it from ``w_hat``, and fed forward through
+        ``J`` it turns an unknown load into a standing acceleration the PLL
+        must absorb (``n_p tau_L / (J w_o^2)``, 2.9 rad at full load on
+        wen2023), the way the mechanical observer loses the rotor. What it does
+        to Wen Tables 6-8 (met where the speed reference explains the largest
+        error, not where an unknown load change does) is measured in
+        :mod:`bench.studies._accel_ff` and the suite's report.
     bpf, hpf, lpf : tuple
         Continuous prototypes ``(b, a)``; defaults Wen eqs. (11)-(13). If
         ``f_h`` is not 500 Hz and ``bpf`` is the default, the BPF centre
@@ -184,6 +207,7 @@ class RotatingInjectionPars:
     a: float | None = option_field(None, positive=True)
     normalise: str = option_field("model", choices=("model", "measured"))
     bpf_tracking: bool = False
+    accel_ff: bool = False
     bpf: tuple[tuple[float, ...], tuple[float, ...]] = option_field(
         BPF_WEN, default_doc=_WEN_FILTERS
     )
@@ -401,6 +425,8 @@ class RotatingHFEstimator:
     #: What of the demodulation lies between ``theta_hat`` and ``err``
     #: (:func:`in_loop_response`): ``"none"``, ``"lpf"`` or ``"bpf+lpf"``.
     IN_LOOP: ClassVar[str] = "none"
+    #: Whether the demodulator takes the ``accel_ff`` option (tt-dq).
+    ACCEL_FF: ClassVar[bool] = False
 
     def __init__(self, motor: MotorModel, T_s: float, pars: RotatingInjectionPars) -> None:
         if motor.L_q <= motor.L_d:
@@ -448,6 +474,11 @@ class RotatingHFEstimator:
         if pars.observer not in ("pll", "mechanical"):
             raise ValueError(f"observer must be 'pll' or 'mechanical', got {pars.observer!r}")
         self.mechanical = pars.observer == "mechanical"
+        self.accel_ff = bool(pars.accel_ff)
+        if self.accel_ff and not (self.ACCEL_FF and not self.mechanical):
+            raise ValueError("accel_ff is an option of tt-dq with its PLL (observer = 'pll')")
+        #: The acceleration fed forward into the PLL this period (rad/s^2, ``accel_ff``).
+        self.accel = 0.0
         self.pll: PositionObserver | LuenbergerObserver
         if self.mechanical:
             a_o = pars.a
@@ -492,7 +523,7 @@ class RotatingHFEstimator:
         self.err = err
         pll = self.pll
         if isinstance(pll, PositionObserver):
-            pll.update(err)
+            pll.update(err, self.accel)
             self.w_hat = pll.w_hat
         else:
             # the rate this step gives the angle, as the PLL's ``w_hat``: the

@@ -86,6 +86,39 @@ margin of 57 degrees. It rejected load steps, and a feed-forward made
 wrong by a wrong inertia, ``(50.8 / 28.6)^2 = 3.2`` times worse. The
 inertia does not enter the loop (:mod:`controller._luenberger`).
 
+Checked against Xue Secs. 3.1-3.3, block by block (issue 30; the C twin
+``controller/core/cc_square_wave.c`` is the same chain, tested bit-identical):
+
+- Rate conversion: eq. (7) with ``T_h/2 = T_s`` (the causal form
+  ``h(k) = (i(k) - i(k-1))/2``), then ``R = 0.5`` (Fig. 4) to one envelope
+  sample per injection period, as Xue describes. Matches.
+- CIC order: single order (``N = 1``, "in this paper, the single-order CIC
+  filter is used"), ``M = R`` (Sec. 3.2). Matches.
+- ``R = (T_h/2)/T_PWM`` as printed under Fig. 8 is 1 at Xue's 500 Hz and
+  1 kHz, which would interpolate nothing; the quadrature signal it raises
+  comes at ``1/T_h`` (Sec. 3.1), and Fig. 9 shows the rate doubled, so the
+  factor is ``T_h / T_PWM = 2``, which the chain uses (``R = 2``).
+- Gain: eq. (8) has a DC gain of ``M``; the chain divides by ``M`` and holds
+  the slow sample (instead of stuffing zeros), so the interpolated signal
+  has the envelope's amplitude. The normalisation below divides it out in
+  any case, so the gain moves no angle.
+- Normalisation: by ``|E|`` and ``|u|`` (Sec. 3.3, "after normalizing the
+  interpolated position quadrature signal"). Matches.
+- Delay compensation including the CIC's own group delay: the hold and the
+  CIC each delay the envelope by half a period; the chain compares it with
+  the injection direction ``u`` carried through the same interpolator, so
+  both have the same age and the delay leaves no bias at any speed (tested:
+  ``test_speed_imposed_converges_and_error_does_not_grow_with_speed`` in
+  tests/test_controller_square_wave_plant.py, with and without CIC). Xue's
+  ``3.5 T_PWM`` compensates the same total against the present estimate;
+  at steady speed the two are the same angle.
+
+No block was wrong, so no number moved. What the CIC does to the quadrature
+signal (Xue Figs. 11-12) is measured by :mod:`bench.studies._cic`; with the
+same observer pole it leaves the max |dtheta| where the hold has it, and the
+shipped ``square-wave-nocic`` gets a larger pole at the same phase margin
+(below), hence its smaller peak after load steps.
+
 Injection amplitude: at 1 kHz the d-axis current ramps by ``U_h T_s / L_d``
 per period; ``U_h = 20 V`` gives 5.7 A peak to peak (+/-2.8 A) on the
 xue2022 motor (``L_d = 3.53 mH``) and a q-axis error signal of

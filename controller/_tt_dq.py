@@ -44,6 +44,7 @@ class TTDQEstimator(RotatingHFEstimator):
     """Rotating injection with TT demodulation in the estimated d-q axes (Wen eqs. 31-34)."""
 
     IN_LOOP = "bpf+lpf"
+    ACCEL_FF = True
 
     def __init__(self, motor: MotorModel, T_s: float, pars: RotatingInjectionPars) -> None:
         super().__init__(motor, T_s, pars)
@@ -93,6 +94,8 @@ class TTDQEstimator(RotatingHFEstimator):
             err = f * self._inv_norm
         i_df = i_d - i_dh
         i_qf = i_q - i_qh
+        if self.accel_ff:
+            self.accel = x.accel_ref
         self._publish(th, f, err, c * i_df - s * i_qf, s * i_df + c * i_qf, x.torque)
 
 

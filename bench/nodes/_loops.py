@@ -134,9 +134,12 @@ def plant_node(
     return node
 
 
-def make_controller_node(scn: Scenario, estimator: str, codec: Codec) -> ControllerNode:
+def make_controller_node(
+    scn: Scenario, estimator: str, codec: Codec, engine: str | None = None
+) -> ControllerNode:
+    """``engine``: the controller's (:func:`~bench.scenarios._setup.build_controller`'s)."""
     return ControllerNode(
-        codec, build_controller(scn, estimator), needs_truth=needs_truth(estimator)
+        codec, build_controller(scn, estimator, engine), needs_truth=needs_truth(estimator)
     )
 
 
@@ -217,6 +220,7 @@ def run_inprocess(
     *,
     plant_times: list[float] | None = None,
     engine: str = "auto",
+    observe: Callable[[Controller], None] | None = None,
 ) -> list[can.Message]:
     """Run a scenario in lockstep in this process; return every frame in wire order.
 
@@ -225,7 +229,10 @@ def run_inprocess(
     latency goes through the same :class:`~bench.nodes._link.LockstepLink` logic
     the link process runs.  ``plant_times`` (when given) gets the plant node's
     computation of every period (s): the plant step and its frames encoded.
-    ``engine`` is the plant's (:class:`plant_rt.Plant`).
+    ``engine`` is the plant's (:class:`plant_rt.Plant`).  ``observe`` (when given) is
+    called with the controller after every period it answered, to record a state no
+    frame carries (the controller's engine is then Python, where the estimator's
+    states live; both engines give the same trace, ``tests/test_controller_engine.py``).
     """
     from bench.nodes._link import LockstepLink
     from bench.scenarios._faults import lockstep_error
@@ -233,7 +240,7 @@ def run_inprocess(
     if err := lockstep_error(scn.faults, scn.source):
         raise err
     pn = make_plant_node(scn, codec, engine=engine)
-    cn = make_controller_node(scn, estimator, codec)
+    cn = make_controller_node(scn, estimator, codec, "python" if observe else None)
     lt = scn.latency
     link = (
         LockstepLink(codec, sample_delay=lt.sample_delay_steps, duty_delay=lt.duty_delay_steps)
@@ -270,6 +277,8 @@ def run_inprocess(
         replies: list[can.Message] = []
         for m in to_ctrl:
             replies.extend(cn.on_message(m))
+        if observe is not None and replies:
+            observe(cn.ctrl)
         frames.extend(replies)
         if link is None:
             to_plant = replies

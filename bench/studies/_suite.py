@@ -53,6 +53,8 @@ from typing import Any, Protocol
 
 from bench._errors import BenchError
 from bench.scenarios._schema import SHIPPED, Scenario, load_scenario
+from bench.studies._accel_ff import AccelFfJob
+from bench.studies._cic import CicJob
 from bench.studies._extras import path_name, run_extras
 from bench.studies._plants import PLANTS, plant_variant
 from controller._registry import ESTIMATOR_NAMES
@@ -492,6 +494,8 @@ def run_suite(opt: SuiteOptions) -> dict[str, Any]:
         plants=opt.plants,
     )
     sweeps = sweep_jobs(opt.sweeps, quick=opt.sweep_quick) if opt.sweeps else []
+    cic = cic_jobs(opt)
+    ff = ff_jobs(opt)
     why = None if opt.estimators is None else unmatched_estimators(opt.scenarios, opt.estimators)
     if not (runs or sweeps):
         raise BenchError(
@@ -507,7 +511,7 @@ def run_suite(opt: SuiteOptions) -> dict[str, Any]:
             f"(in-process), {workers} worker(s); full runs in {opt.runs_dir}",
             file=sys.stderr,
         )
-    jobs: list[Job] = [*runs, *sweeps]
+    jobs: list[Job] = [*runs, *sweeps, *cic, *ff]
     finished: dict[int, dict[str, Any]] = {}  # id(run job) -> its summary record
 
     def on_done(job: Job, res: dict[str, Any]) -> None:
@@ -523,9 +527,19 @@ def run_suite(opt: SuiteOptions) -> dict[str, Any]:
     records = [finished[id(job)] for job in runs if id(job) in finished]
     done_sweeps = [
         (job, res)
-        for job, res in zip(sweeps, results[len(runs) :], strict=True)
+        for job, res in zip(sweeps, results[len(runs) : len(runs) + len(sweeps)], strict=True)
         if res.get("error") != UNFINISHED
     ]
+    n0 = len(runs) + len(sweeps)
+    cic_summary = {
+        job.plant: res
+        for job, res in zip(cic, results[n0 : n0 + len(cic)], strict=True)
+        if res.get("error") != UNFINISHED
+    }
+    ff_summary: dict[str, dict[str, Any]] = {}
+    for fjob, res in zip(ff, results[n0 + len(cic) :], strict=True):
+        if res.get("error") != UNFINISHED:
+            ff_summary.setdefault(fjob.plant, {})[fjob.scenario] = res
     sweep_summary: dict[str, Any] = {}
     if done_sweeps:
         sweep_summary = collect(
@@ -554,11 +568,36 @@ def run_suite(opt: SuiteOptions) -> dict[str, Any]:
     if stopped:
         info["interrupted"] = True
         info["finished"] = fin
-    summary = build_summary(records, sweep_summary, info)
+    summary = build_summary(records, sweep_summary, info, cic_summary, ff_summary)
     write_report(summary, opt.out_dir)
     if stopped:
         _mark_interrupted(opt.out_dir / "report.md", fin)
     return summary
+
+
+def cic_jobs(opt: SuiteOptions) -> list[CicJob]:
+    """The quadrature-signal study of Xue's CIC claim (:mod:`bench.studies._cic`), one job
+    per plant, when the suite runs its scenario with both square-wave estimators (not in
+    ``--quick``, whose runs are cut short)."""
+    from bench.studies._cic import SCENARIO, WITH_CIC, WITHOUT_CIC
+
+    if opt.quick or SCENARIO not in opt.scenarios:
+        return []
+    if opt.estimators is not None and not {WITH_CIC, WITHOUT_CIC} <= set(opt.estimators):
+        return []
+    return [CicJob(plant) for plant in opt.plants]
+
+
+def ff_jobs(opt: SuiteOptions) -> list[AccelFfJob]:
+    """Tables 6-8 with tt-dq's ``accel_ff`` (:mod:`bench.studies._accel_ff`) on the ideal and
+    the drive plant, when the suite runs those scenarios with tt-dq (not in ``--quick``)."""
+    from bench.studies._accel_ff import ESTIMATOR, SCENARIOS, accel_ff_jobs
+
+    if opt.quick or not set(SCENARIOS) <= set(opt.scenarios):
+        return []
+    if opt.estimators is not None and ESTIMATOR not in opt.estimators:
+        return []
+    return accel_ff_jobs(opt.runs_dir, opt.plants)
 
 
 def _mark_interrupted(report: Path, fin: dict[str, int]) -> None:
