@@ -31,7 +31,13 @@ Checks, each with its threshold derived in :meth:`SupervisionPars.design`:
     window) and its currents hold still, every one of them; with a current
     flowing or an injection the other phase moves, and so would this one
     (``i_c = -i_a - i_b`` moves with it). A stuck sensor on a drive whose
-    currents all hold is not seen: a healthy one reads the same.
+    currents all hold is not seen: a healthy one reads the same. A reading
+    held within ``i_res`` of zero is the pattern of a phase that carries
+    nothing, and is reported as :data:`MODE_OPEN_PHASE` (below): a sensor
+    that sticks at its last value is seldom there, an open phase and a
+    sensor that reads zero always are. This is what detects an open phase
+    at any speed, within ``n_stuck`` periods, where the block check below
+    needs a whole electrical period and a speed.
 
 - **open phase** (:data:`MODE_OPEN_PHASE`): over a block of one electrical
   period of the estimated speed, the mean square of one phase's current
@@ -332,19 +338,27 @@ class Supervisor:
         self._stuck_n += 1
         if self._stuck_n >= p.n_stuck:
             lo, hi = self._stuck_lo, self._stuck_hi
-            hit = any(
-                hi[j] - lo[j] <= p.i_res
+            held = [
+                j
+                for j in (0, 1)
+                if hi[j] - lo[j] <= p.i_res
                 and self._du_hi[j] - self._du_lo[j] >= p.du_stuck
                 and hi[1 - j] - lo[1 - j] > p.i_res
-                for j in (0, 1)
-            )
+            ]
+            # held within a resolution step of zero: the phase carries nothing (an open
+            # phase, or a sensor reading zero); held elsewhere: a stuck sensor
+            hit = 0
+            if held:
+                j = held[0]
+                zero = abs(0.5 * (hi[j] + lo[j])) <= p.i_res
+                hit = MODE_OPEN_PHASE if zero else MODE_CURRENT_SENSOR
             self._stuck_n = 0
             self._stuck_lo = [math.inf, math.inf]
             self._stuck_hi = [-math.inf, -math.inf]
             self._du_lo = [math.inf, math.inf]
             self._du_hi = [-math.inf, -math.inf]
             if hit:
-                return MODE_CURRENT_SENSOR
+                return hit
         # open phase: mean squares about the block's mean over one electrical period of
         # the estimated speed
         if self._blk_n == 0:

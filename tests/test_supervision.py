@@ -181,6 +181,24 @@ def test_stuck_sensor_while_the_voltage_moves() -> None:
     assert not any(still.check(2.0, -1.0, U_DC, _out(k)) for k in range(3 * p.n_stuck))
 
 
+def test_a_reading_held_at_zero_is_an_open_phase_at_any_speed() -> None:
+    """The stuck check's pattern with the reading held within ``i_res`` of zero is a phase
+    that carries nothing: reported as ``open_phase`` in the same window, at standstill of
+    the estimate (``w_hat = 0``, where the block check does not score); held elsewhere it
+    stays a stuck sensor."""
+    p = _pars()
+    k0 = 3 * p.n_stuck // 2
+    for held, mode in ((0.0, MODE_OPEN_PHASE), (0.5 * p.i_res, MODE_OPEN_PHASE),
+                       (3.0 * p.i_res, MODE_CURRENT_SENSOR)):  # fmt: skip
+        sup = Supervisor(p)
+        hits = []
+        for k in range(4 * p.n_stuck):
+            i_a, i_b, _, d_a, d_b, d_c = _hf(k)
+            hits.append(sup.check(held if k >= k0 else i_a, i_b, U_DC, _out(k, (d_a, d_b, d_c))))
+        first = next(h for h in hits if h)
+        assert first == mode and hits.index(first) == 3 * p.n_stuck - 1, held
+
+
 def _three_phase(k: int, f_e: float, amp: float) -> tuple[float, float, float]:
     th = 2 * math.pi * f_e * k * T_S
     return tuple(amp * math.cos(th - 2 * math.pi * j / 3) for j in range(3))  # type: ignore[return-value]
@@ -287,6 +305,24 @@ def test_a_stuck_sensor_is_detected_in_a_run(tmp_path: Path) -> None:
     assert np.all(mode[t >= 0.6 + 2 * T_STUCK_DETECT] == MODE_CURRENT_SENSOR)
 
 
+# with an injection the other phase moves: the held-at-zero pattern within two stuck
+# windows; the sensored drive at no load holds its currents still, and the block check
+# over an electrical period reports it
+@pytest.mark.parametrize(
+    ("estimator", "bound_s"), [("tt-dq", 2 * T_STUCK_DETECT), ("sensored", 2 * T_OPEN_MAX)]
+)
+def test_an_open_phase_is_detected_as_one_in_a_run(estimator: str, bound_s: float) -> None:
+    """The fault study's open phase (plant_rt/core/plant_leg.c) is reported as
+    ``open_phase``, not as a sensor fault: the phase's reading sits at zero while the other
+    carries current. (Before, the stuck check called it ``current_sensor``.)"""
+    from bench.studies._faults import _u_dc, catalogue, run_case, scenario_for
+
+    cat = dict(catalogue(_u_dc(scenario_for(estimator))))
+    r = run_case(estimator, "open_phase: a", cat["open_phase: a"], 1.5)
+    assert r["detected_by"] == "controller_open_phase", r
+    assert 0.0 < r["reaction_ms"] <= 1e3 * bound_s + 1.0, r
+
+
 def test_the_same_detection_on_both_controller_engines(tmp_path: Path) -> None:
     from controller import compiled_controller_missing
 
@@ -365,6 +401,8 @@ def _sequence(p: SupervisionPars, fault: str) -> list[Measurement]:
             i_a = p.i_rail
         elif fault == "stuck" and late:
             i_a = 0.25
+        elif fault == "zero" and late:
+            i_a = 0.0
         elif fault == "sag" and n // 3 <= k < n // 2:
             u = 0.7 * U_DC
         out.append(Measurement(k, i_a, i_b, -i_a - i_b, u + 0.37 * math.sin(k)))
@@ -373,7 +411,12 @@ def _sequence(p: SupervisionPars, fault: str) -> list[Measurement]:
 
 @pytest.mark.parametrize(
     ("fault", "mode"),
-    [("rail", MODE_CURRENT_SENSOR), ("stuck", MODE_CURRENT_SENSOR), ("sag", MODE_DC_UNDERVOLTAGE)],
+    [
+        ("rail", MODE_CURRENT_SENSOR),
+        ("stuck", MODE_CURRENT_SENSOR),
+        ("zero", MODE_OPEN_PHASE),
+        ("sag", MODE_DC_UNDERVOLTAGE),
+    ],
 )
 def test_the_compiled_check_is_the_python_check_bit_for_bit(fault: str, mode: int) -> None:
     """controller/core/cc_supervision.c against Supervisor.wrap, on the same compiled

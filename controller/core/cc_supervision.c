@@ -87,11 +87,18 @@ long long cc_sup_check(cc_sup_t *s, double i_a, double i_b, double u_dc, const c
     }
     s->stuck_n += 1;
     if (s->stuck_n >= s->n_stuck) {
-        int hit = 0;
-        for (int j = 0; j < 2 && !hit; j++)
+        int hit = 0, mode = 0;
+        for (int j = 0; j < 2 && !hit; j++) {
             hit = s->stuck_hi[j] - s->stuck_lo[j] <= s->i_res
                   && s->du_hi[j] - s->du_lo[j] >= s->du_stuck
                   && s->stuck_hi[1 - j] - s->stuck_lo[1 - j] > s->i_res;
+            /* held within a resolution step of zero: the phase carries nothing (an open
+             * phase, or a sensor reading zero); held elsewhere: a stuck sensor */
+            if (hit)
+                mode = fabs(0.5 * (s->stuck_hi[j] + s->stuck_lo[j])) <= s->i_res
+                           ? CC_MODE_OPEN_PHASE
+                           : CC_MODE_CURRENT_SENSOR;
+        }
         s->stuck_n = 0;
         for (int j = 0; j < 2; j++) {
             s->stuck_lo[j] = INFINITY;
@@ -100,7 +107,7 @@ long long cc_sup_check(cc_sup_t *s, double i_a, double i_b, double u_dc, const c
             s->du_hi[j] = -INFINITY;
         }
         if (hit)
-            return CC_MODE_CURRENT_SENSOR;
+            return mode;
     }
     /* open phase: mean squares about the block's mean over one electrical period of the
      * estimated speed */
