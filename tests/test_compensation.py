@@ -270,10 +270,11 @@ def test_the_hybrid_corrects_its_injection_estimate_only(weight: float) -> None:
     follows the corrected angle."""
     model = dataclasses.replace(motor_model(WEN), k_dq=-2e-3)
     cp = CompensationPars(cross_saturation=True)
-    ctrl = Controller(
+    ctrl = Controller(  # the Python engine: the test sets and reads the estimator's objects
         ControllerPars(
             motor=model, T_s=T_WEN, estimator="hybrid-tt-dq", startup=False, compensation=cp
-        )
+        ),
+        engine="python",
     )
     est = ctrl.estimator
     ctrl.set_enable(True)
@@ -323,8 +324,9 @@ def test_offset_calibration_removes_a_known_offset() -> None:
     noise = 0.01
     offs = (0.12, -0.07, 0.03)
     cp = CompensationPars(offset_calibration=True, current_noise=noise, adc_lsb=q)
-    ctrl = Controller(
-        ControllerPars(motor=motor_model(WEN), T_s=T_WEN, estimator="sensored", compensation=cp)
+    ctrl = Controller(  # the Python engine: the test reads the calibration's object
+        ControllerPars(motor=motor_model(WEN), T_s=T_WEN, estimator="sensored", compensation=cp),
+        engine="python",
     )
     n = ctrl.calibration.n  # type: ignore[union-attr]
     sigma = math.sqrt(noise**2 + q * q / 12)

@@ -339,6 +339,12 @@ def _local(
     return info
 
 
+#: The longest an interrupted pool's manager thread is waited for (s): it ends within
+#: milliseconds once its workers are killed; the bound is a sixth of the 3 s a suite's
+#: stop is allowed (docs/SCALING.md).
+MANAGER_JOIN_S = 0.5
+
+
 def _end_pool(ex: ProcessPoolExecutor) -> None:
     """Kill a pool's worker processes (the points under way are dropped) and shut it down.
 
@@ -347,7 +353,17 @@ def _end_pool(ex: ProcessPoolExecutor) -> None:
     """
     # the pool's own worker processes (``_processes``: pid -> Process, stable since Python 3.8)
     end_workers(list((getattr(ex, "_processes", None) or {}).values()))
+    manager = getattr(ex, "_executor_manager_thread", None)
     ex.shutdown(wait=False, cancel_futures=True)
+    # The pool's manager thread sees its workers gone, closes its wake-up pipe and ends.
+    # Until it has ended, Python 3.11's exit hook (concurrent.futures.process._python_exit)
+    # still holds that pipe and writes to it: "Exception ignored ... OSError: [Errno 9] Bad
+    # file descriptor", a traceback on the way out of an interrupted run. With its workers
+    # killed it ends within milliseconds; the bound only keeps a stuck one from holding
+    # the stop.
+    if manager is not None:
+        manager.join(timeout=MANAGER_JOIN_S)
+        del manager
 
 
 def _dask(

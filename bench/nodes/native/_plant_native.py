@@ -375,8 +375,11 @@ def native_missing(node: Any, interface: str, *, realtime: bool, external: bool)
         return "sensor noise is drawn by Python (the plant core has no generator yet)"
     if plant.meter is not None:
         return "the energy meter is read by the Python node only"
-    if external and realtime:
-        return "a controller under test in real time is served by the Python node only"
+    if external:
+        # a controller under test: its acknowledgements gate every lockstep period and its
+        # first answer starts the real-time clock, both in Python; the end of its run (the
+        # last sample sent again until it answers) is the Python node's
+        return "a controller under test is served by the Python node only"
     try:
         _lib()
     except BenchError as e:
