@@ -114,6 +114,25 @@ def _catch_signals() -> Iterator[_Interrupt]:
             signal.signal(s, h)
 
 
+def build_native_libraries() -> None:
+    """Build the native node loops' libraries here, before the nodes start, if they are not
+    in the user's cache yet (bench/nodes/native: built once per source change).
+
+    A node builds what it lacks before it reports ready, and a first build (code
+    generation and the C compiler, tens of seconds on a loaded host, longer inside
+    User-Mode Linux) would then count against the node's start-up timeout. A build that
+    fails is left to the nodes: each says in one line why the Python node serves.
+    """
+    from bench.nodes.native._plant_native import plant_lib
+    from bench.nodes.native.controller_node import native_library
+
+    for build in (plant_lib, native_library):
+        try:
+            build()
+        except BenchError:
+            pass
+
+
 def run_scenario(
     scn: Scenario,
     estimator: str,
@@ -131,14 +150,14 @@ def run_scenario(
 ) -> RunResult:
     """Run ``scn`` with ``estimator`` between two processes on ``spec``'s bus.
 
-    The nodes read the run's plan (``plan.json``, :mod:`bench.nodes._plan`), made
-here once; ``node_args`` adds command-line options per role (``plant``,
-``controller``, ``link``) on how a node serves it (``--engine``,
-``--rt-priority``, ``--truth-every``, ...), never the run's settings.
-    ``controller="external"``: no controller process; the controller under test
-    (named ``dut_name`` in the labels) must send its first valid duty within
-    ``dut_timeout`` seconds, else the run ends with a :class:`BenchError`
-    naming the duty frames the bench rejected.
+        The nodes read the run's plan (``plan.json``, :mod:`bench.nodes._plan`), made
+    here once; ``node_args`` adds command-line options per role (``plant``,
+    ``controller``, ``link``) on how a node serves it (``--engine``,
+    ``--rt-priority``, ``--truth-every``, ...), never the run's settings.
+        ``controller="external"``: no controller process; the controller under test
+        (named ``dut_name`` in the labels) must send its first valid duty within
+        ``dut_timeout`` seconds, else the run ends with a :class:`BenchError`
+        naming the duty frames the bench rejected.
     """
     codec = codec or Codec()
     if mode == "lockstep" and (err := lockstep_error(scn.faults, scn.source)):
@@ -196,12 +215,18 @@ here once; ``node_args`` adds command-line options per role (``plant``,
             rec.expect_run(run_id)
             try:
                 if start_error is None:
+                    build_native_libraries()
                     start_nodes(roles, plan_file, out_dir, env, procs, stop=interrupted)
             except BenchError as e:  # a node that never became ready: nothing to record
                 start_error = str(e)
             if start_error is None:
                 pacer = CommandPacer(
-                    scn, codec, mode=mode, pace_every=pace, external=external, schedule=plan.commands
+                    scn,
+                    codec,
+                    mode=mode,
+                    pace_every=pace,
+                    external=external,
+                    schedule=plan.commands,
                 )
                 plant = dict(procs).get("plant")
                 if plant is not None and not interrupted():
