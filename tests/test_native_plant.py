@@ -39,7 +39,7 @@ PER_STEP = {0x10: "PwmDuty", 0x11: "PhaseSamples", 0x12: "PositionSensor", 0x100
 
 @pytest.fixture(scope="module")
 def lib() -> ctypes.CDLL:
-    return _plant_native.load_plant_lib(_plant_native.plant_lib())
+    return _plant_native.load_plant_lib()
 
 
 def _by_step(frames: list[can.Message]) -> dict[tuple[int, int], bytes]:

@@ -115,22 +115,22 @@ def _catch_signals() -> Iterator[_Interrupt]:
 
 
 def build_native_libraries() -> None:
-    """Build the native node loops' libraries here, before the nodes start, if they are not
-    in the user's cache yet (bench/nodes/native: built once per source change).
+    """Build the native node loops' library here, before the nodes start, if it is not in
+    the user's cache yet (bench/nodes/native: built once per source change).
 
     A node builds what it lacks before it reports ready, and a first build (code
     generation and the C compiler, tens of seconds on a loaded host, longer inside
     User-Mode Linux) would then count against the node's start-up timeout. A build that
-    fails is left to the nodes: each says in one line why the Python node serves.
+    fails is left to the nodes: each says in one line why the Python node serves.  The
+    sources are hashed once per process (:func:`bench.nodes.native._native.library_path`
+    keeps the answer), not on every run of a sweep.
     """
-    from bench.nodes.native._plant_native import plant_lib
-    from bench.nodes.native.controller_node import native_library
+    from bench.nodes.native._native import library_path
 
-    for build in (plant_lib, native_library):
-        try:
-            build()
-        except (BenchError, OSError):  # no compiler, or an unwritable cache: the nodes say
-            pass
+    try:
+        library_path()
+    except (BenchError, OSError):  # no compiler, or an unwritable cache: the nodes say
+        pass
 
 
 def run_scenario(

@@ -1,35 +1,68 @@
 """Build the native loop's library and programs, and read its counters (ctypes).
 
 :func:`build` writes the DBC's C code with ``bench codegen`` (the same command
-firmware/Makefile runs) and compiles ``libbench_native.so`` and ``echo`` with
-the system's C compiler; :func:`timing_run` runs the clock alone
-(``bn_timing_run``) and returns its counters.
+firmware/Makefile runs) and compiles the one library of the native pieces,
+``libbench_native.so`` (transports, clock, the plant unit and its loop, the
+controller unit, the in-process pair, with the plant core and the controller
+core), and ``echo`` with the system's C compiler; :func:`library` builds it once
+per source change into the user's cache and loads it once per process (the
+plant node, the controller node and the in-process pair share it);
+:func:`timing_run` runs the clock alone (``bn_timing_run``) and returns its
+counters.  :class:`Frame` and :class:`Sig` mirror ``bn_frame_t`` and
+``bn_sig_t`` (``bn.h``) for every user of the library.
 """
 
 from __future__ import annotations
 
 import ctypes
+import hashlib
 import os
 import shutil
 import subprocess
 import sys
+import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from bench._errors import BenchError
 
-__all__ = ["HERE", "LIB_SOURCES", "NativeBuild", "Stats", "build", "load", "timing_run"]
+__all__ = [
+    "HERE",
+    "LIB_SOURCES",
+    "Frame",
+    "NativeBuild",
+    "Sig",
+    "Stats",
+    "build",
+    "library",
+    "library_path",
+    "load",
+    "timing_run",
+]
 
 HERE = Path(__file__).resolve().parent
 #: The library's sources (beside this file).
 LIB_SOURCES = ("bn_bus.c", "bn_msgpack.c", "bn_clock.c")
-#: The controller node's sources (beside this file); the library links them with the DBC's
-#: C code and the controller core that ``bench codegen`` writes (``gen/``, ``gen/core/``).
-CTL_SOURCES = ("bn_ctl.c",)
+#: The plant node's and the controller node's units and loops, and the in-process pair
+#: (beside this file); the library links them with the DBC's C code and the controller
+#: core that ``bench codegen`` writes (``gen/``, ``gen/core/``) and the plant core.
+NODE_SOURCES = ("bn_plant.c", "bn_plant_loop.c", "bn_ctl.c")
+#: The plant core's sources (the ones ``plant_rt._cplant`` is built from).
+PLANT_CORE_DIR = HERE.parents[2] / "plant_rt" / "core"
 #: Flags of every compile: C99 (with the POSIX and Linux calls), warnings as errors; no
-#: fused multiply-add, as the controller core's own build (controller/core/cc_math.h).
-CFLAGS = ("-std=c99", "-D_GNU_SOURCE", "-O2", "-Wall", "-Wextra", "-Werror", "-ffp-contract=off")
+#: fused multiply-add and no fast math, as the cores' own builds (controller/core/cc_math.h,
+#: setup.py): the same arithmetic as the Plant and the Controller in Python.
+CFLAGS = (
+    "-std=c99",
+    "-D_GNU_SOURCE",
+    "-O2",
+    "-Wall",
+    "-Wextra",
+    "-Werror",
+    "-ffp-contract=off",
+    "-fno-fast-math",
+)
 
 
 @dataclass(frozen=True, slots=True)
@@ -58,7 +91,9 @@ def build(out_dir: Path) -> NativeBuild:
     lib_src = [str(HERE / s) for s in LIB_SOURCES]
     gen_src = [str(gen / "bench_dbc.c"), str(gen / "bench_e2e.c")]
     includes = [f"-I{HERE}", f"-I{gen}"]
-    ctl_src = [str(HERE / s) for s in CTL_SOURCES] + sorted(str(p) for p in gen.glob("core/*.c"))
+    node_src = [str(HERE / s) for s in NODE_SOURCES]
+    node_src += sorted(str(p) for p in gen.glob("core/*.c"))
+    node_src += sorted(str(p) for p in PLANT_CORE_DIR.glob("*.c"))
     lib = out_dir / "libbench_native.so"
     _run(
         [
@@ -68,11 +103,12 @@ def build(out_dir: Path) -> NativeBuild:
             "-shared",
             *includes,
             f"-I{gen / 'core'}",
+            f"-I{PLANT_CORE_DIR}",
             "-o",
             str(lib),
             *lib_src,
             *gen_src,
-            *ctl_src,
+            *node_src,
             "-lm",
         ],
         "compile",
@@ -85,11 +121,104 @@ def build(out_dir: Path) -> NativeBuild:
     return NativeBuild(lib, echo, gen)
 
 
+def _sources_digest() -> str:
+    """A digest of everything the library is built from (C sources, DBC, code generator,
+    plant core, controller core) and the flags."""
+    from bench.wire._codec import default_codec
+    from controller import core_sources
+
+    h = hashlib.sha256()
+    files = sorted(HERE.glob("*.[ch]")) + sorted(PLANT_CORE_DIR.glob("*.[ch]"))
+    files += list(core_sources())
+    files.append(Path(default_codec().path))
+    files.append(HERE.parents[1] / "wire" / "_cgen.py")
+    for f in files:
+        h.update(f.name.encode())
+        h.update(f.read_bytes())
+    h.update(" ".join(CFLAGS).encode())
+    return h.hexdigest()[:16]
+
+
+def _cache_root() -> Path:
+    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
+    return Path(base) / "can-hil-bench"
+
+
+_PATHS: dict[str, Path] = {}
+
+
+def library_path() -> Path:
+    """``libbench_native.so`` for the present sources: built once per source change into the
+    user's cache (``$XDG_CACHE_HOME/can-hil-bench/native-<digest>``, an atomic rename, so
+    that processes building at once agree), looked up once per process.
+
+    :class:`BenchError` with one line when it cannot be built (no C compiler, a compile
+    error); :class:`OSError` when the cache cannot be written.
+    """
+    key = "lib"
+    if key in _PATHS:
+        return _PATHS[key]
+    final = _cache_root() / f"native-{_sources_digest()}"
+    lib = final / "libbench_native.so"
+    if not lib.exists():
+        final.parent.mkdir(parents=True, exist_ok=True)
+        tmp = Path(tempfile.mkdtemp(prefix="build-", dir=final.parent))
+        try:
+            build(tmp)
+            try:
+                tmp.rename(final)  # atomic: another process may have built it meanwhile
+            except OSError:
+                if not lib.exists():
+                    raise
+        finally:
+            if tmp.exists():
+                shutil.rmtree(tmp, ignore_errors=True)
+    _PATHS[key] = lib
+    return lib
+
+
+_LIB: list[ctypes.CDLL] = []
+
+
+def library() -> ctypes.CDLL:
+    """The library (:func:`library_path`), loaded once per process with :func:`load`'s
+    declarations; the plant node, the controller node and the pair add their own."""
+    if not _LIB:
+        _LIB.append(load(library_path()))
+    return _LIB[0]
+
+
 def _run(cmd: list[str], what: str) -> None:
     res = subprocess.run(cmd, capture_output=True, text=True, check=False)
     if res.returncode != 0:
         lines = (res.stderr or res.stdout).strip().splitlines()
         raise BenchError(f"native loop: {what} failed: {lines[0] if lines else res.returncode}")
+
+
+class Frame(ctypes.Structure):
+    """``bn_frame_t`` (bn.h)."""
+
+    _fields_ = [
+        ("id", ctypes.c_uint32),
+        ("len", ctypes.c_uint8),
+        ("flags", ctypes.c_uint8),
+        ("data", ctypes.c_uint8 * 64),
+        ("t_ns", ctypes.c_int64),
+    ]
+
+
+class Sig(ctypes.Structure):
+    """``bn_sig_t`` (bn.h): :meth:`bench.wire._codec.Codec.signal_table` of one signal."""
+
+    _fields_ = [
+        ("lo", ctypes.c_double),
+        ("hi", ctypes.c_double),
+        ("scale", ctypes.c_double),
+        ("offset", ctypes.c_double),
+        ("modulus", ctypes.c_int64),
+        ("chk_lo", ctypes.c_double),
+        ("chk_hi", ctypes.c_double),
+    ]
 
 
 class Rt(ctypes.Structure):

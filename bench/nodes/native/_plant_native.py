@@ -19,11 +19,8 @@ Python node.
 from __future__ import annotations
 
 import ctypes
-import hashlib
 import os
-import shutil
 import sys
-import tempfile
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -32,24 +29,18 @@ from typing import Any
 import can
 
 from bench._errors import BenchError
-from bench.nodes.native._native import CFLAGS, HERE, LIB_SOURCES, Stats, _run, compiler
+from bench.nodes.native import _native
+from bench.nodes.native._native import Frame, Sig, Stats
 
 __all__ = [
-    "PLANT_SOURCES",
-    "build_plant_lib",
+    "Frame",
+    "Sig",
     "load_plant_lib",
     "native_missing",
     "open_native_bus",
-    "plant_lib",
     "plant_loop_native",
 ]
 
-#: The native plant node's own sources (beside :data:`LIB_SOURCES`).
-PLANT_SOURCES = ("bn_plant.c", "bn_plant_loop.c")
-#: The plant core's sources (the ones ``plant_rt._cplant`` is built from).
-CORE_DIR = HERE.parents[2] / "plant_rt" / "core"
-#: The flags of the core's own build (setup.py): the same arithmetic as the Plant's.
-CORE_FLAGS = ("-ffp-contract=off", "-fno-fast-math")
 #: Transports the native loop speaks (``bn_udp_open``, ``bn_can_open``).
 NATIVE_INTERFACES = ("udp_multicast", "socketcan")
 
@@ -61,32 +52,6 @@ N_REJECT = 8
 
 EV_DONE, EV_FRAME, EV_POLL, EV_STALL, EV_CMDS, EV_TRIPPED, EV_ERROR = range(7)
 WAIT_DUTY, WAIT_COMMAND, WAIT_ACK = 1, 2, 3
-
-
-class Frame(ctypes.Structure):
-    """``bn_frame_t``."""
-
-    _fields_ = [
-        ("id", ctypes.c_uint32),
-        ("len", ctypes.c_uint8),
-        ("flags", ctypes.c_uint8),
-        ("data", ctypes.c_uint8 * 64),
-        ("t_ns", ctypes.c_int64),
-    ]
-
-
-class Sig(ctypes.Structure):
-    """``bn_sig_t``: :meth:`bench.wire._codec.Codec.signal_table` of one signal."""
-
-    _fields_ = [
-        ("lo", ctypes.c_double),
-        ("hi", ctypes.c_double),
-        ("scale", ctypes.c_double),
-        ("offset", ctypes.c_double),
-        ("modulus", ctypes.c_int64),
-        ("chk_lo", ctypes.c_double),
-        ("chk_hi", ctypes.c_double),
-    ]
 
 
 class Cmd(ctypes.Structure):
@@ -252,71 +217,10 @@ class Loop(ctypes.Structure):
 # ------------------------------------------------------------------ build
 
 
-def _source_files() -> list[Path]:
-    from bench.wire._codec import default_codec
-
-    files = [HERE / s for s in (*LIB_SOURCES, *PLANT_SOURCES, "bn.h", "bn_plant.h")]
-    files += sorted(CORE_DIR.glob("*.[ch]"))
-    files.append(Path(default_codec().path))
-    files.append(HERE.parents[1] / "wire" / "_cgen.py")
-    return files
-
-
-def build_plant_lib(out_dir: Path) -> Path:
-    """Generate the DBC's C code and compile ``libbench_plant.so`` into ``out_dir``."""
-    cc = compiler()
-    out_dir.mkdir(parents=True, exist_ok=True)
-    gen = out_dir / "gen"
-    _run([sys.executable, "-m", "bench", "codegen", str(gen)], "bench codegen")
-    src = [str(HERE / s) for s in (*LIB_SOURCES, *PLANT_SOURCES)]
-    src += [str(gen / "bench_dbc.c"), str(gen / "bench_e2e.c")]
-    src += sorted(str(p) for p in CORE_DIR.glob("*.c"))
-    lib = out_dir / "libbench_plant.so"
-    inc = [f"-I{HERE}", f"-I{gen}", f"-I{CORE_DIR}"]
-    _run(
-        [cc, *CFLAGS, *CORE_FLAGS, "-fPIC", "-shared", *inc, "-o", str(lib), *src, "-lm"], "compile"
-    )
-    return lib
-
-
-def _cache_root() -> Path:
-    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
-    return Path(base) / "can-hil-bench" / "native"
-
-
-def plant_lib() -> Path:
-    """The built library for the present sources (built once, kept in the user's cache).
-
-    :class:`BenchError` with one line when it cannot be built (no C compiler, a
-    compile error).
-    """
-    h = hashlib.sha256()
-    for f in _source_files():
-        h.update(f.name.encode())
-        h.update(f.read_bytes())
-    h.update(" ".join((*CFLAGS, *CORE_FLAGS)).encode())
-    final = _cache_root() / f"plant-{h.hexdigest()[:16]}"
-    lib = final / "libbench_plant.so"
-    if lib.exists():
-        return lib
-    final.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix="build-", dir=final.parent))
-    try:
-        build_plant_lib(tmp)
-        try:
-            tmp.rename(final)  # atomic: another process may have built it meanwhile
-        except OSError:
-            if not lib.exists():
-                raise
-    finally:
-        if tmp.exists():
-            shutil.rmtree(tmp, ignore_errors=True)
-    return lib
-
-
-def load_plant_lib(path: Path) -> ctypes.CDLL:
-    """The library with the argument types of the calls made here; checks the struct layouts."""
-    dll = ctypes.CDLL(str(path), use_errno=True)
+def load_plant_lib(path: Path | None = None) -> ctypes.CDLL:
+    """The native library (:func:`._native.library`, or the one at ``path``) with the
+    argument types of the calls made here; checks the struct layouts."""
+    dll = _native.library() if path is None else _native.load(path)
     dll.bn_plant_sizeof.restype = ctypes.c_size_t
     dll.bn_plant_loop_sizeof.restype = ctypes.c_size_t
     dll.bn_plant_signal_names.restype = ctypes.c_char_p
@@ -348,7 +252,7 @@ _LIB: ctypes.CDLL | None = None
 def _lib() -> ctypes.CDLL:
     global _LIB
     if _LIB is None:
-        _LIB = load_plant_lib(plant_lib())
+        _LIB = load_plant_lib()
     return _LIB
 
 

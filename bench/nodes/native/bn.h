@@ -47,6 +47,18 @@ typedef struct {
     int64_t t_ns;               /* receive time, CLOCK_REALTIME ns (0: unknown) */
 } bn_frame_t;
 
+/* ---- signal tables ---------------------------------------------------------
+ * Encode-side description of one signal, as bench.wire._codec's _Sig, and the
+ * decode-side range check (chk_lo > chk_hi: not checked): one row of
+ * bench.wire._codec.Codec.signal_table, filled by Python from its codec, so no
+ * DBC fact is written in C.  The plant unit (bn_plant.h) and the controller
+ * unit (bn_ctl.h) both take their tables in it (ctypes: _native.Sig). */
+typedef struct {
+    double lo, hi, scale, offset;
+    int64_t modulus;
+    double chk_lo, chk_hi;
+} bn_sig_t;
+
 /* ---- python-can udp_multicast wire format ---------------------------------
  * One datagram per frame: a msgpack map of the eleven keys python-can's
  * can/interfaces/udp_multicast/utils.py pack_message writes (timestamp,

@@ -42,7 +42,7 @@ static int64_t unwrap(int64_t raw, int64_t expected, int64_t m)
 static size_t slot(int64_t k) { return (size_t)(((k % BN_CTL_RING) + BN_CTL_RING) % BN_CTL_RING); }
 
 /* a signal's raw value as Codec.encode gives it (clipped or wrapped, half to even) */
-static int64_t raw_of(const bn_ctl_sig_t *s, double v)
+static int64_t raw_of(const bn_sig_t *s, double v)
 {
     if (s->modulus > 0) {
         int64_t r = (int64_t)nearbyint((v - s->offset) / s->scale) % s->modulus;

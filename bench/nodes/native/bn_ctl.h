@@ -18,7 +18,7 @@
  * command is due, are events the caller hands to Python, which applies them
  * to the same core and calls again (bn_ctl_resume).  The signals' scale,
  * offset, range and modulus come from the DBC through Python's codec
- * (bn_ctl_sig_t), so no DBC fact is written here.
+ * (bn_sig_t, bn.h), so no DBC fact is written here.
  *
  * No allocation: every buffer is in bn_ctl_t.  bn_ctl_serve is the loop on a
  * bn_bus_t; an in-process driver calls bn_ctl_on_frame with its own sink.
@@ -60,13 +60,9 @@ enum {
     BN_CTL_NSIG
 };
 
-/* one signal's encoding (bench/wire/_codec.py _Sig): clipped to [lo, hi], or
+/* bn_ctl_t.sig: one signal's encoding (bn_sig_t, bn.h): clipped to [lo, hi], or
  * with modulus > 0 its raw value taken modulo modulus; raw = (v - offset) / scale
- * rounded half to even, as cantools */
-typedef struct {
-    double lo, hi, scale, offset;
-    int64_t modulus;
-} bn_ctl_sig_t;
+ * rounded half to even, as cantools (the range check is not used here) */
 
 /* rejection reasons (bench/wire/_codec.py, bench/nodes/_counters.py) */
 enum {
@@ -105,7 +101,7 @@ typedef struct {
     int32_t needs_truth, realtime;
     double n_p;
     int64_t m_step, m_truth, m_tel; /* step counter ranges (2^bits) */
-    bn_ctl_sig_t sig[BN_CTL_NSIG];
+    bn_sig_t sig[BN_CTL_NSIG];
     uint8_t duty_flags, tel_flags; /* BN_FD, BN_BRS of PwmDuty and CtrlTelemetry */
     uint32_t run_id;               /* the run's nonce (CtrlTelemetry.run_id) */
     /* the commands' state, kept by Python's CommandQueue and copied here */

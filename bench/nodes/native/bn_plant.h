@@ -33,14 +33,8 @@ extern "C" {
 #define BN_PLANT_OUT 8     /* frames of one period, at most */
 #define BN_PLANT_SENT 16   /* periods of frames kept for retransmission (delay + 3) */
 
-/* Encode-side description of one signal, as bench.wire._codec's _Sig, and the
- * decode-side range check (chk_lo > chk_hi: not checked).  Python fills them
- * from its Codec by the names bn_plant_signal_names() lists, in that order. */
-typedef struct {
-    double lo, hi, scale, offset;
-    int64_t modulus;
-    double chk_lo, chk_hi;
-} bn_sig_t;
+/* bn_plant_t.sig (bn_sig_t, bn.h): Python fills it from its Codec by the names
+ * bn_plant_signal_names() lists, in that order. */
 
 enum {
     BN_S_PS_I_A, BN_S_PS_I_B, BN_S_PS_U_DC, BN_S_PS_STATUS, BN_S_PS_STEP,

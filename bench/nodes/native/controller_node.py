@@ -25,10 +25,8 @@ then runs, with that one line).
 from __future__ import annotations
 
 import ctypes
-import hashlib
 import os
 from collections.abc import Callable
-from pathlib import Path
 from typing import Any
 
 import can
@@ -41,6 +39,7 @@ from bench.nodes._counters import (
     REPEATED_COUNTER,
 )
 from bench.nodes.native import _native
+from bench.nodes.native._native import Frame, Sig
 from bench.wire._codec import (
     REJECT_BAD_CRC,
     REJECT_BAD_LENGTH,
@@ -98,18 +97,6 @@ SIGNALS = (
 )
 
 
-class Frame(ctypes.Structure):
-    """``bn_frame_t`` (bn.h)."""
-
-    _fields_ = [
-        ("id", ctypes.c_uint32),
-        ("len", ctypes.c_uint8),
-        ("flags", ctypes.c_uint8),
-        ("data", ctypes.c_uint8 * 64),
-        ("t_ns", ctypes.c_int64),
-    ]
-
-
 class Out(ctypes.Structure):
     """``cc_out_t`` (controller/core/cc_foc.h)."""
 
@@ -125,18 +112,6 @@ class Out(ctypes.Structure):
         ("mode", ctypes.c_longlong),
         ("i_d", ctypes.c_double),
         ("i_q", ctypes.c_double),
-    ]
-
-
-class Sig(ctypes.Structure):
-    """``bn_ctl_sig_t``."""
-
-    _fields_ = [
-        ("lo", ctypes.c_double),
-        ("hi", ctypes.c_double),
-        ("scale", ctypes.c_double),
-        ("offset", ctypes.c_double),
-        ("modulus", ctypes.c_int64),
     ]
 
 
@@ -192,45 +167,17 @@ class CtlBlock(ctypes.Structure):
 SINK = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, ctypes.POINTER(Frame))
 
 
-def _sources_digest() -> str:
-    """A digest of everything the library is built from (C sources, DBC, controller core)."""
-    from bench.wire._codec import default_codec
-    from controller import core_sources
-
-    h = hashlib.sha256()
-    files = sorted(_native.HERE.glob("*.[ch]")) + list(core_sources())
-    files.append(Path(default_codec().path))
-    for f in files:
-        h.update(f.name.encode())
-        h.update(f.read_bytes())
-    h.update(" ".join(_native.CFLAGS).encode())
-    return h.hexdigest()[:16]
+_DECLARED: list[ctypes.CDLL] = []
 
 
-_LIB: dict[str, ctypes.CDLL] = {}
-
-
-def native_library(cache: Path | None = None) -> ctypes.CDLL:
-    """``libbench_native.so`` with the controller node, built once per source digest into
-    the user's cache (``$XDG_CACHE_HOME/can-hil-bench``); :class:`BenchError` when it
+def native_library() -> ctypes.CDLL:
+    """The native library (:func:`._native.library`: built once per source change into the
+    user's cache) with the controller unit's calls declared; :class:`BenchError` when it
     cannot be built."""
-    digest = _sources_digest()
-    if digest in _LIB:
-        return _LIB[digest]
-    root = cache or Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
-    out = root / "can-hil-bench" / f"native-{digest}"
-    lib = out / "libbench_native.so"
-    if not lib.exists():
-        tmp = out.with_name(f"{out.name}.{os.getpid()}")
-        built = _native.build(tmp)
-        try:
-            tmp.rename(out)
-        except OSError:  # another process built it first
-            pass
-        lib = out / "libbench_native.so" if out.exists() else built.lib
-    dll = _native.load(lib)
-    _declare(dll)
-    _LIB[digest] = dll
+    dll = _native.library()
+    if not _DECLARED:
+        _declare(dll)
+        _DECLARED.append(dll)
     return dll
 
 
@@ -298,8 +245,8 @@ class NativeController:
         c.m_step, c.m_truth, c.m_tel = node.m_step, node.m_truth, node.m_tel
         codec = node.codec
         for j, (msg, name) in enumerate(SIGNALS):
-            s = next(s for s in codec._spec(msg).sigs if s.name == name)
-            c.sig[j] = Sig(s.lo, s.hi, s.scale, s.offset, s.modulus)
+            lo, hi, scale, offset, mod, chk_lo, chk_hi = codec.signal_table(msg)[name]
+            c.sig[j] = Sig(lo, hi, scale, offset, int(mod), chk_lo, chk_hi)
         for attr, msg in (("duty_flags", "PwmDuty"), ("tel_flags", "CtrlTelemetry")):
             spec = codec._spec(msg)
             setattr(c, attr, (BN_FD if spec.is_fd else 0) | (BN_BRS if spec.brs else 0))
