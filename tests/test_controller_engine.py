@@ -134,7 +134,7 @@ def test_every_scenario_first_second_same_on_both_engines(
             return ctrl
 
         monkeypatch.setattr(loops, "build_controller", build_recorded)
-        frames = loops.run_inprocess(scn, estimator, codec, engine="compiled")
+        frames = loops.run_inprocess(scn, estimator, codec, engine="compiled", loop="python")
         runs[engine] = (outs, [(m.arbitration_id, bytes(m.data)) for m in frames], used[0])
     (py, f_py, e_py), (cc, f_cc, e_cc) = runs["python"], runs["compiled"]
     assert e_py == "python"

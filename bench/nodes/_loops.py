@@ -211,6 +211,22 @@ def command_frames(
 #: would not do: the 16-bit ``BenchCommand.step`` wraps after 65,536 periods
 #: (6.5 s at 10 kHz) and the nodes keep at most ``MAX_PENDING_COMMANDS``.
 INPROCESS_LEAD = 1000
+#: :func:`run_inprocess`'s ``loop`` choices.
+INPROCESS_LOOPS = ("auto", "python", "native")
+
+
+def inprocess_native_unavailable(pn: PlantNode, cn: ControllerNode, *, latency: bool) -> str | None:
+    """Why the in-process loop of these nodes cannot run in C (one line), or None.
+
+    :func:`bench.nodes.native._pair.pair_unavailable`, and the library's build (no C
+    compiler, a failed build) as a reason rather than an error.
+    """
+    try:
+        from bench.nodes.native._pair import pair_unavailable
+
+        return pair_unavailable(pn, cn, latency=latency)
+    except (BenchError, OSError) as e:
+        return str(e)
 
 
 def run_inprocess(
@@ -221,6 +237,7 @@ def run_inprocess(
     plant_times: list[float] | None = None,
     engine: str = "auto",
     observe: Callable[[Controller], None] | None = None,
+    loop: str = "auto",
 ) -> list[can.Message]:
     """Run a scenario in lockstep in this process; return every frame in wire order.
 
@@ -233,15 +250,36 @@ def run_inprocess(
     called with the controller after every period it answered, to record a state no
     frame carries (the controller's engine is then Python, where the estimator's
     states live; both engines give the same trace, ``tests/test_controller_engine.py``).
+
+    ``loop``: ``auto`` (the default) runs the loop in C, both nodes stepped for many
+    periods per call (:func:`bench.nodes.native._pair.run_pair`, the same frames bit
+    for bit), wherever both nodes can serve natively and neither ``plant_times`` nor
+    ``observe`` asks for Python between periods, else the Python loop below;
+    ``python`` asks for the Python loop, ``native`` for the C one (:class:`BenchError`
+    naming why not, when it cannot serve).
     """
     from bench.nodes._link import LockstepLink
     from bench.scenarios._faults import lockstep_error
 
+    if loop not in INPROCESS_LOOPS:
+        raise BenchError(f"run_inprocess: loop {loop!r}: one of {', '.join(INPROCESS_LOOPS)}")
     if err := lockstep_error(scn.faults, scn.source):
         raise err
     pn = make_plant_node(scn, codec, engine=engine)
     cn = make_controller_node(scn, estimator, codec, "python" if observe else None)
     lt = scn.latency
+    if loop != "python":
+        why = inprocess_native_unavailable(
+            pn, cn, latency=bool(lt.sample_delay_steps or lt.duty_delay_steps)
+        )
+        if why is None and (plant_times is not None or observe is not None):
+            why = "plant_times and observe are Python's between periods"
+        if why is None:
+            from bench.nodes.native._pair import run_pair
+
+            return run_pair(pn, cn, command_frames(scn, codec), INPROCESS_LEAD)
+        if loop == "native":
+            raise BenchError(f"in-process native pair: {why}")
     link = (
         LockstepLink(codec, sample_delay=lt.sample_delay_steps, duty_delay=lt.duty_delay_steps)
         if lt.sample_delay_steps or lt.duty_delay_steps

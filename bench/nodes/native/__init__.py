@@ -32,6 +32,10 @@ program:
   ``cc_foc_t`` and ``cc_sup_t`` by address); ``controller_node.py``: the
   Python side (set-up, the bench commands, the report) and ``bench
   controller --engine native``.
+- ``bn_pair.h``, ``bn_pair.c``: the in-process native pair: the plant unit and
+  the controller unit stepped together for many periods per call, the frames
+  passed in memory (:func:`bench.nodes._loops.run_inprocess`'s loop); driven
+  by :mod:`._pair`.
 - ``echo.c``: answers each PhaseSamples with a PwmDuty (same step, E2E CRC),
   or pings (round-trip times): the transports, the codec and the E2E check
   end to end, from python-can or from itself.
@@ -39,13 +43,18 @@ program:
 The frames are packed and unpacked with the C code ``bench codegen`` writes
 from ``dbc/bench.dbc`` (cantools, :mod:`bench.wire._ccodec`) and protected
 with its E2E helper (:func:`bench.cli.codegen.generate_e2e`); firmware/ uses
-the same two.  :func:`._native.build` generates them and compiles the library
-(``libbench_native.so``) and the programs with the system's C compiler.
+the same two.  :func:`._native.build` generates them and compiles the one
+library (``libbench_native.so``: every unit above, the plant core and the
+controller core) and the programs with the system's C compiler;
+:func:`._native.library` builds it once per source change into the user's
+cache and loads it once per process for every user.  ``bn.h`` holds what the
+units share (``bn_frame_t``, ``bn_sig_t``), mirrored once in
+:mod:`._native` (``Frame``, ``Sig``).
 
 What is left for the loop of issue 29:
 
-- the in-process native runs (the plant unit and the controller unit paired
-  in one C call, no transport) and ``inprocess_native.us_per_step_tt_dq``;
+- the lockstep latency model in the in-process pair (such runs take the
+  Python loop);
 - the plant faults, sensor noise and load profiles in the plant core, so the
   native plant serves the runs that have them (today: the Python node, with
   a line saying why);
