@@ -75,6 +75,15 @@ def test_perf_quick_writes_every_figure_and_renders_the_docs(
         r = res["realtime_native"][name]
         assert r["node_engines"]["plant"] == "native" and "controller" in r["note"]
         assert 0 <= r["missed_pct"] <= 100 and r["busy_us_median"] > 0
+    # the in-process native pair: inside C, the whole loop, each unit's share
+    nat = res["inprocess_native"]
+    assert nat["wall_us_per_step_tt_dq"] >= nat["us_per_step_tt_dq"] > 0
+    assert nat["plant_us"] > 0 and nat["controller_us"] > 0
+    assert nat["python_loop_wall_us_per_step_tt_dq"] > 0
+    assert 0 < nat["returns_per_1000_steps"] < 1000
+    assert (
+        res["verdicts"]["inprocess_native_us_per_step_tt_dq"]["value"] == (nat["us_per_step_tt_dq"])
+    )
     assert res["codec"]["analyze_frames"] >= 20_000
     assert res["codec"]["analyze_frames_per_s"] > 0
     # both engines (the compiled one where it is built), in the same run
@@ -184,6 +193,30 @@ def test_a_missed_target_is_explained_and_a_met_one_is_not() -> None:
     assert "**Real time, 10 kHz with `--rt-priority`.**" not in render_benchmarks(res)
 
 
+def test_a_missed_native_pair_target_names_the_units_share() -> None:
+    res = copy.deepcopy(_committed())
+    nat = {
+        "us_per_step_tt_dq": 1.5,
+        "wall_us_per_step_tt_dq": 20.0,
+        "returns_per_1000_steps": 50.0,
+        "plant_us": 0.9,
+        "controller_us": 0.4,
+        "python_loop_wall_us_per_step_tt_dq": 300.0,
+        "steps": 22000.0,
+    }
+    res["inprocess_native"] = nat
+    res["verdicts"] = verdicts(res)
+    v = res["verdicts"]["inprocess_native_us_per_step_tt_dq"]
+    assert v["value"] == 1.5 and not v["met"]
+    page = render_benchmarks(res)
+    assert "**In-process native pair.** The pair spends 1.50 us per step" in page
+    assert "the plant unit takes 0.900 us" in page and "controller unit 0.400 us" in page
+    nat["us_per_step_tt_dq"] = 0.7
+    res["verdicts"] = verdicts(res)
+    assert res["verdicts"]["inprocess_native_us_per_step_tt_dq"]["met"]
+    assert "**In-process native pair.**" not in render_benchmarks(res)
+
+
 def test_late_figures_count_skipped_periods_as_missed() -> None:
     # 1,000 periods computed, 13 late of which 2 ended a host stall; the stalls skipped 40
     f = late_figures(1000, 13, 2, 40)
@@ -198,10 +231,11 @@ def test_the_native_plant_figures_are_rendered_when_measured() -> None:
     ``lockstep_native``; a perf.json without them renders as before."""
     from bench.studies._perf import NATIVE_NOTE
 
-    res = _committed()
+    res = copy.deepcopy(_committed())
+    res.pop("realtime_native", None)
+    res.pop("lockstep_native", None)
     plain = render_benchmarks(res)
     assert "native plant" not in plain
-    res = copy.deepcopy(res)
     res["realtime_native"] = {
         k: {**v, "note": NATIVE_NOTE} for k, v in copy.deepcopy(res["realtime_fifo"]).items()
     }

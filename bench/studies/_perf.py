@@ -48,6 +48,8 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
+from bench._errors import BenchError
+
 #: SCHED_FIFO priority of the plant in the real-time section (controller one below).
 RT_PRIORITY = 80
 #: Fewest frames of the capture ``bench analyze`` is timed on (full run).
@@ -104,6 +106,14 @@ TARGET_LIST = (
         True,
         10.0,
         "x",
+    ),
+    Target(
+        "inprocess_native_us_per_step_tt_dq",
+        "in-process native pair (plant and controller stepped in C, frames in memory), "
+        "tt-dq, 10 kHz, per step",
+        False,
+        0.8,
+        "us",
     ),
     Target(
         "switching_rtf_10khz",
@@ -423,6 +433,65 @@ def inprocess_section(quick: bool, repeats: int, n_steps: int) -> dict[str, Any]
         node[e] = {"us_p50": 1e6 * r["p50"], "us_p99": 1e6 * r["p99"]}
     inproc["plant_node_10khz"] = node
     return inproc
+
+
+def inprocess_native_section(n_steps: int, repeats: int) -> dict[str, Any]:
+    """The in-process native pair (:func:`bench.nodes.native._pair.run_pair`): ``wen-5.1``
+    with tt-dq at 10 kHz, :data:`SETTLE_STEPS` + ``n_steps`` periods, as
+    :func:`bench.nodes._loops.run_inprocess` runs it by default.
+
+    ``us_per_step_tt_dq``: the time inside the C calls per period (the start-up's
+    periods included: one call covers many periods), median of ``repeats`` runs;
+    ``wall_us_per_step_tt_dq``: the whole loop's per period, with the returns to Python
+    (a bench command fed, a command due) and every frame made a :class:`can.Message`;
+    ``returns_per_1000_steps``; ``plant_us`` and ``controller_us``: each unit's share
+    per period, from one more run with the units timed (two clock reads more per frame
+    and per period); ``python_loop_wall_us_per_step_tt_dq``: the Python loop's whole run
+    per period on the same scenario (one run, the same cores).
+    """
+    from bench.nodes._loops import (
+        INPROCESS_LEAD,
+        command_frames,
+        inprocess_native_unavailable,
+        make_controller_node,
+        make_plant_node,
+        run_inprocess,
+    )
+    from bench.nodes.native._pair import PairRun, run_pair
+    from bench.scenarios._schema import load_scenario
+    from bench.scenarios._setup import sample_period
+    from bench.wire._codec import Codec
+
+    scn = load_scenario("wen-5.1")
+    scn = scn.with_overrides(duration=(SETTLE_STEPS + n_steps) * sample_period(scn))
+    codec = Codec()
+    cmds = command_frames(scn, codec)
+
+    def one(timed: bool) -> PairRun:
+        pn = make_plant_node(scn, codec)
+        cn = make_controller_node(scn, "tt-dq", codec)
+        why = inprocess_native_unavailable(pn, cn, latency=False)
+        if why is not None:
+            raise BenchError(f"bench perf: in-process native pair: {why}")
+        m = PairRun(timed=timed)
+        run_pair(pn, cn, cmds, INPROCESS_LEAD, measure=m)
+        return m
+
+    runs = [one(False) for _ in range(repeats)]
+    timed = one(True)
+    t0 = time.perf_counter()
+    run_inprocess(scn, "tt-dq", codec, loop="python")
+    py_wall = time.perf_counter() - t0
+    steps = runs[0].steps
+    return {
+        "us_per_step_tt_dq": statistics.median(1e6 * r.c_seconds / r.steps for r in runs),
+        "wall_us_per_step_tt_dq": statistics.median(1e6 * r.wall_seconds / r.steps for r in runs),
+        "returns_per_1000_steps": 1e3 * runs[0].calls / steps,
+        "plant_us": 1e6 * timed.plant_seconds / timed.steps,
+        "controller_us": 1e6 * timed.ctl_seconds / timed.steps,
+        "python_loop_wall_us_per_step_tt_dq": 1e6 * py_wall / steps,
+        "steps": float(steps),
+    }
 
 
 # -- 2. lockstep ----------------------------------------------------------------------------
@@ -752,6 +821,8 @@ def run_perf(
     res["inprocess"] = inprocess_section(quick, repeats, n_steps)
     if res["inprocess"]["rtf_10khz_tt_dq"] < TARGETS["inprocess_rtf_10khz_tt_dq"]:
         res["inprocess_profile_tt_dq"] = profile_inprocess("tt-dq", n_steps)
+    say("1b. the in-process native pair")
+    res["inprocess_native"] = inprocess_native_section(n_steps, repeats)
     with tempfile.TemporaryDirectory() as tmp:
         tmpd = Path(tmp)
         say("2. the transport's send cost, and two processes in lockstep")
@@ -830,6 +901,10 @@ def verdicts(res: dict[str, Any]) -> dict[str, dict[str, Any]]:
         "inprocess_compiled_over_python_tt_dq": (
             float(inp["tt_dq_10khz"].get("compiled_over_python", math.nan)),
             "same run",
+        ),
+        "inprocess_native_us_per_step_tt_dq": (
+            float(res.get("inprocess_native", {}).get("us_per_step_tt_dq", math.nan)),
+            "wen-5.1, time inside the C calls" if "inprocess_native" in res else "not measured",
         ),
         "switching_rtf_10khz": (sw["rtf"], f"{e_sw} engine"),
         "lockstep_periods_per_s": (ls["steps_per_s"], f"{ls['transport']}, {ls.get('engine')}"),
@@ -1000,6 +1075,33 @@ def figures_sections(res: dict[str, Any]) -> list[str]:
     lines += _table(
         ["estimator", "controller engine", "per step", "PWM rate", "real-time factor"], rows
     )
+    nat = res.get("inprocess_native")
+    if nat is not None:
+        lines += [
+            "",
+            "The in-process native pair (`bench.nodes.native._pair`: the plant unit and the "
+            "controller unit stepped in C for many periods per call, the frames passed in "
+            "memory; what `bench suite --inprocess`, the sweeps and in-process runs use by "
+            f"default), wen-5.1 with tt-dq at 10 kHz, {_num(nat['steps'])} periods:",
+            "",
+        ]
+        lines += _table(
+            ["figure", "per step"],
+            [
+                ["inside the C calls", _num(nat["us_per_step_tt_dq"], "us")],
+                ["of which the plant unit (units timed)", _num(nat["plant_us"], "us")],
+                ["of which the controller unit (units timed)", _num(nat["controller_us"], "us")],
+                [
+                    "the whole loop, frames made Python objects "
+                    f"({_num(nat['returns_per_1000_steps'])} returns per 1,000 steps)",
+                    _num(nat["wall_us_per_step_tt_dq"], "us"),
+                ],
+                [
+                    'the Python loop on the same cores (`run_inprocess(..., loop="python")`)',
+                    _num(nat["python_loop_wall_us_per_step_tt_dq"], "us"),
+                ],
+            ],
+        )
     ls = res["lockstep"]
     lines += [
         "",
@@ -1184,6 +1286,25 @@ def _missed_reasons(res: dict[str, Any]) -> list[str]:
             f"({_num(plant_us, 'us')}) includes: a `Sample` built every period, the "
             "states copied back from the core. The models' arithmetic is no longer what "
             "the loop spends."
+        )
+    nat = res.get("inprocess_native")
+    if nat is not None and not v["inprocess_native_us_per_step_tt_dq"]["met"]:
+        us = nat["us_per_step_tt_dq"]
+        rest = us - nat["plant_us"] - nat["controller_us"]
+        out.append(
+            f"- **In-process native pair.** The pair spends {_num(us, 'us')} per step inside "
+            f"C against the target's {_num(TARGETS['inprocess_native_us_per_step_tt_dq'], 'us')}. "
+            f"With the units timed, the plant unit takes {_num(nat['plant_us'], 'us')} per "
+            "period (the model's step with its PWM sub-intervals, the commands, and the "
+            f"instant's frames encoded with their CRC) and the controller unit "
+            f"{_num(nat['controller_us'], 'us')} (the frames decoded and checked, the tt-dq "
+            f"core's step, the duty and telemetry encoded); the pair's own hand-over about "
+            f"{_num(rest, 'us')}. No Python runs per period "
+            f"({_num(nat['returns_per_1000_steps'])} returns per 1,000 steps, for the bench "
+            "commands): what is left is the two cores' arithmetic. The figures are "
+            "wall-clock times on a shared two-core machine (one-minute load average "
+            f"{_num(load)} at the start of this run): other work on the cores lengthens "
+            "every one of them."
         )
     if not v["switching_rtf_10khz"]["met"]:
         e_sw, sw = _fastest(inp["switching_10khz"])

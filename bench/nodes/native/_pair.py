@@ -127,20 +127,16 @@ def _messages(rec: Any, n: int) -> list[can.Message]:
     lens = a["len"].tolist()
     flags = a["flags"].tolist()
     raw = a["data"].tobytes()
-    out = []
     Message = can.Message
+    flag = [(bool(f & 1), bool(f & 2), bool(f & 4)) for f in range(8)]
+    out = []
     for j in range(n):
-        fl = flags[j]
+        ext, fd, brs = flag[flags[j] & 7]
         o = 64 * j
+        # can.Message's parameters in order: timestamp, arbitration_id, is_extended_id,
+        # is_remote_frame, is_error_frame, channel, dlc, data, is_fd, is_rx, bitrate_switch
         out.append(
-            Message(
-                arbitration_id=ids[j],
-                is_extended_id=bool(fl & 1),
-                is_fd=bool(fl & 2),
-                bitrate_switch=bool(fl & 4),
-                data=raw[o : o + lens[j]],
-                check=False,
-            )
+            Message(0.0, ids[j], ext, False, False, None, None, raw[o : o + lens[j]], fd, True, brs)
         )
     return out
 
