@@ -20,9 +20,16 @@ import can
 from bench._errors import BenchError
 from bench.nodes._clock import RealTimeClock
 from bench.nodes._controller_node import ControllerNode
-from bench.nodes._counters import RejectionSummary, rejection_text
 from bench.nodes._plan import RunPlan
-from bench.nodes._plant_node import PlantNode, fault_name
+from bench.nodes._plant_node import PlantNode
+from bench.nodes._plant_text import (
+    LAST_ANSWER_S,
+    RETRANSMIT_S,
+    STATE_DONE,
+    PlantDiagnostics,
+    stall_text,
+)
+from bench.nodes._plant_text import trip_text as trip_text  # where the run and tests look
 from bench.nodes._rt import no_gc
 from bench.nodes._send import send_all
 from bench.scenarios._faults import Fault
@@ -40,16 +47,12 @@ from bench.scenarios._setup import (
     sample_period,
 )
 from bench.wire._codec import Codec
-from bench.wire._protocol import CMD_NONE, STATE_IDLE
+from bench.wire._protocol import CMD_NONE
 from controller import Controller
 from plant_rt import FAULT_WATCHDOG, Plant, ProtectionPars
 
-#: ``PlantStatus.state`` of the plant's last frame: the run is over, the plant idle.
-STATE_DONE = STATE_IDLE
 STATE_RUN = 1
 
-#: Lockstep: resend the recent frames when the expected duty has not come in this time.
-RETRANSMIT_S = 0.05
 #: Lockstep: give up when nothing arrives for this long.
 STALL_S = 20.0
 #: Real-time plant watchdog: trip after this many PWM periods without a valid duty ...
@@ -396,69 +399,6 @@ def plant_loop(
     send_all(bus, [node.status_frame(STATE_DONE, node.fault)], node.counters)
 
 
-class PlantDiagnostics:
-    """What a running plant says on stderr, for the author of the controller on the bus.
-
-    Once a second, the ``PwmDuty`` frames rejected in that second
-    (``PwmDuty: 722 rejected (bad_crc) in the last second``), and a trip as
-    soon as it happens, with what the controller did wrong for ``wrong_step``.
-    """
-
-    def __init__(self, node: PlantNode) -> None:
-        self.node = node
-        self.summary = RejectionSummary("PwmDuty")
-        self.fault = node.fault
-        self.t_check = 0.0
-
-    def poll(self, force: bool = False) -> None:
-        now = time.monotonic()
-        if not force and now - self.t_check < 0.1:
-            return
-        self.t_check = now
-        node = self.node
-        if node.fault != self.fault:
-            self.fault = node.fault
-            if node.fault:
-                print(f"plant: {trip_text(node.fault, node.fault_step)}", file=sys.stderr)
-        line = self.summary.poll(node.duty_rejected, now, force)
-        if line:
-            print(f"plant: {line}", file=sys.stderr, flush=True)
-
-
-def trip_text(code: int, step: int) -> str:
-    """One line on a trip: its fault name, period, and for ``wrong_step`` the remedy."""
-    name = fault_name(code)
-    s = f"tripped {name} in period {step}, inverter off until a reset"
-    if name == "wrong_step":
-        s += (
-            ": a PwmDuty came with step 0, which answers no sample; the duty computed from "
-            "PhaseSamples step k must carry step k + 1 (docs/PROTOCOL.md, step numbering)"
-        )
-    elif name == "watchdog":
-        s += ": no valid PwmDuty for too long"
-    return s
-
-
-def stall_text(node: PlantNode, waited_s: float) -> str:
-    """Why a lockstep plant waits: the duty it needs, what came instead, what was rejected."""
-    need = node.needed_duty()
-    s = f"no valid PwmDuty for step {need} (the answer to sample {need - 1}) in {waited_s:.0f} s"
-    later = sorted(t for t in node.duties if t > need)
-    if later:
-        # the plant sent sample need - 1 (and resent it): whether the controller's
-        # socket lost it or the controller passed it over, the bus does not say
-        s += (
-            f"; PwmDuty for later steps came ({', '.join(map(str, later[:4]))}): sample "
-            f"{need - 1}, sent and resent every {RETRANSMIT_S * 1e3:.0f} ms, was lost in transit "
-            f"(the controller's receive buffer) or the controller skipped sample {need - 1}"
-        )
-    if node.duty_rejected:
-        s += f"; PwmDuty: {rejection_text(node.duty_rejected)} since the start"
-    if not node.dut_answered and not node.duty_rejected:
-        s += " (is a controller running on this bus?)"
-    return s
-
-
 def _wait_first_answer(
     bus: can.BusABC,
     node: PlantNode,
@@ -636,12 +576,6 @@ def _serve_lockstep(
             diag.poll()
     if node.external and node.done and not stop():
         _last_answer(bus, node, ids, stop)
-
-
-#: Lockstep with a controller under test: how long the plant waits, resending, for
-#: the answer to its last sample (the controller may have lost it; no period follows
-#: that would make the plant resend it otherwise).
-LAST_ANSWER_S = 2.0
 
 
 def _last_answer(bus: can.BusABC, node: PlantNode, ids: set[int], stop: Callable[[], bool]) -> None:

@@ -553,7 +553,7 @@ def plant_loop_native(
     here.  The node's python-can bus stays open beside it and is not read.
     """
     from bench.nodes._clock import DEFAULT_SPIN_S, default_stall_s
-    from bench.nodes._loops import (
+    from bench.nodes._plant_text import (
         LAST_ANSWER_S,
         STATE_DONE,
         PlantDiagnostics,
