@@ -1,7 +1,7 @@
 """The recorder of a run: every frame of the bus(es) into one python-can log file.
 
 :class:`Recorder` keeps every frame (tagged with its bus: 1 the plant side, 2
-the controller side of a latency link), which the capture is written from, and follows
+the controller side of a latency link), writes it to the capture and follows
 the plant's step from the sample counters, which paces the bench's commands
 (:mod:`bench.runs._run`).  :class:`Recording` opens the buses, the writer
 and the notifiers of one run and closes them in order.
@@ -12,7 +12,6 @@ from __future__ import annotations
 import threading
 import time
 from pathlib import Path
-from typing import Any
 
 import can
 
@@ -26,12 +25,7 @@ class Recorder(can.Listener):
     """Keeps every frame (with the index of the bus it came from) and writes the capture."""
 
     def __init__(
-        self,
-        codec: Codec,
-        writer: can.Listener | None,
-        channel: int,
-        *,
-        watch_duties: bool = False,
+        self, codec: Codec, writer: can.Listener, channel: int, *, watch_duties: bool = False
     ) -> None:
         self.codec = codec
         self.writer = writer
@@ -81,8 +75,7 @@ class Recorder(can.Listener):
         msg.channel = self.channel
         with self.lock:
             self.frames.append(msg)
-            if self.writer is not None:
-                self.writer.on_message_received(msg)
+            self.writer.on_message_received(msg)
         known_id = not msg.is_extended_id and msg.arbitration_id in self.run_ids_frames
         if self.run_id is None and known_id:
             # listening before the start: only a frame that passes its E2E check
@@ -135,101 +128,31 @@ class Recorder(can.Listener):
 
 
 def socket_drops(bus: can.BusABC) -> int | None:
-    """Datagrams the kernel dropped on ``bus``'s UDP socket (its receive buffer was full).
+    """Frames the recorder lost on ``bus``'s UDP socket: those the kernel dropped (its
+    receive buffer was full), and those still queued in it, unread, when its reader
+    has stopped (a drain that gave up: :func:`drain`'s limit).
 
-    The ``drops`` column of ``/proc/net/udp`` (``udp6``) for the socket's inode:
-    every frame the recorder lost on udp_multicast, since it reads all it gets.
-    None where the bus has no UDP socket or the system does not say (not Linux).
+    The drops are the ``drops`` column of ``/proc/net/udp`` (``udp6``) for the
+    socket's inode; the queued ones are read out here and counted.  None where
+    the bus has no UDP socket or the system does not say (not Linux).
     """
+    import os
+
     sock = getattr(getattr(bus, "_multicast", None), "_socket", None)
     if sock is None:
         return None
-    return _drops_of_fd(sock.fileno())
-
-
-class NativeReader:
-    """Reads one bus with the native nodes' receiver and hands every frame to a listener.
-
-    python-can's udp_multicast receive costs tens of microseconds a frame in
-    Python (measured: 92 us a frame on this 2-core host under load), more than
-    a native pair at 10 kHz leaves (about 40,000 frames/s); the kernel then
-    drops what the recorder's socket buffer cannot hold.  ``bn_recv``
-    (bench/nodes/native/bn_bus.c: the same wire formats, udp_multicast and
-    SocketCAN) receives and unpacks a frame in C with the GIL released, and a
-    thread of this reader turns it into a :class:`can.Message` for the listener.
-    The run's python-can bus stays open beside it for sending (the bench's
-    commands).
-    """
-
-    def __init__(self, spec: BusSpec, listener: can.Listener) -> None:
-        import ctypes
-
-        from bench.nodes.native._plant_native import Frame, open_native_bus
-
-        self.bus = open_native_bus(spec)
-        self.listener = listener
-        self._frame = Frame()
-        self._ref = ctypes.byref(self._frame)
-        #: ``bn_bus_t.fd`` (bn.h: after ``int kind``), for the socket's drop count.
-        self.fd = ctypes.c_int.from_buffer(self.bus.buf, 4).value
-        self._stop = threading.Event()
-        self.lost: int | None = None
-        self.thread = threading.Thread(target=self._run, name="native-recorder", daemon=True)
-        self.thread.start()
-
-    def _run(self) -> None:
-        dll, ptr, f, ref = self.bus.dll, self.bus.ptr, self._frame, self._ref
-        on = self.listener.on_message_received
-        while not self._stop.is_set():
-            r = dll.bn_recv(ptr, ref, 50_000_000)  # 50 ms, then the stop flag
-            if r <= 0:
-                continue  # a timeout (an error: the socket is gone; stop() ends it)
-            flags = f.flags
-            on(
-                can.Message(
-                    timestamp=f.t_ns * 1e-9 if f.t_ns else time.time(),
-                    arbitration_id=f.id,
-                    is_extended_id=bool(flags & 1),
-                    is_fd=bool(flags & 2),
-                    bitrate_switch=bool(flags & 4),
-                    data=bytes(f.data)[: f.len],
-                    check=False,
-                )
-            )
-
-    def drops(self) -> int | None:
-        """Frames its socket dropped (:func:`socket_drops`)."""
-        return _drops_of_fd(self.fd)
-
-    def stop(self) -> None:
-        """End the thread; the socket's drop count is taken (:attr:`lost`), then it is closed."""
-        self._stop.set()
-        self.thread.join(timeout=5.0)
-        self.lost = self.drops()
-        self.bus.close()
-
-
-def native_reader(spec: BusSpec, listener: can.Listener) -> NativeReader | None:
-    """A :class:`NativeReader` on ``spec`` where the native receiver speaks its transport
-    and its library is built, else None (python-can's notifier reads it)."""
-    from bench._errors import BenchError
-    from bench.nodes.native._plant_native import NATIVE_INTERFACES
-
-    if spec.interface not in NATIVE_INTERFACES:
-        return None
     try:
-        return NativeReader(spec, listener)
-    except (BenchError, OSError):
-        return None
-
-
-def _drops_of_fd(fd: int) -> int | None:
-    import os
-
-    try:
-        inode = str(os.fstat(fd).st_ino)
+        inode = str(os.fstat(sock.fileno()).st_ino)
     except OSError:
         return None
+    unread = 0
+    sock.setblocking(False)
+    try:
+        while True:
+            sock.recv(4096)
+            unread += 1
+    except OSError:  # BlockingIOError: empty
+        pass
     for table in ("/proc/net/udp", "/proc/net/udp6"):
         try:
             lines = Path(table).read_text().splitlines()[1:]
@@ -238,7 +161,7 @@ def _drops_of_fd(fd: int) -> int | None:
         for line in lines:
             cols = line.split()
             if len(cols) >= 13 and cols[9] == inode:
-                return int(cols[12])
+                return int(cols[12]) + unread
     return None
 
 
@@ -259,29 +182,12 @@ def drain(recorders: list[Recorder], quiet_s: float = 0.5, limit_s: float = 10.0
         time.sleep(quiet_s)
 
 
-def _stop_receiving(bus: can.BusABC) -> None:
-    """A python-can bus kept for sending only: its socket's receive buffer made small, so
-    that the kernel does not hold a second copy of the run's frames (best effort)."""
-    import socket
-
-    sock = getattr(getattr(bus, "_multicast", None), "_socket", None) or getattr(
-        bus, "socket", None
-    )
-    if isinstance(sock, socket.socket):
-        try:
-            sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
-        except OSError:
-            pass
-
-
 class Recording:
     """The buses of a run (one, or two with a latency link), each with its recorder.
 
     Opening the buses comes first, so a bus that cannot be opened leaves no
-    empty capture behind.  Each bus is read by a :class:`NativeReader` where
-    the native receiver speaks its transport, else by python-can's notifier.
-    :meth:`close` drains what is still queued, stops the readers, writes the
-    capture from the frames kept (in time order) and closes the buses.
+    empty capture behind.  :meth:`close` drains what is still queued, then
+    stops the notifiers, the writer and the buses.
     """
 
     def __init__(
@@ -296,31 +202,19 @@ class Recording:
                 b.shutdown()
             raise
         self.writer = can.Logger(str(capture))
-        # the capture is written from the frames kept at close (Recorder.frames): the
-        # writer's 10 us a frame is not spent while a run's frames arrive
         # duties are watched where the controller sends them (its side of a link)
         n = len(self.buses)
         self.recorders = [
-            Recorder(codec, None, i + 1, watch_duties=watch_duties and i == n - 1)
+            Recorder(codec, self.writer, i + 1, watch_duties=watch_duties and i == n - 1)
             for i in range(n)
         ]
         self.frames_lost: int | None = None
         for r in self.recorders[1:]:
             r.lock = self.recorders[0].lock  # one writer: one lock, or the capture is corrupted
-        # each bus read by the native receiver where it can (NativeReader), else by
-        # python-can's notifier; the python-can bus sends the bench's commands
-        self.readers: list[NativeReader] = []
-        self.notifiers: list[can.Notifier] = []
-        self._drop_sources: list[Any] = []
-        for spec, b, r in zip(specs, self.buses, self.recorders, strict=True):
-            reader = native_reader(spec, r)
-            if reader is not None:
-                self.readers.append(reader)
-                self._drop_sources.append(reader)
-                _stop_receiving(b)
-            else:
-                self.notifiers.append(can.Notifier(b, [r], timeout=0.05))
-                self._drop_sources.append(b)
+        self.notifiers = [
+            can.Notifier(b, [r], timeout=0.05)
+            for b, r in zip(self.buses, self.recorders, strict=True)
+        ]
 
     @property
     def plant_bus(self) -> can.BusABC:
@@ -375,19 +269,10 @@ class Recording:
         drain(self.recorders)
         for nt in self.notifiers:
             nt.stop()
-        for rd in self.readers:
-            rd.stop()
-        drops = [
-            d.lost if isinstance(d, NativeReader) else socket_drops(d)
-            for d in self._drop_sources
-        ]
+        drops = [socket_drops(b) for b in self.buses]
         #: Frames the recorder's sockets lost (their receive buffers overflowed),
         #: None where the transport does not say (:func:`socket_drops`).
         self.frames_lost = None if None in drops else sum(d for d in drops if d is not None)
-        try:
-            for m in self.frames():
-                self.writer.on_message_received(m)
-        finally:
-            self.writer.stop()
+        self.writer.stop()
         for b in self.buses:
             b.shutdown()
