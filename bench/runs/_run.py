@@ -306,8 +306,8 @@ def run_scenario(
     meta["recorder_frames_lost"] = rec.frames_lost
     if rec.frames_lost:
         print(
-            f"warning: the recorder lost {rec.frames_lost} frames (its receive buffer overflowed); "
-            "signals.csv lacks them",
+            f"warning: the recorder lost {rec.frames_lost} frames (its receive buffer "
+            "overflowed, or it had not read them when the run ended); signals.csv lacks them",
             file=sys.stderr,
             flush=True,
         )
