@@ -67,7 +67,14 @@ def _show(tmp: Path, scenario: Path) -> Path:
 def _controller(
     show: Path, port: str, mistake: str | None = None, extra_ctrl: tuple[str, ...] = ()
 ) -> subprocess.Popen[str]:
-    """The test controller on ``port``, once it listens."""
+    """The test controller on ``port``, once it listens.
+
+    The native libraries are built first: ``bench run`` builds them before its
+    plant starts, and a first build on a loaded host takes longer than the
+    controller's ``--idle-s`` (it would give up before the first sample)."""
+    from bench.runs._run import build_native_libraries
+
+    build_native_libraries()
     ctrl = subprocess.Popen(
         [sys.executable, str(CONTROLLER), "--show", str(show), "-c", GROUP, "-p", port,
          "--idle-s", "30", *(["--mistake", mistake] if mistake else []), *extra_ctrl],
