@@ -69,8 +69,9 @@ static int loop_lockstep(bn_plant_loop_t *L)
     for (;;) {
         if (done(u)) {
             /* bench.nodes._loops._last_answer: a controller under test may have lost
-             * the last sample; resend until its answer came, or a while */
-            if (!u->external || u->stopped || L->last_phase == 2) return BN_EV_DONE;
+             * the last sample; resend until its answer came, or a while (also after a
+             * stop command: the bench's last command stops the run at its last step) */
+            if (!u->external || L->last_phase == 2) return BN_EV_DONE;
             int64_t now = bn_now_ns();
             if (L->last_phase == 0) {
                 L->last_phase = 1;
