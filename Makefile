@@ -50,10 +50,10 @@ reference: $(STAMP)
 	$(BIN)/bench suite paper --inprocess --out docs/results --overwrite
 	$(BIN)/bench suite report docs/results --readme README.md
 
-# Benchmarks: docs/perf/perf.json, and docs/BENCHMARKS.md and the README's
-# perf block rendered from it (a few minutes).
+# Benchmarks: docs/perf/perf.json, and docs/BENCHMARKS.md, the README's perf
+# block and docs/REALTIME.md's native block rendered from it (a few minutes).
 perf: $(STAMP)
-	$(BIN)/bench perf --out docs/perf --doc docs/BENCHMARKS.md --readme README.md
+	$(BIN)/bench perf --out docs/perf --doc docs/BENCHMARKS.md --readme README.md --realtime-doc docs/REALTIME.md
 
 # The scenario reference, from the schema (tests/test_scenarios_doc.py checks it).
 docs: $(STAMP)

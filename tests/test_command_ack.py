@@ -153,10 +153,12 @@ def test_a_dropping_controller_gives_the_clean_trace(tmp_path: Path) -> None:
     ref = _signals(clean)
     meta = json.loads((clean / "meta.json").read_text())
     assert meta["commands"]["commands_verified"] and meta["commands"]["commands_late"] == 0
+    assert meta["node_engines"] == {"plant": "native"}  # its acks gate the native loop
     assert json.loads((clean / "metrics.json").read_text())["late_commands"] == 0
     for seed in (1, 2, 3):
         res, d = _run(tmp_path / f"drop{seed}", extra_ctrl=("--drop", "0.1", "--seed", str(seed)))
         assert res.returncode == 0, res.stderr[-2000:]
+        assert json.loads((d / "meta.json").read_text())["node_engines"] == {"plant": "native"}
         assert _signals(d) == ref, f"seed {seed}: the trace changed"
 
 

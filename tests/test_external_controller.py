@@ -67,7 +67,14 @@ def _show(tmp: Path, scenario: Path) -> Path:
 def _controller(
     show: Path, port: str, mistake: str | None = None, extra_ctrl: tuple[str, ...] = ()
 ) -> subprocess.Popen[str]:
-    """The test controller on ``port``, once it listens."""
+    """The test controller on ``port``, once it listens.
+
+    The native libraries are built first: ``bench run`` builds them before its
+    plant starts, and a first build on a loaded host takes longer than the
+    controller's ``--idle-s`` (it would give up before the first sample)."""
+    from bench.runs._run import build_native_libraries
+
+    build_native_libraries()
     ctrl = subprocess.Popen(
         [sys.executable, str(CONTROLLER), "--show", str(show), "-c", GROUP, "-p", port,
          "--idle-s", "30", *(["--mistake", mistake] if mistake else []), *extra_ctrl],
@@ -214,6 +221,7 @@ def test_external_controller_is_run_and_scored(good_run: dict[str, Any]) -> None
     # the IMC-tuned speed loop holds the 100 rpm reference after the 50 ms ramp
     assert m["speed_err_max_rpm"] < 5.0
     assert meta["controller"] == "external" and meta["controller_name"] == "ext-py"
+    assert meta["node_engines"] == {"plant": "native"}  # the native loop serves it
     assert meta["controller_gains"] == {} and meta["dbc_version"] == "2.4"
     assert (run_dir / "run.png").is_file() and not (run_dir / "controller.log").exists()
     # PlantStatus every 100 ms of plant time (0.3 s: at 1000 and 2000) and at the end
@@ -303,6 +311,7 @@ def test_external_controller_in_real_time(tmp_path: Path) -> None:
     m = json.loads((run_dir / "metrics.json").read_text())
     meta = json.loads((run_dir / "meta.json").read_text())
     assert meta["mode"] == "realtime" and meta["controller"] == "external"
+    assert meta["node_engines"] == {"plant": "native"}
     assert "Traceback" not in res.stderr
     # the status is the trip's, and the trip is named; a controller that a loaded host
     # held back past a command's step is told so (exit 5), as a drive that applied a
@@ -411,6 +420,7 @@ def test_a_controller_killed_in_real_time_before_the_scoring_start_is_a_trip(
     assert "Traceback" not in err and "tripped its watchdog protection" in err
     m = json.loads((run_dir / "metrics.json").read_text())
     assert (run_dir / "meta.json").is_file() and m["plant_fault"] == "watchdog"
+    assert json.loads((run_dir / "meta.json").read_text())["node_engines"] == {"plant": "native"}
     # the plant's periods go on after the death: rows without telemetry, at least the
     # scored 0.4 s (a busy host may skip periods: steps_missing says how many)
     assert m["steps_without_telemetry"] >= 400 - m["steps_missing"] > 0

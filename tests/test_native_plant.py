@@ -205,17 +205,22 @@ def test_auto_says_why_the_python_node_serves(tmp_path: Path) -> None:
     assert len(why) == 1 and "[[faults]]" in why[0]
 
 
-def test_a_controller_under_test_is_served_by_the_python_node(tmp_path: Path) -> None:
-    """``--controller external``: the Python plant node serves it (its acknowledgements gate
-    every lockstep period in Python, and the end of its run resends the last sample until
-    it answers), with one line why in the plant's log; every period run and scored."""
+def test_a_controller_under_test_is_served_by_the_native_node(tmp_path: Path) -> None:
+    """``--controller external``: the native plant node serves it (its acknowledgements
+    gate every lockstep period in C, and the end of its run resends the last sample until
+    it answers), with no fallback line; every period run and scored, the last with the
+    controller's answer."""
+    import numpy as np
+
     from tests.test_external_controller import _run
 
     res, run_dir = _run(tmp_path)
     assert res.returncode == 0, res.stderr[-3000:]
     meta = json.loads((run_dir / "meta.json").read_text())
     m = json.loads((run_dir / "metrics.json").read_text())
-    assert meta["node_engines"] == {"plant": "python"}
+    assert meta["node_engines"] == {"plant": "native"}
     assert m["steps"] == 3001 and m["steps_missing"] == 0
-    log = (run_dir / "plant.log").read_text()
-    assert "a controller under test is served by the Python node only" in log
+    assert m["steps_without_telemetry"] == 0
+    tab = np.genfromtxt(run_dir / "signals.csv", delimiter=",", names=True)
+    assert np.isfinite(tab["theta_hat"][-1])
+    assert "the Python node serves this run" not in (run_dir / "plant.log").read_text()

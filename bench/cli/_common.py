@@ -14,6 +14,7 @@ import os
 import signal
 import sys
 import threading
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -148,23 +149,23 @@ def add_engine(p: argparse.ArgumentParser) -> None:
         "is installed; the controller's where it covers the estimator), python, native (each "
         "node's whole loop in C, on udp_multicast and socketcan), or auto (compiled, and the "
         "native plant and controller nodes where the build, the transport, the scenario and "
-        "the estimator allow, else the Python node with one line why; default)",
+        "the estimator allow, else the Python node with one line why; default); native that "
+        "cannot be served is refused with that line",
     )
 
 
 def add_controller_engine(p: argparse.ArgumentParser) -> None:
     """``bench controller --engine``: the controller's engine, or ``native`` (the node's
     whole loop in C, bench/nodes/native/controller_node.py). Default: the engine the
-    process inherits (``bench run``'s), else auto; auto and native run the native node
-    where it can serve."""
+    process inherits (``bench run``'s), else auto; :func:`choose_node_engine` decides."""
     p.add_argument(
         "--engine",
         choices=(*ENGINES, "native"),
         default=None,
         help="the controller's engine: compiled, python, auto, or native (the node's whole "
         "per-period loop in C on the compiled controller, over udp_multicast or socketcan; "
-        "else the Python node, with one line saying why). Default: auto (native where it "
-        "can serve, on the compiled engine)",
+        "refused with one line saying why where it cannot serve). Default: auto (native where "
+        "it can serve, on the compiled engine, else the Python node with that line)",
     )
 
 
@@ -195,24 +196,34 @@ def plant_engine(args: argparse.Namespace) -> str:
     return core
 
 
-def node_engine(args: argparse.Namespace, node: Any, interface: str, external: bool) -> str:
-    """The plant node's loop for ``--engine``: ``native`` or ``python``.
+#: ``--engine`` values that ask for a node's native loop (bench/nodes/native): ``auto``
+#: where it can serve, ``native`` always.
+NATIVE_ASKS = ("auto", "native")
 
-    ``native`` when asked for (or ``auto``) and
-    :func:`bench.nodes.native._plant_native.native_missing` finds nothing
-    against it; ``auto`` otherwise says why in one line and takes the Python
-    node, ``--engine native`` is refused with that line.
+
+def choose_node_engine(role: str, asked: str, why_not: Callable[[], str | None]) -> str:
+    """The one rule for which loop serves a node (``bench plant``, ``bench controller``).
+
+    ``asked`` is the node's ``--engine``; ``why_not()`` says in one line why the
+    native loop cannot serve this node (the transport, the scenario, the
+    controller, the build), or None when it can.  The rule:
+
+    - ``compiled`` or ``python``: the Python node (``why_not`` is not asked);
+    - ``auto``: ``native`` where it can serve, else the Python node with one line
+      on stderr, ``ROLE: the Python node serves this run: WHY``;
+    - ``native``: ``native`` where it can serve, else refused with one line,
+      ``--engine native: WHY`` (:class:`BenchError`: exit 2).
+
+    Returns ``"native"`` or ``"python"``.
     """
-    if args.engine not in ("auto", "native"):
+    if asked not in NATIVE_ASKS:
         return "python"
-    from bench.nodes.native._plant_native import native_missing
-
-    why = native_missing(node, interface, realtime=args.mode == "realtime", external=external)
+    why = why_not()
     if why is None:
         return "native"
-    if args.engine == "native":
+    if asked == "native":
         raise BenchError(f"--engine native: {why}")
-    print(f"plant: the Python node serves this run: {why}", file=sys.stderr, flush=True)
+    print(f"{role}: the Python node serves this run: {why}", file=sys.stderr, flush=True)
     return "python"
 
 

@@ -20,6 +20,7 @@ from bench.cli._common import (
     add_plan,
     add_rt,
     add_scenario_overrides,
+    choose_node_engine,
     node_rt,
     ready,
     run_id_arg,
@@ -32,7 +33,7 @@ from bench.cli._common import (
 def cmd_controller(args: argparse.Namespace) -> int:
     from bench.cli.plant import node_plan
     from bench.nodes._loops import controller_loop, controller_node
-    from bench.scenarios._setup import ENGINE_ENV, NATIVE
+    from bench.scenarios._setup import ENGINE_ENV
     from bench.wire._codec import Codec
 
     if args.engine is not None:
@@ -43,24 +44,20 @@ def cmd_controller(args: argparse.Namespace) -> int:
     if node.ctrl.engine_note:  # e.g. an estimator the compiled core lacks
         print(f"controller: {node.ctrl.engine_note}", file=sys.stderr)
     node.run_id = plan.run_id
-    # native where it can serve: asked for (--engine native, or bench run --engine native),
-    # or by default (auto, as the plant node); else the Python node, with one line why
-    if os.environ.get(ENGINE_ENV, "auto") in ("auto", NATIVE):
-        from bench.nodes.native.controller_node import native_unavailable
-
-        spec = plan.bus("controller")
-        why = native_unavailable(node, spec.interface)
-        if why is None:
-            return serve_native(
-                args,
-                spec,
-                node,
-                realtime=plan.mode == "realtime",
-                on_ready=ready,
-                stop=STOP.is_set,
-                sample_timeout_s=args.sample_timeout_ms * 1e-3,
-            )
-        print(why, file=sys.stderr)
+    spec = plan.bus("controller")
+    # the same rule as the plant node's (choose_node_engine); without --engine, the
+    # engine bench run's processes inherit, else auto
+    asked = os.environ.get(ENGINE_ENV) or "auto"
+    if choose_node_engine("controller", asked, lambda: _native_missing(node, spec)) == "native":
+        return serve_native(
+            args,
+            spec,
+            node,
+            realtime=plan.mode == "realtime",
+            on_ready=ready,
+            stop=STOP.is_set,
+            sample_timeout_s=args.sample_timeout_ms * 1e-3,
+        )
     return serve_node(
         args,
         plan.bus("controller"),
@@ -75,6 +72,12 @@ def cmd_controller(args: argparse.Namespace) -> int:
             sample_timeout_s=args.sample_timeout_ms * 1e-3,
         ),
     )
+
+
+def _native_missing(node: Any, spec: Any) -> str | None:
+    from bench.nodes.native.controller_node import native_unavailable
+
+    return native_unavailable(node, spec.interface)
 
 
 def serve_native(

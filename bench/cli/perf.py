@@ -31,6 +31,16 @@ def cmd_perf(args: argparse.Namespace) -> int:
         doc = Path(args.doc)
         doc.write_text(render_benchmarks(res), encoding="utf-8")
         print(f"written: {doc}")
+    if args.realtime_doc:
+        from bench.studies._perf import update_realtime_doc
+
+        rdoc = Path(args.realtime_doc)
+        try:
+            text = update_realtime_doc(rdoc.read_text(encoding="utf-8"), res)
+        except OSError as e:
+            raise BenchError(f"--realtime-doc {rdoc}: {e}") from None
+        rdoc.write_text(text, encoding="utf-8")
+        print(f"written: {rdoc} (native nodes block)")
     if args.readme:
         readme = Path(args.readme)
         try:
@@ -56,6 +66,11 @@ def register(sub: Any) -> None:
     )
     p.add_argument(
         "--doc", help="write the benchmarks page rendered from the figures (docs/BENCHMARKS.md)"
+    )
+    p.add_argument(
+        "--realtime-doc",
+        help="rewrite the native nodes' block of this page (docs/REALTIME.md, between its "
+        "perf-native markers)",
     )
     p.add_argument(
         "--readme", help="rewrite the perf block of this README (between its perf markers)"

@@ -27,7 +27,7 @@ from bench.cli._common import (
     add_rt,
     add_scenario_overrides,
     bus_spec,
-    node_engine,
+    choose_node_engine,
     plant_engine,
     ready,
     run_id_arg,
@@ -102,6 +102,12 @@ def node_plan(args: argparse.Namespace, role: str) -> Any:
     return plan
 
 
+def _native_missing(node: Any, spec: Any) -> str | None:
+    from bench.nodes.native._plant_native import native_missing
+
+    return native_missing(node, spec.interface)
+
+
 def cmd_plant(args: argparse.Namespace) -> int:
     import sys
 
@@ -131,7 +137,7 @@ def cmd_plant(args: argparse.Namespace) -> int:
     node.run_id = plan.run_id
     if plan.mode == "lockstep":
         node.pace_every = plan.pace_every
-    node.node_engine = node_engine(args, node, spec.interface, plan.dut_timeout_s > 0)
+    node.node_engine = choose_node_engine("plant", args.engine, lambda: _native_missing(node, spec))
     if node.node_engine == "native":
         from bench.nodes._loops import RETRANSMIT_S, STALL_S
         from bench.nodes.native._plant_native import open_native_bus, plant_loop_native

@@ -127,6 +127,44 @@ class Recorder(can.Listener):
                     self.done.set()
 
 
+def socket_drops(bus: can.BusABC) -> int | None:
+    """Frames the recorder lost on ``bus``'s UDP socket: those the kernel dropped (its
+    receive buffer was full), and those still queued in it, unread, when its reader
+    has stopped (a drain that gave up: :func:`drain`'s limit).
+
+    The drops are the ``drops`` column of ``/proc/net/udp`` (``udp6``) for the
+    socket's inode; the queued ones are read out here and counted.  None where
+    the bus has no UDP socket or the system does not say (not Linux).
+    """
+    import os
+
+    sock = getattr(getattr(bus, "_multicast", None), "_socket", None)
+    if sock is None:
+        return None
+    try:
+        inode = str(os.fstat(sock.fileno()).st_ino)
+    except OSError:
+        return None
+    unread = 0
+    sock.setblocking(False)
+    try:
+        while True:
+            sock.recv(4096)
+            unread += 1
+    except OSError:  # BlockingIOError: empty
+        pass
+    for table in ("/proc/net/udp", "/proc/net/udp6"):
+        try:
+            lines = Path(table).read_text().splitlines()[1:]
+        except OSError:
+            continue
+        for line in lines:
+            cols = line.split()
+            if len(cols) >= 13 and cols[9] == inode:
+                return int(cols[12]) + unread
+    return None
+
+
 def drain(recorders: list[Recorder], quiet_s: float = 0.5, limit_s: float = 10.0) -> None:
     """Wait until the recorders have read what is still queued in their sockets.
 
@@ -170,6 +208,7 @@ class Recording:
             Recorder(codec, self.writer, i + 1, watch_duties=watch_duties and i == n - 1)
             for i in range(n)
         ]
+        self.frames_lost: int | None = None
         for r in self.recorders[1:]:
             r.lock = self.recorders[0].lock  # one writer: one lock, or the capture is corrupted
         self.notifiers = [
@@ -230,6 +269,10 @@ class Recording:
         drain(self.recorders)
         for nt in self.notifiers:
             nt.stop()
+        drops = [socket_drops(b) for b in self.buses]
+        #: Frames the recorder's sockets lost (their receive buffers overflowed),
+        #: None where the transport does not say (:func:`socket_drops`).
+        self.frames_lost = None if None in drops else sum(d for d in drops if d is not None)
         self.writer.stop()
         for b in self.buses:
             b.shutdown()

@@ -303,6 +303,14 @@ def run_scenario(
         if isinstance(rep, dict) and "node_engine" in rep
     }
     meta["exit_codes"] = {role: p.returncode for role, p in procs}
+    meta["recorder_frames_lost"] = rec.frames_lost
+    if rec.frames_lost:
+        print(
+            f"warning: the recorder lost {rec.frames_lost} frames (its receive buffer "
+            "overflowed, or it had not read them when the run ended); signals.csv lacks them",
+            file=sys.stderr,
+            flush=True,
+        )
     if interrupted():
         meta["interrupted"] = True
     if pacer is not None:

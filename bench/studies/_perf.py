@@ -667,7 +667,209 @@ def realtime_run(
         "busy_us_median": float(jit.get("busy_median", math.nan)),
         "busy_us_p99": float(jit.get("busy_p99", math.nan)),
         "policy": str((plant_r.get("rt") or {}).get("policy", "normal")),
+        # frames the recorder's socket dropped (udp_multicast: the kernel's count); -1:
+        # the transport does not say
+        "recorder_frames_lost": float(
+            -1 if res.meta.get("recorder_frames_lost") is None else res.meta["recorder_frames_lost"]
+        ),
     }
+
+
+def recorder_frames_lost(runs: dict[str, dict[str, Any]]) -> float:
+    """Frames the recorder lost in ``runs`` (the native pair's real-time runs by rate), all
+    rates together; -1 when a run's transport does not say (issue 29,
+    ``realtime_native.recorder_frames_lost``)."""
+    lost = [r["recorder_frames_lost"] for r in runs.values()]
+    return -1.0 if any(x < 0 for x in lost) else float(sum(lost))
+
+
+def rate_rows(sec: dict[str, Any]) -> dict[str, dict[str, Any]]:
+    """The per-rate entries of a real-time section (``1kHz``, ...), without its totals."""
+    return {k: v for k, v in sec.items() if isinstance(v, dict)}
+
+
+#: The targets of issue 29 for the native nodes, on this 2-core machine (the issue's
+#: table): the native plant's own work at 10 kHz fits a tenth of the 100 us period;
+#: with ``--rt-priority`` a native pair misses at most 1 % of the periods at 4 kHz and
+#: 5 % at 10 kHz (where a bare C loop already wakes late in 1.5 % on this host);
+#: lockstep at 20,000 periods/s (2 s of a 10 kHz run per second of wall time, for the
+#: demo); and the recorder keeps every frame of a native pair.
+NATIVE_TARGET_LIST = (
+    Target(
+        "native_busy_us_p50_10khz",
+        "native plant node, work per period at 10 kHz, p50 (`realtime_native.10kHz.busy_us_median`)",
+        False,
+        10.0,
+        "us",
+    ),
+    Target(
+        "native_missed_pct_4khz",
+        "real time, native plant, `--rt-priority`, 4 kHz: periods missed "
+        "(`realtime_native.4kHz.missed_pct`)",
+        False,
+        1.0,
+        "%",
+    ),
+    Target(
+        "native_missed_pct_10khz",
+        "real time, native plant, `--rt-priority`, 10 kHz: periods missed "
+        "(`realtime_native.10kHz.missed_pct`)",
+        False,
+        5.0,
+        "%",
+    ),
+    Target(
+        "native_lockstep_periods_per_s",
+        "lockstep, native plant (`lockstep_native.steps_per_s`)",
+        True,
+        20000.0,
+        "periods/s",
+    ),
+    Target(
+        "native_recorder_frames_lost",
+        "frames the recorder lost beside the native pair, 1-10 kHz "
+        "(`realtime_native.recorder_frames_lost`)",
+        False,
+        0.0,
+        "frames",
+    ),
+)
+
+
+def _native_limit(key: str, res: dict[str, Any]) -> str:
+    """What limits a missed native target, from the same run's figures."""
+    if key == "native_lockstep_periods_per_s":
+        ls = res["lockstep_native"]
+        return (
+            f"the round trip sample -> duty through two processes and the transport, "
+            f"p50 {_num(ls['rtt_us_p50'], 'us')} (at most {_num(1e6 / ls['rtt_us_p50'])} "
+            "periods/s one after the other)"
+        )
+    if key == "native_recorder_frames_lost":
+        return "the recorder's receive buffer overflowed: its Python thread falls behind"
+    if key == "native_busy_us_p50_10khz":
+        r = res["realtime_native"]["10kHz"]
+        return (
+            f"the plant node's own period (receive, step, encode, send) on a host with load "
+            f"{_num(res['machine'].get('loadavg_1min_start', math.nan))} on "
+            f"{res['machine'].get('cpus')} cores; p99 {_num(r['busy_us_p99'], 'us')}"
+        )
+    r = res["realtime_native"]["4kHz" if key.endswith("4khz") else "10kHz"]
+    late = r["missed_pct"] - r["late_outside_stalls_pct"]
+    if r["periods_skipped"] > 0 and late >= r["late_outside_stalls_pct"]:
+        return (
+            f"host stalls: {r['host_stalls']:.0f} stalls ({_num(r['host_stall_ms_total'], 'ms')} in "
+            f"all, the longest {_num(r['host_stall_ms_max'], 'ms')}) skipped "
+            f"{r['periods_skipped']:,.0f} periods; late outside them "
+            f"{_num(r['late_outside_stalls_pct'], '%')}"
+        )
+    return (
+        f"late wake-ups outside host stalls: {_num(r['late_outside_stalls_pct'], '%')} "
+        f"(jitter p99 {_num(r['jitter_us_p99'], 'us')})"
+    )
+
+
+def native_verdicts(res: dict[str, Any]) -> dict[str, dict[str, Any]] | None:
+    """Each target of :data:`NATIVE_TARGET_LIST` against its figure (None: not measured)."""
+    nat, ls = res.get("realtime_native"), res.get("lockstep_native")
+    if nat is None or ls is None:
+        return None
+    figures = {
+        "native_busy_us_p50_10khz": nat["10kHz"]["busy_us_median"],
+        "native_missed_pct_4khz": nat["4kHz"]["missed_pct"],
+        "native_missed_pct_10khz": nat["10kHz"]["missed_pct"],
+        "native_lockstep_periods_per_s": ls["steps_per_s"],
+        "native_recorder_frames_lost": float(nat.get("recorder_frames_lost", -1.0)),
+    }
+    out = {}
+    for t in NATIVE_TARGET_LIST:
+        v = figures[t.key]
+        unknown = t.key == "native_recorder_frames_lost" and v < 0
+        met = (v >= t.value if t.at_least else v <= t.value) and not unknown
+        out[t.key] = {
+            "value": v,
+            "target": t.value,
+            "met": bool(met),
+            "limit": None
+            if met
+            else ("not said by the transport" if unknown else _native_limit(t.key, res)),
+        }
+    return out
+
+
+#: The markers of the native nodes' block in docs/REALTIME.md.
+NATIVE_DOC_BEGIN = "<!-- perf-native:begin (written by bench perf --realtime-doc; do not edit) -->"
+NATIVE_DOC_END = "<!-- perf-native:end -->"
+
+
+def render_realtime_native(res: dict[str, Any], source: str = "docs/perf/perf.json") -> str:
+    """The native nodes' block of docs/REALTIME.md from ``perf.json``'s ``realtime_native``
+    and ``lockstep_native``, each target with its verdict and, where missed, its limit."""
+    lines = [NATIVE_DOC_BEGIN, ""]
+    v = native_verdicts(res)
+    if v is None:
+        lines += [
+            f"The native nodes are not measured in `{source}` yet: `make perf` writes "
+            "`realtime_native` and `lockstep_native` (issue 29).",
+            "",
+            NATIVE_DOC_END,
+        ]
+        return "\n".join(lines)
+    load = res["machine"].get("loadavg_1min_start", math.nan)
+    lines += [
+        f"`bench perf` on this project's {res['machine'].get('cpus')}-core shared virtual machine "
+        f"(load {_num(load)} at the start; every figure below is from `{source}`; "
+        f"{res['realtime_native']['10kHz'].get('note', NATIVE_NOTE)}):",
+        "",
+    ]
+    rows = []
+    for t in NATIVE_TARGET_LIST:
+        r = v[t.key]
+        val = "n/a" if r["value"] < 0 and t.unit == "frames" else _num(r["value"], t.unit)
+        rows.append(
+            [t.figure, val, _target_text(t), "met" if r["met"] else "**missed**", r["limit"] or ""]
+        )
+    lines += _table(["figure", "measured", "target", "verdict", "limit"], rows)
+    rows = []
+    for name, r in rate_rows(res["realtime_native"]).items():
+        rows.append(
+            [
+                name,
+                str(r.get("policy", "normal")),
+                _num(r["missed_pct"], "%"),
+                _num(r["late_outside_stalls_pct"], "%"),
+                f"{r['periods_skipped']:,.0f}",
+                f"{_num(r['busy_us_median'])} / {_num(r['busy_us_p99'])} us",
+                "n/a"
+                if r.get("recorder_frames_lost", -1) < 0
+                else f"{r['recorder_frames_lost']:,.0f}",
+            ]
+        )
+    lines += [""]
+    lines += _table(
+        [
+            "rate",
+            "policy",
+            "periods missed",
+            "late outside host stalls",
+            "periods skipped",
+            "work p50 / p99",
+            "recorder frames lost",
+        ],
+        rows,
+    )
+    lines += ["", NATIVE_DOC_END]
+    return "\n".join(lines)
+
+
+def update_realtime_doc(doc: str, res: dict[str, Any]) -> str:
+    """``doc`` (docs/REALTIME.md) with its native block replaced (appended when it has none)."""
+    block = render_realtime_native(res)
+    if NATIVE_DOC_BEGIN in doc and NATIVE_DOC_END in doc:
+        head, _, rest = doc.partition(NATIVE_DOC_BEGIN)
+        _, _, tail = rest.partition(NATIVE_DOC_END)
+        return head + block + tail
+    return doc.rstrip() + "\n\n" + block + "\n"
 
 
 # -- 4. codec and analysis ------------------------------------------------------------------
@@ -865,7 +1067,7 @@ def run_perf(
                 f, dur, tmpd / f"rtn{int(f)}", priority=RT_PRIORITY, plant_engine="native"
             )
             nat[name] = {**r, "note": NATIVE_NOTE}
-        res["realtime_native"] = nat
+        res["realtime_native"] = {**nat, "recorder_frames_lost": recorder_frames_lost(nat)}
         say("4. codec, and bench analyze on a large capture")
         res["codec"] = {
             **codec_figures(repeats),
@@ -1149,7 +1351,7 @@ def figures_sections(res: dict[str, Any]) -> list[str]:
     if "realtime_native" in res:  # the native plant node (measured since it exists)
         sections.append(("SCHED_FIFO, native plant", res["realtime_native"]))
     for label, sec in sections:
-        for name, r in sec.items():
+        for name, r in rate_rows(sec).items():
             got = r.get("policy", "normal")
             want_fifo = label.startswith("SCHED_FIFO")
             tag = label if (got == "fifo") == want_fifo else f"{label} refused"

@@ -209,6 +209,7 @@ class Loop(ctypes.Structure):
         ("t_poll", _I64),
         ("last_phase", _I32),
         ("t_last_end", _I64),
+        ("t_first_sent", _I64),
         ("ev_frame", Frame),
         ("err", _I32),
     ]
@@ -259,7 +260,7 @@ def _lib() -> ctypes.CDLL:
 # ------------------------------------------------------------ eligibility
 
 
-def native_missing(node: Any, interface: str, *, realtime: bool, external: bool) -> str | None:
+def native_missing(node: Any, interface: str) -> str | None:
     """Why ``node`` cannot run on the native loop (one line), or None when it can.
 
     Building the library (once per source change) is part of the answer: no C
@@ -279,11 +280,6 @@ def native_missing(node: Any, interface: str, *, realtime: bool, external: bool)
         return "sensor noise is drawn by Python (the plant core has no generator yet)"
     if plant.meter is not None:
         return "the energy meter is read by the Python node only"
-    if external:
-        # a controller under test: its acknowledgements gate every lockstep period and its
-        # first answer starts the real-time clock, both in Python; the end of its run (the
-        # last sample sent again until it answers) is the Python node's
-        return "a controller under test is served by the Python node only"
     try:
         _lib()
     except BenchError as e:

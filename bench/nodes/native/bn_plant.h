@@ -177,6 +177,7 @@ typedef struct {
     int64_t t_progress, t_quiet, t_poll;
     int32_t last_phase;         /* 0, 1: waiting for the last answer, 2: done */
     int64_t t_last_end;
+    int64_t t_first_sent;       /* real time, a controller under test: sample 0 last sent */
     bn_frame_t ev_frame;
     int32_t err;
 } bn_plant_loop_t;

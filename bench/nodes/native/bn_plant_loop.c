@@ -69,8 +69,9 @@ static int loop_lockstep(bn_plant_loop_t *L)
     for (;;) {
         if (done(u)) {
             /* bench.nodes._loops._last_answer: a controller under test may have lost
-             * the last sample; resend until its answer came, or a while */
-            if (!u->external || u->stopped || L->last_phase == 2) return BN_EV_DONE;
+             * the last sample; resend until its answer came, or a while (also after a
+             * stop command: the bench's last command stops the run at its last step) */
+            if (!u->external || L->last_phase == 2) return BN_EV_DONE;
             int64_t now = bn_now_ns();
             if (L->last_phase == 0) {
                 L->last_phase = 1;
@@ -138,10 +139,48 @@ static int loop_lockstep(bn_plant_loop_t *L)
     }
 }
 
+/* Real time with a controller under test (bench.nodes._loops._wait_first_answer):
+ * sample 0 (in u->out) is sent every retransmit_s until the controller's first
+ * valid duty; the clock starts after it, with sample 0 already out.  0: answered. */
+static int first_answer(bn_plant_loop_t *L)
+{
+    bn_plant_t *u = L->u;
+    bn_frame_t f;
+    int64_t rt = ns(L->retransmit_s);
+    while (!u->dut_answered) {
+        int64_t now = bn_now_ns();
+        if (now - L->t_progress > ns(L->first_s)) {
+            L->stall_what = BN_WAIT_DUTY;
+            return BN_EV_STALL;
+        }
+        if (L->t_first_sent == 0 || now - L->t_first_sent >= rt) {
+            for (int j = 0; j < u->n_out; j++) bn_plant_send(u, L->bus, &u->out[j]);
+            L->t_first_sent = now;
+        }
+        if (now >= L->t_poll) {
+            L->t_poll = now + ns(L->poll_s);
+            return BN_EV_POLL;
+        }
+        int64_t until = L->t_first_sent + rt < L->t_poll ? L->t_first_sent + rt : L->t_poll;
+        int r = bn_recv_until(L->bus, &f, until);
+        if (r < 0) {
+            L->err = r;
+            return BN_EV_ERROR;
+        }
+        if (r > 0 && take(L, &f)) return BN_EV_FRAME;
+    }
+    u->n_out = 0; /* sample 0 is out; the clock starts with period 0 */
+    return 0;
+}
+
 static int loop_realtime(bn_plant_loop_t *L)
 {
     bn_plant_t *u = L->u;
     bn_frame_t f;
+    if (!L->rt_started && u->external) {
+        int ev = first_answer(L);
+        if (ev != 0) return ev;
+    }
     if (!L->rt_started) {
         bn_clock_init(&L->clock, L->period_ns, L->busy_tail_ns, L->stall_ns, L->busy,
                       (size_t)L->busy_cap);

@@ -18,8 +18,9 @@ only for what stays Python's:
 
 After the run the C counters join the Python node's, so :meth:`ControllerNode.report`
 reports what it reports for the Python loop, with ``node_engine = "native"``.
-:func:`native_unavailable` says why a node cannot run native (the Python node
-then runs, with that one line).
+:func:`native_unavailable` says why a node cannot run native, in one line
+(:func:`bench.cli._common.choose_node_engine`: ``auto`` then runs the Python
+node, ``--engine native`` is refused).
 """
 
 from __future__ import annotations
@@ -204,20 +205,18 @@ def _declare(dll: ctypes.CDLL) -> None:
 
 def native_unavailable(node: ControllerNode, interface: str | None) -> str | None:
     """None when ``node`` can run native on ``interface`` (None: no transport, in-process),
-    else one line saying why not (the Python node runs instead)."""
+    else one line saying why not (:func:`bench.cli._common.choose_node_engine` says what
+    follows: the Python node, or a refusal)."""
     ctrl = node.ctrl
     if ctrl._core is None:
         why = ctrl.engine_note or "the controller runs on the Python engine"
-        return f"native controller node: not for this controller ({why}); the Python node runs"
+        return f"the native controller node needs the compiled controller ({why})"
     if interface is not None and interface not in NATIVE_INTERFACES:
-        return (
-            f"native controller node: --interface {interface}: the native loop speaks "
-            f"{' and '.join(NATIVE_INTERFACES)}; the Python node runs"
-        )
+        return f"--interface {interface}: the native loop speaks {' and '.join(NATIVE_INTERFACES)}"
     try:
         native_library()
     except BenchError as e:
-        return f"{e}; the Python node runs"
+        return str(e)
     return None
 
 
