@@ -25,7 +25,7 @@ import shutil
 import sys
 import tempfile
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -129,6 +129,12 @@ _COUNTERS = (
 )
 
 
+class Noise(ctypes.Structure):
+    """``bn_plant_noise_t``: the sensors' noise values, drawn here (:func:`noise_draws`)."""
+
+    _fields_ = [("draws", ctypes.POINTER(ctypes.c_double)), ("n", _I64), ("used", _I64)]
+
+
 class Unit(ctypes.Structure):
     """``bn_plant_t`` (``bn_plant.h``), field for field."""
 
@@ -154,6 +160,7 @@ class Unit(ctypes.Structure):
         ("m_step", _I64),
         ("sig", Sig * 24),
         ("msg_flags", _I32 * 4),
+        ("noise", Noise),
         ("k", _I64),
         ("meas_k", _I64),
         ("started", _I32),
@@ -361,20 +368,19 @@ def native_missing(node: Any, interface: str, *, realtime: bool, external: bool)
     Building the library (once per source change) is part of the answer: no C
     compiler, or a failed build, is a reason.
     """
-    from plant_rt import ConstantLoad
-
     plant = node.plant
     if interface not in NATIVE_INTERFACES:
         return f"the native loop speaks {' and '.join(NATIVE_INTERFACES)}, not {interface}"
     if node.faults is not None:
         return "the scenario's [[faults]] are applied by the Python node only"
-    if type(plant.load) is not ConstantLoad:
-        return f"the load profile {type(plant.load).__name__} is not in the plant core yet"
+    # A load profile needs no check: every bench command sets a constant load
+    # (PlantNode.apply_commands), the start command before the first period, so a
+    # profile the plant was built with never acts in a node's period, Python or native.
+    # The energy meter integrates in the core, whoever steps it (Plant.adopt_core reads it).
     sp = plant.sensor_pars
-    if sp.noise_i > 0.0 or sp.noise_u > 0.0:
-        return "sensor noise is drawn by Python (the plant core has no generator yet)"
-    if plant.meter is not None:
-        return "the energy meter is read by the Python node only"
+    if (sp.noise_i > 0.0 or sp.noise_u > 0.0) and node.n_steps <= 0:
+        # the noise values are drawn before the loop, one set per period it will run
+        return "sensor noise in a run without a step count (n_steps 0) is drawn by the Python node only"
     if external:
         # a controller under test: its acknowledgements gate every lockstep period and its
         # first answer starts the real-time clock, both in Python; the end of its run (the
@@ -550,6 +556,62 @@ class _Sync:
                 node.trips[name] = node.trips.get(name, 0) + n
 
 
+def noise_values(plant: Any) -> Iterator[float]:
+    """The values the plant's sensors take from its generator, in their order.
+
+    ``plant_sensors_measure`` (``plant_rt/core/plant_sensors.c``) calls the
+    generator of :class:`plant_rt._sensors.Sensors` once per phase current
+    (with ``noise_i > 0``), then once for the DC-link voltage (``noise_u > 0``),
+    as ``gauss(0.0, sd)``; this iterator makes the same calls on the same
+    generator, so the native run's samples are the Python node's.
+    """
+    sp = plant.sensor_pars
+    gauss = plant.noise_generator().gauss
+    while True:
+        if sp.noise_i > 0.0:
+            yield gauss(0.0, sp.noise_i)
+            yield gauss(0.0, sp.noise_i)
+            yield gauss(0.0, sp.noise_i)
+        if sp.noise_u > 0.0:
+            yield gauss(0.0, sp.noise_u)
+
+
+class NoiseDraws:
+    """The noise values of a native run, drawn before it (``bn_plant_noise_t``).
+
+    One set per sample the loop will measure (instants ``k`` to ``n_steps``);
+    after the run the generator is put where the Python node's would be: at
+    its state before the draws, advanced by the values the run used.
+    """
+
+    def __init__(self, node: Any, u: Unit) -> None:
+        import itertools
+
+        plant = node.plant
+        sp = plant.sensor_pars
+        self.plant = plant
+        self.active = sp.noise_i > 0.0 or sp.noise_u > 0.0
+        self.u = u
+        if not self.active:
+            return
+        per = (3 if sp.noise_i > 0.0 else 0) + (1 if sp.noise_u > 0.0 else 0)
+        n = (node.n_steps - plant.k + 1) * per
+        self.state = plant.noise_generator().getstate()
+        self.buf = (ctypes.c_double * n)(*itertools.islice(noise_values(plant), n))
+        u.noise.draws = ctypes.cast(self.buf, ctypes.POINTER(ctypes.c_double))
+        u.noise.n, u.noise.used = n, 0
+
+    def restore(self) -> None:
+        """The generator as the Python node would leave it."""
+        import itertools
+
+        if not self.active:
+            return
+        self.plant.noise_generator().setstate(self.state)
+        for _ in itertools.islice(noise_values(self.plant), int(self.u.noise.used)):
+            pass
+
+
 def _fill_config(dll: ctypes.CDLL, node: Any, u: Unit, realtime: bool, external: bool) -> None:
     codec = node.codec
     plant = node.plant
@@ -685,6 +747,7 @@ def plant_loop_native(
         reasons = dll.bn_plant_reject_names().decode().split(",")
         sync = _Sync(node, u, reasons)
         sync.push_all()
+        noise = NoiseDraws(node, u)
         loop = Loop()
         loop.u = ctypes.pointer(u)
         loop.bus = bus.ptr
@@ -764,6 +827,7 @@ def plant_loop_native(
                 u.overruns = loop.clock.st.missed  # also when a stop ended the loop
                 node.jitter = _jitter(dll, loop, busy, late)
             sync.pull()
+            noise.restore()
             diag.poll(force=True)
         final = to_frame(node.status_frame(STATE_DONE, node.fault))
         dll.bn_plant_send(ctypes.byref(u), bus.ptr, ctypes.byref(final))

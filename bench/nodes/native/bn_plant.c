@@ -251,6 +251,33 @@ void bn_plant_on_duty(bn_plant_t *u, const bn_frame_t *f)
     }
 }
 
+/* The sensors' noise source during a native run: Python's draws, in order (bn_plant_noise_t). */
+static int next_draw(void *ctx, double sd, double *out)
+{
+    bn_plant_noise_t *n = ctx;
+    (void)sd; /* drawn with it */
+    if (n->used >= n->n) return 1;
+    *out = n->draws[n->used++];
+    return 0;
+}
+
+/* Plant.sample: the measured values of the true ones (the noise from u->noise). */
+static void measure(bn_plant_t *u, const double i[3], double u_dc, double meas[4])
+{
+    plant_sensors *s = &u->pl->sens;
+    if (u->noise.draws == NULL) {
+        plant_sensors_measure(s, i, u_dc, meas);
+        return;
+    }
+    plant_gauss_fn fn = s->gauss;
+    void *ctx = s->gauss_ctx;
+    s->gauss = next_draw;
+    s->gauss_ctx = &u->noise;
+    plant_sensors_measure(s, i, u_dc, meas);
+    s->gauss = fn; /* the Python generator's again, for Python after the run */
+    s->gauss_ctx = ctx;
+}
+
 /* PlantNode.frames_now */
 void bn_plant_frames_now(bn_plant_t *u)
 {
@@ -264,7 +291,7 @@ void bn_plant_frames_now(bn_plant_t *u)
         plant_currents(pl, i);
         uu = pl->u_dc;
     }
-    plant_sensors_measure(&pl->sens, i, uu, meas); /* no noise: the caller checked */
+    measure(u, i, uu, meas);
     int status;
     if (u->fault != PLANT_FAULT_NONE)
         status = BENCH_DBC_PHASE_SAMPLES_STATUS_FAULT_CHOICE;

@@ -71,6 +71,15 @@ typedef struct {
     int64_t tag; /* the duty's step; -1: empty */
 } bn_plant_duty_t;
 
+/* Sensor noise handed over by Python (bench.nodes.native._plant_native.noise_draws): the
+ * values the plant's generator gives the sensors (plant_rt._sensors.Sensors: its
+ * random.Random(seed).gauss(0.0, sd), called by the core per plant_sensors_measure),
+ * drawn by Python in the order the sensors take them, so no generator is written in C. */
+typedef struct {
+    const double *draws; /* NULL: the plant has no noise */
+    int64_t n, used;
+} bn_plant_noise_t;
+
 typedef struct {
     /* ---- configuration (Python, before the run) */
     plant *pl;                    /* the Plant's core instance (plant_rt.Plant.core_address) */
@@ -83,6 +92,7 @@ typedef struct {
     int64_t m_samples, m_truth, m_status, m_step; /* counter moduli */
     bn_sig_t sig[BN_S_N];
     int32_t msg_flags[4];         /* BN_FD, BN_BRS of PhaseSamples, PositionSensor, PlantTruth, PlantStatus */
+    bn_plant_noise_t noise;
     /* ---- state (Python hands its node's over and takes it back) */
     int64_t k;                    /* the plant's period (plant_rt.Plant.k) */
     int64_t meas_k;               /* the step of pl->meas (sensor delay), -1: none */
