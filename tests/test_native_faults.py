@@ -9,14 +9,23 @@ the ``faults`` entries of metrics.json equal.
 
 from __future__ import annotations
 
+import json
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
-from bench.scenarios._schema import Noise
+import can
+
+from bench.nodes._loops import run_inprocess
+from bench.runs._local import run_local
+from bench.runs._run import run_scenario
+from bench.scenarios._faults import Fault
+from bench.scenarios._schema import Noise, Scenario
 from bench.wire._bus import BusSpec
+from bench.wire._protocol import unwrap
 from tests.ports import free_port
-from tests.test_native_plant import GROUP, _assert_native_equals_python
-from tests.trace_helpers import short
+from tests.test_native_plant import GROUP, NATIVE, _assert_native_equals_python
+from tests.trace_helpers import CODEC, short
 
 
 def test_sensor_noise_native_gives_the_python_nodes_frames(tmp_path: Path) -> None:
@@ -90,3 +99,100 @@ def test_noise_values_are_the_generators_calls_in_the_cores_order() -> None:
         assert abs(got[3] - want[3]) < 1e-12
         a.step(0.5, 0.5, 0.5)
         ideal.step(0.5, 0.5, 0.5)
+
+
+#: Per-step frames compared, with PlantCurrents (DBC 2.4, sent in runs with faults).
+_PER_STEP = {
+    0x10: "PwmDuty",
+    0x11: "PhaseSamples",
+    0x12: "PositionSensor",
+    0x100: "PlantTruth",
+    0x102: "PlantCurrents",
+}
+
+
+def _frames_by_step(frames: list[can.Message]) -> dict[tuple[int, int], bytes]:
+    """Each per-step frame by (identifier, step unwrapped); the recorder frames without run_id."""
+    out: dict[tuple[int, int], bytes] = {}
+    last: dict[int, int] = {}
+    for m in frames:
+        name = _PER_STEP.get(m.arbitration_id)
+        if name is None:
+            continue
+        d = CODEC.decode(m)
+        assert d is not None and d.reason is None, (name, d)
+        data = bytes(m.data)
+        if "run_id" in d.signals:  # the run's nonce differs between two runs
+            s = dict(d.signals)
+            s["run_id"] = 0
+            data = bytes(CODEC.encode(name, s).data)
+        step = unwrap(
+            int(d.signals["step"]), last.get(m.arbitration_id, 0), 1 << CODEC.step_bits(name)
+        )
+        last[m.arbitration_id] = step
+        assert out.setdefault((m.arbitration_id, step), data) == data, (name, step)
+    return out
+
+
+def _fault(i: int, kind: str, at_s: float, dur: float | None, **params: Any) -> Fault:
+    return Fault(i, kind, at_s, dur, params, None)
+
+
+def _assert_faults_native_equal_python(scn: Scenario, est: str, out: Path) -> dict[str, Any]:
+    ref = run_local(scn, est, out / "ref", plots=False)
+    spec = BusSpec("udp_multicast", GROUP, free_port())
+    res = run_scenario(scn, est, spec=spec, out_dir=out / "nat", progress=False, node_args=NATIVE)
+    meta = json.loads((out / "nat" / "meta.json").read_text())
+    assert meta["node_engines"]["plant"] == "native"
+    want = _frames_by_step(run_inprocess(scn, est, CODEC))
+    got = _frames_by_step(list(can.LogReader(str(res.capture))))
+    assert any(k[0] == 0x102 for k in want)  # PlantCurrents compared too
+    assert got.keys() == want.keys()
+    diff = sorted(k for k in want if got[k] != want[k])
+    assert not diff, f"{len(diff)} frames differ, the first {diff[:3]}"
+    assert res.metrics["faults"] == ref.metrics["faults"]
+    out_meta: dict[str, Any] = meta
+    return out_meta
+
+
+def test_plant_faults_native_give_the_python_nodes_frames(tmp_path: Path) -> None:
+    """Every machine and leg kind, overlapping: the parameters and legs on the exact period."""
+    scn = short("wen-5.1", 0.12)
+    faults = (
+        _fault(0, "resistance_drift", 0.02, 0.05, R_s_factor=1.5),
+        _fault(1, "demagnetisation", 0.04, None, psi_f_factor=0.8),
+        _fault(2, "resistance_drift", 0.05, 0.03, R_s_factor=1.2),
+        _fault(3, "dc_link_step", 0.06, 0.02, u_dc_v=400.0),
+        _fault(4, "open_switch", 0.07, 0.02, phase="a", device="upper"),
+        _fault(5, "open_phase", 0.095, 0.01, phase="b"),
+        _fault(6, "open_switch", 0.1, None, phase="c", device="lower"),
+    )
+    _assert_faults_native_equal_python(replace(scn, faults=faults), "tt-dq", tmp_path)
+
+
+def test_sensor_faults_native_give_the_python_nodes_frames(tmp_path: Path) -> None:
+    """Every sensor kind, overlapping in one phase (their order), with noise; the sensored
+    baseline's encoder lost for a while (its frames not sent, counted in the report)."""
+    from bench.scenarios._setup import with_position_sensor
+
+    scn = with_position_sensor(short("wen-5.1", 0.1))
+    scn = replace(scn, noise=Noise(current_std_a=0.02))
+    faults = (
+        _fault(0, "current_offset", 0.02, 0.04, phase="a", a=0.3),
+        _fault(1, "current_gain", 0.03, 0.02, phase="a", factor=1.2),
+        _fault(2, "current_stuck", 0.05, 0.01, phase="b"),
+        _fault(3, "current_lost", 0.07, 0.01, phase="a"),
+        _fault(4, "dc_voltage_offset", 0.04, None, v=-12.5),
+        _fault(5, "position_sensor_lost", 0.08, 0.005),
+        _fault(6, "current_stuck", 0.0, 0.01, phase="a"),
+    )
+    meta = _assert_faults_native_equal_python(replace(scn, faults=faults), "sensored", tmp_path)
+    rep = meta["node_reports"]["plant"]
+    k0, k1 = faults[5].periods(float(meta["T_s"]))
+    assert k1 is not None and k1 - k0 > 10
+    # NodeFaults.sends counts every instant of the window (the Python node's report)
+    assert rep["faults"] == {
+        "duties_lost": 0,
+        "not_sent": {"PositionSensor": k1 - k0},
+        "babbled": 0,
+    }

@@ -177,11 +177,13 @@ def test_raw_values_are_the_codecs(lib: ctypes.CDLL) -> None:
 
 
 def test_auto_says_why_the_python_node_serves(tmp_path: Path) -> None:
-    """A scenario with [[faults]]: auto takes the Python node with one line; native is refused."""
+    """A scenario with a bus fault in [[faults]]: auto takes the Python node with one line
+    naming it; native is refused (the plant's and the sensors' faults are native's,
+    tests/test_native_faults.py)."""
     scn = tmp_path / "faulty.toml"
     scn.write_text(
         'extends = "xue-fig13"\nduration = 1.3\n[[faults]]\nat_s = 1.1\nkind = "current_lost"\n'
-        'phase = "a"\n'
+        'phase = "a"\n[[faults]]\nat_s = 1.2\nkind = "corrupt"\nmessage = "PwmDuty"\n'
     )
     base = [sys.executable, "-m", "bench", "plant", str(scn), "--interface", "udp_multicast",
             "--channel", GROUP, "--port", str(free_port())]  # fmt: skip
@@ -190,7 +192,7 @@ def test_auto_says_why_the_python_node_serves(tmp_path: Path) -> None:
     )
     assert res.returncode == 2
     lines = res.stderr.strip().splitlines()
-    assert lines[-1].startswith("bench: error: --engine native: ") and "[[faults]]" in lines[-1]
+    assert lines[-1].startswith("bench: error: --engine native: ") and "(corrupt)" in lines[-1]
     assert "Traceback" not in res.stderr
     # auto: the one line, then the Python node serves (stopped here by the signal)
     proc = subprocess.Popen(
@@ -202,7 +204,7 @@ def test_auto_says_why_the_python_node_serves(tmp_path: Path) -> None:
         proc.terminate()
         _, err = proc.communicate(timeout=30)
     why = [ln for ln in err.splitlines() if "the Python node serves this run" in ln]
-    assert len(why) == 1 and "[[faults]]" in why[0]
+    assert len(why) == 1 and "bus faults of [[faults]] (corrupt)" in why[0]
 
 
 def test_a_controller_under_test_is_served_by_the_python_node(tmp_path: Path) -> None:

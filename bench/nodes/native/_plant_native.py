@@ -33,6 +33,7 @@ import can
 
 from bench._errors import BenchError
 from bench.nodes.native._native import CFLAGS, HERE, LIB_SOURCES, Stats, _run, compiler
+from plant_rt._faults import LEG_KINDS, MACHINE_KINDS, SENSOR_KINDS
 
 __all__ = [
     "PLANT_SOURCES",
@@ -135,6 +136,87 @@ class Noise(ctypes.Structure):
     _fields_ = [("draws", ctypes.POINTER(ctypes.c_double)), ("n", _I64), ("used", _I64)]
 
 
+class MachinePars(ctypes.Structure):
+    """``plant_machine_pars`` (``plant_rt/core/plant_machine.h``)."""
+
+    _fields_ = [
+        *((name, _D) for name in ("n_p", "R_s", "L_d", "L_q", "psi_f", "J", "b", "i_max")),
+        *((name, _D) for name in ("sat_sigma", "sat_i_sat", "c_dq")),
+        ("saturation", ctypes.c_int),
+        ("cross", ctypes.c_int),
+    ]
+
+
+class PlantPars(ctypes.Structure):
+    """``plant_pars`` (``plant_rt/core/plant.h``): filled from :meth:`plant_rt.Plant._core_pars`,
+    whose order it is (the binding's ``Core(*pars)``)."""
+
+    _fields_ = [
+        ("machine", MachinePars),
+        ("T_s", _D),
+        ("substeps", ctypes.c_int),
+        ("t_delay", _D),
+        ("switching", ctypes.c_int),
+        ("peak", ctypes.c_int),
+        *((name, _D) for name in ("u_dc", "t_dead", "v_ce", "v_f", "r_dc", "c_dc")),
+    ]
+
+    @classmethod
+    def of(cls, values: tuple[float | int | bool, ...]) -> PlantPars:
+        p = cls()
+        names = [f[0] for f in MachinePars._fields_]
+        m, rest = values[: len(names)], values[len(names) :]
+        for name, v in zip(names, m, strict=True):
+            setattr(p.machine, name, v)
+        for f, v in zip(cls._fields_[1:], rest, strict=True):
+            setattr(p, f[0], v)
+        return p
+
+
+class Edge(ctypes.Structure):
+    """``bn_plant_edge_t``."""
+
+    _fields_ = [
+        ("k", _I64),
+        ("set_pars", _I32),
+        ("set_legs", _I32),
+        ("leg", _I32 * 3),
+        ("pad", _I32),
+        ("pars", PlantPars),
+    ]
+
+
+class SensorFault(ctypes.Structure):
+    """``bn_plant_sfault_t``."""
+
+    _fields_ = [
+        ("kind", _I32),
+        ("phase", _I32),
+        ("k0", _I64),
+        ("k1", _I64),
+        ("value", _D),
+        ("held", _I32),
+        ("pad", _I32),
+        ("hold", _D),
+    ]
+
+
+class Faults(ctypes.Structure):
+    """``bn_plant_faults_t``."""
+
+    _fields_ = [
+        ("on", _I32),
+        ("n_edges", _I32),
+        ("next_edge", _I32),
+        ("n_sensor", _I32),
+        ("edges", ctypes.POINTER(Edge)),
+        ("sensor", ctypes.POINTER(SensorFault)),
+        ("last", _D * 3),
+        ("last_k", _I64),
+        ("pos_not_sent", _U64),
+    ]
+
+
 class Unit(ctypes.Structure):
     """``bn_plant_t`` (``bn_plant.h``), field for field."""
 
@@ -158,9 +240,11 @@ class Unit(ctypes.Structure):
         ("m_truth", _I64),
         ("m_status", _I64),
         ("m_step", _I64),
-        ("sig", Sig * 24),
-        ("msg_flags", _I32 * 4),
+        ("sig", Sig * 28),
+        ("msg_flags", _I32 * 5),
+        ("pad_flags", _I32),
         ("noise", Noise),
+        ("faults", Faults),
         ("k", _I64),
         ("meas_k", _I64),
         ("started", _I32),
@@ -328,7 +412,14 @@ def load_plant_lib(path: Path) -> ctypes.CDLL:
     dll.bn_plant_loop_sizeof.restype = ctypes.c_size_t
     dll.bn_plant_signal_names.restype = ctypes.c_char_p
     dll.bn_plant_reject_names.restype = ctypes.c_char_p
-    for name, want in (("bn_plant_sizeof", Unit), ("bn_plant_loop_sizeof", Loop)):
+    dll.bn_plant_edge_sizeof.restype = ctypes.c_size_t
+    dll.bn_plant_sfault_sizeof.restype = ctypes.c_size_t
+    for name, want in (
+        ("bn_plant_sizeof", Unit),
+        ("bn_plant_loop_sizeof", Loop),
+        ("bn_plant_edge_sizeof", Edge),
+        ("bn_plant_sfault_sizeof", SensorFault),
+    ):
         if getattr(dll, name)() != ctypes.sizeof(want):
             raise BenchError(f"native plant: {path}: {name} differs from {want.__name__}")
     dll.bn_plant_loop.argtypes = [ctypes.POINTER(Loop)]
@@ -372,7 +463,9 @@ def native_missing(node: Any, interface: str, *, realtime: bool, external: bool)
     if interface not in NATIVE_INTERFACES:
         return f"the native loop speaks {' and '.join(NATIVE_INTERFACES)}, not {interface}"
     if node.faults is not None:
-        return "the scenario's [[faults]] are applied by the Python node only"
+        bus = sorted({f.kind for f, _ in node.faults.windows} - set(NATIVE_FAULT_KINDS))
+        if bus:
+            return f"the bus faults of [[faults]] ({', '.join(bus)}) are applied by the Python node only"
     # A load profile needs no check: every bench command sets a constant load
     # (PlantNode.apply_commands), the start command before the first period, so a
     # profile the plant was built with never acts in a node's period, Python or native.
@@ -612,6 +705,95 @@ class NoiseDraws:
             pass
 
 
+#: The sensor fault kinds of :class:`plant_rt._faults.PlantFaults` as ``BN_SF_*`` (bn_plant.h).
+_SENSOR_CODES = {
+    "current_offset": 0,
+    "current_gain": 1,
+    "current_stuck": 2,
+    "current_lost": 3,
+    "dc_voltage_offset": 4,
+    "position_sensor_lost": 5,
+}
+#: The parameter each sensor kind applies (``BN_SF_*``'s ``value``).
+_SENSOR_VALUE = {"current_offset": "a", "current_gain": "factor", "dc_voltage_offset": "v"}
+#: The fault kinds the native node applies: the plant's and the sensors'.
+NATIVE_FAULT_KINDS = (*MACHINE_KINDS, *LEG_KINDS, *SENSOR_KINDS)
+
+
+class NativeFaults:
+    """The scenario's plant and sensor faults as the unit's tables (``bn_plant_faults_t``).
+
+    The edges are :class:`plant_rt._faults.PlantFaults`'s own answers
+    (:meth:`~plant_rt._faults.PlantFaults.parameters`,
+    :meth:`~plant_rt._faults.PlantFaults.leg_faults`) at every window's start
+    and end, kept where they change, as its ``before_period`` applies them.
+    """
+
+    def __init__(self, node: Any, u: Unit) -> None:
+        from plant_rt._plant import LEG_FAULTS
+
+        nf = node.faults
+        self.nf = nf
+        if nf is None:
+            return
+        pf = nf.plant
+        plant = node.plant
+        nominal = plant._core_pars()
+        state, legs = (pf.R_s, pf.psi_f, pf.u_dc), ("none", "none", "none")
+        edges: list[Edge] = []
+        ends = {w.k1 for w in pf.windows if w.k1 is not None}
+        for k in sorted({w.k0 for w in pf.windows} | ends):
+            now, now_legs = pf.parameters(k), pf.leg_faults(k)
+            if now == state and now_legs == legs:
+                continue
+            e = Edge()
+            e.k = k
+            if now != state:
+                R, psi, u_src = now
+                e.set_pars = 1
+                e.pars = PlantPars.of(nominal)
+                e.pars.machine.R_s, e.pars.machine.psi_f, e.pars.u_dc = R, psi, u_src
+            if now_legs != legs:
+                e.set_legs = 1
+                for x in range(3):
+                    e.leg[x] = LEG_FAULTS.index(now_legs[x])
+            edges.append(e)
+            state, legs = now, now_legs
+        self.edges = (Edge * max(1, len(edges)))(*edges)
+        sensor = []
+        for w in pf.sensor:
+            f = SensorFault()
+            f.kind = _SENSOR_CODES[w.kind]
+            f.phase = "abc".index(str(w.params.get("phase", "a")))
+            f.k0, f.k1 = w.k0, -1 if w.k1 is None else w.k1
+            if w.kind in _SENSOR_VALUE:
+                f.value = float(w.params[_SENSOR_VALUE[w.kind]])
+            sensor.append(f)
+        self.sensor = (SensorFault * max(1, len(sensor)))(*sensor)
+        F = u.faults
+        F.on = 1
+        F.n_edges, F.next_edge, F.n_sensor = len(edges), 0, len(sensor)
+        F.edges = ctypes.cast(self.edges, ctypes.POINTER(Edge))
+        F.sensor = ctypes.cast(self.sensor, ctypes.POINTER(SensorFault))
+        F.last_k = -1
+        self.seen_pos = 0
+
+    def pull(self, u: Unit, plant: Any) -> None:
+        """The node's fault report (what the plant did not send), and its plant's parameters."""
+        if self.nf is None:
+            return
+        n = int(u.faults.pos_not_sent) - self.seen_pos
+        self.seen_pos += n
+        if n:
+            ns = self.nf.not_sent
+            ns["PositionSensor"] = ns.get("PositionSensor", 0) + n
+
+    def finish(self, plant: Any) -> None:
+        """The Python plant's parameters and legs as the core has them at its present instant."""
+        if self.nf is not None:
+            self.nf.plant.before_period(plant)
+
+
 def _fill_config(dll: ctypes.CDLL, node: Any, u: Unit, realtime: bool, external: bool) -> None:
     codec = node.codec
     plant = node.plant
@@ -649,7 +831,8 @@ def _fill_config(dll: ctypes.CDLL, node: Any, u: Unit, realtime: bool, external:
         s = u.sig[j]
         s.lo, s.hi, s.scale, s.offset = lo, hi, scale, offset
         s.modulus, s.chk_lo, s.chk_hi = int(mod), chk_lo, chk_hi
-    for j, msg in enumerate(("PhaseSamples", "PositionSensor", "PlantTruth", "PlantStatus")):
+    msgs = ("PhaseSamples", "PositionSensor", "PlantTruth", "PlantStatus", "PlantCurrents")
+    for j, msg in enumerate(msgs):
         fd, brs = codec.frame_kind(msg)
         u.msg_flags[j] = (2 if fd else 0) | (4 if brs else 0)
 
@@ -748,6 +931,7 @@ def plant_loop_native(
         sync = _Sync(node, u, reasons)
         sync.push_all()
         noise = NoiseDraws(node, u)
+        faults = NativeFaults(node, u)
         loop = Loop()
         loop.u = ctypes.pointer(u)
         loop.bus = bus.ptr
@@ -781,6 +965,7 @@ def plant_loop_native(
             while True:
                 ev = dll.bn_plant_loop(ctypes.byref(loop))
                 sync.pull()
+                faults.pull(u, node.plant)
                 if node.fault != said_fault:
                     said_fault = node.fault
                     if node.fault:
@@ -827,6 +1012,8 @@ def plant_loop_native(
                 u.overruns = loop.clock.st.missed  # also when a stop ended the loop
                 node.jitter = _jitter(dll, loop, busy, late)
             sync.pull()
+            faults.pull(u, node.plant)
+            faults.finish(node.plant)
             noise.restore()
             diag.poll(force=True)
         final = to_frame(node.status_frame(STATE_DONE, node.fault))

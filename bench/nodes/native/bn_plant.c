@@ -21,7 +21,8 @@ static const char SIG_NAMES[] =
     "PlantTruth.step,PlantTruth.run_id,"
     "PlantStatus.state,PlantStatus.fault_code,PlantStatus.overruns,PlantStatus.late_frames,"
     "PlantStatus.step,"
-    "PwmDuty.duty_a,PwmDuty.duty_b,PwmDuty.duty_c,PwmDuty.enable,PwmDuty.step";
+    "PwmDuty.duty_a,PwmDuty.duty_b,PwmDuty.duty_c,PwmDuty.enable,PwmDuty.step,"
+    "PlantCurrents.i_a,PlantCurrents.i_b,PlantCurrents.step,PlantCurrents.run_id";
 
 static const char REJECT_NAMES[] =
     "bad_crc,bad_length,decode_error,out_of_range,stale_counter,future_counter,wrong_step,"
@@ -31,6 +32,8 @@ const char *bn_plant_signal_names(void) { return SIG_NAMES; }
 const char *bn_plant_reject_names(void) { return REJECT_NAMES; }
 size_t bn_plant_sizeof(void) { return sizeof(bn_plant_t); }
 size_t bn_plant_loop_sizeof(void) { return sizeof(bn_plant_loop_t); }
+size_t bn_plant_edge_sizeof(void) { return sizeof(bn_plant_edge_t); }
+size_t bn_plant_sfault_sizeof(void) { return sizeof(bn_plant_sfault_t); }
 
 /* Python's float % (the sign of the divisor). */
 static double py_mod(double x, double m)
@@ -278,12 +281,76 @@ static void measure(bn_plant_t *u, const double i[3], double u_dc, double meas[4
     s->gauss_ctx = ctx;
 }
 
+/* PlantFaults.before_period: the parameters and legs of instant k on (the edges up to k). */
+static void fault_edges(bn_plant_t *u, int64_t k)
+{
+    bn_plant_faults_t *F = &u->faults;
+    while (F->next_edge < F->n_edges && F->edges[F->next_edge].k <= k) {
+        const bn_plant_edge_t *e = &F->edges[F->next_edge++];
+        if (e->set_legs) plant_set_legs(u->pl, e->leg);
+        if (e->set_pars) plant_set_pars(u->pl, &e->pars);
+    }
+}
+
+static int window_active(const bn_plant_sfault_t *w, int64_t k)
+{
+    return w->k0 <= k && (w->k1 < 0 || k < w->k1);
+}
+
+/* PlantFaults.sample: the active sensor faults on the measured sample of instant k. */
+static void fault_sample(bn_plant_t *u, int64_t k, double meas[4])
+{
+    bn_plant_faults_t *F = &u->faults;
+    double i[3] = {meas[0], meas[1], meas[2]};
+    int have_last = F->last_k == k - 1;
+    double last[3] = {F->last[0], F->last[1], F->last[2]};
+    F->last[0] = meas[0];
+    F->last[1] = meas[1];
+    F->last[2] = meas[2];
+    F->last_k = k;
+    for (int n = 0; n < F->n_sensor; n++) {
+        bn_plant_sfault_t *w = &F->sensor[n];
+        if (!window_active(w, k)) continue;
+        int x = w->phase;
+        switch (w->kind) {
+        case BN_SF_U_OFFSET: meas[3] += w->value; break;
+        case BN_SF_OFFSET: i[x] += w->value; break;
+        case BN_SF_GAIN: i[x] *= w->value; break;
+        case BN_SF_LOST: i[x] = 0.0; break;
+        case BN_SF_STUCK:
+            if (!w->held) { /* the last sample before the window (at k0 = 0 its own) */
+                w->hold = have_last ? last[x] : i[x];
+                w->held = 1;
+            }
+            i[x] = w->hold;
+            break;
+        default: break; /* BN_SF_POS_LOST: the frame, not the sample */
+        }
+    }
+    meas[0] = i[0];
+    meas[1] = i[1];
+    meas[2] = i[2];
+}
+
+/* NodeFaults.sends("PositionSensor", k) with position_sensor_lost (counted every instant) */
+static int position_sent(bn_plant_t *u, int64_t k)
+{
+    bn_plant_faults_t *F = &u->faults;
+    for (int n = 0; n < F->n_sensor; n++)
+        if (F->sensor[n].kind == BN_SF_POS_LOST && window_active(&F->sensor[n], k)) {
+            F->pos_not_sent++;
+            return 0;
+        }
+    return 1;
+}
+
 /* PlantNode.frames_now */
 void bn_plant_frames_now(bn_plant_t *u)
 {
     plant *pl = u->pl;
     int64_t k = u->k;
     double i[3], uu, meas[4];
+    if (u->faults.on) fault_edges(u, k);
     if (u->meas_k == k) {
         memcpy(i, pl->meas, sizeof i);
         uu = pl->meas[3];
@@ -292,6 +359,7 @@ void bn_plant_frames_now(bn_plant_t *u)
         uu = pl->u_dc;
     }
     measure(u, i, uu, meas);
+    if (u->faults.on) fault_sample(u, k, meas);
     int status;
     if (u->fault != PLANT_FAULT_NONE)
         status = BENCH_DBC_PHASE_SAMPLES_STATUS_FAULT_CHOICE;
@@ -317,7 +385,8 @@ void bn_plant_frames_now(bn_plant_t *u)
                           BENCH_E2E_PHASE_SAMPLES_CRC_INDEX);
         put(u, f, BENCH_DBC_PHASE_SAMPLES_FRAME_ID, BENCH_DBC_PHASE_SAMPLES_LENGTH, 0);
     }
-    if (u->encoder_every && k % u->encoder_every == 0) {
+    int pos_sent = !u->faults.on || position_sent(u, k);
+    if (u->encoder_every && k % u->encoder_every == 0 && pos_sent) {
         struct bench_dbc_position_sensor_t m;
         bn_frame_t *f = &u->out[n++];
         double th = plant_encoder_angle(pl->x.th_m, pl->x.w_m, u->encoder_delay_s,
@@ -350,6 +419,22 @@ void bn_plant_frames_now(bn_plant_t *u)
         bench_e2e_protect(BENCH_E2E_PLANT_TRUTH_DATA_ID, f->data, BENCH_DBC_PLANT_TRUTH_LENGTH,
                           BENCH_E2E_PLANT_TRUTH_CRC_INDEX);
         put(u, f, BENCH_DBC_PLANT_TRUTH_FRAME_ID, BENCH_DBC_PLANT_TRUTH_LENGTH, 2);
+    }
+    if (u->faults.on && k % u->truth_every == 0) { /* the true phase currents (DBC 2.4) */
+        struct bench_dbc_plant_currents_t m;
+        bn_frame_t *f = &u->out[n++];
+        double it[3];
+        plant_currents(pl, it);
+        bench_dbc_plant_currents_init(&m);
+        m.i_a = (int16_t)RAW(u, BN_S_PC_I_A, it[0]);
+        m.i_b = (int16_t)RAW(u, BN_S_PC_I_B, it[1]);
+        m.step = (uint32_t)RAW(u, BN_S_PC_STEP, (double)(k % u->m_truth));
+        m.run_id = (uint16_t)RAW(u, BN_S_PC_RUN_ID, u->run_id);
+        memset(f, 0, sizeof *f);
+        bench_dbc_plant_currents_pack(f->data, &m, sizeof f->data);
+        bench_e2e_protect(BENCH_E2E_PLANT_CURRENTS_DATA_ID, f->data,
+                          BENCH_DBC_PLANT_CURRENTS_LENGTH, BENCH_E2E_PLANT_CURRENTS_CRC_INDEX);
+        put(u, f, BENCH_DBC_PLANT_CURRENTS_FRAME_ID, BENCH_DBC_PLANT_CURRENTS_LENGTH, 4);
     }
     u->n_out = n;
     /* PlantNode.sent: this instant's frames (the outbox is not retransmitted) */

@@ -49,6 +49,7 @@ enum {
     BN_S_TR_RUN_ID,
     BN_S_ST_STATE, BN_S_ST_FAULT_CODE, BN_S_ST_OVERRUNS, BN_S_ST_LATE_FRAMES, BN_S_ST_STEP,
     BN_S_PD_DUTY_A, BN_S_PD_DUTY_B, BN_S_PD_DUTY_C, BN_S_PD_ENABLE, BN_S_PD_STEP,
+    BN_S_PC_I_A, BN_S_PC_I_B, BN_S_PC_STEP, BN_S_PC_RUN_ID,
     BN_S_N
 };
 
@@ -80,6 +81,45 @@ typedef struct {
     int64_t n, used;
 } bn_plant_noise_t;
 
+/* The scenario's plant and sensor faults (plant_rt._faults.PlantFaults), handed over by
+ * Python (bench.nodes.native._plant_native.NativeFaults).
+ *
+ * The machine and leg faults are an edge table Python makes from PlantFaults: at each
+ * instant where the parameters in force (PlantFaults.parameters) or the legs
+ * (PlantFaults.leg_faults) change, the plant's whole parameter set and the legs, which
+ * the unit hands to plant_set_pars / plant_set_legs before that instant's sample, as
+ * PlantFaults.before_period does through Plant.set_parameters.  The sensor faults are
+ * PlantFaults.sample's windows, in its order, applied to the measured sample with its
+ * rules (tests/test_native_faults.py holds them to the Python node's frames). */
+typedef struct {
+    int64_t k;                /* from this instant on */
+    int32_t set_pars, set_legs;
+    int32_t leg[3];           /* PLANT_LEG_* (plant_leg.h) */
+    int32_t pad;
+    plant_pars pars;
+} bn_plant_edge_t;
+
+enum { BN_SF_OFFSET, BN_SF_GAIN, BN_SF_STUCK, BN_SF_LOST, BN_SF_U_OFFSET, BN_SF_POS_LOST };
+
+typedef struct {
+    int32_t kind;             /* BN_SF_* */
+    int32_t phase;            /* 0, 1, 2 */
+    int64_t k0, k1;           /* [k0, k1); k1 < 0: to the end */
+    double value;             /* a, factor or v */
+    int32_t held, pad;        /* current_stuck: its value is held (in hold) */
+    double hold;
+} bn_plant_sfault_t;
+
+typedef struct {
+    int32_t on;                /* a fault timeline: PlantCurrents frames too (DBC 2.4) */
+    int32_t n_edges, next_edge, n_sensor;
+    const bn_plant_edge_t *edges;
+    bn_plant_sfault_t *sensor;
+    double last[3];            /* the previous sample as measured (current_stuck's source) */
+    int64_t last_k;            /* its instant; -1: none */
+    uint64_t pos_not_sent;     /* NodeFaults.not_sent["PositionSensor"] */
+} bn_plant_faults_t;
+
 typedef struct {
     /* ---- configuration (Python, before the run) */
     plant *pl;                    /* the Plant's core instance (plant_rt.Plant.core_address) */
@@ -91,8 +131,11 @@ typedef struct {
     int32_t has_prot, watchdog_periods, watchdog_rounds, realtime, external, run_id;
     int64_t m_samples, m_truth, m_status, m_step; /* counter moduli */
     bn_sig_t sig[BN_S_N];
-    int32_t msg_flags[4];         /* BN_FD, BN_BRS of PhaseSamples, PositionSensor, PlantTruth, PlantStatus */
+    int32_t msg_flags[5];         /* BN_FD, BN_BRS of PhaseSamples, PositionSensor, PlantTruth,
+                                     PlantStatus, PlantCurrents */
+    int32_t pad_flags;
     bn_plant_noise_t noise;
+    bn_plant_faults_t faults;
     /* ---- state (Python hands its node's over and takes it back) */
     int64_t k;                    /* the plant's period (plant_rt.Plant.k) */
     int64_t meas_k;               /* the step of pl->meas (sensor delay), -1: none */
@@ -125,6 +168,8 @@ const char *bn_plant_signal_names(void);
 const char *bn_plant_reject_names(void);
 size_t bn_plant_sizeof(void);
 size_t bn_plant_loop_sizeof(void);
+size_t bn_plant_edge_sizeof(void);
+size_t bn_plant_sfault_sizeof(void);
 
 /* The raw value bench.wire._codec.Codec.encode packs for physical value v
  * (clipped, or wrapped for a modular signal; cantools' rounding). */
