@@ -112,7 +112,9 @@ _PER_STEP = {
 
 
 def _frames_by_step(frames: list[can.Message]) -> dict[tuple[int, int], bytes]:
-    """Each per-step frame by (identifier, step unwrapped); the recorder frames without run_id."""
+    """Each per-step frame by (identifier, step unwrapped); the recorder frames without run_id;
+    a frame the codec rejects (babble's) by (identifier, -1 - its payload's hash) (a set:
+    a lockstep resend repeats it)."""
     out: dict[tuple[int, int], bytes] = {}
     last: dict[int, int] = {}
     for m in frames:
@@ -120,7 +122,10 @@ def _frames_by_step(frames: list[can.Message]) -> dict[tuple[int, int], bytes]:
         if name is None:
             continue
         d = CODEC.decode(m)
-        assert d is not None and d.reason is None, (name, d)
+        assert d is not None, name
+        if d.reason is not None:
+            out[(m.arbitration_id, -1 - abs(hash(bytes(m.data))))] = bytes(m.data)
+            continue
         data = bytes(m.data)
         if "run_id" in d.signals:  # the run's nonce differs between two runs
             s = dict(d.signals)
@@ -138,14 +143,30 @@ def _fault(i: int, kind: str, at_s: float, dur: float | None, **params: Any) -> 
     return Fault(i, kind, at_s, dur, params, None)
 
 
-def _assert_faults_native_equal_python(scn: Scenario, est: str, out: Path) -> dict[str, Any]:
-    ref = run_local(scn, est, out / "ref", plots=False)
+def _assert_faults_native_equal_python(
+    scn: Scenario, est: str, out: Path, *, oracle: str = "inprocess"
+) -> dict[str, Any]:
+    """The native plant's lockstep run against the Python node's: the in-process reference
+    (``oracle="inprocess"``), or the Python plant node's process run on udp_multicast
+    (``"process"``: its counters compared too)."""
     spec = BusSpec("udp_multicast", GROUP, free_port())
     res = run_scenario(scn, est, spec=spec, out_dir=out / "nat", progress=False, node_args=NATIVE)
     meta = json.loads((out / "nat" / "meta.json").read_text())
     assert meta["node_engines"]["plant"] == "native"
-    want = _frames_by_step(run_inprocess(scn, est, CODEC))
     got = _frames_by_step(list(can.LogReader(str(res.capture))))
+    if oracle == "inprocess":
+        ref = run_local(scn, est, out / "ref", plots=False)
+        want = _frames_by_step(run_inprocess(scn, est, CODEC))
+    else:
+        py = {"plant": ["--engine", "python"], "controller": []}
+        spec = BusSpec("udp_multicast", GROUP, free_port())
+        ref = run_scenario(scn, est, spec=spec, out_dir=out / "py", progress=False, node_args=py)
+        py_meta = json.loads((out / "py" / "meta.json").read_text())
+        assert py_meta["node_engines"]["plant"] == "python"
+        want = _frames_by_step(list(can.LogReader(str(ref.capture))))
+        a, b = meta["node_reports"]["plant"], py_meta["node_reports"]["plant"]
+        for key in ("faults", "late_duties", "duty_rejected", "trips", "steps"):
+            assert a[key] == b[key], key
     assert any(k[0] == 0x102 for k in want)  # PlantCurrents compared too
     assert got.keys() == want.keys()
     diff = sorted(k for k in want if got[k] != want[k])
@@ -196,3 +217,52 @@ def test_sensor_faults_native_give_the_python_nodes_frames(tmp_path: Path) -> No
         "not_sent": {"PositionSensor": k1 - k0},
         "babbled": 0,
     }
+
+
+def test_bus_faults_native_give_the_python_nodes_frames(tmp_path: Path) -> None:
+    """The lockstep bus kinds: duties dropped at random and corrupted (the period runs with
+    the last duty, counted late), a duty delay with its duty_age, foreign frames babbled;
+    every draw NodeFaults' own, every count in the report the Python node's."""
+    scn = short("wen-5.1", 0.12)
+    faults = (
+        _fault(0, "drop", 0.02, 0.02, message="PwmDuty", prob=0.3),
+        _fault(1, "corrupt", 0.045, 0.002, message="PwmDuty"),
+        _fault(2, "delay", 0.06, 0.02, message="PwmDuty", steps=3),
+        _fault(3, "babble", 0.05, 0.04, rate_hz=500.0),
+        _fault(4, "delay", 0.07, 0.005, message="PwmDuty", steps=1),
+    )
+    # the oracle is the Python node's process run: with duties lost, a process run leaves
+    # the in-process reference (the Python node's too) from the first lost duty on
+    meta = _assert_faults_native_equal_python(
+        replace(scn, faults=faults), "tt-dq", tmp_path, oracle="process"
+    )
+    rep = meta["node_reports"]["plant"]
+    assert rep["faults"]["duties_lost"] > 10
+    assert rep["faults"]["babbled"] == 2 * 20
+    assert meta["node_engines"]["plant"] == "native"
+    assert rep["late_duties"] > rep["faults"]["duties_lost"]
+    assert rep["duty_rejected"]["bad_crc"] > 0
+
+
+def test_silence_in_real_time_native_sends_nothing_either_way(tmp_path: Path) -> None:
+    """Real time, 1 kHz: a 5-period silence: no PhaseSamples or PositionSensor of those
+    instants, no duty taken (counted as the Python node counts them); what holds on a
+    busy host (the counts are per instant, not per frame that arrived)."""
+    scn = replace(short("wen-5.1", 0.3), f_sw=1000.0)
+    scn = replace(scn, faults=(_fault(0, "silence", 0.15, 0.005),))
+    spec = BusSpec("udp_multicast", GROUP, free_port())
+    run_scenario(
+        scn,
+        "sensored",
+        spec=spec,
+        out_dir=tmp_path / "rt",
+        mode="realtime",
+        progress=False,
+        node_args=NATIVE,
+    )
+    meta = json.loads((tmp_path / "rt" / "meta.json").read_text())
+    rep = meta["node_reports"]["plant"]
+    assert meta["node_engines"]["plant"] == "native"
+    assert rep["steps"] == 300
+    assert rep["faults"]["not_sent"] == {"PhaseSamples": 5, "PositionSensor": 5}
+    assert rep["faults"]["babbled"] == 0

@@ -13,6 +13,14 @@ the end.  The node's state and counters are taken back at every event, so
 its report, its stderr lines and its last ``PlantStatus`` are those of the
 Python node.
 
+What needs Python is made before the loop and handed to C once: the sensors'
+noise values (:class:`NoiseDraws`, drawn from the plant's own generator in the
+sensors' order) and the fault timeline (:class:`NativeFaults`: the plant's
+parameter and leg edges from :class:`plant_rt._faults.PlantFaults`, its sensor
+windows, and the bus faults' per-instant tables, each entry
+:class:`bench.nodes._fault_bus.NodeFaults`' own answer).  The loop allocates
+nothing.
+
 :func:`native_missing` says why a plant cannot run natively (one line), or None.
 """
 
@@ -56,7 +64,8 @@ NATIVE_INTERFACES = ("udp_multicast", "socketcan")
 
 RING = 64
 CMDS = 256
-OUT = 8
+OUT = 12
+HISTORY = 512
 SENT = 16
 N_REJECT = 8
 
@@ -201,6 +210,12 @@ class SensorFault(ctypes.Structure):
     ]
 
 
+class Babble(ctypes.Structure):
+    """``bn_plant_babble_t``."""
+
+    _fields_ = [("k", _I64), ("to_plant", Frame), ("to_ctrl", Frame)]
+
+
 class Faults(ctypes.Structure):
     """``bn_plant_faults_t``."""
 
@@ -213,7 +228,18 @@ class Faults(ctypes.Structure):
         ("sensor", ctypes.POINTER(SensorFault)),
         ("last", _D * 3),
         ("last_k", _I64),
-        ("pos_not_sent", _U64),
+        ("n_k", _I64),
+        ("fate", ctypes.POINTER(ctypes.c_int8)),
+        ("shift_ls", ctypes.POINTER(_I32)),
+        ("shift_rt", ctypes.POINTER(_I32)),
+        ("nosend", ctypes.POINTER(ctypes.c_uint8)),
+        ("babble", ctypes.POINTER(Babble)),
+        ("n_babble", _I32),
+        ("next_babble", _I32),
+        ("duties_lost", _U64),
+        ("not_sent", _U64 * 2),
+        ("babbled", _U64),
+        ("history", Duty * HISTORY),
     ]
 
 
@@ -463,9 +489,12 @@ def native_missing(node: Any, interface: str, *, realtime: bool, external: bool)
     if interface not in NATIVE_INTERFACES:
         return f"the native loop speaks {' and '.join(NATIVE_INTERFACES)}, not {interface}"
     if node.faults is not None:
-        bus = sorted({f.kind for f, _ in node.faults.windows} - set(NATIVE_FAULT_KINDS))
-        if bus:
-            return f"the bus faults of [[faults]] ({', '.join(bus)}) are applied by the Python node only"
+        other = sorted({f.kind for f, _ in node.faults.windows} - set(NATIVE_FAULT_KINDS))
+        if other:
+            return f"the faults {', '.join(other)} are applied by the Python node only"
+        if node.n_steps <= 0:
+            # the bus faults' tables are made before the loop, one entry per period it runs
+            return "[[faults]] in a run without a step count (n_steps 0) are applied by the Python node only"
     # A load profile needs no check: every bench command sets a constant load
     # (PlantNode.apply_commands), the start command before the first period, so a
     # profile the plant was built with never acts in a node's period, Python or native.
@@ -716,8 +745,10 @@ _SENSOR_CODES = {
 }
 #: The parameter each sensor kind applies (``BN_SF_*``'s ``value``).
 _SENSOR_VALUE = {"current_offset": "a", "current_gain": "factor", "dc_voltage_offset": "v"}
-#: The fault kinds the native node applies: the plant's and the sensors'.
-NATIVE_FAULT_KINDS = (*MACHINE_KINDS, *LEG_KINDS, *SENSOR_KINDS)
+#: The bus fault kinds (:mod:`bench.nodes._fault_bus`), applied from NativeFaults' tables.
+BUS_KINDS = ("drop", "delay", "corrupt", "silence", "babble")
+#: The fault kinds the native node applies: every kind of the timeline.
+NATIVE_FAULT_KINDS = (*MACHINE_KINDS, *LEG_KINDS, *SENSOR_KINDS, *BUS_KINDS)
 
 
 class NativeFaults:
@@ -776,17 +807,65 @@ class NativeFaults:
         F.edges = ctypes.cast(self.edges, ctypes.POINTER(Edge))
         F.sensor = ctypes.cast(self.sensor, ctypes.POINTER(SensorFault))
         F.last_k = -1
-        self.seen_pos = 0
+        for h in F.history:
+            h.tag = -1
+        self._bus_tables(node, F)
+        self.seen = [0, 0, 0, 0]
+
+    def _bus_tables(self, node: Any, F: Faults) -> None:
+        """NodeFaults' answers for every instant the run can ask (``bn_plant_faults_t``)."""
+        nf = self.nf
+        assert nf is not None
+        kinds = {f.kind for f, _ in nf.windows}
+        if not kinds & {*BUS_KINDS, "position_sensor_lost"}:  # the ones NodeFaults answers
+            return
+        n = node.n_steps + node.delay + 2
+        F.n_k = n
+        fate = (ctypes.c_int8 * n)()
+        code = {"lost": 1, "corrupt": 2}
+        for k in range(n):
+            f = nf.duty_fate(k)
+            if f is not None:
+                fate[k] = code[f]
+        self.fate = fate
+        F.fate = ctypes.cast(fate, ctypes.POINTER(ctypes.c_int8))
+        if "delay" in kinds:
+            self.shift_ls = (_I32 * n)(*(nf.duty_shift(k) for k in range(n)))
+            self.shift_rt = (_I32 * n)(*(nf.duty_shift(k, realtime=True) for k in range(n)))
+            F.shift_ls = ctypes.cast(self.shift_ls, ctypes.POINTER(_I32))
+            F.shift_rt = ctypes.cast(self.shift_rt, ctypes.POINTER(_I32))
+        # sends() and babble() count what they did: asked here, their counts are C's
+        not_sent, babbled = dict(nf.not_sent), nf.babbled
+        nosend = (ctypes.c_uint8 * n)()
+        babble: list[Babble] = []
+        for k in range(n):
+            ps = nf.sends("PhaseSamples", k)
+            pos = nf.sends("PositionSensor", k)
+            nosend[k] = (0 if ps else 1) | (0 if pos else 2)
+            to_plant, to_ctrl = nf.babble(k, node.codec)
+            if to_plant is not None and to_ctrl is not None:
+                babble.append(Babble(k, to_frame(to_plant), to_frame(to_ctrl)))
+        nf.not_sent, nf.babbled = not_sent, babbled
+        self.nosend = nosend
+        F.nosend = ctypes.cast(nosend, ctypes.POINTER(ctypes.c_uint8))
+        self.babble = (Babble * max(1, len(babble)))(*babble)
+        F.babble = ctypes.cast(self.babble, ctypes.POINTER(Babble))
+        F.n_babble, F.next_babble = len(babble), 0
 
     def pull(self, u: Unit, plant: Any) -> None:
-        """The node's fault report (what the plant did not send), and its plant's parameters."""
-        if self.nf is None:
+        """The node's fault report: duties lost, frames not sent, frames babbled."""
+        nf = self.nf
+        if nf is None:
             return
-        n = int(u.faults.pos_not_sent) - self.seen_pos
-        self.seen_pos += n
-        if n:
-            ns = self.nf.not_sent
-            ns["PositionSensor"] = ns.get("PositionSensor", 0) + n
+        F = u.faults
+        now = [int(F.duties_lost), int(F.not_sent[0]), int(F.not_sent[1]), int(F.babbled)]
+        d = [a - b for a, b in zip(now, self.seen, strict=True)]
+        self.seen = now
+        nf.duties_lost += d[0]
+        for msg, n in (("PhaseSamples", d[1]), ("PositionSensor", d[2])):
+            if n:
+                nf.not_sent[msg] = nf.not_sent.get(msg, 0) + n
+        nf.babbled += d[3]
 
     def finish(self, plant: Any) -> None:
         """The Python plant's parameters and legs as the core has them at its present instant."""

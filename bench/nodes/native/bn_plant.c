@@ -160,6 +160,20 @@ int bn_plant_has_duty(const bn_plant_t *u, int64_t t)
 
 #define has_duty bn_plant_has_duty
 
+/* NodeFaults.duty_fate(k) and duty_shift(k) from their tables (bn_plant_faults_t) */
+static int duty_fate(const bn_plant_t *u, int64_t k)
+{
+    const bn_plant_faults_t *F = &u->faults;
+    return F->fate != NULL && k >= 0 && k < F->n_k ? F->fate[k] : BN_FATE_NONE;
+}
+
+static int64_t duty_shift(const bn_plant_t *u, int64_t k, int realtime)
+{
+    const bn_plant_faults_t *F = &u->faults;
+    const int32_t *s = realtime ? F->shift_rt : F->shift_ls;
+    return s != NULL && k >= 0 && k < F->n_k ? s[k] : 0;
+}
+
 static void reject_duty(bn_plant_t *u, int reason)
 {
     u->rejected[reason]++;
@@ -212,6 +226,14 @@ void bn_plant_on_duty(bn_plant_t *u, const bn_frame_t *f)
     }
     if (t > k + 1) {
         reject_duty(u, BN_RJ_FUTURE);
+        return;
+    }
+    int fate = duty_fate(u, t + u->delay);
+    if (fate != BN_FATE_NONE) { /* a bus fault: lost, or arrives with a bad E2E CRC */
+        if (fate == BN_FATE_CORRUPT)
+            reject_duty(u, BN_RJ_BAD_CRC);
+        else
+            u->faults.duties_lost++;
         return;
     }
     if (u->realtime) {
@@ -332,16 +354,13 @@ static void fault_sample(bn_plant_t *u, int64_t k, double meas[4])
     meas[2] = i[2];
 }
 
-/* NodeFaults.sends("PositionSensor", k) with position_sensor_lost (counted every instant) */
-static int position_sent(bn_plant_t *u, int64_t k)
+/* NodeFaults.sends(message, k) from its table: bit 0 PhaseSamples, bit 1 PositionSensor */
+static int sends(bn_plant_t *u, int bit, int64_t k)
 {
     bn_plant_faults_t *F = &u->faults;
-    for (int n = 0; n < F->n_sensor; n++)
-        if (F->sensor[n].kind == BN_SF_POS_LOST && window_active(&F->sensor[n], k)) {
-            F->pos_not_sent++;
-            return 0;
-        }
-    return 1;
+    if (F->nosend == NULL || k < 0 || k >= F->n_k || !(F->nosend[k] & (1 << bit))) return 1;
+    F->not_sent[bit]++;
+    return 0;
 }
 
 /* PlantNode.frames_now */
@@ -385,8 +404,7 @@ void bn_plant_frames_now(bn_plant_t *u)
                           BENCH_E2E_PHASE_SAMPLES_CRC_INDEX);
         put(u, f, BENCH_DBC_PHASE_SAMPLES_FRAME_ID, BENCH_DBC_PHASE_SAMPLES_LENGTH, 0);
     }
-    int pos_sent = !u->faults.on || position_sent(u, k);
-    if (u->encoder_every && k % u->encoder_every == 0 && pos_sent) {
+    if (u->encoder_every && k % u->encoder_every == 0) {
         struct bench_dbc_position_sensor_t m;
         bn_frame_t *f = &u->out[n++];
         double th = plant_encoder_angle(pl->x.th_m, pl->x.w_m, u->encoder_delay_s,
@@ -436,6 +454,25 @@ void bn_plant_frames_now(bn_plant_t *u)
                           BENCH_DBC_PLANT_CURRENTS_LENGTH, BENCH_E2E_PLANT_CURRENTS_CRC_INDEX);
         put(u, f, BENCH_DBC_PLANT_CURRENTS_FRAME_ID, BENCH_DBC_PLANT_CURRENTS_LENGTH, 4);
     }
+    if (u->faults.on) { /* PlantNode.frames_now's filter and babble */
+        int ps = sends(u, 0, k), pos = sends(u, 1, k), kept = first;
+        for (int j = first; j < n; j++) {
+            uint32_t id = u->out[j].id;
+            if ((id == BENCH_DBC_PHASE_SAMPLES_FRAME_ID && !ps) ||
+                (id == BENCH_DBC_POSITION_SENSOR_FRAME_ID && !pos))
+                continue;
+            u->out[kept++] = u->out[j];
+        }
+        n = kept;
+        bn_plant_faults_t *F = &u->faults;
+        while (F->next_babble < F->n_babble && F->babble[F->next_babble].k < k) F->next_babble++;
+        if (F->next_babble < F->n_babble && F->babble[F->next_babble].k == k) {
+            const bn_plant_babble_t *b = &F->babble[F->next_babble++];
+            F->babbled += 2;
+            bn_plant_on_duty(u, &b->to_plant);
+            u->out[n++] = b->to_ctrl;
+        }
+    }
     u->n_out = n;
     /* PlantNode.sent: this instant's frames (the outbox is not retransmitted) */
     int64_t s = u->sent_head % BN_PLANT_SENT;
@@ -447,7 +484,7 @@ void bn_plant_frames_now(bn_plant_t *u)
 int bn_plant_ready(const bn_plant_t *u)
 {
     int64_t t = u->k - u->delay;
-    return t <= 0 || has_duty(u, t);
+    return t <= 0 || has_duty(u, t) || duty_fate(u, u->k) != BN_FATE_NONE;
 }
 
 int bn_plant_paced(const bn_plant_t *u) { return u->pace_every <= 0 || u->k < u->cmd_horizon; }
@@ -518,6 +555,32 @@ static void step_plant(bn_plant_t *u, double d_a, double d_b, double d_c, int en
 
 static int64_t clamp_age(int64_t a) { return a < 0 ? 0 : (a > 254 ? 254 : a); }
 
+/* NodeFaults.keep and delayed: the duty period k applies instead of duty t (in d, en) */
+static void delayed(bn_plant_t *u, int64_t k, int64_t t, double d[3], int *en)
+{
+    bn_plant_faults_t *F = &u->faults;
+    bn_plant_duty_t *h = &F->history[t % BN_PLANT_HISTORY];
+    memcpy(h->d, d, sizeof h->d);
+    h->en = *en;
+    h->tag = t;
+    int64_t n = duty_shift(u, k, 0);
+    if (n == 0) return;
+    const bn_plant_duty_t *best = NULL;
+    for (int j = 0; j < BN_PLANT_HISTORY; j++) {
+        const bn_plant_duty_t *e = &F->history[j];
+        if (e->tag >= 0 && e->tag <= t - n && (best == NULL || e->tag > best->tag)) best = e;
+    }
+    if (best != NULL) {
+        memcpy(d, best->d, 3 * sizeof(double));
+        *en = best->en;
+    } else {
+        d[0] = d[1] = d[2] = 0.5;
+        *en = 0;
+    }
+    int64_t age = u->duty_age + n;
+    u->duty_age = (int32_t)(age < 254 ? age : 254);
+}
+
 /* PlantNode.advance_lockstep */
 static void advance_lockstep(bn_plant_t *u)
 {
@@ -541,6 +604,7 @@ static void advance_lockstep(bn_plant_t *u)
         en = slot->en;
         for (int j = 0; j < BN_PLANT_RING; j++)
             if (u->duties[j].tag >= 0 && u->duties[j].tag <= t) u->duties[j].tag = -1;
+        if (u->faults.shift_ls != NULL) delayed(u, k, t, d, &en);
     }
     if (u->fault != PLANT_FAULT_NONE) {
         en = 0;
@@ -553,9 +617,9 @@ static void advance_lockstep(bn_plant_t *u)
 /* PlantNode.advance_realtime */
 static void advance_realtime(bn_plant_t *u)
 {
-    int64_t k = u->k, best = -1;
+    int64_t k = u->k, best = -1, due = k - duty_shift(u, k, 1);
     for (int j = 0; j < BN_PLANT_RING; j++)
-        if (u->duties[j].tag >= 0 && u->duties[j].tag <= k && u->duties[j].tag > best)
+        if (u->duties[j].tag >= 0 && u->duties[j].tag <= due && u->duties[j].tag > best)
             best = u->duties[j].tag;
     if (best >= 0) {
         bn_plant_duty_t *slot = &u->duties[best & (BN_PLANT_RING - 1)];
@@ -563,7 +627,7 @@ static void advance_realtime(bn_plant_t *u)
         memcpy(u->latest, slot->d, sizeof u->latest);
         u->latest_en = slot->en;
         for (int j = 0; j < BN_PLANT_RING; j++)
-            if (u->duties[j].tag >= 0 && u->duties[j].tag <= k) u->duties[j].tag = -1;
+            if (u->duties[j].tag >= 0 && u->duties[j].tag <= due) u->duties[j].tag = -1;
     }
     double d[3];
     memcpy(d, u->latest, sizeof d);

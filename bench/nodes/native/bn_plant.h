@@ -30,7 +30,8 @@ extern "C" {
 
 #define BN_PLANT_RING 64   /* duties held, by step (t mod 64) */
 #define BN_PLANT_CMDS 256  /* pending commands handed over at a time */
-#define BN_PLANT_OUT 8     /* frames of one period, at most */
+#define BN_PLANT_OUT 12    /* frames of one period, at most (outbox 4, five messages, babble) */
+#define BN_PLANT_HISTORY 512 /* duties kept for a lockstep delay fault (NodeFaults' _HISTORY) */
 #define BN_PLANT_SENT 16   /* periods of frames kept for retransmission (delay + 3) */
 
 /* Encode-side description of one signal, as bench.wire._codec's _Sig, and the
@@ -101,6 +102,19 @@ typedef struct {
 
 enum { BN_SF_OFFSET, BN_SF_GAIN, BN_SF_STUCK, BN_SF_LOST, BN_SF_U_OFFSET, BN_SF_POS_LOST };
 
+/* The bus faults (bench.nodes._fault_bus.NodeFaults) as tables over the instants
+ * 0 .. n_k - 1, each entry NodeFaults' own answer for that instant (its draws included):
+ * fate = duty_fate(k), shift_ls / shift_rt = duty_shift(k) in lockstep / real time,
+ * nosend = not sends("PhaseSamples", k) (bit 0) and not sends("PositionSensor", k)
+ * (bit 1), and babble's frames by instant.  The unit applies them where the Python
+ * node asks them (PlantNode._on_duty, ready, advance_*, frames_now). */
+enum { BN_FATE_NONE = 0, BN_FATE_LOST = 1, BN_FATE_CORRUPT = 2 };
+
+typedef struct {
+    int64_t k;
+    bn_frame_t to_plant, to_ctrl; /* a foreign PwmDuty taken, a foreign PhaseSamples sent */
+} bn_plant_babble_t;
+
 typedef struct {
     int32_t kind;             /* BN_SF_* */
     int32_t phase;            /* 0, 1, 2 */
@@ -117,7 +131,14 @@ typedef struct {
     bn_plant_sfault_t *sensor;
     double last[3];            /* the previous sample as measured (current_stuck's source) */
     int64_t last_k;            /* its instant; -1: none */
-    uint64_t pos_not_sent;     /* NodeFaults.not_sent["PositionSensor"] */
+    int64_t n_k;               /* the bus tables' length; an instant beyond: no fault */
+    const int8_t *fate;        /* NULL: none of these faults */
+    const int32_t *shift_ls, *shift_rt;
+    const uint8_t *nosend;
+    const bn_plant_babble_t *babble;
+    int32_t n_babble, next_babble;
+    uint64_t duties_lost, not_sent[2], babbled; /* NodeFaults.report() */
+    bn_plant_duty_t history[BN_PLANT_HISTORY];  /* NodeFaults.history, by tag mod its size */
 } bn_plant_faults_t;
 
 typedef struct {
