@@ -821,24 +821,35 @@ class NativeFaults:
             return
         n = node.n_steps + node.delay + 2
         F.n_k = n
+        # outside every window each answer is "no fault": only the windows' instants are asked
+        inside = sorted(
+            {
+                k
+                for f, w in nf.windows
+                if f.kind in (*BUS_KINDS, "position_sensor_lost")
+                for k in range(max(0, w.k0), min(n, n if w.k1 is None else w.k1))
+            }
+        )
         fate = (ctypes.c_int8 * n)()
         code = {"lost": 1, "corrupt": 2}
-        for k in range(n):
+        for k in inside:
             f = nf.duty_fate(k)
             if f is not None:
                 fate[k] = code[f]
         self.fate = fate
         F.fate = ctypes.cast(fate, ctypes.POINTER(ctypes.c_int8))
         if "delay" in kinds:
-            self.shift_ls = (_I32 * n)(*(nf.duty_shift(k) for k in range(n)))
-            self.shift_rt = (_I32 * n)(*(nf.duty_shift(k, realtime=True) for k in range(n)))
+            self.shift_ls, self.shift_rt = (_I32 * n)(), (_I32 * n)()
+            for k in inside:
+                self.shift_ls[k] = nf.duty_shift(k)
+                self.shift_rt[k] = nf.duty_shift(k, realtime=True)
             F.shift_ls = ctypes.cast(self.shift_ls, ctypes.POINTER(_I32))
             F.shift_rt = ctypes.cast(self.shift_rt, ctypes.POINTER(_I32))
         # sends() and babble() count what they did: asked here, their counts are C's
         not_sent, babbled = dict(nf.not_sent), nf.babbled
         nosend = (ctypes.c_uint8 * n)()
         babble: list[Babble] = []
-        for k in range(n):
+        for k in inside:
             ps = nf.sends("PhaseSamples", k)
             pos = nf.sends("PositionSensor", k)
             nosend[k] = (0 if ps else 1) | (0 if pos else 2)
@@ -992,11 +1003,17 @@ def plant_loop_native(
     if bus is None:
         bus = NativeBus(dll, spec)
     try:
+        # what Python hands over once, made before the node says it is ready (seconds for a
+        # long run with faults; none of it waits for the start command)
+        u = Unit()
+        noise = NoiseDraws(node, u)
+        faults = NativeFaults(node, u)
         if on_ready:
             on_ready()
         t_idle = time.monotonic()
         while not node.started:  # _wait_for_start, on the native bus
             if stop():
+                noise.restore()
                 return
             f = bus.recv(0.05)
             if f is not None and f.id in ids and not f.flags & 1:
@@ -1004,13 +1021,10 @@ def plant_loop_native(
                 node.apply_commands()
             if time.monotonic() - t_idle > 3600.0:
                 raise BenchError("plant: no start command within an hour")
-        u = Unit()
         _fill_config(dll, node, u, realtime, node.external)
         reasons = dll.bn_plant_reject_names().decode().split(",")
         sync = _Sync(node, u, reasons)
         sync.push_all()
-        noise = NoiseDraws(node, u)
-        faults = NativeFaults(node, u)
         loop = Loop()
         loop.u = ctypes.pointer(u)
         loop.bus = bus.ptr

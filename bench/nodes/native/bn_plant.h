@@ -10,7 +10,9 @@
  * handed over as the pending list (bn_plant_t.cmds); this unit applies them
  * at their step.  Every counter the Python node reports is in bn_plant_t,
  * which Python reads after the run (bench/nodes/native/_plant_native.py
- * mirrors it field by field).  No allocation: every buffer is in the struct.
+ * mirrors it field by field).  No allocation: every buffer is in the struct,
+ * or made by Python before the run and handed over once (the sensors' noise
+ * values, bn_plant_noise_t; the fault timeline's tables, bn_plant_faults_t).
  *
  * bn_plant_loop (bn_plant_loop.c) drives the unit on a bn_bus_t in lockstep
  * or in real time and returns to Python only on an event it does not handle.
