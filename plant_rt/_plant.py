@@ -38,6 +38,7 @@ interval adds one (class notes).
 from __future__ import annotations
 
 import math
+import random
 from array import array
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
@@ -609,6 +610,10 @@ class Plant:
         """
         return self._core.address()
 
+    def noise_generator(self) -> random.Random:
+        """The sensors' noise generator (for a C caller that takes its values in order)."""
+        return self._sensors.rng
+
     def meas_step(self) -> int:
         """The period whose sample the sensor-instant record holds (-1: none)."""
         return self._meas[0] if self._meas is not None else -1
@@ -617,7 +622,8 @@ class Plant:
         """Take the core's states after a C caller stepped it to period ``k``.
 
         ``meas_k``: the step of the core's sensor-instant record (``meas()``),
-        -1 for none. A constant load the caller set becomes :attr:`load`.
+        -1 for none. A constant load the caller set becomes :attr:`load`, and the
+        energy meter's integrals are the core's.
         """
         core = self._core
         (self._i_d, self._i_q, self._w_m, self._th_m, self._u_dc, u_al, u_be) = core.state()
@@ -630,6 +636,9 @@ class Plant:
         tau = core.load_const()
         if tau is not None and _constant_tau(self._load) != tau:
             self._load = ConstantLoad(tau)
+        if self.meter is not None:  # the core integrated it
+            m = self.meter
+            (m.e_in, m.e_cu, m.e_em, m.e_fric, m.e_load, m.q_a, m.q_b, m.q_c) = core.meter()
 
     def _state_to_core(self) -> None:
         """Hand the states changed on the Python side to the core."""

@@ -253,6 +253,11 @@ class Sensors:
         self._code_max = 2 ** (bits - 1) - 1
         self._ucode_max = 2**bits - 1
 
+    @property
+    def rng(self) -> random.Random:
+        """The noise generator."""
+        return self._rng
+
     def constants(self) -> tuple[Any, ...]:
         """What the core's sensors need (``plant_sensors``, ``plant_rt/core/plant_sensors.h``)."""
         p = self.pars

@@ -103,7 +103,14 @@ def _run(
     controller: bool = True,
     extra_ctrl: tuple[str, ...] = (),
 ) -> tuple[subprocess.CompletedProcess[str], Path]:
-    """``bench run --controller external`` with the test controller beside it (or none)."""
+    """``bench run --controller external`` with the test controller beside it (or none).
+
+    The native libraries are built first: the tests' cache starts empty
+    (tests/conftest.py), and ``bench run``'s first build (over a minute on a loaded
+    host) would otherwise outlast the test controller's 30 s without a frame."""
+    from bench.runs._run import build_native_libraries
+
+    build_native_libraries()
     port = str(free_port())
     show = _show(tmp, scenario)
     run_dir = tmp / f"run-{scenario.stem}-{mistake or 'ok'}"

@@ -177,32 +177,39 @@ def test_raw_values_are_the_codecs(lib: ctypes.CDLL) -> None:
 
 
 def test_auto_says_why_the_python_node_serves(tmp_path: Path) -> None:
-    """A scenario with [[faults]]: auto takes the Python node with one line; native is refused."""
+    """A controller under test (``--dut-timeout``): auto takes the Python node with one line;
+    native is refused. A scenario with [[faults]] of every group is native's now
+    (tests/test_native_faults.py): ``--engine native`` serves it."""
     scn = tmp_path / "faulty.toml"
     scn.write_text(
         'extends = "xue-fig13"\nduration = 1.3\n[[faults]]\nat_s = 1.1\nkind = "current_lost"\n'
-        'phase = "a"\n'
+        'phase = "a"\n[[faults]]\nat_s = 1.2\nkind = "corrupt"\nmessage = "PwmDuty"\n'
     )
     base = [sys.executable, "-m", "bench", "plant", str(scn), "--interface", "udp_multicast",
             "--channel", GROUP, "--port", str(free_port())]  # fmt: skip
+    dut = ["--dut-timeout", "30"]
     res = subprocess.run(
-        [*base, "--engine", "native"], cwd=ROOT, capture_output=True, text=True, timeout=60
+        [*base, *dut, "--engine", "native"], cwd=ROOT, capture_output=True, text=True, timeout=60
     )
     assert res.returncode == 2
     lines = res.stderr.strip().splitlines()
-    assert lines[-1].startswith("bench: error: --engine native: ") and "[[faults]]" in lines[-1]
+    assert lines[-1].startswith("bench: error: --engine native: ")
+    assert "controller under test" in lines[-1]
     assert "Traceback" not in res.stderr
-    # auto: the one line, then the Python node serves (stopped here by the signal)
-    proc = subprocess.Popen(
-        base, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
-    )
-    try:
-        assert proc.stdout is not None and proc.stdout.readline().strip() == "READY"
-    finally:
-        proc.terminate()
-        _, err = proc.communicate(timeout=30)
-    why = [ln for ln in err.splitlines() if "the Python node serves this run" in ln]
-    assert len(why) == 1 and "[[faults]]" in why[0]
+    for args, want in (([*base, *dut], 1), ([*base, "--engine", "native"], 0)):
+        # auto: the one line, then the Python node serves (stopped here by the signal);
+        # native with the faults: no line
+        proc = subprocess.Popen(
+            args, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+        )
+        try:
+            assert proc.stdout is not None and proc.stdout.readline().strip() == "READY"
+        finally:
+            proc.terminate()
+            _, err = proc.communicate(timeout=30)
+        why = [ln for ln in err.splitlines() if "the Python node serves this run" in ln]
+        assert len(why) == want, err
+        assert all("controller under test" in ln for ln in why)
 
 
 def test_a_controller_under_test_is_served_by_the_native_node(tmp_path: Path) -> None:

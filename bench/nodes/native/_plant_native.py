@@ -13,6 +13,14 @@ the end.  The node's state and counters are taken back at every event, so
 its report, its stderr lines and its last ``PlantStatus`` are those of the
 Python node.
 
+What needs Python is made before the loop and handed to C once: the sensors'
+noise values (:class:`NoiseDraws`, drawn from the plant's own generator in the
+sensors' order) and the fault timeline (:class:`NativeFaults`: the plant's
+parameter and leg edges from :class:`plant_rt._faults.PlantFaults`, its sensor
+windows, and the bus faults' per-instant tables, each entry
+:class:`bench.nodes._fault_bus.NodeFaults`' own answer).  The loop allocates
+nothing.
+
 :func:`native_missing` says why a plant cannot run natively (one line), or None.
 """
 
@@ -22,7 +30,7 @@ import ctypes
 import os
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -31,6 +39,7 @@ import can
 from bench._errors import BenchError
 from bench.nodes.native import _native
 from bench.nodes.native._native import Frame, Sig, Stats
+from plant_rt._faults import LEG_KINDS, MACHINE_KINDS, SENSOR_KINDS
 
 __all__ = [
     "Frame",
@@ -46,7 +55,8 @@ NATIVE_INTERFACES = ("udp_multicast", "socketcan")
 
 RING = 64
 CMDS = 256
-OUT = 8
+OUT = 12
+HISTORY = 512
 SENT = 16
 N_REJECT = 8
 
@@ -94,6 +104,110 @@ _COUNTERS = (
 )
 
 
+class Noise(ctypes.Structure):
+    """``bn_plant_noise_t``: the sensors' noise values, drawn here (:func:`noise_draws`)."""
+
+    _fields_ = [("draws", ctypes.POINTER(ctypes.c_double)), ("n", _I64), ("used", _I64)]
+
+
+class MachinePars(ctypes.Structure):
+    """``plant_machine_pars`` (``plant_rt/core/plant_machine.h``)."""
+
+    _fields_ = [
+        *((name, _D) for name in ("n_p", "R_s", "L_d", "L_q", "psi_f", "J", "b", "i_max")),
+        *((name, _D) for name in ("sat_sigma", "sat_i_sat", "c_dq")),
+        ("saturation", ctypes.c_int),
+        ("cross", ctypes.c_int),
+    ]
+
+
+class PlantPars(ctypes.Structure):
+    """``plant_pars`` (``plant_rt/core/plant.h``): filled from :meth:`plant_rt.Plant._core_pars`,
+    whose order it is (the binding's ``Core(*pars)``)."""
+
+    _fields_ = [
+        ("machine", MachinePars),
+        ("T_s", _D),
+        ("substeps", ctypes.c_int),
+        ("t_delay", _D),
+        ("switching", ctypes.c_int),
+        ("peak", ctypes.c_int),
+        *((name, _D) for name in ("u_dc", "t_dead", "v_ce", "v_f", "r_dc", "c_dc")),
+    ]
+
+    @classmethod
+    def of(cls, values: tuple[float | int | bool, ...]) -> PlantPars:
+        p = cls()
+        names = [f[0] for f in MachinePars._fields_]
+        m, rest = values[: len(names)], values[len(names) :]
+        for name, v in zip(names, m, strict=True):
+            setattr(p.machine, name, v)
+        for f, v in zip(cls._fields_[1:], rest, strict=True):
+            setattr(p, f[0], v)
+        return p
+
+
+class Edge(ctypes.Structure):
+    """``bn_plant_edge_t``."""
+
+    _fields_ = [
+        ("k", _I64),
+        ("set_pars", _I32),
+        ("set_legs", _I32),
+        ("leg", _I32 * 3),
+        ("pad", _I32),
+        ("pars", PlantPars),
+    ]
+
+
+class SensorFault(ctypes.Structure):
+    """``bn_plant_sfault_t``."""
+
+    _fields_ = [
+        ("kind", _I32),
+        ("phase", _I32),
+        ("k0", _I64),
+        ("k1", _I64),
+        ("value", _D),
+        ("held", _I32),
+        ("pad", _I32),
+        ("hold", _D),
+    ]
+
+
+class Babble(ctypes.Structure):
+    """``bn_plant_babble_t``."""
+
+    _fields_ = [("k", _I64), ("to_plant", Frame), ("to_ctrl", Frame)]
+
+
+class Faults(ctypes.Structure):
+    """``bn_plant_faults_t``."""
+
+    _fields_ = [
+        ("on", _I32),
+        ("n_edges", _I32),
+        ("next_edge", _I32),
+        ("n_sensor", _I32),
+        ("edges", ctypes.POINTER(Edge)),
+        ("sensor", ctypes.POINTER(SensorFault)),
+        ("last", _D * 3),
+        ("last_k", _I64),
+        ("n_k", _I64),
+        ("fate", ctypes.POINTER(ctypes.c_int8)),
+        ("shift_ls", ctypes.POINTER(_I32)),
+        ("shift_rt", ctypes.POINTER(_I32)),
+        ("nosend", ctypes.POINTER(ctypes.c_uint8)),
+        ("babble", ctypes.POINTER(Babble)),
+        ("n_babble", _I32),
+        ("next_babble", _I32),
+        ("duties_lost", _U64),
+        ("not_sent", _U64 * 2),
+        ("babbled", _U64),
+        ("history", Duty * HISTORY),
+    ]
+
+
 class Unit(ctypes.Structure):
     """``bn_plant_t`` (``bn_plant.h``), field for field."""
 
@@ -117,8 +231,11 @@ class Unit(ctypes.Structure):
         ("m_truth", _I64),
         ("m_status", _I64),
         ("m_step", _I64),
-        ("sig", Sig * 24),
-        ("msg_flags", _I32 * 4),
+        ("sig", Sig * 28),
+        ("msg_flags", _I32 * 5),
+        ("pad_flags", _I32),
+        ("noise", Noise),
+        ("faults", Faults),
         ("k", _I64),
         ("meas_k", _I64),
         ("started", _I32),
@@ -226,7 +343,14 @@ def load_plant_lib(path: Path | None = None) -> ctypes.CDLL:
     dll.bn_plant_loop_sizeof.restype = ctypes.c_size_t
     dll.bn_plant_signal_names.restype = ctypes.c_char_p
     dll.bn_plant_reject_names.restype = ctypes.c_char_p
-    for name, want in (("bn_plant_sizeof", Unit), ("bn_plant_loop_sizeof", Loop)):
+    dll.bn_plant_edge_sizeof.restype = ctypes.c_size_t
+    dll.bn_plant_sfault_sizeof.restype = ctypes.c_size_t
+    for name, want in (
+        ("bn_plant_sizeof", Unit),
+        ("bn_plant_loop_sizeof", Loop),
+        ("bn_plant_edge_sizeof", Edge),
+        ("bn_plant_sfault_sizeof", SensorFault),
+    ):
         if getattr(dll, name)() != ctypes.sizeof(want):
             raise BenchError(f"native plant: {path}: {name} differs from {want.__name__}")
     dll.bn_plant_loop.argtypes = [ctypes.POINTER(Loop)]
@@ -266,20 +390,24 @@ def native_missing(node: Any, interface: str) -> str | None:
     Building the library (once per source change) is part of the answer: no C
     compiler, or a failed build, is a reason.
     """
-    from plant_rt import ConstantLoad
-
     plant = node.plant
     if interface not in NATIVE_INTERFACES:
         return f"the native loop speaks {' and '.join(NATIVE_INTERFACES)}, not {interface}"
     if node.faults is not None:
-        return "the scenario's [[faults]] are applied by the Python node only"
-    if type(plant.load) is not ConstantLoad:
-        return f"the load profile {type(plant.load).__name__} is not in the plant core yet"
+        other = sorted({f.kind for f, _ in node.faults.windows} - set(NATIVE_FAULT_KINDS))
+        if other:
+            return f"the faults {', '.join(other)} are applied by the Python node only"
+        if node.n_steps <= 0:
+            # the bus faults' tables are made before the loop, one entry per period it runs
+            return "[[faults]] in a run without a step count (n_steps 0) are applied by the Python node only"
+    # A load profile needs no check: every bench command sets a constant load
+    # (PlantNode.apply_commands), the start command before the first period, so a
+    # profile the plant was built with never acts in a node's period, Python or native.
+    # The energy meter integrates in the core, whoever steps it (Plant.adopt_core reads it).
     sp = plant.sensor_pars
-    if sp.noise_i > 0.0 or sp.noise_u > 0.0:
-        return "sensor noise is drawn by Python (the plant core has no generator yet)"
-    if plant.meter is not None:
-        return "the energy meter is read by the Python node only"
+    if (sp.noise_i > 0.0 or sp.noise_u > 0.0) and node.n_steps <= 0:
+        # the noise values are drawn before the loop, one set per period it will run
+        return "sensor noise in a run without a step count (n_steps 0) is drawn by the Python node only"
     try:
         _lib()
     except BenchError as e:
@@ -450,6 +578,212 @@ class _Sync:
                 node.trips[name] = node.trips.get(name, 0) + n
 
 
+def noise_values(plant: Any) -> Iterator[float]:
+    """The values the plant's sensors take from its generator, in their order.
+
+    ``plant_sensors_measure`` (``plant_rt/core/plant_sensors.c``) calls the
+    generator of :class:`plant_rt._sensors.Sensors` once per phase current
+    (with ``noise_i > 0``), then once for the DC-link voltage (``noise_u > 0``),
+    as ``gauss(0.0, sd)``; this iterator makes the same calls on the same
+    generator, so the native run's samples are the Python node's.
+    """
+    sp = plant.sensor_pars
+    gauss = plant.noise_generator().gauss
+    while True:
+        if sp.noise_i > 0.0:
+            yield gauss(0.0, sp.noise_i)
+            yield gauss(0.0, sp.noise_i)
+            yield gauss(0.0, sp.noise_i)
+        if sp.noise_u > 0.0:
+            yield gauss(0.0, sp.noise_u)
+
+
+class NoiseDraws:
+    """The noise values of a native run, drawn before it (``bn_plant_noise_t``).
+
+    One set per sample the loop will measure (instants ``k`` to ``n_steps``);
+    after the run the generator is put where the Python node's would be: at
+    its state before the draws, advanced by the values the run used.
+    """
+
+    def __init__(self, node: Any, u: Unit) -> None:
+        import itertools
+
+        plant = node.plant
+        sp = plant.sensor_pars
+        self.plant = plant
+        self.active = sp.noise_i > 0.0 or sp.noise_u > 0.0
+        self.u = u
+        if not self.active:
+            return
+        per = (3 if sp.noise_i > 0.0 else 0) + (1 if sp.noise_u > 0.0 else 0)
+        n = (node.n_steps - plant.k + 1) * per
+        self.state = plant.noise_generator().getstate()
+        self.buf = (ctypes.c_double * n)(*itertools.islice(noise_values(plant), n))
+        u.noise.draws = ctypes.cast(self.buf, ctypes.POINTER(ctypes.c_double))
+        u.noise.n, u.noise.used = n, 0
+
+    def restore(self) -> None:
+        """The generator as the Python node would leave it."""
+        import itertools
+
+        if not self.active:
+            return
+        self.plant.noise_generator().setstate(self.state)
+        for _ in itertools.islice(noise_values(self.plant), int(self.u.noise.used)):
+            pass
+
+
+#: The sensor fault kinds of :class:`plant_rt._faults.PlantFaults` as ``BN_SF_*`` (bn_plant.h).
+_SENSOR_CODES = {
+    "current_offset": 0,
+    "current_gain": 1,
+    "current_stuck": 2,
+    "current_lost": 3,
+    "dc_voltage_offset": 4,
+    "position_sensor_lost": 5,
+}
+#: The parameter each sensor kind applies (``BN_SF_*``'s ``value``).
+_SENSOR_VALUE = {"current_offset": "a", "current_gain": "factor", "dc_voltage_offset": "v"}
+#: The bus fault kinds (:mod:`bench.nodes._fault_bus`), applied from NativeFaults' tables.
+BUS_KINDS = ("drop", "delay", "corrupt", "silence", "babble")
+#: The fault kinds the native node applies: every kind of the timeline.
+NATIVE_FAULT_KINDS = (*MACHINE_KINDS, *LEG_KINDS, *SENSOR_KINDS, *BUS_KINDS)
+
+
+class NativeFaults:
+    """The scenario's plant and sensor faults as the unit's tables (``bn_plant_faults_t``).
+
+    The edges are :class:`plant_rt._faults.PlantFaults`'s own answers
+    (:meth:`~plant_rt._faults.PlantFaults.parameters`,
+    :meth:`~plant_rt._faults.PlantFaults.leg_faults`) at every window's start
+    and end, kept where they change, as its ``before_period`` applies them.
+    """
+
+    def __init__(self, node: Any, u: Unit) -> None:
+        from plant_rt._plant import LEG_FAULTS
+
+        nf = node.faults
+        self.nf = nf
+        if nf is None:
+            return
+        pf = nf.plant
+        plant = node.plant
+        nominal = plant._core_pars()
+        state, legs = (pf.R_s, pf.psi_f, pf.u_dc), ("none", "none", "none")
+        edges: list[Edge] = []
+        ends = {w.k1 for w in pf.windows if w.k1 is not None}
+        for k in sorted({w.k0 for w in pf.windows} | ends):
+            now, now_legs = pf.parameters(k), pf.leg_faults(k)
+            if now == state and now_legs == legs:
+                continue
+            e = Edge()
+            e.k = k
+            if now != state:
+                R, psi, u_src = now
+                e.set_pars = 1
+                e.pars = PlantPars.of(nominal)
+                e.pars.machine.R_s, e.pars.machine.psi_f, e.pars.u_dc = R, psi, u_src
+            if now_legs != legs:
+                e.set_legs = 1
+                for x in range(3):
+                    e.leg[x] = LEG_FAULTS.index(now_legs[x])
+            edges.append(e)
+            state, legs = now, now_legs
+        self.edges = (Edge * max(1, len(edges)))(*edges)
+        sensor = []
+        for w in pf.sensor:
+            f = SensorFault()
+            f.kind = _SENSOR_CODES[w.kind]
+            f.phase = "abc".index(str(w.params.get("phase", "a")))
+            f.k0, f.k1 = w.k0, -1 if w.k1 is None else w.k1
+            if w.kind in _SENSOR_VALUE:
+                f.value = float(w.params[_SENSOR_VALUE[w.kind]])
+            sensor.append(f)
+        self.sensor = (SensorFault * max(1, len(sensor)))(*sensor)
+        F = u.faults
+        F.on = 1
+        F.n_edges, F.next_edge, F.n_sensor = len(edges), 0, len(sensor)
+        F.edges = ctypes.cast(self.edges, ctypes.POINTER(Edge))
+        F.sensor = ctypes.cast(self.sensor, ctypes.POINTER(SensorFault))
+        F.last_k = -1
+        for h in F.history:
+            h.tag = -1
+        self._bus_tables(node, F)
+        self.seen = [0, 0, 0, 0]
+
+    def _bus_tables(self, node: Any, F: Faults) -> None:
+        """NodeFaults' answers for every instant the run can ask (``bn_plant_faults_t``)."""
+        nf = self.nf
+        assert nf is not None
+        kinds = {f.kind for f, _ in nf.windows}
+        if not kinds & {*BUS_KINDS, "position_sensor_lost"}:  # the ones NodeFaults answers
+            return
+        n = node.n_steps + node.delay + 2
+        F.n_k = n
+        # outside every window each answer is "no fault": only the windows' instants are asked
+        inside = sorted(
+            {
+                k
+                for f, w in nf.windows
+                if f.kind in (*BUS_KINDS, "position_sensor_lost")
+                for k in range(max(0, w.k0), min(n, n if w.k1 is None else w.k1))
+            }
+        )
+        fate = (ctypes.c_int8 * n)()
+        code = {"lost": 1, "corrupt": 2}
+        for k in inside:
+            f = nf.duty_fate(k)
+            if f is not None:
+                fate[k] = code[f]
+        self.fate = fate
+        F.fate = ctypes.cast(fate, ctypes.POINTER(ctypes.c_int8))
+        if "delay" in kinds:
+            self.shift_ls, self.shift_rt = (_I32 * n)(), (_I32 * n)()
+            for k in inside:
+                self.shift_ls[k] = nf.duty_shift(k)
+                self.shift_rt[k] = nf.duty_shift(k, realtime=True)
+            F.shift_ls = ctypes.cast(self.shift_ls, ctypes.POINTER(_I32))
+            F.shift_rt = ctypes.cast(self.shift_rt, ctypes.POINTER(_I32))
+        # sends() and babble() count what they did: asked here, their counts are C's
+        not_sent, babbled = dict(nf.not_sent), nf.babbled
+        nosend = (ctypes.c_uint8 * n)()
+        babble: list[Babble] = []
+        for k in inside:
+            ps = nf.sends("PhaseSamples", k)
+            pos = nf.sends("PositionSensor", k)
+            nosend[k] = (0 if ps else 1) | (0 if pos else 2)
+            to_plant, to_ctrl = nf.babble(k, node.codec)
+            if to_plant is not None and to_ctrl is not None:
+                babble.append(Babble(k, to_frame(to_plant), to_frame(to_ctrl)))
+        nf.not_sent, nf.babbled = not_sent, babbled
+        self.nosend = nosend
+        F.nosend = ctypes.cast(nosend, ctypes.POINTER(ctypes.c_uint8))
+        self.babble = (Babble * max(1, len(babble)))(*babble)
+        F.babble = ctypes.cast(self.babble, ctypes.POINTER(Babble))
+        F.n_babble, F.next_babble = len(babble), 0
+
+    def pull(self, u: Unit, plant: Any) -> None:
+        """The node's fault report: duties lost, frames not sent, frames babbled."""
+        nf = self.nf
+        if nf is None:
+            return
+        F = u.faults
+        now = [int(F.duties_lost), int(F.not_sent[0]), int(F.not_sent[1]), int(F.babbled)]
+        d = [a - b for a, b in zip(now, self.seen, strict=True)]
+        self.seen = now
+        nf.duties_lost += d[0]
+        for msg, n in (("PhaseSamples", d[1]), ("PositionSensor", d[2])):
+            if n:
+                nf.not_sent[msg] = nf.not_sent.get(msg, 0) + n
+        nf.babbled += d[3]
+
+    def finish(self, plant: Any) -> None:
+        """The Python plant's parameters and legs as the core has them at its present instant."""
+        if self.nf is not None:
+            self.nf.plant.before_period(plant)
+
+
 def _fill_config(dll: ctypes.CDLL, node: Any, u: Unit, realtime: bool, external: bool) -> None:
     codec = node.codec
     plant = node.plant
@@ -487,7 +821,8 @@ def _fill_config(dll: ctypes.CDLL, node: Any, u: Unit, realtime: bool, external:
         s = u.sig[j]
         s.lo, s.hi, s.scale, s.offset = lo, hi, scale, offset
         s.modulus, s.chk_lo, s.chk_hi = int(mod), chk_lo, chk_hi
-    for j, msg in enumerate(("PhaseSamples", "PositionSensor", "PlantTruth", "PlantStatus")):
+    msgs = ("PhaseSamples", "PositionSensor", "PlantTruth", "PlantStatus", "PlantCurrents")
+    for j, msg in enumerate(msgs):
         fd, brs = codec.frame_kind(msg)
         u.msg_flags[j] = (2 if fd else 0) | (4 if brs else 0)
 
@@ -568,11 +903,17 @@ def plant_loop_native(
     if bus is None:
         bus = NativeBus(dll, spec)
     try:
+        # what Python hands over once, made before the node says it is ready (seconds for a
+        # long run with faults; none of it waits for the start command)
+        u = Unit()
+        noise = NoiseDraws(node, u)
+        faults = NativeFaults(node, u)
         if on_ready:
             on_ready()
         t_idle = time.monotonic()
         while not node.started:  # _wait_for_start, on the native bus
             if stop():
+                noise.restore()
                 return
             f = bus.recv(0.05)
             if f is not None and f.id in ids and not f.flags & 1:
@@ -580,7 +921,6 @@ def plant_loop_native(
                 node.apply_commands()
             if time.monotonic() - t_idle > 3600.0:
                 raise BenchError("plant: no start command within an hour")
-        u = Unit()
         _fill_config(dll, node, u, realtime, node.external)
         reasons = dll.bn_plant_reject_names().decode().split(",")
         sync = _Sync(node, u, reasons)
@@ -618,6 +958,7 @@ def plant_loop_native(
             while True:
                 ev = dll.bn_plant_loop(ctypes.byref(loop))
                 sync.pull()
+                faults.pull(u, node.plant)
                 if node.fault != said_fault:
                     said_fault = node.fault
                     if node.fault:
@@ -664,6 +1005,9 @@ def plant_loop_native(
                 u.overruns = loop.clock.st.missed  # also when a stop ended the loop
                 node.jitter = _jitter(dll, loop, busy, late)
             sync.pull()
+            faults.pull(u, node.plant)
+            faults.finish(node.plant)
+            noise.restore()
             diag.poll(force=True)
         final = to_frame(node.status_frame(STATE_DONE, node.fault))
         dll.bn_plant_send(ctypes.byref(u), bus.ptr, ctypes.byref(final))

@@ -21,7 +21,8 @@ static const char SIG_NAMES[] =
     "PlantTruth.step,PlantTruth.run_id,"
     "PlantStatus.state,PlantStatus.fault_code,PlantStatus.overruns,PlantStatus.late_frames,"
     "PlantStatus.step,"
-    "PwmDuty.duty_a,PwmDuty.duty_b,PwmDuty.duty_c,PwmDuty.enable,PwmDuty.step";
+    "PwmDuty.duty_a,PwmDuty.duty_b,PwmDuty.duty_c,PwmDuty.enable,PwmDuty.step,"
+    "PlantCurrents.i_a,PlantCurrents.i_b,PlantCurrents.step,PlantCurrents.run_id";
 
 static const char REJECT_NAMES[] =
     "bad_crc,bad_length,decode_error,out_of_range,stale_counter,future_counter,wrong_step,"
@@ -31,6 +32,8 @@ const char *bn_plant_signal_names(void) { return SIG_NAMES; }
 const char *bn_plant_reject_names(void) { return REJECT_NAMES; }
 size_t bn_plant_sizeof(void) { return sizeof(bn_plant_t); }
 size_t bn_plant_loop_sizeof(void) { return sizeof(bn_plant_loop_t); }
+size_t bn_plant_edge_sizeof(void) { return sizeof(bn_plant_edge_t); }
+size_t bn_plant_sfault_sizeof(void) { return sizeof(bn_plant_sfault_t); }
 
 /* Python's float % (the sign of the divisor). */
 static double py_mod(double x, double m)
@@ -157,6 +160,20 @@ int bn_plant_has_duty(const bn_plant_t *u, int64_t t)
 
 #define has_duty bn_plant_has_duty
 
+/* NodeFaults.duty_fate(k) and duty_shift(k) from their tables (bn_plant_faults_t) */
+static int duty_fate(const bn_plant_t *u, int64_t k)
+{
+    const bn_plant_faults_t *F = &u->faults;
+    return F->fate != NULL && k >= 0 && k < F->n_k ? F->fate[k] : BN_FATE_NONE;
+}
+
+static int64_t duty_shift(const bn_plant_t *u, int64_t k, int realtime)
+{
+    const bn_plant_faults_t *F = &u->faults;
+    const int32_t *s = realtime ? F->shift_rt : F->shift_ls;
+    return s != NULL && k >= 0 && k < F->n_k ? s[k] : 0;
+}
+
 static void reject_duty(bn_plant_t *u, int reason)
 {
     u->rejected[reason]++;
@@ -211,6 +228,14 @@ void bn_plant_on_duty(bn_plant_t *u, const bn_frame_t *f)
         reject_duty(u, BN_RJ_FUTURE);
         return;
     }
+    int fate = duty_fate(u, t + u->delay);
+    if (fate != BN_FATE_NONE) { /* a bus fault: lost, or arrives with a bad E2E CRC */
+        if (fate == BN_FATE_CORRUPT)
+            reject_duty(u, BN_RJ_BAD_CRC);
+        else
+            u->faults.duties_lost++;
+        return;
+    }
     if (u->realtime) {
         if (t == u->latest_duty_step || has_duty(u, t)) {
             u->rejected[BN_RJ_REPEATED]++;
@@ -251,12 +276,100 @@ void bn_plant_on_duty(bn_plant_t *u, const bn_frame_t *f)
     }
 }
 
+/* The sensors' noise source during a native run: Python's draws, in order (bn_plant_noise_t). */
+static int next_draw(void *ctx, double sd, double *out)
+{
+    bn_plant_noise_t *n = ctx;
+    (void)sd; /* drawn with it */
+    if (n->used >= n->n) return 1;
+    *out = n->draws[n->used++];
+    return 0;
+}
+
+/* Plant.sample: the measured values of the true ones (the noise from u->noise). */
+static void measure(bn_plant_t *u, const double i[3], double u_dc, double meas[4])
+{
+    plant_sensors *s = &u->pl->sens;
+    if (u->noise.draws == NULL) {
+        plant_sensors_measure(s, i, u_dc, meas);
+        return;
+    }
+    plant_gauss_fn fn = s->gauss;
+    void *ctx = s->gauss_ctx;
+    s->gauss = next_draw;
+    s->gauss_ctx = &u->noise;
+    plant_sensors_measure(s, i, u_dc, meas);
+    s->gauss = fn; /* the Python generator's again, for Python after the run */
+    s->gauss_ctx = ctx;
+}
+
+/* PlantFaults.before_period: the parameters and legs of instant k on (the edges up to k). */
+static void fault_edges(bn_plant_t *u, int64_t k)
+{
+    bn_plant_faults_t *F = &u->faults;
+    while (F->next_edge < F->n_edges && F->edges[F->next_edge].k <= k) {
+        const bn_plant_edge_t *e = &F->edges[F->next_edge++];
+        if (e->set_legs) plant_set_legs(u->pl, e->leg);
+        if (e->set_pars) plant_set_pars(u->pl, &e->pars);
+    }
+}
+
+static int window_active(const bn_plant_sfault_t *w, int64_t k)
+{
+    return w->k0 <= k && (w->k1 < 0 || k < w->k1);
+}
+
+/* PlantFaults.sample: the active sensor faults on the measured sample of instant k. */
+static void fault_sample(bn_plant_t *u, int64_t k, double meas[4])
+{
+    bn_plant_faults_t *F = &u->faults;
+    double i[3] = {meas[0], meas[1], meas[2]};
+    int have_last = F->last_k == k - 1;
+    double last[3] = {F->last[0], F->last[1], F->last[2]};
+    F->last[0] = meas[0];
+    F->last[1] = meas[1];
+    F->last[2] = meas[2];
+    F->last_k = k;
+    for (int n = 0; n < F->n_sensor; n++) {
+        bn_plant_sfault_t *w = &F->sensor[n];
+        if (!window_active(w, k)) continue;
+        int x = w->phase;
+        switch (w->kind) {
+        case BN_SF_U_OFFSET: meas[3] += w->value; break;
+        case BN_SF_OFFSET: i[x] += w->value; break;
+        case BN_SF_GAIN: i[x] *= w->value; break;
+        case BN_SF_LOST: i[x] = 0.0; break;
+        case BN_SF_STUCK:
+            if (!w->held) { /* the last sample before the window (at k0 = 0 its own) */
+                w->hold = have_last ? last[x] : i[x];
+                w->held = 1;
+            }
+            i[x] = w->hold;
+            break;
+        default: break; /* BN_SF_POS_LOST: the frame, not the sample */
+        }
+    }
+    meas[0] = i[0];
+    meas[1] = i[1];
+    meas[2] = i[2];
+}
+
+/* NodeFaults.sends(message, k) from its table: bit 0 PhaseSamples, bit 1 PositionSensor */
+static int sends(bn_plant_t *u, int bit, int64_t k)
+{
+    bn_plant_faults_t *F = &u->faults;
+    if (F->nosend == NULL || k < 0 || k >= F->n_k || !(F->nosend[k] & (1 << bit))) return 1;
+    F->not_sent[bit]++;
+    return 0;
+}
+
 /* PlantNode.frames_now */
 void bn_plant_frames_now(bn_plant_t *u)
 {
     plant *pl = u->pl;
     int64_t k = u->k;
     double i[3], uu, meas[4];
+    if (u->faults.on) fault_edges(u, k);
     if (u->meas_k == k) {
         memcpy(i, pl->meas, sizeof i);
         uu = pl->meas[3];
@@ -264,7 +377,8 @@ void bn_plant_frames_now(bn_plant_t *u)
         plant_currents(pl, i);
         uu = pl->u_dc;
     }
-    plant_sensors_measure(&pl->sens, i, uu, meas); /* no noise: the caller checked */
+    measure(u, i, uu, meas);
+    if (u->faults.on) fault_sample(u, k, meas);
     int status;
     if (u->fault != PLANT_FAULT_NONE)
         status = BENCH_DBC_PHASE_SAMPLES_STATUS_FAULT_CHOICE;
@@ -324,6 +438,41 @@ void bn_plant_frames_now(bn_plant_t *u)
                           BENCH_E2E_PLANT_TRUTH_CRC_INDEX);
         put(u, f, BENCH_DBC_PLANT_TRUTH_FRAME_ID, BENCH_DBC_PLANT_TRUTH_LENGTH, 2);
     }
+    if (u->faults.on && k % u->truth_every == 0) { /* the true phase currents (DBC 2.4) */
+        struct bench_dbc_plant_currents_t m;
+        bn_frame_t *f = &u->out[n++];
+        double it[3];
+        plant_currents(pl, it);
+        bench_dbc_plant_currents_init(&m);
+        m.i_a = (int16_t)RAW(u, BN_S_PC_I_A, it[0]);
+        m.i_b = (int16_t)RAW(u, BN_S_PC_I_B, it[1]);
+        m.step = (uint32_t)RAW(u, BN_S_PC_STEP, (double)(k % u->m_truth));
+        m.run_id = (uint16_t)RAW(u, BN_S_PC_RUN_ID, u->run_id);
+        memset(f, 0, sizeof *f);
+        bench_dbc_plant_currents_pack(f->data, &m, sizeof f->data);
+        bench_e2e_protect(BENCH_E2E_PLANT_CURRENTS_DATA_ID, f->data,
+                          BENCH_DBC_PLANT_CURRENTS_LENGTH, BENCH_E2E_PLANT_CURRENTS_CRC_INDEX);
+        put(u, f, BENCH_DBC_PLANT_CURRENTS_FRAME_ID, BENCH_DBC_PLANT_CURRENTS_LENGTH, 4);
+    }
+    if (u->faults.on) { /* PlantNode.frames_now's filter and babble */
+        int ps = sends(u, 0, k), pos = sends(u, 1, k), kept = first;
+        for (int j = first; j < n; j++) {
+            uint32_t id = u->out[j].id;
+            if ((id == BENCH_DBC_PHASE_SAMPLES_FRAME_ID && !ps) ||
+                (id == BENCH_DBC_POSITION_SENSOR_FRAME_ID && !pos))
+                continue;
+            u->out[kept++] = u->out[j];
+        }
+        n = kept;
+        bn_plant_faults_t *F = &u->faults;
+        while (F->next_babble < F->n_babble && F->babble[F->next_babble].k < k) F->next_babble++;
+        if (F->next_babble < F->n_babble && F->babble[F->next_babble].k == k) {
+            const bn_plant_babble_t *b = &F->babble[F->next_babble++];
+            F->babbled += 2;
+            bn_plant_on_duty(u, &b->to_plant);
+            u->out[n++] = b->to_ctrl;
+        }
+    }
     u->n_out = n;
     /* PlantNode.sent: this instant's frames (the outbox is not retransmitted) */
     int64_t s = u->sent_head % BN_PLANT_SENT;
@@ -335,7 +484,7 @@ void bn_plant_frames_now(bn_plant_t *u)
 int bn_plant_ready(const bn_plant_t *u)
 {
     int64_t t = u->k - u->delay;
-    return t <= 0 || has_duty(u, t);
+    return t <= 0 || has_duty(u, t) || duty_fate(u, u->k) != BN_FATE_NONE;
 }
 
 int bn_plant_paced(const bn_plant_t *u) { return u->pace_every <= 0 || u->k < u->cmd_horizon; }
@@ -406,6 +555,32 @@ static void step_plant(bn_plant_t *u, double d_a, double d_b, double d_c, int en
 
 static int64_t clamp_age(int64_t a) { return a < 0 ? 0 : (a > 254 ? 254 : a); }
 
+/* NodeFaults.keep and delayed: the duty period k applies instead of duty t (in d, en) */
+static void delayed(bn_plant_t *u, int64_t k, int64_t t, double d[3], int *en)
+{
+    bn_plant_faults_t *F = &u->faults;
+    bn_plant_duty_t *h = &F->history[t % BN_PLANT_HISTORY];
+    memcpy(h->d, d, sizeof h->d);
+    h->en = *en;
+    h->tag = t;
+    int64_t n = duty_shift(u, k, 0);
+    if (n == 0) return;
+    const bn_plant_duty_t *best = NULL;
+    for (int j = 0; j < BN_PLANT_HISTORY; j++) {
+        const bn_plant_duty_t *e = &F->history[j];
+        if (e->tag >= 0 && e->tag <= t - n && (best == NULL || e->tag > best->tag)) best = e;
+    }
+    if (best != NULL) {
+        memcpy(d, best->d, 3 * sizeof(double));
+        *en = best->en;
+    } else {
+        d[0] = d[1] = d[2] = 0.5;
+        *en = 0;
+    }
+    int64_t age = u->duty_age + n;
+    u->duty_age = (int32_t)(age < 254 ? age : 254);
+}
+
 /* PlantNode.advance_lockstep */
 static void advance_lockstep(bn_plant_t *u)
 {
@@ -429,6 +604,7 @@ static void advance_lockstep(bn_plant_t *u)
         en = slot->en;
         for (int j = 0; j < BN_PLANT_RING; j++)
             if (u->duties[j].tag >= 0 && u->duties[j].tag <= t) u->duties[j].tag = -1;
+        if (u->faults.shift_ls != NULL) delayed(u, k, t, d, &en);
     }
     if (u->fault != PLANT_FAULT_NONE) {
         en = 0;
@@ -441,9 +617,9 @@ static void advance_lockstep(bn_plant_t *u)
 /* PlantNode.advance_realtime */
 static void advance_realtime(bn_plant_t *u)
 {
-    int64_t k = u->k, best = -1;
+    int64_t k = u->k, best = -1, due = k - duty_shift(u, k, 1);
     for (int j = 0; j < BN_PLANT_RING; j++)
-        if (u->duties[j].tag >= 0 && u->duties[j].tag <= k && u->duties[j].tag > best)
+        if (u->duties[j].tag >= 0 && u->duties[j].tag <= due && u->duties[j].tag > best)
             best = u->duties[j].tag;
     if (best >= 0) {
         bn_plant_duty_t *slot = &u->duties[best & (BN_PLANT_RING - 1)];
@@ -451,7 +627,7 @@ static void advance_realtime(bn_plant_t *u)
         memcpy(u->latest, slot->d, sizeof u->latest);
         u->latest_en = slot->en;
         for (int j = 0; j < BN_PLANT_RING; j++)
-            if (u->duties[j].tag >= 0 && u->duties[j].tag <= k) u->duties[j].tag = -1;
+            if (u->duties[j].tag >= 0 && u->duties[j].tag <= due) u->duties[j].tag = -1;
     }
     double d[3];
     memcpy(d, u->latest, sizeof d);

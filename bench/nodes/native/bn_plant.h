@@ -10,7 +10,9 @@
  * handed over as the pending list (bn_plant_t.cmds); this unit applies them
  * at their step.  Every counter the Python node reports is in bn_plant_t,
  * which Python reads after the run (bench/nodes/native/_plant_native.py
- * mirrors it field by field).  No allocation: every buffer is in the struct.
+ * mirrors it field by field).  No allocation: every buffer is in the struct,
+ * or made by Python before the run and handed over once (the sensors' noise
+ * values, bn_plant_noise_t; the fault timeline's tables, bn_plant_faults_t).
  *
  * bn_plant_loop (bn_plant_loop.c) drives the unit on a bn_bus_t in lockstep
  * or in real time and returns to Python only on an event it does not handle.
@@ -30,7 +32,8 @@ extern "C" {
 
 #define BN_PLANT_RING 64   /* duties held, by step (t mod 64) */
 #define BN_PLANT_CMDS 256  /* pending commands handed over at a time */
-#define BN_PLANT_OUT 8     /* frames of one period, at most */
+#define BN_PLANT_OUT 12    /* frames of one period, at most (outbox 4, five messages, babble) */
+#define BN_PLANT_HISTORY 512 /* duties kept for a lockstep delay fault (NodeFaults' _HISTORY) */
 #define BN_PLANT_SENT 16   /* periods of frames kept for retransmission (delay + 3) */
 
 /* bn_plant_t.sig (bn_sig_t, bn.h): Python fills it from its Codec by the names
@@ -43,6 +46,7 @@ enum {
     BN_S_TR_RUN_ID,
     BN_S_ST_STATE, BN_S_ST_FAULT_CODE, BN_S_ST_OVERRUNS, BN_S_ST_LATE_FRAMES, BN_S_ST_STEP,
     BN_S_PD_DUTY_A, BN_S_PD_DUTY_B, BN_S_PD_DUTY_C, BN_S_PD_ENABLE, BN_S_PD_STEP,
+    BN_S_PC_I_A, BN_S_PC_I_B, BN_S_PC_STEP, BN_S_PC_RUN_ID,
     BN_S_N
 };
 
@@ -65,6 +69,74 @@ typedef struct {
     int64_t tag; /* the duty's step; -1: empty */
 } bn_plant_duty_t;
 
+/* Sensor noise handed over by Python (bench.nodes.native._plant_native.noise_draws): the
+ * values the plant's generator gives the sensors (plant_rt._sensors.Sensors: its
+ * random.Random(seed).gauss(0.0, sd), called by the core per plant_sensors_measure),
+ * drawn by Python in the order the sensors take them, so no generator is written in C. */
+typedef struct {
+    const double *draws; /* NULL: the plant has no noise */
+    int64_t n, used;
+} bn_plant_noise_t;
+
+/* The scenario's plant and sensor faults (plant_rt._faults.PlantFaults), handed over by
+ * Python (bench.nodes.native._plant_native.NativeFaults).
+ *
+ * The machine and leg faults are an edge table Python makes from PlantFaults: at each
+ * instant where the parameters in force (PlantFaults.parameters) or the legs
+ * (PlantFaults.leg_faults) change, the plant's whole parameter set and the legs, which
+ * the unit hands to plant_set_pars / plant_set_legs before that instant's sample, as
+ * PlantFaults.before_period does through Plant.set_parameters.  The sensor faults are
+ * PlantFaults.sample's windows, in its order, applied to the measured sample with its
+ * rules (tests/test_native_faults.py holds them to the Python node's frames). */
+typedef struct {
+    int64_t k;                /* from this instant on */
+    int32_t set_pars, set_legs;
+    int32_t leg[3];           /* PLANT_LEG_* (plant_leg.h) */
+    int32_t pad;
+    plant_pars pars;
+} bn_plant_edge_t;
+
+enum { BN_SF_OFFSET, BN_SF_GAIN, BN_SF_STUCK, BN_SF_LOST, BN_SF_U_OFFSET, BN_SF_POS_LOST };
+
+/* The bus faults (bench.nodes._fault_bus.NodeFaults) as tables over the instants
+ * 0 .. n_k - 1, each entry NodeFaults' own answer for that instant (its draws included):
+ * fate = duty_fate(k), shift_ls / shift_rt = duty_shift(k) in lockstep / real time,
+ * nosend = not sends("PhaseSamples", k) (bit 0) and not sends("PositionSensor", k)
+ * (bit 1), and babble's frames by instant.  The unit applies them where the Python
+ * node asks them (PlantNode._on_duty, ready, advance_*, frames_now). */
+enum { BN_FATE_NONE = 0, BN_FATE_LOST = 1, BN_FATE_CORRUPT = 2 };
+
+typedef struct {
+    int64_t k;
+    bn_frame_t to_plant, to_ctrl; /* a foreign PwmDuty taken, a foreign PhaseSamples sent */
+} bn_plant_babble_t;
+
+typedef struct {
+    int32_t kind;             /* BN_SF_* */
+    int32_t phase;            /* 0, 1, 2 */
+    int64_t k0, k1;           /* [k0, k1); k1 < 0: to the end */
+    double value;             /* a, factor or v */
+    int32_t held, pad;        /* current_stuck: its value is held (in hold) */
+    double hold;
+} bn_plant_sfault_t;
+
+typedef struct {
+    int32_t on;                /* a fault timeline: PlantCurrents frames too (DBC 2.4) */
+    int32_t n_edges, next_edge, n_sensor;
+    const bn_plant_edge_t *edges;
+    bn_plant_sfault_t *sensor;
+    double last[3];            /* the previous sample as measured (current_stuck's source) */
+    int64_t last_k;            /* its instant; -1: none */
+    int64_t n_k;               /* the bus tables' length; an instant beyond: no fault */
+    const int8_t *fate;        /* NULL: none of these faults */
+    const int32_t *shift_ls, *shift_rt;
+    const uint8_t *nosend;
+    const bn_plant_babble_t *babble;
+    int32_t n_babble, next_babble;
+    uint64_t duties_lost, not_sent[2], babbled; /* NodeFaults.report() */
+    bn_plant_duty_t history[BN_PLANT_HISTORY];  /* NodeFaults.history, by tag mod its size */
+} bn_plant_faults_t;
+
 typedef struct {
     /* ---- configuration (Python, before the run) */
     plant *pl;                    /* the Plant's core instance (plant_rt.Plant.core_address) */
@@ -76,7 +148,11 @@ typedef struct {
     int32_t has_prot, watchdog_periods, watchdog_rounds, realtime, external, run_id;
     int64_t m_samples, m_truth, m_status, m_step; /* counter moduli */
     bn_sig_t sig[BN_S_N];
-    int32_t msg_flags[4];         /* BN_FD, BN_BRS of PhaseSamples, PositionSensor, PlantTruth, PlantStatus */
+    int32_t msg_flags[5];         /* BN_FD, BN_BRS of PhaseSamples, PositionSensor, PlantTruth,
+                                     PlantStatus, PlantCurrents */
+    int32_t pad_flags;
+    bn_plant_noise_t noise;
+    bn_plant_faults_t faults;
     /* ---- state (Python hands its node's over and takes it back) */
     int64_t k;                    /* the plant's period (plant_rt.Plant.k) */
     int64_t meas_k;               /* the step of pl->meas (sensor delay), -1: none */
@@ -109,6 +185,8 @@ const char *bn_plant_signal_names(void);
 const char *bn_plant_reject_names(void);
 size_t bn_plant_sizeof(void);
 size_t bn_plant_loop_sizeof(void);
+size_t bn_plant_edge_sizeof(void);
+size_t bn_plant_sfault_sizeof(void);
 
 /* The raw value bench.wire._codec.Codec.encode packs for physical value v
  * (clipped, or wrapped for a modular signal; cantools' rounding). */

@@ -1,0 +1,268 @@
+"""The native plant node with what the Python node alone served before: sensor noise,
+a load profile, the energy meter, and the scenario's fault timeline.
+
+Each is held to the Python node: a lockstep run on udp_multicast with the native
+plant gives the in-process reference's frames (the Python node's) bit for bit
+(:func:`tests.test_native_plant._assert_native_equals_python`), and, with faults,
+the ``faults`` entries of metrics.json equal.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import can
+
+from bench.nodes._loops import run_inprocess
+from bench.runs._local import run_local
+from bench.runs._run import run_scenario
+from bench.scenarios._faults import Fault
+from bench.scenarios._schema import Noise, Scenario
+from bench.wire._bus import BusSpec
+from bench.wire._protocol import unwrap
+from tests.ports import free_port
+from tests.test_native_plant import GROUP, NATIVE, _assert_native_equals_python
+from tests.trace_helpers import CODEC, short
+
+
+def test_sensor_noise_native_gives_the_python_nodes_frames(tmp_path: Path) -> None:
+    """Current noise and ADC quantisation: the same draws, in the same order, in C."""
+    scn = replace(short("wen-5.1", 0.12), noise=Noise(current_std_a=0.05, adc_bits=12))
+    spec = BusSpec("udp_multicast", GROUP, free_port())
+    _assert_native_equals_python(scn, "tt-dq", spec, tmp_path / "noise")
+
+
+def test_a_plant_stepped_by_a_c_caller_reports_the_cores_energy_meter() -> None:
+    """The meter integrates in the core whoever steps it; :meth:`Plant.adopt_core` reads it
+    (the native node's path), equal to the Python-stepped plant's to the bit."""
+    from plant_rt import Plant, preset
+
+    pre = preset("wen2023")
+    a = Plant(pre.motor, pre.inverter, 1.0 / pre.f_sw, meter=True)
+    b = Plant(pre.motor, pre.inverter, 1.0 / pre.f_sw, meter=True)
+    duties = [(0.5 + 0.3 * (k % 7) / 7, 0.5, 0.5 - 0.2 * (k % 5) / 5) for k in range(200)]
+    for d in duties:
+        a.step(*d)
+    for k, d in enumerate(duties):  # as bn_plant.c does: the core alone
+        b._core.step(*d, k * b.T_s)
+    b.adopt_core(len(duties), -1)
+    assert a.meter is not None and b.meter is not None
+    assert a.meter.e_in != 0.0 and a.meter.e_cu > 0.0
+    assert b.meter == a.meter
+
+
+def test_noise_load_profile_and_meter_leave_the_native_plant_eligible() -> None:
+    """The fallback line names none of them any more (a run with a step count)."""
+    from bench.nodes._plant_node import PlantNode
+    from bench.nodes.native import _plant_native
+    from plant_rt import Plant, SensorPars, StepLoad, preset
+    from tests.trace_helpers import CODEC
+
+    pre = preset("wen2023")
+    plant = Plant(
+        pre.motor,
+        pre.inverter,
+        1.0 / pre.f_sw,
+        sensors=SensorPars(noise_i=0.1, noise_u=0.5, seed=3),
+        load=StepLoad(0.01, 1.0),
+        meter=True,
+    )
+    node = PlantNode(CODEC, plant, n_steps=100)
+    why = _plant_native.native_missing(node, "udp_multicast", realtime=False, external=False)
+    assert why is None
+    node.n_steps = 0  # until stopped: the noise is drawn before the loop, so not native
+    why = _plant_native.native_missing(node, "udp_multicast", realtime=False, external=False)
+    assert why is not None and "noise" in why
+
+
+def test_noise_values_are_the_generators_calls_in_the_cores_order() -> None:
+    """:func:`noise_values` against the core's own calls of the Python generator."""
+    import itertools
+
+    from bench.nodes.native._plant_native import noise_values
+    from plant_rt import Plant, SensorPars, preset
+
+    pre = preset("wen2023")
+    sens = SensorPars(noise_i=0.1, noise_u=0.5, seed=11)
+    a = Plant(pre.motor, pre.inverter, 1.0 / pre.f_sw, sensors=sens)
+    b = Plant(pre.motor, pre.inverter, 1.0 / pre.f_sw, sensors=sens)
+    ideal = Plant(pre.motor, pre.inverter, 1.0 / pre.f_sw)
+    vals = list(itertools.islice(noise_values(b), 4 * 5))
+    for j in range(5):
+        s, t = a.sample(), ideal.sample()
+        got = (s.i_a - t.i_a, s.i_b - t.i_b, s.i_c - t.i_c, s.u_dc - t.u_dc)
+        want = vals[4 * j : 4 * j + 4]
+        assert got[:3] == tuple(want[:3])  # ideal ADC: the currents' noise exactly
+        assert abs(got[3] - want[3]) < 1e-12
+        a.step(0.5, 0.5, 0.5)
+        ideal.step(0.5, 0.5, 0.5)
+
+
+#: Per-step frames compared, with PlantCurrents (DBC 2.4, sent in runs with faults).
+_PER_STEP = {
+    0x10: "PwmDuty",
+    0x11: "PhaseSamples",
+    0x12: "PositionSensor",
+    0x100: "PlantTruth",
+    0x102: "PlantCurrents",
+}
+
+
+def _frames_by_step(frames: list[can.Message]) -> dict[tuple[int, int], bytes]:
+    """Each per-step frame by (identifier, step unwrapped); the recorder frames without run_id;
+    a frame the codec rejects (babble's) by (identifier, -1 - its payload's hash) (a set:
+    a lockstep resend repeats it)."""
+    out: dict[tuple[int, int], bytes] = {}
+    last: dict[int, int] = {}
+    for m in frames:
+        name = _PER_STEP.get(m.arbitration_id)
+        if name is None:
+            continue
+        d = CODEC.decode(m)
+        assert d is not None, name
+        if d.reason is not None:
+            out[(m.arbitration_id, -1 - abs(hash(bytes(m.data))))] = bytes(m.data)
+            continue
+        data = bytes(m.data)
+        if "run_id" in d.signals:  # the run's nonce differs between two runs
+            s = dict(d.signals)
+            s["run_id"] = 0
+            data = bytes(CODEC.encode(name, s).data)
+        step = unwrap(
+            int(d.signals["step"]), last.get(m.arbitration_id, 0), 1 << CODEC.step_bits(name)
+        )
+        last[m.arbitration_id] = step
+        assert out.setdefault((m.arbitration_id, step), data) == data, (name, step)
+    return out
+
+
+def _fault(i: int, kind: str, at_s: float, dur: float | None, **params: Any) -> Fault:
+    return Fault(i, kind, at_s, dur, params, None)
+
+
+def _assert_faults_native_equal_python(
+    scn: Scenario, est: str, out: Path, *, oracle: str = "inprocess"
+) -> dict[str, Any]:
+    """The native plant's lockstep run against the Python node's: the in-process reference
+    (``oracle="inprocess"``), or the Python plant node's process run on udp_multicast
+    (``"process"``: its counters compared too)."""
+    spec = BusSpec("udp_multicast", GROUP, free_port())
+    res = run_scenario(scn, est, spec=spec, out_dir=out / "nat", progress=False, node_args=NATIVE)
+    meta = json.loads((out / "nat" / "meta.json").read_text())
+    assert meta["node_engines"]["plant"] == "native"
+    got = _frames_by_step(list(can.LogReader(str(res.capture))))
+    if oracle == "inprocess":
+        ref = run_local(scn, est, out / "ref", plots=False)
+        want = _frames_by_step(run_inprocess(scn, est, CODEC))
+    else:
+        py = {"plant": ["--engine", "python"], "controller": []}
+        spec = BusSpec("udp_multicast", GROUP, free_port())
+        ref = run_scenario(scn, est, spec=spec, out_dir=out / "py", progress=False, node_args=py)
+        py_meta = json.loads((out / "py" / "meta.json").read_text())
+        assert py_meta["node_engines"]["plant"] == "python"
+        want = _frames_by_step(list(can.LogReader(str(ref.capture))))
+        a, b = meta["node_reports"]["plant"], py_meta["node_reports"]["plant"]
+        for key in ("faults", "late_duties", "duty_rejected", "trips", "steps"):
+            assert a[key] == b[key], key
+    assert any(k[0] == 0x102 for k in want)  # PlantCurrents compared too
+    assert got.keys() == want.keys()
+    diff = sorted(k for k in want if got[k] != want[k])
+    assert not diff, f"{len(diff)} frames differ, the first {diff[:3]}"
+    assert res.metrics["faults"] == ref.metrics["faults"]
+    out_meta: dict[str, Any] = meta
+    return out_meta
+
+
+def test_plant_faults_native_give_the_python_nodes_frames(tmp_path: Path) -> None:
+    """Every machine and leg kind, overlapping: the parameters and legs on the exact period."""
+    scn = short("wen-5.1", 0.12)
+    faults = (
+        _fault(0, "resistance_drift", 0.02, 0.05, R_s_factor=1.5),
+        _fault(1, "demagnetisation", 0.04, None, psi_f_factor=0.8),
+        _fault(2, "resistance_drift", 0.05, 0.03, R_s_factor=1.2),
+        _fault(3, "dc_link_step", 0.06, 0.02, u_dc_v=400.0),
+        _fault(4, "open_switch", 0.07, 0.02, phase="a", device="upper"),
+        _fault(5, "open_phase", 0.095, 0.01, phase="b"),
+        _fault(6, "open_switch", 0.1, None, phase="c", device="lower"),
+    )
+    _assert_faults_native_equal_python(replace(scn, faults=faults), "tt-dq", tmp_path)
+
+
+def test_sensor_faults_native_give_the_python_nodes_frames(tmp_path: Path) -> None:
+    """Every sensor kind, overlapping in one phase (their order), with noise; the sensored
+    baseline's encoder lost for a while (its frames not sent, counted in the report)."""
+    from bench.scenarios._setup import with_position_sensor
+
+    scn = with_position_sensor(short("wen-5.1", 0.1))
+    scn = replace(scn, noise=Noise(current_std_a=0.02))
+    faults = (
+        _fault(0, "current_offset", 0.02, 0.04, phase="a", a=0.3),
+        _fault(1, "current_gain", 0.03, 0.02, phase="a", factor=1.2),
+        _fault(2, "current_stuck", 0.05, 0.01, phase="b"),
+        _fault(3, "current_lost", 0.07, 0.01, phase="a"),
+        _fault(4, "dc_voltage_offset", 0.04, None, v=-12.5),
+        _fault(5, "position_sensor_lost", 0.08, 0.005),
+        _fault(6, "current_stuck", 0.0, 0.01, phase="a"),
+    )
+    meta = _assert_faults_native_equal_python(replace(scn, faults=faults), "sensored", tmp_path)
+    rep = meta["node_reports"]["plant"]
+    k0, k1 = faults[5].periods(float(meta["T_s"]))
+    assert k1 is not None and k1 - k0 > 10
+    # NodeFaults.sends counts every instant of the window (the Python node's report)
+    assert rep["faults"] == {
+        "duties_lost": 0,
+        "not_sent": {"PositionSensor": k1 - k0},
+        "babbled": 0,
+    }
+
+
+def test_bus_faults_native_give_the_python_nodes_frames(tmp_path: Path) -> None:
+    """The lockstep bus kinds: duties dropped at random and corrupted (the period runs with
+    the last duty, counted late), a duty delay with its duty_age, foreign frames babbled;
+    every draw NodeFaults' own, every count in the report the Python node's."""
+    scn = short("wen-5.1", 0.12)
+    faults = (
+        _fault(0, "drop", 0.02, 0.02, message="PwmDuty", prob=0.3),
+        _fault(1, "corrupt", 0.045, 0.002, message="PwmDuty"),
+        _fault(2, "delay", 0.06, 0.02, message="PwmDuty", steps=3),
+        _fault(3, "babble", 0.05, 0.04, rate_hz=500.0),
+        _fault(4, "delay", 0.07, 0.005, message="PwmDuty", steps=1),
+    )
+    # the oracle is the Python node's process run: with duties lost, a process run leaves
+    # the in-process reference (the Python node's too) from the first lost duty on
+    meta = _assert_faults_native_equal_python(
+        replace(scn, faults=faults), "tt-dq", tmp_path, oracle="process"
+    )
+    rep = meta["node_reports"]["plant"]
+    assert rep["faults"]["duties_lost"] > 10
+    assert rep["faults"]["babbled"] == 2 * 20
+    assert meta["node_engines"]["plant"] == "native"
+    assert rep["late_duties"] > rep["faults"]["duties_lost"]
+    assert rep["duty_rejected"]["bad_crc"] > 0
+
+
+def test_silence_in_real_time_native_sends_nothing_either_way(tmp_path: Path) -> None:
+    """Real time, 1 kHz: a 5-period silence: no PhaseSamples or PositionSensor of those
+    instants, no duty taken (counted as the Python node counts them); what holds on a
+    busy host (the counts are per instant, not per frame that arrived)."""
+    scn = replace(short("wen-5.1", 0.3), f_sw=1000.0)
+    scn = replace(scn, faults=(_fault(0, "silence", 0.15, 0.005),))
+    spec = BusSpec("udp_multicast", GROUP, free_port())
+    run_scenario(
+        scn,
+        "sensored",
+        spec=spec,
+        out_dir=tmp_path / "rt",
+        mode="realtime",
+        progress=False,
+        node_args=NATIVE,
+    )
+    meta = json.loads((tmp_path / "rt" / "meta.json").read_text())
+    rep = meta["node_reports"]["plant"]
+    assert meta["node_engines"]["plant"] == "native"
+    assert rep["steps"] == 300
+    assert rep["faults"]["not_sent"] == {"PhaseSamples": 5, "PositionSensor": 5}
+    assert rep["faults"]["babbled"] == 0
