@@ -97,16 +97,29 @@ class NodeFaults:
         return None
 
     def duty_shift(self, k: int, *, realtime: bool = False) -> int:
-        """Periods a ``delay`` fault adds to the duty of period ``k`` (``us`` in real time,
-        ``steps`` in lockstep; the one given when only one is)."""
+        """Periods a ``delay`` fault adds to the duty of period ``k``: ``steps`` in lockstep
+        (``us`` rounded up to whole periods when only it is given); in real time ``steps``
+        of a fault without ``us`` (one with ``us`` holds the frame: :meth:`duty_hold_s`)."""
         n = 0
         for f, w in self._bus("delay"):
-            if w.active(k):
-                if (realtime and "us" in f.params) or "steps" not in f.params:
-                    n += math.ceil(float(f.params["us"]) * 1e-6 / self.T_s - 1e-9)
-                else:
-                    n += int(f.params["steps"])
+            if not w.active(k):
+                continue
+            if realtime:
+                n += 0 if "us" in f.params else int(f.params["steps"])
+            elif "steps" not in f.params:
+                n += math.ceil(float(f.params["us"]) * 1e-6 / self.T_s - 1e-9)
+            else:
+                n += int(f.params["steps"])
         return n
+
+    def duty_hold_s(self, k: int) -> float:
+        """Real time: how long (s) a duty frame that arrives in period ``k`` is held from its
+        arrival before the plant may apply it (the ``us`` of the active ``delay`` faults)."""
+        return sum(
+            float(f.params["us"]) * 1e-6
+            for f, w in self._bus("delay")
+            if w.active(k) and "us" in f.params
+        )
 
     def keep(self, t: int, duty: tuple[float, float, float, bool]) -> None:
         """Remember duty ``t`` for a lockstep ``delay``."""

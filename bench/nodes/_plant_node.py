@@ -56,7 +56,9 @@ needs a bench command the controller has not acknowledged (:meth:`PlantNode.acke
 from __future__ import annotations
 
 import sys
+import time
 from collections import deque
+from collections.abc import Callable
 
 import can
 
@@ -229,6 +231,10 @@ class PlantNode:
         #: Lockstep: PhaseSamples lost on their first sending, in order, sent again
         #: before the next sample that gets through (:mod:`bench.nodes._fault_bus`).
         self.withheld: list[can.Message] = []
+        #: Real time: when each duty held by a ``delay`` in us may be applied (s, :attr:`clock`).
+        self.released_at: dict[int, float] = {}
+        #: The clock of the frames' receive timestamps (python-can's: seconds since the epoch).
+        self.clock: Callable[[], float] = time.time
         #: Which loop served the node: ``python`` (:mod:`bench.nodes._loops`) or
         #: ``native`` (:mod:`bench.nodes.native._plant_native`).
         self.node_engine = "python"
@@ -245,7 +251,7 @@ class PlantNode:
             if d.reason is not None:
                 self._reject_duty(d.reason)
                 return
-            self._on_duty(d.signals)
+            self._on_duty(d.signals, msg.timestamp)
         elif d.name == "BenchCommand":
             if d.reason is not None:
                 c.reject(d.reason)
@@ -282,7 +288,9 @@ class PlantNode:
         if reason != REPEATED_COUNTER:
             self.duty_rejected[reason] = self.duty_rejected.get(reason, 0) + 1
 
-    def _on_duty(self, s: dict[str, float]) -> None:
+    def _on_duty(self, s: dict[str, float], arrived: float = 0.0) -> None:
+        """One valid duty frame; ``arrived``: its receive timestamp (s, the clock of
+        :attr:`clock`; 0: unknown, taken as now), for a real-time ``delay`` in us."""
         c = self.counters
         k = self.plant.k
         t = unwrap(int(s["step"]), k - self.delay, self.m_step)
@@ -344,6 +352,9 @@ class PlantNode:
         # controller answers sample k (duty k + 1) before period k has started,
         # and applying it then would put it one period early.
         self.duties[t] = duty
+        if self.realtime and self.faults is not None and (hold := self.faults.duty_hold_s(k)):
+            # a delay in us: the frame is held from its arrival (a timestamped queue)
+            self.released_at[t] = (arrived or self.clock()) + hold
         if not self.realtime and t > self.latest_duty_step:
             self.latest_duty_step = t
             self.latest_duty = duty
@@ -623,13 +634,16 @@ class PlantNode:
         """
         k = self.plant.k
         shift = 0 if self.faults is None else self.faults.duty_shift(k, realtime=True)
-        due = [t for t in self.duties if t <= k - shift]
+        held = self.released_at
+        now = self.clock() if held else 0.0
+        due = [t for t in self.duties if t <= k - shift and held.get(t, now) <= now]
         if due:
             t = max(due)
             self.latest_duty_step = t
             self.latest_duty = self.duties[t]
-            for t in due:
-                del self.duties[t]
+            for old in [s for s in self.duties if s <= t]:  # an older one still held: passed
+                del self.duties[old]
+                held.pop(old, None)
         d_a, d_b, d_c, en = self.latest_duty
         self.duty_age = (
             255 if self.latest_duty_step < 0 else max(0, min(254, k - self.latest_duty_step))

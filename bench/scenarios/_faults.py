@@ -217,10 +217,11 @@ KINDS: dict[str, Kind] = {
             "Duties take effect later (one of steps and us is required; the other "
             "mode takes the same time rounded up to whole periods).",
             "the period k applies the duty of period k - steps (the last one applied "
-            "when that one is gone)",
-            "the plant holds each duty frame us microseconds from its arrival; a period "
-            "applies at its start the newest duty released by then (steps only: steps "
-            "periods of its clock)",
+            "when that one is gone; us alone: rounded up to whole periods)",
+            "the plant holds each duty frame us microseconds from its arrival (its receive "
+            "timestamp); a period applies at its start the newest duty released by then, so "
+            "a delay below a period costs a period only to a duty that arrives less than us "
+            "before the period starts (steps alone: steps periods of its clock)",
         ),
         Kind(
             "corrupt",

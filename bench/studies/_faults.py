@@ -549,9 +549,30 @@ def render_doc(summary: dict[str, Any]) -> str:
             if any(c != "-" for c in cells):
                 lines.append(f"| {f} | {ctl} | " + " | ".join(cells) + " |")
     lines += ["", "## Not run", ""]
-    lines += [f"- `{k}`: {why}" for k, why in summary["not_run"].items()]
-    lines.append("")
+    lines += [f"- `{k}`: {why}" for k, why in summary["not_run"].items()] or ["None."]
+    lines += ["", *_modes_table()]
     return "\n".join(lines)
+
+
+def _modes_table() -> list[str]:
+    """How each bus kind behaves in each mode (:data:`bench.scenarios._faults.KINDS`)."""
+    from bench.scenarios._faults import KINDS
+
+    lines = [
+        "## The bus kinds in each mode",
+        "",
+        "As `bench faults` and docs/SCENARIOS.md state them. In lockstep the plant's "
+        "retransmission rules apply: the plant never waits for a duty a fault lost, and its "
+        "watchdog counts periods as in real time.",
+        "",
+        "| kind | lockstep | real time |",
+        "|---|---|---|",
+    ]
+    for k in KINDS.values():
+        if k.group == "bus":
+            lines.append(f"| `{k.name}` | {k.refused or k.lockstep} | {k.refused or k.realtime} |")
+    lines.append("")
+    return lines
 
 
 def readme_block(summary: dict[str, Any]) -> str:
