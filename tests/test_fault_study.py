@@ -24,6 +24,7 @@ from bench.studies._faults import (
     render_doc,
     run_case,
     run_fault_study,
+    shortest_duration,
 )
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -111,6 +112,10 @@ def test_from_json_renders_without_running(
     )
     assert main(["suite", "faults", "--duration", "0.9", "--out", str(tmp_path)]) == 2
     assert "--duration must be > 1 s" in capsys.readouterr().err
+    assert main(["suite", "faults", "--controllers", "matlab", "--out", str(tmp_path)]) == 2
+    assert "--controllers: unknown 'matlab'" in capsys.readouterr().err
+    assert main(["suite", "faults", "--update", "--out", str(tmp_path / "none")]) == 2
+    assert "--update: " in capsys.readouterr().err
     bad = tmp_path / "bad.json"
     bad.write_text("{}")
     assert main(["suite", "faults", "--from-json", str(bad)]) == 2
@@ -153,3 +158,32 @@ def test_update_keeps_the_cases_not_run(tmp_path: Path) -> None:
     new = [r for r in s["records"] if r["estimator"] == "square-wave" and r["kind"] == "babble"]
     assert len(new) == 1 and new[0]["controller"] == "in-process"
     assert [r["fault"] for r in s["records"]] == [r["fault"] for r in old["records"]]
+
+
+def test_the_controller_as_a_process_gives_the_in_process_record() -> None:
+    """A 50 ms sample loss in lockstep (the retransmission rules) with the Python and the
+    native controller node as processes over udp_multicast: the same record as in
+    process, reaction time and angle error included (lockstep is deterministic whatever
+    carries the frames); the native node served (not a fallback)."""
+    label, fault = next((lab, f) for lab, f in catalogue(540.0) if "PhaseSamples" in lab)
+    recs = {c: run_case("square-wave", label, fault, 1.2, c) for c in CONTROLLERS[:3]}
+    ref = recs["in-process"]
+    assert ref["outcome"] == "tripped" and ref["error"] is None
+    same = ("exit_status", "detected_by", "reaction_ms", "lock_kept", "theta_err_abs_max_deg")
+    for c in ("python", "native"):
+        assert recs[c]["controller"] == c
+        assert {k: recs[c][k] for k in same} == {k: ref[k] for k in same}, c
+    assert recs["native"]["node_engine"] == "native"
+    assert recs["python"]["node_engine"] == "python"
+
+
+def test_the_external_controller_is_scored_by_the_plant_protections() -> None:
+    """The example external controller (no supervision) under 50 ms of silence: the plant's
+    duty watchdog trips after its 20 ms (wen-5.1, 10 kHz: 198 periods after the last duty,
+    period 4999's), as for the bench's own controller."""
+    label, fault = next((lab, f) for lab, f in catalogue(540.0) if f["kind"] == "silence")
+    rec = run_case("tt-dq", label, fault, shortest_duration() + 0.05, EXTERNAL)
+    assert rec["estimator"] == EXTERNAL and rec["controller"] == EXTERNAL
+    assert rec["error"] is None, rec["error"]
+    assert rec["outcome"] == "tripped" and rec["detected_by"] == "watchdog"
+    assert rec["reaction_ms"] == pytest.approx(19.8)
