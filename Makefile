@@ -73,8 +73,10 @@ reliability: $(STAMP)
 	mkdir -p docs/reliability
 	$(BIN)/bench soak --processes --out docs/reliability/soak.json --doc docs/RELIABILITY.md
 
-# Fault study: every fault kind for every shipped estimator on the drive plant (in-process,
-# about 30 min on 2 cores); docs/faults/faults.json, docs/FAULTS.md and the README's block.
+# Fault study: every fault kind for every shipped estimator on the drive plant in-process
+# (about 30 min on 2 cores), and the bus kinds with the controller as a process: Python node,
+# native node, external controller (about 10 min more); docs/faults/faults.json,
+# docs/FAULTS.md and the README's block.
 faults: $(STAMP)
 	$(BIN)/bench suite faults --out docs/faults --doc docs/FAULTS.md --readme README.md
 

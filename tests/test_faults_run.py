@@ -168,10 +168,63 @@ def test_sensor_and_bus_faults_reach_the_controller_and_lockstep_stays_determini
     assert set(a["duty_age"][(kk > 1250) & (t < 1.29)]) == {0.0}
 
 
-def test_silence_is_refused_in_lockstep_with_one_line(tmp_path: Path) -> None:
-    src = _scenario(tmp_path, [{"at_s": 1.0, "kind": "silence"}])
-    with pytest.raises(ScenarioError, match=r"faults\[0\]\.kind.*not implemented in lockstep"):
-        bench.run(src, estimator="sensored", out=tmp_path / "run")
+def test_a_lost_sample_burst_trips_the_lockstep_watchdog_as_in_real_time(
+    tmp_path: Path,
+) -> None:
+    """drop PhaseSamples prob 1.0 for 50 ms from t = 1.0 s: samples 1000 to 1049 are lost
+    on their first sending, so the controller never answers them in their periods: the
+    last duty in time is 1000 (the answer to sample 999), one period after the last of a
+    lost-duty burst, and the watchdog trips W periods after its period (999); silence
+    loses the duties too, so it trips as the duty burst does."""
+    W = max(WATCHDOG_PERIODS, math.ceil(WATCHDOG_MIN_S / T_S - 1e-9))
+    for fault, last in (
+        ({"kind": "drop", "message": "PhaseSamples", "prob": 1.0}, 999),
+        ({"kind": "silence"}, 998),
+    ):
+        src = _scenario(tmp_path, [{"at_s": 1.0, "duration_s": 0.05, **fault, "expect": "trip"}])
+        run = bench.run(src, estimator="sensored", out=tmp_path / f"run-{fault['kind']}")
+        assert run.metrics["plant_fault"] == "watchdog", fault
+        assert run.metrics["plant_fault_step"] == last + W, fault
+        (f,) = run.metrics["faults"]
+        assert f["detected_by"] == "watchdog" and f["met"] is True
+        assert f["reaction_ms"] == pytest.approx((last + W - 1000) * T_S * 1e3)
+        assert run.exit_status == 0
+
+
+def test_a_short_sample_loss_is_ridden_through_and_lockstep_stays_deterministic(
+    tmp_path: Path,
+) -> None:
+    """5 ms of lost samples (shorter than the watchdog): the periods 1001 to 1005 run
+    with duty 1000, aging by one a period; the lost samples are sent again before
+    sample 1005, so the controller, computing them in order, answers sample 1005 in
+    time and the duties are fresh again from period 1006.  A 30 % loss gives the same
+    trace twice."""
+    src = _scenario(
+        tmp_path,
+        [{"at_s": 1.0, "duration_s": 0.005, "kind": "drop", "message": "PhaseSamples",
+          "prob": 1.0, "expect": "ride_through"}],
+    )  # fmt: skip
+    run = bench.run(src, estimator="sensored", out=tmp_path / "short")
+    assert run.metrics["plant_fault"] == "none" and run.exit_status == 0
+    (f,) = run.metrics["faults"]
+    assert f["detected_by"] is None and f["met"] is True
+    a = run.signals
+    kk = np.rint(a["t"] / T_S).astype(int)
+    age = dict(zip(kk.tolist(), a["duty_age"].tolist(), strict=True))
+    # each row's duty_age is that of the duty of the period before it
+    assert [age[k] for k in range(1000, 1009)] == [0, 0, 1, 2, 3, 4, 5, 0, 0]
+    src = _scenario(
+        tmp_path,
+        [{"at_s": 1.0, "duration_s": 0.05, "kind": "drop", "message": "PhaseSamples",
+          "prob": 0.3}],
+    )  # fmt: skip
+    runs = [bench.run(src, estimator="sensored", out=tmp_path / f"p{i}") for i in range(2)]
+    x, y = (r.signals for r in runs)
+    for col in ("i_a", "theta_err_deg", "duty_age"):
+        np.testing.assert_array_equal(x[col], y[col])
+    lost = x["duty_age"][(x["t"] > 1.0) & (x["t"] <= 1.051)]
+    assert 0 < np.count_nonzero(lost > 0) < len(lost)
+    assert runs[0].metrics["plant_fault"] == "none"
 
 
 def test_an_open_phase_in_a_lockstep_run_holds_its_current_at_zero_from_its_period(

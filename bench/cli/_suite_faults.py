@@ -1,8 +1,13 @@
 """``bench suite faults``: every fault kind for every shipped estimator (:mod:`bench.studies._faults`).
 
 ``bench suite faults [--out DIR] [--doc FILE] [--readme FILE] [--estimators
-A,B] [--kinds K,L] [--duration S] [--jobs N]`` writes ``DIR/faults.json`` and
-``DIR/report.md`` (default ``runs/faults``); ``--doc`` writes the same
+A,B] [--kinds K,L] [--controllers C,D] [--process-catalogue bus|full] [--update]
+[--duration S] [--jobs N]`` writes ``DIR/faults.json`` and
+``DIR/report.md`` (default ``runs/faults``). ``--controllers`` says where the
+controller runs (in-process, python, native, external; default all), and
+``--process-catalogue`` what the process variants run (default ``bus``: the bus
+kinds with one estimator). ``--update`` keeps the records of ``DIR/faults.json``
+for the cases not run now (a study updated in part). ``--doc`` writes the same
 report to FILE (``make faults``: docs/FAULTS.md), ``--readme`` the headline
 block of that README between its markers. ``--from-json`` renders them from
 an existing ``faults.json`` without running. Exits 0 whatever the drives did
@@ -23,7 +28,9 @@ from bench._errors import BenchError
 def cmd_faults(args: argparse.Namespace) -> int:
     from bench.studies._faults import (
         AT_S,
+        CONTROLLERS,
         DURATION_S,
+        PROCESS_CATALOGUES,
         catalogue,
         headline,
         render_doc,
@@ -51,6 +58,15 @@ def cmd_faults(args: argparse.Namespace) -> int:
         for k in kinds:
             if k not in known_kinds:
                 raise BenchError(f"--kinds: unknown kind {k!r} (known: {', '.join(known_kinds)})")
+        ctls = tuple(x.strip() for x in (args.controllers or "").split(",") if x.strip())
+        for c in ctls:
+            if c not in CONTROLLERS:
+                raise BenchError(f"--controllers: unknown {c!r} (known: {', '.join(CONTROLLERS)})")
+        if args.process_catalogue not in PROCESS_CATALOGUES:
+            raise BenchError(
+                f"--process-catalogue: unknown {args.process_catalogue!r} "
+                f"(known: {', '.join(PROCESS_CATALOGUES)})"
+            )
         duration = args.duration if args.duration is not None else DURATION_S
         if not duration > (least := shortest_duration()):
             raise BenchError(
@@ -60,18 +76,30 @@ def cmd_faults(args: argparse.Namespace) -> int:
         if args.jobs < 1:
             raise BenchError(f"--jobs must be >= 1, got {args.jobs}")
         out = Path(args.out) if args.out else Path("runs") / "faults"
+        keep = None
+        if args.update:
+            try:
+                keep = json.loads((out / "faults.json").read_text(encoding="utf-8"))
+                keep["records"]
+            except (OSError, ValueError, KeyError, TypeError) as e:
+                raise BenchError(
+                    f"--update: {out / 'faults.json'}: not a fault study's faults.json ({e})"
+                ) from None
         summary = run_fault_study(
             out,
             estimators=ests or ESTIMATOR_NAMES,
             kinds=kinds or None,
+            controllers=ctls or CONTROLLERS,
+            process_catalogue=args.process_catalogue,
             duration=duration,
             jobs=args.jobs,
+            keep=keep,
             progress=None if args.quiet else lambda s: print(s, file=sys.stderr, flush=True),
         )
         print(f"report: {out / 'report.md'}, {out / 'faults.json'}")
     _write_docs(args, summary)
-    for est, c in headline(summary).items():
-        print(f"{est}: " + ", ".join(f"{n} {o}" for o, n in c.items() if n))
+    for (est, ctl), c in headline(summary).items():
+        print(f"{est} ({ctl}): " + ", ".join(f"{n} {o}" for o, n in c.items() if n))
     return 0
 
 
@@ -91,7 +119,8 @@ def add_parser(ss: Any) -> None:
     """``bench suite faults`` under the ``bench suite`` subparsers ``ss``."""
     q = ss.add_parser(
         "faults",
-        help="every fault kind for every shipped estimator, drive plant, in-process",
+        help="every fault kind for every shipped estimator, drive plant, in-process and with "
+        "the controller as a process",
     )
     q.add_argument("--out", "-o", help="report folder (default runs/faults)")
     q.add_argument("--doc", help="also write the report to this file (docs/FAULTS.md)")
@@ -99,6 +128,21 @@ def add_parser(ss: Any) -> None:
     q.add_argument("--from-json", help="render --doc/--readme from this faults.json, run nothing")
     q.add_argument("--estimators", help="comma-separated shipped estimators (default: all)")
     q.add_argument("--kinds", help="comma-separated fault kinds (default: the whole catalogue)")
+    q.add_argument(
+        "--controllers",
+        help="comma-separated: in-process, python, native, external (default: all)",
+    )
+    q.add_argument(
+        "--process-catalogue",
+        default="bus",
+        help="what the process variants run: bus (the bus kinds, one estimator; default) "
+        "or full (every kind, every estimator)",
+    )
+    q.add_argument(
+        "--update",
+        action="store_true",
+        help="keep the records of OUT/faults.json for the cases not run now",
+    )
     q.add_argument("--duration", type=float, help="simulated seconds per case (default 1.5)")
     q.add_argument("--jobs", "-j", type=int, default=2, help="parallel workers (default 2)")
     q.add_argument("--quiet", "-q", action="store_true", help="no progress lines")

@@ -14,10 +14,23 @@ alike.  The machine and sensor faults are :class:`plant_rt._faults.PlantFaults`
   counts it late, and trips its watchdog after the real-time number of
   periods without a duty, as a real-time plant would.
 - ``drop`` of ``PhaseSamples`` / ``PositionSensor`` and ``silence``: the
-  frames are not sent (real time only; lockstep refuses them,
-  :func:`bench.scenarios._faults.lockstep_error`).
+  plant's sending of instant ``k`` is lost when ``k`` lies in the window (with
+  probability ``prob``, drawn as for a duty, from ``k``). Real time: the frame
+  is gone and the controller skips to the next sample it gets.  Lockstep,
+  under its retransmission rules (a lockstep controller computes its samples
+  in order): a lost ``PhaseSamples`` is kept and sent again, in order before
+  the new one, with the first sending of a later instant that gets through;
+  the controller never answers the lost sample in its period (its duty, come
+  late, is counted lost: :meth:`NodeFaults.answer_lost`), so the plant runs that
+  period with the last duty it applied, counts it late and trips its watchdog
+  after the real-time number of periods, as a real-time plant would.  A lost
+  ``PositionSensor`` is not sent again (as ``position_sensor_lost``: a sensor
+  reading is of its instant only).
 - ``delay`` of ``PwmDuty``: lockstep applies in period ``k`` the duty of
-  ``k - steps``; real time takes a duty ``ceil(us / T_s)`` periods later.
+  ``k - steps``; real time holds each duty frame ``us`` microseconds from its
+  arrival (:meth:`NodeFaults.held_until`) and a period takes the newest duty
+  released by its start, so a delay below a period moves a duty to the next
+  period only when it arrives within ``us`` of that period's start.
 - ``babble``: a foreign ``PwmDuty`` (to the plant) and ``PhaseSamples`` (to
   the controller) with random payloads every ``round(f_sw / rate_hz)`` periods.
 """
@@ -84,16 +97,29 @@ class NodeFaults:
         return None
 
     def duty_shift(self, k: int, *, realtime: bool = False) -> int:
-        """Periods a ``delay`` fault adds to the duty of period ``k`` (``us`` in real time,
-        ``steps`` in lockstep; the one given when only one is)."""
+        """Periods a ``delay`` fault adds to the duty of period ``k``: ``steps`` in lockstep
+        (``us`` rounded up to whole periods when only it is given); in real time ``steps``
+        of a fault without ``us`` (one with ``us`` holds the frame: :meth:`duty_hold_s`)."""
         n = 0
         for f, w in self._bus("delay"):
-            if w.active(k):
-                if (realtime and "us" in f.params) or "steps" not in f.params:
-                    n += math.ceil(float(f.params["us"]) * 1e-6 / self.T_s - 1e-9)
-                else:
-                    n += int(f.params["steps"])
+            if not w.active(k):
+                continue
+            if realtime:
+                n += 0 if "us" in f.params else int(f.params["steps"])
+            elif "steps" not in f.params:
+                n += math.ceil(float(f.params["us"]) * 1e-6 / self.T_s - 1e-9)
+            else:
+                n += int(f.params["steps"])
         return n
+
+    def duty_hold_s(self, k: int) -> float:
+        """Real time: how long (s) a duty frame that arrives in period ``k`` is held from its
+        arrival before the plant may apply it (the ``us`` of the active ``delay`` faults)."""
+        return sum(
+            float(f.params["us"]) * 1e-6
+            for f, w in self._bus("delay")
+            if w.active(k) and "us" in f.params
+        )
 
     def keep(self, t: int, duty: tuple[float, float, float, bool]) -> None:
         """Remember duty ``t`` for a lockstep ``delay``."""
@@ -111,8 +137,9 @@ class NodeFaults:
         older = [s for s in self.history if s <= t - n]
         return self.history[max(older)] if older else (0.5, 0.5, 0.5, False)
 
-    def sends(self, message: str, k: int) -> bool:
-        """Whether the plant sends ``message`` of instant ``k`` (position sensor, drops, silence)."""
+    def lost(self, message: str, k: int) -> bool:
+        """Whether the plant's sending of ``message`` at instant ``k`` is lost (position
+        sensor, drops, silence); a pure function of ``k``."""
         for f, w in self.windows:
             if not w.active(k):
                 continue
@@ -124,9 +151,20 @@ class NodeFaults:
             if lost:
                 p = float(f.params.get("prob", 1.0))
                 if p >= 1.0 or random.Random(f"bench-fault/{self.seed}/{f.index}/{k}").random() < p:
-                    self.not_sent[message] = self.not_sent.get(message, 0) + 1
-                    return False
+                    return True
+        return False
+
+    def sends(self, message: str, k: int) -> bool:
+        """Whether the plant sends ``message`` of instant ``k``; counts the frames not sent."""
+        if self.lost(message, k):
+            self.not_sent[message] = self.not_sent.get(message, 0) + 1
+            return False
         return True
+
+    def answer_lost(self, t: int) -> bool:
+        """Lockstep: whether the duty tagged ``t`` (the answer to sample ``t - 1``) is lost
+        because that sample's first sending was (module docstring)."""
+        return t >= 1 and self.lost("PhaseSamples", t - 1)
 
     def babble(self, k: int, codec: Codec) -> tuple[can.Message | None, can.Message | None]:
         """Foreign frames of instant ``k``: (a PwmDuty for the plant, a PhaseSamples for the

@@ -56,7 +56,9 @@ needs a bench command the controller has not acknowledged (:meth:`PlantNode.acke
 from __future__ import annotations
 
 import sys
+import time
 from collections import deque
+from collections.abc import Callable
 
 import can
 
@@ -168,6 +170,8 @@ class PlantNode:
         self.duties: dict[int, tuple[float, float, float, bool]] = {}
         self.latest_duty: tuple[float, float, float, bool] = _SAFE_DUTY
         self.latest_duty_step = -1
+        #: Lockstep: the newest duty taken in its own period, and its tag.
+        self.applied: tuple[tuple[float, float, float, bool], int] = (_SAFE_DUTY, -1)
         self.commands = CommandQueue(self.m_cmd)
         #: Lockstep pacing (0: off): run period k only once a bench command
         #: for step k + 1 or later has arrived. ``bench run`` sends one at least
@@ -224,6 +228,13 @@ class PlantNode:
         self._outbox: list[can.Message] = []
         #: The scenario's fault timeline (``[[faults]]``; :mod:`bench.nodes._fault_bus`).
         self.faults: NodeFaults | None = None
+        #: Lockstep: PhaseSamples lost on their first sending, in order, sent again
+        #: before the next sample that gets through (:mod:`bench.nodes._fault_bus`).
+        self.withheld: list[can.Message] = []
+        #: Real time: when each duty held by a ``delay`` in us may be applied (s, :attr:`clock`).
+        self.released_at: dict[int, float] = {}
+        #: The clock of the frames' receive timestamps (python-can's: seconds since the epoch).
+        self.clock: Callable[[], float] = time.time
         #: Which loop served the node: ``python`` (:mod:`bench.nodes._loops`) or
         #: ``native`` (:mod:`bench.nodes.native._plant_native`).
         self.node_engine = "python"
@@ -240,7 +251,7 @@ class PlantNode:
             if d.reason is not None:
                 self._reject_duty(d.reason)
                 return
-            self._on_duty(d.signals)
+            self._on_duty(d.signals, msg.timestamp)
         elif d.name == "BenchCommand":
             if d.reason is not None:
                 c.reject(d.reason)
@@ -277,7 +288,9 @@ class PlantNode:
         if reason != REPEATED_COUNTER:
             self.duty_rejected[reason] = self.duty_rejected.get(reason, 0) + 1
 
-    def _on_duty(self, s: dict[str, float]) -> None:
+    def _on_duty(self, s: dict[str, float], arrived: float = 0.0) -> None:
+        """One valid duty frame; ``arrived``: its receive timestamp (s, the clock of
+        :attr:`clock`; 0: unknown, taken as now), for a real-time ``delay`` in us."""
         c = self.counters
         k = self.plant.k
         t = unwrap(int(s["step"]), k - self.delay, self.m_step)
@@ -294,6 +307,16 @@ class PlantNode:
             self._reject_duty(REJECT_FUTURE_COUNTER)
             return
         fate = None if self.faults is None else self.faults.duty_fate(t + self.delay)
+        if (
+            fate is None
+            and self.faults is not None
+            and not self.realtime
+            and t >= k - self.delay
+            and self.faults.answer_lost(t)
+        ):
+            # lockstep: the answer to a sample lost on its first sending, come with the
+            # plant's resend: too late for its period, as in real time (_fault_bus)
+            fate = "lost"
         if fate is not None:  # a bus fault: lost, or arrives with a bad E2E CRC
             if fate == "corrupt":
                 self._reject_duty(REJECT_BAD_CRC)
@@ -329,6 +352,9 @@ class PlantNode:
         # controller answers sample k (duty k + 1) before period k has started,
         # and applying it then would put it one period early.
         self.duties[t] = duty
+        if self.realtime and self.faults is not None and (hold := self.faults.duty_hold_s(k)):
+            # a delay in us: the frame is held from its arrival (a timestamped queue)
+            self.released_at[t] = (arrived or self.clock()) + hold
         if not self.realtime and t > self.latest_duty_step:
             self.latest_duty_step = t
             self.latest_duty = duty
@@ -412,10 +438,11 @@ class PlantNode:
     def ready(self) -> bool:
         """Lockstep: whether the duty for the current period has arrived."""
         t = self.needed_duty()
+        nf = self.faults
         return (
             t <= 0
             or t in self.duties
-            or (self.faults is not None and self.faults.duty_fate(self.plant.k) is not None)
+            or (nf is not None and (nf.duty_fate(self.plant.k) is not None or nf.answer_lost(t)))
         )
 
     def paced(self) -> bool:
@@ -518,7 +545,12 @@ class PlantNode:
             )
         if nf is not None:
             if not nf.sends("PhaseSamples", s.k):
+                if not self.realtime:  # lockstep: sent again with the next that gets through
+                    self.withheld += [m for m in frames if m.arbitration_id == self.id_samples]
                 frames = [m for m in frames if m.arbitration_id != self.id_samples]
+            elif self.withheld:
+                frames = [*self.withheld, *frames]
+                self.withheld = []
             if not nf.sends("PositionSensor", s.k):
                 frames = [m for m in frames if m.arbitration_id != self.id_pos]
             to_plant, to_ctrl = nf.babble(s.k, self.codec)
@@ -547,10 +579,15 @@ class PlantNode:
             d_a, d_b, d_c, en = _SAFE_DUTY
             self.duty_age = 255
         elif t not in self.duties:  # lost to a bus fault: held, counted, watched as in real time
-            d_a, d_b, d_c, en = self.latest_duty
-            self.duty_age = (
-                255 if self.latest_duty_step < 0 else min(254, self.plant.k - self.latest_duty_step)
+            # the newest duty before t: a later one may be here already (a controller that
+            # answers a resent sample at once is ahead of the plant), never applied early
+            held, held_step = (
+                (self.latest_duty, self.latest_duty_step)
+                if self.latest_duty_step < t
+                else self.applied
             )
+            d_a, d_b, d_c, en = held
+            self.duty_age = 255 if held_step < 0 else min(254, self.plant.k - held_step)
             self.counters.late_duties += 1
             # the real-time watchdog counts from the period the last duty arrived in,
             # for a controller answering within its period the one before that duty's:
@@ -565,6 +602,7 @@ class PlantNode:
         else:
             self.duty_age = min(254, self.plant.k - t)
             d_a, d_b, d_c, en = self.duties.pop(t)
+            self.applied = ((d_a, d_b, d_c, en), t)
             for old in [s for s in self.duties if s < t]:
                 del self.duties[old]
             if self.faults is not None:  # a delay fault applies an older duty
@@ -596,13 +634,16 @@ class PlantNode:
         """
         k = self.plant.k
         shift = 0 if self.faults is None else self.faults.duty_shift(k, realtime=True)
-        due = [t for t in self.duties if t <= k - shift]
+        held = self.released_at
+        now = self.clock() if held else 0.0
+        due = [t for t in self.duties if t <= k - shift and held.get(t, now) <= now]
         if due:
             t = max(due)
             self.latest_duty_step = t
             self.latest_duty = self.duties[t]
-            for t in due:
-                del self.duties[t]
+            for old in [s for s in self.duties if s <= t]:  # an older one still held: passed
+                del self.duties[old]
+                held.pop(old, None)
         d_a, d_b, d_c, en = self.latest_duty
         self.duty_age = (
             255 if self.latest_duty_step < 0 else max(0, min(254, k - self.latest_duty_step))

@@ -9,7 +9,8 @@ nodes queue them by that step.  They must not all be sent at once: the
 of a real-time run makes the plant's first periods late.  :class:`CommandPacer`
 sends each command (twice, same ``seq``) once the plant is within
 :attr:`CommandPacer.lead` periods of it, as the host sees the plant's step
-(``PhaseSamples.step``, unwrapped).  In lockstep it also sends a keep-alive
+(``PhaseSamples.step``, unwrapped; this run's ``PlantTruth.step`` while a fault
+loses the samples: :attr:`bench.runs._recorder.Recording.plant_step`).  In lockstep it also sends a keep-alive
 (``cmd`` 0) at least every :data:`PACE_EVERY` periods: a paced plant
 (``bench plant --pace-every``) runs no period beyond the newest command it
 holds, so it never outruns the host's recorder.  ``bench run`` uses it with

@@ -43,6 +43,12 @@ class Recorder(can.Listener):
         #: frame is seen in order (a poller could miss a whole counter cycle).
         self.step = -1
         self._m_step = 1 << codec.step_bits("PhaseSamples")
+        #: The plant's step from this run's ``PlantTruth`` counter, unwrapped alike: the
+        #: plant's progress while its samples are lost to a fault (``[[faults]]`` drop,
+        #: silence), which a lockstep bench must still pace.
+        self.truth_step = -1
+        self._last_raw_truth = -1
+        self._m_truth = 1 << codec.step_bits("PlantTruth")
         self.done = threading.Event()
         self.lock = threading.Lock()
         #: ``PwmDuty`` frames checked here (a controller under test): valid ones,
@@ -90,6 +96,15 @@ class Recorder(can.Listener):
             d = self.codec.decode(msg)
             if d is not None and d.reason is None:
                 rid = int(d.signals["run_id"])
+                if rid == self.run_id and msg.arbitration_id == self.recorder_ids[0]:
+                    raw = int(d.signals["step"])
+                    if self._last_raw_truth < 0:
+                        self.truth_step = self._last_raw_truth = raw
+                    elif (
+                        ahead := (raw - self._last_raw_truth) % self._m_truth
+                    ) < self._m_truth // 2:
+                        self.truth_step += ahead
+                        self._last_raw_truth = raw
                 if rid not in (self.run_id, 0):  # 0: a controller that copies no nonce
                     seen = (msg.arbitration_id, rid, int(d.signals["step"]))
                     if seen not in self._foreign_seen and len(self._foreign_seen) < 4096:
@@ -224,7 +239,8 @@ class Recording:
     @property
     def plant_step(self) -> int:
         """The plant's newest step the recorder has seen (-1 before the first sample)."""
-        return self.recorders[0].step
+        r = self.recorders[0]
+        return r.step if r.step < 0 else max(r.step, r.truth_step)
 
     @property
     def plant_done(self) -> bool:

@@ -22,22 +22,49 @@ survive or see: a DC-link sag to 60 % and a surge to 118 % of the nominal
 voltage (the plant's own trip is at 120 %), 30 % demagnetisation, 50 %
 resistance rise, sensor faults on phase a (the wire carries ``i_a`` and
 ``i_b``: the controller computes ``i_c``), a 50 ms burst of lost or corrupt
-duties, 5 periods of extra duty delay, a babbling node, phase a open and
-phase a's upper switch open (the phase of the sensor faults, so that the
-table sets an open phase beside a lost sensor: the controller reads both as
-a phase without current). ``silence`` and the loss of ``PhaseSamples`` are
-refused in lockstep: the study lists ``silence`` as not run. The JSON (``faults.json``) is the result; :func:`render_doc` writes
+duties, of lost samples and of silence (longer than the plant's duty watchdog;
+lockstep applies the sample side under its retransmission rules,
+:mod:`bench.nodes._fault_bus`), 5 periods of extra duty delay, a babbling node,
+phase a open and phase a's upper switch open (the phase of the sensor faults, so
+that the table sets an open phase beside a lost sensor: the controller reads both
+as a phase without current).
+
+Where the controller runs (:data:`CONTROLLERS`, each record's ``controller``):
+
+- ``in-process``: plant and controller nodes in the study's process
+  (:func:`bench.runs._local.run_local`), the whole catalogue for every estimator;
+- ``python``: the Python controller node (with the compiled core) and ``native``:
+  the native controller node (:mod:`bench.nodes.native.controller_node`), each a
+  process beside the Python plant node over udp_multicast, as ``bench run`` runs them
+  (:func:`bench.runs._run.run_scenario`);
+- ``external``: no controller of the bench's; the controller under test is the
+  repository's example external controller (:data:`EXTERNAL_CONTROLLER`, a sensored
+  drive written from docs/PROTOCOL.md), scored as ``bench run --controller external``
+  scores it. It has no supervision of its own: only the plant's protections detect.
+
+A process run costs several times the wall time of an in-process one (square-wave,
+1.2 s: 31 s against 7 s measured on a loaded 2-core host), so the process
+variants run a reduced catalogue by default (:data:`PROCESS_CATALOGUES`): the bus kinds
+(:data:`BUS_KINDS`, where the transport matters) with :data:`PROCESS_ESTIMATOR` only.
+``full`` runs the whole catalogue for every estimator (``--process-catalogue full``).
+
+The JSON (``faults.json``) is the result; :func:`render_doc` writes
 docs/FAULTS.md from it and :func:`readme_block` the README's block.
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
+import subprocess
+import sys
 import tempfile
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import Any
+
+from bench._errors import BenchError
 
 #: Simulated seconds of every run, and when its fault starts (s).
 DURATION_S = 1.5
@@ -48,6 +75,28 @@ BURST_S = 0.05
 PLANT_PROFILE = "drive"
 #: The outcomes, in the order the headline counts them.
 OUTCOMES = ("detected", "tripped", "ridden through", "lock lost", "failed")
+#: Where the controller runs (module docstring), in the order of the tables.
+CONTROLLERS = ("in-process", "python", "native", "external")
+IN_PROCESS = CONTROLLERS[0]
+EXTERNAL = CONTROLLERS[3]
+#: The ``--engine`` of the controller process per variant: the Python node steps the
+#: compiled core (the in-process runs' engine), ``native`` asks for the native node.
+CONTROLLER_ENGINE = {"python": "compiled", "native": "native"}
+#: The kinds whose frames cross the bus (the transport matters): the reduced catalogue.
+BUS_KINDS = ("drop", "delay", "corrupt", "silence", "babble")
+#: The one estimator of the reduced catalogue of the python and native variants: the
+#: wen-5.1 family's reference estimator.
+PROCESS_ESTIMATOR = "tt-dq"
+#: What the process variants run: ``bus`` (default) or ``full`` (module docstring).
+PROCESS_CATALOGUES = ("bus", "full")
+#: The repository's example external controller (the one of tests/test_external_controller.py).
+EXTERNAL_CONTROLLER = Path(__file__).resolve().parents[2] / "tests" / "ext_controller.py"
+#: Its name in ``meta.json`` and in the tables.
+EXTERNAL_NAME = "ext_controller.py"
+#: The scenario the external controller is studied from (a sensored drive at wen-5.1's speed).
+EXTERNAL_SCENARIO = "wen-5.1"
+#: Wait for the external controller's first valid duty (s): ``bench run``'s default.
+DUT_TIMEOUT_S = 30.0
 
 README_BEGIN = "<!-- fault-study:begin (bench suite faults --readme) -->"
 README_END = "<!-- fault-study:end -->"
@@ -57,13 +106,16 @@ def scenario_for(estimator: str) -> str:
     """The scenario an estimator is studied from (module docstring)."""
     from controller._registry import injection_family
 
+    if estimator == EXTERNAL:
+        return EXTERNAL_SCENARIO
     return "xue-fig13" if injection_family(estimator) == "square" else "wen-5.1"
 
 
 def catalogue(u_dc: float) -> list[tuple[str, dict[str, Any]]]:
     """``(label, [[faults]] entry)`` of every case, for a drive of nominal DC link ``u_dc`` (V).
 
-    One case a kind (two for ``dc_link_step``: a sag and a surge), in the order of
+    One case a kind (two for ``dc_link_step``: a sag and a surge; two for ``drop``: of
+    the duties and of the samples), in the order of
     :data:`bench.scenarios._faults.KINDS`; every
     entry starts at :data:`AT_S` and lasts to the end of the run, but the bus
     bursts (:data:`BURST_S`).
@@ -93,11 +145,16 @@ def catalogue(u_dc: float) -> list[tuple[str, dict[str, Any]]]:
             f"drop: PwmDuty for {1e3 * BURST_S:g} ms",
             {**burst, "kind": "drop", "message": "PwmDuty", "prob": 1.0},
         ),
+        (
+            f"drop: PhaseSamples for {1e3 * BURST_S:g} ms",
+            {**burst, "kind": "drop", "message": "PhaseSamples", "prob": 1.0},
+        ),
         ("delay: PwmDuty +5 periods", {**at, "kind": "delay", "message": "PwmDuty", "steps": 5}),
         (
             f"corrupt: PwmDuty for {1e3 * BURST_S:g} ms",
             {**burst, "kind": "corrupt", "message": "PwmDuty"},
         ),
+        (f"silence for {1e3 * BURST_S:g} ms", {**burst, "kind": "silence"}),
         ("babble: 100 Hz", {**at, "kind": "babble", "rate_hz": 100.0}),
     ]
 
@@ -106,9 +163,7 @@ def not_run() -> dict[str, str]:
     """The kinds the study cannot run, with why (module docstring)."""
     from bench.scenarios._faults import KINDS
 
-    out = {k.name: str(k.refused) for k in KINDS.values() if k.refused}
-    out["silence"] = "refused in lockstep (bench faults)"
-    return out
+    return {k.name: str(k.refused) for k in KINDS.values() if k.refused}
 
 
 def _toml_value(v: Any) -> str:
@@ -132,21 +187,37 @@ def case_toml(scenario: str, fault: dict[str, Any], duration: float) -> str:
     return "\n".join(lines) + "\n"
 
 
-def run_case(estimator: str, label: str, fault: dict[str, Any], duration: float) -> dict[str, Any]:
+def run_case(
+    estimator: str,
+    label: str,
+    fault: dict[str, Any],
+    duration: float,
+    controller: str = IN_PROCESS,
+) -> dict[str, Any]:
     """One run of the study: its ``faults`` entry, exit status and :func:`outcome`.
 
-    Never raises for a run that fails: the record says ``failed`` with its one line.
+    ``controller`` is where the controller runs (:data:`CONTROLLERS`; ``external``
+    ignores ``estimator``). Never raises for a run that fails: the record says
+    ``failed`` with its one line.
     """
-    from bench.runs._local import exit_status, run_local
+    from bench.runs._local import exit_status
     from bench.scenarios._schema import load_scenario
 
+    if controller == EXTERNAL:
+        estimator = EXTERNAL
     scenario = scenario_for(estimator)
-    rec: dict[str, Any] = {"estimator": estimator, "fault": label, "kind": fault["kind"]}
+    rec: dict[str, Any] = {
+        "estimator": estimator,
+        "controller": controller,
+        "fault": label,
+        "kind": fault["kind"],
+    }
     try:
         with tempfile.TemporaryDirectory() as d:
             path = Path(d) / "case.toml"
             path.write_text(case_toml(scenario, fault, duration), encoding="utf-8")
-            res = run_local(load_scenario(str(path)), estimator, Path(d) / "run", plots=False)
+            scn = load_scenario(str(path))
+            res = _run(scn, estimator, controller, path, Path(d) / "run")
             status = exit_status(res)[0]
             metrics = json.loads((Path(d) / "run" / "metrics.json").read_text())
         f = metrics["faults"][0] if metrics.get("faults") else {}
@@ -158,6 +229,9 @@ def run_case(estimator: str, label: str, fault: dict[str, Any], duration: float)
             theta_err_abs_max_deg=f.get("theta_err_abs_max_deg"),
             error=None,
         )
+        if controller != IN_PROCESS:
+            # the node that served: a native node that could not serve leaves the Python one
+            rec["node_engine"] = (res.meta.get("node_engines") or {}).get("controller")
     except Exception as e:  # a failed case is a result of the study, never its end
         rec.update(
             exit_status=None,
@@ -169,6 +243,72 @@ def run_case(estimator: str, label: str, fault: dict[str, Any], duration: float)
         )
     rec["outcome"] = outcome(rec)
     return rec
+
+
+def _run(scn: Any, estimator: str, controller: str, path: Path, out: Path) -> Any:
+    """The run of one case: in this process, or the controller as a process over CAN."""
+    from bench.runs._local import run_local
+
+    if controller == IN_PROCESS:
+        return run_local(scn, estimator, out, plots=False)
+    from bench._api import bus_of
+    from bench.runs._run import run_scenario
+
+    spec = bus_of("udp_multicast")  # a port of the run's own: parallel cases never meet
+    if controller == EXTERNAL:
+        with _external_controller(path, spec, out.parent):
+            return run_scenario(
+                scn,
+                EXTERNAL,
+                spec=spec,
+                out_dir=out,
+                progress=False,
+                controller=EXTERNAL,
+                dut_timeout=DUT_TIMEOUT_S,
+                dut_name=EXTERNAL_NAME,
+            )
+    return run_scenario(
+        scn,
+        estimator,
+        spec=spec,
+        out_dir=out,
+        progress=False,
+        node_args={"controller": ["--engine", CONTROLLER_ENGINE[controller]]},
+    )
+
+
+@contextlib.contextmanager
+def _external_controller(scenario: Path, spec: Any, folder: Path) -> Iterator[None]:
+    """:data:`EXTERNAL_CONTROLLER` on ``spec``'s bus, listening, for the run.
+
+    It reads the scenario's motor and PWM rate from ``bench show SCENARIO --json``, as
+    tests/test_external_controller.py starts it.
+    """
+    if not EXTERNAL_CONTROLLER.is_file():
+        raise BenchError(f"{EXTERNAL_CONTROLLER}: the example external controller is missing")
+    show = folder / "show.json"
+    out = subprocess.run(
+        [sys.executable, "-m", "bench", "show", str(scenario), "--json"],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    if out.returncode != 0:
+        raise BenchError(f"bench show {scenario}: {out.stderr.strip() or out.returncode}")
+    show.write_text(out.stdout, encoding="utf-8")
+    argv = [sys.executable, str(EXTERNAL_CONTROLLER), "--show", str(show)]
+    argv += ["-i", spec.interface, "-c", spec.channel, "--idle-s", "30"]
+    argv += ["-p", str(spec.port)] if spec.port is not None else []
+    proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    try:
+        assert proc.stdout is not None
+        line = proc.stdout.readline().strip()
+        if line != "READY":
+            raise BenchError(f"{EXTERNAL_NAME}: did not start (said {line!r})")
+        yield
+    finally:
+        proc.kill()
+        proc.wait()
 
 
 def outcome(rec: dict[str, Any]) -> str:
@@ -197,44 +337,108 @@ def _u_dc(scenario: str) -> float:
     return float(plant_setup(scn)[1].inverter.u_dc)
 
 
+def cases_of(
+    estimators: Sequence[str],
+    kinds: Sequence[str] | None,
+    controllers: Sequence[str],
+    process_catalogue: str = "bus",
+) -> list[tuple[str, str, str, dict[str, Any]]]:
+    """``(controller, estimator, label, fault)`` of every case to run (module docstring):
+    the ``kinds`` given (None: all) of the catalogue, reduced for the process variants
+    unless ``process_catalogue`` is ``full``."""
+    out: list[tuple[str, str, str, dict[str, Any]]] = []
+    for ctl in controllers:
+        full = ctl == IN_PROCESS or process_catalogue == "full"
+        if ctl == EXTERNAL:
+            ests: Sequence[str] = (EXTERNAL,)
+        elif full:
+            ests = estimators
+        else:
+            ests = [e for e in estimators if e == PROCESS_ESTIMATOR] or list(estimators[:1])
+        for est in ests:
+            for label, fault in catalogue(_u_dc(scenario_for(est))):
+                if kinds is not None and fault["kind"] not in kinds:
+                    continue
+                if not full and fault["kind"] not in BUS_KINDS:
+                    continue
+                out.append((ctl, est, label, fault))
+    return out
+
+
+def _order(rec: dict[str, Any]) -> tuple[int, int, int]:
+    """Tables' order: controller, estimator, then the catalogue's order."""
+    from controller import ESTIMATOR_NAMES
+
+    names = (*ESTIMATOR_NAMES, EXTERNAL)
+    labels = [label for label, _ in catalogue(1.0)]
+    ctl = rec.get("controller", IN_PROCESS)
+    return (
+        CONTROLLERS.index(ctl) if ctl in CONTROLLERS else len(CONTROLLERS),
+        names.index(rec["estimator"]) if rec["estimator"] in names else len(names),
+        labels.index(rec["fault"]) if rec["fault"] in labels else len(labels),
+    )
+
+
+def _key(rec: dict[str, Any]) -> tuple[str, str, str]:
+    return (rec.get("controller", IN_PROCESS), rec["estimator"], rec["fault"])
+
+
 def run_fault_study(
     out: Path,
     *,
     estimators: Sequence[str],
     kinds: Sequence[str] | None = None,
+    controllers: Sequence[str] = CONTROLLERS,
+    process_catalogue: str = "bus",
     duration: float = DURATION_S,
     jobs: int = 1,
+    keep: dict[str, Any] | None = None,
     progress: Callable[[str], None] | None = None,
 ) -> dict[str, Any]:
-    """Run the catalogue for ``estimators`` (only the ``kinds`` given, None: all) and write
-    ``out/faults.json`` and ``out/report.md``; return the summary."""
+    """Run the catalogue for ``estimators`` (only the ``kinds`` given, None: all) with the
+    controller where ``controllers`` say (:func:`cases_of`) and write ``out/faults.json``
+    and ``out/report.md``; return the summary.
+
+    ``keep``: an earlier summary of the same duration whose records of the cases not run
+    now stay in this one (the study updated in part).
+    """
     from bench.wire._codec import default_codec
 
-    cases: list[tuple[str, str, dict[str, Any]]] = []
-    for est in estimators:
-        for label, fault in catalogue(_u_dc(scenario_for(est))):
-            if kinds is None or fault["kind"] in kinds:
-                cases.append((est, label, fault))
+    cases = cases_of(estimators, kinds, controllers, process_catalogue)
     records: list[dict[str, Any]] = []
     if jobs > 1:
         with ProcessPoolExecutor(max_workers=jobs) as ex:
-            futs = [ex.submit(run_case, e, lab, f, duration) for e, lab, f in cases]
+            futs = [ex.submit(run_case, e, lab, f, duration, c) for c, e, lab, f in cases]
             for fut in futs:
                 records.append(fut.result())
                 if progress:
                     progress(_line(records[-1]))
     else:
-        for e, lab, f in cases:
-            records.append(run_case(e, lab, f, duration))
+        for c, e, lab, f in cases:
+            records.append(run_case(e, lab, f, duration, c))
             if progress:
                 progress(_line(records[-1]))
+    if keep is not None:
+        if keep.get("duration_s") != duration:
+            raise BenchError(
+                f"the kept study ran {keep.get('duration_s')} s per case, this one {duration:g}"
+            )
+        new = {_key(r) for r in records}
+        records += [r for r in keep["records"] if _key(r) not in new]
+    records.sort(key=_order)
+    ests = dict.fromkeys(r["estimator"] for r in records)
     summary = {
         "study": "faults",
         "duration_s": duration,
         "at_s": AT_S,
         "plant_profile": PLANT_PROFILE,
         "dbc_version": default_codec().version,
-        "scenarios": {e: scenario_for(e) for e in estimators},
+        "scenarios": {e: scenario_for(e) for e in ests},
+        "process_catalogue": {
+            "bus_kinds": list(BUS_KINDS),
+            "estimator": PROCESS_ESTIMATOR,
+            "external_controller": EXTERNAL_NAME,
+        },
         "not_run": not_run(),
         "records": records,
     }
@@ -245,7 +449,8 @@ def run_fault_study(
 
 
 def _line(rec: dict[str, Any]) -> str:
-    return f"{rec['estimator']:>18}  {rec['fault']:<34} {cell(rec)}"
+    ctl = rec.get("controller", IN_PROCESS)
+    return f"{rec['estimator']:>18} {ctl:>10}  {rec['fault']:<34} {cell(rec)}"
 
 
 def cell(rec: dict[str, Any]) -> str:
@@ -262,24 +467,30 @@ def cell(rec: dict[str, Any]) -> str:
     return "not detected, lock lost"
 
 
-def headline(summary: dict[str, Any]) -> dict[str, dict[str, int]]:
-    """Per estimator, how many cases had each outcome."""
-    out: dict[str, dict[str, int]] = {}
+def headline(summary: dict[str, Any]) -> dict[tuple[str, str], dict[str, int]]:
+    """Per estimator and controller, how many cases had each outcome."""
+    out: dict[tuple[str, str], dict[str, int]] = {}
     for r in summary["records"]:
-        c = out.setdefault(r["estimator"], dict.fromkeys(OUTCOMES, 0))
+        c = out.setdefault(
+            (r["estimator"], r.get("controller", IN_PROCESS)), dict.fromkeys(OUTCOMES, 0)
+        )
         c[r["outcome"]] += 1
     return out
 
 
+def _estimator_cell(est: str) -> str:
+    return f"`{EXTERNAL_NAME}`" if est == EXTERNAL else f"`{est}`"
+
+
 def _headline_table(summary: dict[str, Any]) -> list[str]:
     lines = [
-        "| estimator | scenario | cases | " + " | ".join(OUTCOMES) + " |",
-        "|---|---|---|" + "---|" * len(OUTCOMES),
+        "| estimator | controller | scenario | cases | " + " | ".join(OUTCOMES) + " |",
+        "|---|---|---|---|" + "---|" * len(OUTCOMES),
     ]
-    for est, c in headline(summary).items():
+    for (est, ctl), c in headline(summary).items():
         n = sum(c.values())
         lines.append(
-            f"| `{est}` | {summary['scenarios'][est]} | {n} | "
+            f"| {_estimator_cell(est)} | {ctl} | {summary['scenarios'][est]} | {n} | "
             + " | ".join(str(c[o]) for o in OUTCOMES)
             + " |"
         )
@@ -291,7 +502,9 @@ def render_doc(summary: dict[str, Any]) -> str:
     recs = summary["records"]
     ests = list(dict.fromkeys(r["estimator"] for r in recs))
     faults = list(dict.fromkeys(r["fault"] for r in recs))
-    by = {(r["fault"], r["estimator"]): r for r in recs}
+    ctls = list(dict.fromkeys(r.get("controller", IN_PROCESS) for r in recs))
+    by = {(r["fault"], r.get("controller", IN_PROCESS), r["estimator"]): r for r in recs}
+    proc = summary.get("process_catalogue") or {}
     lines = [
         "# Fault study",
         "",
@@ -299,7 +512,7 @@ def render_doc(summary: dict[str, Any]) -> str:
         "docs/faults/faults.json; do not edit -->",
         "",
         f"Every fault kind a lockstep run applies, inserted at {summary['at_s']:g} s into a "
-        f"{summary['duration_s']:g} s in-process run of the `{summary['plant_profile']}` plant, "
+        f"{summary['duration_s']:g} s lockstep run of the `{summary['plant_profile']}` plant, "
         "for every shipped estimator (the square-wave family from `xue-fig13`, the others from "
         "`wen-5.1`, each from standstill), with the controller's supervision on "
         "(docs/PROTECTION.md). `detected`: the controller reported the fault in its "
@@ -309,22 +522,58 @@ def render_doc(summary: dict[str, Any]) -> str:
         "listed as `failed`. The angle in parentheses is the largest |dtheta| while the fault "
         "lasted (electrical degrees).",
         "",
+        "The controller column says where the controller ran: `in-process` (plant and "
+        "controller nodes in one process, the whole catalogue), `python` (the Python "
+        "controller node with the compiled core) and `native` (the native controller node), "
+        "each a process beside the Python plant node over udp_multicast as `bench run` runs "
+        "them, and `external` (`bench run --controller external` with the repository's "
+        "example external controller, "
+        f"`tests/{proc.get('external_controller', EXTERNAL_NAME)}`: a sensored drive from "
+        f"`{summary['scenarios'].get(EXTERNAL, EXTERNAL_SCENARIO)}` without supervision, so "
+        "only the plant's protections detect). The process variants run the bus kinds ("
+        + ", ".join(f"`{k}`" for k in proc.get("bus_kinds", BUS_KINDS))
+        + f") with `{proc.get('estimator', PROCESS_ESTIMATOR)}` by default; "
+        "`bench suite faults --process-catalogue full` runs them all.",
+        "",
         "## Headline",
         "",
         *_headline_table(summary),
         "",
         "## Every case",
         "",
-        "| fault | " + " | ".join(f"`{e}`" for e in ests) + " |",
-        "|---|" + "---|" * len(ests),
+        "| fault | controller | " + " | ".join(_estimator_cell(e) for e in ests) + " |",
+        "|---|---|" + "---|" * len(ests),
     ]
     for f in faults:
-        cells = [cell(by[(f, e)]) if (f, e) in by else "-" for e in ests]
-        lines.append(f"| {f} | " + " | ".join(cells) + " |")
+        for ctl in ctls:
+            cells = [cell(by[(f, ctl, e)]) if (f, ctl, e) in by else "-" for e in ests]
+            if any(c != "-" for c in cells):
+                lines.append(f"| {f} | {ctl} | " + " | ".join(cells) + " |")
     lines += ["", "## Not run", ""]
-    lines += [f"- `{k}`: {why}" for k, why in summary["not_run"].items()]
-    lines.append("")
+    lines += [f"- `{k}`: {why}" for k, why in summary["not_run"].items()] or ["None."]
+    lines += ["", *_modes_table()]
     return "\n".join(lines)
+
+
+def _modes_table() -> list[str]:
+    """How each bus kind behaves in each mode (:data:`bench.scenarios._faults.KINDS`)."""
+    from bench.scenarios._faults import KINDS
+
+    lines = [
+        "## The bus kinds in each mode",
+        "",
+        "As `bench faults` and docs/SCENARIOS.md state them. In lockstep the plant's "
+        "retransmission rules apply: the plant never waits for a duty a fault lost, and its "
+        "watchdog counts periods as in real time.",
+        "",
+        "| kind | lockstep | real time |",
+        "|---|---|---|",
+    ]
+    for k in KINDS.values():
+        if k.group == "bus":
+            lines.append(f"| `{k.name}` | {k.refused or k.lockstep} | {k.refused or k.realtime} |")
+    lines.append("")
+    return lines
 
 
 def readme_block(summary: dict[str, Any]) -> str:
