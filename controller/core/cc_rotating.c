@@ -12,6 +12,8 @@ void cc_rot_init(cc_rot_t *r, double V_h, double wT, double inv_norm)
     r->k = 0;
     r->track = 0;
     r->w_h = r->T_s = r->B = r->w0_min = 0.0;
+    r->accel_ff = 0;
+    r->accel = 0.0;
 }
 
 void cc_rot_tracking(cc_rot_t *r, double w_h, double T_s, double B, double w0_min)
@@ -46,7 +48,7 @@ void cc_rot_publish(cc_est_t *e, cc_rot_t *r, double th, double f, double err, d
     e->theta_hat = th;
     r->f = f;
     e->err = err;
-    cc_pll_step(&r->pll, err);
+    cc_pll_step(&r->pll, err, r->accel);
     e->w_hat = r->pll.w_hat;
 }
 

@@ -24,6 +24,8 @@ typedef struct {
     long long k;
     int track;                  /* tt-dq: the BPF follows the HF current's frequency */
     double w_h, T_s, B, w0_min; /* its centre, period, bandwidth, lowest centre */
+    int accel_ff;               /* tt-dq: the speed loop's designed acceleration fed into */
+    double accel;               /* the PLL beside its loop (rad/s^2), this period's */
     cc_pll_t pll;
     cc_bq2_t bpf;
     cc_fo_t lpf;     /* tt-dq, sfhf */
@@ -45,7 +47,9 @@ void cc_rot_hf_model(cc_rot_t *r, double I_p, double I_n);
  * with theta_hat: I_p e^{j(ph - pi/2)} + I_n e^{j(2 theta_hat - ph + pi/2)} */
 void cc_rot_hf_current_next(const cc_rot_t *r, double *i_a, double *i_b);
 
-void cc_tt_dq_step(cc_est_t *e, cc_rot_t *r, long long k, double i_a, double i_b);
+/* accel_ref: the speed loop's designed acceleration (rad/s^2), fed forward with accel_ff */
+void cc_tt_dq_step(cc_est_t *e, cc_rot_t *r, long long k, double i_a, double i_b,
+                   double accel_ref);
 void cc_tt_ab_step(cc_est_t *e, cc_rot_t *r, long long k, double i_a, double i_b);
 void cc_sfhf_step(cc_est_t *e, cc_rot_t *r, long long k, double i_a, double i_b);
 void cc_self_demod_step(cc_est_t *e, cc_rot_t *r, long long k, double i_a, double i_b);

@@ -262,6 +262,11 @@ def native_unavailable(node: ControllerNode, interface: str | None) -> str | Non
     if ctrl._core is None:
         why = ctrl.engine_note or "the controller runs on the Python engine"
         return f"native controller node: not for this controller ({why}); the Python node runs"
+    if ctrl.external_estimator:
+        return (
+            f"native controller node: not for this controller (the {ctrl.pars.estimator} "
+            "estimator is Python code, which needs the Python process); the Python node runs"
+        )
     if interface is not None and interface not in NATIVE_INTERFACES:
         return (
             f"native controller node: --interface {interface}: the native loop speaks "
