@@ -27,7 +27,9 @@ estimator (a plug-in, :data:`KIND_EXTERNAL`) runs in it too: the core runs
 the controller and calls the estimator's ``update``, ``injection`` and
 ``reset`` through the estimator interface (``controller/core/cc_estimator.h``),
 so the trace is the Python engine's bit for bit, and an exception the
-estimator raises leaves the step as it leaves the Python step. A controller
+estimator raises leaves the step as it leaves the Python step. A user's
+estimator in C (:func:`controller.c_estimator`, a shared library) is
+called by the core directly, with no Python in the period. A controller
 outside it runs in
 Python whatever the choice, and says why in one line
 (:attr:`controller.Controller.engine_note`; ``bench run`` and ``bench
