@@ -95,7 +95,24 @@ class _Design(ctypes.Structure):
 
 class CEstimator:
     """An estimator in a shared library (module docstring). Subclass it to give the
-    design-time members a C library has no place for (``speed_response``, ``gains``)."""
+    design-time members a C library has no place for (``speed_response``, ``gains``).
+
+    Parameters
+    ----------
+    library : str or os.PathLike
+        The shared library (``cc_estimator_size``, ``cc_estimator_init``).
+    motor : MotorModel
+        The controller's motor model.
+    T_s : float
+        Control period (s).
+    *opts : float
+        The plug-in's options, in their declared order.
+
+    Raises
+    ------
+    ValueError
+        The library cannot be loaded, lacks a function, or refuses the design.
+    """
 
     theta_hat: float
     w_hat: float

@@ -46,8 +46,10 @@ typedef struct {
  *   size_t cc_estimator_size(void);   the bytes of its state (the caller provides them)
  *   int cc_estimator_init(void *state, cc_est_if_t *iface, const cc_est_design_t *d);
  *
- * init designs the estimator from d, fills *iface (ctx = state) and returns 0, or
- * nonzero when it cannot (controller._cplugin reports it). */
+ * init designs the estimator from d (d and its options are valid during the call only:
+ * keep what it needs in state), fills *iface (ctx = state) and returns 0, or nonzero when
+ * it cannot (controller._cplugin reports it). The state needs no other memory: the
+ * functions run in the controller's period. */
 typedef struct {
     double n_p, R_s, L_d, L_q, psi_f, J; /* the controller's motor model (SI) */
     double T_s;                          /* control period (s) */
