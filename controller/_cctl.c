@@ -510,6 +510,17 @@ static PyObject *Core_reference_model(Core *self, PyObject *args)
     Py_RETURN_NONE;
 }
 
+/* mechanical(T_s, g1, g2, g3, gt, l3): a rotating demodulator's observer = "mechanical",
+ * after rotating() */
+static PyObject *Core_mechanical(Core *self, PyObject *args)
+{
+    double T_s, g1, g2, g3, gt, l3;
+    if (!PyArg_ParseTuple(args, "dddddd", &T_s, &g1, &g2, &g3, &gt, &l3))
+        return NULL;
+    cc_rot_mechanical(&self->c.est.rot, T_s, g1, g2, g3, gt, l3);
+    Py_RETURN_NONE;
+}
+
 /* accel_ff(): tt-dq (or the hybrid's tt-dq) feeds the designed acceleration into its PLL */
 static PyObject *Core_accel_ff(Core *self, PyObject *Py_UNUSED(ignored))
 {
@@ -676,6 +687,8 @@ static PyMethodDef Core_methods[] = {
      "external_c(address of a cc_est_if_t): a user's estimator in C"},
     {"reference_model", (PyCFunction)Core_reference_model, METH_VARARGS,
      "reference_model(alpha_s, n_p, a_max, T_s): the speed loop's designed response"},
+    {"mechanical", (PyCFunction)Core_mechanical, METH_VARARGS,
+     "mechanical(T_s, g1, g2, g3, gt, l3): the mechanical observer of a rotating demodulator"},
     {"accel_ff", (PyCFunction)Core_accel_ff, METH_NOARGS,
      "tt-dq's acceleration feed-forward on"},
     {"injection", (PyCFunction)Core_injection, METH_NOARGS,

@@ -22,6 +22,7 @@ from controller._engine import KIND_EXTERNAL, _cctl, compiled_cover
 from controller._epf import EPFEstimator
 from controller._filters import Biquad2, FirstOrder, FirstOrder2
 from controller._hybrid import HybridEstimator
+from controller._luenberger import LuenbergerObserver
 from controller._pll import PositionObserver
 from controller._rotating import RotatingHFEstimator
 from controller._self_demod import SelfDemodEstimator
@@ -50,8 +51,9 @@ def _bq(f: Biquad2) -> tuple[float, float, float, float, float]:
 
 
 def _rotating(core: Any, est: RotatingHFEstimator, tracking: bool) -> None:
-    pll = est.pll
-    assert isinstance(pll, PositionObserver)
+    pll: Any = est.pll
+    mech = isinstance(pll, LuenbergerObserver)  # observer = "mechanical"
+    assert mech or isinstance(pll, PositionObserver)
     e: Any = est
     hpf = getattr(e, "_hpf", None)
     quad = getattr(e, "_quad", None)
@@ -61,13 +63,15 @@ def _rotating(core: Any, est: RotatingHFEstimator, tracking: bool) -> None:
         est.V_h,
         est.wT,
         e._inv_norm,
-        (pll.k_p, pll.k_i, pll.T_s),
+        (0.0, 0.0, pll.T_s) if mech else (pll.k_p, pll.k_i, pll.T_s),
         _bq(e._bpf),
         _fo(lpf),
         None if hpf is None else _fo(hpf),
         (est.w_h, est.T_s, est.bpf_B, e._w0_min) if tracking and est.bpf_tracking else None,
         None if quad is None else _bq(quad),
     )
+    if mech:
+        core.mechanical(pll.T_s, pll._g1, pll._g2, pll._g3, pll._gt, e._l3)
 
 
 def _square_wave(core: Any, est: SquareWaveEstimator) -> None:

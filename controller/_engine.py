@@ -34,8 +34,9 @@ outside it runs in
 Python whatever the choice, and says why in one line
 (:attr:`controller.Controller.engine_note`; ``bench run`` and ``bench
 controller`` print it, and the controller node's report keeps it): the
-measured normalisation and the mechanical position observer (``observer =
-"mechanical"``). Inside it the core runs every period,
+measured normalisation, and the mechanical position observer (``observer =
+"mechanical"``) in hybrid-tt-dq (the core runs it in the other rotating
+demodulators). Inside it the core runs every period,
 the start-up included, and keeps every state; the
 :class:`controller.Controller` holds it by composition and forwards its
 commands (:mod:`controller._compiled`).
@@ -95,7 +96,8 @@ KIND_EXTERNAL = 10
 
 #: The kinds whose estimator is a rotating-injection demodulator with the options
 #: ``normalise`` and ``observer`` (tt-dq, tt-ab, sfhf, hybrid-tt-dq, self-demod, epf), and
-#: those with tt-dq's PLL, which take ``accel_ff`` (tt-dq, hybrid-tt-dq).
+#: those with tt-dq's PLL, which take ``accel_ff`` (tt-dq, hybrid-tt-dq). The core runs
+#: ``observer = "mechanical"`` for each but the hybrid's tt-dq.
 _ROTATING_KINDS = (1, 2, 3, 6, 8, 9)
 _ACCEL_FF_KINDS = (1, 6)
 
@@ -126,7 +128,7 @@ def compiled_cover(pars: Any) -> tuple[int, str | None]:
     opts = dict(pars.estimator_options)
     if kind in _ROTATING_KINDS and opts.get("normalise", "model") != "model":
         return 0, f"{name} with normalise={opts['normalise']!r} is not compiled: Python"
-    if kind in _ROTATING_KINDS and opts.get("observer", "pll") != "pll":
+    if kind == 6 and opts.get("observer", "pll") != "pll":
         return 0, f"{name} with observer={opts['observer']!r} is not compiled: Python"
     if kind not in _ACCEL_FF_KINDS and opts.get("accel_ff", False):
         return 0, f"{name} with accel_ff is not compiled: the controller runs in Python"

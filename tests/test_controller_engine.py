@@ -306,9 +306,12 @@ def test_the_cover_and_the_reasons() -> None:
     used, why = resolve_controller_engine("auto", measured)
     assert used == "python" and "normalise='measured'" in str(why)
     assert Controller(measured, "compiled").engine_note == why
+    # the mechanical observer is in the core, but for the hybrid's tt-dq
     mech = replace(pars, estimator_options={"observer": "mechanical"})
-    used, why = resolve_controller_engine("auto", mech)
-    assert used == "python" and "observer='mechanical'" in str(why)
+    assert resolve_controller_engine("auto", mech) == ("compiled", None)
+    hyb = replace(pars, estimator="hybrid-tt-dq", estimator_options={"observer": "mechanical"})
+    used, why = resolve_controller_engine("auto", hyb)
+    assert used == "python" and "hybrid-tt-dq with observer='mechanical'" in str(why)
     # the countermeasures are in the core
     comp = CompensationPars(dead_time=True, cross_saturation=True, offset_calibration=True)
     drive = replace(pars, compensation=comp)
@@ -384,6 +387,27 @@ def test_a_compiled_controller_is_freed() -> None:
     del ctrl
     gc.collect()
     assert ref() is None
+
+
+@pytest.mark.parametrize("estimator", ["tt-dq", "tt-ab", "sfhf", "self-demod", "epf"])
+def test_the_mechanical_observer_same_on_both_engines(estimator: str, tmp_path: Path) -> None:
+    """``observer = "mechanical"`` (the Luenberger observer with the torque feed-forward in
+    place of the PLL): wen-5.1's start-up and two speed steps, the same output on both
+    engines in every period, and not the PLL's trace."""
+    f = tmp_path / "mech.toml"
+    f.write_text('extends = "wen-5.1"\n[estimator_options]\nobserver = "mechanical"\n')
+    n = 6000
+    events = {
+        n // 3: lambda c: c.set_speed_ref(30.0),
+        (2 * n) // 3: lambda c: c.set_speed_ref(-20.0),
+    }
+    py, c_py = _loop(str(f), estimator, "python", n, events, speed_rpm=0.0)
+    cc, c_cc = _loop(str(f), estimator, "compiled", n, events, speed_rpm=0.0)
+    assert (c_py.engine, c_cc.engine, c_cc.engine_note) == ("python", "compiled", None)
+    first = next((k for k in range(n) if py[k] != cc[k]), None)
+    assert first is None, f"the engines part at period {first}"
+    pll, _ = _loop("wen-5.1", estimator, "compiled", n, events, speed_rpm=0.0)
+    assert pll != cc
 
 
 #: A plug-in around docs/examples/my_estimator.py that raises in its update at period 40,

@@ -104,6 +104,7 @@ static int estim_step(cc_estim_t *e, const cc_meas_t *m, double i_alpha, double 
                       double torque, double u_alpha, double u_beta, int running,
                       double accel_ref)
 {
+    e->rot.torque = torque; /* the mechanical observer's feed-forward */
     switch (e->kind) {
     case CC_EST_EXTERNAL: {
         cc_est_in_t x = {m->k, i_alpha, i_beta, torque, u_alpha, u_beta, running, accel_ref};

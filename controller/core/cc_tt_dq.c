@@ -9,14 +9,14 @@ void cc_tt_dq_step(cc_est_t *e, cc_rot_t *r, long long k, double i_a, double i_b
                    double accel_ref)
 {
     r->k = k;
-    double th = r->pll.theta_hat;
+    double th = cc_rot_theta(r);
     double c = cos(th);
     double s = sin(th);
     double i_d = c * i_a + s * i_b;
     double i_q = c * i_b - s * i_a;
     double i_dh, i_qh;
     if (r->track) {
-        double w_0 = r->w_h - r->pll.w_i;
+        double w_0 = r->w_h - (r->mech ? r->luen.w_hat : r->pll.w_i);
         if (w_0 < 0.0)
             w_0 = -w_0;
         if (w_0 < r->w0_min)
