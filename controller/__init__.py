@@ -18,6 +18,7 @@ from controller._api import (
 )
 from controller._compensation import CompensationPars
 from controller._controller import Controller, ControllerPars
+from controller._cplugin import CEstimator, c_estimator
 from controller._design import PM_TARGET_DEG
 from controller._engine import (
     ENGINES,
@@ -62,6 +63,7 @@ __all__ = [
     "MODE_POLARITY",
     "MODE_RUN",
     "PM_TARGET_DEG",
+    "CEstimator",
     "CompensationPars",
     "ControlOutput",
     "Controller",
@@ -84,6 +86,7 @@ __all__ = [
     "Supervisor",
     "TransitionBand",
     "UnknownEstimatorError",
+    "c_estimator",
     "check_estimator",
     "clarke",
     "compiled_controller_missing",

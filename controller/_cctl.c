@@ -8,6 +8,14 @@
  * Measurement's slots are read, and a ControlOutput's filled, in the order of
  * their dataclass fields (the type's member table), never by attribute name.
  * The states Python may read are the Core's members (offsets into the C struct).
+ *
+ * A user's Python estimator (controller.Estimator) runs in the core as an external
+ * estimator (CC_EST_EXTERNAL, cc_estimator.h): the functions below adapt the Python
+ * object to the interface's function pointers.  The core calls them from its step, with
+ * the GIL held (the step is a Python call); each calls the object's method as the Python
+ * step does, and reads what it publishes by the protocol's attribute names.  An exception
+ * the estimator raises is left set, the core stops the period there (CC_ERR_ESTIMATOR),
+ * and the step raises that same exception, as the Python step does.
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
@@ -20,6 +28,9 @@
 
 #define N_MEAS 7 /* k, i_a, i_b, i_c, u_dc, theta_e, w_e */
 #define N_OUT 11 /* k, d_a, d_b, d_c, enable, theta_hat, w_hat, err, mode, i_d, i_q */
+/* EstimatorInput: k, i_alpha, i_beta, torque, theta_e, w_e, u_alpha, u_beta, running,
+ * accel_ref */
+#define N_IN 10
 
 typedef struct {
     PyObject_HEAD
@@ -28,6 +39,14 @@ typedef struct {
     int sup_on;
     PyTypeObject *meas_t, *out_t;
     Py_ssize_t meas_off[N_MEAS], out_off[N_OUT];
+    /* an external estimator: the Python object, EstimatorInput and its slots, and the
+     * measurement of the step in progress (its k, theta_e and w_e are handed on as the
+     * Python step hands them) */
+    PyObject *est;
+    int calls_python; /* the external estimator is a Python object (else functions in C) */
+    PyTypeObject *in_t;
+    Py_ssize_t in_off[N_IN];
+    PyObject *meas;
 } Core;
 
 /* the offsets of the slots a tuple of member descriptors names, in its order (Python
@@ -58,6 +77,8 @@ static int Core_traverse(Core *self, visitproc visit, void *arg)
 {
     Py_VISIT(self->meas_t);
     Py_VISIT(self->out_t);
+    Py_VISIT(self->est);
+    Py_VISIT(self->in_t);
     return 0;
 }
 
@@ -65,6 +86,8 @@ static int Core_clear(Core *self)
 {
     Py_CLEAR(self->meas_t);
     Py_CLEAR(self->out_t);
+    Py_CLEAR(self->est);
+    Py_CLEAR(self->in_t);
     return 0;
 }
 
@@ -281,6 +304,230 @@ static PyObject *Core_compensation(Core *self, PyObject *args)
     Py_RETURN_NONE;
 }
 
+/* ---------------------------------------------------------------- external estimator */
+static PyObject *s_update, *s_injection, *s_reset, *s_hf_current_next, *s_saliency_offset;
+static PyObject *s_pub[5]; /* theta_hat, w_hat, err, i_alpha_f, i_beta_f */
+
+/* what the estimator publishes, read after update and reset as the Python step reads it */
+static int ext_read(Core *self, cc_est_t *out)
+{
+    double v[5];
+    for (int j = 0; j < 5; j++) {
+        PyObject *a = PyObject_GetAttr(self->est, s_pub[j]);
+        if (a == NULL)
+            return -1;
+        v[j] = PyFloat_AsDouble(a);
+        Py_DECREF(a);
+        if (v[j] == -1.0 && PyErr_Occurred())
+            return -1;
+    }
+    out->theta_hat = v[0];
+    out->w_hat = v[1];
+    out->err = v[2];
+    out->i_alpha_f = v[3];
+    out->i_beta_f = v[4];
+    return 0;
+}
+
+/* a pair (alpha, beta) a method returns, as the Python step unpacks it */
+static int ext_pair(PyObject *r, double *a, double *b)
+{
+    if (r == NULL)
+        return -1;
+    PyObject *seq = PySequence_Fast(r, "an estimator's pair (alpha, beta)");
+    Py_DECREF(r);
+    if (seq == NULL)
+        return -1;
+    int rc = -1;
+    Py_ssize_t n = PySequence_Fast_GET_SIZE(seq);
+    if (n > 2) { /* Python's own words for the unpacking */
+        PyErr_SetString(PyExc_ValueError, "too many values to unpack (expected 2)");
+    } else if (n < 2) {
+        PyErr_Format(PyExc_ValueError, "not enough values to unpack (expected 2, got %zd)", n);
+    } else {
+        *a = PyFloat_AsDouble(PySequence_Fast_GET_ITEM(seq, 0));
+        if (!(*a == -1.0 && PyErr_Occurred())) {
+            *b = PyFloat_AsDouble(PySequence_Fast_GET_ITEM(seq, 1));
+            rc = (*b == -1.0 && PyErr_Occurred()) ? -1 : 0;
+        }
+    }
+    Py_DECREF(seq);
+    return rc;
+}
+
+static int ext_update(void *ctx, const cc_est_in_t *x, cc_est_t *out)
+{
+    Core *self = ctx;
+    PyObject *m = self->meas;
+    PyObject *v[N_IN];
+    /* k, theta_e, w_e: the measurement's own objects */
+    v[0] = *(PyObject **)((char *)m + self->meas_off[0]);
+    v[4] = *(PyObject **)((char *)m + self->meas_off[5]);
+    v[5] = *(PyObject **)((char *)m + self->meas_off[6]);
+    if (v[0] == NULL || v[4] == NULL || v[5] == NULL) {
+        PyErr_SetString(PyExc_AttributeError, "compiled controller: an unset measurement slot");
+        return -1;
+    }
+    Py_INCREF(v[0]);
+    Py_INCREF(v[4]);
+    Py_INCREF(v[5]);
+    v[1] = PyFloat_FromDouble(x->i_alpha);
+    v[2] = PyFloat_FromDouble(x->i_beta);
+    v[3] = PyFloat_FromDouble(x->torque);
+    v[6] = PyFloat_FromDouble(x->u_alpha);
+    v[7] = PyFloat_FromDouble(x->u_beta);
+    v[8] = PyBool_FromLong(x->running);
+    v[9] = PyFloat_FromDouble(x->accel_ref);
+    int ok = 1;
+    for (int j = 0; j < N_IN; j++)
+        ok = ok && v[j] != NULL;
+    PyObject *in = ok ? self->in_t->tp_alloc(self->in_t, 0) : NULL;
+    if (in != NULL) { /* a frozen slotted dataclass: its slots as its __init__ fills them */
+        for (int j = 0; j < N_IN; j++) {
+            *(PyObject **)((char *)in + self->in_off[j]) = v[j];
+            v[j] = NULL;
+        }
+    }
+    for (int j = 0; j < N_IN; j++)
+        Py_XDECREF(v[j]);
+    if (in == NULL)
+        return -1;
+    PyObject *r = PyObject_CallMethodOneArg(self->est, s_update, in);
+    Py_DECREF(in);
+    if (r == NULL)
+        return -1;
+    Py_DECREF(r);
+    return ext_read(self, out);
+}
+
+static int ext_injection(void *ctx, double *u_a, double *u_b)
+{
+    Core *self = ctx;
+    return ext_pair(PyObject_CallMethodNoArgs(self->est, s_injection), u_a, u_b);
+}
+
+static int ext_hf_current_next(void *ctx, double *i_a, double *i_b)
+{
+    Core *self = ctx;
+    return ext_pair(PyObject_CallMethodNoArgs(self->est, s_hf_current_next), i_a, i_b);
+}
+
+static int ext_reset(void *ctx, double theta0, cc_est_t *out)
+{
+    Core *self = ctx;
+    PyObject *th = PyFloat_FromDouble(theta0);
+    if (th == NULL)
+        return -1;
+    PyObject *r = PyObject_CallMethodOneArg(self->est, s_reset, th);
+    Py_DECREF(th);
+    if (r == NULL)
+        return -1;
+    Py_DECREF(r);
+    return ext_read(self, out);
+}
+
+static int ext_set_saliency_offset(void *ctx, double offset)
+{
+    Core *self = ctx;
+    PyObject *v = PyFloat_FromDouble(offset);
+    if (v == NULL)
+        return -1;
+    int rc = PyObject_SetAttr(self->est, s_saliency_offset, v);
+    Py_DECREF(v);
+    return rc;
+}
+
+/* external(estimator, EstimatorInput, its fields' slot descriptors): the core's estimator
+ * is this Python object (a Core of kind KIND_EXTERNAL) */
+static PyObject *Core_external(Core *self, PyObject *args)
+{
+    PyObject *est, *it, *id;
+    if (!PyArg_ParseTuple(args, "OO!O", &est, &PyType_Type, &it, &id))
+        return NULL;
+    if (self->c.est.kind != CC_EST_EXTERNAL) {
+        PyErr_SetString(PyExc_ValueError, "compiled controller: external() on a core estimator");
+        return NULL;
+    }
+    if (slot_offsets((PyTypeObject *)it, id, self->in_off, N_IN, "the estimator input") < 0)
+        return NULL;
+    Py_INCREF(est);
+    Py_XSETREF(self->est, est);
+    Py_INCREF(it);
+    Py_XSETREF(self->in_t, (PyTypeObject *)it);
+    cc_est_if_t *x = &self->c.est.ext;
+    self->calls_python = 1;
+    x->ctx = self;
+    x->update = ext_update;
+    x->injection = ext_injection;
+    x->reset = ext_reset;
+    x->hf_current_next = ext_hf_current_next;
+    x->set_saliency_offset = ext_set_saliency_offset;
+    /* what it publishes before its first update (the disabled periods report it) */
+    if (ext_read(self, &self->c.est.out) < 0)
+        return NULL;
+    Py_RETURN_NONE;
+}
+
+/* external_c(address of a cc_est_if_t): the core's estimator is a user's estimator in C
+ * (controller._cplugin.CEstimator, which keeps its library and state alive); the core
+ * calls its functions directly */
+static PyObject *Core_external_c(Core *self, PyObject *arg)
+{
+    unsigned long long addr = PyLong_AsUnsignedLongLong(arg);
+    if (addr == (unsigned long long)-1 && PyErr_Occurred())
+        return NULL;
+    if (self->c.est.kind != CC_EST_EXTERNAL || addr == 0) {
+        PyErr_SetString(PyExc_ValueError, "compiled controller: external_c() needs an external "
+                                          "core and a cc_est_if_t");
+        return NULL;
+    }
+    const cc_est_if_t *x = (const cc_est_if_t *)(uintptr_t)addr;
+    if (x->update == NULL || x->injection == NULL || x->reset == NULL) {
+        PyErr_SetString(PyExc_ValueError, "compiled controller: update, injection or reset is NULL");
+        return NULL;
+    }
+    self->c.est.ext = *x;
+    self->calls_python = 0;
+    Py_RETURN_NONE;
+}
+
+/* the one error of a C estimator's function that returned nonzero (controller._cplugin) */
+static void *c_estimator_failed(void)
+{
+    if (!PyErr_Occurred())
+        PyErr_SetString(PyExc_RuntimeError, "the estimator in C failed: a function of its "
+                                            "cc_est_if_t returned nonzero");
+    return NULL;
+}
+
+/* reference_model(alpha_s, n_p, a_max, T_s): ReferenceModel's constants */
+static PyObject *Core_reference_model(Core *self, PyObject *args)
+{
+    double alpha_s, n_p, a_max, T_s;
+    if (!PyArg_ParseTuple(args, "dddd", &alpha_s, &n_p, &a_max, &T_s))
+        return NULL;
+    cc_ref_init(&self->c.ref, alpha_s, n_p, a_max, T_s);
+    Py_RETURN_NONE;
+}
+
+/* mechanical(T_s, g1, g2, g3, gt, l3): a rotating demodulator's observer = "mechanical",
+ * after rotating() */
+static PyObject *Core_mechanical(Core *self, PyObject *args)
+{
+    double T_s, g1, g2, g3, gt, l3;
+    if (!PyArg_ParseTuple(args, "dddddd", &T_s, &g1, &g2, &g3, &gt, &l3))
+        return NULL;
+    cc_rot_mechanical(&self->c.est.rot, T_s, g1, g2, g3, gt, l3);
+    Py_RETURN_NONE;
+}
+
+/* accel_ff(): tt-dq (or the hybrid's tt-dq) feeds the designed acceleration into its PLL */
+static PyObject *Core_accel_ff(Core *self, PyObject *Py_UNUSED(ignored))
+{
+    self->c.est.rot.accel_ff = 1;
+    Py_RETURN_NONE;
+}
+
 /* ---------------------------------------------------------------- commands */
 static PyObject *Core_set_speed_ref(Core *self, PyObject *v)
 {
@@ -305,14 +552,16 @@ static PyObject *Core_set_enable(Core *self, PyObject *v)
     int on = PyObject_IsTrue(v);
     if (on < 0)
         return NULL;
-    cc_foc_set_enable(&self->c, on);
+    if (cc_foc_set_enable(&self->c, on) != CC_OK)
+        return c_estimator_failed(); /* or the external estimator's exception */
     Py_RETURN_NONE;
 }
 
 static PyObject *Core_injection(Core *self, PyObject *Py_UNUSED(ignored))
 {
     double u_a, u_b;
-    cc_estim_injection(&self->c.est, &u_a, &u_b);
+    if (cc_estim_injection(&self->c.est, &u_a, &u_b))
+        return c_estimator_failed(); /* or the external estimator's exception */
     return Py_BuildValue("(dd)", u_a, u_b);
 }
 
@@ -365,7 +614,11 @@ static PyObject *Core_step(Core *self, PyObject *meas)
         }
     }
     cc_out_t o;
+    self->meas = meas; /* borrowed for the step: an external estimator's input */
     int rc = cc_foc_step(&self->c, &m, &o);
+    self->meas = NULL;
+    if (rc == CC_ERR_ESTIMATOR) /* the external estimator's exception, as the Python step */
+        return c_estimator_failed(); /* raises it, or a C estimator's failure */
     if (rc == CC_ERR_U_DC) {
         PyErr_SetString(PyExc_ZeroDivisionError, "float division by zero (u_dc = 0)");
         return NULL;
@@ -428,6 +681,16 @@ static PyMethodDef Core_methods[] = {
      "supervision(*Supervisor.args()): the supervision after each step"},
     {"address", (PyCFunction)Core_address, METH_NOARGS,
      "(address of the cc_foc_t, of the cc_sup_t or 0)"},
+    {"external", (PyCFunction)Core_external, METH_VARARGS,
+     "external(estimator, EstimatorInput, its slot descriptors): a Python estimator"},
+    {"external_c", (PyCFunction)Core_external_c, METH_O,
+     "external_c(address of a cc_est_if_t): a user's estimator in C"},
+    {"reference_model", (PyCFunction)Core_reference_model, METH_VARARGS,
+     "reference_model(alpha_s, n_p, a_max, T_s): the speed loop's designed response"},
+    {"mechanical", (PyCFunction)Core_mechanical, METH_VARARGS,
+     "mechanical(T_s, g1, g2, g3, gt, l3): the mechanical observer of a rotating demodulator"},
+    {"accel_ff", (PyCFunction)Core_accel_ff, METH_NOARGS,
+     "tt-dq's acceleration feed-forward on"},
     {"injection", (PyCFunction)Core_injection, METH_NOARGS,
      "the HF voltage (alpha, beta) (V) for the next period"},
     {NULL, NULL, 0, NULL},
@@ -438,6 +701,8 @@ static PyMethodDef Core_methods[] = {
 #define E_(name, field) \
     {name, T_DOUBLE, offsetof(Core, c) + offsetof(cc_foc_t, est.out.field), READONLY, NULL}
 static PyMemberDef Core_members[] = {
+    {"kind", T_INT, offsetof(Core, c) + offsetof(cc_foc_t, est.kind), READONLY, NULL},
+    {"calls_python", T_INT, offsetof(Core, calls_python), READONLY, NULL},
     M_("mode", mode, T_LONGLONG),
     M_("w_m_ref", w_m_ref, T_DOUBLE),
     M_("w_m_hat", w_m_hat, T_DOUBLE),
@@ -491,6 +756,16 @@ PyMODINIT_FUNC PyInit__cctl(void)
 {
     if (PyType_Ready(&CoreType) < 0)
         return NULL;
+    static const char *pub[5] = {"theta_hat", "w_hat", "err", "i_alpha_f", "i_beta_f"};
+    for (int j = 0; j < 5; j++)
+        if ((s_pub[j] = PyUnicode_InternFromString(pub[j])) == NULL)
+            return NULL;
+    if ((s_update = PyUnicode_InternFromString("update")) == NULL
+        || (s_injection = PyUnicode_InternFromString("injection")) == NULL
+        || (s_reset = PyUnicode_InternFromString("reset")) == NULL
+        || (s_hf_current_next = PyUnicode_InternFromString("hf_current_next")) == NULL
+        || (s_saliency_offset = PyUnicode_InternFromString("saliency_offset")) == NULL)
+        return NULL;
     PyObject *m = PyModule_Create(&module);
     if (m == NULL)
         return NULL;
@@ -509,5 +784,6 @@ PyMODINIT_FUNC PyInit__cctl(void)
     PyModule_AddIntConstant(m, "KIND_HYB_SQW", CC_EST_HYBRID_SQUARE_WAVE);
     PyModule_AddIntConstant(m, "KIND_SELF_DEMOD", CC_EST_SELF_DEMOD);
     PyModule_AddIntConstant(m, "KIND_EPF", CC_EST_EPF);
+    PyModule_AddIntConstant(m, "KIND_EXTERNAL", CC_EST_EXTERNAL);
     return m;
 }

@@ -16,11 +16,13 @@ from __future__ import annotations
 from dataclasses import fields
 from typing import Any
 
-from controller._api import ControlOutput, Measurement
-from controller._engine import _cctl, compiled_cover
+from controller._api import ControlOutput, EstimatorInput, Measurement
+from controller._cplugin import CEstimator
+from controller._engine import KIND_EXTERNAL, _cctl, compiled_cover
 from controller._epf import EPFEstimator
 from controller._filters import Biquad2, FirstOrder, FirstOrder2
 from controller._hybrid import HybridEstimator
+from controller._luenberger import LuenbergerObserver
 from controller._pll import PositionObserver
 from controller._rotating import RotatingHFEstimator
 from controller._self_demod import SelfDemodEstimator
@@ -49,8 +51,9 @@ def _bq(f: Biquad2) -> tuple[float, float, float, float, float]:
 
 
 def _rotating(core: Any, est: RotatingHFEstimator, tracking: bool) -> None:
-    pll = est.pll
-    assert isinstance(pll, PositionObserver)
+    pll: Any = est.pll
+    mech = isinstance(pll, LuenbergerObserver)  # observer = "mechanical"
+    assert mech or isinstance(pll, PositionObserver)
     e: Any = est
     hpf = getattr(e, "_hpf", None)
     quad = getattr(e, "_quad", None)
@@ -60,13 +63,15 @@ def _rotating(core: Any, est: RotatingHFEstimator, tracking: bool) -> None:
         est.V_h,
         est.wT,
         e._inv_norm,
-        (pll.k_p, pll.k_i, pll.T_s),
+        (0.0, 0.0, pll.T_s) if mech else (pll.k_p, pll.k_i, pll.T_s),
         _bq(e._bpf),
         _fo(lpf),
         None if hpf is None else _fo(hpf),
         (est.w_h, est.T_s, est.bpf_B, e._w0_min) if tracking and est.bpf_tracking else None,
         None if quad is None else _bq(quad),
     )
+    if mech:
+        core.mechanical(pll.T_s, pll._g1, pll._g2, pll._g3, pll._gt, e._l3)
 
 
 def _square_wave(core: Any, est: SquareWaveEstimator) -> None:
@@ -98,14 +103,17 @@ def _slots(cls: type) -> tuple[Any, ...]:
 
 def build_core(ctrl: Any) -> tuple[Any, str | None]:
     """The core for the designed controller ``ctrl`` (a :class:`controller.Controller`),
-    or ``(None, why)`` when the core does not cover it."""
+    or ``(None, why)`` when the core does not cover it.
+
+    A plug-in's estimator, or a plug-in registered under a compiled estimator's name,
+    is the core's external estimator: the core calls its Python methods."""
     pars = ctrl.pars
     kind, why = compiled_cover(pars)
     est = ctrl.estimator
     if _cctl is None or not kind:
         return None, why
-    if not _kind_of(kind, est):
-        return None, f"the estimator of {type(est).__module__} is not compiled: Python"
+    if kind != KIND_EXTERNAL and not _kind_of(kind, est):
+        kind = KIND_EXTERNAL
     core = _cctl.Core(kind, Measurement, _slots(Measurement), ControlOutput, _slots(ControlOutput))
     m = ctrl.motor
     core.foc(
@@ -125,9 +133,15 @@ def build_core(ctrl: Any) -> tuple[Any, str | None]:
     for which, pi in enumerate((ctrl.pi_d, ctrl.pi_q, ctrl.pi_w)):
         core.pi(which, pi.k_p, pi.k_i, pi.T_s, pi.k_t)
     core.speed_filter(*_fo(ctrl.lpf_w))
+    ref = ctrl.ref_model
+    core.reference_model(ref.alpha_s, float(ref.n_p), ref.a_max, ref.T_s)
     pt = ctrl.polarity
     core.polarity(pt.L_d, pt.T_s, pt.i_pulse, pt.u_frac)
-    if kind in (1, 2, 3, 8, 9):
+    if kind == KIND_EXTERNAL and isinstance(est, CEstimator):
+        core.external_c(est.interface_address)  # a user's estimator in C: no Python
+    elif kind == KIND_EXTERNAL:
+        core.external(est, EstimatorInput, _slots(EstimatorInput))
+    elif kind in (1, 2, 3, 8, 9):
         _rotating(core, est, kind == 1)
     elif kind == 4:
         _square_wave(core, est)
@@ -135,6 +149,8 @@ def build_core(ctrl: Any) -> tuple[Any, str | None]:
         hf = est.hf
         if kind == 6:
             _rotating(core, hf, True)
+            if hf.accel_ff:
+                core.accel_ff()
             tr_T_s = est.tracker.T_s
             n_p, J = 0.0, 1.0
         else:
@@ -150,17 +166,20 @@ def build_core(ctrl: Any) -> tuple[Any, str | None]:
             n_p,
             J,
         )
-    _compensation(core, ctrl, est)
+    if kind == 1 and est.accel_ff:
+        core.accel_ff()
+    _compensation(core, ctrl, est, kind == KIND_EXTERNAL)
     return core, None
 
 
-def _compensation(core: Any, ctrl: Any, est: Any) -> None:
+def _compensation(core: Any, ctrl: Any, est: Any, external: bool) -> None:
     """The countermeasures the controller designed (:mod:`controller._compensation`),
-    switched on in the core as in the Python step."""
+    switched on in the core as in the Python step (an external estimator predicts its HF
+    current itself)."""
     dt = ctrl.dead_time
     cal = ctrl.calibration
     hf: Any = est.hf if isinstance(est, HybridEstimator) else est
-    rot = isinstance(hf, RotatingHFEstimator)
+    rot = isinstance(hf, RotatingHFEstimator) and not external
     core.compensation(
         None
         if dt is None

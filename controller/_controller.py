@@ -114,7 +114,7 @@ from controller._compensation import (
     offset_periods,
 )
 from controller._compiled import build_core
-from controller._engine import resolve_controller_engine
+from controller._engine import KIND_EXTERNAL, resolve_controller_engine
 from controller._filters import lpf_first_order
 from controller._hybrid import HybridEstimator
 from controller._params import MotorModel
@@ -371,6 +371,10 @@ class Controller:
     engine: str = "python"
     #: Why the controller runs in Python although the compiled engine was asked for.
     engine_note: str | None = None
+    #: The compiled core calls the estimator's Python methods each period (a plug-in's
+    #: Python estimator, :data:`controller._engine.KIND_EXTERNAL`): the periods need
+    #: Python. False for a plug-in's estimator in C (:func:`controller.c_estimator`).
+    external_estimator: bool = False
 
     def __init__(self, pars: ControllerPars, engine: str = "auto") -> None:
         self.pars = pars
@@ -449,6 +453,9 @@ class Controller:
         self.engine_note = why
         if self._core is not None:
             self.engine = "compiled"
+            self.external_estimator = bool(
+                self._core.kind == KIND_EXTERNAL and self._core.calls_python
+            )
             # the core's step is called directly (no Python frame per period)
             self.step = self._core.step  # type: ignore[method-assign]
         # the supervision hook: the step (the core's or Python's) with
@@ -760,13 +767,15 @@ class Controller:
         c = self._core
         hybrid = isinstance(self.estimator, HybridEstimator)
         u_h = self.injection()
+        est = self.estimator
         if c is not None:
             out = {name: getattr(c, name) for name in STATE_NAMES}
             out["u_h_alpha"], out["u_h_beta"] = u_h
-            if hybrid:
+            if hybrid and c.kind != KIND_EXTERNAL:
                 out.update({name: getattr(c, name) for name in HYBRID_STATE_NAMES})
+            elif isinstance(est, HybridEstimator):  # a plug-in's hybrid: its own states
+                out.update(_hybrid_states(est))
             return out
-        est = self.estimator
         out = {
             "mode": self.mode,
             "w_m_ref": self.w_m_ref,
@@ -787,15 +796,7 @@ class Controller:
             "u_h_beta": u_h[1],
         }
         if isinstance(est, HybridEstimator):
-            out.update(
-                weight=est.weight,
-                gain=est.gain,
-                y=est.y,
-                hf_theta_hat=est.hf.theta_hat,
-                hf_w_hat=est.hf.w_hat,
-                obs_theta_hat=est.observer.theta_hat,
-                obs_w_hat=est.observer.w_hat,
-            )
+            out.update(_hybrid_states(est))
         return out
 
     def injection(self) -> tuple[float, float]:
@@ -857,6 +858,19 @@ class Controller:
         self._u_a1 = u_a
         self._u_b1 = u_b
         return ControlOutput(k, d_a, d_b, d_c, True, th, 0.0, 0.0, MODE_POLARITY, i_d, i_q)
+
+
+def _hybrid_states(est: HybridEstimator) -> dict[str, float]:
+    """:data:`HYBRID_STATE_NAMES` of a hybrid estimator the Python engine steps."""
+    return {
+        "weight": est.weight,
+        "gain": est.gain,
+        "y": est.y,
+        "hf_theta_hat": est.hf.theta_hat,
+        "hf_w_hat": est.hf.w_hat,
+        "obs_theta_hat": est.observer.theta_hat,
+        "obs_w_hat": est.observer.w_hat,
+    }
 
 
 def _state(name: str) -> property:

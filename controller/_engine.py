@@ -20,14 +20,23 @@ the alignment and run modes with the shipped estimators of
 ``hybrid-square-wave`` (flux observer, hand-over band, trackers), with the
 current fed to the PIs filtered or raw, and the drive countermeasures of
 :mod:`controller._compensation` (dead-time feed-forward, cross-saturation
-correction, offset calibration: ``controller/core/cc_compensation.c``). A
-controller outside it runs in
+correction, offset calibration: ``controller/core/cc_compensation.c``), and
+tt-dq's acceleration feed-forward (``accel_ff``, with the speed loop's
+reference model ``controller/core/cc_reference.c``). A user's Python
+estimator (a plug-in, :data:`KIND_EXTERNAL`) runs in it too: the core runs
+the controller and calls the estimator's ``update``, ``injection`` and
+``reset`` through the estimator interface (``controller/core/cc_estimator.h``),
+so the trace is the Python engine's bit for bit, and an exception the
+estimator raises leaves the step as it leaves the Python step. A user's
+estimator in C (:func:`controller.c_estimator`, a shared library) is
+called by the core directly, with no Python in the period. A controller
+outside it runs in
 Python whatever the choice, and says why in one line
 (:attr:`controller.Controller.engine_note`; ``bench run`` and ``bench
-controller`` print it, and the controller node's report keeps it): an
-estimator the core does not know (every plug-in), the measured normalisation, the
-mechanical position observer (``observer = "mechanical"``) and tt-dq's acceleration
-feed-forward (``accel_ff``). Inside it the core runs every period,
+controller`` print it, and the controller node's report keeps it): the
+measured normalisation, and the mechanical position observer (``observer =
+"mechanical"``) in hybrid-tt-dq (the core runs it in the other rotating
+demodulators). Inside it the core runs every period,
 the start-up included, and keeps every state; the
 :class:`controller.Controller` holds it by composition and forwards its
 commands (:mod:`controller._compiled`).
@@ -77,9 +86,20 @@ else:
 _KINDS = {s.name: s.compiled_kind for s in SPECS.values() if s.compiled_kind is not None}
 
 
-#: The estimators the compiled core covers, by name; any other (a shipped one without a C
-#: twin, a plug-in) runs in Python and :func:`compiled_cover` says so.
+#: The estimators the compiled core covers, by name, with their kernels in C.
 COMPILED_ESTIMATORS: tuple[str, ...] = tuple(_KINDS)
+
+#: The core's kind of an estimator outside it, a user's Python estimator: the core calls
+#: its ``update``, ``injection`` and ``reset`` each period (``controller/core/cc_estimator.h``,
+#: adapted by ``controller/_cctl.c``).
+KIND_EXTERNAL = 10
+
+#: The kinds whose estimator is a rotating-injection demodulator with the options
+#: ``normalise`` and ``observer`` (tt-dq, tt-ab, sfhf, hybrid-tt-dq, self-demod, epf), and
+#: those with tt-dq's PLL, which take ``accel_ff`` (tt-dq, hybrid-tt-dq). The core runs
+#: ``observer = "mechanical"`` for each but the hybrid's tt-dq.
+_ROTATING_KINDS = (1, 2, 3, 6, 8, 9)
+_ACCEL_FF_KINDS = (1, 6)
 
 
 def core_sources() -> list[Path]:
@@ -96,17 +116,21 @@ def compiled_controller_missing() -> str | None:
 
 def compiled_cover(pars: Any) -> tuple[int, str | None]:
     """``(kind, None)`` when the compiled core covers the controller ``pars`` describes,
-    else ``(0, why)``: the one line saying what keeps it in Python."""
+    else ``(0, why)``: the one line saying what keeps it in Python.
+
+    An estimator the registry gives no compiled kind (a plug-in) is
+    :data:`KIND_EXTERNAL`: the core runs the controller and calls the estimator's
+    Python methods each period, with the options the plug-in takes itself."""
     name = pars.estimator
-    kind = _KINDS.get(name, 0)
-    if kind == 0:
-        return 0, f"the {name} estimator is not compiled: the controller runs in Python"
+    kind = _KINDS.get(name, KIND_EXTERNAL)
+    if kind == KIND_EXTERNAL:
+        return kind, None
     opts = dict(pars.estimator_options)
-    if kind in (1, 2, 3, 6, 8, 9) and opts.get("normalise", "model") != "model":
+    if kind in _ROTATING_KINDS and opts.get("normalise", "model") != "model":
         return 0, f"{name} with normalise={opts['normalise']!r} is not compiled: Python"
-    if kind in (1, 2, 3, 6, 8, 9) and opts.get("observer", "pll") != "pll":
+    if kind == 6 and opts.get("observer", "pll") != "pll":
         return 0, f"{name} with observer={opts['observer']!r} is not compiled: Python"
-    if opts.get("accel_ff", False):
+    if kind not in _ACCEL_FF_KINDS and opts.get("accel_ff", False):
         return 0, f"{name} with accel_ff is not compiled: the controller runs in Python"
     if kind in (4, 7) and int(opts.get("M", 2)) > 64:
         return 0, f"{name} with a CIC delay M > 64 is not compiled: Python"

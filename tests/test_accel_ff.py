@@ -4,11 +4,16 @@ acceleration fed into the PLL, beside its loop, which keeps its margin and noise
 from __future__ import annotations
 
 import math
+from dataclasses import fields
+from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
 
-from controller import EstimatorInput, make_estimator
+from bench.scenarios._schema import load_scenario
+from bench.scenarios._setup import build_controller, build_plant
+from controller import EstimatorInput, Measurement, compiled_controller_missing, make_estimator
 from controller._controller import ReferenceModel
 from controller._engine import compiled_cover
 from controller._pll import PositionObserver, open_loop
@@ -119,10 +124,54 @@ def test_options_where_it_applies() -> None:
 
     from types import SimpleNamespace
 
+    # tt-dq's and the hybrid's tt-dq's feed-forward is in the compiled core
+    for name, kind in (("tt-dq", 1), ("hybrid-tt-dq", 6)):
+        pars = SimpleNamespace(estimator=name, estimator_options={"accel_ff": True})
+        assert compiled_cover(pars) == (kind, None)
     kind, why = compiled_cover(
-        SimpleNamespace(estimator="tt-dq", estimator_options={"accel_ff": True})
+        SimpleNamespace(estimator="sfhf", estimator_options={"accel_ff": True})
     )
     assert kind == 0 and why is not None and "accel_ff" in why
+
+
+def _trace(scn: Any, estimator: str, engine: str, n: int) -> tuple[list[tuple[float, ...]], Any]:
+    """A closed loop on the compiled plant: start-up, then speed steps up and down; every
+    output of every period."""
+    sim = build_plant(scn, "compiled")
+    ctrl = build_controller(scn, estimator, engine)
+    ctrl.set_enable(True)
+    d = (0.5, 0.5, 0.5, False)
+    out = []
+    for k in range(n):
+        if k in (n // 3, (2 * n) // 3):
+            ctrl.set_speed_ref(30.0 if k == n // 3 else -20.0)
+        s = sim.sample()
+        o = ctrl.step(Measurement(s.k, s.i_a, s.i_b, s.i_c, s.u_dc))
+        sim.step(*d)
+        out.append(tuple(float(getattr(o, f.name)) for f in fields(o)))
+        d = (o.d_a, o.d_b, o.d_c, o.enable)
+    return out, ctrl
+
+
+@pytest.mark.parametrize("estimator", ["tt-dq", "hybrid-tt-dq"])
+def test_accel_ff_is_the_same_on_both_engines(tmp_path: Path, estimator: str) -> None:
+    """wen-5.1's start-up and two speed steps with ``accel_ff``: the compiled core gives the
+    Python engine's output bit for bit in every period, and the feed-forward acts (the
+    trace without it differs once the speed loop runs)."""
+    if compiled_controller_missing() is not None:
+        pytest.skip(str(compiled_controller_missing()))
+    f = tmp_path / "ff.toml"
+    f.write_text('extends = "wen-5.1"\n[estimator_options]\naccel_ff = true\n')
+    scn = load_scenario(str(f))
+    n = 6000
+    py, c_py = _trace(scn, estimator, "python", n)
+    cc, c_cc = _trace(scn, estimator, "compiled", n)
+    assert (c_py.engine, c_cc.engine, c_cc.engine_note) == ("python", "compiled", None)
+    first = next((k for k in range(n) if py[k] != cc[k]), None)
+    assert first is None, f"the engines part at period {first}"
+    plain, _ = _trace(load_scenario("wen-5.1"), estimator, "compiled", n)
+    parted = next(k for k in range(n) if plain[k] != cc[k])
+    assert n // 3 <= parted < n // 3 + 10  # the first period of the step's acceleration
 
 
 def test_the_tables_maxima_with_accel_ff_are_claims_per_plant() -> None:

@@ -306,9 +306,12 @@ def test_the_cover_and_the_reasons() -> None:
     used, why = resolve_controller_engine("auto", measured)
     assert used == "python" and "normalise='measured'" in str(why)
     assert Controller(measured, "compiled").engine_note == why
+    # the mechanical observer is in the core, but for the hybrid's tt-dq
     mech = replace(pars, estimator_options={"observer": "mechanical"})
-    used, why = resolve_controller_engine("auto", mech)
-    assert used == "python" and "observer='mechanical'" in str(why)
+    assert resolve_controller_engine("auto", mech) == ("compiled", None)
+    hyb = replace(pars, estimator="hybrid-tt-dq", estimator_options={"observer": "mechanical"})
+    used, why = resolve_controller_engine("auto", hyb)
+    assert used == "python" and "hybrid-tt-dq with observer='mechanical'" in str(why)
     # the countermeasures are in the core
     comp = CompensationPars(dead_time=True, cross_saturation=True, offset_calibration=True)
     drive = replace(pars, compensation=comp)
@@ -386,39 +389,126 @@ def test_a_compiled_controller_is_freed() -> None:
     assert ref() is None
 
 
-def test_an_estimator_the_core_does_not_know_runs_in_python_and_says_so(
-    monkeypatch: pytest.MonkeyPatch,
+@pytest.mark.parametrize("estimator", ["tt-dq", "tt-ab", "sfhf", "self-demod", "epf"])
+def test_the_mechanical_observer_same_on_both_engines(estimator: str, tmp_path: Path) -> None:
+    """``observer = "mechanical"`` (the Luenberger observer with the torque feed-forward in
+    place of the PLL): wen-5.1's start-up and two speed steps, the same output on both
+    engines in every period, and not the PLL's trace."""
+    f = tmp_path / "mech.toml"
+    f.write_text('extends = "wen-5.1"\n[estimator_options]\nobserver = "mechanical"\n')
+    n = 6000
+    events = {
+        n // 3: lambda c: c.set_speed_ref(30.0),
+        (2 * n) // 3: lambda c: c.set_speed_ref(-20.0),
+    }
+    py, c_py = _loop(str(f), estimator, "python", n, events, speed_rpm=0.0)
+    cc, c_cc = _loop(str(f), estimator, "compiled", n, events, speed_rpm=0.0)
+    assert (c_py.engine, c_cc.engine, c_cc.engine_note) == ("python", "compiled", None)
+    first = next((k for k in range(n) if py[k] != cc[k]), None)
+    assert first is None, f"the engines part at period {first}"
+    pll, _ = _loop("wen-5.1", estimator, "compiled", n, events, speed_rpm=0.0)
+    assert pll != cc
+
+
+#: A plug-in around docs/examples/my_estimator.py that raises in its update at period 40,
+#: and one whose injection() returns three values.
+RAISING = """
+import my_estimator
+
+
+class Raising(my_estimator.FluxPLL):
+    def update(self, x):
+        if x.k >= 40:
+            raise RuntimeError(f"flux lost at k={x.k}")
+        super().update(x)
+
+    def injection(self):
+        return (0.0, 0.0, 0.0) if self.err == 1.0 else (0.0, 0.0)
+
+
+def create(motor, T_s, **options):
+    e = my_estimator.create(motor, T_s, **options)
+    e.__class__ = Raising
+    return e
+
+
+create.injection_family = "none"
+create.options = my_estimator.create.options
+"""
+
+
+def test_a_plugin_estimator_runs_in_the_core_bit_for_bit(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path
 ) -> None:
-    """Every shipped estimator has its kind in the core; a plug-in asked for on the compiled
-    engine runs in Python, says why in one line naming the estimator, steps as the Python
-    engine does (bit for bit), and the controller node's report carries the line (``bench
-    run`` prints it)."""
+    """Every shipped estimator has its kind in the core; a plug-in's Python estimator runs in
+    it too: the core calls its methods each period (``controller/core/cc_estimator.h``).
+    The example plug-in over flux-known-angle's first 0.4 s, with a speed step and a second
+    start: the Python engine's output bit for bit, its states read back the same; the node's
+    report says compiled, and the native node falls back with one line naming it."""
     from bench.nodes._controller_node import ControllerNode
+    from bench.nodes.native.controller_node import native_unavailable
     from controller import ESTIMATOR_NAMES
-    from controller._engine import COMPILED_ESTIMATORS
+    from controller._cctl import KIND_EXTERNAL as C_KIND
+    from controller._engine import COMPILED_ESTIMATORS, KIND_EXTERNAL
 
     examples = Path(loops.__file__).parents[2] / "docs" / "examples"
     monkeypatch.syspath_prepend(str(examples))
     assert set(COMPILED) == set(COMPILED_ESTIMATORS) == set(ESTIMATOR_NAMES)
+    assert KIND_EXTERNAL == C_KIND
     est = "my_estimator:create"
-    scn = load_scenario(str(examples / "flux-known-angle.toml"))
-    c = build_controller(scn, est, "compiled")
-    assert c.engine == "python", est
-    note = str(c.engine_note)
-    assert note == f"the {est} estimator is not compiled: the controller runs in Python"
-    assert "\n" not in note
-    ref = build_controller(scn, est, "python")
-    assert ref.engine_note is None
-    for ctrl in (c, ref):
-        ctrl.set_enable(True)
-        ctrl.set_speed_ref(10.0)
-    for k in range(300):
-        m = Measurement(k, 0.2 * math.sin(0.3 * k), -0.1, 0.1 - 0.2 * math.sin(0.3 * k), 300.0)
-        assert _bits(c.step(m)) == _bits(ref.step(m)), (est, k)
+    path = str(examples / "flux-known-angle.toml")
+    n = 4000
+    events = {
+        1500: lambda c: c.set_speed_ref(-5.0),
+        2500: lambda c: c.set_enable(False),
+        2600: lambda c: c.set_enable(True),
+    }
+    cc, c = _loop(path, est, "compiled", n, events, speed_rpm=60.0)
+    py, ref = _loop(path, est, "python", n, events, speed_rpm=60.0)
+    assert (c.engine, c.engine_note, c.external_estimator) == ("compiled", None, True)
+    assert (ref.engine, ref.external_estimator) == ("python", False)
+    first = next((k for k in range(n) if py[k] != cc[k]), None)
+    assert first is None, f"the engines part at period {first}"
+    assert len({o for o in cc}) > n // 2  # the trace moves
+    assert c.states() == ref.states()
     rep = ControllerNode(Codec(), c).report()
-    assert (rep["engine"], rep["engine_note"]) == ("python", note)
-    rep = ControllerNode(Codec(), build_controller(scn, "tt-dq", "compiled")).report()
     assert (rep["engine"], rep["engine_note"]) == ("compiled", None)
+    why = native_unavailable(ControllerNode(Codec(), c), None)
+    assert why is not None and est in why and "Python node runs" in why and "\n" not in why
+
+
+def test_a_plugin_that_raises_raises_the_same_on_both_engines(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    """An exception in a plug-in's update reaches the caller of ``step`` unchanged on the
+    compiled engine, in the same period, after the same outputs, as on the Python engine
+    (the controller process then ends with that one line); a malformed ``injection()``
+    result is the same error on both."""
+    examples = Path(loops.__file__).parents[2] / "docs" / "examples"
+    monkeypatch.syspath_prepend(str(examples))
+    monkeypatch.syspath_prepend(str(tmp_path))
+    (tmp_path / "raising_plugin.py").write_text(RAISING)
+    scn = load_scenario(str(examples / "flux-known-angle.toml"))
+    got = {}
+    for engine in ("python", "compiled"):
+        c = build_controller(scn, "raising_plugin:create", engine)
+        assert c.engine == engine
+        c.set_enable(True)
+        c.set_speed_ref(10.0)
+        outs = []
+        with pytest.raises(RuntimeError) as e:
+            for k in range(100):
+                m = Measurement(
+                    k, 0.2 * math.sin(0.3 * k), -0.1, 0.1 - 0.2 * math.sin(0.3 * k), 300.0
+                )
+                outs.append(_bits(c.step(m)))
+        c.estimator.err = 1.0  # injection() now returns three values
+        with pytest.raises(ValueError) as v:
+            c.injection()
+        got[engine] = (str(e.value), outs, str(v.value))
+    assert got["python"][0] == got["compiled"][0] == "flux lost at k=40"
+    assert got["python"][2] == got["compiled"][2] == "too many values to unpack (expected 2)"
+    assert got["python"][1] == got["compiled"][1] and len(got["python"][1]) == 40
 
 
 def test_bench_run_says_in_one_line_that_the_controller_runs_in_python(

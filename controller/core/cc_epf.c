@@ -11,7 +11,7 @@
 void cc_epf_step(cc_est_t *e, cc_rot_t *r, long long k, double i_a, double i_b)
 {
     r->k = k;
-    double th = r->pll.theta_hat;
+    double th = cc_rot_theta(r);
     double c = cos(th);
     double s = sin(th);
     double i_d = c * i_a + s * i_b;

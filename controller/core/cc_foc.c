@@ -4,6 +4,8 @@
 #include "cc_sensored.h"
 #include "cc_svpwm.h"
 
+#include <stddef.h>
+
 void cc_foc_init(cc_foc_t *c, double n_p, double L_d, double L_q, double psi_f, double i_max,
                  double tau_max, double t_delay, long long n_align, long long n_settle,
                  double theta0, int raw_feedback, int align)
@@ -31,6 +33,7 @@ void cc_foc_init(cc_foc_t *c, double n_p, double L_d, double L_q, double psi_f, 
     c->u_a1 = c->u_b1 = c->u_a2 = c->u_b2 = 0.0;
     c->dead_time = c->hf_next = c->cross_sat = c->sal_own = c->calibrate = 0;
     c->k_dq = 0.0;
+    cc_ref_init(&c->ref, 0.0, n_p, 0.0, 0.0); /* no acceleration until designed */
 }
 
 void cc_foc_dead_time(cc_foc_t *c, double T_s, double t_dead, double v_ce, double v_f,
@@ -56,19 +59,27 @@ void cc_foc_offset_calibration(cc_foc_t *c, long long n)
 
 int cc_estim_init(cc_estim_t *e, int kind)
 {
-    if (kind < CC_EST_TT_DQ || kind > CC_EST_EPF)
+    if (kind < CC_EST_TT_DQ || kind > CC_EST_EXTERNAL)
         return -1;
     e->kind = kind;
     e->out.theta_hat = e->out.w_hat = e->out.err = e->out.i_alpha_f = e->out.i_beta_f = 0.0;
     e->hyb.square = kind == CC_EST_HYBRID_SQUARE_WAVE;
     e->hyb.rot = &e->rot;
     e->hyb.sqw = &e->sqw;
+    e->ext.ctx = NULL;
+    e->ext.update = NULL;
+    e->ext.injection = NULL;
+    e->ext.reset = NULL;
+    e->ext.hf_current_next = NULL;
+    e->ext.set_saliency_offset = NULL;
     return 0;
 }
 
-void cc_estim_reset(cc_estim_t *e, double theta0)
+int cc_estim_reset(cc_estim_t *e, double theta0)
 {
     switch (e->kind) {
+    case CC_EST_EXTERNAL:
+        return e->ext.reset(e->ext.ctx, theta0, &e->out) ? -1 : 0;
     case CC_EST_TT_DQ:
     case CC_EST_TT_AB:
     case CC_EST_SFHF:
@@ -86,14 +97,21 @@ void cc_estim_reset(cc_estim_t *e, double theta0)
     default: /* the angle comes from the sensor */
         e->out.theta_hat = theta0;
     }
+    return 0;
 }
 
-static void estim_step(cc_estim_t *e, const cc_meas_t *m, double i_alpha, double i_beta,
-                       double torque, double u_alpha, double u_beta, int running)
+static int estim_step(cc_estim_t *e, const cc_meas_t *m, double i_alpha, double i_beta,
+                      double torque, double u_alpha, double u_beta, int running,
+                      double accel_ref)
 {
+    e->rot.torque = torque; /* the mechanical observer's feed-forward */
     switch (e->kind) {
+    case CC_EST_EXTERNAL: {
+        cc_est_in_t x = {m->k, i_alpha, i_beta, torque, u_alpha, u_beta, running, accel_ref};
+        return e->ext.update(e->ext.ctx, &x, &e->out) ? -1 : 0;
+    }
     case CC_EST_TT_DQ:
-        cc_tt_dq_step(&e->out, &e->rot, m->k, i_alpha, i_beta);
+        cc_tt_dq_step(&e->out, &e->rot, m->k, i_alpha, i_beta, accel_ref);
         break;
     case CC_EST_TT_AB:
         cc_tt_ab_step(&e->out, &e->rot, m->k, i_alpha, i_beta);
@@ -112,16 +130,20 @@ static void estim_step(cc_estim_t *e, const cc_meas_t *m, double i_alpha, double
         break;
     case CC_EST_HYBRID_TT_DQ:
     case CC_EST_HYBRID_SQUARE_WAVE:
-        cc_hyb_step(&e->out, &e->hyb, m->k, i_alpha, i_beta, u_alpha, u_beta, torque, running);
+        cc_hyb_step(&e->out, &e->hyb, m->k, i_alpha, i_beta, u_alpha, u_beta, torque, running,
+                    accel_ref);
         break;
     default:
         cc_sensored_step(&e->out, i_alpha, i_beta, m->theta_e, m->w_e);
     }
+    return 0;
 }
 
-void cc_estim_injection(const cc_estim_t *e, double *u_a, double *u_b)
+int cc_estim_injection(const cc_estim_t *e, double *u_a, double *u_b)
 {
     switch (e->kind) {
+    case CC_EST_EXTERNAL:
+        return e->ext.injection(e->ext.ctx, u_a, u_b) ? -1 : 0;
     case CC_EST_TT_DQ:
     case CC_EST_TT_AB:
     case CC_EST_SFHF:
@@ -140,11 +162,18 @@ void cc_estim_injection(const cc_estim_t *e, double *u_a, double *u_b)
         *u_a = 0.0;
         *u_b = 0.0;
     }
+    return 0;
 }
 
-void cc_estim_hf_current_next(const cc_estim_t *e, double *i_a, double *i_b)
+int cc_estim_hf_current_next(const cc_estim_t *e, double *i_a, double *i_b)
 {
     switch (e->kind) {
+    case CC_EST_EXTERNAL:
+        if (e->ext.hf_current_next != NULL)
+            return e->ext.hf_current_next(e->ext.ctx, i_a, i_b) ? -1 : 0;
+        *i_a = 0.0;
+        *i_b = 0.0;
+        break;
     case CC_EST_TT_DQ:
     case CC_EST_TT_AB:
     case CC_EST_SFHF:
@@ -160,6 +189,7 @@ void cc_estim_hf_current_next(const cc_estim_t *e, double *i_a, double *i_b)
         *i_a = 0.0;
         *i_b = 0.0;
     }
+    return 0;
 }
 
 void cc_foc_set_speed_ref(cc_foc_t *c, double w_m_ref) { c->w_m_ref = w_m_ref; }
@@ -172,13 +202,15 @@ void cc_foc_set_current_ref(cc_foc_t *c, int on, double i_d, double i_q)
     cc_pi_reset(&c->pi_w);
 }
 
-static void foc_restart(cc_foc_t *c)
+static int foc_restart(cc_foc_t *c)
 {
     cc_pi_reset(&c->pi_d);
     cc_pi_reset(&c->pi_q);
     cc_pi_reset(&c->pi_w);
     cc_fo_reset(&c->lpf_w);
-    cc_estim_reset(&c->est, c->theta0);
+    cc_ref_reset(&c->ref, 0.0);
+    if (cc_estim_reset(&c->est, c->theta0))
+        return CC_ERR_ESTIMATOR;
     c->i_d_ref = c->i_q_ref = c->tau_ref = 0.0;
     c->u_a1 = c->u_b1 = c->u_a2 = c->u_b2 = 0.0;
     c->n_mode = 0;
@@ -186,14 +218,16 @@ static void foc_restart(cc_foc_t *c)
     if (c->calibrate)
         cc_offset_cal_restart(&c->cal);
     c->mode = c->align ? CC_MODE_ALIGN : CC_MODE_RUN;
+    return CC_OK;
 }
 
-void cc_foc_set_enable(cc_foc_t *c, int enable)
+int cc_foc_set_enable(cc_foc_t *c, int enable)
 {
     if (enable && c->mode == CC_MODE_DISABLED)
-        foc_restart(c);
-    else if (!enable)
+        return foc_restart(c);
+    if (!enable)
         c->mode = CC_MODE_DISABLED;
+    return CC_OK;
 }
 
 static void set_out(cc_out_t *o, long long k, const double d[3], int enable, double th,
@@ -212,9 +246,26 @@ static void set_out(cc_out_t *o, long long k, const double d[3], int enable, dou
     o->i_q = i_q;
 }
 
+/* the output of every period that applies a voltage (the polarity pulses and the control
+ * periods): the duties of the stationary command (u_a, u_b) for period k + 1, the command
+ * kept for two periods (EstimatorInput.u_alpha), and, with the dead-time feed-forward, the
+ * duties corrected for the phase currents (i_a, -i_a/2 + h, -i_a/2 - h) expected, with
+ * h = sqrt(3)/2 i_beta as the caller forms it */
+static void output_step(cc_foc_t *c, double u_a, double u_b, double u_dc, double i_a, double h,
+                        double d[3])
+{
+    cc_svpwm(u_a, u_b, u_dc, d);
+    c->u_a2 = c->u_a1;
+    c->u_b2 = c->u_b1;
+    c->u_a1 = u_a;
+    c->u_b1 = u_b;
+    if (c->dead_time)
+        cc_deadtime_duties(&c->dt, d, i_a, -0.5 * i_a + h, -0.5 * i_a - h, u_dc);
+}
+
 /* the polarity test's period: a pulse along the estimated d axis */
-static void polarity_step(cc_foc_t *c, long long k, double i_alpha, double i_beta, double u_dc,
-                          cc_out_t *o)
+static int polarity_step(cc_foc_t *c, long long k, double i_alpha, double i_beta, double u_dc,
+                         cc_out_t *o)
 {
     double th = c->theta_pol;
     double co = cos(th);
@@ -225,29 +276,20 @@ static void polarity_step(cc_foc_t *c, long long k, double i_alpha, double i_bet
     double u_d = cc_polarity_step(pt, i_d);
     if (pt->done) {
         double th_new = pt->flip ? cc_mod(th + M_PI, CC_TWO_PI) : th;
-        cc_estim_reset(&c->est, th_new);
+        if (cc_estim_reset(&c->est, th_new))
+            return CC_ERR_ESTIMATOR;
         cc_pi_reset(&c->pi_d);
         cc_pi_reset(&c->pi_q);
         c->mode = CC_MODE_ALIGN;
         c->settled = 1;
         c->n_mode = 0;
     }
-    double u_a = co * u_d;
-    double u_b = si * u_d;
+    /* the pulses get the same feed-forward as every other voltage, the sign the present
+     * pulse current's, along the pulse axis */
     double d[3];
-    cc_svpwm(u_a, u_b, u_dc, d);
-    if (c->dead_time) {
-        /* the pulses get the same feed-forward as every other voltage, the sign the
-         * present pulse current's, along the pulse axis */
-        double i_a = co * i_d;
-        double h = CC_SQRT3_HALF * si * i_d;
-        cc_deadtime_duties(&c->dt, d, i_a, -0.5 * i_a + h, -0.5 * i_a - h, u_dc);
-    }
-    c->u_a2 = c->u_a1;
-    c->u_b2 = c->u_b1;
-    c->u_a1 = u_a;
-    c->u_b1 = u_b;
+    output_step(c, co * u_d, si * u_d, u_dc, co * i_d, CC_SQRT3_HALF * si * i_d, d);
     set_out(o, k, d, 1, th, 0.0, 0.0, CC_MODE_POLARITY, i_d, i_q);
+    return CC_OK;
 }
 
 /* the alignment's end: to the polarity test, or (settled) to the speed loop */
@@ -304,14 +346,21 @@ int cc_foc_step(cc_foc_t *c, const cc_meas_t *m, cc_out_t *o)
     double i_alpha = (2.0 * i_a - i_b - i_c) / 3.0;
     double i_beta = (i_b - i_c) * CC_SQRT3_INV;
     double u_dc = m->u_dc;
-    if (mode == CC_MODE_POLARITY) {
-        polarity_step(c, m->k, i_alpha, i_beta, u_dc, o);
-        return CC_OK;
+    if (mode == CC_MODE_POLARITY)
+        return polarity_step(c, m->k, i_alpha, i_beta, u_dc, o);
+    if (c->sal_own) { /* the hybrid corrects its injection estimate only */
+        double off = cc_cross_saturation_offset(c->k_dq, c->i_q_ref, c->L_d, c->L_q);
+        if (c->est.kind != CC_EST_EXTERNAL)
+            c->est.hyb.saliency_offset = off;
+        else if (c->est.ext.set_saliency_offset != NULL
+                 && c->est.ext.set_saliency_offset(c->est.ext.ctx, off))
+            return CC_ERR_ESTIMATOR;
     }
-    if (c->sal_own) /* the hybrid corrects its injection estimate only */
-        c->est.hyb.saliency_offset =
-            cc_cross_saturation_offset(c->k_dq, c->i_q_ref, c->L_d, c->L_q);
-    estim_step(&c->est, m, i_alpha, i_beta, c->tau_ref, c->u_a2, c->u_b2, mode == CC_MODE_RUN);
+    /* the speed loop's designed acceleration, from the reference alone */
+    double accel = mode == CC_MODE_RUN && !c->has_i_ref ? cc_ref_step(&c->ref, c->w_m_ref) : 0.0;
+    if (estim_step(&c->est, m, i_alpha, i_beta, c->tau_ref, c->u_a2, c->u_b2,
+                   mode == CC_MODE_RUN, accel))
+        return CC_ERR_ESTIMATOR;
     double th = e->theta_hat;
     if (c->cross_sat && !c->sal_own)
         th -= cc_cross_saturation_offset(c->k_dq, c->i_q_ref, c->L_d, c->L_q);
@@ -359,7 +408,8 @@ int cc_foc_step(cc_foc_t *c, const cc_meas_t *m, cc_out_t *o)
     double u_d = cc_pi_output(&c->pi_d, i_d_ref, i_d_pi, -w_e * c->L_q * i_q);
     double u_q = cc_pi_output(&c->pi_q, i_q_ref, i_q_pi, w_e * (c->L_d * i_d + c->psi_f));
     double u_ah, u_bh;
-    cc_estim_injection(&c->est, &u_ah, &u_bh);
+    if (cc_estim_injection(&c->est, &u_ah, &u_bh))
+        return CC_ERR_ESTIMATOR;
     double u_lim = u_dc * CC_SQRT3_INV - sqrt(u_ah * u_ah + u_bh * u_bh);
     double mag2 = u_d * u_d + u_q * u_q;
     double u_dl, u_ql;
@@ -377,26 +427,23 @@ int cc_foc_step(cc_foc_t *c, const cc_meas_t *m, cc_out_t *o)
     double s_u = sin(th_u);
     double u_a = c_u * u_dl - s_u * u_ql + u_ah;
     double u_b = s_u * u_dl + c_u * u_ql + u_bh;
-    double d[3];
-    cc_svpwm(u_a, u_b, u_dc, d);
-    c->u_a2 = c->u_a1;
-    c->u_b2 = c->u_b1;
-    c->u_a1 = u_a;
-    c->u_b1 = u_b;
+    /* phase currents expected at the mid-point of period k + 1 (the dead-time
+     * feed-forward): the reference, plus the injection's HF current where the estimator
+     * predicts it */
+    double i_ar = 0.0, i_br = 0.0;
     if (c->dead_time) {
-        /* phase currents expected at the mid-point of period k + 1: the reference, plus
-         * the injection's HF current where the estimator predicts it */
-        double i_ar = c_u * i_d_ref - s_u * i_q_ref;
-        double i_br = s_u * i_d_ref + c_u * i_q_ref;
+        i_ar = c_u * i_d_ref - s_u * i_q_ref;
+        i_br = s_u * i_d_ref + c_u * i_q_ref;
         if (c->hf_next) {
             double h_a, h_b;
-            cc_estim_hf_current_next(&c->est, &h_a, &h_b);
+            if (cc_estim_hf_current_next(&c->est, &h_a, &h_b))
+                return CC_ERR_ESTIMATOR;
             i_ar += h_a;
             i_br += h_b;
         }
-        double h = CC_SQRT3_HALF * i_br;
-        cc_deadtime_duties(&c->dt, d, i_ar, -0.5 * i_ar + h, -0.5 * i_ar - h, u_dc);
     }
+    double d[3];
+    output_step(c, u_a, u_b, u_dc, i_ar, CC_SQRT3_HALF * i_br, d);
     /* the speed reported is the filtered estimate the speed loop uses */
     set_out(o, m->k, d, 1, cc_mod(th, CC_TWO_PI), w_m * c->n_p, e->err, mode, i_d, i_q);
     /* update the states with the realised outputs */

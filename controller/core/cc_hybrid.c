@@ -78,14 +78,15 @@ static void tracker_sync(cc_hyb_t *h, double theta, double w, double accel, doub
 }
 
 void cc_hyb_step(cc_est_t *e, cc_hyb_t *h, long long k, double i_alpha, double i_beta,
-                 double u_alpha, double u_beta, double torque, int running)
+                 double u_alpha, double u_beta, double torque, int running,
+                 double accel_ref)
 {
     cc_est_t *hf = &h->hf;
     cc_flux_t *obs = &h->obs;
     if (h->square)
         cc_sqw_step(hf, h->sqw, i_alpha, i_beta, torque);
     else
-        cc_tt_dq_step(hf, h->rot, k, i_alpha, i_beta);
+        cc_tt_dq_step(hf, h->rot, k, i_alpha, i_beta, accel_ref);
     double lam = h->weight;
     double off = h->saliency_offset;
     double th, w, w_s, err;

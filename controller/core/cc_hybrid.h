@@ -41,7 +41,8 @@ void cc_hyb_init(cc_est_t *e, cc_hyb_t *h, int square, cc_rot_t *rot, cc_sqw_t *
                  double T_s, double n_p, double J);
 void cc_hyb_reset(cc_est_t *e, cc_hyb_t *h, double theta0);
 void cc_hyb_step(cc_est_t *e, cc_hyb_t *h, long long k, double i_alpha, double i_beta,
-                 double u_alpha, double u_beta, double torque, int running);
+                 double u_alpha, double u_beta, double torque, int running,
+                 double accel_ref);
 void cc_hyb_injection(const cc_hyb_t *h, double *u_a, double *u_b);
 /* the injection estimator's predicted HF current scaled by g (0 for square-wave) */
 void cc_hyb_hf_current_next(const cc_hyb_t *h, double *i_a, double *i_b);

@@ -17,9 +17,11 @@ void cc_pll_reset(cc_pll_t *p, double theta0, double w0)
     p->w_i = w0;
 }
 
-void cc_pll_step(cc_pll_t *p, double err)
+void cc_pll_step(cc_pll_t *p, double err, double accel)
 {
     p->w_i += p->T_s * p->k_i * err;
+    if (accel != 0.0)
+        p->w_i += p->T_s * accel;
     p->w_hat = p->k_p * err + p->w_i;
     p->theta_hat = cc_mod(p->theta_hat + p->T_s * p->w_hat, CC_TWO_PI);
 }

@@ -16,6 +16,7 @@
 
 #include "cc_estimator.h"
 #include "cc_filters.h"
+#include "cc_luenberger.h"
 #include "cc_pll.h"
 
 typedef struct {
@@ -24,7 +25,13 @@ typedef struct {
     long long k;
     int track;                  /* tt-dq: the BPF follows the HF current's frequency */
     double w_h, T_s, B, w0_min; /* its centre, period, bandwidth, lowest centre */
+    int accel_ff;               /* tt-dq: the speed loop's designed acceleration fed into */
+    double accel;               /* the PLL beside its loop (rad/s^2), this period's */
     cc_pll_t pll;
+    int mech;       /* observer = "mechanical": the Luenberger observer below, not pll */
+    cc_luen_t luen; /* with the torque feed-forward; its speed reported as */
+    double l3;      /* w_hat + l3 err (controller/_rotating.py) */
+    double torque;  /* the controller's torque this period (N m), its feed-forward */
     cc_bq2_t bpf;
     cc_fo_t lpf;     /* tt-dq, sfhf */
     cc_fo2_t lpf_ab; /* tt-ab */
@@ -45,13 +52,25 @@ void cc_rot_hf_model(cc_rot_t *r, double I_p, double I_n);
  * with theta_hat: I_p e^{j(ph - pi/2)} + I_n e^{j(2 theta_hat - ph + pi/2)} */
 void cc_rot_hf_current_next(const cc_rot_t *r, double *i_a, double *i_b);
 
-void cc_tt_dq_step(cc_est_t *e, cc_rot_t *r, long long k, double i_a, double i_b);
+/* accel_ref: the speed loop's designed acceleration (rad/s^2), fed forward with accel_ff */
+void cc_tt_dq_step(cc_est_t *e, cc_rot_t *r, long long k, double i_a, double i_b,
+                   double accel_ref);
 void cc_tt_ab_step(cc_est_t *e, cc_rot_t *r, long long k, double i_a, double i_b);
 void cc_sfhf_step(cc_est_t *e, cc_rot_t *r, long long k, double i_a, double i_b);
 void cc_self_demod_step(cc_est_t *e, cc_rot_t *r, long long k, double i_a, double i_b);
 void cc_epf_step(cc_est_t *e, cc_rot_t *r, long long k, double i_a, double i_b);
 
-/* shared by the demodulators: publish the estimate and step the PLL */
+/* the observer's angle (rad), the PLL's or the mechanical observer's */
+static inline double cc_rot_theta(const cc_rot_t *r)
+{
+    return r->mech ? r->luen.theta_hat : r->pll.theta_hat;
+}
+
+/* observer = "mechanical" (after cc_rot_init): the Luenberger observer's gains and l3 */
+void cc_rot_mechanical(cc_rot_t *r, double T_s, double g1, double g2, double g3, double gt,
+                       double l3);
+
+/* shared by the demodulators: publish the estimate and step the observer */
 void cc_rot_publish(cc_est_t *e, cc_rot_t *r, double th, double f, double err, double i_af,
                     double i_bf);
 

@@ -11,7 +11,7 @@
 void cc_self_demod_step(cc_est_t *e, cc_rot_t *r, long long k, double i_a, double i_b)
 {
     r->k = k;
-    double th = r->pll.theta_hat;
+    double th = cc_rot_theta(r);
     double d_a, d_b, q_a, q_b;
     cc_bq2_step(&r->bpf, i_a, i_b, &d_a, &d_b);
     cc_bq2_step(&r->quad, i_a, i_b, &q_a, &q_b);

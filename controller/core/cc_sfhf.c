@@ -8,7 +8,7 @@
 void cc_sfhf_step(cc_est_t *e, cc_rot_t *r, long long k, double i_a, double i_b)
 {
     r->k = k;
-    double th = r->pll.theta_hat;
+    double th = cc_rot_theta(r);
     double ph = cc_mod((double)k * r->wT, 2.0 * M_PI);
     double c_h = cos(ph);
     double s_h = sin(ph);

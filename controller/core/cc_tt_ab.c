@@ -7,7 +7,7 @@
 void cc_tt_ab_step(cc_est_t *e, cc_rot_t *r, long long k, double i_a, double i_b)
 {
     r->k = k;
-    double th = r->pll.theta_hat;
+    double th = cc_rot_theta(r);
     double i_ah, i_bh, s_2, c_2;
     cc_bq2_step(&r->bpf, i_a, i_b, &i_ah, &i_bh);
     cc_fo2_step(&r->lpf_ab, i_ah * i_bh, 0.5 * (i_ah * i_ah - i_bh * i_bh), &s_2, &c_2);

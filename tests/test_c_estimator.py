@@ -1,0 +1,178 @@
+"""A user's estimator written in C (``controller/core/cc_estimator.h``, a shared library
+named through a plug-in's factory, :func:`controller.c_estimator`).
+
+docs/examples/my_estimator_c.c is docs/examples/my_estimator.py's flux observer and
+PLL in C, operation for operation. Built here with the system's C compiler, it gives
+the Python example's trace bit for bit on both engines; on the compiled engine the
+core calls its functions with no Python in the period, so the native controller node
+serves it. A function that fails is the same one error on both engines.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import shutil
+import subprocess
+import sys
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from bench.nodes._controller_node import ControllerNode
+from bench.scenarios._schema import load_scenario
+from bench.scenarios._setup import build_controller, build_plant
+from bench.wire._codec import Codec
+from controller import Measurement, c_estimator, compiled_controller_missing, core_sources
+from controller._cplugin import C_ESTIMATOR_FAILED
+
+ROOT = Path(__file__).resolve().parents[1]
+EXAMPLES = ROOT / "docs" / "examples"
+CC = shutil.which("cc") or shutil.which("gcc") or shutil.which("clang")
+CORE = core_sources()[0].parent
+
+#: A C estimator whose update fails from period 40 on.
+FAILING = r"""
+#include <stddef.h>
+#include "cc_estimator.h"
+typedef struct { cc_est_t out; } st_t;
+static int update(void *ctx, const cc_est_in_t *x, cc_est_t *out)
+{
+    st_t *s = ctx;
+    if (x->k >= 40)
+        return 1;
+    s->out.i_alpha_f = x->i_alpha;
+    s->out.i_beta_f = x->i_beta;
+    *out = s->out;
+    return 0;
+}
+static int injection(void *ctx, double *a, double *b) { (void)ctx; *a = *b = 0.0; return 0; }
+static int reset(void *ctx, double th, cc_est_t *out)
+{
+    st_t *s = ctx;
+    s->out.theta_hat = th;
+    *out = s->out;
+    return 0;
+}
+size_t cc_estimator_size(void) { return sizeof(st_t); }
+int cc_estimator_init(void *state, cc_est_if_t *f, const cc_est_design_t *d)
+{
+    (void)d;
+    st_t *s = state;
+    s->out.theta_hat = s->out.w_hat = s->out.err = s->out.i_alpha_f = s->out.i_beta_f = 0.0;
+    f->ctx = s; f->update = update; f->injection = injection; f->reset = reset;
+    f->hf_current_next = NULL; f->set_saliency_offset = NULL;
+    return 0;
+}
+"""
+
+
+def _build(src: Path, out: Path) -> Path:
+    """The shared library of ``src``, as docs/examples/my_estimator_c.c says to build it."""
+    cmd = [CC or "cc", "-std=c99", "-O2", "-shared", "-fPIC", "-ffp-contract=off"]
+    cmd += ["-Wall", "-Wextra", "-Werror", f"-I{CORE}", "-o", str(out), str(src), "-lm"]
+    subprocess.run(cmd, check=True, capture_output=True, text=True)
+    return out
+
+
+@pytest.fixture
+def c_plugin(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[Path]:
+    if CC is None or compiled_controller_missing() is not None:
+        if os.environ.get("CI"):
+            pytest.fail("needs a C compiler and the compiled controller")
+        pytest.skip("needs a C compiler and the compiled controller")
+    lib = _build(EXAMPLES / "my_estimator_c.c", tmp_path / "libmy_estimator_c.so")
+    monkeypatch.setenv("MY_ESTIMATOR_C_LIB", str(lib))
+    monkeypatch.syspath_prepend(str(EXAMPLES))
+    monkeypatch.delitem(sys.modules, "my_estimator_c", raising=False)
+    yield lib
+    sys.modules.pop("my_estimator_c", None)
+
+
+def _loop(estimator: str, engine: str, n: int) -> tuple[list[tuple[Any, ...]], Any]:
+    """flux-known-angle on the compiled plant: a start, a speed step, a second start."""
+    scn = load_scenario(str(EXAMPLES / "flux-known-angle.toml"))
+    sim = build_plant(scn, "compiled")
+    ctrl = build_controller(scn, estimator, engine)
+    ctrl.set_enable(True)
+    ctrl.set_speed_ref(2.0 * math.pi)
+    d = (0.5, 0.5, 0.5, False)
+    out = []
+    for k in range(n):
+        if k == n // 3:
+            ctrl.set_speed_ref(-math.pi)
+        if k == (2 * n) // 3:
+            ctrl.set_enable(False)
+        if k == (2 * n) // 3 + 50:
+            ctrl.set_enable(True)
+        s = sim.sample()
+        o = ctrl.step(Measurement(s.k, s.i_a, s.i_b, s.i_c, s.u_dc))
+        sim.step(*d)
+        out.append((o.d_a, o.d_b, o.d_c, o.theta_hat, o.w_hat, o.err, o.i_d, o.i_q, o.mode))
+        d = (o.d_a, o.d_b, o.d_c, o.enable)
+    return out, ctrl
+
+
+def test_the_c_estimator_gives_the_python_examples_trace_on_both_engines(c_plugin: Path) -> None:
+    """The C port, on the Python and on the compiled engine, against the Python example on
+    the Python engine: every output of every period equal, bit for bit; the compiled core
+    calls no Python (``external_estimator`` False), and the design is the example's."""
+    n = 4000
+    ref, c_ref = _loop("my_estimator:create", "python", n)
+    py, c_py = _loop("my_estimator_c:create", "python", n)
+    cc, c_cc = _loop("my_estimator_c:create", "compiled", n)
+    assert (c_py.engine, c_cc.engine, c_cc.engine_note) == ("python", "compiled", None)
+    assert not c_cc.external_estimator
+    assert c_cc.gains() == c_ref.gains()
+    for name, got in (("python", py), ("compiled", cc)):
+        first = next((k for k in range(n) if got[k] != ref[k]), None)
+        assert first is None, f"the C estimator on the {name} engine parts at period {first}"
+    assert len(set(ref)) > n // 2  # the trace moves
+
+
+def test_the_native_node_serves_a_c_estimator(c_plugin: Path) -> None:
+    """No Python in the period: the native controller node may run it (a Python plug-in
+    keeps the Python node, tests/test_controller_engine.py)."""
+    from bench.nodes.native.controller_node import native_unavailable
+
+    scn = load_scenario(str(EXAMPLES / "flux-known-angle.toml"))
+    node = ControllerNode(Codec(), build_controller(scn, "my_estimator_c:create", "compiled"))
+    assert native_unavailable(node, "udp_multicast") is None
+
+
+def test_a_failing_c_estimator_is_the_same_error_on_both_engines(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """update returns nonzero from period 40: both engines raise the same RuntimeError in that
+    period, after the same outputs; a design init refuses is one line naming the library."""
+    if CC is None or compiled_controller_missing() is not None:
+        pytest.skip("needs a C compiler and the compiled controller")
+    src = tmp_path / "failing.c"
+    src.write_text(FAILING)
+    lib = _build(src, tmp_path / "libfailing.so")
+    (tmp_path / "failing_c.py").write_text(
+        f"from controller import c_estimator\ncreate = c_estimator({str(lib)!r})\n"
+    )
+    monkeypatch.syspath_prepend(str(tmp_path))
+    scn = load_scenario(str(EXAMPLES / "flux-known-angle.toml"))
+    got = {}
+    for engine in ("python", "compiled"):
+        ctrl = build_controller(scn, "failing_c:create", engine)
+        ctrl.set_enable(True)
+        outs = []
+        with pytest.raises(RuntimeError) as e:
+            for k in range(100):
+                m = Measurement(k, 0.1 * math.sin(0.2 * k), 0.0, -0.1 * math.sin(0.2 * k), 300.0)
+                outs.append(ctrl.step(m))
+        got[engine] = (str(e.value), outs, ctrl.engine)
+    assert got["python"][0] == got["compiled"][0] == C_ESTIMATOR_FAILED
+    assert got["python"][1] == got["compiled"][1] and len(got["python"][1]) == 40
+    assert (got["python"][2], got["compiled"][2]) == ("python", "compiled")
+    refusing = tmp_path / "refusing.c"
+    refusing.write_text(FAILING.replace("(void)d;", "(void)d;\n    if (d->T_s > 0.0) return 3;"))
+    motor = build_controller(scn, "tt-dq", "python").motor
+    with pytest.raises(ValueError, match="refused the design") as r:
+        c_estimator(_build(refusing, tmp_path / "librefusing.so"))(motor, 1e-4)
+    assert "librefusing.so" in str(r.value) and "\n" not in str(r.value)
