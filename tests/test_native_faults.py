@@ -71,10 +71,10 @@ def test_noise_load_profile_and_meter_leave_the_native_plant_eligible() -> None:
         meter=True,
     )
     node = PlantNode(CODEC, plant, n_steps=100)
-    why = _plant_native.native_missing(node, "udp_multicast", realtime=False, external=False)
+    why = _plant_native.native_missing(node, "udp_multicast")
     assert why is None
     node.n_steps = 0  # until stopped: the noise is drawn before the loop, so not native
-    why = _plant_native.native_missing(node, "udp_multicast", realtime=False, external=False)
+    why = _plant_native.native_missing(node, "udp_multicast")
     assert why is not None and "noise" in why
 
 

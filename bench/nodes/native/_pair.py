@@ -87,8 +87,15 @@ def pair_unavailable(pn: Any, cn: Any, *, latency: bool) -> str | None:
 
     if latency:
         return "the lockstep latency model is Python's (bench.nodes._link.LockstepLink)"
+    # The pair does not build the plant node's noise and fault tables (NoiseDraws,
+    # NativeFaults): in-process, both stay with the Python loop.
+    if pn.faults is not None:
+        return "the scenario's [[faults]] are applied by the Python loop in-process"
+    sp = pn.plant.sensor_pars
+    if sp.noise_i > 0.0 or sp.noise_u > 0.0:
+        return "sensor noise is drawn by the Python loop in-process"
     # no transport in-process: the plant node's reasons other than the interface's
-    why = native_missing(pn, NATIVE_INTERFACES[0], realtime=False, external=False)
+    why = native_missing(pn, NATIVE_INTERFACES[0])
     if why is None:
         why = native_unavailable(cn, None)
     return why

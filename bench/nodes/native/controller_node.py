@@ -212,9 +212,7 @@ def native_unavailable(node: ControllerNode, interface: str | None) -> str | Non
         why = ctrl.engine_note or "the controller runs on the Python engine"
         return f"the native controller node needs the compiled controller ({why})"
     if ctrl.external_estimator:
-        return (
-            f"the {ctrl.pars.estimator} estimator is Python code, which needs the Python process"
-        )
+        return f"the {ctrl.pars.estimator} estimator is Python code, which needs the Python process"
     if interface is not None and interface not in NATIVE_INTERFACES:
         return f"--interface {interface}: the native loop speaks {' and '.join(NATIVE_INTERFACES)}"
     try:
