@@ -96,17 +96,23 @@ def _slots(cls: type) -> tuple[Any, ...]:
     return tuple(vars(cls)[f.name] for f in fields(cls))
 
 
-def build_core(ctrl: Any) -> tuple[Any, str | None]:
+def build_core(ctrl: Any, core_type: Any = None) -> tuple[Any, str | None]:
     """The core for the designed controller ``ctrl`` (a :class:`controller.Controller`),
-    or ``(None, why)`` when the core does not cover it."""
+    or ``(None, why)`` when the core does not cover it.
+
+    ``core_type`` takes the binding's calls instead of ``_cctl.Core`` (same constructor and
+    methods): ``bench codegen`` records them as C for a firmware (:mod:`bench.wire._ctlgen`).
+    """
     pars = ctrl.pars
     kind, why = compiled_cover(pars)
     est = ctrl.estimator
-    if _cctl is None or not kind:
+    if core_type is None and _cctl is not None:
+        core_type = _cctl.Core
+    if core_type is None or not kind:
         return None, why
     if not _kind_of(kind, est):
         return None, f"the estimator of {type(est).__module__} is not compiled: Python"
-    core = _cctl.Core(kind, Measurement, _slots(Measurement), ControlOutput, _slots(ControlOutput))
+    core = core_type(kind, Measurement, _slots(Measurement), ControlOutput, _slots(ControlOutput))
     m = ctrl.motor
     core.foc(
         float(m.n_p),
