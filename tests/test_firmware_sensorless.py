@@ -16,6 +16,7 @@ import re
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -217,7 +218,8 @@ def test_the_header_holds_the_python_designs_values(tmp_path: Path) -> None:
     assert pis == [[p.k_p, p.k_i, p.T_s, p.k_t] for p in (ctrl.pi_d, ctrl.pi_q, ctrl.pi_w)]
     f = ctrl.lpf_w
     assert _inits(h, "cc_fo_init")[0] == [f.b0, f.b1, f.a1]
-    pll = ctrl.estimator.pll
+    est: Any = ctrl.estimator
+    pll = est.pll
     assert _inits(h, "cc_pll_init") == [[pll.k_p, pll.k_i, pll.T_s]]
     m = ctrl.motor
     (foc,) = _inits(h, "cc_foc_init")
