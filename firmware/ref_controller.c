@@ -669,7 +669,6 @@ int main(int argc, char **argv)
         close(sock);
         return 1;
     }
-    printf("ref_controller: %s, sensorless\n", BENCH_CTL_ESTIMATOR);
 #else
     foc_init(&law, 1.0 / PWM_FREQ_HZ, MOTOR_N_P, MOTOR_R_S, MOTOR_L_D, MOTOR_L_Q, MOTOR_PSI_F,
              MOTOR_J, MOTOR_I_MAX, MOTOR_TAU_MAX, ALPHA_C, ALPHA_S);
@@ -709,6 +708,9 @@ int main(int argc, char **argv)
         on_frame(sock, &node, &law, &fr, &sen);
     }
     close(sock);
+#ifdef FW_BENCH_CONTROLLER
+    printf("ref_controller: %s, sensorless\n", BENCH_CTL_ESTIMATOR);
+#endif
     printf("ref_controller: %ld steps, %ld rejected, %ld repeats, %ld commands dropped, "
            "%ld send errors\n",
            node.steps, node.rejected, node.repeats, node.cmd_dropped, node.send_errors);
