@@ -101,20 +101,25 @@ def _slots(cls: type) -> tuple[Any, ...]:
     return tuple(vars(cls)[f.name] for f in fields(cls))
 
 
-def build_core(ctrl: Any) -> tuple[Any, str | None]:
+def build_core(ctrl: Any, core_type: Any = None) -> tuple[Any, str | None]:
     """The core for the designed controller ``ctrl`` (a :class:`controller.Controller`),
     or ``(None, why)`` when the core does not cover it.
 
     A plug-in's estimator, or a plug-in registered under a compiled estimator's name,
-    is the core's external estimator: the core calls its Python methods."""
+    is the core's external estimator: the core calls its Python methods.
+    ``core_type`` takes the binding's calls instead of ``_cctl.Core`` (same constructor and
+    methods): ``bench codegen`` records them as C for a firmware (:mod:`bench.wire._ctlgen`).
+    """
     pars = ctrl.pars
     kind, why = compiled_cover(pars)
     est = ctrl.estimator
-    if _cctl is None or not kind:
+    if core_type is None and _cctl is not None:
+        core_type = _cctl.Core
+    if core_type is None or not kind:
         return None, why
     if kind != KIND_EXTERNAL and not _kind_of(kind, est):
         kind = KIND_EXTERNAL
-    core = _cctl.Core(kind, Measurement, _slots(Measurement), ControlOutput, _slots(ControlOutput))
+    core = core_type(kind, Measurement, _slots(Measurement), ControlOutput, _slots(ControlOutput))
     m = ctrl.motor
     core.foc(
         float(m.n_p),

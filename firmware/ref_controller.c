@@ -1,7 +1,21 @@
 /*
  * Reference external drive controller for the CAN hardware-in-the-loop bench.
  *
- * A sensored FOC speed controller that talks to `bench plant` over SocketCAN
+ * Two builds (firmware/Makefile):
+ *
+ *   sensorless (make SCENARIO=FILE ESTIMATOR=NAME): the bench's own controller.  The
+ *     core (controller/core/) runs any estimator it has, initialised by
+ *     bench_controller_init() of the header `bench codegen --scenario FILE --estimator
+ *     NAME` writes (the Python design's values, exact); every period is cc_foc_step()
+ *     (start-up, polarity test and speed loop included) and, when the scenario has
+ *     it, cc_sup_after().  Only PhaseSamples and BenchCommand are read (never
+ *     PositionSensor or PlantTruth); PwmDuty and CtrlTelemetry carry the core's
+ *     output, encoded as the bench's codec encodes them, so a lockstep run gives
+ *     the bench's in-process trace.  The options -e, -n and -d are not used.
+ *
+ *   sensored (make): the FOC speed controller below, on the encoder.
+ *
+ * The sensored build is an FOC speed controller that talks to `bench plant` over SocketCAN
  * using nothing but the DBC (dbc/bench.dbc): the frames are packed and
  * unpacked by the C code `bench codegen` generates (bench_dbc.h/.c, cantools)
  * and protected by the generated E2E helper (bench_e2e.h/.c).  It is meant as
@@ -69,6 +83,12 @@
 #include "bench_e2e.h"
 #include "foc.h"
 #include "motor_params.h"
+#ifdef FW_BENCH_CONTROLLER
+#include "bench_controller.h"
+#if BENCH_CTL_NEEDS_TRUTH
+#error "this estimator reads the plant's true angle (PlantTruth), which a drive has not: build without ESTIMATOR for the encoder's sensored controller"
+#endif
+#endif
 
 #define TWO_PI 6.28318530717958647692
 
@@ -109,6 +129,45 @@ enum { MODE_DISABLED = 0, MODE_RUN = 3 };
 
 /* Commands received ahead of their apply step wait here (fixed size). */
 #define CMD_QUEUE_LEN 128
+
+/* The control law: the core as the bench builds it (sensorless), or foc.c on the
+ * encoder (sensored). */
+#ifdef FW_BENCH_CONTROLLER
+typedef struct {
+    cc_foc_t core;
+    cc_sup_t sup;
+} law_t;
+#else
+typedef foc_t law_t;
+#endif
+
+/* One period's answer: duties for the next period and the telemetry's values. */
+typedef struct {
+    double d_a, d_b, d_c;
+    bool enable;
+    double theta_hat, w_hat, err; /* electrical angle and speed used, error signal */
+    long long mode;
+} law_out_t;
+
+static void law_enable(law_t *law, bool on)
+{
+#ifdef FW_BENCH_CONTROLLER
+    cc_foc_set_enable(&law->core, on ? 1 : 0);
+#else
+    foc_enable(law, on);
+#endif
+}
+
+/* BenchCommand.speed_ref [rpm] as the reference [rad/s] (sensorless: as the bench's
+ * controller node converts it) */
+static void law_speed_ref(law_t *law, double rpm)
+{
+#ifdef FW_BENCH_CONTROLLER
+    cc_foc_set_speed_ref(&law->core, rpm / BENCH_CTL_RPM_PER_RAD_S);
+#else
+    foc_set_speed_ref(law, rpm * (TWO_PI / 60.0));
+#endif
+}
 
 typedef struct {
     int64_t apply_step;
@@ -154,6 +213,7 @@ typedef struct {
     struct bench_dbc_ctrl_telemetry_t last_tel;
     bool have_last_tel;
     bool stop;
+    int step_error; /* cc_foc_step's error (sensorless), 0: none */
     /* counters */
     long steps, rejected, repeats, cmd_dropped, send_errors;
 } node_t;
@@ -206,6 +266,7 @@ static void send_frame(int sock, const struct canfd_frame *fr, node_t *n)
     n->send_errors++;
 }
 
+#ifndef FW_BENCH_CONTROLLER /* sensorless: bench_wire_raw() (bench_controller.h) */
 /* Duty to its raw value, clipped to the DBC range [0 | 1] (raw 0..16384; a raw
  * value above 16384 is out of range and the plant rejects the frame). */
 static uint16_t duty_raw(double d)
@@ -223,19 +284,29 @@ static uint16_t angle_raw(double theta)
     }
     return (uint16_t)r;
 }
+#endif
 
 static void send_telemetry(int sock, node_t *n);
 
-static void send_outputs(int sock, node_t *n, int64_t k, const foc_output_t *o, double theta,
-                         double w_e, bool enabled)
+static void send_outputs(int sock, node_t *n, int64_t k, const law_out_t *o)
 {
     uint8_t buf[64];
     struct canfd_frame fr;
     struct bench_dbc_pwm_duty_t duty;
     bench_dbc_pwm_duty_init(&duty);
+#ifdef FW_BENCH_CONTROLLER
+    /* the bench's codec's encoding (bench_controller.h) */
+    static const bench_wire_sig_t s_da = BENCH_WIRE_PWM_DUTY_DUTY_A,
+                                  s_db = BENCH_WIRE_PWM_DUTY_DUTY_B,
+                                  s_dc = BENCH_WIRE_PWM_DUTY_DUTY_C;
+    duty.duty_a = (uint16_t)bench_wire_raw(&s_da, o->d_a);
+    duty.duty_b = (uint16_t)bench_wire_raw(&s_db, o->d_b);
+    duty.duty_c = (uint16_t)bench_wire_raw(&s_dc, o->d_c);
+#else
     duty.duty_a = duty_raw(o->d_a);
     duty.duty_b = duty_raw(o->d_b);
     duty.duty_c = duty_raw(o->d_c);
+#endif
     duty.enable = o->enable ? 1u : 0u;
     duty.step = (uint16_t)((uint64_t)(k + 1) & ((1u << SAMPLE_STEP_BITS) - 1u));
     int len = bench_dbc_pwm_duty_pack(buf, &duty, sizeof buf);
@@ -247,10 +318,21 @@ static void send_outputs(int sock, node_t *n, int64_t k, const foc_output_t *o, 
 
     struct bench_dbc_ctrl_telemetry_t tel;
     bench_dbc_ctrl_telemetry_init(&tel);
-    tel.theta_hat = angle_raw(theta);
-    tel.w_hat = bench_dbc_ctrl_telemetry_w_hat_encode(w_e);
+#ifdef FW_BENCH_CONTROLLER
+    static const bench_wire_sig_t s_th = BENCH_WIRE_CTRL_TELEMETRY_THETA_HAT,
+                                  s_w = BENCH_WIRE_CTRL_TELEMETRY_W_HAT,
+                                  s_err = BENCH_WIRE_CTRL_TELEMETRY_ERR,
+                                  s_mode = BENCH_WIRE_CTRL_TELEMETRY_MODE;
+    tel.theta_hat = (uint16_t)bench_wire_raw(&s_th, o->theta_hat);
+    tel.w_hat = (int32_t)bench_wire_raw(&s_w, o->w_hat);
+    tel.err = (int16_t)bench_wire_raw(&s_err, o->err);
+    tel.mode = (uint8_t)bench_wire_raw(&s_mode, (double)o->mode);
+#else
+    tel.theta_hat = angle_raw(o->theta_hat);
+    tel.w_hat = bench_dbc_ctrl_telemetry_w_hat_encode(o->w_hat);
     tel.err = 0;
-    tel.mode = enabled ? MODE_RUN : MODE_DISABLED;
+    tel.mode = (uint8_t)o->mode;
+#endif
     tel.step = (uint32_t)k;
     tel.run_id = 0; /* unknown: the nonce is in PlantTruth, which this controller does not read */
     n->last_tel = tel;
@@ -274,7 +356,7 @@ static void send_telemetry(int sock, node_t *n)
 }
 
 /* Apply the commands due at period k, in apply-step order. */
-static void apply_commands(node_t *n, foc_t *foc, int64_t k)
+static void apply_commands(node_t *n, law_t *law, int64_t k)
 {
     for (;;) {
         int best = -1;
@@ -290,25 +372,44 @@ static void apply_commands(node_t *n, foc_t *foc, int64_t k)
         command_t c = n->queue[best];
         n->queue[best] = n->queue[--n->n_queued];
         if (c.cmd == CMD_START || c.cmd == CMD_ENABLE || c.cmd == CMD_RESET) {
-            foc_enable(foc, true);
+            law_enable(law, true);
         } else if (c.cmd == CMD_STOP || c.cmd == CMD_DISABLE) {
-            foc_enable(foc, false);
+            law_enable(law, false);
             if (c.cmd == CMD_STOP) {
                 n->stop = true;
             }
         }
-        foc_set_speed_ref(foc, c.speed_ref_rpm * (TWO_PI / 60.0));
+        law_speed_ref(law, c.speed_ref_rpm);
     }
 }
 
 /* Compute period sample_k when its sample (and its reading, if the sensor reads
  * in that period) are in. */
-static void try_compute(int sock, node_t *n, foc_t *foc, const sensor_t *sen)
+static void try_compute(int sock, node_t *n, law_t *law, const sensor_t *sen)
 {
     if (!n->have_sample) {
         return;
     }
     int64_t k = n->sample_k;
+#ifdef FW_BENCH_CONTROLLER
+    (void)sen;
+    apply_commands(n, law, k);
+    /* the bench controller node's measurement (bench/nodes/_controller_node.py) */
+    cc_meas_t m = {k, n->i_a, n->i_b, -n->i_a - n->i_b, n->u_dc, 0, 0.0, 0.0};
+    cc_out_t o;
+    int rc = cc_foc_step(&law->core, &m, &o);
+    if (rc != CC_OK) {
+        fprintf(stderr, "ref_controller: period %lld: the core's step failed (%d%s)\n",
+                (long long)k, rc, rc == CC_ERR_U_DC ? ": u_dc = 0" : "");
+        n->step_error = rc;
+        n->stop = true;
+        return;
+    }
+#if BENCH_CTL_SUPERVISION
+    cc_sup_after(&law->sup, &law->core, &m, &o);
+#endif
+    law_out_t out = {o.d_a, o.d_b, o.d_c, o.enable != 0, o.theta_hat, o.w_hat, o.err, o.mode};
+#else
     if (k % sen->every == 0) {
         int slot = (int)(k % READING_RING);
         if (n->reading_k[slot] != k) {
@@ -326,7 +427,7 @@ static void try_compute(int sock, node_t *n, foc_t *foc, const sensor_t *sen)
         n->angle_k = k;
         n->theta_m = th;
     }
-    apply_commands(n, foc, k);
+    apply_commands(n, law, k);
     /* the angle at the sample instant: the count's middle, advanced by the
      * estimated speed over the reading's age */
     double age_s = sen->delay_s + (double)(k - n->angle_k) / PWM_FREQ_HZ;
@@ -337,15 +438,18 @@ static void try_compute(int sock, node_t *n, foc_t *foc, const sensor_t *sen)
         theta += TWO_PI;
     }
     foc_input_t in = {n->i_a, n->i_b, n->u_dc, theta, n->w_m_hat};
-    foc_output_t out;
-    foc_step(foc, &in, &out);
-    send_outputs(sock, n, k, &out, theta, w_e, foc->enabled);
+    foc_output_t fo;
+    foc_step(law, &in, &fo);
+    law_out_t out = {fo.d_a,  fo.d_b, fo.d_c, fo.enable, theta, w_e, 0.0,
+                     law->enabled ? MODE_RUN : MODE_DISABLED};
+#endif
+    send_outputs(sock, n, k, &out);
     n->have_sample = false;
     n->next_k = k + 1;
     n->steps++;
 }
 
-static void on_frame(int sock, node_t *n, foc_t *foc, const struct canfd_frame *fr,
+static void on_frame(int sock, node_t *n, law_t *law, const struct canfd_frame *fr,
                      const sensor_t *sen)
 {
     if (fr->can_id & (CAN_EFF_FLAG | CAN_RTR_FLAG | CAN_ERR_FLAG)) {
@@ -381,6 +485,7 @@ static void on_frame(int sock, node_t *n, foc_t *foc, const struct canfd_frame *
         n->u_dc = bench_dbc_phase_samples_u_dc_decode(s.u_dc);
         break;
     }
+#ifndef FW_BENCH_CONTROLLER /* sensorless: no encoder */
     case BENCH_DBC_POSITION_SENSOR_FRAME_ID: {
         struct bench_dbc_position_sensor_t p;
         if (fr->len != BENCH_DBC_POSITION_SENSOR_LENGTH ||
@@ -398,6 +503,7 @@ static void on_frame(int sock, node_t *n, foc_t *foc, const struct canfd_frame *
         n->reading_theta[k % READING_RING] = bench_dbc_position_sensor_theta_m_decode(p.theta_m);
         break;
     }
+#endif
     case BENCH_DBC_BENCH_COMMAND_FRAME_ID: {
         struct bench_dbc_bench_command_t c;
         if (fr->len != BENCH_DBC_BENCH_COMMAND_LENGTH ||
@@ -446,14 +552,14 @@ static void on_frame(int sock, node_t *n, foc_t *foc, const struct canfd_frame *
         if (step <= n->next_k) {
             /* due before the next period is computed: apply now (a stop for the
              * period after the plant's last one ends the program here) */
-            apply_commands(n, foc, n->next_k);
+            apply_commands(n, law, n->next_k);
         }
         return;
     }
     default:
         return;
     }
-    try_compute(sock, n, foc, sen);
+    try_compute(sock, n, law, sen);
 }
 
 /* Raw CAN socket on `ifname` with CAN FD frames enabled and the three input IDs. */
@@ -472,7 +578,9 @@ static int open_can(const char *ifname)
     }
     struct can_filter filters[] = {
         {BENCH_DBC_PHASE_SAMPLES_FRAME_ID, CAN_SFF_MASK | CAN_EFF_FLAG | CAN_RTR_FLAG},
+#ifndef FW_BENCH_CONTROLLER /* sensorless: no encoder */
         {BENCH_DBC_POSITION_SENSOR_FRAME_ID, CAN_SFF_MASK | CAN_EFF_FLAG | CAN_RTR_FLAG},
+#endif
         {BENCH_DBC_BENCH_COMMAND_FRAME_ID, CAN_SFF_MASK | CAN_EFF_FLAG | CAN_RTR_FLAG},
     };
     if (setsockopt(sock, SOL_CAN_RAW, CAN_RAW_FILTER, filters, sizeof filters) != 0) {
@@ -543,7 +651,7 @@ int main(int argc, char **argv)
     signal(SIGTERM, on_signal);
 
     static node_t node; /* static: zero-initialised, off the stack */
-    static foc_t foc;
+    static law_t law;
     node.last_seq = -1;
     node.last_cmd_step = -1;
     node.ack_seq = -1;
@@ -554,8 +662,17 @@ int main(int argc, char **argv)
     for (int i = 0; i < READING_RING; i++) {
         node.reading_k[i] = -1;
     }
-    foc_init(&foc, 1.0 / PWM_FREQ_HZ, MOTOR_N_P, MOTOR_R_S, MOTOR_L_D, MOTOR_L_Q, MOTOR_PSI_F,
+#ifdef FW_BENCH_CONTROLLER
+    if (bench_controller_init(&law.core, &law.sup) != 0) {
+        fprintf(stderr, "ref_controller: the core refused the design of %s\n",
+                BENCH_CTL_ESTIMATOR);
+        close(sock);
+        return 1;
+    }
+#else
+    foc_init(&law, 1.0 / PWM_FREQ_HZ, MOTOR_N_P, MOTOR_R_S, MOTOR_L_D, MOTOR_L_Q, MOTOR_PSI_F,
              MOTOR_J, MOTOR_I_MAX, MOTOR_TAU_MAX, ALPHA_C, ALPHA_S);
+#endif
 
     printf("READY\n");
     fflush(stdout);
@@ -588,11 +705,14 @@ int main(int argc, char **argv)
             node.rejected++;
             continue;
         }
-        on_frame(sock, &node, &foc, &fr, &sen);
+        on_frame(sock, &node, &law, &fr, &sen);
     }
     close(sock);
+#ifdef FW_BENCH_CONTROLLER
+    printf("ref_controller: %s, sensorless\n", BENCH_CTL_ESTIMATOR);
+#endif
     printf("ref_controller: %ld steps, %ld rejected, %ld repeats, %ld commands dropped, "
            "%ld send errors\n",
            node.steps, node.rejected, node.repeats, node.cmd_dropped, node.send_errors);
-    return rc != 0 ? rc : (node.send_errors ? 1 : 0);
+    return rc != 0 ? rc : (node.send_errors || node.step_error ? 1 : 0);
 }

@@ -22,6 +22,7 @@ import numpy as np
 import pytest
 
 from bench.runs._analysis import analyze_frames
+from bench.runs._run import build_native_libraries
 from bench.scenarios._schema import load_scenario
 from bench.scenarios._setup import get_preset, n_steps, sample_period
 from bench.wire._codec import Codec
@@ -61,6 +62,9 @@ def firmware_run(tmp_path_factory: pytest.TempPathFactory) -> dict:
     require_vcan("vcan0")
     out = tmp_path_factory.mktemp("fwrun")
     exe = build_firmware(out / "build")
+    # the bench's native libraries built now, not while the controller waits for frames
+    # (a first build inside User-Mode Linux can outlast its idle timeout)
+    build_native_libraries()
     codec = Codec()
     scn = load_scenario(str(SCENARIO))
     n = n_steps(scn)

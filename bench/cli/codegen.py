@@ -17,8 +17,14 @@ Writes into ``OUT_DIR``:
   (the schedule as constant/ramp/step segments; with ``--commands`` also
   every ``BenchCommand`` frame as a ``const`` table initializer), so a
   controller's firmware builds against the plant it meets.
+- with ``--scenario NAME --estimator EST``, also ``bench_controller.h``
+  (:func:`bench.wire._ctlgen.generate_controller_header`): the scenario's controller
+  for the estimator as the bench builds it, as the core's ``_init`` calls with the
+  Python design's values (``%.17g``), and the encodings of its output signals, so a
+  firmware (``firmware/``, ``make ESTIMATOR=...``) runs the bench's controller.
 
-The code is :mod:`bench.wire._cgen`'s; this module is the command line.
+The code is :mod:`bench.wire._cgen`'s and :mod:`bench.wire._ctlgen`'s; this module is the
+command line.
 """
 
 from __future__ import annotations
@@ -26,6 +32,7 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
+from typing import Any
 
 from bench._errors import BenchError
 
@@ -46,6 +53,20 @@ def _ship_core(out: Path) -> list[Path]:
     return paths
 
 
+def _controller_header(out: Path, scenario: str, estimator: str, codec: Any) -> Path:
+    """``bench_controller.h``: the scenario's controller for ``estimator``, as built."""
+    from bench.scenarios._schema import load_scenario
+    from bench.scenarios._setup import build_controller
+    from bench.wire._ctlgen import generate_controller_header
+
+    scn = load_scenario(scenario)
+    try:
+        ctrl = build_controller(scn, estimator, engine="compiled")
+        return generate_controller_header(out, ctrl, codec, source=f"{estimator} of {scenario}")
+    except ValueError as e:
+        raise BenchError(f"--estimator {estimator}: {e}") from None
+
+
 def cmd_codegen(args: argparse.Namespace) -> int:
     from bench.wire._ccodec import generate_c
     from bench.wire._cgen import generate_e2e, generate_scenario_header
@@ -55,6 +76,8 @@ def cmd_codegen(args: argparse.Namespace) -> int:
     if out.exists() and not out.is_dir():
         raise BenchError(f"OUT_DIR {out}: exists and is not a folder")
     codec = Codec(args.dbc) if args.dbc else Codec()
+    if args.estimator and not args.scenario:
+        raise BenchError("--estimator: needs --scenario (the controller is the scenario's)")
     try:
         files = [*generate_c(out, codec), *generate_e2e(out, codec), *_ship_core(out)]
         if args.scenario:
@@ -66,6 +89,8 @@ def cmd_codegen(args: argparse.Namespace) -> int:
             files.append(
                 generate_scenario_header(out, d, text, codec.version, commands=args.commands)
             )
+        if args.estimator:
+            files.append(_controller_header(out, args.scenario, args.estimator, codec))
     except OSError as e:
         raise BenchError(f"OUT_DIR {out}: cannot write ({e.strerror or e})") from None
     for f in files:
@@ -87,6 +112,12 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
         metavar="NAME",
         help="also write bench_scenario.h: the scenario's motor, PWM timing, start-up and "
         "command schedule (segments)",
+    )
+    p.add_argument(
+        "--estimator",
+        metavar="NAME",
+        help="with --scenario: also write bench_controller.h, the scenario's controller for "
+        "this estimator as the bench builds it (the core's init calls, exact values)",
     )
     p.add_argument(
         "--commands",
