@@ -13,6 +13,7 @@ from __future__ import annotations
 import ctypes
 import json
 import math
+import os
 import random
 import subprocess
 import sys
@@ -177,9 +178,9 @@ def test_raw_values_are_the_codecs(lib: ctypes.CDLL) -> None:
 
 
 def test_auto_says_why_the_python_node_serves(tmp_path: Path) -> None:
-    """A controller under test (``--dut-timeout``): auto takes the Python node with one line;
-    native is refused. A scenario with [[faults]] of every group is native's now
-    (tests/test_native_faults.py): ``--engine native`` serves it."""
+    """No C compiler and an empty library cache: auto takes the Python node with one
+    line; native is refused. A scenario with [[faults]] of every group is native's
+    (tests/test_native_faults.py): ``--engine native`` serves it with no line."""
     scn = tmp_path / "faulty.toml"
     scn.write_text(
         'extends = "xue-fig13"\nduration = 1.3\n[[faults]]\nat_s = 1.1\nkind = "current_lost"\n'
@@ -187,20 +188,23 @@ def test_auto_says_why_the_python_node_serves(tmp_path: Path) -> None:
     )
     base = [sys.executable, "-m", "bench", "plant", str(scn), "--interface", "udp_multicast",
             "--channel", GROUP, "--port", str(free_port())]  # fmt: skip
-    dut = ["--dut-timeout", "30"]
+    # no compiler on PATH (the interpreter is named by its full path) and a fresh cache
+    bare = {**os.environ, "PATH": str(tmp_path / "nobin"), "XDG_CACHE_HOME": str(tmp_path)}
+    bare.pop("CC", None)
     res = subprocess.run(
-        [*base, *dut, "--engine", "native"], cwd=ROOT, capture_output=True, text=True, timeout=60
-    )
+        [*base, "--engine", "native"], cwd=ROOT, capture_output=True, text=True, timeout=60,
+        env=bare,
+    )  # fmt: skip
     assert res.returncode == 2
     lines = res.stderr.strip().splitlines()
     assert lines[-1].startswith("bench: error: --engine native: ")
-    assert "controller under test" in lines[-1]
+    assert "no C compiler" in lines[-1]
     assert "Traceback" not in res.stderr
-    for args, want in (([*base, *dut], 1), ([*base, "--engine", "native"], 0)):
+    for args, env, want in ((base, bare, 1), ([*base, "--engine", "native"], None, 0)):
         # auto: the one line, then the Python node serves (stopped here by the signal);
         # native with the faults: no line
         proc = subprocess.Popen(
-            args, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+            args, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env
         )
         try:
             assert proc.stdout is not None and proc.stdout.readline().strip() == "READY"
@@ -209,7 +213,7 @@ def test_auto_says_why_the_python_node_serves(tmp_path: Path) -> None:
             _, err = proc.communicate(timeout=30)
         why = [ln for ln in err.splitlines() if "the Python node serves this run" in ln]
         assert len(why) == want, err
-        assert all("controller under test" in ln for ln in why)
+        assert all("no C compiler" in ln for ln in why)
 
 
 def test_a_controller_under_test_is_served_by_the_native_node(tmp_path: Path) -> None:

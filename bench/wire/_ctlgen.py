@@ -108,6 +108,26 @@ class _Recorder:
     def polarity(self, L_d: Any, T_s: Any, i_pulse: Any, u_frac: Any) -> None:
         self._call("cc_polarity_init", "&c->polarity", *_d(L_d, T_s, i_pulse, u_frac))
 
+    def reference_model(self, alpha_s: Any, n_p: Any, a_max: Any, T_s: Any) -> None:
+        self._call("cc_ref_init", "&c->ref", *_d(alpha_s, n_p, a_max, T_s))
+
+    def mechanical(self, T_s: Any, g1: Any, g2: Any, g3: Any, gt: Any, l3: Any) -> None:
+        self._call("cc_rot_mechanical", "&c->est.rot", *_d(T_s, g1, g2, g3, gt, l3))
+
+    def accel_ff(self) -> None:
+        self.lines.append("c->est.rot.accel_ff = 1;")
+
+    def external(self, *_args: Any) -> None:
+        raise ValueError(
+            "the estimator is Python code (a plug-in): a firmware runs the core's estimators "
+            "or an estimator in C"
+        )
+
+    def external_c(self, *_args: Any) -> None:
+        raise ValueError(
+            "an estimator in C of a plug-in is loaded at run time: a firmware links it itself"
+        )
+
     def rotating(self, V_h: Any, wT: Any, inv_norm: Any, pll: Any, bpf: Any, lpf: Any,
                  hpf: Any, track: Any, quad: Any = None) -> None:  # fmt: skip
         r = "&c->est.rot"
