@@ -108,14 +108,10 @@ def flux_dq(
     c = motor.cross.c_dq
     i_0 = motor.psi_f / motor.L_d
     m = i_d + i_0
-    g = i_d * (i_d + 2.0 * i_0)  # m^2 - i_0^2
-    return (
-        psi_d - 0.5 * c * m * i_q * i_q,
-        (L_q - 0.5 * c * g) * i_q,
-        L_dd - 0.5 * c * i_q * i_q,
-        -c * m * i_q,
-        L_q - 0.5 * c * g,
-    )
+    # in the operation order of the plant core's one home of these terms (plant_flux_cross)
+    hq = 0.5 * c * i_q
+    L_qq = L_q - 0.5 * c * i_d * (i_d + 2.0 * i_0)
+    return (psi_d - hq * m * i_q, L_qq * i_q, L_dd - hq * i_q, -c * m * i_q, L_qq)
 
 
 def clamp_duty(d: float) -> float:
