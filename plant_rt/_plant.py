@@ -17,7 +17,11 @@ states ``(i_d, i_q, w_m, theta_m)``. The average inverter voltage is constant
 over the period in the stationary alpha-beta frame, not in d-q, so every RK4
 stage rotates it into d-q with the stage's own rotor angle (at 1 kHz and
 300 rpm the rotor turns 0.126 rad electrical per period). The load torque is
-evaluated once per substep, at its start.
+evaluated once per substep, at its start. At high speed each step is cut
+further, into ``ceil(|w_e| h)`` equal RK4 steps: the rotor-frame pole pair
+at ``+-j w_e`` leaves RK4's stability region at ``|w_e| h = 2 sqrt(2)``
+(derived in ``plant_rt/core/plant_rk4.h``). Below ``|w_e| h = 1``, every
+paper scenario, the step is one.
 
 Switching inverter (``InverterPars.model = "switching"``): the period is cut
 at every switching edge, every end of a dead interval (``plant_rt/core/plant_pwm.h``),
@@ -178,6 +182,8 @@ class Plant:
         ``PLANT_MAX_SUBSTEPS``, its fixed-size grid); the switching model cuts
         its sub-intervals at the same grid, so none is longer than
         ``T_s / substeps``, and evaluates the load torque at each grid point.
+        A step of length ``h`` with ``|w_e| h > 1`` is taken in
+        ``ceil(|w_e| h)`` equal RK4 steps (stability at high speed).
     saturation : bool, optional
         Use the saturated d-axis flux model (:class:`SaturationPars`).
     theta_m0, w_m0 : float, optional

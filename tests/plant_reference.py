@@ -108,14 +108,10 @@ def flux_dq(
     c = motor.cross.c_dq
     i_0 = motor.psi_f / motor.L_d
     m = i_d + i_0
-    g = i_d * (i_d + 2.0 * i_0)  # m^2 - i_0^2
-    return (
-        psi_d - 0.5 * c * m * i_q * i_q,
-        (L_q - 0.5 * c * g) * i_q,
-        L_dd - 0.5 * c * i_q * i_q,
-        -c * m * i_q,
-        L_q - 0.5 * c * g,
-    )
+    # in the operation order of the plant core's one home of these terms (plant_flux_cross)
+    hq = 0.5 * c * i_q
+    L_qq = L_q - 0.5 * c * i_d * (i_d + 2.0 * i_0)
+    return (psi_d - hq * m * i_q, L_qq * i_q, L_dd - hq * i_q, -c * m * i_q, L_qq)
 
 
 def clamp_duty(d: float) -> float:
@@ -1235,8 +1231,8 @@ class ReferencePlant:
             v_x,
         )
 
-    def _rk4_cross(self, h: float, u_al: float, u_be: float, tau_L: float) -> None:
-        """:meth:`_rk4_fast` with the cross-saturated flux map (:class:`CrossSaturationPars`).
+    def _rk4_cross_step(self, h: float, u_al: float, u_be: float, tau_L: float) -> None:
+        """:meth:`_rk4_fast_step` with the cross-saturated flux map (:class:`CrossSaturationPars`).
 
         ``L_inc d i_dq / dt = u_dq - R i_dq - w_e J psi_dq``, solved with the
         2x2 incremental inductance matrix at every stage.
@@ -1306,7 +1302,7 @@ class ReferencePlant:
         self._w_m = w0 + h6 * s_w
         self._th_m = th0 + h6 * s_th
 
-    def _rk4_fast(self, h: float, u_al: float, u_be: float, tau_L: float) -> None:
+    def _rk4_fast_step(self, h: float, u_al: float, u_be: float, tau_L: float) -> None:
         """One RK4 step with a stator voltage constant in alpha-beta.
 
         Same equations as :meth:`_f`, inlined: this is the per-period hot path.
@@ -1364,7 +1360,43 @@ class ReferencePlant:
         self._w_m = w0 + h6 * s_w
         self._th_m = th0 + h6 * s_th
 
+    def _substeps(self, h: float) -> int:
+        """Equal RK4 steps over an interval h: ``ceil(|w_e| h / 1)``, at least 1.
+
+        The rotor-frame pole pair at ``+-j w_e`` leaves RK4's stability region
+        at ``|w_e| h = 2 sqrt(2)``; ``plant_rt/core/plant_rk4.h`` derives the
+        bound of 1.
+        """
+        x = abs(self._n_p * self._w_m) * h / 1.0
+        if not x > 1.0:
+            return 1
+        return min(math.ceil(x), 1_000_000)
+
+    def _rk4_cross(self, h: float, u_al: float, u_be: float, tau_L: float) -> None:
+        n = self._substeps(h)
+        for _ in range(n):
+            self._rk4_cross_step(h / n if n > 1 else h, u_al, u_be, tau_L)
+
+    def _rk4_fast(self, h: float, u_al: float, u_be: float, tau_L: float) -> None:
+        n = self._substeps(h)
+        for _ in range(n):
+            self._rk4_fast_step(h / n if n > 1 else h, u_al, u_be, tau_L)
+
     def _rk4(
+        self, h: float, v_a: float, v_b: float, v_c: float, fx: int, tau_L: float
+    ) -> tuple[float, float]:
+        """:meth:`_rk4_step` in :meth:`_substeps` equal steps; their mean stator voltage."""
+        n = self._substeps(h)
+        if n == 1:
+            return self._rk4_step(h, v_a, v_b, v_c, fx, tau_L)
+        ua_sum = ub_sum = 0.0
+        for _ in range(n):
+            ua, ub = self._rk4_step(h / n, v_a, v_b, v_c, fx, tau_L)
+            ua_sum += ua
+            ub_sum += ub
+        return ua_sum / n, ub_sum / n
+
+    def _rk4_step(
         self, h: float, v_a: float, v_b: float, v_c: float, fx: int, tau_L: float
     ) -> tuple[float, float]:
         """General RK4 step: optional floating phase ``fx`` and energy metering.

@@ -351,3 +351,30 @@ def test_fast_and_metered_paths_agree(saturation: bool) -> None:
         (ta.i_d, ta.i_q, ta.w_m, ta.theta_m), (tb.i_d, tb.i_q, tb.w_m, tb.theta_m), strict=True
     ):
         assert x == pytest.approx(y, rel=1e-9, abs=1e-9)
+
+
+@pytest.mark.parametrize("meter", [False, True])
+def test_short_circuit_beyond_rk4_limit_stays_bounded_at_closed_form(meter: bool) -> None:
+    """Shorted terminals (equal duties, ideal inverter), the speed held by a dynamometer
+    at |w_e| h = 3, past RK4's imaginary-axis limit 2 sqrt(2) for one step per
+    interval (|R(3j)| = 1.51: a single step a period grows by half each period).
+
+    With u_dq = 0 the rotor-frame equations are linear with a constant input
+    w_e psi_f, so their equilibrium, which any consistent integrator keeps exactly,
+    is the closed form of the short-circuited machine:
+    i_d = -w_e^2 L_q psi_f / (R^2 + w_e^2 L_d L_q), i_q = -w_e R psi_f / (R^2 + w_e^2 L_d L_q).
+    The plant must reach it (subdivided steps) instead of diverging."""
+    p = preset("xue2022")
+    m = p.motor
+    h = p.T_s  # one RK4 interval per period on the average model's substeps=1
+    w_e = 3.0 / h
+    plant = Plant(m, p.inverter, p.T_s, substeps=1, meter=meter)
+    plant.impose_speed(-w_e / m.n_p)
+    for _ in range(round(1.0 / p.T_s)):  # 25 time constants L_q / R_s
+        plant.step(0.5, 0.5, 0.5)
+    den = m.R_s**2 + w_e**2 * m.L_d * m.L_q
+    i_d = -(w_e**2) * m.L_q * m.psi_f / den
+    i_q = w_e * m.R_s * m.psi_f / den  # w_e < 0 here
+    tr = plant.truth()
+    assert tr.i_d == pytest.approx(i_d, rel=1e-9)
+    assert tr.i_q == pytest.approx(i_q, rel=1e-9)

@@ -40,20 +40,11 @@ void plant_flux_d(const plant_machine *m, double i_d, double *psi_d, double *L_d
     plant_flux_d_sat(m, i_d, i_d / m->i_sat, psi_d, L_dd);
 }
 
-/* CrossSaturationPars: the co-energy terms in c_dq, i_0 = psi_f / L_d. */
+/* CrossSaturationPars: the d-axis model with the co-energy terms (plant_flux_cross). */
 void plant_flux_dq(const plant_machine *m, double i_d, double i_q, double out[5])
 {
-    double psi_d, L_dd;
-    plant_flux_d(m, i_d, &psi_d, &L_dd);
-    double L_q = m->L_q, c = m->c_dq;
-    double i_0 = m->i_0;
-    double mm = i_d + i_0;
-    double g = i_d * (i_d + 2.0 * i_0);
-    out[0] = psi_d - 0.5 * c * mm * i_q * i_q;
-    out[1] = (L_q - 0.5 * c * g) * i_q;
-    out[2] = L_dd - 0.5 * c * i_q * i_q;
-    out[3] = -c * mm * i_q;
-    out[4] = L_q - 0.5 * c * g;
+    plant_flux_d(m, i_d, &out[0], &out[2]);
+    plant_flux_cross(m, i_d, i_q, &out[0], &out[2], &out[1], &out[3], &out[4]);
 }
 
 void plant_machine_f(const plant_machine *m, int imposed, double i_d, double i_q, double w_m,

@@ -13,7 +13,7 @@
  *     psi_d(i_d) = psi_f + L_d (i_d - sigma i_sat (sqrt(1 + x^2) - 1)),  x = i_d / i_sat
  *     L_dd(i_d)  = L_d (1 - sigma x / sqrt(1 + x^2))
  *
- * and, with cross-saturation, the co-energy terms in c_dq (flux_dq).
+ * and, with cross-saturation, the co-energy terms in c_dq (plant_flux_cross).
  */
 #ifndef PLANT_MACHINE_H
 #define PLANT_MACHINE_H
@@ -68,6 +68,26 @@ static inline void plant_flux_d_sat(const plant_machine *m, double i_d, double x
     *L_dd = m->L_d * (1.0 - m->sig * x / r);
 }
 
+/* The cross-saturation's co-energy terms (CrossSaturationPars, the one home of these
+ * equations: the hot stage and plant_flux_dq), c = c_dq, i_0 = psi_f / L_d:
+ *   psi_d += -c/2 (i_d + i_0) i_q^2,        L_dd += -c/2 i_q^2,
+ *   L_qq = L_q - c/2 i_d (i_d + 2 i_0),     psi_q = L_qq i_q,
+ *   L_dq = d psi_d / d i_q = d psi_q / d i_d = -c (i_d + i_0) i_q;
+ * psi_d and L_dd come in as the d-axis model's and go out with the terms added. */
+static inline void plant_flux_cross(const plant_machine *m, double i_d, double i_q,
+                                    double *psi_d, double *L_dd, double *psi_q,
+                                    double *L_dq, double *L_qq)
+{
+    double c_dq = m->c_dq, i_0 = m->i_0;
+    double mm = i_d + i_0;
+    double hq = 0.5 * c_dq * i_q;
+    double L = m->L_q - 0.5 * c_dq * i_d * (i_d + 2.0 * i_0);
+    *psi_d -= hq * mm * i_q;
+    *psi_q = L * i_q;
+    *L_dd -= hq * i_q;
+    *L_dq = -c_dq * mm * i_q;
+    *L_qq = L;
+}
 
 /* psi_d and L_dd of the d-axis model in use (x = i_d / i_sat). */
 void plant_flux_d(const plant_machine *m, double i_d, double *psi_d, double *L_dd);
@@ -114,14 +134,8 @@ static inline void plant_machine_stage(const plant_machine *m, double i_d, doubl
     }
     switch (m->variant) {
     case PLANT_FLUX_CROSS: {
-        double c_dq = m->c_dq, i_0 = m->i_0;
-        double mm = i_d + i_0;
-        double hq = 0.5 * c_dq * i_q;
-        double L_qq = L_q - 0.5 * c_dq * i_d * (i_d + 2.0 * i_0);
-        psi_d -= hq * mm * i_q;
-        double psi_q = L_qq * i_q;
-        L_dd -= hq * i_q;
-        double L_dq = -c_dq * mm * i_q;
+        double psi_q, L_dq, L_qq;
+        plant_flux_cross(m, i_d, i_q, &psi_d, &L_dd, &psi_q, &L_dq, &L_qq);
         double e_d = c * u_al + sn * u_be - R * i_d + w_e * psi_q;
         double e_q = c * u_be - sn * u_al - R * i_q - w_e * psi_d;
         double inv_det = 1.0 / (L_dd * L_qq - L_dq * L_dq);

@@ -32,9 +32,10 @@ static void meter_stage(const plant_machine *m, plant_meter *e, int imposed, dou
     e->q_c += dt * i_c;
 }
 
-void plant_rk4(const plant_machine *m, plant_state *s, int imposed, int kind, int fx, double h,
-               double u_al, double u_be, double tau_L, double *ua, double *ub, plant_meter *meter,
-               const double v[3])
+/* One classic RK4 step of length h (no subdivision). */
+static void rk4_step(const plant_machine *m, plant_state *s, int imposed, int kind, int fx,
+                     double h, double u_al, double u_be, double tau_L, double *ua, double *ub,
+                     plant_meter *meter, const double v[3])
 {
     double vs[3] = {0.0, 0.0, 0.0};
     if (meter) {
@@ -95,4 +96,34 @@ void plant_rk4(const plant_machine *m, plant_state *s, int imposed, int kind, in
         *ua = ua_sum / 6.0;
         *ub = ub_sum / 6.0;
     }
+}
+
+int plant_rk4_substeps(const plant_machine *m, const plant_state *s, double h)
+{
+    double x = fabs(m->n_p * s->w_m) * h / PLANT_RK4_WH_MAX;
+    if (!(x > 1.0)) return 1; /* also a NaN state: one step, as before */
+    if (x >= (double)PLANT_RK4_MAX_SPLIT) return PLANT_RK4_MAX_SPLIT;
+    int n = (int)x; /* ceil(x) for 1 < x < PLANT_RK4_MAX_SPLIT */
+    return n < x ? n + 1 : n;
+}
+
+void plant_rk4(const plant_machine *m, plant_state *s, int imposed, int kind, int fx, double h,
+               double u_al, double u_be, double tau_L, double *ua, double *ub, plant_meter *meter,
+               const double v[3])
+{
+    int n = plant_rk4_substeps(m, s, h);
+    if (n == 1) {
+        rk4_step(m, s, imposed, kind, fx, h, u_al, u_be, tau_L, ua, ub, meter, v);
+        return;
+    }
+    /* n equal steps; the interval's mean stator voltage is the mean of theirs. */
+    double hn = h / n, ua_sum = 0.0, ub_sum = 0.0;
+    for (int k = 0; k < n; k++) {
+        double ua_k = u_al, ub_k = u_be;
+        rk4_step(m, s, imposed, kind, fx, hn, u_al, u_be, tau_L, &ua_k, &ub_k, meter, v);
+        ua_sum += ua_k;
+        ub_sum += ub_k;
+    }
+    if (ua) *ua = ua_sum / n;
+    if (ub) *ub = ub_sum / n;
 }
