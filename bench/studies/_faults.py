@@ -251,8 +251,8 @@ def _run(scn: Any, estimator: str, controller: str, path: Path, out: Path) -> An
 
     if controller == IN_PROCESS:
         return run_local(scn, estimator, out, plots=False)
-    from bench._api import bus_of
     from bench.runs._run import run_scenario
+    from bench.wire._bus import bus_of
 
     spec = bus_of("udp_multicast")  # a port of the run's own: parallel cases never meet
     if controller == EXTERNAL:

@@ -469,3 +469,48 @@ def grow_receive_buffer(bus: can.BusABC) -> None:
             return
         except OSError:
             continue
+
+
+def bus_of(transport: str | None, *, known_port: bool = False) -> BusSpec:
+    """The bus of ``transport=``: ``"socketcan:vcan0"``, ``"udp_multicast"`` (its group, on a
+    port of the run's own), ``"udp_multicast:GROUP:PORT"``, any python-can interface as
+    ``"NAME:CHANNEL"``; None: ``bench run``'s default (python-can's own configuration
+    when it names an interface, else vcan0 when it is up, else udp_multicast on a port
+    of the run's own). :func:`bench.wire._bus.resolve_bus` resolves it, as it does every
+    bus of the bench.
+
+    ``known_port``: udp_multicast without a port takes python-can's default port
+    instead, where a controller under test that was told nothing finds it (as ``bench
+    run --controller external`` does).
+    """
+    from dataclasses import replace
+
+    iface: str | None = None
+    chan: str | None = None
+    port: int | None = None
+    if transport is not None:
+        iface, _, rest = transport.partition(":")
+        if (
+            iface == "udp_multicast"
+            and rest.rpartition(":")[2].isdigit()
+            and rest.count(":") in (1, 8)
+        ):  # GROUP:PORT (an IPv6 group has 7 colons of its own)
+            rest, _, p = rest.rpartition(":")
+            port = int(p)
+        check_interface(iface)
+        chan = rest or default_channel(iface)
+        if not chan and iface != "virtual":
+            raise InterfaceError(
+                f"transport {transport}: this adapter needs a channel (NAME:CHANNEL)"
+            )
+    spec, _ = resolve_bus(
+        iface,
+        chan,
+        port,
+        virtual="transport virtual: python-can's virtual bus lives inside one process and "
+        "the bench's nodes are separate processes; use udp_multicast or socketcan",
+    )
+    if spec.interface == "udp_multicast" and spec.port is None:
+        # parallel runs must not hear each other, unless the other side must find this one
+        spec = replace(spec, port=UDP_DEFAULT_PORT if known_port else own_udp_port())
+    return spec
