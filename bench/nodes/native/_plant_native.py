@@ -397,6 +397,15 @@ def native_missing(node: Any, interface: str) -> str | None:
         other = sorted({f.kind for f, _ in node.faults.windows} - set(NATIVE_FAULT_KINDS))
         if other:
             return f"the faults {', '.join(other)} are applied by the Python node only"
+        resent = any(
+            f.kind == "silence" or (f.kind == "drop" and f.params["message"] == "PhaseSamples")
+            for f, _ in node.faults.windows
+        )
+        if resent and not node.realtime:
+            # NodeFaults' lockstep retransmission rules: a lost sample is sent again, in
+            # order, with the next that gets through, and its answer is lost
+            # (PlantNode.frames_now, _on_duty, ready); the native unit only withholds it
+            return "a lockstep drop of PhaseSamples or silence is applied by the Python node only"
         if node.n_steps <= 0:
             # the bus faults' tables are made before the loop, one entry per period it runs
             return "[[faults]] in a run without a step count (n_steps 0) are applied by the Python node only"
