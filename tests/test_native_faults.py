@@ -231,10 +231,10 @@ def test_bus_faults_native_give_the_python_nodes_frames(tmp_path: Path) -> None:
         _fault(3, "babble", 0.05, 0.04, rate_hz=500.0),
         _fault(4, "delay", 0.07, 0.005, message="PwmDuty", steps=1),
     )
-    # the oracle is the Python node's process run: with duties lost, a process run leaves
-    # the in-process reference (the Python node's too) from the first lost duty on
+    # a lost duty is held at the last one applied, never a later one already here, so
+    # the in-process reference is the process runs' too (test_faults_run.py)
     meta = _assert_faults_native_equal_python(
-        replace(scn, faults=faults), "tt-dq", tmp_path, oracle="process"
+        replace(scn, faults=faults), "tt-dq", tmp_path, oracle="inprocess"
     )
     rep = meta["node_reports"]["plant"]
     assert rep["faults"]["duties_lost"] > 10
