@@ -7,14 +7,16 @@ import math
 from pathlib import Path
 from typing import Any
 
+import can
 import numpy as np
 import pytest
 
 import bench
 from bench._errors import EXIT_FAULT_EXPECTATION, ScenarioError
-from bench.nodes._loops import WATCHDOG_MIN_S, WATCHDOG_PERIODS
+from bench.nodes._loops import WATCHDOG_MIN_S, WATCHDOG_PERIODS, run_inprocess
 from bench.scenarios._faults import KINDS
 from bench.scenarios._schema import load_scenario
+from tests.trace_helpers import CODEC, assert_same_trace, trace
 
 T_S = 1e-3  # xue-fig13: 1 kHz
 
@@ -267,3 +269,34 @@ def test_an_open_phase_in_a_lockstep_run_holds_its_current_at_zero_from_its_peri
     np.testing.assert_array_equal(s["i_c_true"][open_], -s["i_a_true"][open_])
     np.testing.assert_array_equal(s["i_a_true"], s["i_a"])
     assert np.all(s["fault_active"][(kk >= 1000) & (kk < 1100)] == 1)
+
+
+def test_a_pwmduty_drop_gives_one_trace_in_process_and_as_processes(tmp_path: Path) -> None:
+    """A lost duty is held at the last duty the plant applied, never at a newer one
+    already here.  In-process the controller answers sample ``k`` (duty ``k + 1``)
+    before period ``k`` runs, as processes it seldom has: a plant that held the newest
+    duty it had applied duty ``k + 1`` one period early in-process only, and the two
+    modes parted from the first lost duty on.  wen-5.1 (10 kHz) with ``tt-dq``: 30 %
+    of the duties of 100 ms to 120 ms lost, then every duty of 200 ms to 205 ms."""
+    lines = ['extends = "wen-5.1"', "duration = 0.25", "score_from_s = 0.05"]
+    for at, dur, prob in ((0.1, 0.02, 0.3), (0.2, 0.005, 1.0)):
+        lines += ["[[faults]]", f"at_s = {at}", f"duration_s = {dur}", 'kind = "drop"',
+                  'message = "PwmDuty"', f"prob = {prob}"]  # fmt: skip
+    src = tmp_path / "drop.toml"
+    src.write_text("\n".join(lines) + "\n")
+    scn = load_scenario(str(src))
+    ref = trace(run_inprocess(scn, "tt-dq", CODEC, loop="python"), scn)
+    # the burst: periods 2000 to 2049 run with duty 1999, one period older each (each
+    # row carries the age of the duty of the period before it)
+    age = dict(zip(ref["step"].tolist(), ref["duty_age"].tolist(), strict=True))
+    assert [age[k] for k in range(2000, 2053)] == [0, *range(1, 51), 0, 0]
+    held = np.count_nonzero(ref["duty_age"][(ref["step"] >= 1000) & (ref["step"] < 1200)] > 0)
+    assert 20 < held < 120  # 30 % of 200 periods lost, some in a row
+    # the Python plant node (engine compiled) and the native one (auto), as bench run runs them
+    for engine, node in (("compiled", "python"), ("auto", "native")):
+        run = bench.run(
+            src, estimator="tt-dq", engine=engine, transport="udp_multicast", out=tmp_path / engine
+        )
+        assert run.folder is not None and run.meta["node_engines"]["plant"] == node
+        got = trace(list(can.LogReader(str(run.folder / "capture.blf"))), scn)
+        assert_same_trace(ref, got)

@@ -231,10 +231,10 @@ def test_bus_faults_native_give_the_python_nodes_frames(tmp_path: Path) -> None:
         _fault(3, "babble", 0.05, 0.04, rate_hz=500.0),
         _fault(4, "delay", 0.07, 0.005, message="PwmDuty", steps=1),
     )
-    # the oracle is the Python node's process run: with duties lost, a process run leaves
-    # the in-process reference (the Python node's too) from the first lost duty on
+    # a lost duty is held at the last one applied, never a later one already here, so
+    # the in-process reference is the process runs' too (test_faults_run.py)
     meta = _assert_faults_native_equal_python(
-        replace(scn, faults=faults), "tt-dq", tmp_path, oracle="process"
+        replace(scn, faults=faults), "tt-dq", tmp_path, oracle="inprocess"
     )
     rep = meta["node_reports"]["plant"]
     assert rep["faults"]["duties_lost"] > 10
@@ -266,3 +266,30 @@ def test_silence_in_real_time_native_sends_nothing_either_way(tmp_path: Path) ->
     assert rep["steps"] == 300
     assert rep["faults"]["not_sent"] == {"PhaseSamples": 5, "PositionSensor": 5}
     assert rep["faults"]["babbled"] == 0
+
+
+def test_a_lockstep_sample_loss_is_left_to_the_python_node() -> None:
+    """A lockstep drop of PhaseSamples (and silence) sends each lost sample again with the
+    next that gets through (NodeFaults' retransmission rules); the native unit only
+    withheld it, and its controller, computing its samples in order, waited for the lost
+    one until the plant's stall error.  The native loop refuses it in lockstep, and
+    serves it in real time, where a lost sample is gone."""
+    from bench.nodes._fault_bus import NodeFaults
+    from bench.nodes._plant_node import PlantNode
+    from bench.nodes.native import _plant_native
+    from plant_rt import Plant, preset
+
+    pre = preset("wen2023")
+    for fault in (_fault(0, "drop", 0.001, 0.001, message="PhaseSamples", prob=1.0),
+                  _fault(0, "silence", 0.001, 0.001)):  # fmt: skip
+        node = PlantNode(CODEC, Plant(pre.motor, pre.inverter, 1.0 / pre.f_sw), n_steps=100)
+        node.faults = NodeFaults([fault], node.plant, 0)
+        why = _plant_native.native_missing(node, "udp_multicast")
+        assert why is not None and "PhaseSamples" in why, fault.kind
+        node.realtime = True
+        assert _plant_native.native_missing(node, "udp_multicast") is None, fault.kind
+    node.faults = NodeFaults(
+        [_fault(0, "drop", 0.001, 0.001, message="PwmDuty", prob=1.0)], node.plant, 0
+    )
+    node.realtime = False
+    assert _plant_native.native_missing(node, "udp_multicast") is None

@@ -137,7 +137,7 @@ def cmd_plant(args: argparse.Namespace) -> int:
     node.run_id = plan.run_id
     if plan.mode == "lockstep":
         node.pace_every = plan.pace_every
-    node.realtime = plan.mode == "realtime"  # the loop sets it too; native_missing reads it
+    node.realtime = plan.mode == "realtime"  # what the native loop serves depends on it
     node.node_engine = choose_node_engine("plant", args.engine, lambda: _native_missing(node, spec))
     if node.node_engine == "native":
         from bench.nodes._loops import RETRANSMIT_S, STALL_S

@@ -190,7 +190,9 @@ KINDS: dict[str, Kind] = {
             "Frames of one message are lost, each period's with probability prob "
             "(a seeded stream per fault and period, so a run is reproducible).",
             "PwmDuty: a lost duty stays lost when the controller sends it again: the "
-            "plant runs that period with the last duty it applied, counts it late, and "
+            "plant runs that period with the last duty it applied (never a later one "
+            "already received, so a run in-process and one as processes agree), counts "
+            "it late, and "
             "its watchdog counts periods as in real time (prob 1.0 for longer than the "
             "watchdog trips it). PhaseSamples: the retransmission rules keep the "
             "controller's samples in order: a lost sample is sent again before the next "

@@ -397,16 +397,21 @@ def native_missing(node: Any, interface: str) -> str | None:
         other = sorted({f.kind for f, _ in node.faults.windows} - set(NATIVE_FAULT_KINDS))
         if other:
             return f"the faults {', '.join(other)} are applied by the Python node only"
-        kinds = [(f.kind, f.params) for f, _ in node.faults.windows]
-        if not node.realtime and any(
-            k == "silence" or (k == "drop" and p.get("message") == "PhaseSamples") for k, p in kinds
+        resent = any(
+            f.kind == "silence" or (f.kind == "drop" and f.params["message"] == "PhaseSamples")
+            for f, _ in node.faults.windows
+        )
+        if resent and not node.realtime:
+            # NodeFaults' lockstep retransmission rules: a lost sample is sent again, in
+            # order, with the next that gets through, and its answer is lost
+            # (PlantNode.frames_now, _on_duty, ready); the native unit only withholds it
+            return "a lockstep drop of PhaseSamples or silence is applied by the Python node only"
+        if node.realtime and any(
+            f.kind == "delay" and "us" in f.params for f, _ in node.faults.windows
         ):
-            # lockstep keeps a lost sample and sends it again before the next one, and
-            # counts its late answer lost (bench.nodes._fault_bus): the Python node's rule
-            return "lockstep's rule for lost samples (drop of PhaseSamples, silence) is the Python node's"
-        if node.realtime and any(k == "delay" and "us" in p for k, p in kinds):
-            # the duty frame held "us" from its arrival (NodeFaults.duty_hold_s)
-            return "a real-time delay in microseconds (a duty held from its arrival) is the Python node's"
+            # the duty frame held "us" from its arrival (NodeFaults.duty_hold_s): not in
+            # the native unit's tables, whose real-time delay is whole periods
+            return "a real-time delay in microseconds (a duty held from its arrival) is applied by the Python node only"
         if node.n_steps <= 0:
             # the bus faults' tables are made before the loop, one entry per period it runs
             return "[[faults]] in a run without a step count (n_steps 0) are applied by the Python node only"
