@@ -293,3 +293,28 @@ def test_a_lockstep_sample_loss_is_left_to_the_python_node() -> None:
     )
     node.realtime = False
     assert _plant_native.native_missing(node, "udp_multicast") is None
+
+
+def test_a_real_time_delay_in_microseconds_is_left_to_the_python_node() -> None:
+    """Real time holds a duty frame ``us`` from its arrival (NodeFaults.duty_hold_s); the
+    native unit's tables shift duties by whole periods only, so it refuses such a delay in
+    real time and serves it in lockstep (rounded up to whole periods by both nodes) and a
+    delay in ``steps``."""
+    from bench.nodes._fault_bus import NodeFaults
+    from bench.nodes._plant_node import PlantNode
+    from bench.nodes.native import _plant_native
+    from plant_rt import Plant, preset
+
+    pre = preset("wen2023")
+    node = PlantNode(CODEC, Plant(pre.motor, pre.inverter, 1.0 / pre.f_sw), n_steps=100)
+    us = _fault(0, "delay", 0.001, 0.002, message="PwmDuty", us=30.0)
+    node.faults = NodeFaults([us], node.plant, 0)
+    node.realtime = True
+    why = _plant_native.native_missing(node, "udp_multicast")
+    assert why is not None and "microseconds" in why
+    node.realtime = False
+    assert _plant_native.native_missing(node, "udp_multicast") is None
+    steps = _fault(0, "delay", 0.001, 0.002, message="PwmDuty", steps=2)
+    node.faults = NodeFaults([steps], node.plant, 0)
+    node.realtime = True
+    assert _plant_native.native_missing(node, "udp_multicast") is None
