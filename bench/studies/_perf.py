@@ -58,8 +58,8 @@ ANALYZE_MIN_FRAMES = 200_000
 F_10KHZ = 10e3
 #: What ran in the ``lockstep_native`` and ``realtime_native`` figures.
 NATIVE_NOTE = (
-    "the native plant node (--engine native: its loop in C, bench/nodes/native) with the "
-    "bench's Python controller node on its compiled core, sensored"
+    "the native pair (--engine native: the plant node's and the controller node's loops "
+    "in C, bench/nodes/native), sensored"
 )
 #: Speed reference of the in-process loops (rpm), and the periods run before timing.
 SPEED_REF_RPM = 100.0
@@ -1342,7 +1342,7 @@ def figures_sections(res: dict[str, Any]) -> list[str]:
     if (lsn := res.get("lockstep_native")) is not None:
         lines += [
             "",
-            f"The native plant node ({lsn['note']}): {_num(lsn['steps_per_s'])} periods/s, "
+            f"Lockstep, {lsn['note']}: {_num(lsn['steps_per_s'])} periods/s, "
             f"round trip p50 {_num(lsn['rtt_us_p50'], 'us')}.",
         ]
     lines += ["", "### 3. Real time (plant on its wall clock, sensored controller)", ""]
