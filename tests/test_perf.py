@@ -245,4 +245,4 @@ def test_the_native_plant_figures_are_rendered_when_measured() -> None:
     assert len(rows) == len(RATES)
     refused = sum(res["realtime_native"][r].get("policy") != "fifo" for r in RATES)
     assert sum("native plant refused" in ln for ln in rows) == refused
-    assert f"The native plant node ({NATIVE_NOTE})" in text
+    assert f"Lockstep, {NATIVE_NOTE}:" in text
