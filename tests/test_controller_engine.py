@@ -197,6 +197,13 @@ def _events(n: int) -> dict[int, Any]:
     }
 
 
+def _state_bits(states: dict[str, Any]) -> dict[str, Any]:
+    """``states`` with each float as its bytes: the same bits compare equal, NaN included
+    (a run whose rotor is lost and whose plant leaves its flux map's range ends in NaN on
+    both engines alike)."""
+    return {k: struct.pack("<d", v) if isinstance(v, float) else v for k, v in states.items()}
+
+
 @pytest.mark.parametrize(
     ("scn_name", "estimator", "n", "plant"),
     [
@@ -226,7 +233,7 @@ def test_commands_and_reads_between_engines_keep_the_trace(
     assert first is None, f"the engines part at period {first}"
     # the states after the run, read from the compiled core, are the same bits
     s_py, s_cc = c_py.states(), c_cc.states()
-    assert s_cc == s_py
+    assert _state_bits(s_cc) == _state_bits(s_py)
     # one design for both engines: the same gains, bandwidths and corners
     assert c_cc.gains() == c_py.gains()
     assert [type(v) for v in s_cc.values()] == [type(v) for v in s_py.values()]
@@ -474,7 +481,7 @@ def test_a_plugin_estimator_runs_in_the_core_bit_for_bit(
     rep = ControllerNode(Codec(), c).report()
     assert (rep["engine"], rep["engine_note"]) == ("compiled", None)
     why = native_unavailable(ControllerNode(Codec(), c), None)
-    assert why is not None and est in why and "Python node runs" in why and "\n" not in why
+    assert why is not None and est in why and "Python process" in why and "\n" not in why
 
 
 def test_a_plugin_that_raises_raises_the_same_on_both_engines(
