@@ -54,7 +54,13 @@ from bench.runs._processes import (
     stop_nodes,
 )
 from bench.runs._recorder import Recording
-from bench.runs._results import RunResult, finish_run, run_metadata, scoring_scenario
+from bench.runs._results import (
+    RunResult,
+    finish_run,
+    realtime_warning,
+    run_metadata,
+    scoring_scenario,
+)
 from bench.scenarios._faults import lockstep_error
 from bench.scenarios._schema import Scenario, write_effective
 from bench.scenarios._setup import sample_period, with_position_sensor
@@ -370,7 +376,11 @@ def run_scenario(
         lost = pacer.verification_line()
         tripped = result.metrics.get("plant_fault", "none") not in ("none", None)
         if lost is not None and pacer.acked is not None and not tripped:
-            # a trip (exit 3) is the cause of what the controller missed after it
+            # a trip (exit 3) is the cause of what the controller missed after it. The
+            # real-time verdict is a result too: said here, as the run ends with exit 5
+            # (bench run prints it after a run that returns)
+            if mode == "realtime" and (warn := realtime_warning(result.metrics)):
+                print(warn, file=sys.stderr, flush=True)
             raise CommandsLost(f"{lost}; files in {out_dir}")
         if lost is not None:
             print(f"warning: {lost}", file=sys.stderr, flush=True)
