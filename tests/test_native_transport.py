@@ -18,6 +18,7 @@ import pytest
 from can.interfaces.udp_multicast.utils import pack_message, unpack_message
 
 from bench.nodes.native import _native
+from bench.nodes.native._native import BN_BRS, BN_ESI, BN_EXT, BN_FD, Frame
 from bench.wire._bus import BusSpec, udp_multicast_group
 from bench.wire._codec import Codec
 from tests.ports import free_port
@@ -25,21 +26,6 @@ from tests.ports import free_port
 pytestmark = pytest.mark.skipif(
     not any(__import__("shutil").which(c) for c in ("cc", "gcc")), reason="needs a C compiler"
 )
-
-
-class Frame(ctypes.Structure):
-    """``bn_frame_t`` (bn.h)."""
-
-    _fields_ = [
-        ("id", ctypes.c_uint32),
-        ("len", ctypes.c_uint8),
-        ("flags", ctypes.c_uint8),
-        ("data", ctypes.c_uint8 * 64),
-        ("t_ns", ctypes.c_int64),
-    ]
-
-
-BN_EXT, BN_FD, BN_BRS, BN_ESI = 1, 2, 4, 8
 
 
 @pytest.fixture(scope="module")

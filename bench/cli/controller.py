@@ -60,7 +60,7 @@ def cmd_controller(args: argparse.Namespace) -> int:
         )
     return serve_node(
         args,
-        plan.bus("controller"),
+        spec,
         "controller",
         node,
         lambda bus: controller_loop(

@@ -195,6 +195,10 @@ def _run(cmd: list[str], what: str) -> None:
         raise BenchError(f"native loop: {what} failed: {lines[0] if lines else res.returncode}")
 
 
+#: ``bn_frame_t.flags`` (bn.h's enum).
+BN_EXT, BN_FD, BN_BRS, BN_ESI, BN_RTR, BN_ERR = 1, 2, 4, 8, 16, 32
+
+
 class Frame(ctypes.Structure):
     """``bn_frame_t`` (bn.h)."""
 

@@ -26,7 +26,7 @@ import can
 import numpy as np
 
 from bench._errors import BenchError
-from bench.nodes.native._native import Frame
+from bench.nodes.native._native import BN_BRS, BN_EXT, BN_FD, Frame
 
 __all__ = ["PairRun", "pair_unavailable", "run_pair"]
 
@@ -135,10 +135,11 @@ def _messages(rec: Any, n: int) -> list[can.Message]:
     flags = a["flags"].tolist()
     raw = a["data"].tobytes()
     Message = can.Message
-    flag = [(bool(f & 1), bool(f & 2), bool(f & 4)) for f in range(8)]
+    mask = BN_EXT | BN_FD | BN_BRS
+    flag = [(bool(f & BN_EXT), bool(f & BN_FD), bool(f & BN_BRS)) for f in range(mask + 1)]
     out = []
     for j in range(n):
-        ext, fd, brs = flag[flags[j] & 7]
+        ext, fd, brs = flag[flags[j] & mask]
         o = 64 * j
         # can.Message's parameters in order: timestamp, arbitration_id, is_extended_id,
         # is_remote_frame, is_error_frame, channel, dlc, data, is_fd, is_rx, bitrate_switch

@@ -38,7 +38,7 @@ import can
 
 from bench._errors import BenchError
 from bench.nodes.native import _native
-from bench.nodes.native._native import Frame, Sig, Stats
+from bench.nodes.native._native import BN_BRS, BN_EXT, BN_FD, Frame, Sig, Stats
 from plant_rt._faults import LEG_KINDS, MACHINE_KINDS, SENSOR_KINDS
 
 __all__ = [
@@ -472,9 +472,9 @@ def open_native_bus(spec: Any) -> NativeBus:
 def to_message(f: Frame) -> can.Message:
     return can.Message(
         arbitration_id=f.id,
-        is_extended_id=bool(f.flags & 1),
-        is_fd=bool(f.flags & 2),
-        bitrate_switch=bool(f.flags & 4),
+        is_extended_id=bool(f.flags & BN_EXT),
+        is_fd=bool(f.flags & BN_FD),
+        bitrate_switch=bool(f.flags & BN_BRS),
         data=bytes(f.data[: f.len]),
         check=False,
     )
@@ -485,7 +485,9 @@ def to_frame(m: can.Message) -> Frame:
     f.id = m.arbitration_id
     f.len = len(m.data)
     f.flags = (
-        (1 if m.is_extended_id else 0) | (2 if m.is_fd else 0) | (4 if m.bitrate_switch else 0)
+        (BN_EXT if m.is_extended_id else 0)
+        | (BN_FD if m.is_fd else 0)
+        | (BN_BRS if m.bitrate_switch else 0)
     )
     for i, b in enumerate(m.data):
         f.data[i] = b
@@ -839,7 +841,7 @@ def _fill_config(dll: ctypes.CDLL, node: Any, u: Unit, realtime: bool, external:
     msgs = ("PhaseSamples", "PositionSensor", "PlantTruth", "PlantStatus", "PlantCurrents")
     for j, msg in enumerate(msgs):
         fd, brs = codec.frame_kind(msg)
-        u.msg_flags[j] = (2 if fd else 0) | (4 if brs else 0)
+        u.msg_flags[j] = (BN_FD if fd else 0) | (BN_BRS if brs else 0)
 
 
 def _jitter(
@@ -931,7 +933,7 @@ def plant_loop_native(
                 noise.restore()
                 return
             f = bus.recv(0.05)
-            if f is not None and f.id in ids and not f.flags & 1:
+            if f is not None and f.id in ids and not f.flags & BN_EXT:
                 node.on_message(to_message(f))
                 node.apply_commands()
             if time.monotonic() - t_idle > 3600.0:

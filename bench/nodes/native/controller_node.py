@@ -40,7 +40,7 @@ from bench.nodes._counters import (
     REPEATED_COUNTER,
 )
 from bench.nodes.native import _native
-from bench.nodes.native._native import Frame, Sig
+from bench.nodes.native._native import BN_BRS, BN_ERR, BN_EXT, BN_FD, BN_RTR, Frame, Sig
 from bench.wire._codec import (
     REJECT_BAD_CRC,
     REJECT_BAD_LENGTH,
@@ -69,7 +69,6 @@ _INT64_MAX = (1 << 63) - 1
 # events (bn_ctl.h)
 EV_NONE, EV_COMMAND, EV_DUE, EV_STOPPED, EV_IDLE, EV_TIMEOUT, EV_POLL, EV_ERROR = range(8)
 # bn_frame_t flags (bn.h)
-BN_EXT, BN_FD, BN_BRS, BN_ESI, BN_RTR, BN_ERR = 1, 2, 4, 8, 16, 32
 #: The rejection reasons, in the order of bn_ctl.h's BN_CTL_R_*.
 REASONS = (
     REJECT_BAD_LENGTH,
