@@ -864,12 +864,9 @@ def render_realtime_native(res: dict[str, Any], source: str = "docs/perf/perf.js
 
 def update_realtime_doc(doc: str, res: dict[str, Any]) -> str:
     """``doc`` (docs/REALTIME.md) with its native block replaced (appended when it has none)."""
-    block = render_realtime_native(res)
-    if NATIVE_DOC_BEGIN in doc and NATIVE_DOC_END in doc:
-        head, _, rest = doc.partition(NATIVE_DOC_BEGIN)
-        _, _, tail = rest.partition(NATIVE_DOC_END)
-        return head + block + tail
-    return doc.rstrip() + "\n\n" + block + "\n"
+    from bench.studies._rtcheck import splice_block
+
+    return splice_block(doc, render_realtime_native(res), NATIVE_DOC_BEGIN, NATIVE_DOC_END)
 
 
 # -- 4. codec and analysis ------------------------------------------------------------------

@@ -242,14 +242,19 @@ def render_doc_block(res: dict[str, Any]) -> str:
     )
 
 
-def update_doc(doc: str, res: dict[str, Any]) -> str:
-    """``doc`` with its measured block replaced (appended when it has none)."""
-    block = render_doc_block(res)
-    if DOC_BEGIN in doc and DOC_END in doc:
-        head, _, rest = doc.partition(DOC_BEGIN)
-        _, _, tail = rest.partition(DOC_END)
+def splice_block(doc: str, block: str, begin: str, end: str) -> str:
+    """``doc`` with the block from ``begin`` to ``end`` replaced by ``block`` (which holds
+    both markers), appended when ``doc`` has none: docs/REALTIME.md's measured blocks."""
+    if begin in doc and end in doc:
+        head, _, rest = doc.partition(begin)
+        _, _, tail = rest.partition(end)
         return head + block + tail
     return doc.rstrip() + "\n\n" + block + "\n"
+
+
+def update_doc(doc: str, res: dict[str, Any]) -> str:
+    """``doc`` with its measured block replaced (appended when it has none)."""
+    return splice_block(doc, render_doc_block(res), DOC_BEGIN, DOC_END)
 
 
 def host_file() -> Path:
