@@ -395,8 +395,15 @@ def pour_fuzz(
     sent: dict[str, int] = {}
     n = 0
     t0 = time.monotonic()
+    #: The flood's own frames, which multicast loops back to its socket with a fresh
+    #: time stamp: not the run's, and a replayed old frame must not come back as new.
+    echo: dict[tuple[int, bytes], int] = {}
     while not stop():
         while (seen := bus.recv(0.0)) is not None:
+            key = (seen.arbitration_id, bytes(seen.data))
+            if echo.get(key, 0) > 0:
+                echo[key] -= 1
+                continue
             fz.history.append(seen)
         now = time.time()
         if any(0.0 < m.timestamp < now - REPLAY_FRESH_S for m in fz.history):
@@ -423,6 +430,8 @@ def pour_fuzz(
             msg, kind = fz.one()
         try:
             bus.send(msg)
+            key = (msg.arbitration_id, bytes(msg.data))
+            echo[key] = echo.get(key, 0) + 1
         except (can.CanError, OSError):
             kind = "send_failed"
         sent[kind] = sent.get(kind, 0) + 1
