@@ -44,18 +44,37 @@ def drain(reader: can.BufferedReader) -> list[can.Message]:
     return out
 
 
-def _keeps_the_time_line(rel: np.ndarray, want: np.ndarray, tol_s: float) -> None:
-    """Most frames arrive on the capture's time line (up to one common offset).
+PACE_FRAMES_PER_S = 3000.0
 
-    A stall of the machine makes a few frames late (the schedule is absolute,
-    so the replay catches up); frames dumped at once, or paced wrongly, put
-    most of them off the line by a sizeable part of the span.
+
+def _pace(chosen: list[can.Message]) -> float:
+    """Replay speed for about 3,000 frames/s.
+
+    The capture holds up to 40,000 frames/s (10 kHz). A sender on a loaded
+    machine that runs at its own limit never catches up after a stall, and
+    then the time line says nothing about the replay; at a tenth of that rate
+    it has the spare rate to catch up, which is what the absolute schedule is
+    for.
     """
-    dev = rel - want
-    spread = np.abs(dev - np.median(dev))
-    assert np.median(spread) <= tol_s, np.median(spread)
-    assert np.mean(spread <= 2 * tol_s) >= 0.75, np.mean(spread <= 2 * tol_s)
-    assert want[-1] > 20 * tol_s  # the capture is long enough for this to mean something
+    span = chosen[-1].timestamp - chosen[0].timestamp
+    return PACE_FRAMES_PER_S * span / len(chosen)
+
+
+def _keeps_the_time_line(rel: np.ndarray, want: np.ndarray) -> None:
+    """The frames arrive on the capture's (stretched) time line.
+
+    Relative to the span, so that a busy machine does not fail it: the slope
+    of the received times against the schedule is 1 within 5 % (frames dumped
+    at once give 0, a wrong pace gives the pace's ratio), and the median
+    distance from the fitted line is under 3 % of the span (a stall of the
+    machine makes a few frames late, the schedule is absolute, so the replay
+    catches up). Tight timing belongs in ``bench perf``, not here.
+    """
+    slope, offset = np.polyfit(want, rel, 1)
+    assert 0.95 <= slope <= 1.05, slope
+    resid = np.abs(rel - (slope * want + offset))
+    assert np.median(resid) <= 0.03 * want[-1], (np.median(resid), want[-1])
+    assert want[-1] >= 0.5  # long enough for a stall to be a small part of it
 
 
 @pytest.mark.parametrize("clock", ["deadline", "messagesync"])
@@ -66,7 +85,7 @@ def test_replay_on_virtual_bus_keeps_frames_order_and_timing(
     chan = f"replay{os.getpid()}{clock}"
     tx = can.Bus(interface="virtual", channel=chan)
     rx = can.Bus(interface="virtual", channel=chan)
-    speed = 0.5  # 30,000 frames/s recorded: leave a loaded machine room to keep pace
+    speed = _pace(chosen)
     try:
         res = replay_frames(tx, chosen, clock=clock, speed=speed)
         got = []
@@ -87,7 +106,7 @@ def test_replay_on_virtual_bus_keeps_frames_order_and_timing(
     # up to 100 us early by design; the deadline clock never sends early
     early_us = 1.0 if clock == "deadline" else 100.0
     assert res.error_worst_us >= res.error_median_us >= -early_us
-    _keeps_the_time_line(rel, want, 2e-3)
+    _keeps_the_time_line(rel, want)
     # and the replay took the capture's time, not less (frames were not just dumped)
     assert res.wall_s >= 0.99 * want[-1]
 
@@ -99,10 +118,8 @@ def test_replay_on_udp_multicast(frames: list[can.Message]) -> None:
     tx = spec.open()
     reader = can.BufferedReader()
     notifier = can.Notifier(rx, [reader], timeout=0.05)
-    # a quarter of the recorded pace: the capture holds up to 40,000 frames/s
-    # (10 kHz), about what one udp_multicast sender can do at all, so at full
-    # pace a loaded machine falls behind and the time line says nothing
-    speed = 0.25
+    span = chosen[-1].timestamp - chosen[0].timestamp
+    speed = _pace(chosen)
     try:
         res = replay_frames(tx, chosen, speed=speed)
         got = drain(reader)
@@ -114,11 +131,10 @@ def test_replay_on_udp_multicast(frames: list[can.Message]) -> None:
     assert [(m.arbitration_id, bytes(m.data)) for m in got] == [
         (m.arbitration_id, bytes(m.data)) for m in chosen
     ]
-    span = chosen[-1].timestamp - chosen[0].timestamp
     assert res.wall_s >= 0.99 * span / speed
     rel = np.array([m.timestamp for m in got]) - got[0].timestamp
     want = (np.array([m.timestamp for m in chosen]) - chosen[0].timestamp) / speed
-    _keeps_the_time_line(rel, want, 5e-3)
+    _keeps_the_time_line(rel, want)
 
 
 TAGGED: list[tuple[int, int | str]] = [
