@@ -524,10 +524,10 @@ static PyObject *Core_mechanical(Core *self, PyObject *args)
 /* measured(floor): a rotating demodulator's normalise = "measured", after rotating() */
 static PyObject *Core_measured(Core *self, PyObject *arg)
 {
-    double floor = PyFloat_AsDouble(arg);
-    if (floor == -1.0 && PyErr_Occurred())
+    double amp_floor = PyFloat_AsDouble(arg);
+    if (amp_floor == -1.0 && PyErr_Occurred())
         return NULL;
-    cc_rot_measured(&self->c.est.rot, floor);
+    cc_rot_measured(&self->c.est.rot, amp_floor);
     Py_RETURN_NONE;
 }
 

@@ -17,14 +17,14 @@ void cc_rot_init(cc_rot_t *r, double V_h, double wT, double inv_norm)
     r->mech = 0;
     r->l3 = r->torque = 0.0;
     r->measured = 0;
-    r->floor = 0.0;
+    r->amp_floor = 0.0;
     cc_fo2_init(&r->lpf_m, 0.0, 0.0, 0.0);
 }
 
-void cc_rot_measured(cc_rot_t *r, double floor)
+void cc_rot_measured(cc_rot_t *r, double amp_floor)
 {
     r->measured = 1;
-    r->floor = floor;
+    r->amp_floor = amp_floor;
     cc_fo2_init(&r->lpf_m, r->lpf.b0, r->lpf.b1, r->lpf.a1);
 }
 
