@@ -521,6 +521,16 @@ static PyObject *Core_mechanical(Core *self, PyObject *args)
     Py_RETURN_NONE;
 }
 
+/* measured(floor): a rotating demodulator's normalise = "measured", after rotating() */
+static PyObject *Core_measured(Core *self, PyObject *arg)
+{
+    double amp_floor = PyFloat_AsDouble(arg);
+    if (amp_floor == -1.0 && PyErr_Occurred())
+        return NULL;
+    cc_rot_measured(&self->c.est.rot, amp_floor);
+    Py_RETURN_NONE;
+}
+
 /* accel_ff(): tt-dq (or the hybrid's tt-dq) feeds the designed acceleration into its PLL */
 static PyObject *Core_accel_ff(Core *self, PyObject *Py_UNUSED(ignored))
 {
@@ -689,6 +699,8 @@ static PyMethodDef Core_methods[] = {
      "reference_model(alpha_s, n_p, a_max, T_s): the speed loop's designed response"},
     {"mechanical", (PyCFunction)Core_mechanical, METH_VARARGS,
      "mechanical(T_s, g1, g2, g3, gt, l3): the mechanical observer of a rotating demodulator"},
+    {"measured", (PyCFunction)Core_measured, METH_O,
+     "measured(floor): a rotating demodulator's normalise = 'measured'"},
     {"accel_ff", (PyCFunction)Core_accel_ff, METH_NOARGS,
      "tt-dq's acceleration feed-forward on"},
     {"injection", (PyCFunction)Core_injection, METH_NOARGS,
@@ -747,9 +759,31 @@ static PyTypeObject CoreType = {
     .tp_members = Core_members,
 };
 
+/* hypot(x, y): the core's cc_hypot (cc_math.h), for its test against math.hypot */
+static PyObject *cctl_hypot(PyObject *Py_UNUSED(m), PyObject *const *args, Py_ssize_t n)
+{
+    if (n != 2) {
+        PyErr_SetString(PyExc_TypeError, "hypot(x, y) takes two floats");
+        return NULL;
+    }
+    double x = PyFloat_AsDouble(args[0]);
+    if (x == -1.0 && PyErr_Occurred())
+        return NULL;
+    double y = PyFloat_AsDouble(args[1]);
+    if (y == -1.0 && PyErr_Occurred())
+        return NULL;
+    return PyFloat_FromDouble(cc_hypot(x, y));
+}
+
+static PyMethodDef module_methods[] = {
+    {"hypot", (PyCFunction)(void (*)(void))cctl_hypot, METH_FASTCALL,
+     "hypot(x, y): the core's cc_hypot, rounded as this interpreter's math.hypot"},
+    {NULL, NULL, 0, NULL},
+};
+
 static struct PyModuleDef module = {
     PyModuleDef_HEAD_INIT, "controller._cctl",
-    "The controller core bound to Python (see controller._compiled).", -1, NULL,
+    "The controller core bound to Python (see controller._compiled).", -1, module_methods,
 };
 
 PyMODINIT_FUNC PyInit__cctl(void)

@@ -72,6 +72,8 @@ def _rotating(core: Any, est: RotatingHFEstimator, tracking: bool) -> None:
     )
     if mech:
         core.mechanical(pll.T_s, pll._g1, pll._g2, pll._g3, pll._gt, e._l3)
+    if est.measured:  # normalise = "measured"
+        core.measured(e._floor)
 
 
 def _square_wave(core: Any, est: SquareWaveEstimator) -> None:

@@ -94,11 +94,9 @@ COMPILED_ESTIMATORS: tuple[str, ...] = tuple(_KINDS)
 #: adapted by ``controller/_cctl.c``).
 KIND_EXTERNAL = 10
 
-#: The kinds whose estimator is a rotating-injection demodulator with the options
-#: ``normalise`` and ``observer`` (tt-dq, tt-ab, sfhf, hybrid-tt-dq, self-demod, epf), and
-#: those with tt-dq's PLL, which take ``accel_ff`` (tt-dq, hybrid-tt-dq). The core runs
-#: ``observer = "mechanical"`` for each but the hybrid's tt-dq.
-_ROTATING_KINDS = (1, 2, 3, 6, 8, 9)
+#: The kinds with tt-dq's PLL, which take ``accel_ff`` (tt-dq, hybrid-tt-dq). The core runs
+#: every rotating-injection demodulator (tt-dq, tt-ab, sfhf, hybrid-tt-dq, self-demod, epf)
+#: with either ``normalise`` and ``observer = "mechanical"`` for each but the hybrid's tt-dq.
 _ACCEL_FF_KINDS = (1, 6)
 
 
@@ -126,8 +124,6 @@ def compiled_cover(pars: Any) -> tuple[int, str | None]:
     if kind == KIND_EXTERNAL:
         return kind, None
     opts = dict(pars.estimator_options)
-    if kind in _ROTATING_KINDS and opts.get("normalise", "model") != "model":
-        return 0, f"{name} with normalise={opts['normalise']!r} is not compiled: Python"
     if kind == 6 and opts.get("observer", "pll") != "pll":
         return 0, f"{name} with observer={opts['observer']!r} is not compiled: Python"
     if kind not in _ACCEL_FF_KINDS and opts.get("accel_ff", False):

@@ -310,9 +310,7 @@ def test_the_cover_and_the_reasons() -> None:
     assert (c.engine, c.engine_note) == ("python", None)
     pars = build_controller(scn, "tt-dq", "python").pars
     measured = replace(pars, estimator_options={"normalise": "measured"})
-    used, why = resolve_controller_engine("auto", measured)
-    assert used == "python" and "normalise='measured'" in str(why)
-    assert Controller(measured, "compiled").engine_note == why
+    assert resolve_controller_engine("auto", measured) == ("compiled", None)
     # the mechanical observer is in the core, but for the hybrid's tt-dq
     mech = replace(pars, estimator_options={"observer": "mechanical"})
     assert resolve_controller_engine("auto", mech) == ("compiled", None)
@@ -415,6 +413,49 @@ def test_the_mechanical_observer_same_on_both_engines(estimator: str, tmp_path: 
     assert first is None, f"the engines part at period {first}"
     pll, _ = _loop("wen-5.1", estimator, "compiled", n, events, speed_rpm=0.0)
     assert pll != cc
+
+
+#: The estimators with the option ``normalise`` (the registry's options), each with a
+#: scenario it runs in: the hybrid's own for a hybrid (speed_band), else wen-5.1.
+NORMALISE = [
+    (s.name, "wide-speed-wen" if s.speed_band else "wen-5.1")
+    for s in SPECS.values()
+    if s.options is not None and "normalise" in {f.name for f in fields(s.options)}
+]
+
+
+def test_every_demodulator_with_normalise_is_tested() -> None:
+    """The parity below covers the six rotating demodulators, the hybrid's tt-dq among
+    them (an estimator with the option is never left out of it)."""
+    assert len(NORMALISE) == 6 and any(scn == "wide-speed-wen" for _, scn in NORMALISE)
+
+
+@pytest.mark.parametrize(("estimator", "scn_name"), NORMALISE)
+def test_normalise_measured_same_on_both_engines(
+    estimator: str, scn_name: str, tmp_path: Path
+) -> None:
+    """``normalise = "measured"`` (the error normalised by the measured HF amplitude, its
+    ``math.hypot`` the core's ``cc_hypot``) runs in the core: start-up, two speed steps, a
+    stop and a second start (the quadrature LPF reset), the same output in every period
+    and the same states, and not the trace of the model normalisation."""
+    f = tmp_path / "measured.toml"
+    f.write_text(f'extends = "{scn_name}"\n[estimator_options]\nnormalise = "measured"\n')
+    n = 6000
+    events = {
+        n // 4: lambda c: c.set_speed_ref(30.0),
+        n // 2: lambda c: c.set_speed_ref(-20.0),
+        (2 * n) // 3: lambda c: c.set_enable(False),
+        (2 * n) // 3 + 20: lambda c: c.set_enable(True),
+    }
+    py, c_py = _loop(str(f), estimator, "python", n, events, speed_rpm=0.0)
+    cc, c_cc = _loop(str(f), estimator, "compiled", n, events, speed_rpm=0.0)
+    assert (c_py.engine, c_cc.engine, c_cc.engine_note) == ("python", "compiled", None)
+    first = next((k for k in range(n) if py[k] != cc[k]), None)
+    assert first is None, f"the engines part at period {first}"
+    assert c_cc.states() == c_py.states()
+    assert c_py.states()["mode"] == 3  # it reached speed control
+    model, _ = _loop(scn_name, estimator, "compiled", n, events, speed_rpm=0.0)
+    assert model != cc
 
 
 #: A plug-in around docs/examples/my_estimator.py that raises in its update at period 40,
@@ -521,7 +562,7 @@ def test_a_plugin_that_raises_raises_the_same_on_both_engines(
 def test_bench_run_says_in_one_line_that_the_controller_runs_in_python(
     tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    """``bench run`` of tt-dq with ``normalise = "measured"`` (outside the core) on
+    """``bench run`` of hybrid-tt-dq with ``observer = "mechanical"`` (outside the core) on
     ``--engine compiled``: the run completes (exit 0) on the Python controller, and stderr
     has the one line saying why."""
     from bench.cli import main
@@ -529,15 +570,13 @@ def test_bench_run_says_in_one_line_that_the_controller_runs_in_python(
 
     monkeypatch.setenv(ENGINE_ENV, "auto")  # restored after main() sets it to --engine
     out = tmp_path / "run"
-    src = Path(loops.__file__).parents[1] / "scenarios" / "wen-5.1.toml"
-    scn = tmp_path / "measured.toml"
-    # an empty [motor]: the preset's motor, which the injection settings are for
-    scn.write_text(src.read_text() + '\n[motor]\n\n[estimator_options]\nnormalise = "measured"\n')
-    argv = ["run", str(scn), "-e", "tt-dq", "--engine", "compiled", "--duration", "0.05"]
+    scn = tmp_path / "mechanical.toml"
+    scn.write_text('extends = "wide-speed-wen"\n[estimator_options]\nobserver = "mechanical"\n')
+    argv = ["run", str(scn), "-e", "hybrid-tt-dq", "--engine", "compiled", "--duration", "0.05"]
     argv += ["--port", str(free_port()), "--out", str(out), "--quiet"]
     assert main(argv) == 0
     err = capsys.readouterr().err
-    line = "controller: tt-dq with normalise='measured' is not compiled: Python"
+    line = "controller: hybrid-tt-dq with observer='mechanical' is not compiled: Python"
     assert line in err.splitlines()
     meta = json.loads((out / "meta.json").read_text())
     assert meta["node_reports"]["controller"]["engine"] == "python"

@@ -94,12 +94,19 @@ int main(void)
 """
 
 
-def _scenario(tmp_path: Path, supervision: bool) -> Path:
-    """The test scenario, with the supervision on or as it is (off)."""
-    if not supervision:
+def _scenario(tmp_path: Path, supervision: bool, measured: bool = False) -> Path:
+    """The test scenario, with the supervision on or as it is (off), and with the
+    demodulator's ``normalise = "measured"`` or as it is (``"model"``)."""
+    if not (supervision or measured):
         return SCENARIO
-    p = tmp_path / "supervised.toml"
-    p.write_text(SCENARIO.read_text() + "\n[controller]\nsupervision = true\n")
+    p = tmp_path / "variant.toml"
+    text = SCENARIO.read_text()
+    if supervision:
+        text += "\n[controller]\nsupervision = true\n"
+    if measured:
+        # an empty [motor]: the preset's motor, which the injection settings are for
+        text += '\n[motor]\n\n[estimator_options]\nnormalise = "measured"\n'
+    p.write_text(text)
     return p
 
 
@@ -151,17 +158,26 @@ def _script(seed: int) -> list[tuple]:
 
 
 @pytest.mark.parametrize(
-    ("estimator", "supervision"),
-    [*[(e, False) for e in SENSORLESS], ("tt-dq", True), ("square-wave", True)],
+    ("estimator", "supervision", "measured"),
+    [
+        *[(e, False, False) for e in SENSORLESS],
+        ("tt-dq", True, False),
+        ("square-wave", True, False),
+        # normalise = "measured": cc_rot_measured and the quadrature LPF in the header
+        ("tt-dq", False, True),
+        ("epf", False, True),
+    ],
 )
 def test_the_generated_core_is_the_bench_controllers(
-    tmp_path: Path, estimator: str, supervision: bool
+    tmp_path: Path, estimator: str, supervision: bool, measured: bool
 ) -> None:
     """Initialised by bench_controller_init, the firmware's cc_foc_t and cc_sup_t are the
     bench's compiled controller's byte for byte; stepped with the same commands and
     samples, every output is the same double."""
-    scn = _scenario(tmp_path, supervision)
+    scn = _scenario(tmp_path, supervision, measured)
     exe = _harness(tmp_path, scn, estimator)
+    header = (tmp_path / "gen" / "bench_controller.h").read_text()
+    assert ("cc_rot_measured(" in header) == measured
     ctrl = build_controller(load_scenario(str(scn)), estimator, engine="compiled")
     assert ctrl.engine == "compiled"
     assert (ctrl.supervisor is not None) == supervision

@@ -114,6 +114,9 @@ class _Recorder:
     def mechanical(self, T_s: Any, g1: Any, g2: Any, g3: Any, gt: Any, l3: Any) -> None:
         self._call("cc_rot_mechanical", "&c->est.rot", *_d(T_s, g1, g2, g3, gt, l3))
 
+    def measured(self, floor: Any) -> None:
+        self._call("cc_rot_measured", "&c->est.rot", *_d(floor))
+
     def accel_ff(self) -> None:
         self.lines.append("c->est.rot.accel_ff = 1;")
 

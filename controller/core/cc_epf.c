@@ -31,7 +31,16 @@ void cc_epf_step(cc_est_t *e, cc_rot_t *r, long long k, double i_a, double i_b)
     cc_fo2_step(&r->lpf_n, dc - qs, qc + ds, &n_r, &n_i);
     /* P_p P_n = I_p I_n exp(j 2 dtheta) */
     double f = p_r * n_i + p_i * n_r;
-    double err = f * r->inv_norm;
+    double err;
+    if (r->measured) {
+        /* the amplitude I_p I_n from the product and its quadrature, low-passed once more
+         * (controller/_epf.py) */
+        double a_f, a_g;
+        cc_fo2_step(&r->lpf_m, f, p_r * n_r - p_i * n_i, &a_f, &a_g);
+        err = cc_rot_err_measured(r, f, a_f, a_g);
+    } else {
+        err = f * r->inv_norm;
+    }
     double i_df = i_d - i_dh;
     double i_qf = i_q - i_qh;
     cc_rot_publish(e, r, th, f, err, c * i_df - s * i_qf, s * i_df + c * i_qf);

@@ -15,6 +15,7 @@
 #ifndef CC_MATH_H
 #define CC_MATH_H
 
+#include <float.h>
 #include <math.h>
 
 #ifndef M_PI
@@ -41,5 +42,101 @@ static inline double cc_mod(double x, double m)
 }
 
 static inline double cc_clip01(double d) { return d < 0.0 ? 0.0 : (d > 1.0 ? 1.0 : d); }
+
+/* sqrt(x^2 + y^2) rounded as CPython's math.hypot(x, y) rounds it (the Python engine's
+ * normalise = "measured"), bit for bit: CPython's vector_norm (Modules/mathmodule.c) for
+ * two arguments.  max(|x|, |y|) is scaled by a power of two into [0.5, 1) (lossless);
+ * each square is split exactly into hi + lo (Dekker's product, Veltkamp's split by
+ * 2^27 + 1), the his summed from 1.0 with their rounding errors kept (Neumaier), the
+ * square root taken, and one differential correction h += (sum - h^2) / (2 h) applied
+ * with the residual sum - h^2 formed the same exact way.  Below 2^-1024 (max
+ * subnormal) the scale 2^-e overflows: CPython 3.12 and later divide both by DBL_MIN
+ * and run the same steps; 3.11 divides by max and sums the plain squares.  The build
+ * for a 3.11 interpreter defines CC_HYPOT_CPYTHON311 (setup.py); the two differ only
+ * there.  Needs -ffp-contract=off: a fused multiply-add breaks the exact split.
+ * inf beats nan, as in CPython. */
+typedef struct {
+    double hi, lo;
+} cc_dl_t;
+
+/* a + b = hi + lo exactly, |a| >= |b| (Dekker's fast two-sum) */
+static inline cc_dl_t cc_dl_fast_sum(double a, double b)
+{
+    double x = a + b;
+    cc_dl_t r = {x, (a - x) + b};
+    return r;
+}
+
+/* x y = hi + lo exactly (Dekker's product on Veltkamp's split) */
+static inline cc_dl_t cc_dl_mul(double x, double y)
+{
+    double t = x * 134217729.0;
+    double xh = t - (t - x), xl = x - xh;
+    t = y * 134217729.0;
+    double yh = t - (t - y), yl = y - yh;
+    double p = xh * yh;
+    double q = xh * yl + xl * yh;
+    double z = p + q;
+    cc_dl_t r = {z, p - z + q + xl * yl};
+    return r;
+}
+
+/* the norm of (a, b), 0 <= a, b <= m, m = max(a, b) normal-scalable (m >= 2^-1024) */
+static inline double cc_norm2_scaled(double a, double b, double m)
+{
+    int e;
+    (void)frexp(m, &e);
+    double scale = ldexp(1.0, -e);
+    double v[2] = {a * scale, b * scale};
+    double csum = 1.0, frac1 = 0.0, frac2 = 0.0;
+    cc_dl_t pr, sm;
+    for (int i = 0; i < 2; i++) {
+        pr = cc_dl_mul(v[i], v[i]);
+        sm = cc_dl_fast_sum(csum, pr.hi);
+        csum = sm.hi;
+        frac1 += pr.lo;
+        frac2 += sm.lo;
+    }
+    double h = sqrt(csum - 1.0 + (frac1 + frac2));
+    pr = cc_dl_mul(-h, h);
+    sm = cc_dl_fast_sum(csum, pr.hi);
+    csum = sm.hi;
+    frac1 += pr.lo;
+    frac2 += sm.lo;
+    double x = csum - 1.0 + (frac1 + frac2);
+    h += x / (2.0 * h);
+    return h / scale;
+}
+
+static inline double cc_hypot(double x, double y)
+{
+    double a = fabs(x), b = fabs(y);
+    if (isinf(a) || isinf(b))
+        return INFINITY;
+    if (isnan(a) || isnan(b))
+        return NAN;
+    double m = a > b ? a : b;
+    if (m == 0.0)
+        return m;
+    int e;
+    (void)frexp(m, &e);
+    if (e >= -1023)
+        return cc_norm2_scaled(a, b, m);
+#ifdef CC_HYPOT_CPYTHON311
+    {
+        double v[2] = {a / m, b / m};
+        double csum = 1.0, frac = 0.0;
+        for (int i = 0; i < 2; i++) {
+            double s = v[i] * v[i];
+            double old = csum;
+            csum += s;
+            frac += (old - csum) + s;
+        }
+        return m * sqrt(csum - 1.0 + frac);
+    }
+#else
+    return DBL_MIN * cc_norm2_scaled(a / DBL_MIN, b / DBL_MIN, m / DBL_MIN);
+#endif
+}
 
 #endif /* CC_MATH_H */

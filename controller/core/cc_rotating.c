@@ -16,6 +16,16 @@ void cc_rot_init(cc_rot_t *r, double V_h, double wT, double inv_norm)
     r->accel = 0.0;
     r->mech = 0;
     r->l3 = r->torque = 0.0;
+    r->measured = 0;
+    r->amp_floor = 0.0;
+    cc_fo2_init(&r->lpf_m, 0.0, 0.0, 0.0);
+}
+
+void cc_rot_measured(cc_rot_t *r, double amp_floor)
+{
+    r->measured = 1;
+    r->amp_floor = amp_floor;
+    cc_fo2_init(&r->lpf_m, r->lpf.b0, r->lpf.b1, r->lpf.a1);
 }
 
 void cc_rot_mechanical(cc_rot_t *r, double T_s, double g1, double g2, double g3, double gt,
@@ -53,6 +63,7 @@ void cc_rot_reset(cc_est_t *e, cc_rot_t *r, double theta0)
     cc_fo2_reset(&r->hpf);
     cc_bq2_reset(&r->quad);
     cc_fo2_reset(&r->lpf_n);
+    cc_fo2_reset(&r->lpf_m);
 }
 
 void cc_rot_publish(cc_est_t *e, cc_rot_t *r, double th, double f, double err, double i_af,

@@ -9,12 +9,16 @@
  *                       quadrature twin, the positive one demodulating the negative;
  *   epf    (cc_epf.c),   Wen's [25]: two demodulation signals in the estimated frame.
  * Each gives err = f / norm (the model normalisation of controller/_rotating.py),
- * which drives the PLL (cc_pll.h).
+ * or with normalise = "measured" (cc_rot_measured) err = f / (2 max(|(f, g)|, floor)):
+ * g the quadrature of f through a second LPF (lpf_m), |.| cc_hypot (cc_math.h), floor
+ * the tenth of the model amplitude the estimator's module states; err drives the PLL
+ * (cc_pll.h).
  */
 #ifndef CC_ROTATING_H
 #define CC_ROTATING_H
 
 #include "cc_estimator.h"
+#include "cc_math.h"
 #include "cc_filters.h"
 #include "cc_luenberger.h"
 #include "cc_pll.h"
@@ -38,6 +42,10 @@ typedef struct {
     cc_fo2_t hpf;    /* sfhf */
     cc_bq2_t quad;   /* self-demod: the BPF's quadrature twin (s / w_h) H_B */
     cc_fo2_t lpf_n;  /* epf: the negative sequence's LPF (lpf_ab: the positive's) */
+    int measured;     /* normalise = "measured": the amplitude from f and its quadrature */
+    double amp_floor; /* the least amplitude err is normalised by (A^2 or A) */
+    cc_fo2_t lpf_m;   /* the LPF of (f, quadrature), lpf's coefficients (epf: of (f, its
+                       * quadrature) once more; tt-ab: unused, its lpf_ab gives both) */
 } cc_rot_t;
 
 /* constants; the caller initialises pll, bpf, lpf / lpf_ab, hpf with their _init */
@@ -69,6 +77,16 @@ static inline double cc_rot_theta(const cc_rot_t *r)
 /* observer = "mechanical" (after cc_rot_init): the Luenberger observer's gains and l3 */
 void cc_rot_mechanical(cc_rot_t *r, double T_s, double g1, double g2, double g3, double gt,
                        double l3);
+
+/* normalise = "measured" (after cc_rot_init and lpf's _init): err = f / (2 max(|(f, g)|,
+ * amp_floor)), lpf_m initialised with lpf's coefficients */
+void cc_rot_measured(cc_rot_t *r, double amp_floor);
+/* err of the measured normalisation: f / (2 max(cc_hypot(a, b), amp_floor)) */
+static inline double cc_rot_err_measured(const cc_rot_t *r, double f, double a, double b)
+{
+    double n = cc_hypot(a, b);
+    return f / (2.0 * (r->amp_floor > n ? r->amp_floor : n)); /* Python's max(n, amp_floor) */
+}
 
 /* shared by the demodulators: publish the estimate and step the observer */
 void cc_rot_publish(cc_est_t *e, cc_rot_t *r, double th, double f, double err, double i_af,

@@ -24,7 +24,15 @@ void cc_self_demod_step(cc_est_t *e, cc_rot_t *r, long long k, double i_a, doubl
     double m_i = 0.25 * (p_r * n_i + p_i * n_r);
     double c_2 = cos(2.0 * th);
     double s_2 = sin(2.0 * th);
-    double f = cc_fo_step(&r->lpf, m_i * c_2 - m_r * s_2);
-    double err = f * r->inv_norm;
+    double f, err;
+    if (r->measured) {
+        /* quadrature: Re{i_p i_n exp(-j 2 theta_hat)} = I_p I_n cos(2 dtheta + ...) */
+        double g;
+        cc_fo2_step(&r->lpf_m, m_i * c_2 - m_r * s_2, m_r * c_2 + m_i * s_2, &f, &g);
+        err = cc_rot_err_measured(r, f, f, g);
+    } else {
+        f = cc_fo_step(&r->lpf, m_i * c_2 - m_r * s_2);
+        err = f * r->inv_norm;
+    }
     cc_rot_publish(e, r, th, f, err, i_a - d_a, i_b - d_b);
 }

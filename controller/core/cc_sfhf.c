@@ -20,7 +20,15 @@ void cc_sfhf_step(cc_est_t *e, cc_rot_t *r, long long k, double i_a, double i_b)
     double ref = 2.0 * th - ph;
     double c_r = cos(ref);
     double s_r = sin(ref);
-    double f = cc_fo_step(&r->lpf, -(i_an * c_r + i_bn * s_r));
-    double err = f * r->inv_norm;
+    double f, err;
+    if (r->measured) {
+        /* quadrature: i_bn cos(ref) - i_an sin(ref) = I_n cos(2 dtheta) */
+        double g;
+        cc_fo2_step(&r->lpf_m, -(i_an * c_r + i_bn * s_r), i_bn * c_r - i_an * s_r, &f, &g);
+        err = cc_rot_err_measured(r, f, f, g);
+    } else {
+        f = cc_fo_step(&r->lpf, -(i_an * c_r + i_bn * s_r));
+        err = f * r->inv_norm;
+    }
     cc_rot_publish(e, r, th, f, err, i_a - i_ah, i_b - i_bh);
 }

@@ -12,6 +12,6 @@ void cc_tt_ab_step(cc_est_t *e, cc_rot_t *r, long long k, double i_a, double i_b
     cc_bq2_step(&r->bpf, i_a, i_b, &i_ah, &i_bh);
     cc_fo2_step(&r->lpf_ab, i_ah * i_bh, 0.5 * (i_ah * i_ah - i_bh * i_bh), &s_2, &c_2);
     double f = s_2 * cos(2.0 * th) - c_2 * sin(2.0 * th);
-    double err = f * r->inv_norm;
+    double err = r->measured ? cc_rot_err_measured(r, f, s_2, c_2) : f * r->inv_norm;
     cc_rot_publish(e, r, th, f, err, i_a - i_ah, i_b - i_bh);
 }

@@ -27,8 +27,16 @@ void cc_tt_dq_step(cc_est_t *e, cc_rot_t *r, long long k, double i_a, double i_b
         r->bpf.b2 = -b0;
     }
     cc_bq2_step(&r->bpf, i_d, i_q, &i_dh, &i_qh);
-    double f = cc_fo_step(&r->lpf, i_dh * i_qh);
-    double err = f * r->inv_norm;
+    double f, err;
+    if (r->measured) {
+        /* quadrature: LPF((i_dh^2 - i_qh^2)/2) = I_p I_n cos(2 dtheta) */
+        double g;
+        cc_fo2_step(&r->lpf_m, i_dh * i_qh, 0.5 * (i_dh * i_dh - i_qh * i_qh), &f, &g);
+        err = cc_rot_err_measured(r, f, f, g);
+    } else {
+        f = cc_fo_step(&r->lpf, i_dh * i_qh);
+        err = f * r->inv_norm;
+    }
     double i_df = i_d - i_dh;
     double i_qf = i_q - i_qh;
     if (r->accel_ff)
