@@ -81,8 +81,6 @@ setup(
             ["controller/_cctl.c", *sorted(glob.glob("controller/core/*.c"))],
             depends=sorted(glob.glob("controller/core/*.h")),
             extra_compile_args=["-O2", "-std=c99", "-ffp-contract=off", "-fno-fast-math"],
-            # cc_hypot rounds as this interpreter's math.hypot: 3.11's differs below 2^-1024
-            define_macros=[("CC_HYPOT_CPYTHON311", "1")] if sys.version_info < (3, 12) else [],
         ),
     ],
     cmdclass={"build_ext": OptionalBuildExt},
