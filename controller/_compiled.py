@@ -159,7 +159,9 @@ def build_core(ctrl: Any, core_type: Any = None) -> tuple[Any, str | None]:
             if hf.accel_ff:
                 core.accel_ff()
             tr_T_s = est.tracker.T_s
-            n_p, J = 0.0, 1.0
+            # observer = "mechanical": the Luenberger tracker's model, -n_p / J
+            mech = hf.mechanical
+            n_p, J = (float(hf.pll.n_p), hf.pll.J) if mech else (0.0, 1.0)
         else:
             _square_wave(core, hf)
             tr_T_s = hf.T_s

@@ -15,9 +15,12 @@ What it covers (:func:`compiled_cover`): the speed and current control of
 the alignment and run modes with the shipped estimators of
 :data:`COMPILED_ESTIMATORS`: ``tt-dq``,
 ``tt-ab``, ``sfhf``, ``self-demod`` and ``epf`` (Wen's references [27] and
-[25]; model normalisation), ``square-wave``,
+[25]), each with the model or the measured normalisation (``normalise``;
+the core's ``cc_hypot`` rounds as CPython's ``math.hypot``) and the PLL or
+the mechanical position observer (``observer``), ``square-wave``,
 ``square-wave-nocic``, ``sensored``, and the hybrids ``hybrid-tt-dq`` and
-``hybrid-square-wave`` (flux observer, hand-over band, trackers), with the
+``hybrid-square-wave`` (flux observer, hand-over band, trackers: tt-dq's
+PLL or mechanical observer, square-wave's Luenberger observer), with the
 current fed to the PIs filtered or raw, and the drive countermeasures of
 :mod:`controller._compensation` (dead-time feed-forward, cross-saturation
 correction, offset calibration: ``controller/core/cc_compensation.c``), and
@@ -33,10 +36,9 @@ called by the core directly, with no Python in the period. A controller
 outside it runs in
 Python whatever the choice, and says why in one line
 (:attr:`controller.Controller.engine_note`; ``bench run`` and ``bench
-controller`` print it, and the controller node's report keeps it): the
-measured normalisation, and the mechanical position observer (``observer =
-"mechanical"``) in hybrid-tt-dq (the core runs it in the other rotating
-demodulators). Inside it the core runs every period,
+controller`` print it, and the controller node's report keeps it): of the
+shipped estimators' options only a CIC delay line longer than the core's
+(square-wave's ``M`` above 64). Inside it the core runs every period,
 the start-up included, and keeps every state; the
 :class:`controller.Controller` holds it by composition and forwards its
 commands (:mod:`controller._compiled`).
@@ -96,7 +98,7 @@ KIND_EXTERNAL = 10
 
 #: The kinds with tt-dq's PLL, which take ``accel_ff`` (tt-dq, hybrid-tt-dq). The core runs
 #: every rotating-injection demodulator (tt-dq, tt-ab, sfhf, hybrid-tt-dq, self-demod, epf)
-#: with either ``normalise`` and ``observer = "mechanical"`` for each but the hybrid's tt-dq.
+#: with either ``normalise`` and either ``observer``.
 _ACCEL_FF_KINDS = (1, 6)
 
 
@@ -124,8 +126,6 @@ def compiled_cover(pars: Any) -> tuple[int, str | None]:
     if kind == KIND_EXTERNAL:
         return kind, None
     opts = dict(pars.estimator_options)
-    if kind == 6 and opts.get("observer", "pll") != "pll":
-        return 0, f"{name} with observer={opts['observer']!r} is not compiled: Python"
     if kind not in _ACCEL_FF_KINDS and opts.get("accel_ff", False):
         return 0, f"{name} with accel_ff is not compiled: the controller runs in Python"
     if kind in (4, 7) and int(opts.get("M", 2)) > 64:

@@ -243,20 +243,34 @@ def test_commands_and_reads_between_engines_keep_the_trace(
 
 @pytest.mark.parametrize("plant", PLANTS)
 @pytest.mark.parametrize(
-    ("scn_name", "estimator", "top_rpm", "t_ramp"),
+    ("scn_name", "estimator", "top_rpm", "t_ramp", "observer"),
     [
-        ("wide-speed-wen", "hybrid-tt-dq", 1300.0, 1.0),
-        ("wide-speed-xue", "hybrid-square-wave", 800.0, 1.5),
+        ("wide-speed-wen", "hybrid-tt-dq", 1300.0, 1.0, "pll"),
+        # tt-dq's mechanical observer as the hybrid's tracker (slaved above the band with
+        # its load state, its speed the schedule's below it)
+        ("wide-speed-wen", "hybrid-tt-dq", 1300.0, 1.0, "mechanical"),
+        ("wide-speed-xue", "hybrid-square-wave", 800.0, 1.5, None),
     ],
 )
 def test_hybrids_through_their_band_and_back_same_on_both_engines(
-    scn_name: str, estimator: str, top_rpm: float, t_ramp: float, plant: str
+    scn_name: str,
+    estimator: str,
+    top_rpm: float,
+    t_ramp: float,
+    observer: str | None,
+    plant: str,
+    tmp_path: Path,
 ) -> None:
     """A hybrid from standstill up through its whole hand-over band (the flux observer
     slaved, blended, alone with the injection off and the injection estimator slaved)
     and back into it, the reference a 100 Hz staircase: the same trace on both engines,
     on the drive plant with the cross-saturation offset taken from the injection estimate
-    alone and the dead-time sign from its faded HF current."""
+    alone and the dead-time sign from its faded HF current. hybrid-tt-dq with either
+    position observer of tt-dq (``observer``)."""
+    if observer is not None:
+        f = tmp_path / f"{observer}.toml"
+        f.write_text(f'extends = "{scn_name}"\n[estimator_options]\nobserver = "{observer}"\n')
+        scn_name = str(f)
     scn = _scenario(scn_name, plant)
     T = sample_period(scn)
     n0, n_up, n_top = round(0.4 / T), round(t_ramp / T), round(0.3 / T)
@@ -287,6 +301,9 @@ def test_hybrids_through_their_band_and_back_same_on_both_engines(
     py, c_py = _loop(scn_name, estimator, "python", n, events, speed_rpm=0.0, plant=plant)
     cc, c_cc = _loop(scn_name, estimator, "compiled", n, events, speed_rpm=0.0, plant=plant)
     assert (c_py.engine, c_cc.engine) == ("python", "compiled")
+    if observer is not None:  # the option reached the injection estimator
+        hf: Any = c_py.estimator.hf  # type: ignore[attr-defined]
+        assert hf.mechanical == (observer == "mechanical")
     first = next((k for k in range(n) if py[k] != cc[k]), None)
     assert first is None, f"the engines part at period {first}"
     # the run crossed the band both ways: the observer alone, then the injection back
@@ -311,12 +328,18 @@ def test_the_cover_and_the_reasons() -> None:
     pars = build_controller(scn, "tt-dq", "python").pars
     measured = replace(pars, estimator_options={"normalise": "measured"})
     assert resolve_controller_engine("auto", measured) == ("compiled", None)
-    # the mechanical observer is in the core, but for the hybrid's tt-dq
+    # the mechanical observer is in the core, the hybrid's tt-dq's included
     mech = replace(pars, estimator_options={"observer": "mechanical"})
     assert resolve_controller_engine("auto", mech) == ("compiled", None)
     hyb = replace(pars, estimator="hybrid-tt-dq", estimator_options={"observer": "mechanical"})
-    used, why = resolve_controller_engine("auto", hyb)
-    assert used == "python" and "hybrid-tt-dq with observer='mechanical'" in str(why)
+    assert resolve_controller_engine("auto", hyb) == ("compiled", None)
+    # every shipped estimator and option runs compiled but a CIC delay line longer than the
+    # core's (square-wave's M): that one runs in Python with the line saying why
+    for est in ("square-wave", "hybrid-square-wave"):
+        cic = replace(pars, estimator=est, estimator_options={"M": 64})
+        assert resolve_controller_engine("auto", cic) == ("compiled", None)
+        used, why = resolve_controller_engine("auto", replace(cic, estimator_options={"M": 65}))
+        assert used == "python" and f"{est} with a CIC delay M > 64" in str(why)
     # the countermeasures are in the core
     comp = CompensationPars(dead_time=True, cross_saturation=True, offset_calibration=True)
     drive = replace(pars, compensation=comp)
@@ -562,21 +585,21 @@ def test_a_plugin_that_raises_raises_the_same_on_both_engines(
 def test_bench_run_says_in_one_line_that_the_controller_runs_in_python(
     tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    """``bench run`` of hybrid-tt-dq with ``observer = "mechanical"`` (outside the core) on
-    ``--engine compiled``: the run completes (exit 0) on the Python controller, and stderr
-    has the one line saying why."""
+    """``bench run`` of square-wave with a CIC delay ``M = 65`` (longer than the core's
+    delay line, the one option outside the core) on ``--engine compiled``: the run
+    completes (exit 0) on the Python controller, and stderr has the one line saying why."""
     from bench.cli import main
     from tests.ports import free_port
 
     monkeypatch.setenv(ENGINE_ENV, "auto")  # restored after main() sets it to --engine
     out = tmp_path / "run"
-    scn = tmp_path / "mechanical.toml"
-    scn.write_text('extends = "wide-speed-wen"\n[estimator_options]\nobserver = "mechanical"\n')
-    argv = ["run", str(scn), "-e", "hybrid-tt-dq", "--engine", "compiled", "--duration", "0.05"]
+    scn = tmp_path / "long-cic.toml"
+    scn.write_text('extends = "xue-fig13"\n[estimator_options]\nM = 65\n')
+    argv = ["run", str(scn), "-e", "square-wave", "--engine", "compiled", "--duration", "0.05"]
     argv += ["--port", str(free_port()), "--out", str(out), "--quiet"]
     assert main(argv) == 0
     err = capsys.readouterr().err
-    line = "controller: hybrid-tt-dq with observer='mechanical' is not compiled: Python"
+    line = "controller: square-wave with a CIC delay M > 64 is not compiled: Python"
     assert line in err.splitlines()
     meta = json.loads((out / "meta.json").read_text())
     assert meta["node_reports"]["controller"]["engine"] == "python"

@@ -59,21 +59,34 @@ void cc_hyb_reset(cc_est_t *e, cc_hyb_t *h, double theta0)
     h->y = 0.0;
 }
 
-/* the tracker's smooth speed: the PLL's integrator, or the observer's speed */
+/* the tracker's smooth speed: the PLL's integrator, or the Luenberger observer's speed
+ * (square-wave's, or tt-dq's with observer = "mechanical") */
 static double tracker_w_smooth(const cc_hyb_t *h)
 {
-    return h->square ? h->sqw->obs.w_hat : h->rot->pll.w_i;
+    if (h->square)
+        return h->sqw->obs.w_hat;
+    return h->rot->mech ? h->rot->luen.w_hat : h->rot->pll.w_i;
+}
+
+/* a Luenberger tracker released without an acceleration error: its load state is what
+ * the model dw/dt = n_p tau / J + x lacks */
+static void luen_sync(const cc_hyb_t *h, cc_luen_t *o, double theta, double w, double accel,
+                      double torque)
+{
+    cc_luen_reset(o, theta, w, accel + h->tr_k_x * torque);
 }
 
 static void tracker_sync(cc_hyb_t *h, double theta, double w, double accel, double torque)
 {
-    if (!h->square) { /* its state is one period ahead */
+    if (h->square) {
+        luen_sync(h, &h->sqw->obs, theta, w, accel, torque);
+    } else if (h->rot->mech) { /* tt-dq's mechanical observer: one period ahead */
+        luen_sync(h, &h->rot->luen, theta + h->tr_T_s * w, w, accel, torque);
+    } else { /* tt-dq's PLL: one period ahead */
         cc_pll_t *p = &h->rot->pll;
         p->theta_hat = cc_mod(theta + h->tr_T_s * w, CC_TWO_PI);
         p->w_hat = w;
         p->w_i = w;
-    } else { /* released without an acceleration error */
-        cc_luen_reset(&h->sqw->obs, theta, w, accel + h->tr_k_x * torque);
     }
 }
 

@@ -4,9 +4,9 @@
  *   theta_hat = theta_HF + lam wrap(theta_obs - theta_HF),  w_hat = w_HF + lam (w_obs - w_HF)
  *   injection scaled by g;  (lam, g) from the schedule speed y, the play operator on |w|
  *   (y follows |w| down at once, up with a lag h), ramps w_lo..w_mid and w_mid..w_hi.
- * The injection estimator is tt-dq (its PLL tracker) or square-wave (its Luenberger
- * tracker); above the band it is slaved to the observer (sync), below it the observer
- * is slaved to it. */
+ * The injection estimator is tt-dq (its PLL tracker, or with observer = "mechanical"
+ * its Luenberger observer, cc_rotating.h) or square-wave (its Luenberger tracker); above
+ * the band it is slaved to the observer (sync), below it the observer is slaved to it. */
 #ifndef CC_HYBRID_H
 #define CC_HYBRID_H
 
@@ -22,13 +22,13 @@ double cc_band_play(const cc_band_t *b, double y, double w);
 void cc_band_weights(const cc_band_t *b, double y, double *lam, double *g);
 
 typedef struct {
-    int square;           /* 0: tt-dq and its PLL tracker; 1: square-wave and its observer */
+    int square;           /* 0: tt-dq and its PLL or mechanical observer; 1: square-wave */
     cc_est_t hf;          /* the injection estimator's published estimate */
     cc_rot_t *rot;        /* the injection estimator (one of the two) */
     cc_sqw_t *sqw;
     cc_flux_t obs;
     cc_band_t band;
-    double tr_T_s, tr_k_x; /* the trackers' constants: T_s; -n_p / J */
+    double tr_T_s, tr_k_x; /* the trackers' constants: T_s; -n_p / J (a Luenberger one) */
     double weight, gain, y;
     /* the angle (rad) by which the injection estimator's saliency axis leads the rotor's
      * (cross-saturation, cc_compensation.h), set by the controller before each step and
