@@ -777,7 +777,7 @@ static PyObject *cctl_hypot(PyObject *Py_UNUSED(m), PyObject *const *args, Py_ss
 
 static PyMethodDef module_methods[] = {
     {"hypot", (PyCFunction)(void (*)(void))cctl_hypot, METH_FASTCALL,
-     "hypot(x, y): the core's cc_hypot, rounded as this interpreter's math.hypot"},
+     "hypot(x, y): the core's cc_hypot, rounded as CPython 3.12+'s math.hypot"},
     {NULL, NULL, 0, NULL},
 };
 
