@@ -11,6 +11,7 @@ Python loop, and asking for the C loop where it cannot serve names the reason.
 from __future__ import annotations
 
 import shutil
+from collections.abc import Sequence
 from dataclasses import replace
 from typing import Any
 
@@ -41,7 +42,7 @@ def _key(m: can.Message) -> tuple[int, bool, bool, bool, bytes]:
     return (m.arbitration_id, m.is_extended_id, m.is_fd, m.bitrate_switch, bytes(m.data))
 
 
-def _both(scn: Any, estimator: str) -> tuple[list[can.Message], list[can.Message]]:
+def _both(scn: Any, estimator: str) -> tuple[Sequence[can.Message], Sequence[can.Message]]:
     codec = Codec()
     py = loops.run_inprocess(scn, estimator, codec, loop="python")
     native = loops.run_inprocess(scn, estimator, codec, loop="native")
@@ -89,7 +90,7 @@ def test_run_inprocess_runs_the_pair_by_default(monkeypatch: pytest.MonkeyPatch)
     calls: list[int] = []
     real = _pair.run_pair
 
-    def counted(*a: Any, **k: Any) -> list[can.Message]:
+    def counted(*a: Any, **k: Any) -> Sequence[can.Message]:
         calls.append(1)
         return real(*a, **k)
 

@@ -8,7 +8,9 @@ period.  It returns only to feed the nodes a bench command (the same schedule
 as the Python loop: :data:`bench.nodes._loops.INPROCESS_LEAD` periods ahead),
 to apply a command due at the controller, to take the recorded frames when
 their buffer is full, and at the end.  The frames it returns are those of the
-Python loop, bit for bit and in the same order (``tests/test_native_pair.py``).
+Python loop, bit for bit and in the same order (``tests/test_native_pair.py``), as
+one :class:`~bench.wire._frames.FrameArray`: the record buffer's rows, with no
+:class:`can.Message` made unless a consumer asks for one.
 
 :func:`pair_unavailable` says why a pair cannot run native (one line), or None:
 the plant node's and the controller node's own reasons (``[[faults]]``, noise,
@@ -27,6 +29,7 @@ import numpy as np
 
 from bench._errors import BenchError
 from bench.nodes.native._native import BN_BRS, BN_EXT, BN_FD, Frame
+from bench.wire._frames import FRAME_DTYPE, FrameArray
 
 __all__ = ["PairRun", "pair_unavailable", "run_pair"]
 
@@ -127,26 +130,19 @@ _FRAME_DTYPE = np.dtype(
 )
 
 
-def _messages(rec: Any, n: int) -> list[can.Message]:
-    """The first ``n`` recorded frames as :class:`can.Message` (as the codec makes them)."""
+def _rows(rec: Any, n: int) -> FrameArray:
+    """The first ``n`` recorded frames as rows of :data:`~bench.wire._frames.FRAME_DTYPE`
+    (the fields a :class:`can.Message` of the codec gets: no time stamp)."""
     a = np.frombuffer(rec, dtype=_FRAME_DTYPE, count=n)
-    ids = a["id"].tolist()
-    lens = a["len"].tolist()
-    flags = a["flags"].tolist()
-    raw = a["data"].tobytes()
-    Message = can.Message
-    mask = BN_EXT | BN_FD | BN_BRS
-    flag = [(bool(f & BN_EXT), bool(f & BN_FD), bool(f & BN_BRS)) for f in range(mask + 1)]
-    out = []
-    for j in range(n):
-        ext, fd, brs = flag[flags[j] & mask]
-        o = 64 * j
-        # can.Message's parameters in order: timestamp, arbitration_id, is_extended_id,
-        # is_remote_frame, is_error_frame, channel, dlc, data, is_fd, is_rx, bitrate_switch
-        out.append(
-            Message(0.0, ids[j], ext, False, False, None, None, raw[o : o + lens[j]], fd, True, brs)
-        )
-    return out
+    rows = np.zeros(n, dtype=FRAME_DTYPE)
+    rows["id"] = a["id"]
+    rows["len"] = a["len"]
+    flags = a["flags"]
+    rows["extended"] = (flags & BN_EXT) != 0
+    rows["fd"] = (flags & BN_FD) != 0
+    rows["brs"] = (flags & BN_BRS) != 0
+    rows["data"] = a["data"]
+    return FrameArray(rows)
 
 
 def run_pair(
@@ -156,8 +152,10 @@ def run_pair(
     lead: int,
     *,
     measure: PairRun | None = None,
-) -> list[can.Message]:
-    """``run_inprocess``'s loop on the pair (module docstring); every frame in wire order.
+) -> FrameArray:
+    """``run_inprocess``'s loop on the pair (module docstring); every frame in wire order,
+    as one :class:`~bench.wire._frames.FrameArray` (a :class:`can.Message` is made only
+    where a consumer asks for one).
 
     ``pn``, ``cn``: the plant and controller nodes as built; ``cmds``: the bench's
     commands by step (:func:`bench.nodes._loops.command_frames`); ``lead``: how far
@@ -168,7 +166,8 @@ def run_pair(
     from bench.nodes.native.controller_node import EV_DUE, NativeController
 
     dll = _lib()
-    frames: list[can.Message] = []
+    #: the frames so far, a block per return of C (the commands fed in between as theirs)
+    parts: list[FrameArray] = []
     sent = 0
     #: commands fed while frames wait in the record buffer: (frames before them, command)
     fed: list[tuple[int, can.Message]] = []
@@ -178,7 +177,7 @@ def run_pair(
         while sent < len(cmds) and cmds[sent][0] <= up_to:
             m = cmds[sent][1]
             if nc is None:
-                frames.append(m)
+                parts.append(FrameArray.from_messages([m]))
             else:
                 fed.append((int(P.n_rec), m))
             pn.on_message(m)
@@ -186,14 +185,14 @@ def run_pair(
             sent += 1
 
     def flush() -> None:
-        """The recorded frames into ``frames``, with the commands fed among them."""
-        got = _messages(rec, int(P.n_rec))
+        """The recorded frames into ``parts``, with the commands fed among them."""
+        got = _rows(rec, int(P.n_rec))
         at = 0
         for pos, m in fed:
-            frames.extend(got[at:pos])
-            frames.append(m)
+            parts.append(FrameArray(got.rows[at:pos]))
+            parts.append(FrameArray.from_messages([m]))
             at = pos
-        frames.extend(got[at:])
+        parts.append(FrameArray(got.rows[at:]))
         fed.clear()
         P.n_rec = 0
 
@@ -270,4 +269,4 @@ def run_pair(
         measure.wall_seconds += time.perf_counter() - t_start
         measure.plant_seconds += 1e-9 * P.plant_ns
         measure.ctl_seconds += 1e-9 * P.ctl_ns
-    return frames
+    return FrameArray.concatenate(parts)
