@@ -26,6 +26,7 @@ from bench.scenarios._setup import n_steps
 from bench.studies._plants import plant_variant
 from bench.studies._reliability import run_trace
 from bench.wire._codec import Codec
+from bench.wire._frames import FrameArray
 from controller import compiled_controller_missing
 
 pytestmark = [
@@ -118,6 +119,9 @@ def test_the_pair_returns_to_python_only_at_commands_and_the_end() -> None:
     # at most: one feed and one due command per command, the buffer's returns, the end
     assert m.calls <= 2 * len(cmds) + len(frames) // (1 << 16) + 2
     assert m.calls < m.steps / 10
+    # the frames come back as one array, timed apart from C and the rest
+    assert isinstance(frames, FrameArray) and len(frames) >= 3 * m.steps
+    assert 0 < m.frames_seconds < m.wall_seconds - m.c_seconds
 
 
 def test_asking_for_the_pair_where_it_cannot_serve_names_why() -> None:

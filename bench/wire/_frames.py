@@ -78,13 +78,6 @@ class FrameArray(Sequence[can.Message]):
             r["data"][: len(d)] = np.frombuffer(d, dtype=np.uint8)
         return cls(rows)
 
-    @staticmethod
-    def concatenate(parts: Sequence[FrameArray]) -> FrameArray:
-        """The frames of ``parts`` one after the other (their rows)."""
-        if not parts:
-            return FrameArray(np.zeros(0, dtype=FRAME_DTYPE))
-        return FrameArray(np.concatenate([p.rows for p in parts]))
-
     def messages(self) -> list[can.Message]:
         """Every frame as a :class:`can.Message`, made once (class docstring)."""
         if self._made is None:

@@ -26,6 +26,7 @@ from typing import Any
 
 import can
 import numpy as np
+import numpy.typing as npt
 
 from bench._errors import BenchError
 from bench.nodes.native._native import BN_BRS, BN_EXT, BN_FD, Frame
@@ -106,8 +107,10 @@ def pair_unavailable(pn: Any, cn: Any, *, latency: bool) -> str | None:
 
 class PairRun:
     """What :func:`run_pair` measured: periods advanced, calls into C, the seconds inside
-    them, and the whole call's; with ``timed``, the seconds inside each unit (two clock
-    reads more per frame and per period, so not in the same run as ``c_seconds``)."""
+    them, and the whole call's; of the rest, ``frames_seconds`` made the frames'
+    :class:`~bench.wire._frames.FrameArray` from the record buffer (the commands fed
+    among them); with ``timed``, the seconds inside each unit (two clock reads more per
+    frame and per period, so not in the same run as ``c_seconds``)."""
 
     def __init__(self, timed: bool = False) -> None:
         self.timed = timed
@@ -117,6 +120,7 @@ class PairRun:
         self.wall_seconds = 0.0
         self.plant_seconds = 0.0
         self.ctl_seconds = 0.0
+        self.frames_seconds = 0.0
 
 
 #: ``bn_frame_t`` as numpy reads the record buffer (bn.h; checked against :class:`Frame`).
@@ -130,19 +134,42 @@ _FRAME_DTYPE = np.dtype(
 )
 
 
-def _rows(rec: Any, n: int) -> FrameArray:
-    """The first ``n`` recorded frames as rows of :data:`~bench.wire._frames.FRAME_DTYPE`
-    (the fields a :class:`can.Message` of the codec gets: no time stamp)."""
-    a = np.frombuffer(rec, dtype=_FRAME_DTYPE, count=n)
-    rows = np.zeros(n, dtype=FRAME_DTYPE)
-    rows["id"] = a["id"]
-    rows["len"] = a["len"]
-    flags = a["flags"]
-    rows["extended"] = (flags & BN_EXT) != 0
-    rows["fd"] = (flags & BN_FD) != 0
-    rows["brs"] = (flags & BN_BRS) != 0
-    rows["data"] = a["data"]
-    return FrameArray(rows)
+class _Rows:
+    """The run's frames as rows of :data:`~bench.wire._frames.FRAME_DTYPE`, written in
+    place into one array grown by doubling (a fresh array per block and a concatenation
+    at the end cost more than the C loop: page faults on a busy machine)."""
+
+    def __init__(self, cap: int) -> None:
+        self.rows = np.zeros(max(cap, 1), dtype=FRAME_DTYPE)
+        self.n = 0
+
+    def _room(self, k: int) -> npt.NDArray[np.void]:
+        if self.n + k > len(self.rows):
+            more = np.zeros(max(2 * len(self.rows), self.n + k), dtype=FRAME_DTYPE)
+            more[: self.n] = self.rows[: self.n]
+            self.rows = more
+        at = self.n
+        self.n += k
+        return self.rows[at : self.n]
+
+    def recorded(self, rec: Any, lo: int, hi: int) -> None:
+        """Frames ``lo`` to ``hi`` of the record buffer (the fields a :class:`can.Message`
+        of the codec gets: no time stamp)."""
+        a = np.frombuffer(rec, dtype=_FRAME_DTYPE, count=hi)[lo:]
+        r = self._room(hi - lo)
+        r["id"] = a["id"]
+        r["len"] = a["len"]
+        flags = a["flags"]
+        r["extended"] = (flags & BN_EXT) != 0
+        r["fd"] = (flags & BN_FD) != 0
+        r["brs"] = (flags & BN_BRS) != 0
+        r["data"] = a["data"]
+
+    def message(self, m: can.Message) -> None:
+        self._room(1)[:] = FrameArray.from_messages([m]).rows
+
+    def frames(self) -> FrameArray:
+        return FrameArray(self.rows[: self.n])
 
 
 def run_pair(
@@ -166,8 +193,9 @@ def run_pair(
     from bench.nodes.native.controller_node import EV_DUE, NativeController
 
     dll = _lib()
-    #: the frames so far, a block per return of C (the commands fed in between as theirs)
-    parts: list[FrameArray] = []
+    #: the frames so far (the commands fed in between as theirs): about four a period
+    out = _Rows(4 * pn.n_steps + len(cmds) + 64)
+    frames_s = 0.0  # seconds spent in flush (PairRun.frames_seconds)
     sent = 0
     #: commands fed while frames wait in the record buffer: (frames before them, command)
     fed: list[tuple[int, can.Message]] = []
@@ -177,7 +205,7 @@ def run_pair(
         while sent < len(cmds) and cmds[sent][0] <= up_to:
             m = cmds[sent][1]
             if nc is None:
-                parts.append(FrameArray.from_messages([m]))
+                out.message(m)
             else:
                 fed.append((int(P.n_rec), m))
             pn.on_message(m)
@@ -185,16 +213,18 @@ def run_pair(
             sent += 1
 
     def flush() -> None:
-        """The recorded frames into ``parts``, with the commands fed among them."""
-        got = _rows(rec, int(P.n_rec))
+        """The recorded frames into ``out``, with the commands fed among them."""
+        nonlocal frames_s
+        t0 = time.perf_counter()
         at = 0
         for pos, m in fed:
-            parts.append(FrameArray(got.rows[at:pos]))
-            parts.append(FrameArray.from_messages([m]))
+            out.recorded(rec, at, pos)
+            out.message(m)
             at = pos
-        parts.append(FrameArray(got.rows[at:]))
+        out.recorded(rec, at, int(P.n_rec))
         fed.clear()
         P.n_rec = 0
+        frames_s += time.perf_counter() - t0
 
     nc: NativeController | None = None
 
@@ -262,11 +292,13 @@ def run_pair(
         flush()
         sync.pull()
         nc.merge()
+    t_end = time.perf_counter()
     if measure is not None:
         measure.steps += int(P.steps)
         measure.c_seconds += c_s
         measure.calls += calls
-        measure.wall_seconds += time.perf_counter() - t_start
+        measure.wall_seconds += t_end - t_start
+        measure.frames_seconds += frames_s
         measure.plant_seconds += 1e-9 * P.plant_ns
         measure.ctl_seconds += 1e-9 * P.ctl_ns
-    return FrameArray.concatenate(parts)
+    return out.frames()
