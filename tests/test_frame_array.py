@@ -73,15 +73,20 @@ def test_a_frame_array_reads_as_its_messages() -> None:
     with pytest.raises(ValueError, match="65 data bytes"):
         FrameArray.from_messages([can.Message(data=bytes(65), is_fd=True)])
     duty = Codec().frame_id("PwmDuty")
-    picked = with_ids(fa, (duty,))
+    picked = with_ids(FrameArray.from_messages(msgs), (duty,))
     assert isinstance(picked, FrameArray)
     assert [_fields(m) for m in picked] == [_fields(m) for m in msgs if m.arbitration_id == duty]
     assert with_ids(msgs, (duty,)) is msgs
-    # once made, the messages are kept: a time stamp set stays (a capture's writer)
+    # once made, the messages are kept: a time stamp set stays (a capture's writer),
+    # and readers of the whole block take them, not the rows
+    fa = FrameArray.from_messages(msgs)
+    assert not fa.made
     for j, m in enumerate(fa):
         m.timestamp = 10.0 + j
+    assert fa.made
     assert [m.timestamp for m in fa] == [10.0 + j for j in range(len(msgs))]
     assert fa[1:3][0].timestamp == 11.0
+    assert with_ids(fa, (duty,)) is fa
 
 
 def test_decode_batch_reads_the_columns_with_the_same_result(
@@ -108,6 +113,14 @@ def test_decode_batch_reads_the_columns_with_the_same_result(
     assert a.index.tolist() == b.index.tolist() == [0, 6]
     for k, v in b.signals.items():
         assert np.array_equal(a.signals[k], v), k
+    # a message changed after they were made is what a whole-block reader sees
+    monkeypatch.undo()
+    fa2 = FrameArray.from_messages(msgs)
+    fa2[0].data = bytearray(8)  # its CRC no longer holds
+    assert decode_batch(fa2, codec).rejected == {
+        **want.rejected,
+        "bad_crc": want.rejected["bad_crc"] + 1,
+    }
 
 
 @pytest.mark.skipif(not any(shutil.which(c) for c in ("cc", "gcc")), reason="needs a C compiler")

@@ -139,7 +139,7 @@ def decode_batch(frames: Sequence[can.Message], codec: Codec) -> BatchDecoded:
     """
     n = len(frames)
     res = BatchDecoded(messages={}, frames=n)
-    rows = frames.rows if isinstance(frames, FrameArray) else None
+    rows = frames.rows if isinstance(frames, FrameArray) and not frames.made else None
     if rows is not None:  # the block's columns: no can.Message made
         keys = rows["id"].astype(np.int64) | np.where(rows["extended"], _EXTENDED, 0)
         keys[rows["error"] | rows["remote"]] = _SKIP

@@ -8,7 +8,7 @@ more than the run's arithmetic.  :class:`FrameArray` keeps them as rows of
 iteration asked for makes the messages (the fields the codec gives them), once,
 so every consumer that takes a list of frames takes it unchanged.  Those that look at the whole block at once
 (:func:`bench.wire._batch_decode.decode_batch`) read :attr:`FrameArray.rows`
-without any message being made.
+without any message being made, as long as none has been (:attr:`FrameArray.made`).
 """
 
 from __future__ import annotations
@@ -84,6 +84,12 @@ class FrameArray(Sequence[can.Message]):
             self._made = self._messages(self.rows)
         return self._made
 
+    @property
+    def made(self) -> bool:
+        """True once the messages are made: a consumer may have changed them, so a reader
+        of the whole block takes the messages, not ``rows``."""
+        return self._made is not None
+
     def __len__(self) -> int:
         return len(self.rows)
 
@@ -132,6 +138,6 @@ def with_ids(frames: Sequence[can.Message], ids: Iterable[int]) -> Sequence[can.
     """The frames of ``frames`` whose identifier is one of ``ids``, in order, for a scan
     over a few messages: a :class:`FrameArray`'s rows selected by column (no
     :class:`can.Message` made for the others); any other sequence as it is."""
-    if not isinstance(frames, FrameArray):
+    if not isinstance(frames, FrameArray) or frames.made:
         return frames
     return FrameArray(frames.rows[np.isin(frames.rows["id"], np.fromiter(ids, dtype=np.uint32))])
