@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import subprocess
 import sys
+from collections.abc import Sequence
 from pathlib import Path
 
 import can
@@ -55,7 +56,7 @@ def _build(out: Path, estimator: str) -> Path:
     return out / "ref_controller"
 
 
-def _table(frames: list[can.Message]) -> dict[str, np.ndarray]:
+def _table(frames: Sequence[can.Message]) -> dict[str, np.ndarray]:
     scn = load_scenario(str(SCENARIO))
     cap = analyze_frames(frames, Codec(), T_s=sample_period(scn), n_p=get_preset(scn).motor.n_p)
     return cap.table

@@ -10,6 +10,7 @@ the ``faults`` entries of metrics.json equal.
 from __future__ import annotations
 
 import json
+from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -111,7 +112,7 @@ _PER_STEP = {
 }
 
 
-def _frames_by_step(frames: list[can.Message]) -> dict[tuple[int, int], bytes]:
+def _frames_by_step(frames: Sequence[can.Message]) -> dict[tuple[int, int], bytes]:
     """Each per-step frame by (identifier, step unwrapped); the recorder frames without run_id;
     a frame the codec rejects (babble's) by (identifier, -1 - its payload's hash) (a set:
     a lockstep resend repeats it)."""

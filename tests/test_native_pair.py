@@ -11,6 +11,7 @@ Python loop, and asking for the C loop where it cannot serve names the reason.
 from __future__ import annotations
 
 import shutil
+from collections.abc import Sequence
 from dataclasses import replace
 from typing import Any
 
@@ -25,6 +26,7 @@ from bench.scenarios._setup import n_steps
 from bench.studies._plants import plant_variant
 from bench.studies._reliability import run_trace
 from bench.wire._codec import Codec
+from bench.wire._frames import FrameArray
 from controller import compiled_controller_missing
 
 pytestmark = [
@@ -41,7 +43,7 @@ def _key(m: can.Message) -> tuple[int, bool, bool, bool, bytes]:
     return (m.arbitration_id, m.is_extended_id, m.is_fd, m.bitrate_switch, bytes(m.data))
 
 
-def _both(scn: Any, estimator: str) -> tuple[list[can.Message], list[can.Message]]:
+def _both(scn: Any, estimator: str) -> tuple[Sequence[can.Message], Sequence[can.Message]]:
     codec = Codec()
     py = loops.run_inprocess(scn, estimator, codec, loop="python")
     native = loops.run_inprocess(scn, estimator, codec, loop="native")
@@ -89,7 +91,7 @@ def test_run_inprocess_runs_the_pair_by_default(monkeypatch: pytest.MonkeyPatch)
     calls: list[int] = []
     real = _pair.run_pair
 
-    def counted(*a: Any, **k: Any) -> list[can.Message]:
+    def counted(*a: Any, **k: Any) -> Sequence[can.Message]:
         calls.append(1)
         return real(*a, **k)
 
@@ -117,6 +119,9 @@ def test_the_pair_returns_to_python_only_at_commands_and_the_end() -> None:
     # at most: one feed and one due command per command, the buffer's returns, the end
     assert m.calls <= 2 * len(cmds) + len(frames) // (1 << 16) + 2
     assert m.calls < m.steps / 10
+    # the frames come back as one array, timed apart from C and the rest
+    assert isinstance(frames, FrameArray) and len(frames) >= 3 * m.steps
+    assert 0 < m.frames_seconds < m.wall_seconds - m.c_seconds
 
 
 def test_asking_for_the_pair_where_it_cannot_serve_names_why() -> None:

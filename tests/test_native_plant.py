@@ -17,6 +17,7 @@ import os
 import random
 import subprocess
 import sys
+from collections.abc import Sequence
 from pathlib import Path
 
 import can
@@ -43,7 +44,7 @@ def lib() -> ctypes.CDLL:
     return _plant_native.load_plant_lib()
 
 
-def _by_step(frames: list[can.Message]) -> dict[tuple[int, int], bytes]:
+def _by_step(frames: Sequence[can.Message]) -> dict[tuple[int, int], bytes]:
     """Each per-step frame by (identifier, step unwrapped); PlantTruth without its run_id."""
     out: dict[tuple[int, int], bytes] = {}
     last: dict[int, int] = {}

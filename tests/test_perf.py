@@ -81,6 +81,9 @@ def test_perf_quick_writes_every_figure_and_renders_the_docs(
     assert nat["plant_us"] > 0 and nat["controller_us"] > 0
     assert nat["python_loop_wall_us_per_step_tt_dq"] > 0
     assert 0 < nat["returns_per_1000_steps"] < 1000
+    # the whole loop's split (medians over the runs): the frames' rows, Python at the returns
+    assert 0 < nat["frames_us_per_step"] < nat["wall_us_per_step_tt_dq"]
+    assert 0 < nat["returns_us_per_step"] < nat["wall_us_per_step_tt_dq"]
     assert (
         res["verdicts"]["inprocess_native_us_per_step_tt_dq"]["value"] == (nat["us_per_step_tt_dq"])
     )

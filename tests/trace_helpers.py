@@ -3,6 +3,7 @@ helpers the reliability study uses (bench/studies/_reliability.py)."""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any
 
 import can
@@ -21,7 +22,7 @@ def short(name: str, duration: float, **lat: Any) -> Scenario:
     return scn
 
 
-def trace(frames: list[can.Message], scn: Scenario) -> dict[str, np.ndarray]:
+def trace(frames: Sequence[can.Message], scn: Scenario) -> dict[str, np.ndarray]:
     """The per-step table of a run's frames."""
     return run_trace(frames, scn)
 

@@ -241,7 +241,7 @@ def run_inprocess(
     engine: str = "auto",
     observe: Callable[[Controller], None] | None = None,
     loop: str = "auto",
-) -> list[can.Message]:
+) -> Sequence[can.Message]:
     """Run a scenario in lockstep in this process; return every frame in wire order.
 
     The frames are the same objects the CAN nodes would send (same DBC
@@ -256,7 +256,8 @@ def run_inprocess(
 
     ``loop``: ``auto`` (the default) runs the loop in C, both nodes stepped for many
     periods per call (:func:`bench.nodes.native._pair.run_pair`, the same frames bit
-    for bit), wherever both nodes can serve natively and neither ``plant_times`` nor
+    for bit, returned as one :class:`bench.wire._frames.FrameArray`: a
+    :class:`can.Message` is made only where one is asked for), wherever both nodes can serve natively and neither ``plant_times`` nor
     ``observe`` asks for Python between periods, else the Python loop below;
     ``python`` asks for the Python loop, ``native`` for the C one (:class:`BenchError`
     naming why not, when it cannot serve).

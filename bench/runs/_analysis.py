@@ -14,7 +14,7 @@ whose content differs) and out-of-order counters (counted).
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 
 import can
@@ -247,7 +247,7 @@ def analyze_frames(
     """
     from bench.wire._batch_decode import decode_batch
 
-    seq = frames if isinstance(frames, list) else list(frames)
+    seq = frames if isinstance(frames, Sequence) else list(frames)
     dec = decode_batch(seq, codec)
     cap = Capture(
         table={},
@@ -427,7 +427,7 @@ def read_csv(path: str) -> dict[str, Array]:
     return {n: np.asarray(arr[n], dtype=float) for n in arr.dtype.names or ()}
 
 
-def measure_latency(frames: list[can.Message], codec: Codec) -> dict[str, dict[str, float]]:
+def measure_latency(frames: Sequence[can.Message], codec: Codec) -> dict[str, dict[str, float]]:
     """Wall-clock latency across a link, per direction, from a two-bus capture.
 
     ``frames`` must carry ``channel`` 1 (plant side, bus A) and 2 (controller

@@ -9,6 +9,8 @@ the warning lines that go with it.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import json
 import math
 import platform
@@ -42,6 +44,7 @@ from bench.scenarios._setup import (
     sample_period,
 )
 from bench.wire._codec import Codec
+from bench.wire._frames import with_ids
 from bench.wire._protocol import unwrap
 
 
@@ -218,7 +221,7 @@ def scoring_scenario(scn: Scenario, t_first: float, t_end: float) -> tuple[Scena
 
 
 def finish_run(
-    frames: list[can.Message],
+    frames: Sequence[can.Message],
     codec: Codec,
     scn: Scenario,
     out_dir: Path,
@@ -500,7 +503,7 @@ def hybrid_band_metrics(
     )
 
 
-def plant_fault(frames: list[can.Message], codec: Codec) -> tuple[str, int]:
+def plant_fault(frames: Sequence[can.Message], codec: Codec) -> tuple[str, int]:
     """The plant's first protection trip in a capture: (fault name, period), or ("none", -1).
 
     From the ``PlantStatus`` frames the plant sends when it trips; their
@@ -513,7 +516,7 @@ def plant_fault(frames: list[can.Message], codec: Codec) -> tuple[str, int]:
     id_status, id_truth = codec.frame_id("PlantStatus"), codec.frame_id("PlantTruth")
     m = 1 << codec.step_bits("PlantStatus")
     last_truth: can.Message | None = None
-    for f in frames:
+    for f in with_ids(frames, (id_status, id_truth)):
         if f.arbitration_id == id_truth:
             last_truth = f
         elif f.arbitration_id == id_status:
@@ -527,7 +530,7 @@ def plant_fault(frames: list[can.Message], codec: Codec) -> tuple[str, int]:
     return "none", -1
 
 
-def plant_status_counters(frames: list[can.Message], codec: Codec) -> dict[str, int] | None:
+def plant_status_counters(frames: Sequence[can.Message], codec: Codec) -> dict[str, int] | None:
     """The counters of the capture's last valid ``PlantStatus`` (None: the capture has none).
 
     ``late_frames`` (periods without their own duty plus duties rejected) and
@@ -535,7 +538,7 @@ def plant_status_counters(frames: list[can.Message], codec: Codec) -> dict[str, 
     the last frame holds the run's totals (saturated at 65535).
     """
     id_status = codec.frame_id("PlantStatus")
-    for f in reversed(frames):
+    for f in reversed(with_ids(frames, (id_status,))):
         if f.arbitration_id == id_status:
             d = codec.decode(f)
             if d is not None and d.reason is None:

@@ -29,7 +29,7 @@ import signal
 import subprocess
 import sys
 import time
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
@@ -713,7 +713,7 @@ def _node_reports(out_dir: Path) -> dict[str, Any]:
 
 
 def _partial_scoring(
-    frames: list[can.Message], codec: Codec, scn: Scenario, T_s: float, meta: dict[str, Any]
+    frames: Sequence[can.Message], codec: Codec, scn: Scenario, T_s: float, meta: dict[str, Any]
 ) -> Scenario:
     """The scenario a partial run is scored with: ``bench analyze``'s rule on its span."""
     from bench.runs._analysis import analyze_frames
@@ -729,7 +729,7 @@ def _partial_scoring(
 
 
 def _score(
-    frames: list[can.Message],
+    frames: Sequence[can.Message],
     codec: Codec,
     scn: Scenario,
     out_dir: Path,

@@ -443,11 +443,15 @@ def inprocess_native_section(n_steps: int, repeats: int) -> dict[str, Any]:
     ``us_per_step_tt_dq``: the time inside the C calls per period (the start-up's
     periods included: one call covers many periods), median of ``repeats`` runs;
     ``wall_us_per_step_tt_dq``: the whole loop's per period, with the returns to Python
-    (a bench command fed, a command due) and every frame made a :class:`can.Message`;
-    ``returns_per_1000_steps``; ``plant_us`` and ``controller_us``: each unit's share
-    per period, from one more run with the units timed (two clock reads more per frame
-    and per period); ``python_loop_wall_us_per_step_tt_dq``: the Python loop's whole run
-    per period on the same scenario (one run, the same cores).
+    (a bench command fed, a command due) and the frames handed over as one
+    :class:`~bench.wire._frames.FrameArray` (no :class:`can.Message` made); its split,
+    from the same runs: ``frames_us_per_step`` the frames' rows written from the
+    record buffer, ``returns_us_per_step`` the rest outside C (the returns' Python, the
+    nodes built and merged); ``returns_per_1000_steps``; ``plant_us`` and
+    ``controller_us``: each unit's share per period, from one more run with the units
+    timed (two clock reads more per frame and per period);
+    ``python_loop_wall_us_per_step_tt_dq``: the Python loop's whole run per period on
+    the same scenario (one run, the same cores).
     """
     from bench.nodes._loops import (
         INPROCESS_LEAD,
@@ -486,6 +490,10 @@ def inprocess_native_section(n_steps: int, repeats: int) -> dict[str, Any]:
     return {
         "us_per_step_tt_dq": statistics.median(1e6 * r.c_seconds / r.steps for r in runs),
         "wall_us_per_step_tt_dq": statistics.median(1e6 * r.wall_seconds / r.steps for r in runs),
+        "frames_us_per_step": statistics.median(1e6 * r.frames_seconds / r.steps for r in runs),
+        "returns_us_per_step": statistics.median(
+            1e6 * (r.wall_seconds - r.c_seconds - r.frames_seconds) / r.steps for r in runs
+        ),
         "returns_per_1000_steps": 1e3 * runs[0].calls / steps,
         "plant_us": 1e6 * timed.plant_seconds / timed.steps,
         "controller_us": 1e6 * timed.ctl_seconds / timed.steps,
@@ -1291,10 +1299,27 @@ def figures_sections(res: dict[str, Any]) -> list[str]:
                 ["of which the plant unit (units timed)", _num(nat["plant_us"], "us")],
                 ["of which the controller unit (units timed)", _num(nat["controller_us"], "us")],
                 [
-                    "the whole loop, frames made Python objects "
+                    "the whole loop, the frames handed over as one array "
+                    f"({_num(nat['returns_per_1000_steps'])} returns per 1,000 steps)"
+                    if "frames_us_per_step" in nat
+                    else "the whole loop, frames made Python objects "
                     f"({_num(nat['returns_per_1000_steps'])} returns per 1,000 steps)",
                     _num(nat["wall_us_per_step_tt_dq"], "us"),
                 ],
+                *(
+                    [
+                        [
+                            "of which the frames' rows written from the record buffer",
+                            _num(nat["frames_us_per_step"], "us"),
+                        ],
+                        [
+                            "of which Python at the returns (commands fed, nodes built)",
+                            _num(nat["returns_us_per_step"], "us"),
+                        ],
+                    ]
+                    if "frames_us_per_step" in nat
+                    else []
+                ),
                 [
                     'the Python loop on the same cores (`run_inprocess(..., loop="python")`)',
                     _num(nat["python_loop_wall_us_per_step_tt_dq"], "us"),

@@ -32,7 +32,7 @@ import sys
 import tempfile
 import time
 from collections import deque
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
@@ -85,7 +85,7 @@ def _loadavg() -> float:
         return float("nan")
 
 
-def run_trace(frames: list[can.Message], scn: Any) -> dict[str, np.ndarray]:
+def run_trace(frames: Sequence[can.Message], scn: Any) -> dict[str, np.ndarray]:
     """The per-step table of a run's frames (the preset's pole pairs)."""
     from bench.runs._analysis import analyze_frames
     from bench.scenarios._setup import get_preset, sample_period

@@ -31,6 +31,7 @@ import numpy.typing as npt
 
 from bench.wire._codec import REJECT_BAD_CRC, REJECT_BAD_LENGTH, REJECT_OUT_OF_RANGE, Codec, _Spec
 from bench.wire._e2e import CRC8_J1850_TABLE
+from bench.wire._frames import FrameArray
 
 __all__ = ["BatchDecoded", "MessageBatch", "decode_batch"]
 
@@ -133,19 +134,26 @@ def decode_batch(frames: Sequence[can.Message], codec: Codec) -> BatchDecoded:
 
     The result per message holds exactly the frames :meth:`Codec.decode`
     accepts, with the same values; rejected frames are counted by reason.
+    A :class:`~bench.wire._frames.FrameArray` is read from its columns, without a
+    :class:`can.Message` made (but for a message decoded frame by frame).
     """
     n = len(frames)
     res = BatchDecoded(messages={}, frames=n)
-    keys = np.fromiter(
-        (
-            _SKIP
-            if m.is_error_frame or m.is_remote_frame
-            else (m.arbitration_id | _EXTENDED if m.is_extended_id else m.arbitration_id)
-            for m in frames
-        ),
-        dtype=np.int64,
-        count=n,
-    )
+    rows = frames.rows if isinstance(frames, FrameArray) and not frames.made else None
+    if rows is not None:  # the block's columns: no can.Message made
+        keys = rows["id"].astype(np.int64) | np.where(rows["extended"], _EXTENDED, 0)
+        keys[rows["error"] | rows["remote"]] = _SKIP
+    else:
+        keys = np.fromiter(
+            (
+                _SKIP
+                if m.is_error_frame or m.is_remote_frame
+                else (m.arbitration_id | _EXTENDED if m.is_extended_id else m.arbitration_id)
+                for m in frames
+            ),
+            dtype=np.int64,
+            count=n,
+        )
     specs: dict[int, _Spec] = codec._by_id
     res.skipped = int(np.count_nonzero(keys == _SKIP))
     order = np.argsort(keys, kind="stable")
@@ -161,17 +169,24 @@ def decode_batch(frames: Sequence[can.Message], codec: Codec) -> BatchDecoded:
         if not _vector_ok(spec):
             res.messages[spec.name] = _decode_one_by_one(codec, spec, frames, idx, res)
             continue
-        payloads = list(map(_DATA, map(frames.__getitem__, idx)))
         L = spec.length
-        lens = np.fromiter(map(len, payloads), dtype=np.int64, count=len(payloads))
+        if rows is not None:
+            lens = rows["len"][idx_arr].astype(np.int64)
+        else:
+            payloads = list(map(_DATA, map(frames.__getitem__, idx)))
+            lens = np.fromiter(map(len, payloads), dtype=np.int64, count=len(payloads))
         good_len = lens == L
-        n_bad_len = int(len(payloads) - np.count_nonzero(good_len))
+        n_bad_len = int(len(lens) - np.count_nonzero(good_len))
         if n_bad_len:
             res.rejected[REJECT_BAD_LENGTH] = res.rejected.get(REJECT_BAD_LENGTH, 0) + n_bad_len
             idx_arr = idx_arr[good_len]
-            payloads = [p for p, g in zip(payloads, good_len.tolist(), strict=True) if g]
-        data = np.frombuffer(b"".join(payloads), dtype=np.uint8).reshape(len(payloads), L)
-        ok = np.ones(len(payloads), dtype=bool)
+            if rows is None:
+                payloads = [p for p, g in zip(payloads, good_len.tolist(), strict=True) if g]
+        if rows is not None:
+            data = np.ascontiguousarray(rows["data"][idx_arr, :L])
+        else:
+            data = np.frombuffer(b"".join(payloads), dtype=np.uint8).reshape(len(payloads), L)
+        ok = np.ones(len(data), dtype=bool)
         if spec.crc_index >= 0:
             ok = _crc_ok(spec, data)
             n_bad = int(len(ok) - np.count_nonzero(ok))

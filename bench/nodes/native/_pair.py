@@ -8,7 +8,9 @@ period.  It returns only to feed the nodes a bench command (the same schedule
 as the Python loop: :data:`bench.nodes._loops.INPROCESS_LEAD` periods ahead),
 to apply a command due at the controller, to take the recorded frames when
 their buffer is full, and at the end.  The frames it returns are those of the
-Python loop, bit for bit and in the same order (``tests/test_native_pair.py``).
+Python loop, bit for bit and in the same order (``tests/test_native_pair.py``), as
+one :class:`~bench.wire._frames.FrameArray`: the record buffer's rows, with no
+:class:`can.Message` made unless a consumer asks for one.
 
 :func:`pair_unavailable` says why a pair cannot run native (one line), or None:
 the plant node's and the controller node's own reasons (``[[faults]]``, noise,
@@ -24,9 +26,11 @@ from typing import Any
 
 import can
 import numpy as np
+import numpy.typing as npt
 
 from bench._errors import BenchError
 from bench.nodes.native._native import BN_BRS, BN_EXT, BN_FD, Frame
+from bench.wire._frames import FRAME_DTYPE, FrameArray
 
 __all__ = ["PairRun", "pair_unavailable", "run_pair"]
 
@@ -103,8 +107,10 @@ def pair_unavailable(pn: Any, cn: Any, *, latency: bool) -> str | None:
 
 class PairRun:
     """What :func:`run_pair` measured: periods advanced, calls into C, the seconds inside
-    them, and the whole call's; with ``timed``, the seconds inside each unit (two clock
-    reads more per frame and per period, so not in the same run as ``c_seconds``)."""
+    them, and the whole call's; of the rest, ``frames_seconds`` made the frames'
+    :class:`~bench.wire._frames.FrameArray` from the record buffer (the commands fed
+    among them); with ``timed``, the seconds inside each unit (two clock reads more per
+    frame and per period, so not in the same run as ``c_seconds``)."""
 
     def __init__(self, timed: bool = False) -> None:
         self.timed = timed
@@ -114,6 +120,7 @@ class PairRun:
         self.wall_seconds = 0.0
         self.plant_seconds = 0.0
         self.ctl_seconds = 0.0
+        self.frames_seconds = 0.0
 
 
 #: ``bn_frame_t`` as numpy reads the record buffer (bn.h; checked against :class:`Frame`).
@@ -127,26 +134,42 @@ _FRAME_DTYPE = np.dtype(
 )
 
 
-def _messages(rec: Any, n: int) -> list[can.Message]:
-    """The first ``n`` recorded frames as :class:`can.Message` (as the codec makes them)."""
-    a = np.frombuffer(rec, dtype=_FRAME_DTYPE, count=n)
-    ids = a["id"].tolist()
-    lens = a["len"].tolist()
-    flags = a["flags"].tolist()
-    raw = a["data"].tobytes()
-    Message = can.Message
-    mask = BN_EXT | BN_FD | BN_BRS
-    flag = [(bool(f & BN_EXT), bool(f & BN_FD), bool(f & BN_BRS)) for f in range(mask + 1)]
-    out = []
-    for j in range(n):
-        ext, fd, brs = flag[flags[j] & mask]
-        o = 64 * j
-        # can.Message's parameters in order: timestamp, arbitration_id, is_extended_id,
-        # is_remote_frame, is_error_frame, channel, dlc, data, is_fd, is_rx, bitrate_switch
-        out.append(
-            Message(0.0, ids[j], ext, False, False, None, None, raw[o : o + lens[j]], fd, True, brs)
-        )
-    return out
+class _Rows:
+    """The run's frames as rows of :data:`~bench.wire._frames.FRAME_DTYPE`, written in
+    place into one array grown by doubling (a fresh array per block and a concatenation
+    at the end cost more than the C loop: page faults on a busy machine)."""
+
+    def __init__(self, cap: int) -> None:
+        self.rows = np.zeros(max(cap, 1), dtype=FRAME_DTYPE)
+        self.n = 0
+
+    def _room(self, k: int) -> npt.NDArray[np.void]:
+        if self.n + k > len(self.rows):
+            more = np.zeros(max(2 * len(self.rows), self.n + k), dtype=FRAME_DTYPE)
+            more[: self.n] = self.rows[: self.n]
+            self.rows = more
+        at = self.n
+        self.n += k
+        return self.rows[at : self.n]
+
+    def recorded(self, rec: Any, lo: int, hi: int) -> None:
+        """Frames ``lo`` to ``hi`` of the record buffer (the fields a :class:`can.Message`
+        of the codec gets: no time stamp)."""
+        a = np.frombuffer(rec, dtype=_FRAME_DTYPE, count=hi)[lo:]
+        r = self._room(hi - lo)
+        r["id"] = a["id"]
+        r["len"] = a["len"]
+        flags = a["flags"]
+        r["extended"] = (flags & BN_EXT) != 0
+        r["fd"] = (flags & BN_FD) != 0
+        r["brs"] = (flags & BN_BRS) != 0
+        r["data"] = a["data"]
+
+    def message(self, m: can.Message) -> None:
+        self._room(1)[:] = FrameArray.from_messages([m]).rows
+
+    def frames(self) -> FrameArray:
+        return FrameArray(self.rows[: self.n])
 
 
 def run_pair(
@@ -156,8 +179,10 @@ def run_pair(
     lead: int,
     *,
     measure: PairRun | None = None,
-) -> list[can.Message]:
-    """``run_inprocess``'s loop on the pair (module docstring); every frame in wire order.
+) -> FrameArray:
+    """``run_inprocess``'s loop on the pair (module docstring); every frame in wire order,
+    as one :class:`~bench.wire._frames.FrameArray` (a :class:`can.Message` is made only
+    where a consumer asks for one).
 
     ``pn``, ``cn``: the plant and controller nodes as built; ``cmds``: the bench's
     commands by step (:func:`bench.nodes._loops.command_frames`); ``lead``: how far
@@ -168,7 +193,9 @@ def run_pair(
     from bench.nodes.native.controller_node import EV_DUE, NativeController
 
     dll = _lib()
-    frames: list[can.Message] = []
+    #: the frames so far (the commands fed in between as theirs): about four a period
+    out = _Rows(4 * pn.n_steps + len(cmds) + 64)
+    frames_s = 0.0  # seconds spent in flush (PairRun.frames_seconds)
     sent = 0
     #: commands fed while frames wait in the record buffer: (frames before them, command)
     fed: list[tuple[int, can.Message]] = []
@@ -178,7 +205,7 @@ def run_pair(
         while sent < len(cmds) and cmds[sent][0] <= up_to:
             m = cmds[sent][1]
             if nc is None:
-                frames.append(m)
+                out.message(m)
             else:
                 fed.append((int(P.n_rec), m))
             pn.on_message(m)
@@ -186,16 +213,18 @@ def run_pair(
             sent += 1
 
     def flush() -> None:
-        """The recorded frames into ``frames``, with the commands fed among them."""
-        got = _messages(rec, int(P.n_rec))
+        """The recorded frames into ``out``, with the commands fed among them."""
+        nonlocal frames_s
+        t0 = time.perf_counter()
         at = 0
         for pos, m in fed:
-            frames.extend(got[at:pos])
-            frames.append(m)
+            out.recorded(rec, at, pos)
+            out.message(m)
             at = pos
-        frames.extend(got[at:])
+        out.recorded(rec, at, int(P.n_rec))
         fed.clear()
         P.n_rec = 0
+        frames_s += time.perf_counter() - t0
 
     nc: NativeController | None = None
 
@@ -263,11 +292,13 @@ def run_pair(
         flush()
         sync.pull()
         nc.merge()
+    t_end = time.perf_counter()
     if measure is not None:
         measure.steps += int(P.steps)
         measure.c_seconds += c_s
         measure.calls += calls
-        measure.wall_seconds += time.perf_counter() - t_start
+        measure.wall_seconds += t_end - t_start
+        measure.frames_seconds += frames_s
         measure.plant_seconds += 1e-9 * P.plant_ns
         measure.ctl_seconds += 1e-9 * P.ctl_ns
-    return frames
+    return out.frames()

@@ -74,7 +74,16 @@ int64_t bn_plant_raw(const bn_sig_t *s, double v)
 {
     /* Codec.encode: wrap or clip the physical value */
     if (s->modulus) {
-        double r = py_mod(py_round((v - s->offset) / s->scale), (double)s->modulus);
+        double w = py_round((v - s->offset) / s->scale), r;
+        if (fabs(w) < 0x1p62 && s->modulus > 0) {
+            /* a whole number: its remainder in integers is fmod's exactly (both are exact);
+             * a zero remainder comes out +0.0 where fmod keeps -0.0, which no raw value
+             * below tells apart (0 * scale + offset, then rounded to a whole number) */
+            int64_t q = (int64_t)w % s->modulus;
+            r = (double)(q < 0 ? q + s->modulus : q);
+        } else {
+            r = py_mod(w, (double)s->modulus);
+        }
         v = r * s->scale + s->offset;
     } else if (v < s->lo) {
         v = s->lo;
@@ -84,6 +93,11 @@ int64_t bn_plant_raw(const bn_sig_t *s, double v)
     /* bench.wire._hotcodec._raw_expr: cantools' numeric_scaled_to_raw */
     if (s->scale == 1.0 && s->offset == 0.0) return (int64_t)py_round(v);
     double x = v - s->offset, q, m;
+    /* x / scale not a whole number: x is no whole multiple of scale (one would divide
+     * exactly), so divmod's remainder is not 0 and the raw value is round(x / scale);
+     * the remainder (fmod) only for a quotient that is whole */
+    double d = x / s->scale;
+    if (d != floor(d)) return (int64_t)py_round(d);
     py_divmod(x, s->scale, &q, &m);
     return (int64_t)py_round(m == 0.0 ? q : x / s->scale);
 }
@@ -363,8 +377,9 @@ static int sends(bn_plant_t *u, int bit, int64_t k)
     return 0;
 }
 
-/* PlantNode.frames_now */
-void bn_plant_frames_now(bn_plant_t *u)
+/* PlantNode.frames_now; i_now: the plant's phase currents now when the caller has them
+ * (plant_currents of the same state: the same numbers), else NULL */
+static void frames_now(bn_plant_t *u, const double *i_now)
 {
     plant *pl = u->pl;
     int64_t k = u->k;
@@ -374,7 +389,10 @@ void bn_plant_frames_now(bn_plant_t *u)
         memcpy(i, pl->meas, sizeof i);
         uu = pl->meas[3];
     } else {
-        plant_currents(pl, i);
+        if (i_now != NULL && !u->faults.on) /* a fault edge may have changed the legs */
+            memcpy(i, i_now, sizeof i);
+        else
+            plant_currents(pl, i);
         uu = pl->u_dc;
     }
     measure(u, i, uu, meas);
@@ -481,6 +499,8 @@ void bn_plant_frames_now(bn_plant_t *u)
     u->sent_head++;
 }
 
+void bn_plant_frames_now(bn_plant_t *u) { frames_now(u, NULL); }
+
 int bn_plant_ready(const bn_plant_t *u)
 {
     int64_t t = u->k - u->delay;
@@ -537,9 +557,11 @@ static void step_plant(bn_plant_t *u, double d_a, double d_b, double d_c, int en
         plant_step_off(pl, t0);
     u->k++;
     if (pl->t_meas > 0.0) u->meas_k = u->k;
+    double i[3];
+    int have_i = 0; /* the currents of the state after the step, for the frames too */
     if (u->has_prot && u->fault == PLANT_FAULT_NONE) { /* PlantNode._check_protection */
-        double i[3];
         plant_currents(pl, i);
+        have_i = 1;
         int code = plant_protection_check(&u->prot, i[0], i[1], i[2], pl->u_dc, pl->x.w_m);
         if (code != PLANT_FAULT_NONE) trip(u, code);
     }
@@ -550,7 +572,7 @@ static void step_plant(bn_plant_t *u, double d_a, double d_b, double d_c, int en
                      u->fault != PLANT_FAULT_NONE ? BENCH_DBC_PLANT_STATUS_STATE_FAULT_CHOICE
                                                   : BENCH_DBC_PLANT_STATUS_STATE_RUNNING_CHOICE,
                      u->fault);
-    bn_plant_frames_now(u);
+    frames_now(u, have_i ? i : NULL);
 }
 
 static int64_t clamp_age(int64_t a) { return a < 0 ? 0 : (a > 254 ? 254 : a); }
@@ -602,8 +624,12 @@ static void advance_lockstep(bn_plant_t *u)
         u->duty_age = (int32_t)(k - t < 254 ? k - t : 254);
         memcpy(d, slot->d, sizeof d);
         en = slot->en;
-        for (int j = 0; j < BN_PLANT_RING; j++)
-            if (u->duties[j].tag >= 0 && u->duties[j].tag <= t) u->duties[j].tag = -1;
+        /* every duty up to t is used up (tag 0..t: -1); t > 0 here, so one unsigned
+         * comparison is both bounds, and the loop has no branch to mispredict */
+        for (int j = 0; j < BN_PLANT_RING; j++) {
+            int64_t tag = u->duties[j].tag;
+            u->duties[j].tag = (uint64_t)tag <= (uint64_t)t ? -1 : tag;
+        }
         if (u->faults.shift_ls != NULL) delayed(u, k, t, d, &en);
     }
     if (u->fault != PLANT_FAULT_NONE) {
