@@ -243,7 +243,9 @@ def stop_nodes(
                 ctrl.wait(timeout=10.0)
             except subprocess.TimeoutExpired:
                 pass
-        time.sleep(0.2)
+        if any(p.poll() is None for _, p in procs):
+            # a node still running (the link, a controller behind it) answers the last frames
+            time.sleep(0.2)
     for role, p in procs:
         if p.poll() is None:
             p.send_signal(signal.SIGTERM)
