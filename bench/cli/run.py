@@ -135,7 +135,7 @@ def cmd_run(args: argparse.Namespace) -> int:
             controller=args.controller,
             dut_timeout=args.dut_timeout,
             dut_name=args.dut_name,
-            # the controller built once here (a misfit is one line), while the nodes start
+            # a controller node that cannot start: the controller built here names the misfit
             check=None if external else functools.partial(build_controller_check, scn, est),
         )
     finally:

@@ -28,7 +28,6 @@ import os
 import signal
 import subprocess
 import sys
-import threading
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -121,39 +120,6 @@ def _catch_signals() -> Iterator[_Interrupt]:
             signal.signal(s, h)
 
 
-class _Check:
-    """A check of a run's settings (:func:`run_scenario`'s ``check``) in a thread of its own.
-
-    ``bench run`` builds the run's controller once in its own process, so that a
-    misfit is one line naming the scenario and the estimator; the build
-    (importing scipy.signal, the controller's design) takes about as long as a
-    node's start-up, which it now overlaps: the process mostly waits for the
-    nodes' ``READY`` meanwhile.
-    """
-
-    def __init__(self, fn: Callable[[], object]) -> None:
-        self.exc: BaseException | None = None
-
-        def target() -> None:
-            try:
-                fn()
-            except BaseException as e:  # handed to the main thread by error()
-                self.exc = e
-
-        self.thread = threading.Thread(target=target, name="settings check", daemon=True)
-        self.thread.start()
-
-    def error(self) -> str | None:
-        """Wait for the check; its :class:`BenchError` line (None: it passed); any other
-        exception is raised here, in the caller's thread."""
-        self.thread.join()
-        if self.exc is None:
-            return None
-        if isinstance(self.exc, BenchError):
-            return str(self.exc)
-        raise self.exc
-
-
 def build_native_libraries() -> None:
     """Build the native node loops' library here, before the nodes start, if it is not in
     the user's cache yet (bench/nodes/native: built once per source change).
@@ -200,10 +166,11 @@ def run_scenario(
         ``dut_timeout`` seconds, else the run ends with a :class:`BenchError`
         naming the duty frames the bench rejected.
         ``check``: a check of the run's settings that takes a while (``bench run``:
-        building the controller once, :func:`bench.scenarios._setup.check_estimator_fits`),
-        done in a thread while the nodes start (:class:`_Check`); its
-        :class:`BenchError` ends the run before its start command, named before
-        any node's failure, with nothing recorded.
+        building the controller, :func:`bench.scenarios._setup.build_controller_check`),
+        done only when a node failed to start: the controller node builds the same
+        controller before its ``READY`` and fails on the same misfit, which the
+        check then names in its own line (its :class:`BenchError`) in place of the
+        node's exit; nothing is recorded.
     """
     codec = codec or Codec()
     if mode == "lockstep" and (err := lockstep_error(scn.faults, scn.source)):
@@ -257,7 +224,6 @@ def run_scenario(
     pacer: CommandPacer | None = None
     with _catch_signals() as interrupted:
         try:
-            checking = _Check(check) if check is not None else None
             start_error = _bus_in_use(rec, spec, interrupted)
             rec.expect_run(run_id)
             try:
@@ -266,9 +232,12 @@ def run_scenario(
                     start_nodes(roles, plan_file, out_dir, env, procs, stop=interrupted)
             except BenchError as e:  # a node that never became ready: nothing to record
                 start_error = str(e)
-            if checking is not None:
-                # the settings' own line comes first: a node that failed on them says less
-                start_error = checking.error() or start_error
+            if start_error is not None and check is not None:
+                # a node that failed on the run's settings says less than their own check
+                try:
+                    check()
+                except BenchError as e:
+                    start_error = str(e)
             if start_error is None:
                 pacer = CommandPacer(
                     scn,
