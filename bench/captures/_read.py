@@ -32,6 +32,7 @@ from bench.runs._results import (
     scoring_scenario,
 )
 from bench.scenarios._schema import Scenario, load_scenario, scenario_from_dict
+from bench.wire._canimport import load_mf4
 from bench.wire._codec import Codec
 
 #: Suffixes python-can reads (``.mf4`` needs ``asammdf``), in the order a folder is searched.
@@ -136,6 +137,8 @@ def _text_tail(path: Path) -> tuple[int | None, bool]:
 
 def _open_reader(path: Path) -> Iterable[can.Message]:
     """python-can's reader of a binary capture (text ones: :func:`_read_text_lines`)."""
+    if path.suffix.lower() == ".mf4":
+        load_mf4()  # python-can's MF4 support, left out of the command line's start-up
     return can.LogReader(str(path))
 
 

@@ -24,6 +24,10 @@ import sys
 from typing import Any, NoReturn
 
 from bench._errors import BenchError, error_line
+from bench.wire._canimport import import_can_without_mf4
+
+# every process of a run starts here: python-can without asammdf (bench.wire._canimport)
+import_can_without_mf4()
 
 #: The subcommand modules, in the order ``bench --help`` lists them.
 SUBCOMMANDS = (

@@ -3,8 +3,9 @@
 ``bench run`` starts ``bench plant``, ``bench controller`` and, when latency
 is injected, ``bench link`` as OS processes, each on the run's plan
 (``plan.json``, :mod:`bench.nodes._plan`), with its stderr in ``ROLE.log``
-and its counters in ``ROLE.json`` of the run folder.  A node is
-started only once the previous one has printed ``READY``.
+and its counters in ``ROLE.json`` of the run folder.  The nodes start
+together (their imports and set-up overlap) and the run goes on once each
+has printed ``READY``: none sends a frame before the run's start command.
 
 Each node runs in a session (process group) of its own, so that a Ctrl-C
 on the terminal reaches ``bench run`` alone, which stops the nodes in order
@@ -167,15 +168,19 @@ def start_nodes(
     *,
     stop: Any,
 ) -> None:
-    """Start each role's process on the run's plan and wait for its ``READY``; appended to
-    ``procs`` as started.
+    """Start each role's process on the run's plan, all at once, and wait for every
+    ``READY``; appended to ``procs`` as started.
 
     Every node reads ``plan_file`` (``bench ROLE --plan FILE``) and nothing else of
     the run; the plant and the controller write their report to ``ROLE.json``.
+    The nodes are started together: each spends its start-up (imports, the
+    controller's design, opening the bus) before its ``READY``, and none sends
+    before the run's start command, so their order matters only in which
+    failure is named first (the link, the controller, the plant).
     ``procs`` is filled in place so that the caller can kill what was started
-    when a later node fails to start.  ``stop()`` (a signal came) ends the
-    start-up early.
+    when a node fails to start.  ``stop()`` (a signal came) ends the start-up early.
     """
+    started: list[tuple[str, subprocess.Popen[str]]] = []
     for role, extra in roles:
         if stop():
             return
@@ -195,7 +200,9 @@ def start_nodes(
             preexec_fn=functools.partial(die_with_parent, os.getpid()),
         )
         procs.append((role, p))
-        _wait_ready(p, role, log, stop=stop)
+        started.append((role, p))
+    for role, p in started:
+        _wait_ready(p, role, out_dir / f"{role}.log", stop=stop)
 
 
 def stop_nodes(
@@ -236,7 +243,9 @@ def stop_nodes(
                 ctrl.wait(timeout=10.0)
             except subprocess.TimeoutExpired:
                 pass
-        time.sleep(0.2)
+        if any(p.poll() is None for _, p in procs):
+            # a node still running (the link, a controller behind it) answers the last frames
+            time.sleep(0.2)
     for role, p in procs:
         if p.poll() is None:
             p.send_signal(signal.SIGTERM)

@@ -180,21 +180,58 @@ def socket_drops(bus: can.BusABC) -> int | None:
     return None
 
 
-def drain(recorders: list[Recorder], quiet_s: float = 0.5, limit_s: float = 10.0) -> None:
+#: How often :func:`drain` looks (s): the recorders' notifier timeout
+#: (:class:`Recording`), the longest their thread blocks in a receive before it looks again.
+DRAIN_POLL_S = 0.05
+
+
+def queued_bytes(bus: can.BusABC) -> int | None:
+    """What waits unread in the bus's socket (``FIONREAD``: for a UDP socket the size of
+    the next datagram, 0 when none); None where the bus or its socket cannot say (a
+    SocketCAN raw socket, an adapter without a file descriptor, not Linux)."""
+    try:
+        import fcntl
+        import struct
+        import termios
+
+        fd = bus.fileno()
+        if not isinstance(fd, int) or fd < 0:
+            return None
+        n = struct.unpack("i", fcntl.ioctl(fd, termios.FIONREAD, b"\0\0\0\0"))[0]
+    except (ImportError, AttributeError, NotImplementedError, OSError, ValueError):
+        return None
+    return int(n)
+
+
+def drain(
+    recorders: list[Recorder],
+    quiet_s: float = 0.5,
+    limit_s: float = 10.0,
+    buses: list[can.BusABC] | None = None,
+) -> None:
     """Wait until the recorders have read what is still queued in their sockets.
 
     On a slow host (User-Mode Linux) the recorder thread lags the nodes by
     thousands of frames; stopping it as soon as the nodes end would lose them.
-    Returns once no frame came in for ``quiet_s``, or after ``limit_s``.
+    Called once the nodes have ended.  Returns once every socket of ``buses``
+    says it is empty (:func:`queued_bytes`) and no frame came in for one look
+    (:data:`DRAIN_POLL_S`): a frame the recorder thread has taken from its socket
+    is recorded before its notifier's ``stop()`` lets it end.  Where a socket
+    cannot say: once no frame came in for ``quiet_s``.  At most ``limit_s``.
     """
-    t_end = time.monotonic() + limit_s
-    last = -1
-    while time.monotonic() < t_end:
+    t0 = time.monotonic()
+    last, t_last = -1, t0
+    while time.monotonic() - t0 < limit_s:
         n = sum(len(r.frames) for r in recorders)
-        if n == last:
-            return
-        last = n
-        time.sleep(quiet_s)
+        now = time.monotonic()
+        if n != last:
+            last, t_last = n, now
+        else:
+            queued = [queued_bytes(b) for b in buses or []]
+            empty = bool(queued) and all(q == 0 for q in queued)
+            if now - t_last >= (DRAIN_POLL_S if empty else quiet_s):
+                return
+        time.sleep(DRAIN_POLL_S)
 
 
 class Recording:
@@ -227,7 +264,7 @@ class Recording:
         for r in self.recorders[1:]:
             r.lock = self.recorders[0].lock  # one writer: one lock, or the capture is corrupted
         self.notifiers = [
-            can.Notifier(b, [r], timeout=0.05)
+            can.Notifier(b, [r], timeout=DRAIN_POLL_S)
             for b, r in zip(self.buses, self.recorders, strict=True)
         ]
 
@@ -282,7 +319,7 @@ class Recording:
         return sorted((m for r in self.recorders for m in r.frames), key=lambda m: m.timestamp)
 
     def close(self) -> None:
-        drain(self.recorders)
+        drain(self.recorders, buses=self.buses)
         for nt in self.notifiers:
             nt.stop()
         drops = [socket_drops(b) for b in self.buses]

@@ -29,7 +29,7 @@ import signal
 import subprocess
 import sys
 import time
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
@@ -153,6 +153,7 @@ def run_scenario(
     controller: str = "bench",
     dut_timeout: float = DUT_TIMEOUT_S,
     dut_name: str | None = None,
+    check: Callable[[], object] | None = None,
 ) -> RunResult:
     """Run ``scn`` with ``estimator`` between two processes on ``spec``'s bus.
 
@@ -164,6 +165,12 @@ def run_scenario(
         (named ``dut_name`` in the labels) must send its first valid duty within
         ``dut_timeout`` seconds, else the run ends with a :class:`BenchError`
         naming the duty frames the bench rejected.
+        ``check``: a check of the run's settings that takes a while (``bench run``:
+        building the controller, :func:`bench.scenarios._setup.build_controller_check`),
+        done only when a node failed to start: the controller node builds the same
+        controller before its ``READY`` and fails on the same misfit, which the
+        check then names in its own line (its :class:`BenchError`) in place of the
+        node's exit; nothing is recorded.
     """
     codec = codec or Codec()
     if mode == "lockstep" and (err := lockstep_error(scn.faults, scn.source)):
@@ -225,6 +232,12 @@ def run_scenario(
                     start_nodes(roles, plan_file, out_dir, env, procs, stop=interrupted)
             except BenchError as e:  # a node that never became ready: nothing to record
                 start_error = str(e)
+            if start_error is not None and check is not None:
+                # a node that failed on the run's settings says less than their own check
+                try:
+                    check()
+                except BenchError as e:
+                    start_error = str(e)
             if start_error is None:
                 pacer = CommandPacer(
                     scn,

@@ -536,13 +536,21 @@ def check_estimator_name(est: str, option: str = "--estimator") -> str:
 
 
 def check_estimator_fits(scn: Scenario, est: str) -> str | None:
-    """Build the controller once, so a misfit is one line before any process starts.
+    """Build the controller once, so a misfit is one line before any run starts.
 
     Returns the line to tell the user when some of the scenario's estimator
     options are left out (:func:`options_note`: one scenario serves every
     estimator, each takes the options it declares; ``sensored`` takes none).
     """
     check_estimator_name(est)
+    build_controller_check(scn, est)
+    return options_note(scn, est)
+
+
+def build_controller_check(scn: Scenario, est: str) -> None:
+    """Build the controller once; a misfit is a :class:`ScenarioError` of one line
+    (:func:`check_estimator_fits` without its note; ``bench run`` does it while its
+    nodes start)."""
     try:
         build_controller(scn, est)
     except (ValueError, TypeError) as e:
@@ -550,7 +558,6 @@ def check_estimator_fits(scn: Scenario, est: str) -> str | None:
             f"--estimator {est}: cannot run scenario {scn.name} ({e}); "
             f"the scenario's estimators: {', '.join(scn.estimators)}"
         ) from None
-    return options_note(scn, est)
 
 
 def options_note(scn: Scenario, est: str) -> str | None:
