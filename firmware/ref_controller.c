@@ -77,7 +77,8 @@
  *   -s  the sample timeout [ms] (default FW_SAMPLE_TIMEOUT_S, the bench controller
  *       node's SAMPLE_TIMEOUT_S, which firmware/Makefile passes; as `bench controller
  *       --sample-timeout-ms`)
- * Prints READY when listening; exits 0 after the stop command, with a summary.
+ * Prints READY when listening; exits 0 after the stop command, with a summary (1 after a
+ * sample timeout, a send error or a failed step of the core).
  */
 #include <errno.h>
 #include <math.h>
