@@ -770,7 +770,8 @@ int main(int argc, char **argv)
     printf("READY\n");
     fflush(stdout);
     int rc = 0;
-    /* poll at a quarter of the sample timeout (at most 0.1 s), as the bench's node does */
+    /* poll at a quarter of the sample timeout, as the bench's node does (and at least
+     * every 0.1 s, for the idle limit -t) */
     double poll_s = timeout_s / 4.0 < 0.1 ? timeout_s / 4.0 : 0.1;
     int poll_ms = poll_s < 0.001 ? 1 : (int)(poll_s * 1e3);
     double t_frame = monotonic_s(), t_sample = t_frame;
