@@ -12,6 +12,14 @@ the estimator it builds, :class:`CEstimator`, is a
   directly (``controller/_compiled.py``), with no Python in the period, so
   the native controller node can run it too.
 
+The two optional members of the interface are the protocol's optional members:
+a library whose ``hf_current_next`` is not NULL has the method
+``hf_current_next`` (the dead-time feed-forward adds the HF current it predicts),
+and one whose ``set_saliency_offset`` is not NULL has the attribute
+``saliency_offset`` (with cross-saturation compensation the controller hands it
+the offset instead of correcting the angle itself, as for the hybrids); with a
+NULL one the member is absent, as on a Python estimator without it.
+
 Both engines give the same trace bit for bit (``tests/test_c_estimator.py``).
 A function that returns nonzero is the one error
 :data:`C_ESTIMATOR_FAILED` on both engines.
@@ -147,6 +155,7 @@ class CEstimator:
         self._out = _Out()
         self._a = ctypes.c_double()
         self._b = ctypes.c_double()
+        self._saliency_offset = 0.0
         self._publish()
 
     @property
@@ -183,6 +192,36 @@ class CEstimator:
         if self.iface.reset(self.iface.ctx, float(theta0), ctypes.byref(self._out)) != 0:
             raise RuntimeError(C_ESTIMATOR_FAILED)
         self._publish()
+
+    @property
+    def hf_current_next(self) -> Callable[[], tuple[float, float]]:
+        """The library's ``hf_current_next`` as the protocol's method; absent
+        (``AttributeError``) when the library's is NULL."""
+        if not self.iface.hf_current_next:
+            raise AttributeError("hf_current_next: NULL in the library's cc_est_if_t")
+        return self._hf_current_next
+
+    def _hf_current_next(self) -> tuple[float, float]:
+        a, b = self._a, self._b
+        if self.iface.hf_current_next(self.iface.ctx, ctypes.byref(a), ctypes.byref(b)) != 0:
+            raise RuntimeError(C_ESTIMATOR_FAILED)
+        return a.value, b.value
+
+    @property
+    def saliency_offset(self) -> float:
+        """The cross-saturation offset (rad) last handed to the library's
+        ``set_saliency_offset``; absent (``AttributeError``) when that is NULL."""
+        if not self.iface.set_saliency_offset:
+            raise AttributeError("saliency_offset: set_saliency_offset is NULL in cc_est_if_t")
+        return self._saliency_offset
+
+    @saliency_offset.setter
+    def saliency_offset(self, offset: float) -> None:
+        if not self.iface.set_saliency_offset:
+            raise AttributeError("saliency_offset: set_saliency_offset is NULL in cc_est_if_t")
+        if self.iface.set_saliency_offset(self.iface.ctx, float(offset)) != 0:
+            raise RuntimeError(C_ESTIMATOR_FAILED)
+        self._saliency_offset = float(offset)
 
 
 def c_estimator(

@@ -50,7 +50,21 @@
  * late) gets the same PwmDuty again.  Frames with a bad length, a bad E2E
  * CRC or an out-of-range value are counted and dropped.
  *
+ * Sample timeout (both builds; real time only, -r, as the bench's own controller
+ * node's rule, bench/nodes/_loops.py controller_loop: in lockstep the plant paces
+ * the samples and waits for each duty, so a pause of the plant is no loss, and its
+ * own watchdog rounds judge a lost duty): once a valid PhaseSamples came, when
+ * none comes for SAMPLE_TIMEOUT whole PWM periods (ceil of -s over the period,
+ * counted on the monotonic clock) the drive gates its PWM off: the law is
+ * disabled, so every PwmDuty it sends from then on has enable 0 (all legs off),
+ * and it says so on stderr once.  It resumes only when a start, enable or reset
+ * command is applied (the law then starts again as after any enable; a speed
+ * reference alone does not).  When the stop command is due with the sample that
+ * did not come (the plant's last one), the program ends as on the stop instead.
+ * The timeouts are counted in the summary; one or more make the exit status 1.
+ *
  * Usage: ref_controller [-i IFACE] [-e SENSOR_EVERY] [-n COUNTS] [-d DELAY_US] [-t IDLE_S]
+ *                       [-r] [-s SAMPLE_TIMEOUT_MS]
  *   -i  SocketCAN interface (default vcan0); CAN FD must be enabled on it
  *   -e  PWM periods between two PositionSensor readings (default 1)
  *   -n  the encoder's counts per mechanical revolution (default 65536)
@@ -59,7 +73,12 @@
  *   defaults are the sensor the plant gives a controller under test when the
  *   scenario states none)
  *   -t  exit after this many seconds without a frame (default 30)
- * Prints READY when listening; exits 0 after the stop command, with a summary.
+ *   -r  real time (the run's `bench run --mode realtime`): the sample timeout is armed
+ *   -s  the sample timeout [ms] (default FW_SAMPLE_TIMEOUT_S, the bench controller
+ *       node's SAMPLE_TIMEOUT_S, which firmware/Makefile passes; as `bench controller
+ *       --sample-timeout-ms`)
+ * Prints READY when listening; exits 0 after the stop command, with a summary (1 after a
+ * sample timeout, a send error or a failed step of the core).
  */
 #include <errno.h>
 #include <math.h>
@@ -91,6 +110,19 @@
 #endif
 
 #define TWO_PI 6.28318530717958647692
+
+/* The PWM period [s]: the bench's design's (sensorless) or the encoder build's. */
+#ifdef FW_BENCH_CONTROLLER
+#define FW_T_S BENCH_CTL_T_S
+#else
+#define FW_T_S (1.0 / PWM_FREQ_HZ)
+#endif
+
+/* The default sample timeout [s]: bench.nodes._loops.SAMPLE_TIMEOUT_S, the bench's own
+ * controller node's (firmware/Makefile passes it: one home). */
+#ifndef FW_SAMPLE_TIMEOUT_S
+#error "FW_SAMPLE_TIMEOUT_S: build with firmware/Makefile (the bench controller node's SAMPLE_TIMEOUT_S)"
+#endif
 
 /* Widths of the step counters (DBC: PhaseSamples.step, PositionSensor.step and
  * PwmDuty.step are 10 bits, BenchCommand.step 16 bits, CtrlTelemetry.step 32
@@ -214,8 +246,13 @@ typedef struct {
     bool have_last_tel;
     bool stop;
     int step_error; /* cc_foc_step's error (sensorless), 0: none */
+    /* sample timeout: PWM periods without a valid sample that gate the PWM off (0: not
+     * armed, lockstep), and whether it is off for that reason (until a start, enable or
+     * reset command) */
+    int64_t timeout_periods;
+    bool faulted;
     /* counters */
-    long steps, rejected, repeats, cmd_dropped, send_errors;
+    long steps, rejected, repeats, cmd_dropped, send_errors, samples_accepted, sample_timeouts;
 } node_t;
 
 static volatile sig_atomic_t interrupted;
@@ -372,6 +409,7 @@ static void apply_commands(node_t *n, law_t *law, int64_t k)
         command_t c = n->queue[best];
         n->queue[best] = n->queue[--n->n_queued];
         if (c.cmd == CMD_START || c.cmd == CMD_ENABLE || c.cmd == CMD_RESET) {
+            n->faulted = false; /* the sample timeout's resume rule */
             law_enable(law, true);
         } else if (c.cmd == CMD_STOP || c.cmd == CMD_DISABLE) {
             law_enable(law, false);
@@ -479,6 +517,7 @@ static void on_frame(int sock, node_t *n, law_t *law, const struct canfd_frame *
             return;
         }
         n->have_sample = true;
+        n->samples_accepted++;
         n->sample_k = k;
         n->i_a = bench_dbc_phase_samples_i_a_decode(s.i_a);
         n->i_b = bench_dbc_phase_samples_i_b_decode(s.i_b);
@@ -562,6 +601,59 @@ static void on_frame(int sock, node_t *n, law_t *law, const struct canfd_frame *
     try_compute(sock, n, law, sen);
 }
 
+/* The sample timeout (header comment): `periods` whole PWM periods passed since the newest
+ * valid PhaseSamples (the caller counts them only once one came). */
+static void sample_watch(node_t *n, law_t *law, int64_t periods)
+{
+    if (n->timeout_periods == 0 || periods < n->timeout_periods) {
+        return;
+    }
+    for (int i = 0; i < n->n_queued; i++) {
+        if (n->queue[i].cmd == CMD_STOP && n->queue[i].apply_step <= n->next_k) {
+            n->stop = true; /* due with the sample that did not come: the run is over */
+            return;
+        }
+    }
+    if (!n->faulted) {
+        n->faulted = true;
+        n->sample_timeouts++;
+        law_enable(law, false);
+        fprintf(stderr,
+                "ref_controller: no PhaseSamples for %lld periods after period %lld: PWM off "
+                "until a start, enable or reset command\n",
+                (long long)periods, (long long)(n->next_k - 1));
+    }
+}
+
+/* The node before its first frame, with a sample timeout of `timeout_s` (0: not armed). */
+static void node_init(node_t *n, double timeout_s)
+{
+    memset(n, 0, sizeof *n);
+    n->last_seq = -1;
+    n->last_cmd_step = -1;
+    n->ack_seq = -1;
+    n->ack_step = -1;
+    for (int i = 0; i < SEQ_MOD; i++) {
+        n->beyond[i] = -1;
+    }
+    for (int i = 0; i < READING_RING; i++) {
+        n->reading_k[i] = -1;
+    }
+    /* whole periods, as the plant's watchdog counts them (bench/nodes/_loops.py) */
+    n->timeout_periods = 0;
+    if (timeout_s > 0.0) {
+        n->timeout_periods = (int64_t)ceil(timeout_s / FW_T_S - 1e-9);
+        n->timeout_periods = n->timeout_periods < 1 ? 1 : n->timeout_periods;
+    }
+}
+
+static double monotonic_s(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+
 /* Raw CAN socket on `ifname` with CAN FD frames enabled and the three input IDs. */
 static int open_can(const char *ifname)
 {
@@ -613,8 +705,10 @@ int main(int argc, char **argv)
     const char *ifname = "vcan0";
     sensor_t sen = {1, 65536.0, 0.0, 0.0};
     double idle_s = 30.0;
+    double timeout_s = FW_SAMPLE_TIMEOUT_S;
+    bool realtime = false;
     int opt;
-    while ((opt = getopt(argc, argv, "i:e:n:d:t:")) != -1) {
+    while ((opt = getopt(argc, argv, "i:e:n:d:t:rs:")) != -1) {
         switch (opt) {
         case 'i':
             ifname = optarg;
@@ -631,15 +725,23 @@ int main(int argc, char **argv)
         case 't':
             idle_s = atof(optarg);
             break;
+        case 'r':
+            realtime = true;
+            break;
+        case 's':
+            timeout_s = atof(optarg) * 1e-3;
+            break;
         default:
             fprintf(stderr,
-                    "usage: %s [-i IFACE] [-e SENSOR_EVERY] [-n COUNTS] [-d DELAY_US] [-t IDLE_S]\n",
+                    "usage: %s [-i IFACE] [-e SENSOR_EVERY] [-n COUNTS] [-d DELAY_US] [-t IDLE_S] "
+                    "[-r] [-s SAMPLE_TIMEOUT_MS]\n",
                     argv[0]);
             return 2;
         }
     }
-    if (sen.every < 1 || !(sen.counts >= 1.0) || !(sen.delay_s >= 0.0) || !(idle_s > 0.0)) {
-        fprintf(stderr, "ref_controller: -e must be >= 1, -n >= 1, -d >= 0 and -t > 0\n");
+    if (sen.every < 1 || !(sen.counts >= 1.0) || !(sen.delay_s >= 0.0) || !(idle_s > 0.0) ||
+        !(timeout_s > 0.0)) {
+        fprintf(stderr, "ref_controller: -e must be >= 1, -n >= 1, -d >= 0, -t > 0 and -s > 0\n");
         return 2;
     }
     sen.a = 1.0 - exp(-SPEED_FILTER_BW * (double)sen.every / PWM_FREQ_HZ);
@@ -650,18 +752,9 @@ int main(int argc, char **argv)
     signal(SIGINT, on_signal);
     signal(SIGTERM, on_signal);
 
-    static node_t node; /* static: zero-initialised, off the stack */
+    static node_t node; /* static: off the stack */
     static law_t law;
-    node.last_seq = -1;
-    node.last_cmd_step = -1;
-    node.ack_seq = -1;
-    node.ack_step = -1;
-    for (int i = 0; i < SEQ_MOD; i++) {
-        node.beyond[i] = -1;
-    }
-    for (int i = 0; i < READING_RING; i++) {
-        node.reading_k[i] = -1;
-    }
+    node_init(&node, realtime ? timeout_s : 0.0);
 #ifdef FW_BENCH_CONTROLLER
     if (bench_controller_init(&law.core, &law.sup) != 0) {
         fprintf(stderr, "ref_controller: the core refused the design of %s\n",
@@ -677,25 +770,36 @@ int main(int argc, char **argv)
     printf("READY\n");
     fflush(stdout);
     int rc = 0;
-    double idle = 0.0;
+    /* poll at a quarter of the sample timeout, as the bench's node does (and at least
+     * every 0.1 s, for the idle limit -t) */
+    double poll_s = timeout_s / 4.0 < 0.1 ? timeout_s / 4.0 : 0.1;
+    int poll_ms = poll_s < 0.001 ? 1 : (int)(poll_s * 1e3);
+    double t_frame = monotonic_s(), t_sample = t_frame;
+    long seen = 0;
     struct pollfd pfd = {sock, POLLIN, 0};
     while (!node.stop && !interrupted) {
-        int ready = poll(&pfd, 1, 100);
+        int ready = poll(&pfd, 1, poll_ms);
         if (ready < 0 && errno != EINTR) {
             perror("ref_controller: poll");
             rc = 1;
             break;
         }
+        double now = monotonic_s();
+        if (node.samples_accepted != seen) {
+            seen = node.samples_accepted;
+            t_sample = now;
+        } else if (seen > 0) {
+            sample_watch(&node, &law, (int64_t)floor((now - t_sample) / FW_T_S));
+        }
         if (ready <= 0) {
-            idle += 0.1;
-            if (idle >= idle_s) {
+            if (now - t_frame >= idle_s) {
                 fprintf(stderr, "ref_controller: no frame for %.0f s, exiting\n", idle_s);
                 rc = 1;
                 break;
             }
             continue;
         }
-        idle = 0.0;
+        t_frame = now;
         struct canfd_frame fr;
         ssize_t nbytes = read(sock, &fr, sizeof fr);
         if (nbytes != CAN_MTU && nbytes != CANFD_MTU) {
@@ -712,7 +816,8 @@ int main(int argc, char **argv)
     printf("ref_controller: %s, sensorless\n", BENCH_CTL_ESTIMATOR);
 #endif
     printf("ref_controller: %ld steps, %ld rejected, %ld repeats, %ld commands dropped, "
-           "%ld send errors\n",
-           node.steps, node.rejected, node.repeats, node.cmd_dropped, node.send_errors);
-    return rc != 0 ? rc : (node.send_errors || node.step_error ? 1 : 0);
+           "%ld send errors, %ld sample timeouts\n",
+           node.steps, node.rejected, node.repeats, node.cmd_dropped, node.send_errors,
+           node.sample_timeouts);
+    return rc != 0 ? rc : (node.send_errors || node.step_error || node.sample_timeouts ? 1 : 0);
 }

@@ -176,3 +176,124 @@ def test_a_failing_c_estimator_is_the_same_error_on_both_engines(
     with pytest.raises(ValueError, match="refused the design") as r:
         c_estimator(_build(refusing, tmp_path / "librefusing.so"))(motor, 1e-4)
     assert "librefusing.so" in str(r.value) and "\n" not in str(r.value)
+
+
+#: A C estimator with both optional members: the offset it is handed is its published
+#: ``err`` and turns its angle; its predicted HF current is a 20 A phasor turning with
+#: k. -DNO_HF / -DNO_SAL build it with that member NULL.
+OPTIONAL = r"""
+#include <math.h>
+#include <stddef.h>
+#include "cc_estimator.h"
+typedef struct { cc_est_t out; long long k; double off; double w; } st_t;
+static int update(void *ctx, const cc_est_in_t *x, cc_est_t *out)
+{
+    st_t *s = ctx;
+    s->k = x->k;
+    s->out.theta_hat = remainder(s->w * (double)x->k + s->off, 6.283185307179586);
+    s->out.w_hat = s->w / 1e-4;
+    s->out.err = s->off;
+    s->out.i_alpha_f = x->i_alpha;
+    s->out.i_beta_f = x->i_beta;
+    *out = s->out;
+    return 0;
+}
+static int injection(void *ctx, double *a, double *b) { (void)ctx; *a = *b = 0.0; return 0; }
+static int reset(void *ctx, double th, cc_est_t *out)
+{
+    st_t *s = ctx;
+    s->out.theta_hat = th;
+    *out = s->out;
+    return 0;
+}
+#ifndef NO_HF
+static int hf_next(void *ctx, double *a, double *b)
+{
+    st_t *s = ctx;
+    *a = 20.0 * cos(0.3 * (double)s->k);
+    *b = 20.0 * sin(0.3 * (double)s->k);
+    return 0;
+}
+#endif
+#ifndef NO_SAL
+static int set_off(void *ctx, double off)
+{
+    ((st_t *)ctx)->off = off;
+    return 0;
+}
+#endif
+size_t cc_estimator_size(void) { return sizeof(st_t); }
+int cc_estimator_init(void *state, cc_est_if_t *f, const cc_est_design_t *d)
+{
+    st_t *s = state;
+    s->out.theta_hat = s->out.w_hat = s->out.err = s->out.i_alpha_f = s->out.i_beta_f = 0.0;
+    s->k = 0; s->off = 0.0; s->w = 2e-3 * d->T_s / 1e-4;
+    f->ctx = s; f->update = update; f->injection = injection; f->reset = reset;
+#ifdef NO_HF
+    f->hf_current_next = NULL;
+#else
+    f->hf_current_next = hf_next;
+#endif
+#ifdef NO_SAL
+    f->set_saliency_offset = NULL;
+#else
+    f->set_saliency_offset = set_off;
+#endif
+    return 0;
+}
+"""
+
+
+def test_a_c_estimators_optional_members_are_wired_on_both_engines(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``hf_current_next`` and ``set_saliency_offset`` of cc_est_if_t: with dead-time and
+    cross-saturation compensation on, both engines call them (the offset handed is the
+    estimator's ``err``, nonzero once the speed loop asks for torque; the predicted HF
+    current moves the duties) and give the same trace bit for bit; a library with either
+    NULL gives another trace, and its estimator has no such member."""
+    if CC is None or compiled_controller_missing() is not None:
+        pytest.skip("needs a C compiler and the compiled controller")
+    src = tmp_path / "optional.c"
+    src.write_text(OPTIONAL)
+    scn_path = tmp_path / "comp.toml"
+    scn_path.write_text(
+        f'extends = "{EXAMPLES / "flux-known-angle.toml"}"\n'
+        "[controller]\ndead_time_compensation = true\nt_dead = 2e-6\n"
+        "cross_saturation_compensation = true\n"
+    )
+    scn = load_scenario(str(scn_path))
+    traces: dict[str, dict[str, list[tuple[Any, ...]]]] = {}
+    for variant, flags in (("both", []), ("no_hf", ["-DNO_HF"]), ("no_sal", ["-DNO_SAL"])):
+        out = tmp_path / f"lib{variant}.so"
+        cmd = [CC, "-std=c99", "-O2", "-shared", "-fPIC", "-ffp-contract=off", *flags]
+        cmd += ["-Wall", "-Wextra", "-Werror", f"-I{CORE}", "-o", str(out), str(src), "-lm"]
+        subprocess.run(cmd, check=True, capture_output=True, text=True)
+        (tmp_path / f"opt_{variant}.py").write_text(
+            f"from controller import c_estimator\n"
+            f"create = c_estimator({str(out)!r}, family='rotating')\n"
+        )
+        monkeypatch.syspath_prepend(str(tmp_path))
+        traces[variant] = {}
+        for engine in ("python", "compiled"):
+            ctrl = build_controller(scn, f"opt_{variant}:create", engine)
+            assert ctrl.engine == engine and not ctrl.external_estimator
+            assert ctrl.dead_time is not None and ctrl.cross_sat
+            est = ctrl.estimator
+            assert hasattr(est, "hf_current_next") == (variant != "no_hf")
+            assert hasattr(est, "saliency_offset") == (variant != "no_sal")
+            ctrl.set_enable(True)
+            ctrl.set_speed_ref(2.0 * math.pi)
+            rows = []
+            for k in range(300):
+                m = Measurement(k, 2.0 * math.sin(0.01 * k), 0.0, -2.0 * math.sin(0.01 * k), 540.0)
+                o = ctrl.step(m)
+                rows.append((o.d_a, o.d_b, o.d_c, o.theta_hat, o.err, o.i_d, o.i_q))
+            traces[variant][engine] = rows
+    for variant, by_engine in traces.items():
+        assert by_engine["python"] == by_engine["compiled"], variant
+    both = traces["both"]["python"]
+    assert any(r[4] != 0.0 for r in both)  # the offset reached the library
+    assert all(r[4] == 0.0 for r in traces["no_sal"]["python"])
+    assert traces["no_hf"]["python"] != both
+    assert [r[:3] for r in traces["no_sal"]["python"]] != [r[:3] for r in both]

@@ -294,7 +294,8 @@ def test_the_sensorless_firmware_reads_no_sensor_or_truth() -> None:
     code = re.sub(r"/\*.*?\*/|//[^\n]*", "", (FIRMWARE / "ref_controller.c").read_text(),
                   flags=re.S)  # fmt: skip
     res = subprocess.run(
-        [CC or "cc", "-E", "-P", "-DFW_BENCH_CONTROLLER", "-nostdinc", "-x", "c", "-"],
+        [CC or "cc", "-E", "-P", "-DFW_BENCH_CONTROLLER", "-DFW_SAMPLE_TIMEOUT_S=0.05",
+         "-nostdinc", "-x", "c", "-"],
         input=re.sub(r"^\s*#\s*include[^\n]*$", "", code, flags=re.M),
         capture_output=True, text=True, timeout=60,
     )  # fmt: skip

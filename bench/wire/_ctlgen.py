@@ -74,7 +74,12 @@ def _d(*xs: Any) -> list[str]:
 class _Recorder:
     """Takes the calls :func:`controller._compiled.build_core` makes on ``_cctl.Core`` and
     keeps, for each, the C calls ``controller/_cctl.c`` makes for it (same order, same
-    argument conversions: ``d`` -> double, ``L`` -> long long, ``p`` -> truth)."""
+    argument conversions: ``d`` -> double, ``L`` -> long long, ``p`` -> truth).
+
+    The binding's mapping written a second time, as C text: tests/test_ctlgen_mapping.py
+    fails when the two could disagree (a design method of the binding without its twin
+    here, or a design whose header-initialised structs are not the binding's byte for
+    byte, over designs that run every method here)."""
 
     def __init__(self, kind: int, *_layout: Any) -> None:
         self.kind = int(kind)
