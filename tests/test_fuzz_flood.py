@@ -27,8 +27,8 @@ import time
 from pathlib import Path
 
 import can
+import pytest
 
-from bench.nodes.native._native import library_path
 from bench.runs._run import START_TIMEOUT_S
 from bench.studies._reliability import FLOOD_LIMIT_S, GROUP, flood_check, free_port
 from bench.wire._codec import Codec
@@ -93,6 +93,7 @@ def _hold_at_plant_ready(run: subprocess.Popen[str], bus: can.BusABC, codec: Cod
             assert not (d.name == "BenchCommand" and d.signals["cmd"] == CMD_START), d
 
 
+@pytest.mark.usefixtures("native_library")  # its first build is not in the wall time
 def test_a_plant_that_cannot_start_ends_the_run_with_a_line(tmp_path: Path) -> None:
     """A valid command forged with the start's step and alive counter, sent before the
     start (the E2E check cannot tell it from a genuine one): the plant takes the genuine
@@ -105,9 +106,6 @@ def test_a_plant_that_cannot_start_ends_the_run_with_a_line(tmp_path: Path) -> N
     machine: the plant started, the controller (up first) took the forged copy and never
     enabled, and the run ended with exit 0 and no row scored.
     """
-    # the native loops' library is built here first: its first build (tens of seconds on
-    # a loaded host) is not part of the start timeout the wall time is checked against
-    library_path()
     codec = Codec()
     port = free_port()
     out = tmp_path / "run"

@@ -129,6 +129,7 @@ def test_a_run_cut_short_scores_as_bench_analyze_scores_its_capture(tmp_path: Pa
 
 
 @pytest.mark.skipif(sys.platform != "linux", reason="uses /proc")
+@pytest.mark.usefixtures("native_library")  # its first build: not in the 90 s
 def test_controller_killed_in_lockstep_ends_the_run_at_once_naming_the_signal(
     tmp_path: Path,
 ) -> None:
@@ -165,6 +166,7 @@ def test_controller_killed_in_lockstep_ends_the_run_at_once_naming_the_signal(
 
 
 @pytest.mark.skipif(sys.platform != "linux", reason="uses /proc")
+@pytest.mark.usefixtures("native_library")  # its first build: not in the 90 s
 def test_an_interrupted_run_says_that_it_scores_what_was_recorded(tmp_path: Path) -> None:
     out = tmp_path / "int"
     cmd = [sys.executable, "-m", "bench", "run", "wen-5.1", "-e", "sensored", "--duration",

@@ -98,7 +98,11 @@ def _alive(pid: int) -> bool:
     return st.exists() and st.read_text().split()[2] != "Z"
 
 
-pytestmark = pytest.mark.skipif(sys.platform != "linux", reason="uses /proc")
+pytestmark = [
+    pytest.mark.skipif(sys.platform != "linux", reason="uses /proc"),
+    # the runs must start within the bounds below: the library's first build is not in them
+    pytest.mark.usefixtures("native_library"),
+]
 
 
 def test_killed_controller_puts_the_plant_in_safe_state(tmp_path: Path) -> None:
