@@ -100,8 +100,8 @@ def test_a_plant_that_cannot_start_ends_the_run_with_a_line(tmp_path: Path) -> N
     start for a repeat and never starts, and the run stops after the start timeout
     naming it and what the plant turned away.
 
-    The forged copies go out while ``bench run`` is held between its plant's start and
-    the plant's ``READY`` (:func:`_hold_at_plant_ready`), so they are in the plant's
+    The forged command goes out while ``bench run`` is held between its plant's start and
+    the plant's ``READY`` (:func:`_hold_at_plant_ready`), so it is in the plant's
     socket before the genuine start.  A forger that raced the start lost it on a loaded
     machine: the plant started, the controller (up first) took the forged copy and never
     enabled, and the run ended with exit 0 and no row scored.
