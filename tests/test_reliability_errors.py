@@ -15,6 +15,7 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -129,6 +130,7 @@ def test_a_run_cut_short_scores_as_bench_analyze_scores_its_capture(tmp_path: Pa
 
 
 @pytest.mark.skipif(sys.platform != "linux", reason="uses /proc")
+@pytest.mark.usefixtures("native_library")  # its first build: not in the 90 s
 def test_controller_killed_in_lockstep_ends_the_run_at_once_naming_the_signal(
     tmp_path: Path,
 ) -> None:
@@ -137,6 +139,15 @@ def test_controller_killed_in_lockstep_ends_the_run_at_once_naming_the_signal(
            "30", "-i", "udp_multicast", "--channel", "239.74.163.2", "--port",
            str(free_port()), "--out", str(out)]  # fmt: skip
     proc = subprocess.Popen(cmd, cwd=ROOT, stderr=subprocess.PIPE, stdout=subprocess.DEVNULL)
+    said: list[tuple[float, str]] = []  # stderr's lines as they come, with their time
+
+    def read_err() -> None:
+        assert proc.stderr is not None
+        for line in proc.stderr:
+            said.append((time.monotonic(), line.decode()))
+
+    reader = threading.Thread(target=read_err, daemon=True)
+    reader.start()
     try:
         t0 = time.monotonic()
         pid = None
@@ -147,24 +158,29 @@ def test_controller_killed_in_lockstep_ends_the_run_at_once_naming_the_signal(
         time.sleep(1.0)  # the plant stepping
         os.kill(pid, signal.SIGKILL)
         t_kill = time.monotonic()
-        _, err_b = proc.communicate(timeout=60)
-        took = time.monotonic() - t_kill
+        proc.wait(timeout=120)
+        reader.join(timeout=30)
     finally:
         if proc.poll() is None:
             proc.kill()
-    err = err_b.decode()
+    err = "".join(line for _, line in said)
     assert proc.returncode == 2, err
     assert "Traceback" not in err
     last = err.strip().splitlines()[-1]
     assert "controller process ended before the run did (killed by SIGKILL)" in last, err
     # said as soon as seen, before the nodes are stopped and the run scored
-    assert "controller process ended (killed by SIGKILL) at step" in err
-    # ended by the bench, not by the plant's stall timeout (20 s) after it
+    seen = [t for t, line in said if "controller process ended (killed by SIGKILL) at step" in line]
+    assert seen, err
+    # seen by the bench, not by the plant's stall timeout (20 s) after it; timed to the
+    # line that says so: the stop of the nodes and the scoring after it take tens of
+    # seconds on a loaded 2-core host (16.6 s to the exit measured at load 15)
+    took = seen[0] - t_kill
     assert took < 10.0, took
     assert json.loads((out / "metrics.json").read_text())["steps"] > 0
 
 
 @pytest.mark.skipif(sys.platform != "linux", reason="uses /proc")
+@pytest.mark.usefixtures("native_library")  # its first build: not in the 90 s
 def test_an_interrupted_run_says_that_it_scores_what_was_recorded(tmp_path: Path) -> None:
     out = tmp_path / "int"
     cmd = [sys.executable, "-m", "bench", "run", "wen-5.1", "-e", "sensored", "--duration",

@@ -428,6 +428,11 @@ def pour_fuzz(
             fz.history.append(msg)
         else:
             msg, kind = fz.one()
+            if 0.0 < msg.timestamp < time.time() - REPLAY_FRESH_S:
+                # a copy chosen before a stall of this thread (a burst's later frames
+                # wait in the fuzzer across iterations): 0.41 s and 992 periods old on a
+                # loaded host, it took the place of a current sample; not sent
+                continue
         try:
             bus.send(msg)
             key = (msg.arbitration_id, bytes(msg.data))
@@ -463,11 +468,15 @@ def flood_check(
     import threading
 
     from bench.nodes._loops import run_inprocess
+    from bench.runs._run import build_native_libraries
     from bench.scenarios._schema import write_effective
     from bench.wire._codec import default_codec
 
     scn = short_scenario("wen-5.1", 0.3)
     ref = run_trace(run_inprocess(scn, "sensored", default_codec()), scn)
+    # the run's own first build of the native library (minutes on a loaded host) is
+    # done here, not inside FLOOD_LIMIT_S, which is the run's
+    build_native_libraries()
     with tempfile.TemporaryDirectory() as tmp:
         scn_file = Path(tmp) / "flood.json"
         write_effective(scn, scn_file)
