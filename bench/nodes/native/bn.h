@@ -103,12 +103,14 @@ typedef struct {
     uint8_t rx_buf[BN_BATCH][BN_DGRAM];
     struct mmsghdr rx_msg[BN_BATCH];
     struct iovec rx_iov[BN_BATCH];
-    /* the send batch of bn_send_many */
+    /* the send batch of bn_send_many; UDP: its tx_n datagrams, looped back to this
+     * socket by the kernel, are dropped on receipt without decoding (rx_own) */
+    int32_t tx_n;
     uint8_t tx_buf[BN_BATCH][BN_DGRAM];
     struct mmsghdr tx_msg[BN_BATCH];
     struct iovec tx_iov[BN_BATCH];
     /* counters */
-    uint64_t rx, tx, rx_malformed, tx_errors, tx_waits;
+    uint64_t rx, tx, rx_malformed, tx_errors, tx_waits, rx_own;
 } bn_bus_t;
 
 /* sizeof(bn_bus_t): the room Python allocates for one. */
