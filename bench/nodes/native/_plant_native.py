@@ -331,7 +331,6 @@ class Loop(ctypes.Structure):
         ("err", _I32),
         ("parts", ctypes.POINTER(ctypes.c_uint32)),
         ("part_ns", _I64 * 3),
-        ("spin_ns", _I64),
     ]
 
 

@@ -95,7 +95,6 @@ typedef struct {
     socklen_t dest_len;
     uint8_t buf[BN_DGRAM];          /* UDP datagram being sent */
     int64_t send_wait_ns;           /* bn_send waits this long for room (open: 1 ms) */
-    int64_t spin_ns;                /* bn_recv_until polls this long before it blocks (0) */
     /* the receive batch: rx_n datagrams of the last recvmmsg, rx_i handed out,
      * received at rx_t_ns (CLOCK_REALTIME) */
     int32_t rx_n, rx_i;
@@ -142,8 +141,7 @@ int bn_send_many(bn_bus_t *b, const bn_frame_t *f, int n);
  * 0: do not wait).  1 a frame, 0 none by the deadline, -errno on an error.
  * Malformed datagrams are counted and skipped.  The socket is drained by
  * recvmmsg, up to BN_BATCH datagrams per call; the frames of one call carry
- * its time.  Before blocking in ppoll, it polls without blocking for up to
- * b->spin_ns (bounded by the deadline). */
+ * its time. */
 int bn_recv_until(bn_bus_t *b, bn_frame_t *f, int64_t deadline_ns);
 
 /* bn_recv_until with a relative timeout (ns; 0: do not wait). */

@@ -365,21 +365,9 @@ int bn_recv_until(bn_bus_t *b, bn_frame_t *f, int64_t deadline_ns)
         if (r != 0) {
             return r;
         }
-        int64_t now = bn_now_ns(), left = deadline_ns - now;
+        int64_t left = deadline_ns - bn_now_ns();
         if (deadline_ns == 0 || left <= 0) {
             return 0;
-        }
-        if (b->spin_ns > 0) { /* poll without blocking first: an answer due soon */
-            int64_t end = now + (b->spin_ns < left ? b->spin_ns : left);
-            while ((r = recv_now(b, f)) == 0 && bn_now_ns() < end) {
-            }
-            if (r != 0) {
-                return r;
-            }
-            left = deadline_ns - bn_now_ns();
-            if (left <= 0) {
-                return 0;
-            }
         }
         struct pollfd p = {b->fd, POLLIN, 0};
         struct timespec ts = {(time_t)(left / 1000000000), (long)(left % 1000000000)};

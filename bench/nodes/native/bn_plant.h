@@ -263,7 +263,6 @@ typedef struct {
      * part_ns: the period's so far (BN_PART_*) */
     uint32_t *parts;
     int64_t part_ns[3];
-    int64_t spin_ns;            /* lockstep: the bus polls this long before it blocks */
 } bn_plant_loop_t;
 
 enum { BN_PART_SEND = 0, BN_PART_RECV = 1, BN_PART_STEP = 2 };

@@ -248,7 +248,6 @@ static int loop_realtime(bn_plant_loop_t *L)
 int bn_plant_loop(bn_plant_loop_t *L)
 {
     bn_plant_t *u = L->u;
-    L->bus->spin_ns = u->realtime ? 0 : L->spin_ns;
     if (L->phase == 0) {
         L->t_progress = L->t_quiet = bn_now_ns();
         L->t_poll = L->t_progress + ns(L->poll_s);
