@@ -144,6 +144,9 @@ def test_native_plant_in_real_time_completes_and_reports_its_counters(tmp_path: 
     assert jit["n"] == n  # one clock period per plant period
     assert 0 <= rep["overruns"] <= n
     assert jit["busy_max"] >= jit["busy_p99"] >= jit["busy_median"] > 0
+    # the busy time part by part (send, receive, step): each inside each period's busy time
+    for part in ("send_median", "recv_median", "step_median"):
+        assert 0 < jit[part] <= jit["busy_median"]
     assert jit["max"] >= jit["p99"] >= jit["median"] >= 0  # the Python node's statistics
     assert res.metrics["jitter_us"]["max"] == pytest.approx(jit["max"])
     # every valid duty frame ends in exactly one counter

@@ -183,3 +183,34 @@ def test_echo_reports_a_bus_it_cannot_open(built: _native.NativeBuild, tmp_path:
     )
     assert res.returncode == 2
     assert res.stderr.startswith("echo: udp_multicast not-a-group: ")
+
+
+def test_a_send_batch_reaches_python_can_and_is_not_received_back() -> None:
+    """bn_send_many: one sendmmsg, each datagram python-can's; the kernel loops the batch
+    back to the sending socket too, and the receive side drops those copies undecoded."""
+    from bench.nodes.native._plant_native import NativeBus, _lib
+
+    dll = _lib()
+    dll.bn_send_many.argtypes = [ctypes.c_void_p, ctypes.POINTER(Frame), ctypes.c_int]
+    dll.bn_send_many.restype = ctypes.c_int
+    group, port = udp_multicast_group(), free_port()
+    with can.Bus(interface="udp_multicast", channel=group, port=port, fd=True) as py:
+        nb = NativeBus(dll, BusSpec("udp_multicast", group, port))
+        try:
+            frames = (Frame * 3)()
+            for j, f in enumerate(frames):
+                f.id, f.len = 0x11 + j, 2
+                f.data[0], f.data[1] = j, 0xA5
+            assert dll.bn_send_many(nb.ptr, frames, 3) == 3
+            got = [py.recv(2.0) for _ in range(3)]
+            assert [(m.arbitration_id, bytes(m.data)) for m in got if m is not None] == [
+                (0x11 + j, bytes([j, 0xA5])) for j in range(3)
+            ]
+            py.send(can.Message(arbitration_id=0x21, data=b"\x07", is_extended_id=False))
+            f = Frame()
+            # the batch's own copies were queued first; the first frame taken is python-can's
+            assert dll.bn_recv(nb.ptr, ctypes.byref(f), int(2e9)) == 1
+            assert (f.id, bytes(f.data[: f.len])) == (0x21, b"\x07")
+            assert dll.bn_recv(nb.ptr, ctypes.byref(f), 0) == 0
+        finally:
+            nb.close()

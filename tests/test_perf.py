@@ -25,6 +25,7 @@ from bench.studies._perf import (
     late_figures,
     render_benchmarks,
     render_readme_block,
+    render_realtime_native,
     update_readme,
     verdicts,
 )
@@ -76,6 +77,9 @@ def test_perf_quick_writes_every_figure_and_renders_the_docs(
         r = res["realtime_native"][name]
         assert r["node_engines"]["plant"] == "native" and "controller" in r["note"]
         assert 0 <= r["missed_pct"] <= 100 and r["busy_us_median"] > 0
+        # the busy time part by part: each part is inside each period's busy time
+        for key in ("send_us_median", "recv_us_median", "step_us_median"):
+            assert 0 < r[key] <= r["busy_us_median"]
     # the in-process native pair: inside C, the whole loop, each unit's share
     nat = res["inprocess_native"]
     assert nat["wall_us_per_step_tt_dq"] >= nat["us_per_step_tt_dq"] > 0
@@ -250,6 +254,15 @@ def test_the_native_plant_figures_are_rendered_when_measured() -> None:
     refused = sum(res["realtime_native"][r].get("policy") != "fifo" for r in RATES)
     assert sum("native plant refused" in ln for ln in rows) == refused
     assert f"Lockstep, {NATIVE_NOTE}:" in text
+    # the Python node's rows have no split of the busy time: no line of parts
+    assert "part by part" not in text
+    for i, name in enumerate(RATES):
+        r = res["realtime_native"][name]
+        r.update(send_us_median=30.0 + i, recv_us_median=5.0, step_us_median=1.0)
+    text = render_benchmarks(res)
+    for i, name in enumerate(RATES):
+        assert f"{name}: send (the instant's frames out) {30 + i:.1f} us" in text
+    assert "part by part" in render_realtime_native(res)
 
 
 def test_the_demo_section_is_rendered_against_the_issue_target_when_measured() -> None:

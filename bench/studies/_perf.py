@@ -677,6 +677,11 @@ def realtime_run(
         "jitter_us_max": float(jit.get("max", math.nan)),
         "busy_us_median": float(jit.get("busy_median", math.nan)),
         "busy_us_p99": float(jit.get("busy_p99", math.nan)),
+        # the native loop's busy time split (nan for the Python node): sending the
+        # instant's frames, draining the socket, the step and the next frames' encoding
+        "send_us_median": float(jit.get("send_median", math.nan)),
+        "recv_us_median": float(jit.get("recv_median", math.nan)),
+        "step_us_median": float(jit.get("step_median", math.nan)),
         "policy": str((plant_r.get("rt") or {}).get("policy", "normal")),
         # frames the recorder's socket dropped (udp_multicast: the kernel's count); -1:
         # the transport does not say
@@ -697,6 +702,31 @@ def recorder_frames_lost(runs: dict[str, dict[str, Any]]) -> float:
 def rate_rows(sec: dict[str, Any]) -> dict[str, dict[str, Any]]:
     """The per-rate entries of a real-time section (``1kHz``, ...), without its totals."""
     return {k: v for k, v in sec.items() if isinstance(v, dict)}
+
+
+#: The native loop's busy time split (``realtime_native.<rate>``): the key, and what it is.
+NATIVE_PARTS = (
+    ("send_us_median", "send (the instant's frames out)"),
+    ("recv_us_median", "receive (drain the socket, check and decode)"),
+    ("step_us_median", "step (the model and the next frames' encoding)"),
+)
+
+
+def native_parts_lines(sec: dict[str, Any]) -> list[str]:
+    """One line saying where the native plant's period goes, per rate of ``sec``
+    (``realtime_native``); none for a ``perf.json`` written before the split was kept."""
+    rows = [
+        f"{name}: "
+        + ", ".join(f"{what} {_num(r[key], 'us')}" for key, what in NATIVE_PARTS)
+        + f" of the {_num(r['busy_us_median'], 'us')} p50 work"
+        for name, r in rate_rows(sec).items()
+        if all(math.isfinite(r.get(key, math.nan)) for key, _ in NATIVE_PARTS)
+    ]
+    if not rows:
+        return []
+    return ["", "The native plant's work per period, part by part (p50 of each part):", ""] + [
+        f"- {row}" for row in rows
+    ]
 
 
 #: The targets of issue 29 for the native nodes, on this 2-core machine (the issue's
@@ -760,9 +790,15 @@ def _native_limit(key: str, res: dict[str, Any]) -> str:
         return "the recorder's receive buffer overflowed: its Python thread falls behind"
     if key == "native_busy_us_p50_10khz":
         r = res["realtime_native"]["10kHz"]
+        split = ""
+        if all(math.isfinite(r.get(key, math.nan)) for key, _ in NATIVE_PARTS):
+            split = (
+                f" (p50 send {_num(r['send_us_median'], 'us')}, receive "
+                f"{_num(r['recv_us_median'], 'us')}, step {_num(r['step_us_median'], 'us')})"
+            )
         return (
-            f"the plant node's own period (receive, step, encode, send) on a host with load "
-            f"{_num(res['machine'].get('loadavg_1min_start', math.nan))} on "
+            f"the plant node's own period (receive, step, encode, send){split} on a host with "
+            f"load {_num(res['machine'].get('loadavg_1min_start', math.nan))} on "
             f"{res['machine'].get('cpus')} cores; p99 {_num(r['busy_us_p99'], 'us')}"
         )
     r = res["realtime_native"]["4kHz" if key.endswith("4khz") else "10kHz"]
@@ -869,6 +905,7 @@ def render_realtime_native(res: dict[str, Any], source: str = "docs/perf/perf.js
         ],
         rows,
     )
+    lines += native_parts_lines(res["realtime_native"])
     lines += ["", NATIVE_DOC_END]
     return "\n".join(lines)
 
@@ -1551,6 +1588,8 @@ def figures_sections(res: dict[str, Any]) -> list[str]:
         ],
         rows,
     )
+    if "realtime_native" in res:
+        lines += native_parts_lines(res["realtime_native"])
     c = res["codec"]
     lines += ["", "### 4. Codec and analysis", ""]
     rows = [

@@ -12,7 +12,10 @@ program:
   ``udp_multicast`` bus (the default transport of a host without CAN): the
   same multicast group, port, hop limit 1 and ``SO_REUSEADDR``/``SO_REUSEPORT``
   as python-can, so C and python-can nodes meet on one port.  Non-blocking
-  receive up to an absolute deadline (``bn_recv_until``), and send.
+  receive up to an absolute deadline (``bn_recv_until``), the socket drained
+  by ``recvmmsg``; send, and an instant's frames in one ``sendmmsg``
+  (``bn_send_many``), whose copies the kernel loops back to the sending
+  socket are dropped unread.
 - ``bn_msgpack.c``: python-can's udp_multicast datagram, the msgpack map of
   ``can/interfaces/udp_multicast/utils.py`` (eleven keys), written and read
   without allocation.
@@ -23,7 +26,8 @@ program:
   (``bn_stats_t``) that Python reads with ctypes (:class:`._native.Stats`).
 - ``bn_plant.h``, ``bn_plant.c``, ``bn_plant_loop.c``: the plant node's
   per-period logic on the plant core (transport-free: frames in, frames out)
-  and its loop on a bus, lockstep and real time; built and driven by
+  and its loop on a bus, lockstep and real time (each real-time period's
+  send, receive and step time kept for Python beside its busy time); built and driven by
   :mod:`._plant_native` (``--engine native``).
 - ``bn_ctl.h``, ``bn_ctl.c``: the controller node's per-period logic
   (:class:`bench.nodes._controller_node.ControllerNode` on frames in and

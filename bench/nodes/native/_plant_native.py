@@ -329,6 +329,8 @@ class Loop(ctypes.Structure):
         ("t_first_sent", _I64),
         ("ev_frame", Frame),
         ("err", _I32),
+        ("parts", ctypes.POINTER(ctypes.c_uint32)),
+        ("part_ns", _I64 * 3),
     ]
 
 
@@ -363,6 +365,7 @@ def load_plant_lib(path: Path | None = None) -> ctypes.CDLL:
         ctypes.c_int,
     ]
     dll.bn_can_open.argtypes = [ctypes.c_void_p, ctypes.c_char_p, ctypes.c_bool]
+    dll.bn_bus_size.restype = ctypes.c_size_t
     dll.bn_recv.argtypes = [ctypes.c_void_p, ctypes.POINTER(Frame), ctypes.c_int64]
     dll.bn_send.argtypes = [ctypes.c_void_p, ctypes.POINTER(Frame)]
     dll.bn_plant_send.argtypes = [ctypes.POINTER(Unit), ctypes.c_void_p, ctypes.POINTER(Frame)]
@@ -440,7 +443,7 @@ class NativeBus:
         from bench.wire._bus import RECEIVE_BUFFER, UDP_DEFAULT_PORT
 
         self.dll = dll
-        self.buf = (ctypes.c_uint64 * 1024)()  # room for bn_bus_t
+        self.buf = (ctypes.c_uint64 * ((dll.bn_bus_size() + 7) // 8))()  # room for bn_bus_t
         self.ptr = ctypes.cast(self.buf, ctypes.c_void_p)
         if spec.interface == "udp_multicast":
             port = spec.port if spec.port is not None else UDP_DEFAULT_PORT
@@ -849,8 +852,12 @@ def _jitter(
     loop: Loop,
     busy: ctypes.Array[ctypes.c_uint32],
     late: ctypes.Array[ctypes.c_uint32],
+    parts: ctypes.Array[ctypes.c_uint32],
 ) -> dict[str, float]:
-    """The Python node's ``jitter`` (:class:`bench.nodes._clock.JitterStats`, us) of the run."""
+    """The Python node's ``jitter`` (:class:`bench.nodes._clock.JitterStats`, us) of the run,
+    and the native loop's split of the busy time: ``send_median`` (the instant's frames out),
+    ``recv_median`` (draining the socket, checking and decoding what came) and
+    ``step_median`` (the model's step and the next frames' encoding), each period's, us."""
     import numpy as np
 
     st = Stats()
@@ -862,6 +869,9 @@ def _jitter(
         * 1e-3
     )
     stall = lt[lt > 1e-3 * loop.stall_ns]
+    cap = int(loop.busy_cap)
+    raw = np.frombuffer(memoryview(parts), dtype=np.uint32, count=3 * cap).reshape(3, cap)
+    pt = raw[:, :n_busy].astype(float) * 1e-3
 
     def q(x: Any, p: float) -> float:
         return float(np.quantile(x, p)) if len(x) else 0.0
@@ -874,6 +884,9 @@ def _jitter(
         "busy_median": q(b, 0.5),
         "busy_p99": q(b, 0.99),
         "busy_max": float(b.max()) if len(b) else 0.0,
+        "send_median": q(pt[0], 0.5),
+        "recv_median": q(pt[1], 0.5),
+        "step_median": q(pt[2], 0.5),
         "stalls": float(st.stalls),
         "stall_total": float(stall.sum()),
         "stall_max": float(stall.max()) if len(stall) else 0.0,
@@ -956,6 +969,7 @@ def plant_loop_native(
         loop.last_answer_s = LAST_ANSWER_S
         busy: ctypes.Array[ctypes.c_uint32] | None = None
         late: ctypes.Array[ctypes.c_uint32] | None = None
+        parts: ctypes.Array[ctypes.c_uint32] | None = None
         if realtime:
             T = node.plant.T_s
             n = max(1, node.n_steps if node.n_steps > 0 else 1_000_000)
@@ -968,6 +982,8 @@ def plant_loop_native(
             late = (ctypes.c_uint32 * n)()
             loop.late = ctypes.cast(late, ctypes.POINTER(ctypes.c_uint32))
             loop.late_cap = n
+            parts = (ctypes.c_uint32 * (3 * n))()
+            loop.parts = ctypes.cast(parts, ctypes.POINTER(ctypes.c_uint32))
         diag = PlantDiagnostics(node)
         t_loop = time.perf_counter()
         said_fault = node.fault
@@ -1018,9 +1034,9 @@ def plant_loop_native(
                     raise BenchError(f"plant: native loop: {os.strerror(-loop.err)}")
         finally:
             node.loop_s = time.perf_counter() - t_loop
-            if realtime and loop.rt_started and busy is not None and late is not None:
+            if realtime and loop.rt_started and busy and late and parts:
                 u.overruns = loop.clock.st.missed  # also when a stop ended the loop
-                node.jitter = _jitter(dll, loop, busy, late)
+                node.jitter = _jitter(dll, loop, busy, late, parts)
             sync.pull()
             faults.pull(u, node.plant)
             faults.finish(node.plant)

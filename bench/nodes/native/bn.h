@@ -21,6 +21,7 @@
 #include <stddef.h>
 #include <stdint.h>
 #include <sys/socket.h>
+#include <sys/uio.h>
 
 #ifdef __cplusplus
 extern "C" {
@@ -80,17 +81,39 @@ int bn_mp_unpack(const uint8_t *in, size_t n, bn_frame_t *f);
 
 enum { BN_BUS_UDP = 1, BN_BUS_CAN = 2 };
 
+/* Datagrams or frames taken from the socket by one recvmmsg, and sent by one
+ * sendmmsg (bn_send_many).  A 10 kHz period of the plant sees its own 3-5
+ * looped-back frames and the controller's 2; 16 drains a period in one call. */
+#define BN_BATCH 16
+#define BN_DGRAM (BN_MP_MAX + 64) /* room for one datagram (a longer one is malformed) */
+
 typedef struct {
     int kind;                       /* BN_BUS_UDP or BN_BUS_CAN */
     int fd;                         /* socket, -1 when closed */
     bool can_fd;                    /* SocketCAN: CAN_RAW_FD_FRAMES granted */
     struct sockaddr_storage dest;   /* UDP: the group and port */
     socklen_t dest_len;
-    uint8_t buf[BN_MP_MAX + 64];    /* UDP datagram (a longer one is malformed) */
+    uint8_t buf[BN_DGRAM];          /* UDP datagram being sent */
     int64_t send_wait_ns;           /* bn_send waits this long for room (open: 1 ms) */
+    /* the receive batch: rx_n datagrams of the last recvmmsg, rx_i handed out,
+     * received at rx_t_ns (CLOCK_REALTIME) */
+    int32_t rx_n, rx_i;
+    int64_t rx_t_ns;
+    uint8_t rx_buf[BN_BATCH][BN_DGRAM];
+    struct mmsghdr rx_msg[BN_BATCH];
+    struct iovec rx_iov[BN_BATCH];
+    /* the send batch of bn_send_many; UDP: its tx_n datagrams, looped back to this
+     * socket by the kernel, are dropped on receipt without decoding (rx_own) */
+    int32_t tx_n;
+    uint8_t tx_buf[BN_BATCH][BN_DGRAM];
+    struct mmsghdr tx_msg[BN_BATCH];
+    struct iovec tx_iov[BN_BATCH];
     /* counters */
-    uint64_t rx, tx, rx_malformed, tx_errors, tx_waits;
+    uint64_t rx, tx, rx_malformed, tx_errors, tx_waits, rx_own;
 } bn_bus_t;
+
+/* sizeof(bn_bus_t): the room Python allocates for one. */
+size_t bn_bus_size(void);
 
 /* Join python-can's udp_multicast bus: group (IPv6 "ff15:..." or IPv4
  * "239.74.163.2"), port, hop limit / TTL (python-can: 1).  SO_REUSEADDR and
@@ -109,9 +132,16 @@ int bn_can_open(bn_bus_t *b, const char *ifname, bool fd);
  * is counted in tx_errors; a wait is counted in tx_waits). */
 int bn_send(bn_bus_t *b, const bn_frame_t *f);
 
+/* Send n frames with one sendmmsg (UDP; SocketCAN: one write each); the
+ * number of frames the socket took, from the first, without waiting (a full
+ * socket, an error: the caller sends the rest with bn_send). */
+int bn_send_many(bn_bus_t *b, const bn_frame_t *f, int n);
+
 /* Receive one frame, waiting no later than deadline_ns (CLOCK_MONOTONIC ns;
  * 0: do not wait).  1 a frame, 0 none by the deadline, -errno on an error.
- * Malformed datagrams are counted and skipped. */
+ * Malformed datagrams are counted and skipped.  The socket is drained by
+ * recvmmsg, up to BN_BATCH datagrams per call; the frames of one call carry
+ * its time. */
 int bn_recv_until(bn_bus_t *b, bn_frame_t *f, int64_t deadline_ns);
 
 /* bn_recv_until with a relative timeout (ns; 0: do not wait). */

@@ -35,12 +35,23 @@ int64_t bn_realtime_ns(void)
     return (int64_t)ts.tv_sec * 1000000000 + ts.tv_nsec;
 }
 
+size_t bn_bus_size(void) { return sizeof(bn_bus_t); }
+
 static void bus_reset(bn_bus_t *b, int kind)
 {
     memset(b, 0, sizeof *b);
     b->kind = kind;
     b->fd = -1;
     b->send_wait_ns = 1000000;
+    for (int j = 0; j < BN_BATCH; j++) { /* once: the batches' headers point at their buffers */
+        b->rx_iov[j].iov_base = b->rx_buf[j];
+        b->rx_iov[j].iov_len = sizeof b->rx_buf[j];
+        b->rx_msg[j].msg_hdr.msg_iov = &b->rx_iov[j];
+        b->rx_msg[j].msg_hdr.msg_iovlen = 1;
+        b->tx_iov[j].iov_base = b->tx_buf[j];
+        b->tx_msg[j].msg_hdr.msg_iov = &b->tx_iov[j];
+        b->tx_msg[j].msg_hdr.msg_iovlen = 1;
+    }
 }
 
 static int fail(bn_bus_t *b)
@@ -228,29 +239,102 @@ int bn_send(bn_bus_t *b, const bn_frame_t *f)
     return r;
 }
 
+int bn_send_many(bn_bus_t *b, const bn_frame_t *f, int n)
+{
+    if (b->kind != BN_BUS_UDP) {
+        for (int j = 0; j < n; j++) {
+            struct canfd_frame fr;
+            const void *p;
+            size_t len;
+            if (encode(b, &f[j], &fr, &p, &len) != 0 || write(b->fd, p, len) != (ssize_t)len) {
+                return j;
+            }
+            b->tx++;
+        }
+        return n;
+    }
+    if (n > BN_BATCH) {
+        n = BN_BATCH;
+    }
+    b->tx_n = 0;
+    double t = (double)bn_realtime_ns() * 1e-9; /* python-can stamps each at its send */
+    for (int j = 0; j < n; j++) {
+        size_t len = bn_mp_pack(&f[j], t, b->tx_buf[j], sizeof b->tx_buf[j]);
+        if (len == 0) {
+            n = j; /* the caller's bn_send counts it */
+            break;
+        }
+        b->tx_iov[j].iov_len = len;
+        b->tx_msg[j].msg_hdr.msg_name = &b->dest;
+        b->tx_msg[j].msg_hdr.msg_namelen = b->dest_len;
+    }
+    if (n == 0) {
+        return 0;
+    }
+    int got = sendmmsg(b->fd, b->tx_msg, (unsigned)n, MSG_DONTWAIT);
+    if (got < 0) {
+        return 0;
+    }
+    b->tx_n = got;
+    b->tx += (uint64_t)got;
+    return got;
+}
+
+/* Refill the receive batch with one recvmmsg: the number taken, 0 (none), -errno. */
+static int refill(bn_bus_t *b)
+{
+    b->rx_i = b->rx_n = 0;
+    int n = recvmmsg(b->fd, b->rx_msg, BN_BATCH, MSG_DONTWAIT, NULL);
+    if (n < 0) {
+        return (errno == EAGAIN || errno == EWOULDBLOCK) ? 0 : -errno;
+    }
+    b->rx_n = n;
+    b->rx_t_ns = bn_realtime_ns();
+    return n;
+}
+
+/* A datagram of the last send batch, looped back (its bytes, time stamp included). */
+static bool own(const bn_bus_t *b, const uint8_t *d, size_t n)
+{
+    for (int j = 0; j < b->tx_n; j++) {
+        if (b->tx_iov[j].iov_len == n && memcmp(b->tx_buf[j], d, n) == 0) {
+            return true;
+        }
+    }
+    return false;
+}
+
 /* One datagram or frame without waiting: 1, 0 (none), -errno. */
 static int recv_now(bn_bus_t *b, bn_frame_t *f)
 {
     for (;;) {
-        if (b->kind == BN_BUS_UDP) {
-            ssize_t n = recv(b->fd, b->buf, sizeof b->buf, MSG_DONTWAIT | MSG_TRUNC);
-            if (n < 0) {
-                return (errno == EAGAIN || errno == EWOULDBLOCK) ? 0 : -errno;
+        if (b->rx_i >= b->rx_n) {
+            int r = refill(b);
+            if (r <= 0) {
+                return r;
             }
-            if ((size_t)n > sizeof b->buf || bn_mp_unpack(b->buf, (size_t)n, f) != 0) {
+        }
+        struct mmsghdr *m = &b->rx_msg[b->rx_i];
+        const uint8_t *d = b->rx_buf[b->rx_i];
+        size_t n = m->msg_len;
+        int trunc = (m->msg_hdr.msg_flags & MSG_TRUNC) != 0;
+        b->rx_i++;
+        if (b->kind == BN_BUS_UDP) {
+            if (own(b, d, n)) {
+                b->rx_own++;
+                continue;
+            }
+            if (trunc || bn_mp_unpack(d, n, f) != 0) {
                 b->rx_malformed++;
                 continue;
             }
         } else {
             struct canfd_frame fr;
-            ssize_t n = recv(b->fd, &fr, sizeof fr, MSG_DONTWAIT);
-            if (n < 0) {
-                return (errno == EAGAIN || errno == EWOULDBLOCK) ? 0 : -errno;
-            }
-            if (n != (ssize_t)CAN_MTU && n != (ssize_t)CANFD_MTU) {
+            if (trunc || (n != CAN_MTU && n != CANFD_MTU)) {
                 b->rx_malformed++;
                 continue;
             }
+            memcpy(&fr, d, n);
             memset(f, 0, sizeof *f);
             if (fr.can_id & CAN_EFF_FLAG) {
                 f->flags |= BN_EXT;
@@ -260,7 +344,7 @@ static int recv_now(bn_bus_t *b, bn_frame_t *f)
             }
             f->flags |= (fr.can_id & CAN_RTR_FLAG) ? BN_RTR : 0;
             f->flags |= (fr.can_id & CAN_ERR_FLAG) ? BN_ERR : 0;
-            if (n == (ssize_t)CANFD_MTU) {
+            if (n == CANFD_MTU) {
                 f->flags |= BN_FD;
                 f->flags |= (fr.flags & CANFD_BRS) ? BN_BRS : 0;
                 f->flags |= (fr.flags & CANFD_ESI) ? BN_ESI : 0;
@@ -268,7 +352,7 @@ static int recv_now(bn_bus_t *b, bn_frame_t *f)
             f->len = fr.len > CANFD_MAX_DLEN ? CANFD_MAX_DLEN : fr.len;
             memcpy(f->data, fr.data, f->len);
         }
-        f->t_ns = bn_realtime_ns();
+        f->t_ns = b->rx_t_ns;
         b->rx++;
         return 1;
     }

@@ -288,7 +288,37 @@ int bn_ctl_on_frame(bn_ctl_t *ctl, const bn_frame_t *in, bn_ctl_sink_t sink, voi
     return BN_CTL_EV_NONE; /* the loop listens to no other frame */
 }
 
-static int bus_sink(void *ctx, const bn_frame_t *f) { return bn_send((bn_bus_t *)ctx, f); }
+/* The frames one received frame makes (a duty and its telemetry, or the answers
+ * resent), collected and sent together with one bn_send_many when it is handled. */
+typedef struct {
+    bn_ctl_t *ctl;
+    bn_bus_t *bus;
+    int n;
+    bn_frame_t f[BN_BATCH];
+} batch_t;
+
+/* Send what is collected; what the batch did not take goes one by one (bn_send's
+ * wait for room), each failure counted as emit counts it. */
+static void flush(batch_t *b)
+{
+    int j = b->n > 0 ? bn_send_many(b->bus, b->f, b->n) : 0;
+    for (; j < b->n; j++) {
+        if (bn_send(b->bus, &b->f[j]) != 0) {
+            b->ctl->c.send_errors++;
+            b->ctl->c.frames_lost_on_send++;
+        }
+    }
+    b->n = 0;
+}
+
+static int bus_sink(void *ctx, const bn_frame_t *f)
+{
+    batch_t *b = (batch_t *)ctx;
+    if (b->n == BN_BATCH)
+        flush(b);
+    b->f[b->n++] = *f;
+    return 0;
+}
 
 /* controller_loop: frames until an event; real time: the sample timeout */
 int bn_ctl_serve(bn_ctl_t *ctl, bn_bus_t *bus)
@@ -297,7 +327,12 @@ int bn_ctl_serve(bn_ctl_t *ctl, bn_bus_t *bus)
     int64_t t_return = now + ctl->return_ns;
     if (ctl->t_last == 0)
         ctl->t_last = ctl->t_sample = now;
-    int ev = bn_ctl_resume(ctl, bus_sink, bus);
+    batch_t out;
+    out.ctl = ctl;
+    out.bus = bus;
+    out.n = 0;
+    int ev = bn_ctl_resume(ctl, bus_sink, &out);
+    flush(&out);
     if (ev != BN_CTL_EV_NONE)
         return ev;
     for (;;) {
@@ -335,7 +370,8 @@ int bn_ctl_serve(bn_ctl_t *ctl, bn_bus_t *bus)
             && !(ctl->needs_truth && id == BENCH_DBC_PLANT_TRUTH_FRAME_ID))
             continue;
         ctl->t_last = now;
-        ev = bn_ctl_on_frame(ctl, &in, bus_sink, bus);
+        ev = bn_ctl_on_frame(ctl, &in, bus_sink, &out);
+        flush(&out);
         if (ev != BN_CTL_EV_NONE)
             return ev;
     }

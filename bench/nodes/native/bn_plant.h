@@ -258,7 +258,14 @@ typedef struct {
     int64_t t_first_sent;       /* real time, a controller under test: sample 0 last sent */
     bn_frame_t ev_frame;
     int32_t err;
+    /* real time: the caller's buffer of 3 busy_cap entries, each period's time (ns,
+     * saturated) sending [0, cap), receiving [cap, 2 cap) and stepping [2 cap, 3 cap);
+     * part_ns: the period's so far (BN_PART_*) */
+    uint32_t *parts;
+    int64_t part_ns[3];
 } bn_plant_loop_t;
+
+enum { BN_PART_SEND = 0, BN_PART_RECV = 1, BN_PART_STEP = 2 };
 
 /* Run until an event (BN_EV_*); re-enter after Python handled it. */
 int bn_plant_loop(bn_plant_loop_t *L);

@@ -22,9 +22,11 @@ void bn_plant_send(bn_plant_t *u, bn_bus_t *bus, const bn_frame_t *f)
     }
 }
 
+/* The instant's frames: one sendmmsg; what it did not take, one by one with retries. */
 static void send_out(bn_plant_loop_t *L)
 {
-    for (int j = 0; j < L->u->n_out; j++) bn_plant_send(L->u, L->bus, &L->u->out[j]);
+    int j = L->u->n_out > 0 ? bn_send_many(L->bus, L->u->out, L->u->n_out) : 0;
+    for (; j < L->u->n_out; j++) bn_plant_send(L->u, L->bus, &L->u->out[j]);
     L->u->n_out = 0;
 }
 
@@ -189,8 +191,12 @@ static int loop_realtime(bn_plant_loop_t *L)
         L->phase = 1;
     }
     for (;;) {
+        int64_t t0 = bn_now_ns(), t1;
         if (L->phase == 1) {
             send_out(L); /* this instant's frames leave at its deadline */
+            t1 = bn_now_ns();
+            L->part_ns[BN_PART_SEND] += t1 - t0;
+            t0 = t1;
             if (done(u)) {
                 u->overruns = L->clock.st.missed;
                 return BN_EV_DONE;
@@ -205,12 +211,28 @@ static int loop_realtime(bn_plant_loop_t *L)
                     return BN_EV_ERROR;
                 }
                 if (r == 0) break;
-                if (take(L, &f)) return BN_EV_FRAME;
+                if (take(L, &f)) {
+                    L->part_ns[BN_PART_RECV] += bn_now_ns() - t0;
+                    return BN_EV_FRAME;
+                }
             }
+            t1 = bn_now_ns();
+            L->part_ns[BN_PART_RECV] += t1 - t0;
+            t0 = t1;
             if (u->n_cmds == 0 && u->cmds_more) return BN_EV_CMDS;
             bn_plant_advance(u);
+            L->part_ns[BN_PART_STEP] += bn_now_ns() - t0;
             L->phase = 3;
         }
+        uint64_t p = L->clock.st.periods;
+        if (L->parts != NULL && p < L->busy_cap) {
+            for (int j = 0; j < 3; j++) {
+                int64_t v = L->part_ns[j];
+                L->parts[(uint64_t)j * L->busy_cap + p] =
+                    (uint32_t)(v > (int64_t)UINT32_MAX ? UINT32_MAX : v);
+            }
+        }
+        L->part_ns[0] = L->part_ns[1] = L->part_ns[2] = 0;
         int64_t late = bn_clock_wait(&L->clock);
         if (L->late != NULL && L->n_late < L->late_cap)
             L->late[L->n_late++] = (uint32_t)(late > (int64_t)UINT32_MAX ? UINT32_MAX : late);
