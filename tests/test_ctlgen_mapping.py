@@ -52,6 +52,7 @@ supervision = true
 OPTIONS = "\n[motor]\n[estimator_options]\n"
 TRACKING = OPTIONS + "bpf_tracking = true\naccel_ff = true\n"
 MECHANICAL = OPTIONS + 'observer = "mechanical"\n'
+MEASURED = OPTIONS + 'normalise = "measured"\n'
 
 
 def _design_methods() -> set[str]:
@@ -101,7 +102,13 @@ def _cases(tmp_path: Path) -> list[tuple[Path, str]]:
     tracking.write_text(base + TRACKING)
     mechanical = tmp_path / "mechanical.toml"
     mechanical.write_text(base + MECHANICAL)
-    return [(all_on, e) for e in SENSORLESS] + [(tracking, "tt-dq"), (mechanical, "sfhf")]
+    measured = tmp_path / "measured.toml"
+    measured.write_text(base + MEASURED)
+    return [(all_on, e) for e in SENSORLESS] + [
+        (tracking, "tt-dq"),
+        (mechanical, "sfhf"),
+        (measured, "tt-dq"),
+    ]
 
 
 def test_the_header_maps_every_design_as_the_binding(tmp_path: Path) -> None:

@@ -30,6 +30,7 @@ from bench.nodes._loops import make_plant_node, run_inprocess
 from bench.runs._results import run_metadata
 from bench.runs._run import _score
 from bench.scenarios._schema import load_scenario
+from bench.wire._bus import BusSpec
 from bench.wire._codec import Codec
 from plant_rt import FAULT_WATCHDOG
 from tests.ports import free_port
@@ -135,9 +136,11 @@ def test_controller_killed_in_lockstep_ends_the_run_at_once_naming_the_signal(
     tmp_path: Path,
 ) -> None:
     out = tmp_path / "kill"
+    port = free_port()
     cmd = [sys.executable, "-m", "bench", "run", "wen-5.1", "-e", "sensored", "--duration",
            "30", "-i", "udp_multicast", "--channel", "239.74.163.2", "--port",
-           str(free_port()), "--out", str(out)]  # fmt: skip
+           str(port), "--out", str(out)]  # fmt: skip
+    bus = BusSpec("udp_multicast", "239.74.163.2", port).open()
     proc = subprocess.Popen(cmd, cwd=ROOT, stderr=subprocess.PIPE, stdout=subprocess.DEVNULL)
     said: list[tuple[float, str]] = []  # stderr's lines as they come, with their time
 
@@ -149,18 +152,15 @@ def test_controller_killed_in_lockstep_ends_the_run_at_once_naming_the_signal(
     reader = threading.Thread(target=read_err, daemon=True)
     reader.start()
     try:
-        t0 = time.monotonic()
-        pid = None
-        while pid is None or not (out / "plant.log").exists():
-            assert time.monotonic() - t0 < 90, "the run did not start"
-            time.sleep(0.1)
-            pid = _controller_pid(out)
-        time.sleep(1.0)  # the plant stepping
+        _wait_stepping(bus)
+        pid = _controller_pid(out)
+        assert pid is not None
         os.kill(pid, signal.SIGKILL)
         t_kill = time.monotonic()
         proc.wait(timeout=120)
         reader.join(timeout=30)
     finally:
+        bus.shutdown()
         if proc.poll() is None:
             proc.kill()
     err = "".join(line for _, line in said)
@@ -183,19 +183,18 @@ def test_controller_killed_in_lockstep_ends_the_run_at_once_naming_the_signal(
 @pytest.mark.usefixtures("native_library")  # its first build: not in the 90 s
 def test_an_interrupted_run_says_that_it_scores_what_was_recorded(tmp_path: Path) -> None:
     out = tmp_path / "int"
+    port = free_port()
     cmd = [sys.executable, "-m", "bench", "run", "wen-5.1", "-e", "sensored", "--duration",
            "30", "-i", "udp_multicast", "--channel", "239.74.163.2", "--port",
-           str(free_port()), "--out", str(out)]  # fmt: skip
+           str(port), "--out", str(out)]  # fmt: skip
+    bus = BusSpec("udp_multicast", "239.74.163.2", port).open()
     proc = subprocess.Popen(cmd, cwd=ROOT, stderr=subprocess.PIPE, stdout=subprocess.DEVNULL)
     try:
-        t0 = time.monotonic()
-        while _controller_pid(out) is None or not (out / "plant.log").exists():
-            assert time.monotonic() - t0 < 90, "the run did not start"
-            time.sleep(0.1)
-        time.sleep(1.0)
+        _wait_stepping(bus)
         proc.send_signal(signal.SIGINT)
         _, err_b = proc.communicate(timeout=60)
     finally:
+        bus.shutdown()
         if proc.poll() is None:
             proc.kill()
     err = err_b.decode()
@@ -203,6 +202,23 @@ def test_an_interrupted_run_says_that_it_scores_what_was_recorded(tmp_path: Path
     line = next(ln for ln in err.splitlines() if ln.startswith("interrupted at step"))
     assert "stopping the nodes and scoring what was recorded" in line, err
     assert err.strip().splitlines()[-1] == "bench: interrupted"
+
+
+def _wait_stepping(bus: can.BusABC, samples: int = 300) -> None:
+    """Until the run's plant has sent ``samples`` PhaseSamples: the run is stepping.
+
+    The nodes start together, so neither the plant's log nor the controller's
+    process says that the controller is ready; in lockstep the plant's samples
+    after the first follow the controller's answers.
+    """
+    fid = Codec().frame_id("PhaseSamples")
+    t0 = time.monotonic()
+    n = 0
+    while n < samples:
+        assert time.monotonic() - t0 < 90, "the run did not start"
+        m = bus.recv(1.0)
+        if m is not None and m.arbitration_id == fid:
+            n += 1
 
 
 def _controller_pid(out: Path) -> int | None:
