@@ -403,8 +403,9 @@ static PyObject *mod_machine(PyObject *unused, PyObject *args)
 {
     plant_machine_pars p = {0};
     double i_d, i_q;
-    if (!PyArg_ParseTuple(args, "dddddddppdd", &p.n_p, &p.L_d, &p.L_q, &p.psi_f, &p.sat_sigma,
-                          &p.sat_i_sat, &p.c_dq, &p.saturation, &p.cross, &i_d, &i_q))
+    if (!PyArg_ParseTuple(args, "ddddddddppdd", &p.n_p, &p.L_d, &p.L_q, &p.psi_f, &p.i_max,
+                          &p.sat_sigma, &p.sat_i_sat, &p.c_dq, &p.saturation, &p.cross, &i_d,
+                          &i_q))
         return NULL;
     p.J = 1.0;
     plant_machine m;
@@ -446,7 +447,7 @@ static PyObject *mod_device_drop_error(PyObject *unused, PyObject *const *args, 
 
 static PyMethodDef module_methods[] = {
     {"machine", (PyCFunction)mod_machine, METH_VARARGS,
-     "machine(n_p, L_d, L_q, psi_f, sigma, i_sat, c_dq, saturation, cross, i_d, i_q) -> "
+     "machine(n_p, L_d, L_q, psi_f, i_max, sigma, i_sat, c_dq, saturation, cross, i_d, i_q) -> "
      "(psi_d, psi_q, L_dd, L_dq, L_qq, tau_e): the flux map and the torque"},
     {"dead_time_error", (PyCFunction)(void (*)(void))mod_dead_time_error, METH_FASTCALL,
      "dead_time_error(i_x, u_dc, t_dead, T_s) -> the period-mean pole-voltage error (V)"},
@@ -476,7 +477,8 @@ PyMODINIT_FUNC PyInit__cplant(void)
         || PyModule_AddIntConstant(m, "FAULT_OVER_CURRENT", PLANT_FAULT_OVER_CURRENT) < 0
         || PyModule_AddIntConstant(m, "FAULT_OVER_VOLTAGE", PLANT_FAULT_OVER_VOLTAGE) < 0
         || PyModule_AddIntConstant(m, "FAULT_OVER_SPEED", PLANT_FAULT_OVER_SPEED) < 0
-        || PyModule_AddIntConstant(m, "MAX_SUBSTEPS", PLANT_MAX_SUBSTEPS) < 0) {
+        || PyModule_AddIntConstant(m, "MAX_SUBSTEPS", PLANT_MAX_SUBSTEPS) < 0
+        || PyModule_AddObject(m, "FLUX_RANGE", PyFloat_FromDouble(PLANT_FLUX_RANGE)) < 0) {
         Py_DECREF(m);
         return NULL;
     }

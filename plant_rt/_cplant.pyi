@@ -11,6 +11,7 @@ FAULT_OVER_CURRENT: int
 FAULT_OVER_VOLTAGE: int
 FAULT_OVER_SPEED: int
 MAX_SUBSTEPS: int
+FLUX_RANGE: float
 
 class Core:
     def __init__(self, *pars: float | int | bool) -> None: ...
@@ -42,6 +43,7 @@ def machine(
     L_d: float,
     L_q: float,
     psi_f: float,
+    i_max: float,
     sigma: float,
     i_sat: float,
     c_dq: float,

@@ -223,6 +223,7 @@ def _machine(
         float(motor.L_d),
         float(motor.L_q),
         float(motor.psi_f),
+        float(motor.i_max),
         float(motor.sat.sigma),
         float(motor.sat.i_sat),
         float(motor.cross.c_dq),
