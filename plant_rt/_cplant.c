@@ -156,6 +156,11 @@ static PyObject *Core_meter(Core *s, PyObject *unused)
                          e->q_b, e->q_c);
 }
 
+static PyObject *Core_out_of_range(Core *s, PyObject *unused)
+{
+    return PyLong_FromLong(s->pl.n_out);
+}
+
 static PyObject *Core_currents(Core *s, PyObject *unused)
 {
     double i[3];
@@ -333,6 +338,8 @@ static PyMethodDef Core_methods[] = {
      "set_metering(on): integrate the energy flows with the states"},
     {"meter", (PyCFunction)Core_meter, METH_NOARGS,
      "meter() -> (e_in, e_cu, e_em, e_fric, e_load, q_a, q_b, q_c)"},
+    {"out_of_range", (PyCFunction)Core_out_of_range, METH_NOARGS,
+     "out_of_range() -> the periods that ended outside the flux map's checked range"},
     {"currents", (PyCFunction)Core_currents, METH_NOARGS, "currents() -> (i_a, i_b, i_c) now"},
     {"torque", (PyCFunction)Core_torque, METH_NOARGS, "torque() -> tau_e now (N m)"},
     {"back_emf", (PyCFunction)Core_back_emf, METH_NOARGS, "back_emf() -> (e_a, e_b, e_c) now (V)"},
@@ -478,7 +485,8 @@ PyMODINIT_FUNC PyInit__cplant(void)
         || PyModule_AddIntConstant(m, "FAULT_OVER_VOLTAGE", PLANT_FAULT_OVER_VOLTAGE) < 0
         || PyModule_AddIntConstant(m, "FAULT_OVER_SPEED", PLANT_FAULT_OVER_SPEED) < 0
         || PyModule_AddIntConstant(m, "MAX_SUBSTEPS", PLANT_MAX_SUBSTEPS) < 0
-        || PyModule_AddObject(m, "FLUX_RANGE", PyFloat_FromDouble(PLANT_FLUX_RANGE)) < 0) {
+        || PyModule_AddObject(m, "FLUX_RANGE", PyFloat_FromDouble(PLANT_FLUX_RANGE)) < 0
+        || PyModule_AddObject(m, "FLUX_FADE", PyFloat_FromDouble(PLANT_FLUX_FADE)) < 0) {
         Py_DECREF(m);
         return NULL;
     }

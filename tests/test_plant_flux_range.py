@@ -1,0 +1,171 @@
+"""The flux map beyond its checked range (plant_flux_cross_ext) and the plant's count of it.
+
+Inside ``|i_d|, |i_q| <= 2 i_max`` the cross-saturated map is the polynomial of
+CrossSaturationPars, written out here::
+
+    L_dd = L_dd,sat(i_d) - (c/2) i_q^2
+    L_dq = -c (i_d + i_0) i_q
+    L_qq = L_q - (c/2) (i_d^2 + 2 i_0 i_d)
+
+Beyond it the co-energy is taken at the currents limited by
+``s(u) = sgn(u) a + w tanh((u - sgn(u) a) / w)``: the matrix stays the Hessian of one
+co-energy (symmetric, the Jacobian of the flux), continuous across the edge, positive
+definite everywhere, and far out it is the d-axis model's ``diag(L_dd,sat(i_d), L_q)``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from plant_rt import InverterPars, Plant, flux_dq, preset
+from plant_rt._machine import FLUX_FADE, FLUX_RANGE
+from tests.plant_reference import flux_dq as ref_flux_dq
+
+NAMES = ["wen2023", "xue2022"]
+
+
+def l_sat(name: str, i_d: float, sat: bool) -> float:
+    m = preset(name).motor
+    if not sat:
+        return m.L_d
+    x = i_d / m.sat.i_sat
+    return m.L_d * (1.0 - m.sat.sigma * x / math.sqrt(1.0 + x * x))
+
+
+def least_eig(L_dd: float, L_dq: float, L_qq: float) -> float:
+    return 0.5 * (L_dd + L_qq) - math.hypot(0.5 * (L_dd - L_qq), L_dq)
+
+
+def polar(r_max: float, n_r: int = 120, n_a: int = 144) -> list[tuple[float, float]]:
+    """Radii evenly in log from r_max / 1000 to r_max, by n_a angles."""
+    out = []
+    for k in range(n_r + 1):
+        r = r_max * 1000.0 ** (k / n_r - 1.0)
+        for j in range(n_a):
+            a = 2.0 * math.pi * (j + 0.5) / n_a
+            out.append((r * math.cos(a), r * math.sin(a)))
+    return out
+
+
+@pytest.mark.parametrize("sat", [False, True])
+@pytest.mark.parametrize("name", NAMES)
+def test_map_positive_definite_to_50_i_max(name: str, sat: bool) -> None:
+    """The least eigenvalue of the incremental inductance matrix is positive on a polar
+    grid to 50 i_max (the polynomial alone turns singular near 3 i_max (wen2023) and 5 i_max
+    (xue2022)), and with both currents past 10 i_max the matrix is diag(L_dd,sat, L_q)."""
+    m = preset(name).motor
+    worst = math.inf
+    for i_d, i_q in polar(50.0 * m.i_max):
+        _, _, L_dd, L_dq, L_qq = flux_dq(m, i_d, i_q, sat, True)
+        assert L_dq == flux_dq(m, i_d, i_q, sat, True)[3]
+        worst = min(worst, least_eig(L_dd, L_dq, L_qq) / m.L_d)
+        if min(abs(i_d), abs(i_q)) > 10.0 * m.i_max:
+            assert L_dd == pytest.approx(l_sat(name, i_d, sat), rel=1e-9)
+            assert L_qq == pytest.approx(m.L_q, rel=1e-9)
+            assert abs(L_dq) < 1e-9 * m.L_d
+    assert worst > 0.1
+    # the polynomial itself is not: the continuation is what keeps it positive
+    i = 6.0 * m.i_max
+    c, i_0 = m.cross.c_dq, m.psi_f / m.L_d
+    poly = least_eig(
+        l_sat(name, i, sat) - 0.5 * c * i * i,
+        -c * (i + i_0) * i,
+        m.L_q - 0.5 * c * (i * i + 2 * i_0 * i),
+    )
+    assert poly < 0.0
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_same_map_inside_the_range_and_the_oracle_everywhere(name: str) -> None:
+    """Inside |i_d|, |i_q| <= 2 i_max the map is the polynomial (the closed form to 1e-13,
+    the reference model's operations bit for bit); beyond it the core and the reference
+    model's continuation agree bit for bit too."""
+    m = preset(name).motor
+    a = FLUX_RANGE * m.i_max
+    c, i_0 = m.cross.c_dq, m.psi_f / m.L_d
+    n = 0
+    for i_d, i_q in polar(50.0 * m.i_max, 60, 72):
+        got = flux_dq(m, i_d, i_q, True, True)
+        assert got == ref_flux_dq(m, i_d, i_q, True, True)
+        if max(abs(i_d), abs(i_q)) <= a:
+            n += 1
+            want = (
+                l_sat(name, i_d, True) - 0.5 * c * i_q * i_q,
+                -c * (i_d + i_0) * i_q,
+                m.L_q - 0.5 * c * (i_d * i_d + 2.0 * i_0 * i_d),
+            )
+            assert got[2:] == pytest.approx(want, rel=1e-13, abs=1e-13 * m.L_d)
+    assert n > 1000
+
+
+@pytest.mark.parametrize(
+    ("u_d", "u_q"), [(1.0, 0.3), (-1.0, 0.5), (0.2, 1.0), (-0.7, -1.0), (1.0, 1.0), (-1.0, -1.0)]
+)
+@pytest.mark.parametrize("name", NAMES)
+def test_continuous_across_the_edge_and_one_co_energy_beyond(
+    name: str, u_d: float, u_q: float
+) -> None:
+    """At the edge (one current at +-a) flux and matrix are continuous (a jump of the
+    matrix would show as a difference of order c a^2 over a step of 1e-9 a); beyond the
+    edge the matrix is the flux's Jacobian (central differences, 1e-6) and symmetric."""
+    m = preset(name).motor
+    a = FLUX_RANGE * m.i_max
+    at = (u_d * a, u_q * a)
+    for axis in (0, 1):
+        if abs(at[axis]) != a:
+            continue
+        eps = 1e-9 * a
+        lo = list(at)
+        hi = list(at)
+        lo[axis] -= math.copysign(eps, at[axis])
+        hi[axis] += math.copysign(eps, at[axis])
+        f_lo = flux_dq(m, lo[0], lo[1], True, True)
+        f_hi = flux_dq(m, hi[0], hi[1], True, True)
+        for x, y in zip(f_lo[2:], f_hi[2:], strict=True):
+            assert abs(x - y) < 1e-7 * m.L_d
+        for x, y in zip(f_lo[:2], f_hi[:2], strict=True):
+            assert abs(x - y) < 1e-8 * m.psi_f
+    # beyond: the Jacobian of the flux, symmetric (one co-energy)
+    for k in (1.13, 1.37, 2.3, 5.3):  # no current exactly at an edge
+        i_d, i_q = k * at[0], k * at[1]
+        _, _, L_dd, L_dq, L_qq = flux_dq(m, i_d, i_q, True, True)
+        h = 1e-4 * a
+
+        def psi(x: float, y: float) -> tuple[float, float]:
+            f = flux_dq(m, x, y, True, True)
+            return f[0], f[1]
+
+        dd = (psi(i_d + h, i_q)[0] - psi(i_d - h, i_q)[0]) / (2 * h)
+        dq = (psi(i_d, i_q + h)[0] - psi(i_d, i_q - h)[0]) / (2 * h)
+        qd = (psi(i_d + h, i_q)[1] - psi(i_d - h, i_q)[1]) / (2 * h)
+        qq = (psi(i_d, i_q + h)[1] - psi(i_d, i_q - h)[1]) / (2 * h)
+        tol = 1e-6 * m.L_q
+        assert (dd, dq, qd, qq) == pytest.approx((L_dd, L_dq, L_dq, L_qq), abs=tol)
+    assert FLUX_FADE == 0.25
+
+
+def test_plant_counts_the_periods_outside_the_range_and_stays_finite() -> None:
+    """A locked xue2022 rotor (cross-saturated map) under full voltage: the current runs to
+    u / R, about 50 times the range, the states stay finite, and the count is the number
+    of periods whose end state lies beyond 2 i_max (read from the truth each period).
+    With the cross map off there is no range and no count."""
+    pre = preset("xue2022")
+    inv = InverterPars(u_dc=pre.inverter.u_dc)
+    for cross in (True, False):
+        p = Plant(pre.motor, inv, pre.T_s, saturation=True, cross_saturation=cross)
+        p.impose_speed(0.0)
+        r = FLUX_RANGE * pre.motor.i_max
+        want = 0
+        peak = 0.0
+        for k in range(200):
+            p.step(1.0, 0.0, 0.0) if k < 150 else p.step(0.5, 0.5, 0.5)
+            tr = p.truth()
+            i = math.hypot(tr.i_d, tr.i_q)
+            assert math.isfinite(i)
+            peak = max(peak, i)
+            want += i > r
+        assert peak > 40.0 * pre.motor.i_max
+        assert p.out_of_range_periods == (want if cross else 0)
+        assert 100 < want < 300  # and the current came back inside
