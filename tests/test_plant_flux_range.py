@@ -19,6 +19,8 @@ import math
 
 import pytest
 
+from bench._errors import EXIT_LOCK_LOST, EXIT_MODEL_RANGE, EXIT_PLANT_TRIPPED
+from bench.runs._results import outcome
 from plant_rt import InverterPars, Plant, flux_dq, preset
 from plant_rt._machine import FLUX_FADE, FLUX_RANGE
 from tests.plant_reference import flux_dq as ref_flux_dq
@@ -169,3 +171,19 @@ def test_plant_counts_the_periods_outside_the_range_and_stays_finite() -> None:
         assert peak > 40.0 * pre.motor.i_max
         assert p.out_of_range_periods == (want if cross else 0)
         assert 100 < want < 300  # and the current came back inside
+
+
+def test_a_run_beyond_the_range_is_a_result_with_its_own_exit_status() -> None:
+    """``plant_out_of_range_s`` above 0: a warning line naming the time and exit status 7;
+    a lost angle (its cause) and a trip win over it; 0 or None (no plant report) is 0."""
+    ok = {"plant_fault": "none", "lock_lost": False, "plant_out_of_range_s": 0.0}
+    assert outcome(ok, 1e-3) == (0, [])
+    assert outcome({**ok, "plant_out_of_range_s": None}, 1e-3) == (0, [])
+    out = {**ok, "plant_out_of_range_s": 3.21}
+    status, lines = outcome(out, 1e-3)
+    assert status == EXIT_MODEL_RANGE == 7
+    assert len(lines) == 1 and "3.2100 s" in lines[0] and "2 i_max" in lines[0]
+    status, lines = outcome({**out, "lock_lost": True, "lock_lost_at_s": 1.0}, 1e-3)
+    assert status == EXIT_LOCK_LOST and len(lines) == 2
+    tripped = {**out, "plant_fault": "over_current", "plant_fault_step": 5}
+    assert outcome(tripped, 1e-3)[0] == EXIT_PLANT_TRIPPED
