@@ -424,10 +424,10 @@ class Plant:
         The range is ``FLUX_RANGE i_max`` (:data:`plant_rt._machine.FLUX_RANGE`), where
         :func:`cross_saturation_check` proves the cross-saturated map physical; beyond
         it the core continues the map so that it stays positive definite, but that
-        continuation was not identified on any machine, so a run that goes there is
-        not a result of the modelled motor. Counted with the cross-saturated map only
-        (the one map with a range; the d-axis saturation model is positive definite
-        everywhere), 0 otherwise.
+        continuation was not identified on any machine (nor were the linear and the
+        d-axis saturated maps, positive definite everywhere, identified that far), so a
+        run that goes there is not a result of the modelled motor. Counted for every
+        flux map.
         """
         return self._core.out_of_range()
 

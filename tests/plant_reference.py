@@ -1402,13 +1402,33 @@ class ReferencePlant:
         self._th_m = th0 + h6 * s_th
 
     def _substeps(self, h: float) -> int:
-        """Equal RK4 steps over an interval h: ``ceil(|w_e| h / 1)``, at least 1.
+        """Equal RK4 steps over an interval h: ``ceil(|w_e| h / 1)``, at least 1, with
+        ``w_em h`` added beyond the flux map's range when the speed is free.
 
         The rotor-frame pole pair at ``+-j w_e`` leaves RK4's stability region
         at ``|w_e| h = 2 sqrt(2)``; ``plant_rt/core/plant_rk4.h`` derives the
         bound of 1.
         """
         x = abs(self._n_p * self._w_m) * h / 1.0
+        i_d, i_q = self._i_d, self._i_q
+        x_lim = FLUX_RANGE * self.motor.i_max
+        if self._w_imp is None and i_d * i_d + i_q * i_q > x_lim * x_lim:
+            # the electromechanical mode beyond the range (plant_rk4.h derives w_em)
+            psi_d, psi_q, L_dd, L_dq, L_qq = flux_dq(
+                self.motor, i_d, i_q, self.saturation, self.cross_saturation
+            )
+            mid = 0.5 * (L_dd + L_qq)
+            hd = 0.5 * (L_dd - L_qq)
+            rad = math.sqrt(hd * hd + L_dq * L_dq)
+            L_lo, L_hi = mid - rad, mid + rad
+            psi = math.sqrt(psi_d * psi_d + psi_q * psi_q)
+            i_s = math.sqrt(i_d * i_d + i_q * i_q)
+            w_em = (
+                math.sqrt(self._n_p * self._k_tau * self._inv_J * psi * (psi + L_hi * i_s) / L_lo)
+                if L_lo > 0.0
+                else math.inf
+            )
+            x += w_em * h / 1.0
         if not x > 1.0:
             return 1
         return min(math.ceil(x), 1_000_000)

@@ -29,7 +29,7 @@ static void set_constants(plant *pl, const plant_pars *p)
     pl->pwm.t_dead = p->t_dead;
     pl->avg_general = pl->dc.dynamic || pl->t_meas > 0.0;
     double r = PLANT_FLUX_RANGE * i_max;
-    pl->out_r2 = pl->m.cross ? r * r : HUGE_VAL;
+    pl->out_r2 = r * r;
 }
 
 /* The period's end: count it when the current left the flux map's checked range. */

@@ -90,8 +90,7 @@ typedef struct {
     plant_meter meter;
 
     /* Periods that ended with |i_s| beyond the flux map's checked range
-     * (PLANT_FLUX_RANGE i_max; with the cross-saturated map only, the one map
-     * with a range: plant_flux_cross_ext), and that range squared (A^2). */
+     * (PLANT_FLUX_RANGE i_max: plant_flux_cross_ext), and that range squared (A^2). */
     long n_out;
     double out_r2;
 } plant;
