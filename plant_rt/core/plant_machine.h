@@ -82,9 +82,10 @@ static inline void plant_flux_d_sat(const plant_machine *m, double i_d, double x
  *   L_qq = L_q - c/2 i_d (i_d + 2 i_0),     psi_q = L_qq i_q,
  *   L_dq = d psi_d / d i_q = d psi_q / d i_d = -c (i_d + i_0) i_q;
  * psi_d and L_dd come in as the d-axis model's and go out with the terms added.
- * Valid inside |i_d|, |i_q| <= x_lim = 2 i_max, a square around the disc |i_s| <= 2 i_max
- * that plant_rt.cross_saturation_check proves positive definite; beyond it
- * plant_flux_cross_ext continues the map (see there). */
+ * Used inside |i_d|, |i_q| <= x_lim = 2 i_max, a square around the checked disc
+ * |i_s| <= 2 i_max; beyond it plant_flux_cross_ext continues the map (see there).
+ * plant_rt.cross_saturation_check proves the disc and, on a wider grid, the rest of
+ * the plane positive definite. */
 void plant_flux_cross_ext(const plant_machine *m, double i_d, double i_q, double *psi_d,
                           double *L_dd, double *psi_q, double *L_dq, double *L_qq);
 
