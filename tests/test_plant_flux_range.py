@@ -233,3 +233,17 @@ def test_the_reference_model_follows_the_core_beyond_the_range(cross: bool) -> N
         for x, y in ((ta.i_d, tb.i_d), (ta.i_q, tb.i_q), (ta.w_m, tb.w_m)):
             assert x == pytest.approx(y, rel=1e-9, abs=1e-9)
     assert math.hypot(ta.i_d, ta.i_q) > 40.0 * pre.motor.i_max
+
+
+def test_the_plant_node_reports_the_count() -> None:
+    """The plant node's report (read by the run's metrics) carries the plant's count."""
+    from bench.nodes._loops import make_plant_node
+    from bench.scenarios._schema import load_scenario
+    from bench.wire._codec import Codec
+
+    pn = make_plant_node(load_scenario("xue-fig13"), Codec())
+    assert pn.report()["out_of_range_periods"] == 0
+    for _ in range(30):
+        pn.plant.step(0.0, 1.0, 0.0)
+    n = pn.plant.out_of_range_periods
+    assert n > 20 and pn.report()["out_of_range_periods"] == n

@@ -585,8 +585,9 @@ def model_range_warning(m: dict[str, Any]) -> str | None:
         return None
     return (
         f"warning: the plant's current was beyond its flux map's checked range "
-        f"(|i_s| > {FLUX_RANGE:g} i_max) for {t:.4f} s: the plant ran on the map's continuation there, "
-        "not on the modelled motor; the metrics are not a scenario result"
+        f"(|i_s| > {FLUX_RANGE:g} i_max) for {t:.4f} s: the motor model was identified on "
+        "no machine there (the plant stays finite on its continuation); the metrics are not "
+        "a scenario result"
     )
 
 
