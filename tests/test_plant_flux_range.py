@@ -56,8 +56,8 @@ def polar(r_max: float, n_r: int = 120, n_a: int = 144) -> list[tuple[float, flo
 @pytest.mark.parametrize("name", NAMES)
 def test_map_positive_definite_to_50_i_max(name: str, sat: bool) -> None:
     """The least eigenvalue of the incremental inductance matrix is positive on a polar
-    grid to 50 i_max (the polynomial alone turns singular near 3 i_max (wen2023) and 5 i_max
-    (xue2022)), and with both currents past 10 i_max the matrix is diag(L_dd,sat, L_q)."""
+    grid to 50 i_max (the polynomial alone turns singular past 3 i_max (wen2023) and 4 i_max
+    (xue2022), as their presets say), and with both currents past 10 i_max the matrix is diag(L_dd,sat, L_q)."""
     m = preset(name).motor
     worst = math.inf
     for i_d, i_q in polar(50.0 * m.i_max):
