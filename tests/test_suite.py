@@ -255,6 +255,9 @@ def test_update_reruns_only_the_chosen_runs_and_keeps_every_other_record(
     assert replaced == 1
     assert after["sweeps"] == before["sweeps"]  # no sweep ran: the kept one stays
     assert [u["runs"] for u in after["suite"]["updates"]] == [[list(victim)]]
+    # the report says which runs were made again
+    note = "`bench suite paper --update` (1 updates): xue-fig17/square-wave (drive)."
+    assert note in (copy / "report.md").read_text()
     for f in out.rglob("*"):
         rel = f.relative_to(out)
         if f.is_file() and rel.parent != vdir and rel.name not in ("summary.json", "report.md"):
