@@ -46,6 +46,10 @@ suite: $(STAMP)
 
 # The committed reference (docs/results, the README's claims table): in-process,
 # which gives the two-process runs' traces (tests/test_bench_loop.py), on all three plants.
+# A change that moves only a few runs regenerates just those (minutes, not an hour):
+#   bench suite paper --inprocess --out docs/results --update --scenarios S1,S2 \
+#       --estimators E --plants P   (keeps every other record and run folder)
+#   bench suite report docs/results --readme README.md
 reference: $(STAMP)
 	$(BIN)/bench suite paper --inprocess --out docs/results --overwrite
 	$(BIN)/bench suite report docs/results --readme README.md

@@ -88,7 +88,9 @@ class Run:
         (also when every declared fault expectation held, a trip included),
         3 the plant tripped a protection, 4 the estimator lost the rotor
         angle, 5 commands held late or never, 6 a fault expectation missed
-        (``[[faults]]`` ``expect``), 130 interrupted (DESIGN.md).
+        (``[[faults]]`` ``expect``), 7 the plant's current left its flux
+        map's checked range (``plant_out_of_range_s``), 130 interrupted
+        (DESIGN.md).
     folder : Path or None
         The run folder (``out=``); None when the run was given none (its
         files were read and removed).

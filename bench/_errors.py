@@ -16,6 +16,7 @@ __all__ = [
     "EXIT_FAULT_EXPECTATION",
     "EXIT_INTERRUPTED",
     "EXIT_LOCK_LOST",
+    "EXIT_MODEL_RANGE",
     "EXIT_PLANT_TRIPPED",
     "EXIT_USER_ERROR",
     "BenchError",
@@ -45,6 +46,11 @@ EXIT_COMMANDS_LOST = 5
 #: (``metrics.json`` ``faults``; every file written).  A run whose every declared
 #: expectation holds exits 0, even when what it expected is a trip.
 EXIT_FAULT_EXPECTATION = 6
+#: Exit status of ``bench run`` when the plant's current left its flux map's checked
+#: range (``plant_rt._machine.FLUX_RANGE``; ``metrics.json`` ``plant_out_of_range_s``; every file
+#: written): the plant stayed finite on the map's continuation, but that part of the
+#: run is not the modelled motor's (plant_rt/core/plant_machine.c).
+EXIT_MODEL_RANGE = 7
 #: Exit status of an interrupted command (Ctrl-C), with the files of the part that ran.
 EXIT_INTERRUPTED = 130
 

@@ -14,6 +14,7 @@ from plant_rt._load import (
     StepLoad,
 )
 from plant_rt._machine import (
+    FLUX_RANGE,
     CrossSaturationPars,
     MotorPars,
     SaturationPars,
@@ -53,6 +54,7 @@ __all__ = [
     "FAULT_OVER_SPEED",
     "FAULT_OVER_VOLTAGE",
     "FAULT_WATCHDOG",
+    "FLUX_RANGE",
     "PRESETS",
     "PROFILE_NAMES",
     "ConstantLoad",

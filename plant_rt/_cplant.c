@@ -156,6 +156,11 @@ static PyObject *Core_meter(Core *s, PyObject *unused)
                          e->q_b, e->q_c);
 }
 
+static PyObject *Core_out_of_range(Core *s, PyObject *unused)
+{
+    return PyLong_FromLong(s->pl.n_out);
+}
+
 static PyObject *Core_currents(Core *s, PyObject *unused)
 {
     double i[3];
@@ -333,6 +338,8 @@ static PyMethodDef Core_methods[] = {
      "set_metering(on): integrate the energy flows with the states"},
     {"meter", (PyCFunction)Core_meter, METH_NOARGS,
      "meter() -> (e_in, e_cu, e_em, e_fric, e_load, q_a, q_b, q_c)"},
+    {"out_of_range", (PyCFunction)Core_out_of_range, METH_NOARGS,
+     "out_of_range() -> the periods that ended outside the flux map's checked range"},
     {"currents", (PyCFunction)Core_currents, METH_NOARGS, "currents() -> (i_a, i_b, i_c) now"},
     {"torque", (PyCFunction)Core_torque, METH_NOARGS, "torque() -> tau_e now (N m)"},
     {"back_emf", (PyCFunction)Core_back_emf, METH_NOARGS, "back_emf() -> (e_a, e_b, e_c) now (V)"},
@@ -403,8 +410,9 @@ static PyObject *mod_machine(PyObject *unused, PyObject *args)
 {
     plant_machine_pars p = {0};
     double i_d, i_q;
-    if (!PyArg_ParseTuple(args, "dddddddppdd", &p.n_p, &p.L_d, &p.L_q, &p.psi_f, &p.sat_sigma,
-                          &p.sat_i_sat, &p.c_dq, &p.saturation, &p.cross, &i_d, &i_q))
+    if (!PyArg_ParseTuple(args, "ddddddddppdd", &p.n_p, &p.L_d, &p.L_q, &p.psi_f, &p.i_max,
+                          &p.sat_sigma, &p.sat_i_sat, &p.c_dq, &p.saturation, &p.cross, &i_d,
+                          &i_q))
         return NULL;
     p.J = 1.0;
     plant_machine m;
@@ -446,7 +454,7 @@ static PyObject *mod_device_drop_error(PyObject *unused, PyObject *const *args, 
 
 static PyMethodDef module_methods[] = {
     {"machine", (PyCFunction)mod_machine, METH_VARARGS,
-     "machine(n_p, L_d, L_q, psi_f, sigma, i_sat, c_dq, saturation, cross, i_d, i_q) -> "
+     "machine(n_p, L_d, L_q, psi_f, i_max, sigma, i_sat, c_dq, saturation, cross, i_d, i_q) -> "
      "(psi_d, psi_q, L_dd, L_dq, L_qq, tau_e): the flux map and the torque"},
     {"dead_time_error", (PyCFunction)(void (*)(void))mod_dead_time_error, METH_FASTCALL,
      "dead_time_error(i_x, u_dc, t_dead, T_s) -> the period-mean pole-voltage error (V)"},
@@ -476,7 +484,9 @@ PyMODINIT_FUNC PyInit__cplant(void)
         || PyModule_AddIntConstant(m, "FAULT_OVER_CURRENT", PLANT_FAULT_OVER_CURRENT) < 0
         || PyModule_AddIntConstant(m, "FAULT_OVER_VOLTAGE", PLANT_FAULT_OVER_VOLTAGE) < 0
         || PyModule_AddIntConstant(m, "FAULT_OVER_SPEED", PLANT_FAULT_OVER_SPEED) < 0
-        || PyModule_AddIntConstant(m, "MAX_SUBSTEPS", PLANT_MAX_SUBSTEPS) < 0) {
+        || PyModule_AddIntConstant(m, "MAX_SUBSTEPS", PLANT_MAX_SUBSTEPS) < 0
+        || PyModule_AddObject(m, "FLUX_RANGE", PyFloat_FromDouble(PLANT_FLUX_RANGE)) < 0
+        || PyModule_AddObject(m, "FLUX_FADE", PyFloat_FromDouble(PLANT_FLUX_FADE)) < 0) {
         Py_DECREF(m);
         return NULL;
     }

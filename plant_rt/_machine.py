@@ -223,6 +223,7 @@ def _machine(
         float(motor.L_d),
         float(motor.L_q),
         float(motor.psi_f),
+        float(motor.i_max),
         float(motor.sat.sigma),
         float(motor.sat.i_sat),
         float(motor.cross.c_dq),
@@ -322,13 +323,36 @@ def flux_dq(
     return _machine(motor, i_d, i_q, saturation, cross)[:5]
 
 
+FLUX_RANGE: float = _cplant.FLUX_RANGE
+"""The flux map's checked range in units of ``i_max``: ``|i_s| <= FLUX_RANGE i_max``
+(``PLANT_FLUX_RANGE``, ``plant_rt/core/plant_machine.h``). The cross-saturated map is
+checked positive definite there; beyond it the core continues the map (its cross
+co-energy stops growing, ``plant_flux_cross_ext``) and a plant counts the periods spent
+outside (:attr:`plant_rt.Plant.out_of_range_periods`)."""
+
+FLUX_FADE: float = _cplant.FLUX_FADE
+"""The width of the continuation's fade beyond the range, as a fraction of the range
+(``PLANT_FLUX_FADE``; derived beside ``plant_flux_cross_ext``)."""
+
+CHECK_REACH = 50.0
+"""How far (in units of ``i_max``) :func:`cross_saturation_check` checks the continued
+map: 50 i_max is past any current a drive's supply can push (a runaway of the xue2022
+drive peaks near 2000 A, 100 i_max, only where the plant's integration has already
+failed), and far beyond the fade of the continuation (2.5 i_max), where the matrix is
+the d-axis model's diag(L_dd, L_q), positive by construction."""
+
+
 def cross_saturation_check(motor: MotorPars, saturation: bool, i_max: float) -> None:
     """Raise ValueError unless the flux map is positive definite for ``|i_s| <= i_max``.
 
     The incremental inductance matrix must stay positive definite (a
     physical magnetic circuit stores energy for every current change); the
     quadratic cross term of :class:`CrossSaturationPars` does so only up to
-    some current, checked here on a polar grid (24 radii by 72 angles).
+    some current, checked here on a polar grid (24 radii by 72 angles). The
+    map the core continues beyond that range (``plant_flux_cross_ext``) is
+    checked too, on 48 radii spaced evenly in log from ``i_max`` to
+    :data:`CHECK_REACH` ``motor.i_max``: a plant whose continued map is singular
+    somewhere would turn NaN when a runaway reaches it.
 
     Parameters
     ----------
@@ -339,16 +363,20 @@ def cross_saturation_check(motor: MotorPars, saturation: bool, i_max: float) -> 
     i_max : float
         Radius of the current disc to check (A).
     """
-    for n in range(1, 25):
-        r = i_max * n / 24.0
+    radii = [i_max * n / 24.0 for n in range(1, 25)]
+    reach = CHECK_REACH * motor.i_max
+    if reach > i_max:
+        radii += [i_max * (reach / i_max) ** (n / 48.0) for n in range(1, 49)]
+    for r in radii:
         for j in range(72):
             a = 2.0 * math.pi * j / 72.0
             i_d = r * math.cos(a)
             i_q = r * math.sin(a)
             _, _, L_dd, L_dq, L_qq = flux_dq(motor, i_d, i_q, saturation, True)
             if not (L_dd > 0.0 and L_dd * L_qq - L_dq * L_dq > 0.0):
+                where = f"inside |i_s| <= {i_max:g} A" if r <= i_max else "its continuation"
                 raise ValueError(
                     f"CrossSaturationPars.c_dq = {motor.cross.c_dq:g} H/A^2 makes the "
                     f"incremental inductance matrix singular at i_d = {i_d:.3g} A, "
-                    f"i_q = {i_q:.3g} A (inside |i_s| <= {i_max:g} A): lower c_dq"
+                    f"i_q = {i_q:.3g} A ({where}): lower c_dq"
                 )

@@ -50,7 +50,7 @@ from dataclasses import dataclass
 from plant_rt._engine import _cplant, resolve_engine
 from plant_rt._inverter import InverterPars
 from plant_rt._load import ConstantLoad, LoadProfile
-from plant_rt._machine import MotorPars, cross_saturation_check, magnetic_energy
+from plant_rt._machine import FLUX_RANGE, MotorPars, cross_saturation_check, magnetic_energy
 from plant_rt._sensors import SensorPars, Sensors
 
 TWO_PI = 2.0 * math.pi
@@ -291,7 +291,7 @@ class Plant:
         if not sens.t_delay < T_s:
             raise ValueError(f"SensorPars.t_delay must be below T_s = {T_s} s, got {sens.t_delay}")
         if cross_saturation:
-            cross_saturation_check(motor, bool(saturation), 2.0 * motor.i_max)
+            cross_saturation_check(motor, bool(saturation), FLUX_RANGE * motor.i_max)
         self.motor = motor
         self.inverter = inverter
         self.T_s = float(T_s)
@@ -374,7 +374,7 @@ class Plant:
                 f"set_parameters: dead time must be in [0, T_s / 2), got {inv.t_dead} s"
             )
         if self.cross_saturation:
-            cross_saturation_check(m, self.saturation, 2.0 * m.i_max)
+            cross_saturation_check(m, self.saturation, FLUX_RANGE * m.i_max)
         self.motor = m
         self.inverter = inv
         if not inv.r_dc > 0.0:
@@ -416,6 +416,20 @@ class Plant:
     def t(self) -> float:
         """Time of the present sample instant, ``k T_s`` (s)."""
         return self.k * self.T_s
+
+    @property
+    def out_of_range_periods(self) -> int:
+        """Periods that ended with ``|i_s|`` beyond the flux map's checked range.
+
+        The range is ``FLUX_RANGE i_max`` (:data:`plant_rt._machine.FLUX_RANGE`), where
+        :func:`cross_saturation_check` proves the cross-saturated map physical; beyond
+        it the core continues the map so that it stays positive definite, but that
+        continuation was not identified on any machine (nor were the linear and the
+        d-axis saturated maps, positive definite everywhere, identified that far), so a
+        run that goes there is not a result of the modelled motor. Counted for every
+        flux map.
+        """
+        return self._core.out_of_range()
 
     @property
     def load(self) -> LoadProfile:

@@ -17,7 +17,7 @@ import math
 import random
 
 from plant_rt import ConstantLoad, InverterPars, LoadProfile, MotorPars, SensorPars
-from plant_rt._machine import cross_saturation_check
+from plant_rt._machine import FLUX_FADE, FLUX_RANGE, cross_saturation_check
 from plant_rt._plant import EnergyMeter, Sample, Truth
 
 SQRT3 = math.sqrt(3.0)
@@ -107,11 +107,48 @@ def flux_dq(
         return psi_d, L_q * i_q, L_dd, 0.0, L_q
     c = motor.cross.c_dq
     i_0 = motor.psi_f / motor.L_d
+    x_lim = FLUX_RANGE * motor.i_max
+    if abs(i_d) > x_lim or abs(i_q) > x_lim:
+        return cross_ext(motor, i_d, i_q, psi_d, L_dd)
     m = i_d + i_0
     # in the operation order of the plant core's one home of these terms (plant_flux_cross)
     hq = 0.5 * c * i_q
     L_qq = L_q - 0.5 * c * i_d * (i_d + 2.0 * i_0)
     return (psi_d - hq * m * i_q, L_qq * i_q, L_dd - hq * i_q, -c * m * i_q, L_qq)
+
+
+def _limit(u: float, a: float, w: float) -> tuple[float, float, float]:
+    """``s(u)``, ``s'(u)``, ``s''(u)`` of the cross map's current limit (plant_flux_cross_ext)."""
+    if abs(u) <= a:
+        return u, 1.0, 0.0
+    e = a if u > 0.0 else -a
+    t = 1.0 - 2.0 / (math.exp(2.0 * (u - e) / w) + 1.0)
+    s1 = 1.0 - t * t
+    return e + w * t, s1, -2.0 * t * s1 / w
+
+
+def cross_ext(
+    motor: MotorPars, i_d: float, i_q: float, psi_d: float, L_dd: float
+) -> tuple[float, float, float, float, float]:
+    """The cross map beyond its checked range (``plant_flux_cross_ext``, the same operations):
+    the co-energy ``-(c/4) (m_d^2 - i_0^2) i_q^2`` at the currents limited by :func:`_limit`."""
+    c = motor.cross.c_dq
+    i_0 = motor.psi_f / motor.L_d
+    a = FLUX_RANGE * motor.i_max
+    w = FLUX_FADE * a
+    sd, sd1, sd2 = _limit(i_d, a, w)
+    sq, sq1, sq2 = _limit(i_q, a, w)
+    m = sd + i_0
+    p = m * m - i_0 * i_0
+    g_d = -0.5 * c * m * sq * sq
+    g_q = -0.5 * c * p * sq
+    return (
+        psi_d + g_d * sd1,
+        motor.L_q * i_q + g_q * sq1,
+        L_dd + (-0.5 * c * sq * sq * sd1 * sd1 + g_d * sd2),
+        -c * m * sq * sd1 * sq1,
+        motor.L_q - 0.5 * c * p * sq1 * sq1 + g_q * sq2,
+    )
 
 
 def clamp_duty(d: float) -> float:
@@ -504,7 +541,7 @@ class ReferencePlant:
         if not sens.t_delay < T_s:
             raise ValueError(f"SensorPars.t_delay must be below T_s = {T_s} s, got {sens.t_delay}")
         if cross_saturation:
-            cross_saturation_check(motor, bool(saturation), 2.0 * motor.i_max)
+            cross_saturation_check(motor, bool(saturation), FLUX_RANGE * motor.i_max)
         self.motor = motor
         self.inverter = inverter
         self.T_s = float(T_s)
@@ -1250,6 +1287,7 @@ class ReferencePlant:
         b = self._b
         inv_J = self._inv_J
         c_dq = self._c_dq
+        x_lim = FLUX_RANGE * self.motor.i_max
         i_0 = self._i_0
         i_d0 = self._i_d
         i_q0 = self._i_q
@@ -1279,13 +1317,16 @@ class ReferencePlant:
             else:
                 psi_d = psi_f + L_d * i_d
                 L_dd = L_d
-            m = i_d + i_0
-            hq = 0.5 * c_dq * i_q
-            L_qq = L_q - 0.5 * c_dq * i_d * (i_d + 2.0 * i_0)
-            psi_d -= hq * m * i_q
-            psi_q = L_qq * i_q
-            L_dd -= hq * i_q
-            L_dq = -c_dq * m * i_q
+            if abs(i_d) > x_lim or abs(i_q) > x_lim:
+                psi_d, psi_q, L_dd, L_dq, L_qq = cross_ext(self.motor, i_d, i_q, psi_d, L_dd)
+            else:
+                m = i_d + i_0
+                hq = 0.5 * c_dq * i_q
+                L_qq = L_q - 0.5 * c_dq * i_d * (i_d + 2.0 * i_0)
+                psi_d -= hq * m * i_q
+                psi_q = L_qq * i_q
+                L_dd -= hq * i_q
+                L_dq = -c_dq * m * i_q
             e_d = c * u_al + s * u_be - R * i_d + w_e * psi_q
             e_q = c * u_be - s * u_al - R * i_q - w_e * psi_d
             inv_det = 1.0 / (L_dd * L_qq - L_dq * L_dq)
@@ -1361,13 +1402,33 @@ class ReferencePlant:
         self._th_m = th0 + h6 * s_th
 
     def _substeps(self, h: float) -> int:
-        """Equal RK4 steps over an interval h: ``ceil(|w_e| h / 1)``, at least 1.
+        """Equal RK4 steps over an interval h: ``ceil(|w_e| h / 1)``, at least 1, with
+        ``w_em h`` added beyond the flux map's range when the speed is free.
 
         The rotor-frame pole pair at ``+-j w_e`` leaves RK4's stability region
         at ``|w_e| h = 2 sqrt(2)``; ``plant_rt/core/plant_rk4.h`` derives the
         bound of 1.
         """
         x = abs(self._n_p * self._w_m) * h / 1.0
+        i_d, i_q = self._i_d, self._i_q
+        x_lim = FLUX_RANGE * self.motor.i_max
+        if self._w_imp is None and i_d * i_d + i_q * i_q > x_lim * x_lim:
+            # the electromechanical mode beyond the range (plant_rk4.h derives w_em)
+            psi_d, psi_q, L_dd, L_dq, L_qq = flux_dq(
+                self.motor, i_d, i_q, self.saturation, self.cross_saturation
+            )
+            mid = 0.5 * (L_dd + L_qq)
+            hd = 0.5 * (L_dd - L_qq)
+            rad = math.sqrt(hd * hd + L_dq * L_dq)
+            L_lo, L_hi = mid - rad, mid + rad
+            psi = math.sqrt(psi_d * psi_d + psi_q * psi_q)
+            i_s = math.sqrt(i_d * i_d + i_q * i_q)
+            w_em = (
+                math.sqrt(self._n_p * self._k_tau * self._inv_J * psi * (psi + L_hi * i_s) / L_lo)
+                if L_lo > 0.0
+                else math.inf
+            )
+            x += w_em * h / 1.0
         if not x > 1.0:
             return 1
         return min(math.ceil(x), 1_000_000)

@@ -211,3 +211,72 @@ def test_run_record_keeps_a_hybrid_runs_band_metrics(tmp_path: Path) -> None:
     rec = run_record(job, {"metrics": metrics, "wall_s": 1.0}, tmp_path)
     assert rec["metrics"] == {"theta_err_max_deg": 1.0, **band}
     assert "frames_recorded" not in SUMMARY_METRICS
+
+
+def test_update_reruns_only_the_chosen_runs_and_keeps_every_other_record(
+    quick_suite: tuple[Path, Path, dict], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``bench suite paper --update``: the chosen run's record and folder are replaced, every
+    other record and file stays byte for byte; a filter that matches no run is one line."""
+    import shutil
+
+    out, _, _ = quick_suite
+    copy = tmp_path / "suite"
+    shutil.copytree(out, copy)
+    before = json.loads((out / "summary.json").read_text())
+    victim = ("xue-fig17", "square-wave", "drive")
+    vdir = Path("runs", "drive", "xue-fig17", "square-wave")
+    # a stale record and a stale file, so that a kept (not replaced) run is seen
+    stale = json.loads((copy / "summary.json").read_text())
+    for r in stale["runs"]:
+        if (r["scenario"], r["estimator"], r["plant"]) == victim:
+            r["metrics"]["theta_err_rms_deg"] = -1.0
+    (copy / "summary.json").write_text(json.dumps(stale))
+    (copy / vdir / "stale.txt").write_text("older run")
+    args = ["suite", "paper", "--update", "--quick", "--inprocess", "--out", str(copy)]
+    args += ["--runs-dir", str(tmp_path / "runs"), "-q"]
+    sel = ["--scenarios", "xue-fig17", "--estimators", "square-wave", "--plants", "drive"]
+    assert cli.main([*args, *sel]) == 0
+    after = json.loads((copy / "summary.json").read_text())
+    assert len(after["runs"]) == len(before["runs"]) == 18
+    replaced = 0
+    for old, new in zip(before["runs"], after["runs"], strict=True):
+        key = (new["scenario"], new["estimator"], new["plant"])
+        assert key == (old["scenario"], old["estimator"], old["plant"])  # in its place
+        if key == victim:
+            replaced += 1
+            assert new["metrics"]["theta_err_rms_deg"] > 0  # not the stale record
+            # lockstep is exact: the run made again gives the same numbers
+            assert {k: v for k, v in new["metrics"].items() if k != "wall_s"} == {
+                k: v for k, v in old["metrics"].items() if k != "wall_s"
+            }
+        else:
+            assert json.dumps(new, sort_keys=True) == json.dumps(old, sort_keys=True), key
+    assert replaced == 1
+    assert after["sweeps"] == before["sweeps"]  # no sweep ran: the kept one stays
+    assert [u["runs"] for u in after["suite"]["updates"]] == [[list(victim)]]
+    # the report says which runs were made again
+    note = "`bench suite paper --update` (1 updates): xue-fig17/square-wave (drive)."
+    assert note in (copy / "report.md").read_text()
+    for f in out.rglob("*"):
+        rel = f.relative_to(out)
+        if f.is_file() and rel.parent != vdir and rel.name not in ("summary.json", "report.md"):
+            assert (copy / rel).read_bytes() == f.read_bytes(), rel
+    assert not (copy / vdir / "stale.txt").exists()
+    assert (copy / vdir / "metrics.json").is_file() and (copy / vdir / "run.png").is_file()
+    capsys.readouterr()
+    # a filter that matches no run: one line, exit 2, the suite untouched
+    kept = (copy / "summary.json").read_bytes()
+    nothing = ["--scenarios", "wen-5.4", "--estimators", "square-wave"]
+    assert cli.main([*args, *nothing]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "square-wave" in err[0] and "nothing left to run" in err[0], err
+    assert (copy / "summary.json").read_bytes() == kept
+    # runs made otherwise than the suite's (over a bus into an in-process suite): refused
+    assert cli.main([*args[:4], *args[5:], *sel]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--inprocess" in err[0], err
+    # no suite in --out
+    assert cli.main(["suite", "paper", "--update", "--out", str(tmp_path / "none"), *sel]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "summary.json" in err[0], err

@@ -63,11 +63,13 @@ def cmd_paper(args: argparse.Namespace) -> int:
     from bench.scenarios._schema import SHIPPED
     from bench.scenarios._setup import check_estimator_name
     from bench.studies._executors import catch_signals
-    from bench.studies._suite import PLANTS, SMOKE, SuiteOptions, run_suite
+    from bench.studies._suite import PLANTS, SMOKE, SuiteOptions, check_update, run_suite
     from bench.studies._sweep import SWEEPS
 
     smoke = args.quick and args.scenarios is None and args.estimators is None
     scenarios = _csv(args.scenarios) or (SMOKE.scenarios if smoke else SHIPPED)
+    if args.update and args.scenarios is None and args.estimators is None and args.plants is None:
+        scenarios = ()  # --update --sweeps ...: the sweeps only
     for s in scenarios:
         if s not in SHIPPED and not Path(s).is_file():
             raise BenchError(
@@ -80,34 +82,69 @@ def cmd_paper(args: argparse.Namespace) -> int:
     _check_names(plants, PLANTS, "--plants")
     sweeps = (
         ()
-        if args.no_sweep
+        if args.no_sweep or (args.update and args.sweeps is None)
         else (_csv(args.sweeps) or (SMOKE.sweeps if args.quick else tuple(SWEEPS)))
     )
     _check_names(sweeps, tuple(SWEEPS), "--sweeps")
     if args.jobs < 1:
         raise BenchError(f"--jobs must be >= 1, got {args.jobs}")
     out = Path(args.out) if args.out else Path("runs") / "suite-paper"
-    _check_new(out, args.overwrite)
-    runs_dir = Path(args.runs_dir) if args.runs_dir else Path("runs") / "suite-runs"
-    with catch_signals():
-        summary = run_suite(
-            SuiteOptions(
-                out_dir=out,
-                runs_dir=runs_dir,
-                scenarios=tuple(scenarios),
-                estimators=estimators,
-                plants=tuple(plants),
-                quick=args.quick,
-                sweeps=tuple(sweeps),
-                sweep_quick=args.quick,
-                inprocess=args.inprocess,
-                workers=args.jobs,
-                interface=args.interface,
-                channel=args.channel,
-                progress=not args.quiet,
+    keep = None
+    if args.update:
+        if args.overwrite:
+            raise BenchError(
+                "--update keeps the records not chosen, --overwrite replaces them all; give one"
             )
-        )
+        if (
+            args.scenarios is None
+            and args.estimators is None
+            and args.plants is None
+            and args.sweeps is None
+        ):
+            raise BenchError(
+                "--update: choose what to run again (--scenarios, --estimators, --plants, --sweeps); "
+                "the whole suite is --overwrite"
+            )
+        keep = _load_suite(out)
+    else:
+        _check_new(out, args.overwrite)
+    runs_dir = Path(args.runs_dir) if args.runs_dir else Path("runs") / "suite-runs"
+    opts = SuiteOptions(
+        out_dir=out,
+        runs_dir=runs_dir,
+        scenarios=tuple(scenarios),
+        estimators=estimators,
+        plants=tuple(plants),
+        quick=args.quick,
+        sweeps=tuple(sweeps),
+        sweep_quick=args.quick,
+        inprocess=args.inprocess,
+        workers=args.jobs,
+        interface=args.interface,
+        channel=args.channel,
+        progress=not args.quiet,
+        keep=keep,
+    )
+    if keep is not None:
+        check_update(keep, opts, out / "summary.json")
+    with catch_signals():
+        summary = run_suite(opts)
     return _finish(summary, out)
+
+
+def _load_suite(out: Path) -> dict[str, Any]:
+    """The summary ``--update`` merges into: ``out/summary.json`` of a paper suite."""
+    import json
+
+    path = out / "summary.json"
+    try:
+        keep: dict[str, Any] = json.loads(path.read_text(encoding="utf-8"))
+        runs = keep["runs"]
+        if not isinstance(runs, list) or not isinstance(keep["suite"], dict):
+            raise TypeError("runs is not a list or suite is not a table")
+    except (OSError, ValueError, KeyError, TypeError) as e:
+        raise BenchError(f"--update: {path}: not a paper suite's summary.json ({e})") from None
+    return keep
 
 
 def cmd_sweep(args: argparse.Namespace) -> int:
@@ -264,6 +301,14 @@ def register(sub: Any) -> None:
         "--interface", "-i", help="python-can interface (default: vcan0 or udp_multicast)"
     )
     q.add_argument("--channel", "-c", help="channel of --interface")
+    q.add_argument(
+        "--update",
+        action="store_true",
+        help="run again only the runs (and --sweeps) chosen by --scenarios/--estimators/--plants "
+        "into the suite already in --out: their records and run folders are replaced, every "
+        "other record is kept byte for byte; no sweep unless --sweeps names it; the runs are "
+        "made as the suite's were (same --inprocess, --quick)",
+    )
     _common(q)
     q.set_defaults(func=cmd_paper)
 

@@ -708,6 +708,8 @@ class PlantNode:
             duty_rejected=dict(self.duty_rejected),
             late_frames=self.late_frames,
             fault_step=self.fault_step,
+            # periods that ended beyond the flux map's checked range (Plant.out_of_range_periods)
+            out_of_range_periods=self.plant.out_of_range_periods,
             # period in which the last valid duty frame arrived (the watchdog's reference)
             last_duty_arrival=self.last_duty_k,
             trips=dict(self.trips),

@@ -22,7 +22,14 @@ import can
 import numpy as np
 
 from bench import _jsonio as jsonio
-from bench._errors import EXIT_FAULT_EXPECTATION, EXIT_LOCK_LOST, EXIT_PLANT_TRIPPED
+from plant_rt import FLUX_RANGE
+
+from bench._errors import (
+    EXIT_FAULT_EXPECTATION,
+    EXIT_LOCK_LOST,
+    EXIT_MODEL_RANGE,
+    EXIT_PLANT_TRIPPED,
+)
 from bench.nodes._counters import REPEATED_COUNTER
 from bench.runs._analysis import analyze_frames, signals_doc, write_csv
 from bench.runs._metrics import (
@@ -340,6 +347,10 @@ def finish_run(
         fault, fault_step = str(plant_r["fault"]), int(plant_r.get("fault_step", -1))
     m["plant_fault"] = fault
     m["plant_fault_step"] = fault_step
+    # time the plant's current spent beyond its flux map's checked range (its report;
+    # None for a capture analysed without one)
+    n_out = plant_r.get("out_of_range_periods")
+    m["plant_out_of_range_s"] = None if n_out is None else int(n_out) * T_s
     m["faults"] = fault_metrics(
         cap.table,
         [(f.kind, f.at_s, f.end_s(m["sim_s"]), f.expect) for f in scn.faults if f.at_s < m["sim_s"]],
@@ -570,6 +581,19 @@ def lock_warning(m: dict[str, Any]) -> str | None:
     )
 
 
+def model_range_warning(m: dict[str, Any]) -> str | None:
+    """One line when the plant's current left its flux map's checked range."""
+    t = m.get("plant_out_of_range_s")
+    if not t:
+        return None
+    return (
+        f"warning: the plant's current was beyond its flux map's checked range "
+        f"(|i_s| > {FLUX_RANGE:g} i_max) for {t:.4f} s: the motor model was identified on "
+        "no machine there (the plant stays finite on its continuation); the metrics are not "
+        "a scenario result"
+    )
+
+
 def telemetry_warning(m: dict[str, Any]) -> str | None:
     """One line for rows without the controller's telemetry, and for metrics left null."""
     parts = []
@@ -616,13 +640,24 @@ def outcome(m: dict[str, Any], T_s: float) -> tuple[int, list[str]]:
     """The exit status of a finished run or analysis and its warning lines.
 
     3 when the plant tripped a protection, 4 when the estimator lost the rotor
-    angle, 0 otherwise (DESIGN.md).  A trip comes first: an estimator whose
-    inverter was switched off loses the angle as a consequence.  A run with
+    angle, 7 when the plant's current left its flux map's checked range
+    (``plant_out_of_range_s``), 0 otherwise (DESIGN.md).  A trip comes first: an
+    estimator whose inverter was switched off loses the angle as a consequence; a
+    lost angle comes before the range, whose runaway it causes.  A run with
     fault expectations (``[[faults]]`` ``expect``) exits 6 when one was missed
     and 0 when every one held, even when what held was a trip (the lines
     still say what happened).
     """
-    lines = [w for w in (fault_warning(m, T_s), lock_warning(m), telemetry_warning(m)) if w]
+    lines = [
+        w
+        for w in (
+            fault_warning(m, T_s),
+            lock_warning(m),
+            model_range_warning(m),
+            telemetry_warning(m),
+        )
+        if w
+    ]
     expected = [f for f in m.get("faults") or [] if f.get("expect") is not None]
     missed = [f for f in expected if not f.get("met")]
     for f in missed:
@@ -643,6 +678,8 @@ def outcome(m: dict[str, Any], T_s: float) -> tuple[int, list[str]]:
         return EXIT_PLANT_TRIPPED, lines
     if m.get("lock_lost"):
         return EXIT_LOCK_LOST, lines
+    if m.get("plant_out_of_range_s"):
+        return EXIT_MODEL_RANGE, lines
     return 0, lines
 
 

@@ -1002,6 +1002,18 @@ def _sweep_section(summary: dict[str, Any]) -> list[str]:
     return lines
 
 
+def updates_note(info: dict[str, Any]) -> str:
+    """The runs made again since the suite (``bench suite paper --update``), as a sentence;
+    '' when none was."""
+    ups = info.get("updates") or []
+    if not ups:
+        return ""
+    runs = [f"{s}/{e} ({p})" if p != "ideal" else f"{s}/{e}" for u in ups for s, e, p in u["runs"]]
+    sweeps = [w for u in ups for w in u.get("sweeps", [])]
+    what = ", ".join([*runs, *(f"sweep {w}" for w in sweeps)])
+    return f"Runs made again since by `bench suite paper --update` ({len(ups)} updates): {what}."
+
+
 def render_markdown(summary: dict[str, Any]) -> str:
     """``report.md`` from a summary."""
     info = summary["suite"]
@@ -1014,7 +1026,8 @@ def render_markdown(summary: dict[str, Any]) -> str:
             " **Quick mode: durations cut, numbers not comparable with the papers.**"
             if info["quick"]
             else ""
-        ),
+        )
+        + (" " + updates_note(info) if info.get("updates") else ""),
         "",
         "Angles are electrical degrees, dtheta = theta_e - theta_hat. The scenarios follow the "
         "papers; what the papers leave open is chosen once in the presets and is the same for "
@@ -1336,7 +1349,8 @@ def readme_block(summary: dict[str, Any]) -> str:
         [
             f"From `{info.get('command', 'bench suite paper')}`: "
             f"{float(info['wall_s']) / 60:.1f} min wall time with {info.get('workers', '?')} "
-            f"worker(s), {info.get('mode', '?')} over {str(info.get('transport', '?')).split()[0]}.",
+            f"worker(s), {info.get('mode', '?')} over {str(info.get('transport', '?')).split()[0]}."
+            + (" " + updates_note(info) if info.get("updates") else ""),
             "",
         ]
         if info.get("wall_s") is not None

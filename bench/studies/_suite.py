@@ -406,6 +406,8 @@ def export_run(job: RunJob, out_dir: Path, png: bytes | None = None) -> Path:
     """Copy a run's small files (metrics, metadata, and ``png``, its plot made small by the
     worker, :func:`small_png`) under ``out_dir``."""
     dst = out_dir / "runs" / run_subdir(job.plant, job.scenario.name, job.estimator)
+    if dst.is_dir():  # an earlier run's files (--overwrite, --update): none of them is kept
+        shutil.rmtree(dst)
     dst.mkdir(parents=True, exist_ok=True)
     for name in ("metrics.json", "meta.json"):
         if (job.run_dir / name).exists():
@@ -463,6 +465,70 @@ class SuiteOptions:
     interface: str | None = None
     channel: str | None = None
     progress: bool = True
+    #: ``bench suite paper --update``: the summary already in ``out_dir``, whose records
+    #: of the runs not chosen now are kept (:func:`merge_update`)
+    keep: dict[str, Any] | None = None
+
+
+def run_key(rec: dict[str, Any]) -> tuple[str, str, str]:
+    """What names a run in ``summary.json``: scenario, estimator, plant."""
+    return (rec["scenario"], rec["estimator"], rec.get("plant", "ideal"))
+
+
+def check_update(keep: dict[str, Any], opt: SuiteOptions, where: Path) -> None:
+    """A suite is updated only by runs made as its own were (transport, ``--quick``), so
+    that its records stay comparable; a :class:`BenchError` names the difference."""
+    info = keep.get("suite") or {}
+    was = info.get("transport")
+    now = "in-process" if opt.inprocess else "a bus"
+    if (was == "in-process") != opt.inprocess:
+        raise BenchError(
+            f"--update: {where}: its runs were made {'in-process' if was == 'in-process' else f'over {was}'}, "
+            f"these would be made {now}; give the same transport ({'--inprocess' if was == 'in-process' else 'no --inprocess'})"
+        )
+    if bool(info.get("quick")) != opt.quick:
+        raise BenchError(
+            f"--update: {where}: suite.quick is {bool(info.get('quick'))}; give "
+            f"{'--quick' if info.get('quick') else 'no --quick'} so the runs are cut alike"
+        )
+
+
+def merge_update(
+    keep: dict[str, Any],
+    records: list[dict[str, Any]],
+    sweeps: dict[str, Any],
+    cic: dict[str, Any],
+    accel_ff: dict[str, dict[str, Any]],
+    info: dict[str, Any],
+) -> tuple[list[dict[str, Any]], dict[str, Any], dict[str, Any], dict[str, Any], dict[str, Any]]:
+    """The kept summary with the parts run now in place of theirs (``--update``).
+
+    A run's record replaces the kept one of the same scenario, estimator and
+    plant in its place (a new one is appended); every other record is kept as
+    it was.  A sweep, the CIC study of a plant and the ``accel_ff`` runs of a
+    plant and scenario replace theirs likewise.  The suite information is
+    the kept one, with this command and its runs added to ``updates``.
+    """
+    new = {run_key(r): r for r in records}
+    runs = [new.pop(run_key(r), r) for r in keep.get("runs", [])]
+    runs.extend(new.values())
+    sw = {**keep.get("sweeps", {}), **sweeps}
+    cc = {**keep.get("cic", {}), **cic}
+    ff = {p: dict(v) for p, v in keep.get("accel_ff", {}).items()}
+    for plant, per in accel_ff.items():
+        ff.setdefault(plant, {}).update(per)
+    kept_info = dict(keep.get("suite") or {})
+    upd = {
+        "command": info["command"],
+        "runs": [list(run_key(r)) for r in records],
+        "sweeps": list(sweeps),
+        "wall_s": info["wall_s"],
+    }
+    kept_info["updates"] = [*kept_info.get("updates", []), upd]
+    for k in ("interrupted", "finished"):
+        if k in info:
+            kept_info[k] = info[k]
+    return runs, sw, cc, ff, kept_info
 
 
 def run_suite(opt: SuiteOptions) -> dict[str, Any]:
@@ -519,6 +585,11 @@ def run_suite(opt: SuiteOptions) -> dict[str, Any]:
         if isinstance(job, RunJob):
             if "error" not in res:
                 export_run(job, opt.out_dir, res.pop("png", None))
+            elif opt.keep is not None:  # its record says the run failed: no older files beside it
+                shutil.rmtree(
+                    opt.out_dir / "runs" / run_subdir(job.plant, job.scenario.name, job.estimator),
+                    ignore_errors=True,
+                )
             finished[id(job)] = run_record(job, res, opt.out_dir)
 
     results = run_jobs(jobs, workers=workers, progress=opt.progress, on_done=on_done)
@@ -568,6 +639,10 @@ def run_suite(opt: SuiteOptions) -> dict[str, Any]:
     if stopped:
         info["interrupted"] = True
         info["finished"] = fin
+    if opt.keep is not None:
+        records, sweep_summary, cic_summary, ff_summary, info = merge_update(
+            opt.keep, records, sweep_summary, cic_summary, ff_summary, info
+        )
     summary = build_summary(records, sweep_summary, info, cic_summary, ff_summary)
     write_report(summary, opt.out_dir)
     if stopped:

@@ -28,6 +28,14 @@ static void set_constants(plant *pl, const plant_pars *p)
     pl->drops = p->v_ce > 0.0 || p->v_f > 0.0;
     pl->pwm.t_dead = p->t_dead;
     pl->avg_general = pl->dc.dynamic || pl->t_meas > 0.0;
+    double r = PLANT_FLUX_RANGE * i_max;
+    pl->out_r2 = r * r;
+}
+
+/* The period's end: count it when the current left the flux map's checked range. */
+static void count_range(plant *pl)
+{
+    if (pl->x.i_d * pl->x.i_d + pl->x.i_q * pl->x.i_q > pl->out_r2) pl->n_out++;
 }
 
 int plant_init(plant *pl, const plant_pars *p)
@@ -793,6 +801,7 @@ int plant_step_off(plant *pl, double t0)
     }
     if (pl->err) return PLANT_ERR_LOAD;
     pl->x.th_m = plant_py_mod(pl->x.th_m, PLANT_TWO_PI);
+    count_range(pl);
     return PLANT_OK;
 }
 
@@ -811,6 +820,7 @@ int plant_step(plant *pl, double d_a, double d_b, double d_c, double t0)
         step_fast(pl, d_a, d_b, d_c, t0);
     if (pl->err) return PLANT_ERR_LOAD;
     pl->x.th_m = plant_py_mod(pl->x.th_m, PLANT_TWO_PI);
+    count_range(pl);
     return PLANT_OK;
 }
 

@@ -88,6 +88,11 @@ typedef struct {
     /* energy meter (off unless metering is set) */
     int metering;
     plant_meter meter;
+
+    /* Periods that ended with |i_s| beyond the flux map's checked range
+     * (PLANT_FLUX_RANGE i_max: plant_flux_cross_ext), and that range squared (A^2). */
+    long n_out;
+    double out_r2;
 } plant;
 
 /* Errors. */

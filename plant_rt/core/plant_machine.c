@@ -25,6 +25,8 @@ void plant_machine_init(plant_machine *m, const plant_machine_pars *p)
     m->sig_isat = p->sat_sigma * p->sat_i_sat;
     m->c_dq = p->c_dq;
     m->i_0 = p->psi_f / p->L_d;
+    m->x_lim = PLANT_FLUX_RANGE * p->i_max;
+    m->x_w = PLANT_FLUX_FADE * m->x_lim;
     m->sat = p->saturation != 0;
     m->cross = p->cross != 0;
     m->variant = m->cross ? PLANT_FLUX_CROSS : (m->sat ? PLANT_FLUX_SAT : PLANT_FLUX_LINEAR);
@@ -38,6 +40,69 @@ void plant_flux_d(const plant_machine *m, double i_d, double *psi_d, double *L_d
         return;
     }
     plant_flux_d_sat(m, i_d, i_d / m->i_sat, psi_d, L_dd);
+}
+
+/* The cross map beyond its range: what the emulator does where the map was not identified.
+ *
+ * Decision. The cross co-energy W'_x = -(c/4) (m_d^2 - i_0^2) i_q^2 is a polynomial fitted
+ * to the identified range; continued as it is, its quadratic growth drives the incremental
+ * inductance matrix through zero (the xue2022 map at |i_s| of 100-800 A, 5 to 40 i_max),
+ * the current equations turn singular and the plant emits NaN. A real machine's iron
+ * saturates instead: its incremental inductances fall towards the air-core (leakage)
+ * values, which stay positive. So beyond the range the cross co-energy stops growing: it is
+ * evaluated at each current limited smoothly to the range,
+ *
+ *     W'_x(s(i_d), s(i_q)),  s(u) = u                                  for |u| <= a,
+ *                            s(u) = sgn(u) a + w tanh((u - sgn(u) a) / w) beyond,
+ *
+ * a = x_lim = PLANT_FLUX_RANGE i_max (the checked range), w = x_w = PLANT_FLUX_FADE a.
+ * s has s(a) = a, s'(a) = 1 and s''(a) = 0, so the flux (the gradient of W'_x) and the
+ * incremental inductance matrix (its Hessian) are continuous across the edge, and the
+ * map is the same bits as before inside |i_d|, |i_q| <= a. Far beyond the edge s' and s''
+ * vanish: the cross terms fade and the matrix tends to diag(L_dd(i_d), L_q), whose least
+ * value L_d (1 - sigma) (the d-axis model's fully saturated incremental inductance,
+ * SaturationPars) is the floor. Still one co-energy: the matrix stays symmetric and the
+ * machine conserves energy. Why w = a / 4: the limited currents end at 1.25 a = 2.5 i_max,
+ * short of the 3 i_max and 4 i_max up to which the shipped presets' maps are positive
+ * definite (plant_rt/_presets.py), so the continued map only reuses currents where the
+ * map is still physical; plant_rt.cross_saturation_check verifies the whole continued
+ * map on a grid to 50 i_max when a plant is built. A run that leaves |i_s| <= 2 i_max is
+ * outside what the map models: the plant counts those periods (plant_out_of_range_s).
+ *
+ * With G = W'_x and its derivatives at (s_d, s_q) = (s(i_d), s(i_q)):
+ *   psi_d += G_d s_d',   psi_q = L_q i_q + G_q s_q',
+ *   L_dd += G_dd s_d'^2 + G_d s_d'',   L_dq = G_dq s_d' s_q',   L_qq = L_q + G_qq s_q'^2 + G_q s_q''. */
+static void flux_limit(double u, double a, double w, double *s, double *s1, double *s2)
+{
+    if (fabs(u) <= a) {
+        *s = u;
+        *s1 = 1.0;
+        *s2 = 0.0;
+        return;
+    }
+    double e = u > 0.0 ? a : -a;
+    double t = 1.0 - 2.0 / (exp(2.0 * (u - e) / w) + 1.0); /* tanh((u - e) / w), in libm's exp */
+    *s = e + w * t;
+    *s1 = 1.0 - t * t;
+    *s2 = -2.0 * t * *s1 / w;
+}
+
+void plant_flux_cross_ext(const plant_machine *m, double i_d, double i_q, double *psi_d,
+                          double *L_dd, double *psi_q, double *L_dq, double *L_qq)
+{
+    double c_dq = m->c_dq, i_0 = m->i_0;
+    double sd, sd1, sd2, sq, sq1, sq2;
+    flux_limit(i_d, m->x_lim, m->x_w, &sd, &sd1, &sd2);
+    flux_limit(i_q, m->x_lim, m->x_w, &sq, &sq1, &sq2);
+    double mm = sd + i_0;
+    double p = mm * mm - i_0 * i_0;
+    double G_d = -0.5 * c_dq * mm * sq * sq;
+    double G_q = -0.5 * c_dq * p * sq;
+    *psi_d += G_d * sd1;
+    *psi_q = m->L_q * i_q + G_q * sq1;
+    *L_dd += -0.5 * c_dq * sq * sq * sd1 * sd1 + G_d * sd2;
+    *L_dq = -c_dq * mm * sq * sd1 * sq1;
+    *L_qq = m->L_q - 0.5 * c_dq * p * sq1 * sq1 + G_q * sq2;
 }
 
 /* CrossSaturationPars: the d-axis model with the co-energy terms (plant_flux_cross). */

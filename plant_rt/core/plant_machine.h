@@ -36,6 +36,13 @@ typedef struct {
     int cross;        /* the cross-saturation model */
 } plant_machine_pars;
 
+/* The flux map's checked range, |i_s| <= PLANT_FLUX_RANGE i_max (plant_rt.cross_saturation_check
+ * proves the cross-saturated map positive definite there; a plant counts the periods it
+ * spends beyond it), and the width beyond it, as a fraction of the range, over which the
+ * cross map's currents are limited (plant_flux_cross_ext, where both are derived). */
+#define PLANT_FLUX_RANGE 2.0
+#define PLANT_FLUX_FADE 0.25
+
 /* Flux-map variant of the per-stage derivative. */
 enum { PLANT_FLUX_LINEAR = 0, PLANT_FLUX_SAT = 1, PLANT_FLUX_CROSS = 2 };
 
@@ -43,6 +50,7 @@ enum { PLANT_FLUX_LINEAR = 0, PLANT_FLUX_SAT = 1, PLANT_FLUX_CROSS = 2 };
 typedef struct {
     double n_p, R, L_d, L_q, psi_f, b, inv_J, k_tau;
     double sigma, i_sat, sig, inv_i_sat, sig_isat, c_dq, i_0;
+    double x_lim, x_w; /* the cross map's range edge and fade width (plant_flux_cross_ext) */
     int sat, cross;
     int variant; /* PLANT_FLUX_* for the hot stage */
 } plant_machine;
@@ -73,11 +81,22 @@ static inline void plant_flux_d_sat(const plant_machine *m, double i_d, double x
  *   psi_d += -c/2 (i_d + i_0) i_q^2,        L_dd += -c/2 i_q^2,
  *   L_qq = L_q - c/2 i_d (i_d + 2 i_0),     psi_q = L_qq i_q,
  *   L_dq = d psi_d / d i_q = d psi_q / d i_d = -c (i_d + i_0) i_q;
- * psi_d and L_dd come in as the d-axis model's and go out with the terms added. */
+ * psi_d and L_dd come in as the d-axis model's and go out with the terms added.
+ * Used inside |i_d|, |i_q| <= x_lim = 2 i_max, a square around the checked disc
+ * |i_s| <= 2 i_max; beyond it plant_flux_cross_ext continues the map (see there).
+ * plant_rt.cross_saturation_check proves the disc and, on a wider grid, the rest of
+ * the plane positive definite. */
+void plant_flux_cross_ext(const plant_machine *m, double i_d, double i_q, double *psi_d,
+                          double *L_dd, double *psi_q, double *L_dq, double *L_qq);
+
 static inline void plant_flux_cross(const plant_machine *m, double i_d, double i_q,
                                     double *psi_d, double *L_dd, double *psi_q,
                                     double *L_dq, double *L_qq)
 {
+    if (fabs(i_d) > m->x_lim || fabs(i_q) > m->x_lim) {
+        plant_flux_cross_ext(m, i_d, i_q, psi_d, L_dd, psi_q, L_dq, L_qq);
+        return;
+    }
     double c_dq = m->c_dq, i_0 = m->i_0;
     double mm = i_d + i_0;
     double hq = 0.5 * c_dq * i_q;

@@ -98,9 +98,32 @@ static void rk4_step(const plant_machine *m, plant_state *s, int imposed, int ki
     }
 }
 
-int plant_rk4_substeps(const plant_machine *m, const plant_state *s, double h)
+/* The electromechanical mode's rate bound w_em (rad/s) at state s (plant_rk4.h). */
+static double em_rate(const plant_machine *m, const plant_state *s)
+{
+    double fl[5];
+    if (m->cross) {
+        plant_flux_dq(m, s->i_d, s->i_q, fl);
+    } else {
+        plant_flux_d(m, s->i_d, &fl[0], &fl[2]);
+        fl[1] = m->L_q * s->i_q;
+        fl[3] = 0.0;
+        fl[4] = m->L_q;
+    }
+    double mid = 0.5 * (fl[2] + fl[4]), hd = 0.5 * (fl[2] - fl[4]);
+    double rad = sqrt(hd * hd + fl[3] * fl[3]);
+    double L_lo = mid - rad, L_hi = mid + rad;
+    if (!(L_lo > 0.0)) return HUGE_VAL;
+    double psi = sqrt(fl[0] * fl[0] + fl[1] * fl[1]);
+    double i_s = sqrt(s->i_d * s->i_d + s->i_q * s->i_q);
+    return sqrt(m->n_p * m->k_tau * m->inv_J * psi * (psi + L_hi * i_s) / L_lo);
+}
+
+int plant_rk4_substeps(const plant_machine *m, const plant_state *s, int imposed, double h)
 {
     double x = fabs(m->n_p * s->w_m) * h / PLANT_RK4_WH_MAX;
+    if (!imposed && s->i_d * s->i_d + s->i_q * s->i_q > m->x_lim * m->x_lim)
+        x += em_rate(m, s) * h / PLANT_RK4_WH_MAX;
     if (!(x > 1.0)) return 1; /* also a NaN state: one step, as before */
     if (x >= (double)PLANT_RK4_MAX_SPLIT) return PLANT_RK4_MAX_SPLIT;
     int n = (int)x; /* ceil(x) for 1 < x < PLANT_RK4_MAX_SPLIT */
@@ -111,7 +134,7 @@ void plant_rk4(const plant_machine *m, plant_state *s, int imposed, int kind, in
                double u_al, double u_be, double tau_L, double *ua, double *ub, plant_meter *meter,
                const double v[3])
 {
-    int n = plant_rk4_substeps(m, s, h);
+    int n = plant_rk4_substeps(m, s, imposed, h);
     if (n == 1) {
         rk4_step(m, s, imposed, kind, fx, h, u_al, u_be, tau_L, ua, ub, meter, v);
         return;

@@ -24,6 +24,24 @@
  * amplified) and the phase error 0.5 %, so the rotation stays accurate as
  * well as bounded. Below |w_e| h = 1 (every paper run: |w_e| <= 1000 rad/s at
  * h <= 1 ms) n = 1 and the step is the classic one, bit for bit.
+ *
+ * Beyond the flux map's range (|i_s| > PLANT_FLUX_RANGE i_max, plant_machine.h) a
+ * second fast mode matters: the speed and the currents exchange energy through
+ * the back-EMF (d i/dt gets -L_inc^-1 n_p J psi dw) and the torque (dw/dt gets
+ * (k_tau / J) grad(psi_d i_q - psi_q i_d) . di, the gradient at most
+ * |psi| + L_hi |i_s|). Linearised, this pair [[0, u], [v^T, 0]] has the
+ * eigenvalues +-sqrt(v . u), so its rate is at most
+ *     w_em = sqrt(n_p k_tau |psi| (|psi| + L_hi |i_s|) / (J L_lo)),
+ * L_lo, L_hi the least and largest eigenvalues of the incremental inductance
+ * matrix. It grows with the current (xue2022: 7 to 15 rad/s per A; a runaway of
+ * the xue-fig13 square-wave loop without protection reached 2000-4000 A and, at
+ * h = 0.5 ms, left RK4's region and went NaN). There the
+ * step count takes n = ceil((|w_e| + w_em) h / PLANT_RK4_WH_MAX), the sum bounding
+ * both modes' rates. Inside the range w_em h is small (xue2022 at 40 A, h = 0.5 ms:
+ * at most 0.29; wen2023 at 16 A, h = 50 us: at most 0.04) and is not added, so every
+ * run that stays
+ * in the range keeps its steps, bit for bit; with the speed imposed there is no
+ * mechanical mode.
  */
 #ifndef PLANT_RK4_H
 #define PLANT_RK4_H
@@ -49,8 +67,9 @@ enum { PLANT_STAGE_HOT = 0, PLANT_STAGE_GENERAL = 1, PLANT_STAGE_FLOAT = 2 };
 #define PLANT_RK4_MAX_SPLIT 1000000
 
 /* The number of equal RK4 steps that plant_rk4 takes over h from state s:
- * ceil(|n_p w_m| h / PLANT_RK4_WH_MAX), at least 1. */
-int plant_rk4_substeps(const plant_machine *m, const plant_state *s, double h);
+ * ceil(|n_p w_m| h / PLANT_RK4_WH_MAX), at least 1, with w_em h added beyond the
+ * flux map's range when the speed is free (see the header comment). */
+int plant_rk4_substeps(const plant_machine *m, const plant_state *s, int imposed, double h);
 
 /* One interval of length h, in plant_rk4_substeps equal RK4 steps. kind PLANT_STAGE_FLOAT needs the floating phase fx
  * (0..2) and the voltage (u_al, u_be) of the other legs; *ua, *ub (may be
