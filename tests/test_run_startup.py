@@ -51,8 +51,8 @@ def test_every_node_is_started_before_the_first_ready_is_awaited(
 def test_a_controller_that_cannot_be_built_is_one_line_naming_scenario_and_estimator(
     tmp_path: Path,
 ) -> None:
-    """The controller node fails to start on the misfit; the parent's build then names it in
-    place of the node's exit; nothing is recorded."""
+    """The parent builds the controller before any process starts: a misfit is one line
+    naming the scenario and the estimator, and nothing is recorded."""
     (tmp_path / "refusing_est.py").write_text(REFUSING_PLUGIN)
     out = tmp_path / "run"
     cmd = [sys.executable, "-m", "bench", "run", "wen-5.1", "-e", "refusing_est:create"]
@@ -66,20 +66,4 @@ def test_a_controller_that_cannot_be_built_is_one_line_naming_scenario_and_estim
         "bench: error: --estimator refusing_est:create: cannot run scenario wen-5.1 "
         "(this estimator refuses the design)"
     ), lines[0]
-    assert not (out / "capture.blf").exists() and (out / "error.txt").is_file()
-
-
-def test_a_run_whose_nodes_start_builds_no_controller_in_the_parent(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
-) -> None:
-    """The controller node builds the controller and reports its design: the parent's check
-    runs only to name why a node did not start."""
-    from bench.cli import main
-    from bench.scenarios import _setup
-
-    calls: list[str] = []
-    monkeypatch.setattr(_setup, "build_controller_check", lambda scn, est: calls.append(est))
-    out = tmp_path / "run"
-    argv = ["run", "wen-5.1", "-e", "tt-dq", "--duration", "0.01", "--port", str(free_port())]
-    assert main([*argv, "--out", str(out), "-q"]) == 0
-    assert calls == [] and (out / "metrics.json").is_file()
+    assert not (out / "capture.blf").exists()

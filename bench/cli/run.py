@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import functools
 import sys
 import threading
 from pathlib import Path
@@ -23,7 +22,7 @@ from bench.cli._common import (
     scenario_from_args,
     writable_dir,
 )
-from bench.scenarios._setup import check_estimator_name
+from bench.scenarios._setup import check_estimator_fits, check_estimator_name
 
 
 def run_node_args(args: argparse.Namespace) -> dict[str, list[str]]:
@@ -74,12 +73,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     from bench.runs._local import exit_status
     from bench.runs._results import format_metrics, frames_warning, realtime_warning
     from bench.runs._run import run_scenario
-    from bench.scenarios._setup import (
-        build_controller_check,
-        countermeasures_text,
-        options_note,
-        sample_period,
-    )
+    from bench.scenarios._setup import countermeasures_text, sample_period
 
     scn = scenario_from_args(args)
     external = args.controller == "external"
@@ -92,7 +86,9 @@ def cmd_run(args: argparse.Namespace) -> int:
     else:
         est = args.estimator or scn.estimator
         check_estimator_name(est)
-        if note := options_note(scn, est):
+        # a misfit (e.g. an injection estimator on a motor without saliency) is one
+        # line before any process starts: the controller is built here once
+        if note := check_estimator_fits(scn, est):
             print(note, file=sys.stderr)
     plant_engine(args)
     if args.monitor and not (sys.stdin.isatty() and sys.stdout.isatty() and sys.stderr.isatty()):
@@ -135,8 +131,6 @@ def cmd_run(args: argparse.Namespace) -> int:
             controller=args.controller,
             dut_timeout=args.dut_timeout,
             dut_name=args.dut_name,
-            # a controller node that cannot start: the controller built here names the misfit
-            check=None if external else functools.partial(build_controller_check, scn, est),
         )
     finally:
         if view is not None:

@@ -165,8 +165,9 @@ def run_scenario(
         (named ``dut_name`` in the labels) must send its first valid duty within
         ``dut_timeout`` seconds, else the run ends with a :class:`BenchError`
         naming the duty frames the bench rejected.
-        ``check``: a check of the run's settings that takes a while (``bench run``:
-        building the controller, :func:`bench.scenarios._setup.build_controller_check`),
+        ``check``: a check of the run's settings that takes a while (e.g. building the
+        controller, :func:`bench.scenarios._setup.build_controller_check`; ``bench run``
+        builds it before any process starts, so a misfit is refused first),
         done only when a node failed to start: the controller node builds the same
         controller before its ``READY`` and fails on the same misfit, which the
         check then names in its own line (its :class:`BenchError`) in place of the
