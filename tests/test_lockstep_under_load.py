@@ -34,6 +34,7 @@ from bench.nodes._link import LockstepLink
 from bench.nodes._loops import (
     WATCHDOG_ROUNDS,
     command_frames,
+    lockstep_delay,
     make_controller_node,
     make_plant_node,
     run_inprocess,
@@ -47,12 +48,17 @@ from tests.ports import free_port
 from tests.trace_helpers import CODEC, assert_same_trace, short, trace
 
 
-def link_scenario() -> Scenario:
-    return short("wen-5.1", 0.06, duty_delay_steps=2, sample_delay_steps=1)
+def link_scenario(duty: int = 2, sample: int = 1) -> Scenario:
+    return short("wen-5.1", 0.06, duty_delay_steps=duty, sample_delay_steps=sample)
 
 
 def scheduled_run(
-    scn: Scenario, seed: int, *, retransmit_p: float, startup_rounds: int = 0
+    scn: Scenario,
+    seed: int,
+    *,
+    retransmit_p: float,
+    startup_rounds: int = 0,
+    lose_p: float = 0.0,
 ) -> tuple[list[can.Message], dict[str, int]]:
     """The lockstep loop through the link logic under a random schedule.
 
@@ -61,8 +67,16 @@ def scheduled_run(
     or lets the plant run its period (when its duty and pacing allow), or,
     when the plant waits and nothing is on its way to it, a retransmission
     round (:meth:`PlantNode.on_duty_timeout` and :meth:`PlantNode.retransmit`,
-    as the plant loop does after each quiet ``RETRANSMIT_S``).
+    as the plant loop does after each quiet ``RETRANSMIT_S``).  A round
+    comes only while the link has at most one round's frames from the plant
+    still to read: ``RETRANSMIT_S`` is 50 ms, in which a link that keeps up
+    with its input reads hundreds of frames (a link that cannot keep up falls
+    behind whatever the rules; :class:`LockstepLink` sends nothing twice for
+    one repeat so that it does not make its own backlog).
     ``startup_rounds`` rounds pass before the link sees anything: a slow start.
+    ``lose_p``: each frame other than a bench command is lost on its way with this
+    probability, on any of the four paths (a full socket queue of a loaded host;
+    the bench sends every command twice, which a test of losses must not count on).
     Returns every frame the nodes sent (the recorder's view) and the plant's trips.
     """
     rng = random.Random(seed)
@@ -92,6 +106,8 @@ def scheduled_run(
 
     def deliver(q: deque[can.Message]) -> None:
         m = q.popleft()
+        if lose_p and m.arbitration_id != CODEC.frame_id("BenchCommand") and rng.random() < lose_p:
+            return
         if q is to_link_a or q is to_link_b:
             tb, ta = link.from_a(m) if q is to_link_a else link.from_b(m)
             to_ctrl.extend(tb)
@@ -110,7 +126,12 @@ def scheduled_run(
         busy = [q for q in paths if q]
         if pn.ready() and pn.paced() and (not busy or rng.random() < 0.3):
             out = pn.advance_lockstep()
-        elif not busy or (not pn.ready() and not to_plant and rng.random() < retransmit_p):
+        elif not busy or (
+            not pn.ready()
+            and not to_plant
+            and len(to_link_a) <= 3 * (lockstep_delay(scn) + 3)  # one round's frames
+            and rng.random() < retransmit_p
+        ):
             out = pn.on_duty_timeout() + pn.retransmit()
         else:
             deliver(rng.choice(busy))
@@ -118,7 +139,11 @@ def scheduled_run(
         rec += out
         to_link_a.extend(out)
     assert pn.done
-    while any(paths):  # the frames still on their way
+    # the frames still on their way, none lost: no period waits for the answer to
+    # the last sample, so nothing would resend it (a loss there is a last row
+    # without the controller's answer, a different matter from recovery)
+    lose_p = 0.0
+    while any(paths):
         deliver(next(q for q in paths if q))
     return rec, dict(pn.trips)
 
@@ -141,6 +166,24 @@ def test_any_schedule_with_retransmissions_gives_the_in_process_trace(seed: int)
     # the schedule did what it is for: frames repeated, answered from the caches
     n_samples = sum(m.arbitration_id == CODEC.frame_id("PhaseSamples") for m in rec)
     assert n_samples > len(ref["step"]) + 100
+
+
+@pytest.mark.parametrize(("seed", "duty", "sample"), [(4, 2, 1), (5, 2, 1), (6, 2, 1), (7, 9, 4)])
+def test_frames_lost_on_any_path_are_recovered_with_the_in_process_trace(
+    seed: int, duty: int, sample: int
+) -> None:
+    """Frames lost before and after the link, both ways, samples, truth and duties:
+    the plant's retransmission through the link's rules recovers every one.
+
+    A truth frame lost before the link once stalled the run for good on vcan: its
+    repeat came after its sample had been released, was queued behind the newest
+    sample (held until the next one, which the waiting plant never sends), and the
+    sensored controller waited for it for ever."""
+    scn = link_scenario(duty, sample)
+    ref = trace(run_inprocess(scn, "sensored", CODEC), scn)
+    rec, trips = scheduled_run(scn, seed, retransmit_p=0.3, lose_p=0.05)
+    assert trips == {}
+    assert_same_trace(ref, trace(rec, scn))
 
 
 def test_a_silent_controller_still_trips_the_armed_watchdog() -> None:

@@ -76,5 +76,11 @@ echo "setup done"
 
 cd "$ROOT" || fail "cd $ROOT"
 "$ROOT/.venv/bin/pytest" "${PYTEST_ARGS[@]}" >"$WORK/pytest.log" 2>&1
-echo $? >"$WORK/rc.part" && mv "$WORK/rc.part" "$WORK/rc"
+rc=$?
+# The temporary tree is a tmpfs that goes with the machine: keep the run folders
+# of a failed run (their error.txt, node logs and reports) on the host.
+if [ "$rc" -ne 0 ]; then
+	mkdir -p "$WORK/kept" && cp -a "$WORK/tmp"/pytest-of-* "$WORK/kept/" 2>/dev/null
+fi
+echo "$rc" >"$WORK/rc.part" && mv "$WORK/rc.part" "$WORK/rc"
 halt_machine

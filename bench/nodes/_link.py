@@ -139,6 +139,14 @@ class LockstepLink:
         self.held_a: deque[tuple[int, can.Message]] = deque()
         self.released_b: dict[int, list[can.Message]] = {}
         self.released_a: deque[can.Message] = deque(maxlen=4)
+        #: Periods a repeat can reach back: the plant resends its last ``delay + 3``
+        #: periods (``delay`` = ``sample_delay + duty_delay``), and a little more.
+        self.keep = self.n_s + self.n_d + 8
+        #: Steps of the duties held or released, the last ``keep``: a duty seen again (the
+        #: controller answering a repeated sample from its cache) is not forwarded;
+        #: the plant's repeat of its newest sample brings it :attr:`released_a`.
+        #: A duty first seen after later ones (its first copy lost) is new.
+        self.duty_seen: set[int] = set()
         self.dropped_samples = 0
         self.dropped_duties = 0
 
@@ -153,7 +161,8 @@ class LockstepLink:
         while self.held_b and self.held_b[0][0] <= self.latest_a - self.n_s:
             j, m = self.held_b.popleft()
             self.released_b.setdefault(j, []).append(m)
-            self.released_b.pop(j - 8, None)
+            if len(self.released_b) > 2 * self.keep:
+                self.released_b = {s: v for s, v in self.released_b.items() if s > j - self.keep}
             if self.p_s and self.rng_s.random() < self.p_s:
                 self.dropped_samples += 1
             else:
@@ -167,8 +176,40 @@ class LockstepLink:
                 to_a.append(m)
         return to_b, to_a
 
+    def _seen(self, j: int, fid: int) -> bool:
+        """Whether a frame ``fid`` of period ``j`` is held or was released."""
+        return any(m.arbitration_id == fid for m in self.released_b.get(j, ())) or any(
+            s == j and m.arbitration_id == fid for s, m in self.held_b
+        )
+
+    def _hold(self, j: int, msg: can.Message) -> None:
+        """Hold ``msg`` of period ``j`` in period order (after those of ``j`` held)."""
+        if not self.held_b or self.held_b[-1][0] <= j:
+            self.held_b.append((j, msg))
+        else:  # a frame of an earlier period, come after its first copy was lost
+            self.held_b = deque(sorted([*self.held_b, (j, msg)], key=lambda x: x[0]))
+
     def from_a(self, msg: can.Message) -> tuple[list[can.Message], list[can.Message]]:
-        """A frame seen on A: (frames for B, frames for A)."""
+        """A frame seen on A: (frames for B, frames for A).
+
+        A sample of a new period moves the link's period on; every frame is held
+        in period order until its period is ``sample_delay`` periods old.  A frame
+        already held or released is a repeat (the plant resends its last periods
+        when the duty it needs does not come): a repeated sample resends what
+        was released to B for its period (sample and truth), and the repeat of
+        the newest one, which ends each of the plant's rounds, the duties last
+        released to A, so a frame lost on either side comes again.  Nothing is
+        sent twice for one repeat: on a loaded host a link that answered each
+        repeated sample with every duty, and forwarded the controller's cached
+        answers again, fell behind its input, each round of the waiting plant
+        added to the backlog, and a run stalled for seconds (thousands of
+        copies of one duty on vcan inside User-Mode Linux).  A frame of
+        an earlier period that this link never saw (its first copy was lost on
+        the way in) is new, held in its place: the controller takes its samples
+        (and the sensored one its truth) in order and waits for it.  Which frame
+        was seen is asked per frame identifier: a period whose truth came but
+        whose sample was lost is still waiting for that sample.
+        """
         fid = msg.arbitration_id
         if fid == self.id_cmd:
             return [msg], []
@@ -178,29 +219,18 @@ class LockstepLink:
         if d is None or d.reason is not None:
             return [], []
         j = unwrap(int(d.signals["step"]) % self.m, max(self.latest_a, 0), self.m)
-        if fid == self.id_samples:
-            if j <= self.latest_a:
-                unseen = (
-                    j > self.latest_a - 8  # the window released_b keeps
-                    and j not in self.released_b
-                    and not any(s == j and m.arbitration_id == fid for s, m in self.held_b)
-                )
-                if unseen:
-                    # the sample of a period this link never saw (its first copy was lost
-                    # on the way in, and a later one moved latest_a on): it is new, held in
-                    # its place; without it the controller, which takes its samples in
-                    # order, would wait for it while the plant repeats it for ever
-                    held = sorted([*self.held_b, (j, msg)], key=lambda x: x[0])
-                    self.held_b = deque(held)
-                    to_b, to_a = self._release()
-                    return to_b, [*to_a, *self.released_a]
-                # the plant repeats itself: a frame was lost somewhere; repeat what was released
-                again_b = list(self.released_b.get(j, [])) if j <= self.latest_a - self.n_s else []
-                return again_b, list(self.released_a)
+        is_sample = fid == self.id_samples
+        if is_sample and j > self.latest_a:
             self.latest_a = j
-        elif any(j == s and m.arbitration_id == self.id_truth for s, m in self.held_b):
+        elif self._seen(j, fid):
+            if not is_sample:
+                return [], []  # resent with its period's sample
+            again_b = list(self.released_b.get(j, [])) if j <= self.latest_a - self.n_s else []
+            # the duties once per round: the round ends with the plant's newest sample
+            return again_b, list(self.released_a) if j == self.latest_a else []
+        elif j <= self.latest_a - self.keep:  # older than the window released_b keeps
             return [], []
-        self.held_b.append((j, msg))
+        self._hold(j, msg)
         return self._release()
 
     def from_b(self, msg: can.Message) -> tuple[list[can.Message], list[can.Message]]:
@@ -212,6 +242,11 @@ class LockstepLink:
         if d is None or d.reason is not None:
             return [], []
         t = unwrap(int(d.signals["step"]), max(self.latest_a, 0) + 1, self.m)
+        if t in self.duty_seen or t <= max(self.latest_a, 0) - self.keep:
+            return [], []  # seen: held, or released (resent from released_a when lost)
+        self.duty_seen.add(t)
+        if len(self.duty_seen) > 2 * self.keep:
+            self.duty_seen = {s for s in self.duty_seen if s > t - self.keep}
         # duty t answers sample t - 1, which B saw when A carried sample t - 1 + N_s
         self.held_a.append((t - 1 + self.n_s + self.n_d, msg))
         if len(self.held_a) > 1 and self.held_a[-2][0] > self.held_a[-1][0]:
