@@ -3,10 +3,13 @@
 from __future__ import annotations
 
 import json
+import os
+import time
 from pathlib import Path
 
 import pytest
 
+from bench._errors import BenchError
 from bench.cli import main
 from bench.studies._rtcheck import (
     DOC_BEGIN,
@@ -60,3 +63,20 @@ def test_the_committed_doc_is_the_committed_measurement() -> None:
     doc = (ROOT / "docs" / "REALTIME.md").read_text()
     assert render_doc_block(res) in doc
     assert update_doc(doc, res) == doc
+
+
+def _ends_without_result(T_s: float, seconds: float, fifo: bool, q: object) -> None:
+    os._exit(3)
+
+
+def test_a_measuring_process_that_dies_is_one_line_not_a_wait(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The child is waited for while it lives; one that ends without a result is named."""
+    import bench.studies._rtcheck as rc
+
+    monkeypatch.setattr(rc, "_measure_wakeups", _ends_without_result)
+    t0 = time.monotonic()
+    with pytest.raises(BenchError, match=r"ended without a result \(exit status 3\)"):
+        rc.wakeup_latency(1e-3, 0.1, fifo=False)
+    assert time.monotonic() - t0 < rc.START_LIMIT_S

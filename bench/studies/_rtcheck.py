@@ -29,10 +29,13 @@ from __future__ import annotations
 import math
 import multiprocessing as mp
 import os
+import queue
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
+
+from bench._errors import BenchError
 
 #: Share of the period the p99 computation and wake-up latency may use for ``yes``.
 MARGIN = 0.8
@@ -101,11 +104,38 @@ def wakeup_latency(T_s: float, seconds: float, *, fifo: bool) -> Latency:
     q = ctx.Queue()
     p = ctx.Process(target=_measure_wakeups, args=(T_s, seconds, fifo, q))
     p.start()
+    # The child imports the bench and measures the plant's computation before its
+    # wake-ups: on a loaded host that took more than a minute, so it is waited for as
+    # long as it lives (up to START_LIMIT_S beyond the measurement), never by one timeout.
+    deadline = time.monotonic() + seconds + START_LIMIT_S
     try:
-        res: Latency = q.get(timeout=seconds + 60.0)
+        while True:
+            try:
+                res: Latency = q.get(timeout=1.0)
+                return res
+            except queue.Empty:
+                if not p.is_alive():
+                    try:  # its result may have come just before it ended
+                        return q.get(timeout=1.0)
+                    except queue.Empty:
+                        raise BenchError(
+                            "rtcheck: the measuring process ended without a result "
+                            f"(exit status {p.exitcode})"
+                        ) from None
+                if time.monotonic() > deadline:
+                    p.kill()
+                    raise BenchError(
+                        f"rtcheck: the measuring process gave no result in "
+                        f"{seconds + START_LIMIT_S:g} s (a host this loaded cannot be rated)"
+                    ) from None
     finally:
         p.join(timeout=10.0)
-    return res
+
+
+#: How long a measuring process may take beyond its measurement (s): its start-up
+#: (imports, the plant's computation measured first) on a loaded 2-core host took
+#: over 60 s; ten times that is a host that cannot be rated at all.
+START_LIMIT_S = 600.0
 
 
 def plant_compute_us(periods: int = 4000) -> dict[str, float]:
