@@ -20,6 +20,7 @@ from typing import Any
 
 import pytest
 
+from bench.cli import main
 from bench.scenarios._schema import load_scenario
 from bench.scenarios._setup import build_controller
 from bench.wire._ctlgen import _C_TYPES, _c_arg, _Recorder, design_signatures
@@ -157,3 +158,23 @@ def test_the_header_maps_every_design_as_the_binding(tmp_path: Path) -> None:
             _same_struct(lines[1], sup_addr)
     # every design function was compared at least once
     assert sorted(set(design_signatures()) - covered) == []
+
+
+def test_the_headers_compile_alone_in_strict_c99(tmp_path: Path) -> None:
+    """``bench_controller.h`` (and ``bench_wire.h`` and ``cc_design.h`` it includes) needs
+    no include before it: a program of that one include builds with ``-pedantic``."""
+    gen = tmp_path / "gen"
+    args = ["codegen", str(gen), "--scenario", str(SCENARIO), "--estimator", "tt-dq"]
+    assert main(args) == 0
+    src = tmp_path / "alone.c"
+    src.write_text(
+        '#include "bench_controller.h"\n'
+        "static cc_foc_t c;\nstatic cc_sup_t sup;\n"
+        "int main(void) { return bench_controller_init(&c, &sup); }\n"
+    )
+    exe = tmp_path / "alone"
+    cmd = [str(CC), "-std=c99", "-pedantic", "-Wall", "-Wextra", "-Werror", f"-I{gen}"]
+    cmd += [f"-I{gen / 'core'}", "-o", str(exe), str(src), *map(str, (gen / "core").glob("*.c"))]
+    res = subprocess.run([*cmd, "-lm"], capture_output=True, text=True, timeout=120)
+    assert res.returncode == 0, res.stderr
+    assert subprocess.run([str(exe)], timeout=30).returncode == 0

@@ -19,6 +19,8 @@
 #ifndef CC_DESIGN_H
 #define CC_DESIGN_H
 
+#include <stddef.h> /* NULL: an argument left out (None) */
+
 #include "cc_foc.h"
 #include "cc_supervision.h"
 
