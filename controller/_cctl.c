@@ -2,9 +2,11 @@
  *
  * A Core object holds one cc_foc_t (the controller, its estimator and start-up).
  * Python designs every gain and filter (controller/_controller.py and the
- * estimators' modules) and hands the values to the core's _init functions by
- * position (controller/_compiled.py); the core then runs every period, commands
- * included, and keeps every state.  The seam's records cross as structs: a
+ * estimators' modules) and hands the values by position (controller/_compiled.py) to
+ * the design methods below, each of which calls its one cc_design_* function
+ * (core/cc_design.h, the design's mapping onto the core's _init calls, which the header
+ * `bench codegen --estimator` writes for a firmware calls too); the core then runs every
+ * period, commands included, and keeps every state.  The seam's records cross as structs: a
  * Measurement's slots are read, and a ControlOutput's filled, in the order of
  * their dataclass fields (the type's member table), never by attribute name.
  * The states Python may read are the Core's members (offsets into the C struct).
@@ -23,6 +25,7 @@
 #include <stdint.h>
 #include <structmember.h>
 
+#include "core/cc_design.h"
 #include "core/cc_foc.h"
 #include "core/cc_supervision.h"
 
@@ -107,7 +110,8 @@ static int Core_init(Core *self, PyObject *args, PyObject *kwds)
     if (!PyArg_ParseTuple(args, "iO!OO!O", &kind, &PyType_Type, &mt, &md, &PyType_Type, &ot,
                           &od))
         return -1;
-    if (cc_estim_init(&self->c.est, kind) < 0) {
+    self->sup_on = 0;
+    if (cc_design_init(&self->c, &self->sup, kind) < 0) {
         PyErr_Format(PyExc_ValueError, "compiled controller: unknown estimator kind %d", kind);
         return -1;
     }
@@ -122,6 +126,9 @@ static int Core_init(Core *self, PyObject *args, PyObject *kwds)
 }
 
 /* ---------------------------------------------------------------- design values */
+/* Each design method converts Python's values and calls its cc_design_* function
+ * (core/cc_design.h: the one mapping onto the core's _init calls, which the firmware's
+ * generated header calls too); tuples cross as arrays of doubles, None as NULL. */
 static PyObject *Core_foc(Core *self, PyObject *args)
 {
     double n_p, L_d, L_q, psi_f, i_max, tau_max, t_delay, theta0;
@@ -130,8 +137,8 @@ static PyObject *Core_foc(Core *self, PyObject *args)
     if (!PyArg_ParseTuple(args, "dddddddLLdpp", &n_p, &L_d, &L_q, &psi_f, &i_max, &tau_max,
                           &t_delay, &n_align, &n_settle, &theta0, &raw, &align))
         return NULL;
-    cc_foc_init(&self->c, n_p, L_d, L_q, psi_f, i_max, tau_max, t_delay, n_align, n_settle,
-                theta0, raw, align);
+    cc_design_foc(&self->c, n_p, L_d, L_q, psi_f, i_max, tau_max, t_delay, n_align, n_settle,
+                  theta0, raw, align);
     Py_RETURN_NONE;
 }
 
@@ -141,8 +148,7 @@ static PyObject *Core_pi(Core *self, PyObject *args)
     double k_p, k_i, T_s, k_t;
     if (!PyArg_ParseTuple(args, "idddd", &which, &k_p, &k_i, &T_s, &k_t))
         return NULL;
-    cc_pi_t *p = which == 0 ? &self->c.pi_d : which == 1 ? &self->c.pi_q : &self->c.pi_w;
-    cc_pi_init(p, k_p, k_i, T_s, k_t);
+    cc_design_pi(&self->c, which, k_p, k_i, T_s, k_t);
     Py_RETURN_NONE;
 }
 
@@ -151,7 +157,7 @@ static PyObject *Core_speed_filter(Core *self, PyObject *args)
     double b0, b1, a1;
     if (!PyArg_ParseTuple(args, "ddd", &b0, &b1, &a1))
         return NULL;
-    cc_fo_init(&self->c.lpf_w, b0, b1, a1);
+    cc_design_speed_filter(&self->c, b0, b1, a1);
     Py_RETURN_NONE;
 }
 
@@ -160,7 +166,7 @@ static PyObject *Core_polarity(Core *self, PyObject *args)
     double L_d, T_s, i_pulse, u_frac;
     if (!PyArg_ParseTuple(args, "dddd", &L_d, &T_s, &i_pulse, &u_frac))
         return NULL;
-    cc_polarity_init(&self->c.polarity, L_d, T_s, i_pulse, u_frac);
+    cc_design_polarity(&self->c, L_d, T_s, i_pulse, u_frac);
     Py_RETURN_NONE;
 }
 
@@ -169,36 +175,22 @@ static PyObject *Core_polarity(Core *self, PyObject *args)
  *          [, (quadrature twin b0, b1, b2, a1, a2) or None]) */
 static PyObject *Core_rotating(Core *self, PyObject *args)
 {
-    double V_h, wT, inv_norm, pk, pi, pT, b0, b1, b2, a1, a2, l0, l1, la;
-    PyObject *hpf, *track, *quad = Py_None;
-    if (!PyArg_ParseTuple(args, "ddd(ddd)(ddddd)(ddd)OO|O", &V_h, &wT, &inv_norm, &pk, &pi, &pT,
-                          &b0, &b1, &b2, &a1, &a2, &l0, &l1, &la, &hpf, &track, &quad))
+    double V_h, wT, inv_norm, pll[3], bpf[5], lpf[3], hpf[3], track[4], quad[5];
+    PyObject *hpf_o, *track_o, *quad_o = Py_None;
+    if (!PyArg_ParseTuple(args, "ddd(ddd)(ddddd)(ddd)OO|O", &V_h, &wT, &inv_norm, &pll[0],
+                          &pll[1], &pll[2], &bpf[0], &bpf[1], &bpf[2], &bpf[3], &bpf[4], &lpf[0],
+                          &lpf[1], &lpf[2], &hpf_o, &track_o, &quad_o))
         return NULL;
-    cc_rot_t *r = &self->c.est.rot;
-    cc_rot_init(r, V_h, wT, inv_norm);
-    cc_pll_init(&r->pll, pk, pi, pT);
-    cc_bq2_init(&r->bpf, b0, b1, b2, a1, a2);
-    cc_fo_init(&r->lpf, l0, l1, la);
-    cc_fo2_init(&r->lpf_ab, l0, l1, la);
-    cc_fo2_init(&r->lpf_n, l0, l1, la);
-    cc_bq2_init(&r->quad, 0.0, 0.0, 0.0, 0.0, 0.0);
-    if (quad != Py_None) {
-        if (!PyArg_ParseTuple(quad, "ddddd", &b0, &b1, &b2, &a1, &a2))
-            return NULL;
-        cc_bq2_init(&r->quad, b0, b1, b2, a1, a2);
-    }
-    cc_fo2_init(&r->hpf, 0.0, 0.0, 0.0);
-    if (hpf != Py_None) {
-        if (!PyArg_ParseTuple(hpf, "ddd", &l0, &l1, &la))
-            return NULL;
-        cc_fo2_init(&r->hpf, l0, l1, la);
-    }
-    if (track != Py_None) {
-        double w_h, T_s, B, w0_min;
-        if (!PyArg_ParseTuple(track, "dddd", &w_h, &T_s, &B, &w0_min))
-            return NULL;
-        cc_rot_tracking(r, w_h, T_s, B, w0_min);
-    }
+    if ((hpf_o != Py_None && !PyArg_ParseTuple(hpf_o, "ddd", &hpf[0], &hpf[1], &hpf[2]))
+        || (track_o != Py_None
+            && !PyArg_ParseTuple(track_o, "dddd", &track[0], &track[1], &track[2], &track[3]))
+        || (quad_o != Py_None
+            && !PyArg_ParseTuple(quad_o, "ddddd", &quad[0], &quad[1], &quad[2], &quad[3],
+                                 &quad[4])))
+        return NULL;
+    cc_design_rotating(&self->c, V_h, wT, inv_norm, pll, bpf, lpf,
+                       hpf_o != Py_None ? hpf : NULL, track_o != Py_None ? track : NULL,
+                       quad_o != Py_None ? quad : NULL);
     Py_RETURN_NONE;
 }
 
@@ -207,18 +199,15 @@ static PyObject *Core_square_wave(Core *self, PyObject *args)
 {
     int cic;
     long long M;
-    double U_h, t_comp, k_err, T_s, g1, g2, g3, gt;
-    if (!PyArg_ParseTuple(args, "pLddd(ddddd)", &cic, &M, &U_h, &t_comp, &k_err, &T_s, &g1,
-                          &g2, &g3, &gt))
+    double U_h, t_comp, k_err, obs[5];
+    if (!PyArg_ParseTuple(args, "pLddd(ddddd)", &cic, &M, &U_h, &t_comp, &k_err, &obs[0],
+                          &obs[1], &obs[2], &obs[3], &obs[4]))
         return NULL;
-    cc_sqw_t *q = &self->c.est.sqw;
-    cc_est_t *e = self->c.est.kind == CC_EST_SQUARE_WAVE ? &self->c.est.out : &self->c.est.hyb.hf;
-    if (cc_sqw_init(e, q, cic, M, U_h, t_comp, k_err) < 0) {
+    if (cc_design_square_wave(&self->c, cic, M, U_h, t_comp, k_err, obs) < 0) {
         PyErr_Format(PyExc_ValueError, "compiled controller: CIC delay %lld outside 1..%d", M,
                      CC_CIC_MAX);
         return NULL;
     }
-    cc_luen_init(&q->obs, T_s, g1, g2, g3, gt);
     Py_RETURN_NONE;
 }
 
@@ -226,15 +215,12 @@ static PyObject *Core_square_wave(Core *self, PyObject *args)
  *        T_s, n_p, J) */
 static PyObject *Core_hybrid(Core *self, PyObject *args)
 {
-    double R_s, L_d, L_q, psi_f, T_o, zeta_f, w_min, k_p, k_i, w_lo, w_mid, w_hi, h, T_s, n_p, J;
-    if (!PyArg_ParseTuple(args, "(ddddddddd)(dddd)ddd", &R_s, &L_d, &L_q, &psi_f, &T_o, &zeta_f,
-                          &w_min, &k_p, &k_i, &w_lo, &w_mid, &w_hi, &h, &T_s, &n_p, &J))
+    double obs[9], band[4], T_s, n_p, J;
+    if (!PyArg_ParseTuple(args, "(ddddddddd)(dddd)ddd", &obs[0], &obs[1], &obs[2], &obs[3],
+                          &obs[4], &obs[5], &obs[6], &obs[7], &obs[8], &band[0], &band[1],
+                          &band[2], &band[3], &T_s, &n_p, &J))
         return NULL;
-    cc_estim_t *e = &self->c.est;
-    cc_hyb_init(&e->out, &e->hyb, e->kind == CC_EST_HYBRID_SQUARE_WAVE, &e->rot, &e->sqw, T_s,
-                n_p, J);
-    cc_flux_init(&e->hyb.obs, R_s, L_d, L_q, psi_f, T_o, zeta_f, w_min, k_p, k_i);
-    cc_band_init(&e->hyb.band, w_lo, w_mid, w_hi, h);
+    cc_design_hybrid(&self->c, obs, band, T_s, n_p, J);
     Py_RETURN_NONE;
 }
 
@@ -248,8 +234,8 @@ static PyObject *Core_supervision(Core *self, PyObject *args)
                           &n_stuck, &i_min, &rho_open, &n_open_min, &n_open_max, &u_uv, &u_ov,
                           &u_hyst, &n_dc))
         return NULL;
-    cc_sup_init(&self->sup, T_s, i_rail, n_range, i_res, du_stuck, n_stuck, i_min, rho_open,
-                n_open_min, n_open_max, u_uv, u_ov, u_hyst, n_dc);
+    cc_design_supervision(&self->sup, T_s, i_rail, n_range, i_res, du_stuck, n_stuck, i_min,
+                          rho_open, n_open_min, n_open_max, u_uv, u_ov, u_hyst, n_dc);
     self->sup_on = 1;
     Py_RETURN_NONE;
 }
@@ -267,39 +253,38 @@ static PyObject *Core_address(Core *self, PyObject *Py_UNUSED(ignored))
  *              switched on, and the rotating injection's model HF amplitudes */
 static PyObject *Core_compensation(Core *self, PyObject *args)
 {
-    PyObject *dt, *cross, *cal, *hf;
-    if (!PyArg_ParseTuple(args, "OOOO", &dt, &cross, &cal, &hf))
+    PyObject *dt_o, *cross_o, *cal_o, *hf_o;
+    double dt[7], cross[2], hf[2];
+    long long n = 0;
+    if (!PyArg_ParseTuple(args, "OOOO", &dt_o, &cross_o, &cal_o, &hf_o))
         return NULL;
-    if (dt != Py_None) {
-        double T_s, t_dead, v_ce, v_f, i_band;
+    if (dt_o != Py_None) {
         int sine, hf_next;
-        if (!PyArg_ParseTuple(dt, "dddddpp", &T_s, &t_dead, &v_ce, &v_f, &i_band, &sine,
+        if (!PyArg_ParseTuple(dt_o, "dddddpp", &dt[0], &dt[1], &dt[2], &dt[3], &dt[4], &sine,
                               &hf_next))
             return NULL;
-        cc_foc_dead_time(&self->c, T_s, t_dead, v_ce, v_f, i_band, sine, hf_next);
+        dt[5] = sine ? 1.0 : 0.0;
+        dt[6] = hf_next ? 1.0 : 0.0;
     }
-    if (cross != Py_None) {
-        double k_dq;
+    if (cross_o != Py_None) {
         int sal_own;
-        if (!PyArg_ParseTuple(cross, "dp", &k_dq, &sal_own))
+        if (!PyArg_ParseTuple(cross_o, "dp", &cross[0], &sal_own))
             return NULL;
-        cc_foc_cross_saturation(&self->c, k_dq, sal_own);
+        cross[1] = sal_own ? 1.0 : 0.0;
     }
-    if (cal != Py_None) {
-        long long n = PyLong_AsLongLong(cal);
+    if (cal_o != Py_None) {
+        n = PyLong_AsLongLong(cal_o);
         if (n == -1 && PyErr_Occurred())
             return NULL;
-        if (n < 1) {
-            PyErr_Format(PyExc_ValueError, "compiled controller: %lld offset periods", n);
-            return NULL;
-        }
-        cc_foc_offset_calibration(&self->c, n);
     }
-    if (hf != Py_None) {
-        double I_p, I_n;
-        if (!PyArg_ParseTuple(hf, "dd", &I_p, &I_n))
-            return NULL;
-        cc_rot_hf_model(&self->c.est.rot, I_p, I_n);
+    if (hf_o != Py_None && !PyArg_ParseTuple(hf_o, "dd", &hf[0], &hf[1]))
+        return NULL;
+    if (cc_design_compensation(&self->c, dt_o != Py_None ? dt : NULL,
+                               cross_o != Py_None ? cross : NULL, cal_o != Py_None ? &n : NULL,
+                               hf_o != Py_None ? hf : NULL)
+        < 0) {
+        PyErr_Format(PyExc_ValueError, "compiled controller: %lld offset periods", n);
+        return NULL;
     }
     Py_RETURN_NONE;
 }
@@ -506,7 +491,7 @@ static PyObject *Core_reference_model(Core *self, PyObject *args)
     double alpha_s, n_p, a_max, T_s;
     if (!PyArg_ParseTuple(args, "dddd", &alpha_s, &n_p, &a_max, &T_s))
         return NULL;
-    cc_ref_init(&self->c.ref, alpha_s, n_p, a_max, T_s);
+    cc_design_reference_model(&self->c, alpha_s, n_p, a_max, T_s);
     Py_RETURN_NONE;
 }
 
@@ -517,7 +502,7 @@ static PyObject *Core_mechanical(Core *self, PyObject *args)
     double T_s, g1, g2, g3, gt, l3;
     if (!PyArg_ParseTuple(args, "dddddd", &T_s, &g1, &g2, &g3, &gt, &l3))
         return NULL;
-    cc_rot_mechanical(&self->c.est.rot, T_s, g1, g2, g3, gt, l3);
+    cc_design_mechanical(&self->c, T_s, g1, g2, g3, gt, l3);
     Py_RETURN_NONE;
 }
 
@@ -527,14 +512,14 @@ static PyObject *Core_measured(Core *self, PyObject *arg)
     double amp_floor = PyFloat_AsDouble(arg);
     if (amp_floor == -1.0 && PyErr_Occurred())
         return NULL;
-    cc_rot_measured(&self->c.est.rot, amp_floor);
+    cc_design_measured(&self->c, amp_floor);
     Py_RETURN_NONE;
 }
 
 /* accel_ff(): tt-dq (or the hybrid's tt-dq) feeds the designed acceleration into its PLL */
 static PyObject *Core_accel_ff(Core *self, PyObject *Py_UNUSED(ignored))
 {
-    self->c.est.rot.accel_ff = 1;
+    cc_design_accel_ff(&self->c);
     Py_RETURN_NONE;
 }
 

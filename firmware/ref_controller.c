@@ -303,7 +303,7 @@ static void send_frame(int sock, const struct canfd_frame *fr, node_t *n)
     n->send_errors++;
 }
 
-#ifndef FW_BENCH_CONTROLLER /* sensorless: bench_wire_raw() (bench_controller.h) */
+#ifndef FW_BENCH_CONTROLLER /* sensorless: bench_wire_raw() (bench_wire.h) */
 /* Duty to its raw value, clipped to the DBC range [0 | 1] (raw 0..16384; a raw
  * value above 16384 is out of range and the plant rejects the frame). */
 static uint16_t duty_raw(double d)
@@ -332,7 +332,7 @@ static void send_outputs(int sock, node_t *n, int64_t k, const law_out_t *o)
     struct bench_dbc_pwm_duty_t duty;
     bench_dbc_pwm_duty_init(&duty);
 #ifdef FW_BENCH_CONTROLLER
-    /* the bench's codec's encoding (bench_controller.h) */
+    /* the bench's codec's encoding: bench_wire_raw() (bench_wire.h, as the bench's node) */
     static const bench_wire_sig_t s_da = BENCH_WIRE_PWM_DUTY_DUTY_A,
                                   s_db = BENCH_WIRE_PWM_DUTY_DUTY_B,
                                   s_dc = BENCH_WIRE_PWM_DUTY_DUTY_C;

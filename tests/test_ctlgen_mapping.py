@@ -1,13 +1,15 @@
-"""The two writings of the design's mapping onto the core's ``_init`` calls agree.
+"""The design's mapping onto the core's ``_init`` calls has one home: ``cc_design.h``.
 
-``controller/_cctl.c`` (the binding: each ``Core`` method's arguments to the core's
-``_init`` calls) and ``bench/wire/_ctlgen.py``'s ``_Recorder`` (the same calls as C text for
-``bench_controller.h``) map the same :func:`controller._compiled.build_core` calls. These
-tests fail when the two could disagree: every design method of the binding has its
-recorder twin, and over a set of designs that makes every recorder method run (every
+``controller/_cctl.c`` (the binding) turns each design call of
+:func:`controller._compiled.build_core` into the call of its ``cc_design_*`` function
+(``controller/core/cc_design.h``); ``bench/wire/_ctlgen.py``'s ``_Recorder`` records the
+same calls and arguments as calls of the same functions for ``bench_controller.h``. These
+tests fail when the two could part: a design method of the binding without its
+``cc_design_*`` function (or one the binding has not), a recorded argument of a type the
+header cannot print, and, over a set of designs that makes every design call run (every
 countermeasure, the supervision, raw current feedback, the tracking BPF, every sensorless
-estimator of the core) the header's ``cc_foc_t`` and ``cc_sup_t`` are the binding's byte
-for byte (``tests/test_firmware_sensorless.py``'s harness and comparison).
+estimator of the core), a header whose ``cc_foc_t`` and ``cc_sup_t`` are not the
+binding's byte for byte (``tests/test_firmware_sensorless.py``'s harness and comparison).
 """
 
 from __future__ import annotations
@@ -18,9 +20,10 @@ from typing import Any
 
 import pytest
 
+from bench.cli import main
 from bench.scenarios._schema import load_scenario
 from bench.scenarios._setup import build_controller
-from bench.wire._ctlgen import _Recorder
+from bench.wire._ctlgen import _C_TYPES, _c_arg, _Recorder, design_signatures
 from controller import compiled_controller_missing
 from controller._compiled import build_core
 from tests.test_firmware import CC, MAKE
@@ -33,7 +36,8 @@ pytestmark = pytest.mark.skipif(
 
 #: ``Core`` methods that run the controller, not design it (build_core never calls them).
 RUNTIME = {"step", "injection", "set_enable", "set_speed_ref", "set_current_ref", "address"}
-#: Recorder methods that refuse (a plug-in's estimator: no firmware header).
+#: Design methods a firmware has no C function for (a plug-in's estimator: the recorder
+#: refuses them).
 REFUSING = {"external", "external_c"}
 
 #: Every countermeasure on, the supervision, and the raw current feedback.
@@ -65,30 +69,55 @@ def _design_methods() -> set[str]:
     }
 
 
-def test_every_design_method_of_the_binding_has_its_recorder_twin() -> None:
-    missing = sorted(n for n in _design_methods() if not callable(getattr(_Recorder, n, None)))
-    assert missing == [], f"bench/wire/_ctlgen.py _Recorder lacks {missing}"
-    extra = sorted(
-        n
-        for n in vars(_Recorder)
-        if not n.startswith("_") and callable(vars(_Recorder)[n]) and n not in _design_methods()
-    )
-    assert extra == [], f"_Recorder maps methods the binding has not: {extra}"
+def test_every_design_method_of_the_binding_is_one_cc_design_function() -> None:
+    sigs = design_signatures()
+    methods = _design_methods()
+    missing = sorted(methods - REFUSING - set(sigs))
+    assert missing == [], f"controller/core/cc_design.h lacks cc_design_{missing}"
+    # init is the binding's constructor (Core(kind, ...)); the rest are its methods
+    extra = sorted(set(sigs) - {"init"} - methods)
+    assert extra == [], f"cc_design.h has functions the binding has not: {extra}"
+    # the binding calls each one, and the recorder maps none itself
+    binding = (Path(__file__).parents[1] / "controller" / "_cctl.c").read_text()
+    for name in sigs:
+        assert f"cc_design_{name}(" in binding, name
+    assert sorted(n for n in vars(_Recorder) if n in sigs) == []
+    # every parameter is of a type the recorder prints
+    for name, (_, ctypes) in sigs.items():
+        for t in ctypes:
+            assert t in _C_TYPES, (name, t)
+
+
+def test_the_recorder_prints_each_argument_as_its_parameter_type() -> None:
+    assert _c_arg("double", 2) == "2.0"
+    assert _c_arg("double", -0.0) == "-0.0"
+    assert _c_arg("long long", 50) == "50LL"
+    assert _c_arg("int", True) == "1"
+    assert _c_arg("const double *", None) == "NULL"
+    assert _c_arg("const double *", (0.5, True, 3)) == "(const double[]){0.5, 1.0, 3.0}"
+    assert _c_arg("const long long *", 7) == "&(const long long){7LL}"
+    with pytest.raises(ValueError, match="float"):
+        _c_arg("float", 1.0)
+
+
+def test_the_recorder_refuses_what_the_binding_refuses(tmp_path: Path) -> None:
+    """A value the core refuses (here the offset calibration's periods) stops the header
+    with the binding's own error, not a header whose init returns -1."""
+    ctrl = build_controller(load_scenario(str(SCENARIO)), "tt-dq", engine="compiled")
+    rec, why = build_core(ctrl, _Recorder)
+    assert rec is not None, why
+    with pytest.raises(ValueError, match="0 offset periods"):
+        rec.compensation(None, None, 0, None)
+    assert not any("cc_design_compensation(c, NULL, NULL, &" in ln for ln in rec.lines)
+    with pytest.raises(AttributeError):
+        rec.step  # noqa: B018 (a run-time method: no design function)
 
 
 def _calls(ctrl: Any) -> set[str]:
-    """The recorder methods :func:`build_core` (and the header's supervision) call."""
-    names: set[str] = set()
-
-    class Spy(_Recorder):
-        def __getattribute__(self, name: str) -> Any:
-            v = super().__getattribute__(name)
-            if not name.startswith("_") and callable(v):
-                names.add(name)
-            return v
-
-    rec, why = build_core(ctrl, Spy)
+    """The design methods :func:`build_core` (and the header's supervision) call."""
+    rec, why = build_core(ctrl, _Recorder)
     assert rec is not None, why
+    names = {ln.split("cc_design_", 1)[1].split("(", 1)[0] for ln in rec.lines}
     if ctrl.supervisor is not None:
         names.add("supervision")
     return names
@@ -127,5 +156,25 @@ def test_the_header_maps_every_design_as_the_binding(tmp_path: Path) -> None:
         _same_struct(lines[0], foc_addr)
         if sup_addr:
             _same_struct(lines[1], sup_addr)
-    # every mapping the recorder writes was compared at least once
-    assert sorted(_design_methods() - REFUSING - covered) == []
+    # every design function was compared at least once
+    assert sorted(set(design_signatures()) - covered) == []
+
+
+def test_the_headers_compile_alone_in_strict_c99(tmp_path: Path) -> None:
+    """``bench_controller.h`` (and ``bench_wire.h`` and ``cc_design.h`` it includes) needs
+    no include before it: a program of that one include builds with ``-pedantic``."""
+    gen = tmp_path / "gen"
+    args = ["codegen", str(gen), "--scenario", str(SCENARIO), "--estimator", "tt-dq"]
+    assert main(args) == 0
+    src = tmp_path / "alone.c"
+    src.write_text(
+        '#include "bench_controller.h"\n'
+        "static cc_foc_t c;\nstatic cc_sup_t sup;\n"
+        "int main(void) { return bench_controller_init(&c, &sup); }\n"
+    )
+    exe = tmp_path / "alone"
+    cmd = [str(CC), "-std=c99", "-pedantic", "-Wall", "-Wextra", "-Werror", f"-I{gen}"]
+    cmd += [f"-I{gen / 'core'}", "-o", str(exe), str(src), *map(str, (gen / "core").glob("*.c"))]
+    res = subprocess.run([*cmd, "-lm"], capture_output=True, text=True, timeout=120)
+    assert res.returncode == 0, res.stderr
+    assert subprocess.run([str(exe)], timeout=30).returncode == 0

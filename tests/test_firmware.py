@@ -57,7 +57,14 @@ def test_codegen_writes_dbc_code_and_e2e_helper(tmp_path: Path, capsys) -> None:
     out = tmp_path / "gen"
     assert main(["codegen", str(out)]) == 0
     names = sorted(p.name for p in out.iterdir())
-    assert names == ["bench_dbc.c", "bench_dbc.h", "bench_e2e.c", "bench_e2e.h", "core"]
+    assert names == [
+        "bench_dbc.c",
+        "bench_dbc.h",
+        "bench_e2e.c",
+        "bench_e2e.h",
+        "bench_wire.h",
+        "core",
+    ]
     # the controller core a firmware builds on, byte for byte the bench's own
     core = sorted((out / "core").iterdir())
     assert [p.name for p in core] == [p.name for p in core_sources()]

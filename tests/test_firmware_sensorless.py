@@ -163,7 +163,7 @@ def _script(seed: int) -> list[tuple]:
         *[(e, False, False) for e in SENSORLESS],
         ("tt-dq", True, False),
         ("square-wave", True, False),
-        # normalise = "measured": cc_rot_measured and the quadrature LPF in the header
+        # normalise = "measured": cc_design_measured and the quadrature LPF in the header
         ("tt-dq", False, True),
         ("epf", False, True),
     ],
@@ -177,7 +177,7 @@ def test_the_generated_core_is_the_bench_controllers(
     scn = _scenario(tmp_path, supervision, measured)
     exe = _harness(tmp_path, scn, estimator)
     header = (tmp_path / "gen" / "bench_controller.h").read_text()
-    assert ("cc_rot_measured(" in header) == measured
+    assert ("cc_design_measured(" in header) == measured
     ctrl = build_controller(load_scenario(str(scn)), estimator, engine="compiled")
     assert ctrl.engine == "compiled"
     assert (ctrl.supervisor is not None) == supervision
@@ -213,13 +213,20 @@ def test_the_generated_core_is_the_bench_controllers(
     assert len(modes) >= 2  # the start-up and the run (or the supervision's trip) ran
 
 
-def _inits(header: str, fn: str) -> list[list[float]]:
-    """The numeric arguments of every call of ``fn`` in the header."""
-    calls = re.findall(rf"\b{fn}\(([^;]*)\);", header)
+def _inits(header: str, fn: str) -> list[list[Any]]:
+    """The arguments after the struct of every call of ``fn`` in the header: a number as
+    a float, an array ``(const double[]){...}`` as a list of floats, anything else as its
+    text."""
+
+    def value(a: str) -> Any:
+        if a.startswith("(const double[]){"):
+            return [float(x) for x in a[a.index("{") + 1 : -1].split(",")]
+        return float(a.removesuffix("LL")) if re.match(r"^-?[\d.]", a) else a
+
     out = []
-    for args in calls:
-        nums = [a.strip() for a in args.split(",")[1:]]
-        out.append([float(a.removesuffix("LL")) for a in nums if re.match(r"^-?[\d.]", a)])
+    for args in re.findall(rf"\b{fn}\((.*)\)( < 0\) return -1)?;", header):
+        parts = re.findall(r"\(const double\[\]\)\{[^}]*\}|[^,\s][^,]*", args[0])
+        out.append([value(a.strip()) for a in parts[1:]])
     return out
 
 
@@ -230,15 +237,17 @@ def test_the_header_holds_the_python_designs_values(tmp_path: Path) -> None:
     assert main(["codegen", str(gen), "--scenario", str(SCENARIO), "--estimator", "tt-dq"]) == 0
     h = (gen / "bench_controller.h").read_text()
     ctrl = build_controller(load_scenario(str(SCENARIO)), "tt-dq", engine="compiled")
-    pis = _inits(h, "cc_pi_init")
-    assert pis == [[p.k_p, p.k_i, p.T_s, p.k_t] for p in (ctrl.pi_d, ctrl.pi_q, ctrl.pi_w)]
+    pis = _inits(h, "cc_design_pi")
+    assert pis == [[j, p.k_p, p.k_i, p.T_s, p.k_t]
+                   for j, p in enumerate((ctrl.pi_d, ctrl.pi_q, ctrl.pi_w))]  # fmt: skip
     f = ctrl.lpf_w
-    assert _inits(h, "cc_fo_init")[0] == [f.b0, f.b1, f.a1]
+    assert _inits(h, "cc_design_speed_filter") == [[f.b0, f.b1, f.a1]]
     est: Any = ctrl.estimator
     pll = est.pll
-    assert _inits(h, "cc_pll_init") == [[pll.k_p, pll.k_i, pll.T_s]]
+    (rot,) = _inits(h, "cc_design_rotating")
+    assert rot[3] == [pll.k_p, pll.k_i, pll.T_s]
     m = ctrl.motor
-    (foc,) = _inits(h, "cc_foc_init")
+    (foc,) = _inits(h, "cc_design_foc")
     assert foc[:7] == [m.n_p, m.L_d, m.L_q, m.psi_f, ctrl.i_max, ctrl.tau_max, ctrl.t_delay]
     assert foc[7:9] == [ctrl.n_align, ctrl.n_settle]
     assert '#define BENCH_CTL_ESTIMATOR "tt-dq"' in h

@@ -9,7 +9,11 @@ Writes into ``OUT_DIR``:
   (:func:`bench.wire._cgen.generate_e2e`): CRC-8 SAE J1850 (poly 0x1D, init 0xFF, xorout
   0xFF) over the message's 16-bit ``E2EDataId`` (low byte first) and every
   payload byte except the crc byte, as :mod:`bench.wire._e2e` computes it, with
-  the data ID and crc byte index of each protected message as macros.
+  the data ID and crc byte index of each protected message as macros;
+- ``bench_wire.h`` (:func:`bench.wire._ctlgen.generate_wire_header`): ``bench_wire_raw()``,
+  a signal's raw value as the bench's codec encodes it (the bench's native controller node
+  and the firmware both encode with it);
+- ``core/``: the controller core (``controller/core/``).
 
 - with ``--scenario NAME``, ``bench_scenario.h`` (:func:`bench.wire._cgen.generate_scenario_header`):
   the scenario's motor (preset values with its ``[motor]`` in place), PWM
@@ -19,7 +23,7 @@ Writes into ``OUT_DIR``:
   controller's firmware builds against the plant it meets.
 - with ``--scenario NAME --estimator EST``, also ``bench_controller.h``
   (:func:`bench.wire._ctlgen.generate_controller_header`): the scenario's controller
-  for the estimator as the bench builds it, as the core's ``_init`` calls with the
+  for the estimator as the bench builds it, as the core's ``cc_design_*`` calls with the
   Python design's values (``%.17g``), and the encodings of its output signals, so a
   firmware (``firmware/``, ``make ESTIMATOR=...``) runs the bench's controller.
 
@@ -71,6 +75,7 @@ def cmd_codegen(args: argparse.Namespace) -> int:
     from bench.wire._ccodec import generate_c
     from bench.wire._cgen import generate_e2e, generate_scenario_header
     from bench.wire._codec import Codec
+    from bench.wire._ctlgen import generate_wire_header
 
     out = Path(args.out_dir)
     if out.exists() and not out.is_dir():
@@ -79,7 +84,8 @@ def cmd_codegen(args: argparse.Namespace) -> int:
     if args.estimator and not args.scenario:
         raise BenchError("--estimator: needs --scenario (the controller is the scenario's)")
     try:
-        files = [*generate_c(out, codec), *generate_e2e(out, codec), *_ship_core(out)]
+        files = [*generate_c(out, codec), *generate_e2e(out, codec), generate_wire_header(out)]
+        files += _ship_core(out)
         if args.scenario:
             from bench.scenarios._describe import describe, schedule_lines
             from bench.scenarios._schema import load_scenario

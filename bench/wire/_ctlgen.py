@@ -1,38 +1,54 @@
-"""C header of a designed controller: the core's ``_init`` calls with the bench's own values.
+"""C headers of a designed controller: the core's design calls with the bench's own values.
 
 ``bench codegen --scenario FILE --estimator NAME`` writes ``bench_controller.h``
 (:func:`generate_controller_header`) beside the core it ships (``core/``), so a drive
 firmware (``firmware/``) initialises its ``cc_foc_t`` exactly as the bench's compiled
 controller does. Nothing in it is written by hand: :func:`controller._compiled.build_core`
 is run on the :class:`controller.Controller` the bench builds for the scenario, with a
-recorder in place of the binding (``controller/_cctl.c``) that prints each of the
-binding's calls as the C calls the binding makes, every double printed with ``%.17g``
-(round-trip exact). The header holds:
+recorder in place of the binding (``controller/_cctl.c``) that records each of the
+binding's design calls and its arguments as the call of the core's ``cc_design_*``
+function the binding calls for it (``controller/core/cc_design.h``, the one mapping onto
+the core's ``_init`` calls), every double printed with ``%.17g`` (round-trip exact). The
+header holds:
 
-- ``bench_controller_init(cc_foc_t *c, cc_sup_t *sup)``: ``c`` and ``sup`` zeroed, then
-  the estimator's kind, the FOC constants, the three PIs, the speed filter, the polarity
-  test, the estimator's blocks, the countermeasures and the supervision, in the order the
-  binding receives them; returns 0, or -1 for a CIC delay the core refuses (as the
-  binding raises);
+- ``bench_controller_init(cc_foc_t *c, cc_sup_t *sup)``: ``c`` and ``sup`` zeroed with
+  the estimator's kind (``cc_design_init``), then the FOC constants, the three PIs, the
+  speed filter, the polarity test, the estimator's blocks, the countermeasures and the
+  supervision, in the order the binding receives them; returns 0, or -1 for a value the
+  core refuses (the binding raises on the same value, and so does ``bench codegen``);
 - ``BENCH_CTL_*`` macros: the estimator's name, the period ``T_s``, whether it needs plant
   truth, whether the supervision runs, and ``BENCH_CTL_RPM_PER_RAD_S``
   (:data:`bench.wire._protocol.RPM_PER_RAD_S`, how a node turns ``speed_ref`` into rad/s);
 - ``BENCH_WIRE_<MESSAGE>_<SIGNAL>`` for every signal of ``PwmDuty`` and
   ``CtrlTelemetry``: ``{lo, hi, scale, offset, modulus}`` as the bench's codec encodes
-  them, and ``bench_wire_raw()``, its encoding (clipped or wrapped, rounded half to even:
-  ``nearbyint``), so the firmware's frames are the bench node's bit for bit.
+  them, for ``bench_wire_raw()``.
+
+Every ``bench codegen`` also writes ``bench_wire.h`` (:func:`generate_wire_header`):
+``bench_wire_raw()``, the codec's encoding (clipped or wrapped, rounded half to even:
+``nearbyint``), the one C home of that rule, which the firmware and the bench's native
+controller node (``bench/nodes/native/bn_ctl.c``) both include, so the firmware's frames
+are the bench node's bit for bit.
 """
 
 from __future__ import annotations
 
 import math
+import re
 from pathlib import Path
 from typing import Any
 
 from bench.wire._codec import Codec
 from bench.wire._protocol import RPM_PER_RAD_S
 
-__all__ = ["CONTROLLER_HEADER", "WIRE_MESSAGES", "c_double", "generate_controller_header"]
+__all__ = [
+    "CONTROLLER_HEADER",
+    "WIRE_HEADER",
+    "WIRE_MESSAGES",
+    "c_double",
+    "design_signatures",
+    "generate_controller_header",
+    "generate_wire_header",
+]
 
 CONTROLLER_HEADER = "bench_controller.h"
 """The generated header's file name."""
@@ -71,59 +87,111 @@ def _d(*xs: Any) -> list[str]:
     return [c_double(x) for x in xs]
 
 
+DESIGN_HEADER = "cc_design.h"
+"""The core's header of the design functions (``controller/core/cc_design.h``): one
+``cc_design_<method>`` per design method of the binding, the one mapping onto the core's
+``_init`` calls."""
+
+_PROTO = re.compile(r"^(void|int) cc_design_(\w+)\(([^;]*)\);", re.M)
+
+
+def _ctype(param: str) -> str:
+    """A prototype's parameter without its name: ``const double *pll`` -> ``const double *``."""
+    m = re.fullmatch(r"(.+?)\s*(\w+)", " ".join(param.split()))
+    if m is None:
+        raise ValueError(f"{DESIGN_HEADER}: cannot read the parameter {param!r}")
+    return " ".join(m.group(1).replace("*", " * ").split())
+
+
+def design_signatures() -> dict[str, tuple[bool, tuple[str, ...]]]:
+    """``{method: (returns int, parameter types)}`` of every ``cc_design_*`` function of
+    the core's :data:`DESIGN_HEADER` (``init`` included: the binding's constructor)."""
+    from controller import core_sources
+
+    (path,) = [p for p in core_sources() if p.name == DESIGN_HEADER]
+    text = path.read_text(encoding="utf-8")
+    return {
+        m.group(2): (m.group(1) == "int", tuple(_ctype(q) for q in m.group(3).split(",")))
+        for m in _PROTO.finditer(text)
+    }
+
+
+def _c_arg(ctype: str, x: Any) -> str:
+    """A recorded Python value as the C argument of a parameter of type ``ctype`` (the
+    binding's conversion: a tuple of doubles, flags 1.0/0.0; None -> NULL)."""
+    if ctype == "double":
+        return c_double(x)
+    if ctype == "long long":
+        return _ll(x)
+    if ctype == "int":
+        return str(int(x))
+    if ctype in ("const double *", "const long long *") and x is None:
+        return "NULL"
+    if ctype == "const double *":
+        return f"(const double[]){{{_args(*_d(*x))}}}"
+    if ctype == "const long long *":
+        return f"&(const long long){{{_ll(x)}}}"
+    raise ValueError(f"{DESIGN_HEADER}: no C argument for a parameter of type {ctype!r}")
+
+
+_TARGETS = {"cc_foc_t *": "c", "cc_sup_t *": "sup"}
+"""The header's structs, by the parameter types that take them."""
+
+_C_TYPES = (*_TARGETS, "double", "long long", "int", "const double *", "const long long *")
+"""Every parameter type :func:`_c_arg` (or :data:`_TARGETS`) prints."""
+
+
 class _Recorder:
-    """Takes the calls :func:`controller._compiled.build_core` makes on ``_cctl.Core`` and
-    keeps, for each, the C calls ``controller/_cctl.c`` makes for it (same order, same
-    argument conversions: ``d`` -> double, ``L`` -> long long, ``p`` -> truth).
+    """Takes the calls :func:`controller._compiled.build_core` makes on ``_cctl.Core`` (and
+    the supervision's) and records each as the call of its ``cc_design_*`` function, the
+    arguments printed as the parameter types of :data:`DESIGN_HEADER` say: the recorder
+    knows the calls and their arguments only, the core how they map onto its ``_init``
+    calls (the binding, ``controller/_cctl.c``, calls the same functions).
 
-    The binding's mapping written a second time, as C text: tests/test_ctlgen_mapping.py
-    fails when the two could disagree (a design method of the binding without its twin
-    here, or a design whose header-initialised structs are not the binding's byte for
-    byte, over designs that run every method here)."""
+    Each call is made on a real ``_cctl.Core`` too, so a value the binding refuses
+    (a CIC delay, the offset periods) is refused here with the binding's own error."""
 
-    def __init__(self, kind: int, *_layout: Any) -> None:
-        self.kind = int(kind)
-        self.lines: list[str] = [f"if (cc_estim_init(&c->est, {self.kind}) < 0) return -1;"]
+    def __init__(self, kind: int, *layout: Any) -> None:
+        from controller._engine import _cctl
+
+        if _cctl is None:
+            raise ValueError("the compiled controller is not built")
+        self._core = _cctl.Core(kind, *layout)
+        self._sigs = design_signatures()
+        self.lines: list[str] = []
         self.supervision_on = False
+        self._record("init", int(kind))
 
-    def _call(self, fn: str, *args: str) -> None:
-        self.lines.append(f"{fn}({_args(*args)});")
+    def _record(self, name: str, *args: Any) -> None:
+        returns_int, ctypes = self._sigs[name]
+        out: list[str] = []
+        vals = list(args)
+        for t in ctypes:
+            if t in _TARGETS:
+                out.append(_TARGETS[t])
+            elif vals:
+                out.append(_c_arg(t, vals.pop(0)))
+            elif t.endswith("*"):  # an optional argument left out: None
+                out.append("NULL")
+            else:
+                raise TypeError(f"cc_design_{name}: too few arguments ({len(args)})")
+        if vals:
+            raise TypeError(f"cc_design_{name}: too many arguments ({len(args)})")
+        call = f"cc_design_{name}({_args(*out)})"
+        self.lines.append(f"if ({call} < 0) return -1;" if returns_int else f"{call};")
 
-    def foc(self, n_p: Any, L_d: Any, L_q: Any, psi_f: Any, i_max: Any, tau_max: Any,
-            t_delay: Any, n_align: Any, n_settle: Any, theta0: Any, raw: Any,
-            align: Any) -> None:  # fmt: skip
-        self._call(
-            "cc_foc_init",
-            "c",
-            *_d(n_p, L_d, L_q, psi_f, i_max, tau_max, t_delay),
-            _ll(n_align),
-            _ll(n_settle),
-            c_double(theta0),
-            _flag(raw),
-            _flag(align),
-        )
+    def __getattr__(self, name: str) -> Any:
+        if name.startswith("_") or name == "init" or name not in self._sigs:
+            raise AttributeError(name)
+        method = getattr(self._core, name)
 
-    def pi(self, which: int, k_p: Any, k_i: Any, T_s: Any, k_t: Any) -> None:
-        target = ("&c->pi_d", "&c->pi_q", "&c->pi_w")[min(int(which), 2)]
-        self._call("cc_pi_init", target, *_d(k_p, k_i, T_s, k_t))
+        def record(*args: Any) -> None:
+            method(*args)  # the binding's checks, and its errors
+            if name == "supervision":
+                self.supervision_on = True
+            self._record(name, *args)
 
-    def speed_filter(self, b0: Any, b1: Any, a1: Any) -> None:
-        self._call("cc_fo_init", "&c->lpf_w", *_d(b0, b1, a1))
-
-    def polarity(self, L_d: Any, T_s: Any, i_pulse: Any, u_frac: Any) -> None:
-        self._call("cc_polarity_init", "&c->polarity", *_d(L_d, T_s, i_pulse, u_frac))
-
-    def reference_model(self, alpha_s: Any, n_p: Any, a_max: Any, T_s: Any) -> None:
-        self._call("cc_ref_init", "&c->ref", *_d(alpha_s, n_p, a_max, T_s))
-
-    def mechanical(self, T_s: Any, g1: Any, g2: Any, g3: Any, gt: Any, l3: Any) -> None:
-        self._call("cc_rot_mechanical", "&c->est.rot", *_d(T_s, g1, g2, g3, gt, l3))
-
-    def measured(self, floor: Any) -> None:
-        self._call("cc_rot_measured", "&c->est.rot", *_d(floor))
-
-    def accel_ff(self) -> None:
-        self.lines.append("c->est.rot.accel_ff = 1;")
+        return record
 
     def external(self, *_args: Any) -> None:
         raise ValueError(
@@ -134,80 +202,6 @@ class _Recorder:
     def external_c(self, *_args: Any) -> None:
         raise ValueError(
             "an estimator in C of a plug-in is loaded at run time: a firmware links it itself"
-        )
-
-    def rotating(self, V_h: Any, wT: Any, inv_norm: Any, pll: Any, bpf: Any, lpf: Any,
-                 hpf: Any, track: Any, quad: Any = None) -> None:  # fmt: skip
-        r = "&c->est.rot"
-        self._call("cc_rot_init", r, *_d(V_h, wT, inv_norm))
-        self._call("cc_pll_init", "&c->est.rot.pll", *_d(*pll))
-        self._call("cc_bq2_init", "&c->est.rot.bpf", *_d(*bpf))
-        for f in ("lpf", "lpf_ab", "lpf_n"):
-            fn = "cc_fo_init" if f == "lpf" else "cc_fo2_init"
-            self._call(fn, f"&c->est.rot.{f}", *_d(*lpf))
-        self._call("cc_bq2_init", "&c->est.rot.quad", *_d(*(quad or (0.0,) * 5)))
-        self._call("cc_fo2_init", "&c->est.rot.hpf", *_d(*(hpf or (0.0,) * 3)))
-        if track is not None:
-            self._call("cc_rot_tracking", r, *_d(*track))
-
-    def square_wave(self, cic: Any, M: Any, U_h: Any, t_comp: Any, k_err: Any,
-                    obs: Any) -> None:  # fmt: skip
-        self.lines.append(
-            "if (cc_sqw_init(c->est.kind == CC_EST_SQUARE_WAVE ? &c->est.out : &c->est.hyb.hf, "
-            f"&c->est.sqw, {_flag(cic)}, {_ll(M)}, {_args(*_d(U_h, t_comp, k_err))}) < 0) "
-            "return -1;"
-        )
-        self._call("cc_luen_init", "&c->est.sqw.obs", *_d(*obs))
-
-    def hybrid(self, obs: Any, band: Any, T_s: Any, n_p: Any, J: Any) -> None:
-        self._call(
-            "cc_hyb_init",
-            "&c->est.out",
-            "&c->est.hyb",
-            "c->est.kind == CC_EST_HYBRID_SQUARE_WAVE",
-            "&c->est.rot",
-            "&c->est.sqw",
-            *_d(T_s, n_p, J),
-        )
-        self._call("cc_flux_init", "&c->est.hyb.obs", *_d(*obs))
-        self._call("cc_band_init", "&c->est.hyb.band", *_d(*band))
-
-    def compensation(self, dt: Any, cross: Any, cal: Any, hf: Any) -> None:
-        if dt is not None:
-            T_s, t_dead, v_ce, v_f, i_band, sine, hf_next = dt
-            self._call(
-                "cc_foc_dead_time",
-                "c",
-                *_d(T_s, t_dead, v_ce, v_f, i_band),
-                _flag(sine),
-                _flag(hf_next),
-            )
-        if cross is not None:
-            self._call("cc_foc_cross_saturation", "c", c_double(cross[0]), _flag(cross[1]))
-        if cal is not None:
-            if int(cal) < 1:
-                raise ValueError(f"compiled controller: {int(cal)} offset periods")
-            self._call("cc_foc_offset_calibration", "c", _ll(cal))
-        if hf is not None:
-            self._call("cc_rot_hf_model", "&c->est.rot", *_d(*hf))
-
-    def supervision(self, T_s: Any, i_rail: Any, n_range: Any, i_res: Any, du_stuck: Any,
-                    n_stuck: Any, i_min: Any, rho_open: Any, n_open_min: Any,
-                    n_open_max: Any, u_uv: Any, u_ov: Any, u_hyst: Any,
-                    n_dc: Any) -> None:  # fmt: skip
-        self.supervision_on = True
-        self._call(
-            "cc_sup_init",
-            "sup",
-            *_d(T_s, i_rail),
-            _ll(n_range),
-            *_d(i_res, du_stuck),
-            _ll(n_stuck),
-            *_d(i_min, rho_open),
-            _ll(n_open_min),
-            _ll(n_open_max),
-            *_d(u_uv, u_ov, u_hyst),
-            _ll(n_dc),
         )
 
 
@@ -225,6 +219,53 @@ def _wire_lines(codec: Codec) -> list[str]:
             vals = _args(*_d(s.lo, s.hi, s.scale, s.offset), _ll(s.modulus))
             out.append(f"#define {macro} {{{vals}}}")
     return out
+
+
+WIRE_HEADER = "bench_wire.h"
+"""The encoding header's file name (written by every ``bench codegen``)."""
+
+_WIRE_H = """/* Generated by `bench codegen` (bench/wire/_ctlgen.py): do not edit.
+ *
+ * A signal's raw value as the bench's codec encodes it (bench/wire/_codec.py
+ * Codec.encode): the value clipped to [lo, hi], or with modulus > 0 its raw value taken
+ * modulo modulus; raw = (value - offset) / scale rounded half to even (nearbyint, the
+ * default rounding mode).  The one C home of that rule: the drive firmware's frames
+ * (bench_controller.h) and the bench's native controller node
+ * (bench/nodes/native/bn_ctl.c) both encode with it.
+ */
+#ifndef BENCH_WIRE_H
+#define BENCH_WIRE_H
+
+#include <math.h>
+
+/* one signal's encoding: {lo, hi, scale, offset, modulus} */
+typedef struct {
+    double lo, hi, scale, offset;
+    long long modulus;
+} bench_wire_sig_t;
+
+static inline long long bench_wire_raw(const bench_wire_sig_t *s, double v)
+{
+    if (s->modulus > 0) {
+        long long r = (long long)nearbyint((v - s->offset) / s->scale) % s->modulus;
+        return r < 0 ? r + s->modulus : r;
+    }
+    v = v < s->lo ? s->lo : (v > s->hi ? s->hi : v);
+    return (long long)nearbyint((v - s->offset) / s->scale);
+}
+
+#endif /* BENCH_WIRE_H */
+"""
+
+
+def generate_wire_header(out_dir: str | Path) -> Path:
+    """Write ``bench_wire.h``: ``bench_wire_sig_t`` and ``bench_wire_raw()``, the codec's
+    encoding of one signal in C (see the header's comment); returns its path."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    path = out / WIRE_HEADER
+    path.write_text(_WIRE_H, encoding="utf-8")
+    return path
 
 
 def generate_controller_header(
@@ -268,19 +309,17 @@ def generate_controller_header(
     body = "\n".join(f"    {ln}" for ln in rec.lines)
     text = f"""/* Generated by `bench codegen` (bench/wire/_ctlgen.py): do not edit.
  *
- * The controller {source or ctrl.pars.estimator} as the bench builds it: the calls its
- * compiled engine makes to the core's _init functions (controller/_cctl.c), with the
- * values the Python design gives them (doubles printed %.17g, exact).  A firmware that
+ * The controller {source or ctrl.pars.estimator} as the bench builds it: the design calls
+ * its compiled engine makes (controller/_cctl.c), as the calls of the core's cc_design_*
+ * functions (cc_design.h) the binding makes, with the values the Python design gives
+ * them (doubles printed %.17g, exact).  A firmware that
  * calls bench_controller_init() runs the bench's controller bit for bit.
  */
 #ifndef BENCH_CONTROLLER_H
 #define BENCH_CONTROLLER_H
 
-#include <math.h>
-#include <string.h>
-
-#include "cc_foc.h"
-#include "cc_supervision.h"
+#include "bench_wire.h"
+#include "cc_design.h"
 
 /* the estimator (its registry name) and the control period [s] */
 #define BENCH_CTL_ESTIMATOR "{ctrl.pars.estimator}"
@@ -295,32 +334,12 @@ def generate_controller_header(
 /* c and sup zeroed, then initialised as the bench's compiled controller; 0, or -1 */
 static inline int bench_controller_init(cc_foc_t *c, cc_sup_t *sup)
 {{
-    memset(c, 0, sizeof *c);
-    memset(sup, 0, sizeof *sup);
 {body}
-    (void)sup;
     return 0;
 }}
 
-/* One output signal's encoding as the bench's codec applies it (bench/wire/_codec.py):
- * the value clipped to [lo, hi], or with modulus > 0 its raw value taken modulo modulus;
- * raw = (value - offset) / scale rounded half to even. */
-typedef struct {{
-    double lo, hi, scale, offset;
-    long long modulus;
-}} bench_wire_sig_t;
-
+/* the encodings of the output signals (bench_wire_sig_t, bench_wire_raw(): bench_wire.h) */
 {chr(10).join(_wire_lines(codec))}
-
-static inline long long bench_wire_raw(const bench_wire_sig_t *s, double v)
-{{
-    if (s->modulus > 0) {{
-        long long r = (long long)nearbyint((v - s->offset) / s->scale) % s->modulus;
-        return r < 0 ? r + s->modulus : r;
-    }}
-    v = v < s->lo ? s->lo : (v > s->hi ? s->hi : v);
-    return (long long)nearbyint((v - s->offset) / s->scale);
-}}
 
 #endif /* BENCH_CONTROLLER_H */
 """

@@ -132,6 +132,7 @@ def _sources_digest() -> str:
     files += list(core_sources())
     files.append(Path(default_codec().path))
     files.append(HERE.parents[1] / "wire" / "_cgen.py")
+    files.append(HERE.parents[1] / "wire" / "_ctlgen.py")  # bench_wire.h
     for f in files:
         h.update(f.name.encode())
         h.update(f.read_bytes())

@@ -9,6 +9,7 @@
 
 #include "bench_dbc.h"
 #include "bench_e2e.h"
+#include "bench_wire.h"
 
 size_t bn_ctl_bus_size(void) { return sizeof(bn_bus_t); }
 size_t bn_ctl_size(void) { return sizeof(bn_ctl_t); }
@@ -41,18 +42,12 @@ static int64_t unwrap(int64_t raw, int64_t expected, int64_t m)
 
 static size_t slot(int64_t k) { return (size_t)(((k % BN_CTL_RING) + BN_CTL_RING) % BN_CTL_RING); }
 
-/* a signal's raw value as Codec.encode gives it (clipped or wrapped, half to even) */
+/* a signal's raw value as Codec.encode gives it: bench_wire_raw() (bench_wire.h, which
+ * `bench codegen` writes for the firmware too) */
 static int64_t raw_of(const bn_sig_t *s, double v)
 {
-    if (s->modulus > 0) {
-        int64_t r = (int64_t)nearbyint((v - s->offset) / s->scale) % s->modulus;
-        return r < 0 ? r + s->modulus : r;
-    }
-    if (v < s->lo)
-        v = s->lo;
-    else if (v > s->hi)
-        v = s->hi;
-    return (int64_t)nearbyint((v - s->offset) / s->scale);
+    const bench_wire_sig_t w = {s->lo, s->hi, s->scale, s->offset, s->modulus};
+    return bench_wire_raw(&w, v);
 }
 
 static int64_t raw(const bn_ctl_t *ctl, int j, double v) { return raw_of(&ctl->sig[j], v); }
