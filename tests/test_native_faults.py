@@ -456,3 +456,32 @@ def test_a_real_time_us_delay_native_gives_the_python_nodes_periods(
         assert set(ages) == {0}
     else:
         assert max(ages) >= 1 and set(got[0][_K0 + 40 :]) == {0}
+
+
+def test_the_native_bus_stamps_a_frame_at_its_arrival_as_python_can_does() -> None:
+    """A real-time ``us`` delay holds a duty from its receive stamp: the kernel's
+    (SO_TIMESTAMPNS, python-can's), not the time the loop drained its socket, which
+    in the native loop is the next period's start.  A frame received 50 ms after it
+    arrived carries its arrival time (a busy host only lengthens the wait)."""
+    import time
+
+    from bench.nodes.native._plant_native import open_native_bus
+
+    spec = BusSpec("udp_multicast", GROUP, free_port())
+    nat = open_native_bus(spec)
+    py = spec.open()
+    try:
+        duty = CODEC.encode(
+            "PwmDuty", {"duty_a": 0.5, "duty_b": 0.5, "duty_c": 0.5, "enable": 1, "step": 1}
+        )
+        t_sent = time.time()
+        py.send(duty)
+        time.sleep(0.05)
+        f = nat.recv(1.0)
+        t_got = time.time()
+        assert f is not None and f.id == duty.arbitration_id
+        stamp = f.t_ns * 1e-9
+        assert t_sent - 0.005 <= stamp and t_got - stamp >= 0.045
+    finally:
+        py.shutdown()
+        nat.close()
