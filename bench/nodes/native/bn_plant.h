@@ -103,7 +103,9 @@ enum { BN_SF_OFFSET, BN_SF_GAIN, BN_SF_STUCK, BN_SF_LOST, BN_SF_U_OFFSET, BN_SF_
  * fate = duty_fate(k), shift_ls / shift_rt = duty_shift(k) in lockstep / real time,
  * nosend = not sends("PhaseSamples", k) (bit 0) and not sends("PositionSensor", k)
  * (bit 1), and babble's frames by instant.  The unit applies them where the Python
- * node asks them (PlantNode._on_duty, ready, advance_*, frames_now). */
+ * node asks them (PlantNode._on_duty, ready, advance_*, frames_now); bit 0 of nosend at
+ * t - 1 is also NodeFaults.answer_lost(t), the lockstep answer to a sample lost on its
+ * first sending, and hold_ns the real-time delay in us (NodeFaults.duty_hold_s). */
 enum { BN_FATE_NONE = 0, BN_FATE_LOST = 1, BN_FATE_CORRUPT = 2 };
 
 typedef struct {
