@@ -10,18 +10,20 @@ the ``faults`` entries of metrics.json equal.
 from __future__ import annotations
 
 import json
+import math
 from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 import can
+import pytest
 
 from bench.nodes._loops import run_inprocess
 from bench.runs._local import run_local
 from bench.runs._run import run_scenario
 from bench.scenarios._faults import Fault
-from bench.scenarios._schema import Noise, Scenario
+from bench.scenarios._schema import Noise, Scenario, load_scenario
 from bench.wire._bus import BusSpec
 from bench.wire._protocol import unwrap
 from tests.ports import free_port
@@ -269,38 +271,79 @@ def test_silence_in_real_time_native_sends_nothing_either_way(tmp_path: Path) ->
     assert rep["faults"]["babbled"] == 0
 
 
-def test_a_lockstep_sample_loss_is_left_to_the_python_node() -> None:
-    """A lockstep drop of PhaseSamples (and silence) sends each lost sample again with the
-    next that gets through (NodeFaults' retransmission rules); the native unit only
-    withheld it, and its controller, computing its samples in order, waited for the lost
-    one until the plant's stall error.  The native loop refuses it in lockstep, and
-    serves it in real time, where a lost sample is gone."""
-    from bench.nodes._fault_bus import NodeFaults
-    from bench.nodes._plant_node import PlantNode
-    from bench.nodes.native import _plant_native
-    from plant_rt import Plant, preset
-
-    pre = preset("wen2023")
-    for fault in (_fault(0, "drop", 0.001, 0.001, message="PhaseSamples", prob=1.0),
-                  _fault(0, "silence", 0.001, 0.001)):  # fmt: skip
-        node = PlantNode(CODEC, Plant(pre.motor, pre.inverter, 1.0 / pre.f_sw), n_steps=100)
-        node.faults = NodeFaults([fault], node.plant, 0)
-        why = _plant_native.native_missing(node, "udp_multicast")
-        assert why is not None and "PhaseSamples" in why, fault.kind
-        node.realtime = True
-        assert _plant_native.native_missing(node, "udp_multicast") is None, fault.kind
-    node.faults = NodeFaults(
-        [_fault(0, "drop", 0.001, 0.001, message="PwmDuty", prob=1.0)], node.plant, 0
-    )
-    node.realtime = False
-    assert _plant_native.native_missing(node, "udp_multicast") is None
+def _xue(tmp_path: Path, faults: list[dict[str, Any]], duration: float = 0.6) -> Scenario:
+    """xue-fig13 (1 kHz, as tests/test_faults_run.py) with a fault timeline."""
+    lines = ['extends = "xue-fig13"', f"duration = {duration}", f"score_from_s = {duration / 2}"]
+    for f in faults:
+        lines.append("[[faults]]")
+        lines += [f"{k} = {v!r}".replace("'", '"') for k, v in f.items()]
+    src = tmp_path / "f.toml"
+    src.write_text("\n".join(lines) + "\n")
+    return load_scenario(str(src))
 
 
-def test_a_real_time_delay_in_microseconds_is_left_to_the_python_node() -> None:
-    """Real time holds a duty frame ``us`` from its arrival (NodeFaults.duty_hold_s); the
-    native unit's tables shift duties by whole periods only, so it refuses such a delay in
-    real time and serves it in lockstep (rounded up to whole periods by both nodes) and a
-    delay in ``steps``."""
+#: xue-fig13's period (s) and the fault's first period.
+_T_S, _K0 = 1e-3, 300
+
+
+@pytest.mark.parametrize(
+    ("fault", "last"),
+    [
+        ({"kind": "drop", "message": "PhaseSamples", "prob": 1.0}, _K0 - 1),
+        ({"kind": "silence"}, _K0 - 2),
+    ],
+)
+def test_a_lockstep_sample_burst_native_trips_as_the_python_node(
+    tmp_path: Path, fault: dict[str, Any], last: int
+) -> None:
+    """50 ms of lost samples in lockstep (tests/test_faults_run.py's rules): each lost
+    sample is sent again, in order, before the next that gets through, its late answer
+    counted lost, the periods run with the last duty applied, and the watchdog trips W
+    periods after the last duty in time (the answer to sample K0 - 1; silence loses the
+    duties too, so one period earlier).  The native plant's frames are the Python node's
+    bit for bit, and so are the faults' metrics."""
+    from bench.nodes._loops import WATCHDOG_MIN_S, WATCHDOG_PERIODS
+
+    at = {"at_s": _K0 * _T_S, "duration_s": 0.05, "expect": "trip"}
+    scn = _xue(tmp_path, [{**at, **fault}])
+    meta = _assert_faults_native_equal_python(scn, "sensored", tmp_path)
+    rep = meta["node_reports"]["plant"]
+    W = max(WATCHDOG_PERIODS, math.ceil(WATCHDOG_MIN_S / _T_S - 1e-9))
+    assert rep["fault"] == "watchdog" and rep["fault_step"] == last + W
+    assert rep["faults"]["not_sent"]["PhaseSamples"] == 50
+    # the answers to the samples sent again come after their periods: none applied
+    assert rep["faults"]["duties_lost"] + rep["duty_rejected"].get("stale_counter", 0) > 0
+
+
+def test_a_short_lockstep_sample_loss_native_is_ridden_through_as_by_the_python_node(
+    tmp_path: Path,
+) -> None:
+    """5 ms of lost samples: the periods K0 + 1 .. K0 + 5 run with duty K0, aging 1 .. 5,
+    and the duties are fresh again once the samples sent again are answered; the native
+    plant's frames (PlantTruth.duty_age among them) are the Python node's bit for bit."""
+    fault = {"at_s": _K0 * _T_S, "duration_s": 0.005, "kind": "drop",
+             "message": "PhaseSamples", "prob": 1.0, "expect": "ride_through"}  # fmt: skip
+    scn = _xue(tmp_path, [fault])
+    meta = _assert_faults_native_equal_python(scn, "sensored", tmp_path)
+    rep = meta["node_reports"]["plant"]
+    assert rep["fault"] == "none" and rep["faults"]["not_sent"] == {"PhaseSamples": 5}
+    (capture,) = (tmp_path / "nat").glob("capture.*")
+    frames = list(can.LogReader(str(capture)))
+    ages: dict[int, int] = {}
+    last = 0
+    for m in frames:
+        if m.arbitration_id == CODEC.frame_id("PlantTruth"):
+            d = CODEC.decode(m)
+            assert d is not None and d.reason is None
+            last = unwrap(int(d.signals["step"]), last, 1 << CODEC.step_bits("PlantTruth"))
+            ages[last] = int(d.signals["duty_age"])
+    # PlantTruth of instant k: the age of the duty of period k - 1
+    assert [ages[k] for k in range(_K0, _K0 + 9)] == [0, 0, 1, 2, 3, 4, 5, 0, 0]
+
+
+def test_lockstep_sample_loss_and_real_time_us_delay_leave_the_native_plant_eligible() -> None:
+    """The native unit holds NodeFaults' rules for them (the tests above and below), so the
+    fallback line names none of them, in either mode."""
     from bench.nodes._fault_bus import NodeFaults
     from bench.nodes._plant_node import PlantNode
     from bench.nodes.native import _plant_native
@@ -308,14 +351,159 @@ def test_a_real_time_delay_in_microseconds_is_left_to_the_python_node() -> None:
 
     pre = preset("wen2023")
     node = PlantNode(CODEC, Plant(pre.motor, pre.inverter, 1.0 / pre.f_sw), n_steps=100)
-    us = _fault(0, "delay", 0.001, 0.002, message="PwmDuty", us=30.0)
-    node.faults = NodeFaults([us], node.plant, 0)
-    node.realtime = True
+    for fault in (
+        _fault(0, "drop", 0.001, 0.001, message="PhaseSamples", prob=1.0),
+        _fault(0, "silence", 0.001, 0.001),
+        _fault(0, "delay", 0.001, 0.002, message="PwmDuty", us=30.0),
+        _fault(0, "delay", 0.001, 0.002, message="PwmDuty", steps=2),
+    ):
+        node.faults = NodeFaults([fault], node.plant, 0)
+        for realtime in (False, True):
+            node.realtime = realtime
+            assert _plant_native.native_missing(node, "udp_multicast") is None, fault
+    node.n_steps = 0  # the tables are made for the periods the run has
     why = _plant_native.native_missing(node, "udp_multicast")
-    assert why is not None and "microseconds" in why
-    node.realtime = False
-    assert _plant_native.native_missing(node, "udp_multicast") is None
-    steps = _fault(0, "delay", 0.001, 0.002, message="PwmDuty", steps=2)
-    node.faults = NodeFaults([steps], node.plant, 0)
+    assert why is not None and "n_steps" in why
+
+
+class _FakeClock:
+    def __init__(self) -> None:
+        self.t = 0.0
+
+    def __call__(self) -> float:
+        return self.t
+
+
+def _delay_realtime(
+    tmp_path: Path, us: float | None, answer_s: float, *, native: bool
+) -> tuple[list[int], list[list[bytes]], int]:
+    """tests/test_fault_delay_realtime.py's drive of a real-time plant on a fake clock (the
+    node's clock and the frames' receive stamps), through the Python node or the C unit
+    (``bn_plant_on_duty``, ``bn_plant_advance``): each period's duty age, its frames, and
+    the late duties counted."""
+    import ctypes
+
+    from bench.nodes._loops import command_frames, make_plant_node
+    from bench.nodes.native import _plant_native as pn
+
+    faults = [] if us is None else [
+        {"at_s": _K0 * _T_S, "duration_s": 0.04, "kind": "delay", "message": "PwmDuty", "us": us}
+    ]  # fmt: skip
+    scn = _xue(tmp_path, faults, duration=0.5)
+    node = make_plant_node(scn, CODEC)
     node.realtime = True
-    assert _plant_native.native_missing(node, "udp_multicast") is None
+    clock = _FakeClock()
+    node.clock = clock
+    for _, m in command_frames(scn, CODEC):
+        node.on_message(m)
+    node.apply_commands()
+    ages: list[int] = []
+    out: list[list[bytes]] = []
+    pending: list[can.Message] = []
+    if native:
+        dll = pn._lib()
+        u = pn.Unit()
+        keep = (pn.NoiseDraws(node, u), pn.NativeFaults(node, u))
+        pn._fill_config(dll, node, u, True, False)
+        sync = pn._Sync(node, u, dll.bn_plant_reject_names().decode().split(","))
+        sync.push_all()
+    for k in range(400):
+        clock.t = 1000.0 + k * _T_S  # the period's start
+        if native:
+            for m in pending:
+                f = pn.to_frame(m)
+                f.t_ns = round(m.timestamp * 1e9)
+                dll.bn_plant_on_duty(ctypes.byref(u), ctypes.byref(f))
+            dll.bn_plant_advance(ctypes.byref(u))
+            ages.append(int(u.duty_age))
+            out.append([bytes(u.out[j].data[: u.out[j].len]) for j in range(u.n_out)])
+            u.n_out = 0
+        else:
+            for m in pending:
+                node.on_message(m)
+            frames = node.advance_realtime()
+            ages.append(node.duty_age)
+            out.append([bytes(m.data) for m in frames])
+        pending = []
+        duty = CODEC.encode(
+            "PwmDuty",
+            {"duty_a": 0.5, "duty_b": 0.5, "duty_c": 0.5, "enable": 1, "step": (k + 1) % 1024},
+        )
+        duty.timestamp = clock.t + answer_s  # the answer to sample k
+        pending.append(duty)
+    if native:
+        sync.pull()
+        del keep
+    return ages, out, node.counters.late_duties
+
+
+@pytest.mark.parametrize(("us", "answer_s"), [(300.0, 0.5e-3), (300.0, 0.8e-3), (2500.0, 0.2e-3)])
+def test_a_real_time_us_delay_native_gives_the_python_nodes_periods(
+    tmp_path: Path, us: float, answer_s: float
+) -> None:
+    """A duty frame held ``us`` from its receive stamp, a period applying the newest duty
+    released by its start (tests/test_fault_delay_realtime.py's cases): on the same fake
+    clock the C unit gives the Python node's duty ages, frames and late duties, period
+    for period; and the delay acts (ages above 0 in the window where it must)."""
+    want = _delay_realtime(tmp_path, us, answer_s, native=False)
+    got = _delay_realtime(tmp_path, us, answer_s, native=True)
+    assert got[0] == want[0]
+    assert got[2] == want[2]
+    diff = [k for k in range(len(want[1])) if got[1][k] != want[1][k]]
+    assert not diff, f"the frames of periods {diff[:5]} differ"
+    ages = got[0][_K0 : _K0 + 40]
+    if us * 1e-6 + answer_s < _T_S:
+        assert set(ages) == {0}
+    else:
+        assert max(ages) >= 1 and set(got[0][_K0 + 40 :]) == {0}
+
+
+def test_the_native_bus_stamps_a_frame_at_its_arrival_as_python_can_does() -> None:
+    """A real-time ``us`` delay holds a duty from its receive stamp: the kernel's
+    (SO_TIMESTAMPNS, python-can's), not the time the loop drained its socket, which
+    in the native loop is the next period's start.  A frame received 50 ms after it
+    arrived carries its arrival time (a busy host only lengthens the wait)."""
+    import time
+
+    from bench.nodes.native._plant_native import open_native_bus
+
+    spec = BusSpec("udp_multicast", GROUP, free_port())
+    nat = open_native_bus(spec)
+    py = spec.open()
+    try:
+        duty = CODEC.encode(
+            "PwmDuty", {"duty_a": 0.5, "duty_b": 0.5, "duty_c": 0.5, "enable": 1, "step": 1}
+        )
+        t_sent = time.time()
+        py.send(duty)
+        time.sleep(0.05)
+        f = nat.recv(1.0)
+        t_got = time.time()
+        assert f is not None and f.id == duty.arbitration_id
+        stamp = f.t_ns * 1e-9
+        assert t_sent - 0.005 <= stamp and t_got - stamp >= 0.045
+    finally:
+        py.shutdown()
+        nat.close()
+
+
+def test_a_real_time_us_delay_is_served_by_the_native_plant(tmp_path: Path) -> None:
+    """Real time, 1 kHz: a 300 us delay for 50 ms runs on the native loop (no fallback
+    line), every period run; which periods it costs depends on when the answers arrive
+    (the fake-clock test above holds the rule), so only what a busy host keeps is asserted."""
+    scn = replace(short("wen-5.1", 0.3), f_sw=1000.0)
+    scn = replace(scn, faults=(_fault(0, "delay", 0.15, 0.05, message="PwmDuty", us=300.0),))
+    spec = BusSpec("udp_multicast", GROUP, free_port())
+    res = run_scenario(
+        scn,
+        "sensored",
+        spec=spec,
+        out_dir=tmp_path / "rt",
+        mode="realtime",
+        progress=False,
+        node_args=NATIVE,
+    )
+    meta = json.loads((tmp_path / "rt" / "meta.json").read_text())
+    assert meta["node_engines"]["plant"] == "native"
+    assert meta["node_reports"]["plant"]["steps"] == 300
+    assert [f["kind"] for f in res.metrics["faults"]] == ["delay"]

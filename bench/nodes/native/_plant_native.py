@@ -181,6 +181,13 @@ class Babble(ctypes.Structure):
     _fields_ = [("k", _I64), ("to_plant", Frame), ("to_ctrl", Frame)]
 
 
+#: ``bn_plant_faults_t.clock_ns``: the clock of the frames' receive stamps (ns); NULL:
+#: CLOCK_REALTIME, the clock of python-can's timestamps (:attr:`PlantNode.clock`).
+CLOCK_NS = ctypes.CFUNCTYPE(ctypes.c_int64)
+#: ``bn_plant_faults_t.released`` of a duty not held.
+NOT_HELD = -(1 << 63)
+
+
 class Faults(ctypes.Structure):
     """``bn_plant_faults_t``."""
 
@@ -205,6 +212,17 @@ class Faults(ctypes.Structure):
         ("not_sent", _U64 * 2),
         ("babbled", _U64),
         ("history", Duty * HISTORY),
+        ("withheld", ctypes.POINTER(Frame)),
+        ("wh_cap", _I64),
+        ("wh_n", _I64),
+        ("wh_sent", _I64),
+        ("out_wh", _I64 * 2),
+        ("out_wh_at", _I32),
+        ("pad_wh", _I32),
+        ("sent_wh", (_I64 * 2) * SENT),
+        ("hold_ns", ctypes.POINTER(_I64)),
+        ("released", _I64 * RING),
+        ("clock_ns", CLOCK_NS),
     ]
 
 
@@ -257,6 +275,7 @@ class Unit(ctypes.Structure):
         ("n_cmds", _I32),
         ("cmds_more", _I32),
         ("pace_every", _I32),
+        ("applied", Duty),
         ("cmds", Cmd * CMDS),
         ("duties", Duty * RING),
         ("accepted", _U64),
@@ -355,6 +374,9 @@ def load_plant_lib(path: Path | None = None) -> ctypes.CDLL:
     ):
         if getattr(dll, name)() != ctypes.sizeof(want):
             raise BenchError(f"native plant: {path}: {name} differs from {want.__name__}")
+    dll.bn_plant_on_duty.argtypes = [ctypes.POINTER(Unit), ctypes.POINTER(Frame)]
+    dll.bn_plant_advance.argtypes = [ctypes.POINTER(Unit)]
+    dll.bn_plant_frames_now.argtypes = [ctypes.POINTER(Unit)]
     dll.bn_plant_loop.argtypes = [ctypes.POINTER(Loop)]
     dll.bn_plant_loop.restype = ctypes.c_int
     dll.bn_udp_open.argtypes = [
@@ -400,21 +422,6 @@ def native_missing(node: Any, interface: str) -> str | None:
         other = sorted({f.kind for f, _ in node.faults.windows} - set(NATIVE_FAULT_KINDS))
         if other:
             return f"the faults {', '.join(other)} are applied by the Python node only"
-        resent = any(
-            f.kind == "silence" or (f.kind == "drop" and f.params["message"] == "PhaseSamples")
-            for f, _ in node.faults.windows
-        )
-        if resent and not node.realtime:
-            # NodeFaults' lockstep retransmission rules: a lost sample is sent again, in
-            # order, with the next that gets through, and its answer is lost
-            # (PlantNode.frames_now, _on_duty, ready); the native unit only withholds it
-            return "a lockstep drop of PhaseSamples or silence is applied by the Python node only"
-        if node.realtime and any(
-            f.kind == "delay" and "us" in f.params for f, _ in node.faults.windows
-        ):
-            # the duty frame held "us" from its arrival (NodeFaults.duty_hold_s): not in
-            # the native unit's tables, whose real-time delay is whole periods
-            return "a real-time delay in microseconds (a duty held from its arrival) is applied by the Python node only"
         if node.n_steps <= 0:
             # the bus faults' tables are made before the loop, one entry per period it runs
             return "[[faults]] in a run without a step count (n_steps 0) are applied by the Python node only"
@@ -535,6 +542,13 @@ class _Sync:
         for t, (a, b, c, e) in node.duties.items():
             slot = u.duties[t % RING]
             slot.d[0], slot.d[1], slot.d[2], slot.en, slot.tag = a, b, c, int(e), t
+        (a, b, c, e), t = node.applied
+        ap = u.applied
+        ap.d[0], ap.d[1], ap.d[2], ap.en, ap.tag = a, b, c, int(e), t
+        for j in range(RING):
+            u.faults.released[j] = NOT_HELD
+        for t, at in node.released_at.items():
+            u.faults.released[t % RING] = round(at * 1e9)
         self.push_commands()
 
     def push_commands(self) -> None:
@@ -567,6 +581,13 @@ class _Sync:
         node.duty_age = u.duty_age
         node.duties = {
             int(s.tag): (s.d[0], s.d[1], s.d[2], bool(s.en)) for s in u.duties if s.tag >= 0
+        }
+        ap = u.applied
+        node.applied = ((ap.d[0], ap.d[1], ap.d[2], bool(ap.en)), int(ap.tag))
+        node.released_at = {
+            int(s.tag): u.faults.released[j] * 1e-9
+            for j, s in enumerate(u.duties)
+            if s.tag >= 0 and u.faults.released[j] != NOT_HELD
         }
         c = node.counters
         delta = {}
@@ -741,6 +762,8 @@ class NativeFaults:
             return
         n = node.n_steps + node.delay + 2
         F.n_k = n
+        self.clock_ns = node_clock_ns(node)  # kept alive while C may call it
+        F.clock_ns = self.clock_ns
         # outside every window each answer is "no fault": only the windows' instants are asked
         inside = sorted(
             {
@@ -760,11 +783,15 @@ class NativeFaults:
         F.fate = ctypes.cast(fate, ctypes.POINTER(ctypes.c_int8))
         if "delay" in kinds:
             self.shift_ls, self.shift_rt = (_I32 * n)(), (_I32 * n)()
+            self.hold_ns = (_I64 * n)()
             for k in inside:
                 self.shift_ls[k] = nf.duty_shift(k)
                 self.shift_rt[k] = nf.duty_shift(k, realtime=True)
+                self.hold_ns[k] = round(nf.duty_hold_s(k) * 1e9)
             F.shift_ls = ctypes.cast(self.shift_ls, ctypes.POINTER(_I32))
             F.shift_rt = ctypes.cast(self.shift_rt, ctypes.POINTER(_I32))
+            if any(self.hold_ns[k] for k in inside):
+                F.hold_ns = ctypes.cast(self.hold_ns, ctypes.POINTER(_I64))
         # sends() and babble() count what they did: asked here, their counts are C's
         not_sent, babbled = dict(nf.not_sent), nf.babbled
         nosend = (ctypes.c_uint8 * n)()
@@ -777,6 +804,14 @@ class NativeFaults:
             if to_plant is not None and to_ctrl is not None:
                 babble.append(Babble(k, to_frame(to_plant), to_frame(to_ctrl)))
         nf.not_sent, nf.babbled = not_sent, babbled
+        if not node.realtime:
+            # lockstep: each PhaseSamples lost on its first sending is kept to be sent again
+            # (PlantNode.withheld): room for every one the table loses
+            n_lost = sum(nosend[k] & 1 for k in inside)
+            if n_lost:
+                self.withheld = (Frame * n_lost)()
+                F.withheld = ctypes.cast(self.withheld, ctypes.POINTER(Frame))
+                F.wh_cap = n_lost
         self.nosend = nosend
         F.nosend = ctypes.cast(nosend, ctypes.POINTER(ctypes.c_uint8))
         self.babble = (Babble * max(1, len(babble)))(*babble)
@@ -802,6 +837,15 @@ class NativeFaults:
         """The Python plant's parameters and legs as the core has them at its present instant."""
         if self.nf is not None:
             self.nf.plant.before_period(plant)
+
+
+def node_clock_ns(node: Any) -> Any:
+    """``bn_plant_faults_t.clock_ns`` for ``node``: NULL while its clock is ``time.time``
+    (CLOCK_REALTIME, which C reads itself), else its clock in ns (a test's fake clock)."""
+    if node.clock is time.time:
+        return CLOCK_NS()
+    clock = node.clock
+    return CLOCK_NS(lambda: round(clock() * 1e9))
 
 
 def _fill_config(dll: ctypes.CDLL, node: Any, u: Unit, realtime: bool, external: bool) -> None:

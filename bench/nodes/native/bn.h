@@ -96,12 +96,14 @@ typedef struct {
     uint8_t buf[BN_DGRAM];          /* UDP datagram being sent */
     int64_t send_wait_ns;           /* bn_send waits this long for room (open: 1 ms) */
     /* the receive batch: rx_n datagrams of the last recvmmsg, rx_i handed out,
-     * received at rx_t_ns (CLOCK_REALTIME) */
+     * drained at rx_t_ns (CLOCK_REALTIME); each frame's t_ns is the kernel's receive
+     * stamp (SO_TIMESTAMPNS, in rx_ctl, as python-can's), else rx_t_ns */
     int32_t rx_n, rx_i;
     int64_t rx_t_ns;
     uint8_t rx_buf[BN_BATCH][BN_DGRAM];
     struct mmsghdr rx_msg[BN_BATCH];
     struct iovec rx_iov[BN_BATCH];
+    uint64_t rx_ctl[BN_BATCH][8];
     /* the send batch of bn_send_many; UDP: its tx_n datagrams, looped back to this
      * socket by the kernel, are dropped on receipt without decoding (rx_own) */
     int32_t tx_n;

@@ -48,6 +48,7 @@ static void bus_reset(bn_bus_t *b, int kind)
         b->rx_iov[j].iov_len = sizeof b->rx_buf[j];
         b->rx_msg[j].msg_hdr.msg_iov = &b->rx_iov[j];
         b->rx_msg[j].msg_hdr.msg_iovlen = 1;
+        b->rx_msg[j].msg_hdr.msg_control = b->rx_ctl[j];
         b->tx_iov[j].iov_base = b->tx_buf[j];
         b->tx_msg[j].msg_hdr.msg_iov = &b->tx_iov[j];
         b->tx_msg[j].msg_hdr.msg_iovlen = 1;
@@ -81,6 +82,8 @@ int bn_udp_open(bn_bus_t *b, const char *group, uint16_t port, int hop_limit, in
      * a larger send buffer rides out a descheduled transmit completion */
     int sndbuf = 1 << 20;
     (void)setsockopt(b->fd, SOL_SOCKET, SO_SNDBUFFORCE, &sndbuf, sizeof sndbuf);
+    /* receive stamps of the kernel, as python-can's (best effort: else the drain time) */
+    (void)setsockopt(b->fd, SOL_SOCKET, SO_TIMESTAMPNS, &one, sizeof one);
     if (rcvbuf > 0 &&
         setsockopt(b->fd, SOL_SOCKET, SO_RCVBUFFORCE, &rcvbuf, sizeof rcvbuf) < 0) {
         (void)setsockopt(b->fd, SOL_SOCKET, SO_RCVBUF, &rcvbuf, sizeof rcvbuf); /* best effort */
@@ -155,6 +158,8 @@ int bn_can_open(bn_bus_t *b, const char *ifname, bool fd)
     if (ioctl(b->fd, SIOCGIFINDEX, &ifr) < 0) {
         return fail(b);
     }
+    /* receive stamps of the kernel, as python-can's (best effort: else the drain time) */
+    (void)setsockopt(b->fd, SOL_SOCKET, SO_TIMESTAMPNS, &one, sizeof one);
     /* python-can's socketcan bus does not receive its own frames either */
     if (setsockopt(b->fd, SOL_CAN_RAW, CAN_RAW_RECV_OWN_MSGS, &zero, sizeof zero) < 0) {
         return fail(b);
@@ -284,6 +289,7 @@ int bn_send_many(bn_bus_t *b, const bn_frame_t *f, int n)
 static int refill(bn_bus_t *b)
 {
     b->rx_i = b->rx_n = 0;
+    for (int j = 0; j < BN_BATCH; j++) b->rx_msg[j].msg_hdr.msg_controllen = sizeof b->rx_ctl[j];
     int n = recvmmsg(b->fd, b->rx_msg, BN_BATCH, MSG_DONTWAIT, NULL);
     if (n < 0) {
         return (errno == EAGAIN || errno == EWOULDBLOCK) ? 0 : -errno;
@@ -304,6 +310,20 @@ static bool own(const bn_bus_t *b, const uint8_t *d, size_t n)
     return false;
 }
 
+/* The kernel's receive stamp of a datagram (SO_TIMESTAMPNS), else the batch's drain time. */
+static int64_t rx_stamp(const bn_bus_t *b, struct mmsghdr *m)
+{
+    struct msghdr *h = &m->msg_hdr;
+    for (struct cmsghdr *c = CMSG_FIRSTHDR(h); c != NULL; c = CMSG_NXTHDR(h, c)) {
+        if (c->cmsg_level == SOL_SOCKET && c->cmsg_type == SCM_TIMESTAMPNS) {
+            struct timespec ts;
+            memcpy(&ts, CMSG_DATA(c), sizeof ts);
+            return (int64_t)ts.tv_sec * 1000000000 + ts.tv_nsec;
+        }
+    }
+    return b->rx_t_ns;
+}
+
 /* One datagram or frame without waiting: 1, 0 (none), -errno. */
 static int recv_now(bn_bus_t *b, bn_frame_t *f)
 {
@@ -318,6 +338,7 @@ static int recv_now(bn_bus_t *b, bn_frame_t *f)
         const uint8_t *d = b->rx_buf[b->rx_i];
         size_t n = m->msg_len;
         int trunc = (m->msg_hdr.msg_flags & MSG_TRUNC) != 0;
+        int64_t stamp = rx_stamp(b, m);
         b->rx_i++;
         if (b->kind == BN_BUS_UDP) {
             if (own(b, d, n)) {
@@ -352,7 +373,7 @@ static int recv_now(bn_bus_t *b, bn_frame_t *f)
             f->len = fr.len > CANFD_MAX_DLEN ? CANFD_MAX_DLEN : fr.len;
             memcpy(f->data, fr.data, f->len);
         }
-        f->t_ns = b->rx_t_ns;
+        f->t_ns = stamp;
         b->rx++;
         return 1;
     }

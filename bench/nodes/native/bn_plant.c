@@ -188,6 +188,20 @@ static int64_t duty_shift(const bn_plant_t *u, int64_t k, int realtime)
     return s != NULL && k >= 0 && k < F->n_k ? s[k] : 0;
 }
 
+/* NodeFaults.answer_lost(t): lockstep, the duty tagged t answers sample t - 1, lost on its
+ * first sending (bit 0 of the nosend table: NodeFaults.lost("PhaseSamples", t - 1)) */
+static int answer_lost(const bn_plant_t *u, int64_t t)
+{
+    const bn_plant_faults_t *F = &u->faults;
+    return F->nosend != NULL && t >= 1 && t - 1 < F->n_k && (F->nosend[t - 1] & 1);
+}
+
+/* PlantNode.clock: the clock of the frames' receive stamps */
+static int64_t clock_now(const bn_plant_t *u)
+{
+    return u->faults.clock_ns != NULL ? u->faults.clock_ns() : bn_realtime_ns();
+}
+
 static void reject_duty(bn_plant_t *u, int reason)
 {
     u->rejected[reason]++;
@@ -243,6 +257,8 @@ void bn_plant_on_duty(bn_plant_t *u, const bn_frame_t *f)
         return;
     }
     int fate = duty_fate(u, t + u->delay);
+    if (fate == BN_FATE_NONE && !u->realtime && t >= k - u->delay && answer_lost(u, t))
+        fate = BN_FATE_LOST; /* the answer to a sample lost on its first sending: too late */
     if (fate != BN_FATE_NONE) { /* a bus fault: lost, or arrives with a bad E2E CRC */
         if (fate == BN_FATE_CORRUPT)
             reject_duty(u, BN_RJ_BAD_CRC);
@@ -283,6 +299,12 @@ void bn_plant_on_duty(bn_plant_t *u, const bn_frame_t *f)
     slot->d[2] = d_c;
     slot->en = m.enable != 0;
     slot->tag = t;
+    if (u->realtime) { /* a delay in us: the frame is held from its arrival */
+        const bn_plant_faults_t *F = &u->faults;
+        int64_t hold = F->hold_ns != NULL && k >= 0 && k < F->n_k ? F->hold_ns[k] : 0;
+        u->faults.released[t & (BN_PLANT_RING - 1)] =
+            hold > 0 ? (f->t_ns != 0 ? f->t_ns : clock_now(u)) + hold : INT64_MIN;
+    }
     if (!u->realtime && t > u->latest_duty_step) {
         u->latest_duty_step = t;
         memcpy(u->latest, slot->d, sizeof u->latest);
@@ -407,6 +429,7 @@ static void frames_now(bn_plant_t *u, const double *i_now)
     for (int b = 0; b < u->n_outbox; b++) u->out[n++] = u->outbox[b];
     u->n_outbox = 0;
     int first = n;
+    u->faults.out_wh[0] = u->faults.out_wh[1] = 0; /* no withheld samples in u->out */
     {
         struct bench_dbc_phase_samples_t m;
         bn_frame_t *f = &u->out[n++];
@@ -473,16 +496,26 @@ static void frames_now(bn_plant_t *u, const double *i_now)
         put(u, f, BENCH_DBC_PLANT_CURRENTS_FRAME_ID, BENCH_DBC_PLANT_CURRENTS_LENGTH, 4);
     }
     if (u->faults.on) { /* PlantNode.frames_now's filter and babble */
+        bn_plant_faults_t *F = &u->faults;
         int ps = sends(u, 0, k), pos = sends(u, 1, k), kept = first;
         for (int j = first; j < n; j++) {
             uint32_t id = u->out[j].id;
-            if ((id == BENCH_DBC_PHASE_SAMPLES_FRAME_ID && !ps) ||
-                (id == BENCH_DBC_POSITION_SENSOR_FRAME_ID && !pos))
+            if (id == BENCH_DBC_PHASE_SAMPLES_FRAME_ID && !ps) {
+                /* lockstep: sent again, in order, with the next that gets through */
+                if (!u->realtime && F->withheld != NULL && F->wh_n < F->wh_cap)
+                    F->withheld[F->wh_n++] = u->out[j];
                 continue;
+            }
+            if (id == BENCH_DBC_POSITION_SENSOR_FRAME_ID && !pos) continue;
             u->out[kept++] = u->out[j];
         }
         n = kept;
-        bn_plant_faults_t *F = &u->faults;
+        if (ps && F->wh_sent < F->wh_n) { /* the withheld samples go first */
+            F->out_wh[0] = F->wh_sent;
+            F->out_wh[1] = F->wh_n;
+            F->out_wh_at = first;
+            F->wh_sent = F->wh_n;
+        }
         while (F->next_babble < F->n_babble && F->babble[F->next_babble].k < k) F->next_babble++;
         if (F->next_babble < F->n_babble && F->babble[F->next_babble].k == k) {
             const bn_plant_babble_t *b = &F->babble[F->next_babble++];
@@ -494,6 +527,8 @@ static void frames_now(bn_plant_t *u, const double *i_now)
     u->n_out = n;
     /* PlantNode.sent: this instant's frames (the outbox is not retransmitted) */
     int64_t s = u->sent_head % BN_PLANT_SENT;
+    u->faults.sent_wh[s][0] = u->faults.out_wh[0];
+    u->faults.sent_wh[s][1] = u->faults.out_wh[1];
     u->n_sent[s] = n - first;
     memcpy(u->sent[s], &u->out[first], (size_t)(n - first) * sizeof(bn_frame_t));
     u->sent_head++;
@@ -504,7 +539,7 @@ void bn_plant_frames_now(bn_plant_t *u) { frames_now(u, NULL); }
 int bn_plant_ready(const bn_plant_t *u)
 {
     int64_t t = u->k - u->delay;
-    return t <= 0 || has_duty(u, t) || duty_fate(u, u->k) != BN_FATE_NONE;
+    return t <= 0 || has_duty(u, t) || duty_fate(u, u->k) != BN_FATE_NONE || answer_lost(u, t);
 }
 
 int bn_plant_paced(const bn_plant_t *u) { return u->pace_every <= 0 || u->k < u->cmd_horizon; }
@@ -612,9 +647,18 @@ static void advance_lockstep(bn_plant_t *u)
     if (t <= 0) {
         u->duty_age = 255;
     } else if (!has_duty(u, t)) {
-        memcpy(d, u->latest, sizeof d);
-        en = u->latest_en;
-        u->duty_age = u->latest_duty_step < 0 ? 255 : (int32_t)(k - u->latest_duty_step < 254 ? k - u->latest_duty_step : 254);
+        /* the newest duty before t: a later one may be here already (a controller that
+         * answers a resent sample at once is ahead of the plant), never applied early */
+        int64_t held_step = u->latest_duty_step;
+        if (held_step < t) {
+            memcpy(d, u->latest, sizeof d);
+            en = u->latest_en;
+        } else {
+            memcpy(d, u->applied.d, sizeof d);
+            en = u->applied.en;
+            held_step = u->applied.tag;
+        }
+        u->duty_age = held_step < 0 ? 255 : (int32_t)clamp_age(k - held_step);
         u->late_duties++;
         if (u->watchdog_periods && u->latest_duty_step >= 0 && u->fault == PLANT_FAULT_NONE &&
             t - u->latest_duty_step >= u->watchdog_periods - 1)
@@ -624,6 +668,7 @@ static void advance_lockstep(bn_plant_t *u)
         u->duty_age = (int32_t)(k - t < 254 ? k - t : 254);
         memcpy(d, slot->d, sizeof d);
         en = slot->en;
+        u->applied = *slot;
         /* every duty up to t is used up (tag 0..t: -1); t > 0 here, so one unsigned
          * comparison is both bounds, and the loop has no branch to mispredict */
         for (int j = 0; j < BN_PLANT_RING; j++) {
@@ -643,17 +688,29 @@ static void advance_lockstep(bn_plant_t *u)
 /* PlantNode.advance_realtime */
 static void advance_realtime(bn_plant_t *u)
 {
-    int64_t k = u->k, best = -1, due = k - duty_shift(u, k, 1);
-    for (int j = 0; j < BN_PLANT_RING; j++)
-        if (u->duties[j].tag >= 0 && u->duties[j].tag <= due && u->duties[j].tag > best)
-            best = u->duties[j].tag;
+    int64_t k = u->k, best = -1, due = k - duty_shift(u, k, 1), now = 0;
+    int have_now = 0;
+    for (int j = 0; j < BN_PLANT_RING; j++) {
+        int64_t tag = u->duties[j].tag;
+        if (tag < 0 || tag > due || tag <= best) continue;
+        int64_t at = u->faults.released[j];
+        if (at != INT64_MIN) { /* held by a delay in us: due once released by now */
+            if (!have_now) {
+                now = clock_now(u);
+                have_now = 1;
+            }
+            if (at > now) continue;
+        }
+        best = tag;
+    }
     if (best >= 0) {
         bn_plant_duty_t *slot = &u->duties[best & (BN_PLANT_RING - 1)];
         u->latest_duty_step = best;
         memcpy(u->latest, slot->d, sizeof u->latest);
         u->latest_en = slot->en;
+        /* an older one still held: passed */
         for (int j = 0; j < BN_PLANT_RING; j++)
-            if (u->duties[j].tag >= 0 && u->duties[j].tag <= due) u->duties[j].tag = -1;
+            if (u->duties[j].tag >= 0 && u->duties[j].tag <= best) u->duties[j].tag = -1;
     }
     double d[3];
     memcpy(d, u->latest, sizeof d);
@@ -687,6 +744,7 @@ void bn_plant_advance(bn_plant_t *u)
 void bn_plant_duty_timeout(bn_plant_t *u)
 {
     u->n_out = 0;
+    u->faults.out_wh[0] = u->faults.out_wh[1] = 0;
     if (u->external && !u->dut_answered) goto flush;
     u->rounds_waiting++;
     if (u->watchdog_rounds && u->started && u->latest_duty_step >= 0 &&

@@ -103,7 +103,9 @@ enum { BN_SF_OFFSET, BN_SF_GAIN, BN_SF_STUCK, BN_SF_LOST, BN_SF_U_OFFSET, BN_SF_
  * fate = duty_fate(k), shift_ls / shift_rt = duty_shift(k) in lockstep / real time,
  * nosend = not sends("PhaseSamples", k) (bit 0) and not sends("PositionSensor", k)
  * (bit 1), and babble's frames by instant.  The unit applies them where the Python
- * node asks them (PlantNode._on_duty, ready, advance_*, frames_now). */
+ * node asks them (PlantNode._on_duty, ready, advance_*, frames_now); bit 0 of nosend at
+ * t - 1 is also NodeFaults.answer_lost(t), the lockstep answer to a sample lost on its
+ * first sending, and hold_ns the real-time delay in us (NodeFaults.duty_hold_s). */
 enum { BN_FATE_NONE = 0, BN_FATE_LOST = 1, BN_FATE_CORRUPT = 2 };
 
 typedef struct {
@@ -135,6 +137,23 @@ typedef struct {
     int32_t n_babble, next_babble;
     uint64_t duties_lost, not_sent[2], babbled; /* NodeFaults.report() */
     bn_plant_duty_t history[BN_PLANT_HISTORY];  /* NodeFaults.history, by tag mod its size */
+    /* Lockstep: the PhaseSamples lost on their first sending (PlantNode.withheld), kept in
+     * Python's buffer of wh_cap frames (one per lost instant of the tables), in order;
+     * [wh_sent, wh_n) are not sent yet.  The instant that next gets its sample through
+     * sends them first (out_wh: withheld[out_wh[0], out_wh[1]) go before out[out_wh_at]),
+     * and its record for retransmission holds them first (sent_wh, by sent's index). */
+    bn_frame_t *withheld;
+    int64_t wh_cap, wh_n, wh_sent;
+    int64_t out_wh[2];
+    int32_t out_wh_at, pad_wh;
+    int64_t sent_wh[BN_PLANT_SENT][2];
+    /* Real time: a delay in us (NodeFaults.duty_hold_s) as ns per instant of arrival (NULL:
+     * none); released: when the duty in each ring slot may be applied (INT64_MIN: not
+     * held, PlantNode.released_at); clock_ns: the clock of the frames' receive stamps
+     * (bn_frame_t.t_ns), NULL: CLOCK_REALTIME (bn_realtime_ns); a test's fake clock. */
+    const int64_t *hold_ns;
+    int64_t released[BN_PLANT_RING];
+    int64_t (*clock_ns)(void);
 } bn_plant_faults_t;
 
 typedef struct {
@@ -164,6 +183,7 @@ typedef struct {
     int32_t ctrl_ack;             /* CtrlTelemetry.cmd_ack, -1: none */
     int64_t cmd_horizon, applied_upto;
     int32_t applied_seq, n_cmds, cmds_more, pace_every;
+    bn_plant_duty_t applied;      /* lockstep: the duty taken in its own period last (tag -1: none) */
     bn_plant_cmd_t cmds[BN_PLANT_CMDS]; /* pending, by step */
     bn_plant_duty_t duties[BN_PLANT_RING];
     /* ---- counters (added to the Python node's after the run) */

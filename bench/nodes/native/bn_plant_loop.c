@@ -22,12 +22,31 @@ void bn_plant_send(bn_plant_t *u, bn_bus_t *bus, const bn_frame_t *f)
     }
 }
 
-/* The instant's frames: one sendmmsg; what it did not take, one by one with retries. */
+/* Frames f[0, n): one sendmmsg; what it did not take, one by one with retries. */
+static void send_frames(bn_plant_loop_t *L, const bn_frame_t *f, int64_t n)
+{
+    while (n > 0) {
+        int m = (int)(n < BN_BATCH ? n : BN_BATCH);
+        int j = bn_send_many(L->bus, f, m);
+        if (j < 0) j = 0;
+        for (; j < m; j++) bn_plant_send(L->u, L->bus, &f[j]);
+        f += m;
+        n -= m;
+    }
+}
+
+/* The instant's frames, with the lockstep samples withheld by a fault first (out_wh). */
 static void send_out(bn_plant_loop_t *L)
 {
-    int j = L->u->n_out > 0 ? bn_send_many(L->bus, L->u->out, L->u->n_out) : 0;
-    for (; j < L->u->n_out; j++) bn_plant_send(L->u, L->bus, &L->u->out[j]);
-    L->u->n_out = 0;
+    bn_plant_t *u = L->u;
+    bn_plant_faults_t *F = &u->faults;
+    int64_t wn = F->out_wh[1] - F->out_wh[0];
+    int at = wn > 0 ? F->out_wh_at : u->n_out;
+    send_frames(L, u->out, at);
+    if (wn > 0) send_frames(L, &F->withheld[F->out_wh[0]], wn);
+    send_frames(L, &u->out[at], u->n_out - at);
+    u->n_out = 0;
+    F->out_wh[0] = F->out_wh[1] = 0;
 }
 
 /* PlantNode.retransmit */
@@ -38,6 +57,8 @@ static void retransmit(bn_plant_loop_t *L)
     u->retransmits++;
     for (int64_t p = u->sent_head - n; p < u->sent_head; p++) {
         int64_t s = p % BN_PLANT_SENT;
+        const int64_t *w = u->faults.sent_wh[s]; /* withheld samples sent with it, first */
+        for (int64_t j = w[0]; j < w[1]; j++) bn_plant_send(u, L->bus, &u->faults.withheld[j]);
         for (int j = 0; j < u->n_sent[s]; j++) bn_plant_send(u, L->bus, &u->sent[s][j]);
     }
 }
