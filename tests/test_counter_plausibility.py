@@ -18,12 +18,15 @@ import ctypes
 from typing import Any
 
 import can
+import numpy as np
 import pytest
 
 from bench import load_scenario
 from bench.nodes._controller_node import ControllerNode
 from bench.nodes._counters import REJECT_FUTURE_COUNTER
-from bench.scenarios._setup import build_controller, needs_truth
+from bench.nodes._loops import run_inprocess
+from bench.runs._analysis import analyze_frames
+from bench.scenarios._setup import build_controller, needs_truth, sample_period
 from bench.wire._codec import Codec
 from bench.wire._protocol import CMD_START, lockstep_sample_lead
 from controller import compiled_controller_missing
@@ -202,3 +205,88 @@ def test_a_forged_truth_31_ahead_is_rejected_in_the_sensored_baseline(answers: A
     n = node()
     assert answers(n, frames(True)) == want and len(want) == 240
     assert n.report()["reject_reasons"] == {REJECT_FUTURE_COUNTER: 1}
+
+
+# ---------------------------------------------------------------- the run's analysis
+@pytest.fixture(scope="module")
+def capture() -> tuple[list[can.Message], float]:
+    """A clean lockstep capture of 0.15 s (wire order, as a recorder sees it)."""
+    scn = load_scenario("wen-5.1", {"duration": 0.15, "score_from_s": 0.1})
+    got = run_inprocess(scn, "tt-dq", CODEC)
+    return [got[i] for i in range(len(got))], sample_period(scn)
+
+
+def _step(m: can.Message) -> int:
+    d = CODEC.decode(m)
+    assert d is not None
+    return int(d.signals["step"])
+
+
+def _forge_after_sample(
+    frames: list[can.Message], newest: int, name: str, step: int, values: dict[str, Any]
+) -> list[can.Message]:
+    """``frames`` with a valid-CRC ``name`` frame tagged ``step`` inserted just after the
+    plant's sample ``newest`` (its first sending)."""
+    sid = CODEC.frame_id("PhaseSamples")
+    at = next(
+        j for j, m in enumerate(frames) if m.arbitration_id == sid and _step(m) == newest % M_STEP
+    )
+    m = 1 << CODEC.step_bits(name)
+    forged = CODEC.encode(name, {**values, "step": step % m})
+    return [*frames[: at + 1], forged, *frames[at + 1 :]]
+
+
+def test_a_forged_duty_138_ahead_takes_no_part_in_the_table(
+    capture: tuple[list[can.Message], float],
+) -> None:
+    frames, T_s = capture
+    newest = 1018
+    duty = {"duty_a": 0.9, "duty_b": 0.1, "duty_c": 0.5, "enable": 1}
+    forged = _forge_after_sample(frames, newest, "PwmDuty", newest + 138 + 1, duty)
+    clean = analyze_frames(frames, CODEC, T_s=T_s, n_p=4)
+    got = analyze_frames(forged, CODEC, T_s=T_s, n_p=4)
+    assert clean.rejected == {}
+    assert got.rejected == {REJECT_FUTURE_COUNTER: 1}
+    assert got.duplicates == clean.duplicates and got.out_of_order == clean.out_of_order
+    for col, v in clean.table.items():
+        np.testing.assert_array_equal(got.table[col], v, err_msg=col)
+    # the genuine duty of that step is in the table, not the forged one
+    row = int(np.searchsorted(clean.table["step"], newest + 138))
+    assert clean.table["step"][row] == newest + 138 and clean.table["d_a"][row] != 0.9
+
+
+def test_a_duty_answering_the_newest_sample_is_kept(
+    capture: tuple[list[can.Message], float],
+) -> None:
+    # the bound is exact: a duty for the sample just seen is the controller's answer
+    frames, T_s = capture
+    newest = 1018
+    duty = {"duty_a": 0.9, "duty_b": 0.1, "duty_c": 0.5, "enable": 1}
+    cut = [m for m in frames if m.arbitration_id != CODEC.frame_id("PwmDuty")]
+    got = analyze_frames(
+        _forge_after_sample(cut, newest, "PwmDuty", newest + 1, duty), CODEC, T_s=T_s, n_p=4
+    )
+    assert got.rejected == {}
+    row = int(np.searchsorted(got.table["step"], newest))
+    assert got.table["d_a"][row] == pytest.approx(0.9, abs=1e-3)
+    too_far = analyze_frames(
+        _forge_after_sample(cut, newest, "PwmDuty", newest + 2, duty), CODEC, T_s=T_s, n_p=4
+    )
+    assert too_far.rejected == {REJECT_FUTURE_COUNTER: 1}
+
+
+def test_a_forged_telemetry_ahead_is_counted_and_takes_no_part(
+    capture: tuple[list[can.Message], float],
+) -> None:
+    # a telemetry carries a wide counter, which anchors the narrow ones: dropped, the
+    # steps are unwrapped again without it
+    frames, T_s = capture
+    newest = 1018
+    clean = analyze_frames(frames, CODEC, T_s=T_s, n_p=4)
+    tel = {"theta_hat": 1.0, "w_hat": 10.0, "err": 0.0, "mode": 3, "run_id": clean.run_id,
+           "cmd_ack_valid": 0, "cmd_ack": 0}  # fmt: skip
+    forged = _forge_after_sample(frames, newest, "CtrlTelemetry", newest + 5000, tel)
+    got = analyze_frames(forged, CODEC, T_s=T_s, n_p=4, run_id=clean.run_id)
+    assert got.rejected == {REJECT_FUTURE_COUNTER: 1}
+    for col, v in clean.table.items():
+        np.testing.assert_array_equal(got.table[col], v, err_msg=col)

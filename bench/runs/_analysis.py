@@ -8,7 +8,9 @@ Tolerated: captures that start mid-run (steps are counted from the first one
 seen), gaps, other traffic (IDs not in the DBC are counted and skipped),
 frames that fail their CRC or length (counted per reason), frames repeated
 for a step (first one wins; identical copies counted apart from duplicates
-whose content differs) and out-of-order counters (counted).
+whose content differs) and out-of-order counters (counted).  A controller's
+frame (duty, telemetry) for a step the plant has not reached in the capture
+is no answer of the run's (``future_counter``, counted with the rejected).
 """
 
 from __future__ import annotations
@@ -16,14 +18,15 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
-
-import can
 from typing import Any
 
+import can
 import numpy as np
 import numpy.typing as npt
 
+from bench.nodes._counters import REJECT_FUTURE_COUNTER
 from bench.wire._codec import Codec
+from bench.wire._protocol import ANSWER_LEAD
 
 Array = npt.NDArray[np.float64]
 
@@ -211,6 +214,81 @@ def _own_run(dec: Any, run_id: int | None, cap: Capture) -> None:
             b.signals = {k: v[keep] for k, v in b.signals.items()}
 
 
+def _all_full_steps(dec: Any, bits: dict[str, int]) -> dict[str, npt.NDArray[np.int64]]:
+    """Per message of the table, the step each of its valid frames belongs to (a duty's:
+    the sample it answers, its tag - 1), unwrapped by :func:`_full_steps`."""
+    wide = max(bits.values())
+    # anchor of the narrow counters: every valid frame with a wide counter
+    a_parts = [
+        (dec.messages[n].index, dec.messages[n].signals["step"])
+        for n, _ in _TABLE_MESSAGES
+        if bits[n] == wide and n in dec.messages
+    ]
+    anchor = None
+    if a_parts:
+        a_idx = np.concatenate([p[0] for p in a_parts])
+        a_step = np.concatenate([p[1] for p in a_parts]).astype(np.int64)
+        o = np.argsort(a_idx, kind="stable")
+        anchor = (a_idx[o], a_step[o])
+    out: dict[str, npt.NDArray[np.int64]] = {}
+    for name, _ in _TABLE_MESSAGES:
+        b = dec.messages.get(name)
+        if b is None or len(b.index) == 0:
+            continue
+        raw = b.signals["step"].astype(np.int64)
+        full = _full_steps(name, raw, b.index, bits[name], anchor if bits[name] < wide else None)
+        if name == "PwmDuty":
+            full = full - 1  # the duty tagged k+1 answers sample k
+        out[name] = full
+    return out
+
+
+#: The plant's messages, whose steps say how far the plant has come in a capture.
+_PLANT_MESSAGES = ("PhaseSamples", "PlantTruth")
+#: The controller's answers, never for a step the plant has not reached.
+_ANSWER_MESSAGES = ("PwmDuty", "CtrlTelemetry")
+
+
+def _drop_implausible(dec: Any, fulls: dict[str, npt.NDArray[np.int64]], cap: Capture) -> bool:
+    """Drop the controller's frames for a step ahead of the plant's newest before them.
+
+    A duty tagged ``t`` answers sample ``t - 1`` and a telemetry of step ``k`` sample
+    ``k``: the plant sent that sample before, so its step is at most the newest
+    ``PhaseSamples`` / ``PlantTruth`` step before it in the capture (capture order,
+    every channel) plus :data:`bench.wire._protocol.ANSWER_LEAD`.  Such a frame
+    further ahead is not the run's (a random frame that passed the E2E CRC with a
+    counter in the unwrap window): counted in ``cap.rejected`` as ``future_counter``,
+    removed from ``dec`` (and from ``fulls``) so that it takes no part.  Frames before
+    the capture's first plant frame (a capture started mid-run) are kept.  True when a
+    frame was dropped.
+    """
+    plant = [n for n in _PLANT_MESSAGES if n in fulls]
+    if not plant:
+        return False
+    # the plant's newest step at each capture index (none yet: the lowest int64)
+    none = np.iinfo(np.int64).min
+    at = np.full(dec.frames + 1, none, dtype=np.int64)
+    for n in plant:
+        at[dec.messages[n].index + 1] = fulls[n]  # one message per index
+    newest = np.maximum.accumulate(at)  # newest[i]: of the frames before index i
+    dropped = False
+    for name in _ANSWER_MESSAGES:
+        if name not in fulls:
+            continue
+        b = dec.messages[name]
+        before = newest[b.index]
+        ahead = (before != none) & (fulls[name] > before + ANSWER_LEAD)
+        n_bad = int(np.count_nonzero(ahead))
+        if n_bad:
+            keep = ~ahead
+            b.index = b.index[keep]
+            b.signals = {k: v[keep] for k, v in b.signals.items()}
+            fulls[name] = fulls[name][keep]
+            cap.rejected[REJECT_FUTURE_COUNTER] = cap.rejected.get(REJECT_FUTURE_COUNTER, 0) + n_bad
+            dropped = True
+    return dropped
+
+
 def analyze_frames(
     frames: Iterable[can.Message],
     codec: Codec,
@@ -236,7 +314,9 @@ def analyze_frames(
 
     Frames that fail their E2E check (every message has one since DBC 2.1,
     the recorder's ``PlantTruth`` and ``CtrlTelemetry`` included) are counted
-    in ``rejected`` and take no part, not even in the step unwrapping. The
+    in ``rejected`` and take no part, not even in the step unwrapping; so are
+    a duty and a telemetry for a step the plant had not reached before them
+    in the capture (``future_counter``, :func:`_drop_implausible`). The
     recorder frames of another run (``run_id`` not the run's, see
     :func:`_own_run`) are counted in ``foreign`` and take no part either.
 
@@ -257,29 +337,16 @@ def analyze_frames(
     )
     _own_run(dec, run_id, cap)
     bits = {name: codec.step_bits(name) for name, _ in _TABLE_MESSAGES}
-    wide = max(bits.values())
-    # anchor of the narrow counters: every valid frame with a wide counter
-    a_parts = [
-        (dec.messages[n].index, dec.messages[n].signals["step"])
-        for n, _ in _TABLE_MESSAGES
-        if bits[n] == wide and n in dec.messages
-    ]
-    anchor = None
-    if a_parts:
-        a_idx = np.concatenate([p[0] for p in a_parts])
-        a_step = np.concatenate([p[1] for p in a_parts]).astype(np.int64)
-        o = np.argsort(a_idx, kind="stable")
-        anchor = (a_idx[o], a_step[o])
+    fulls = _all_full_steps(dec, bits)
+    if _drop_implausible(dec, fulls, cap) and bits["CtrlTelemetry"] == max(bits.values()):
+        fulls = _all_full_steps(dec, bits)  # a dropped telemetry anchored the narrow counters
     stores: dict[str, tuple[npt.NDArray[np.int64], Array]] = {}
     for name, sigs in _TABLE_MESSAGES:
         b = dec.messages.get(name)
         if b is None or len(b.index) == 0:
             stores[name] = (np.zeros(0, dtype=np.int64), np.zeros((0, len(sigs))))
             continue
-        raw = b.signals["step"].astype(np.int64)
-        full = _full_steps(name, raw, b.index, bits[name], anchor if bits[name] < wide else None)
-        if name == "PwmDuty":
-            full = full - 1  # the duty tagged k+1 answers sample k
+        full = fulls[name]
         steps_u, first, inv = np.unique(full, return_index=True, return_inverse=True)
         later = np.ones(len(full), dtype=bool)
         later[first] = False
