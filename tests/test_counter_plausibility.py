@@ -290,3 +290,34 @@ def test_a_forged_telemetry_ahead_is_counted_and_takes_no_part(
     assert got.rejected == {REJECT_FUTURE_COUNTER: 1}
     for col, v in clean.table.items():
         np.testing.assert_array_equal(got.table[col], v, err_msg=col)
+
+
+def test_a_forged_sample_31_ahead_takes_no_part_in_the_table(
+    capture: tuple[list[can.Message], float],
+) -> None:
+    # the capture of the first defect: the forged sample came before the genuine one of
+    # its step, and i_a of that step was the forgery's
+    frames, T_s = capture
+    newest = 1018
+    smp = {"i_a": 2.5, "i_b": -1.0, "u_dc": 540.0, "status": 1}
+    forged = _forge_after_sample(frames, newest, "PhaseSamples", newest + FORGED_LEAD, smp)
+    clean = analyze_frames(frames, CODEC, T_s=T_s, n_p=4)
+    got = analyze_frames(forged, CODEC, T_s=T_s, n_p=4)
+    assert got.rejected == {REJECT_FUTURE_COUNTER: 1}
+    for col, v in clean.table.items():
+        np.testing.assert_array_equal(got.table[col], v, err_msg=col)
+
+
+def test_a_sample_after_frames_the_recorder_lost_is_kept(
+    capture: tuple[list[can.Message], float],
+) -> None:
+    # the plant's frames of instants 500..504 lost: sample 505 is 6 ahead of the newest
+    # plant step before it, and its own truth after it vouches for it
+    frames, T_s = capture
+    plant = {CODEC.frame_id("PhaseSamples"), CODEC.frame_id("PlantTruth")}
+    gap = [m for m in frames if not (m.arbitration_id in plant and 500 <= _step(m) % M_STEP < 505)]
+    clean = analyze_frames(frames, CODEC, T_s=T_s, n_p=4)
+    got = analyze_frames(gap, CODEC, T_s=T_s, n_p=4)
+    assert got.rejected == {}
+    assert len(got.table["step"]) == len(clean.table["step"]) - 5
+    assert 505 in got.table["step"] and 504 not in got.table["step"]

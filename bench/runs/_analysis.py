@@ -26,7 +26,7 @@ import numpy.typing as npt
 
 from bench.nodes._counters import REJECT_FUTURE_COUNTER
 from bench.wire._codec import Codec
-from bench.wire._protocol import ANSWER_LEAD
+from bench.wire._protocol import ANSWER_LEAD, PLANT_LEAD
 
 Array = npt.NDArray[np.float64]
 
@@ -247,46 +247,90 @@ def _all_full_steps(dec: Any, bits: dict[str, int]) -> dict[str, npt.NDArray[np.
 _PLANT_MESSAGES = ("PhaseSamples", "PlantTruth")
 #: The controller's answers, never for a step the plant has not reached.
 _ANSWER_MESSAGES = ("PwmDuty", "CtrlTelemetry")
+#: No plant step yet (before the capture's first plant frame).
+_NONE = np.iinfo(np.int64).min
+
+
+class _PlantSteps:
+    """The plant's steps (``PhaseSamples``, ``PlantTruth``) by capture index."""
+
+    def __init__(self, dec: Any, fulls: dict[str, npt.NDArray[np.int64]]) -> None:
+        at = np.full(dec.frames + 1, _NONE, dtype=np.int64)
+        for m in _PLANT_MESSAGES:
+            if m in fulls:
+                at[dec.messages[m].index + 1] = fulls[m]  # one message per index
+        #: the plant's newest step before each capture index (the lowest int64: none)
+        self.newest = np.maximum.accumulate(at)
+        self.at = at[1:]
+
+    def any(self) -> bool:
+        return bool(self.newest[-1] != _NONE)
+
+    def ahead(self, index: npt.NDArray[np.int64], k: npt.NDArray[np.int64], lead: int) -> Any:
+        """Which frames (capture ``index``, step ``k``) are further than ``lead`` ahead of the
+        newest plant step before them and beyond the step of the plant's next frame."""
+        before = self.newest[index]
+        bad = (before != _NONE) & (k > before + lead)
+        if bad.any():  # rare: the plant's next frame after each suspect
+            p_idx = np.flatnonzero(self.at != _NONE)
+            pos = np.searchsorted(p_idx, index[bad], side="right")
+            n = len(p_idx)
+            nxt = np.where(pos < n, self.at[p_idx[np.minimum(pos, n - 1)]], _NONE)
+            bad[bad] = k[bad] > nxt
+        return bad
+
+
+def _drop(dec: Any, fulls: dict[str, npt.NDArray[np.int64]], name: str, bad: Any) -> int:
+    """Remove the frames ``bad`` (a mask) of message ``name`` from ``dec`` and ``fulls``."""
+    n_bad = int(np.count_nonzero(bad))
+    if n_bad:
+        keep = ~bad
+        b = dec.messages[name]
+        b.index = b.index[keep]
+        b.signals = {k: v[keep] for k, v in b.signals.items()}
+        fulls[name] = fulls[name][keep]
+    return n_bad
 
 
 def _drop_implausible(dec: Any, fulls: dict[str, npt.NDArray[np.int64]], cap: Capture) -> bool:
-    """Drop the controller's frames for a step ahead of the plant's newest before them.
+    """Drop the frames whose step is ahead of what the plant had sent around them.
 
-    A duty tagged ``t`` answers sample ``t - 1`` and a telemetry of step ``k`` sample
-    ``k``: the plant sent that sample before, so its step is at most the newest
-    ``PhaseSamples`` / ``PlantTruth`` step before it in the capture (capture order,
-    every channel) plus :data:`bench.wire._protocol.ANSWER_LEAD`.  Such a frame
-    further ahead is not the run's (a random frame that passed the E2E CRC with a
-    counter in the unwrap window): counted in ``cap.rejected`` as ``future_counter``,
-    removed from ``dec`` (and from ``fulls``) so that it takes no part.  Frames before
-    the capture's first plant frame (a capture started mid-run) are kept.  True when a
-    frame was dropped.
+    - A duty tagged ``t`` answers sample ``t - 1`` and a telemetry of step ``k`` sample
+      ``k``: the plant sent that sample before, so its step is at most the newest
+      ``PhaseSamples`` / ``PlantTruth`` step before it in the capture (capture order,
+      every channel) plus :data:`bench.wire._protocol.ANSWER_LEAD`.
+    - A sample is at most :data:`bench.wire._protocol.PLANT_LEAD` ahead of that newest
+      step.  Checked first: a forged sample would otherwise move the newest step for
+      the answers after it.
+
+    When the recorder lost the plant's frames before a genuine frame, the plant's next
+    frame after it vouches for it instead: that frame's step is at least the one the
+    frame answers (or is, for a sample: the plant goes on with that instant's truth,
+    then the next instant), so only a frame beyond both is taken for another's.  It is
+    not the run's (a random frame that passed the E2E CRC with a counter in the unwrap
+    window, which would take the place of the genuine frame of its step): counted in
+    ``cap.rejected`` as ``future_counter`` and removed from ``dec`` (and ``fulls``), so
+    that it takes no part.  Frames before the capture's first plant frame (a capture
+    started mid-run) are kept.  True when a frame was dropped.
     """
-    plant = [n for n in _PLANT_MESSAGES if n in fulls]
-    if not plant:
+    if not any(n in fulls for n in _PLANT_MESSAGES):
         return False
-    # the plant's newest step at each capture index (none yet: the lowest int64)
-    none = np.iinfo(np.int64).min
-    at = np.full(dec.frames + 1, none, dtype=np.int64)
-    for n in plant:
-        at[dec.messages[n].index + 1] = fulls[n]  # one message per index
-    newest = np.maximum.accumulate(at)  # newest[i]: of the frames before index i
-    dropped = False
-    for name in _ANSWER_MESSAGES:
-        if name not in fulls:
-            continue
-        b = dec.messages[name]
-        before = newest[b.index]
-        ahead = (before != none) & (fulls[name] > before + ANSWER_LEAD)
-        n_bad = int(np.count_nonzero(ahead))
+    n_bad = 0
+    plant = _PlantSteps(dec, fulls)
+    if "PhaseSamples" in fulls:
+        b = dec.messages["PhaseSamples"]
+        bad = plant.ahead(b.index, fulls["PhaseSamples"], PLANT_LEAD)
+        n_bad = _drop(dec, fulls, "PhaseSamples", bad)
         if n_bad:
-            keep = ~ahead
-            b.index = b.index[keep]
-            b.signals = {k: v[keep] for k, v in b.signals.items()}
-            fulls[name] = fulls[name][keep]
-            cap.rejected[REJECT_FUTURE_COUNTER] = cap.rejected.get(REJECT_FUTURE_COUNTER, 0) + n_bad
-            dropped = True
-    return dropped
+            plant = _PlantSteps(dec, fulls)
+    if plant.any():
+        for name in _ANSWER_MESSAGES:
+            if name in fulls:
+                bad = plant.ahead(dec.messages[name].index, fulls[name], ANSWER_LEAD)
+                n_bad += _drop(dec, fulls, name, bad)
+    if n_bad:
+        cap.rejected[REJECT_FUTURE_COUNTER] = cap.rejected.get(REJECT_FUTURE_COUNTER, 0) + n_bad
+    return n_bad > 0
 
 
 def analyze_frames(
@@ -338,8 +382,8 @@ def analyze_frames(
     _own_run(dec, run_id, cap)
     bits = {name: codec.step_bits(name) for name, _ in _TABLE_MESSAGES}
     fulls = _all_full_steps(dec, bits)
-    if _drop_implausible(dec, fulls, cap) and bits["CtrlTelemetry"] == max(bits.values()):
-        fulls = _all_full_steps(dec, bits)  # a dropped telemetry anchored the narrow counters
+    if _drop_implausible(dec, fulls, cap):
+        fulls = _all_full_steps(dec, bits)  # a dropped telemetry may have anchored some
     stores: dict[str, tuple[npt.NDArray[np.int64], Array]] = {}
     for name, sigs in _TABLE_MESSAGES:
         b = dec.messages.get(name)

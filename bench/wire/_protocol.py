@@ -81,6 +81,12 @@ def lockstep_sample_lead(delay: int) -> int:
 #: stamps, holds the sample (on the controller's bus, and earlier on the plant's)
 #: before the answer, whichever of the two sockets of a latency link it reads.
 ANSWER_LEAD = 0
+#: How far a ``PhaseSamples`` may be ahead of the newest plant step before it in a
+#: capture: 1.  A plant sends the frames of instant ``k`` (sample, then truth) after
+#: those of instant ``k - 1``, and resends only older ones.  (For this and
+#: :data:`ANSWER_LEAD`: when the recorder lost the frames before a genuine frame, the
+#: plant's next frame after it vouches for it instead, :mod:`bench.runs._analysis`.)
+PLANT_LEAD = 1
 
 
 #: ``BenchCommand.seq`` counts distinct commands (keep-alives included) modulo this.
