@@ -8,9 +8,9 @@ Tolerated: captures that start mid-run (steps are counted from the first one
 seen), gaps, other traffic (IDs not in the DBC are counted and skipped),
 frames that fail their CRC or length (counted per reason), frames repeated
 for a step (first one wins; identical copies counted apart from duplicates
-whose content differs) and out-of-order counters (counted).  A controller's
-frame (duty, telemetry) for a step the plant has not reached in the capture
-is no answer of the run's (``future_counter``, counted with the rejected).
+whose content differs) and out-of-order counters (counted).  A sample, duty
+or telemetry for a step ahead of the plant's frames around it in the capture
+is not the run's (``future_counter``, counted with the rejected).
 """
 
 from __future__ import annotations
@@ -359,8 +359,8 @@ def analyze_frames(
     Frames that fail their E2E check (every message has one since DBC 2.1,
     the recorder's ``PlantTruth`` and ``CtrlTelemetry`` included) are counted
     in ``rejected`` and take no part, not even in the step unwrapping; so are
-    a duty and a telemetry for a step the plant had not reached before them
-    in the capture (``future_counter``, :func:`_drop_implausible`). The
+    a sample, a duty and a telemetry for a step ahead of the plant's frames
+    around them in the capture (``future_counter``, :func:`_drop_implausible`). The
     recorder frames of another run (``run_id`` not the run's, see
     :func:`_own_run`) are counted in ``foreign`` and take no part either.
 
