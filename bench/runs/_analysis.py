@@ -267,8 +267,8 @@ class _PlantSteps:
         return bool(self.newest[-1] != _NONE)
 
     def ahead(self, index: npt.NDArray[np.int64], k: npt.NDArray[np.int64], lead: int) -> Any:
-        """Which frames (capture ``index``, step ``k``) are further than ``lead`` ahead of the
-        newest plant step before them and beyond the step of the plant's next frame."""
+        """Which frames (capture ``index``, step ``k``) are further than ``lead`` ahead of both
+        the newest plant step before them and the step of the plant's next frame."""
         before = self.newest[index]
         bad = (before != _NONE) & (k > before + lead)
         if bad.any():  # rare: the plant's next frame after each suspect
@@ -276,7 +276,7 @@ class _PlantSteps:
             pos = np.searchsorted(p_idx, index[bad], side="right")
             n = len(p_idx)
             nxt = np.where(pos < n, self.at[p_idx[np.minimum(pos, n - 1)]], _NONE)
-            bad[bad] = k[bad] > nxt
+            bad[bad] = k[bad] > nxt + lead
         return bad
 
 
@@ -303,10 +303,11 @@ def _drop_implausible(dec: Any, fulls: dict[str, npt.NDArray[np.int64]], cap: Ca
       step.  Checked first: a forged sample would otherwise move the newest step for
       the answers after it.
 
-    When the recorder lost the plant's frames before a genuine frame, the plant's next
-    frame after it vouches for it instead: that frame's step is at least the one the
-    frame answers (or is, for a sample: the plant goes on with that instant's truth,
-    then the next instant), so only a frame beyond both is taken for another's.  It is
+    When the recorder lost the plant's frames before a genuine frame, or the capture
+    has neighbours out of order (a real bus sends the frames queued in its mailboxes
+    by identifier, a log may merge interfaces), the plant's next frame after it vouches
+    for it instead, with the same lead: the plant goes on with the rest of that instant
+    and the next, so only a frame ahead of both is taken for another's.  It is
     not the run's (a random frame that passed the E2E CRC with a counter in the unwrap
     window, which would take the place of the genuine frame of its step): counted in
     ``cap.rejected`` as ``future_counter`` and removed from ``dec`` (and ``fulls``), so

@@ -84,8 +84,9 @@ ANSWER_LEAD = 0
 #: How far a ``PhaseSamples`` may be ahead of the newest plant step before it in a
 #: capture: 1.  A plant sends the frames of instant ``k`` (sample, then truth) after
 #: those of instant ``k - 1``, and resends only older ones.  (For this and
-#: :data:`ANSWER_LEAD`: when the recorder lost the frames before a genuine frame, the
-#: plant's next frame after it vouches for it instead, :mod:`bench.runs._analysis`.)
+#: :data:`ANSWER_LEAD`: when the recorder lost the frames before a genuine frame, or
+#: recorded neighbours out of order, the plant's next frame after it vouches for it
+#: instead, with the same lead: :mod:`bench.runs._analysis`.)
 PLANT_LEAD = 1
 
 
