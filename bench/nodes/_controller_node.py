@@ -26,6 +26,7 @@ from bench.wire._protocol import (
     CMD_START,
     CMD_STOP,
     RPM_PER_RAD_S,
+    lockstep_sample_lead,
     unwrap,
 )
 from controller import Controller, ControlOutput, HybridEstimator, Measurement
@@ -73,18 +74,41 @@ class ControllerNode:
 
     Samples are processed strictly in step order; a sample that arrives
     twice gets the cached answer again (the plant retransmits when a frame
-    was lost), a sample from the future waits for the missing ones.
+    was lost), a sample from the future waits for the missing ones.  In
+    lockstep with a known ``lockstep_delay``, a sample further ahead than the
+    plant can be (:func:`bench.wire._protocol.lockstep_sample_lead`) is
+    rejected (``future_counter``): it is not the plant's, and held it would
+    take the place of the genuine sample of its step.
 
     Parameters
     ----------
     needs_truth : bool
         The sensored baseline waits for ``PlantTruth`` of the same step.
+    lockstep_delay : int, optional
+        The plan's ``lockstep_delay`` (:attr:`bench.nodes._plan.RunPlan.lockstep_delay`),
+        which bounds how far ahead a lockstep sample can be; None (a node not made
+        from a run's plan): the unwrap window, as in real time.
+    truth_may_lead : bool
+        The plan has a fault timeline: its lockstep plant sends ``PlantTruth``
+        while it withholds the samples a fault loses and runs on without their
+        answers (:mod:`bench.nodes._fault_bus`), so a truth may lead by the
+        length of such a window and keeps the unwrap window's bound.
     """
 
-    def __init__(self, codec: Codec, controller: Controller, *, needs_truth: bool = False) -> None:
+    def __init__(
+        self,
+        codec: Codec,
+        controller: Controller,
+        *,
+        needs_truth: bool = False,
+        lockstep_delay: int | None = None,
+        truth_may_lead: bool = False,
+    ) -> None:
         self.codec = codec
         self.ctrl = controller
         self.needs_truth = needs_truth
+        self.lockstep_delay = lockstep_delay
+        self.truth_may_lead = truth_may_lead
         self.m_step = 1 << codec.step_bits("PhaseSamples")
         self.m_cmd = 1 << codec.step_bits("BenchCommand")
         self.m_tel = 1 << codec.step_bits("CtrlTelemetry")
@@ -153,6 +177,10 @@ class ControllerNode:
                     # the same duty; the telemetry with the acknowledgement held now
                     return [cached[0], self._telemetry(last)]
                 return list(cached)
+            lead = self.sample_lead()
+            if lead is not None and k > self.next_k + lead:
+                c.reject(REJECT_FUTURE_COUNTER)
+                return []
             if k in self.samples:
                 c.reject(REPEATED_COUNTER)
                 return []
@@ -168,12 +196,24 @@ class ControllerNode:
             if k < self.next_k or k in self.truth:
                 c.reject(REPEATED_COUNTER)
                 return []
-            if k > self.next_k + self.m_step:
+            lead = self.truth_lead()
+            if k > self.next_k + (self.m_step if lead is None else lead):
                 c.reject(REJECT_FUTURE_COUNTER)
                 return []
             c.frames_accepted += 1
             self.truth[k] = d.signals
         return self._run_ready()
+
+    def sample_lead(self) -> int | None:
+        """The most steps a sample may be ahead of :attr:`next_k`: in lockstep with a known
+        delay :func:`~bench.wire._protocol.lockstep_sample_lead`; else None (the unwrap window)."""
+        if self.realtime or self.lockstep_delay is None:
+            return None
+        return lockstep_sample_lead(self.lockstep_delay)
+
+    def truth_lead(self) -> int | None:
+        """The same for ``PlantTruth`` (None: one sample counter range, ``m_step``)."""
+        return None if self.truth_may_lead else self.sample_lead()
 
     def sample_timeout(self) -> None:
         """Samples stopped (real time): disable the PWM until a reset or enable command.

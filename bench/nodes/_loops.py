@@ -161,7 +161,13 @@ def controller_node(plan: RunPlan, codec: Codec) -> ControllerNode:
         ctrl = Controller(plan.controller, engine)
     except TypeError as e:
         raise BenchError(f"plan of {plan.scenario}: estimator options: {e}") from None
-    return ControllerNode(codec, ctrl, needs_truth=plan.needs_truth)
+    return ControllerNode(
+        codec,
+        ctrl,
+        needs_truth=plan.needs_truth,
+        lockstep_delay=plan.lockstep_delay,
+        truth_may_lead=bool(plan.faults),
+    )
 
 
 def command_frames(

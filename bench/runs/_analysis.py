@@ -8,7 +8,9 @@ Tolerated: captures that start mid-run (steps are counted from the first one
 seen), gaps, other traffic (IDs not in the DBC are counted and skipped),
 frames that fail their CRC or length (counted per reason), frames repeated
 for a step (first one wins; identical copies counted apart from duplicates
-whose content differs) and out-of-order counters (counted).
+whose content differs) and out-of-order counters (counted).  A sample, duty
+or telemetry for a step ahead of the plant's frames around it in the capture
+is not the run's (``future_counter``, counted with the rejected).
 """
 
 from __future__ import annotations
@@ -16,14 +18,15 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
-
-import can
 from typing import Any
 
+import can
 import numpy as np
 import numpy.typing as npt
 
+from bench.nodes._counters import REJECT_FUTURE_COUNTER
 from bench.wire._codec import Codec
+from bench.wire._protocol import ANSWER_LEAD, PLANT_LEAD
 
 Array = npt.NDArray[np.float64]
 
@@ -211,6 +214,126 @@ def _own_run(dec: Any, run_id: int | None, cap: Capture) -> None:
             b.signals = {k: v[keep] for k, v in b.signals.items()}
 
 
+def _all_full_steps(dec: Any, bits: dict[str, int]) -> dict[str, npt.NDArray[np.int64]]:
+    """Per message of the table, the step each of its valid frames belongs to (a duty's:
+    the sample it answers, its tag - 1), unwrapped by :func:`_full_steps`."""
+    wide = max(bits.values())
+    # anchor of the narrow counters: every valid frame with a wide counter
+    a_parts = [
+        (dec.messages[n].index, dec.messages[n].signals["step"])
+        for n, _ in _TABLE_MESSAGES
+        if bits[n] == wide and n in dec.messages
+    ]
+    anchor = None
+    if a_parts:
+        a_idx = np.concatenate([p[0] for p in a_parts])
+        a_step = np.concatenate([p[1] for p in a_parts]).astype(np.int64)
+        o = np.argsort(a_idx, kind="stable")
+        anchor = (a_idx[o], a_step[o])
+    out: dict[str, npt.NDArray[np.int64]] = {}
+    for name, _ in _TABLE_MESSAGES:
+        b = dec.messages.get(name)
+        if b is None or len(b.index) == 0:
+            continue
+        raw = b.signals["step"].astype(np.int64)
+        full = _full_steps(name, raw, b.index, bits[name], anchor if bits[name] < wide else None)
+        if name == "PwmDuty":
+            full = full - 1  # the duty tagged k+1 answers sample k
+        out[name] = full
+    return out
+
+
+#: The plant's messages, whose steps say how far the plant has come in a capture.
+_PLANT_MESSAGES = ("PhaseSamples", "PlantTruth")
+#: The controller's answers, never for a step the plant has not reached.
+_ANSWER_MESSAGES = ("PwmDuty", "CtrlTelemetry")
+#: No plant step yet (before the capture's first plant frame).
+_NONE = np.iinfo(np.int64).min
+
+
+class _PlantSteps:
+    """The plant's steps (``PhaseSamples``, ``PlantTruth``) by capture index."""
+
+    def __init__(self, dec: Any, fulls: dict[str, npt.NDArray[np.int64]]) -> None:
+        at = np.full(dec.frames + 1, _NONE, dtype=np.int64)
+        for m in _PLANT_MESSAGES:
+            if m in fulls:
+                at[dec.messages[m].index + 1] = fulls[m]  # one message per index
+        #: the plant's newest step before each capture index (the lowest int64: none)
+        self.newest = np.maximum.accumulate(at)
+        self.at = at[1:]
+
+    def any(self) -> bool:
+        return bool(self.newest[-1] != _NONE)
+
+    def ahead(self, index: npt.NDArray[np.int64], k: npt.NDArray[np.int64], lead: int) -> Any:
+        """Which frames (capture ``index``, step ``k``) are further than ``lead`` ahead of both
+        the newest plant step before them and the step of the plant's next frame."""
+        before = self.newest[index]
+        bad = (before != _NONE) & (k > before + lead)
+        if bad.any():  # rare: the plant's next frame after each suspect
+            p_idx = np.flatnonzero(self.at != _NONE)
+            pos = np.searchsorted(p_idx, index[bad], side="right")
+            n = len(p_idx)
+            nxt = np.where(pos < n, self.at[p_idx[np.minimum(pos, n - 1)]], _NONE)
+            bad[bad] = k[bad] > nxt + lead
+        return bad
+
+
+def _drop(dec: Any, fulls: dict[str, npt.NDArray[np.int64]], name: str, bad: Any) -> int:
+    """Remove the frames ``bad`` (a mask) of message ``name`` from ``dec`` and ``fulls``."""
+    n_bad = int(np.count_nonzero(bad))
+    if n_bad:
+        keep = ~bad
+        b = dec.messages[name]
+        b.index = b.index[keep]
+        b.signals = {k: v[keep] for k, v in b.signals.items()}
+        fulls[name] = fulls[name][keep]
+    return n_bad
+
+
+def _drop_implausible(dec: Any, fulls: dict[str, npt.NDArray[np.int64]], cap: Capture) -> bool:
+    """Drop the frames whose step is ahead of what the plant had sent around them.
+
+    - A duty tagged ``t`` answers sample ``t - 1`` and a telemetry of step ``k`` sample
+      ``k``: the plant sent that sample before, so its step is at most the newest
+      ``PhaseSamples`` / ``PlantTruth`` step before it in the capture (capture order,
+      every channel) plus :data:`bench.wire._protocol.ANSWER_LEAD`.
+    - A sample is at most :data:`bench.wire._protocol.PLANT_LEAD` ahead of that newest
+      step.  Checked first: a forged sample would otherwise move the newest step for
+      the answers after it.
+
+    When the recorder lost the plant's frames before a genuine frame, or the capture
+    has neighbours out of order (a real bus sends the frames queued in its mailboxes
+    by identifier, a log may merge interfaces), the plant's next frame after it vouches
+    for it instead, with the same lead: the plant goes on with the rest of that instant
+    and the next, so only a frame ahead of both is taken for another's.  It is
+    not the run's (a random frame that passed the E2E CRC with a counter in the unwrap
+    window, which would take the place of the genuine frame of its step): counted in
+    ``cap.rejected`` as ``future_counter`` and removed from ``dec`` (and ``fulls``), so
+    that it takes no part.  Frames before the capture's first plant frame (a capture
+    started mid-run) are kept.  True when a frame was dropped.
+    """
+    if not any(n in fulls for n in _PLANT_MESSAGES):
+        return False
+    n_bad = 0
+    plant = _PlantSteps(dec, fulls)
+    if "PhaseSamples" in fulls:
+        b = dec.messages["PhaseSamples"]
+        bad = plant.ahead(b.index, fulls["PhaseSamples"], PLANT_LEAD)
+        n_bad = _drop(dec, fulls, "PhaseSamples", bad)
+        if n_bad:
+            plant = _PlantSteps(dec, fulls)
+    if plant.any():
+        for name in _ANSWER_MESSAGES:
+            if name in fulls:
+                bad = plant.ahead(dec.messages[name].index, fulls[name], ANSWER_LEAD)
+                n_bad += _drop(dec, fulls, name, bad)
+    if n_bad:
+        cap.rejected[REJECT_FUTURE_COUNTER] = cap.rejected.get(REJECT_FUTURE_COUNTER, 0) + n_bad
+    return n_bad > 0
+
+
 def analyze_frames(
     frames: Iterable[can.Message],
     codec: Codec,
@@ -236,7 +359,9 @@ def analyze_frames(
 
     Frames that fail their E2E check (every message has one since DBC 2.1,
     the recorder's ``PlantTruth`` and ``CtrlTelemetry`` included) are counted
-    in ``rejected`` and take no part, not even in the step unwrapping. The
+    in ``rejected`` and take no part, not even in the step unwrapping; so are
+    a sample, a duty and a telemetry for a step ahead of the plant's frames
+    around them in the capture (``future_counter``, :func:`_drop_implausible`). The
     recorder frames of another run (``run_id`` not the run's, see
     :func:`_own_run`) are counted in ``foreign`` and take no part either.
 
@@ -257,29 +382,16 @@ def analyze_frames(
     )
     _own_run(dec, run_id, cap)
     bits = {name: codec.step_bits(name) for name, _ in _TABLE_MESSAGES}
-    wide = max(bits.values())
-    # anchor of the narrow counters: every valid frame with a wide counter
-    a_parts = [
-        (dec.messages[n].index, dec.messages[n].signals["step"])
-        for n, _ in _TABLE_MESSAGES
-        if bits[n] == wide and n in dec.messages
-    ]
-    anchor = None
-    if a_parts:
-        a_idx = np.concatenate([p[0] for p in a_parts])
-        a_step = np.concatenate([p[1] for p in a_parts]).astype(np.int64)
-        o = np.argsort(a_idx, kind="stable")
-        anchor = (a_idx[o], a_step[o])
+    fulls = _all_full_steps(dec, bits)
+    if _drop_implausible(dec, fulls, cap):
+        fulls = _all_full_steps(dec, bits)  # a dropped telemetry may have anchored some
     stores: dict[str, tuple[npt.NDArray[np.int64], Array]] = {}
     for name, sigs in _TABLE_MESSAGES:
         b = dec.messages.get(name)
         if b is None or len(b.index) == 0:
             stores[name] = (np.zeros(0, dtype=np.int64), np.zeros((0, len(sigs))))
             continue
-        raw = b.signals["step"].astype(np.int64)
-        full = _full_steps(name, raw, b.index, bits[name], anchor if bits[name] < wide else None)
-        if name == "PwmDuty":
-            full = full - 1  # the duty tagged k+1 answers sample k
+        full = fulls[name]
         steps_u, first, inv = np.unique(full, return_index=True, return_inverse=True)
         later = np.ones(len(full), dtype=bool)
         later[first] = False

@@ -616,7 +616,7 @@ def frames_warning(m: dict[str, Any]) -> str | None:
     parts = []
     bad = int(m.get("frames_rejected_recorded", 0))
     if bad:
-        parts.append(f"{bad:,} recorded frames failed their check (E2E CRC, length or range)")
+        parts.append(f"{bad:,} recorded frames failed their check (E2E CRC, length, range or counter)")
     foreign = int(m.get("frames_foreign", 0))
     if foreign:
         by = ", ".join(f"{k} {v:,}" for k, v in (m.get("frames_foreign_by_message") or {}).items())

@@ -49,6 +49,47 @@ def unwrap(raw: int, expected: int, modulus: int) -> int:
     return expected + d
 
 
+def lockstep_sample_lead(delay: int) -> int:
+    """The most steps a genuine ``PhaseSamples`` (or ``PlantTruth``) can be ahead of the
+    next step of a lockstep controller whose plant runs with ``delay`` periods of lockstep
+    latency (the plan's ``lockstep_delay``: sample plus duty delay of the link).
+
+    The controller's next step ``n`` says that the newest duty it has sent is tagged
+    ``n`` (the answer to sample ``n - 1``).  A lockstep plant runs period ``p`` only
+    with the duty tagged ``p - delay`` (periods with ``p - delay <= 0`` need none), so
+    with duties up to ``n`` it can run up to period ``n + delay``, which ends with the
+    sample of instant ``n + delay + 1``; its next period needs duty ``n + 1``, which the
+    controller has not computed.  A latency link only holds samples back (it releases
+    sample ``j`` once the plant's bus carried ``j + N_s``), and a retransmission resends
+    older frames.  So a genuine sample is at most ``delay + 1`` steps ahead; samples
+    arrive in the plant's order, so one that far ahead follows a loss the plant's
+    retransmission fills.  Anything further is not the plant's: a random frame that
+    passed the 8-bit E2E CRC (one in 256 do) with a counter in the unwrap window
+    (:data:`bench.nodes._counters.REJECT_FUTURE_COUNTER`, as AUTOSAR E2E's
+    MaxDeltaCounter).  Real time keeps the unwrap window: after a gap the controller
+    skips ahead to the newest sample.
+    """
+    return delay + 1
+
+
+#: How far a controller's answer (``PwmDuty`` tagged ``t``, which answers sample
+#: ``t - 1``; ``CtrlTelemetry`` of step ``k``, which answers sample ``k``) may be ahead
+#: of the newest plant step (``PhaseSamples``, ``PlantTruth``) before it in a capture,
+#: in the step of the sample it answers: 0.  A controller answers a sample only after
+#: it received it, and the recorder's sockets stamp every frame on receipt in the
+#: kernel (``SO_TIMESTAMPNS``; SocketCAN alike), so the capture, merged by those
+#: stamps, holds the sample (on the controller's bus, and earlier on the plant's)
+#: before the answer, whichever of the two sockets of a latency link it reads.
+ANSWER_LEAD = 0
+#: How far a ``PhaseSamples`` may be ahead of the newest plant step before it in a
+#: capture: 1.  A plant sends the frames of instant ``k`` (sample, then truth) after
+#: those of instant ``k - 1``, and resends only older ones.  (For this and
+#: :data:`ANSWER_LEAD`: when the recorder lost the frames before a genuine frame, or
+#: recorded neighbours out of order, the plant's next frame after it vouches for it
+#: instead, with the same lead: :mod:`bench.runs._analysis`.)
+PLANT_LEAD = 1
+
+
 #: ``BenchCommand.seq`` counts distinct commands (keep-alives included) modulo this.
 SEQ_MODULUS = 16
 #: Commands the host may have sent beyond the newest one the controller

@@ -202,6 +202,10 @@ static int on_sample(bn_ctl_t *ctl, const bn_frame_t *in, bn_ctl_sink_t sink, vo
         }
         return BN_CTL_EV_NONE;
     }
+    if (ctl->sample_lead >= 0 && k > ctl->next_k + ctl->sample_lead) {
+        reject(ctl, BN_CTL_R_FUTURE); /* further than a lockstep plant can be */
+        return BN_CTL_EV_NONE;
+    }
     size_t j = slot(k);
     if (ctl->s_k[j] == k) {
         reject(ctl, BN_CTL_R_REPEATED);
@@ -250,7 +254,7 @@ static int on_truth(bn_ctl_t *ctl, const bn_frame_t *in, bn_ctl_sink_t sink, voi
         reject(ctl, BN_CTL_R_REPEATED);
         return BN_CTL_EV_NONE;
     }
-    if (k > ctl->next_k + ctl->m_step) {
+    if (k > ctl->next_k + (ctl->truth_lead >= 0 ? ctl->truth_lead : ctl->m_step)) {
         reject(ctl, BN_CTL_R_FUTURE);
         return BN_CTL_EV_NONE;
     }

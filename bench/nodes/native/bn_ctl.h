@@ -4,7 +4,8 @@
  * on frames in and frames out, without a transport:
  *
  *   PhaseSamples  length, E2E CRC, DBC ranges; its step unwrapped against the
- *                 next step; a repeat answered from the last 8 answers; a
+ *                 next step; a repeat answered from the last 8 answers; one
+ *                 further ahead than sample_lead rejected (future_counter); a
  *                 sample from the future held until the missing ones come
  *                 (real time: skip to the newest); steps run strictly in order
  *   PlantTruth    the sensored baseline waits for the truth of the same step
@@ -101,6 +102,10 @@ typedef struct {
     int32_t needs_truth, realtime;
     double n_p;
     int64_t m_step, m_truth, m_tel; /* step counter ranges (2^bits) */
+    /* the most steps a sample / a truth may be ahead of next_k (lockstep with the
+     * plan's delay: ControllerNode.sample_lead, truth_lead); -1: the unwrap window
+     * (a truth: m_step) */
+    int64_t sample_lead, truth_lead;
     bn_sig_t sig[BN_CTL_NSIG];
     uint8_t duty_flags, tel_flags; /* BN_FD, BN_BRS of PwmDuty and CtrlTelemetry */
     uint32_t run_id;               /* the run's nonce (CtrlTelemetry.run_id) */

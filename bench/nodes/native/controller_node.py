@@ -142,6 +142,8 @@ class CtlBlock(ctypes.Structure):
         ("m_step", ctypes.c_int64),
         ("m_truth", ctypes.c_int64),
         ("m_tel", ctypes.c_int64),
+        ("sample_lead", ctypes.c_int64),
+        ("truth_lead", ctypes.c_int64),
         ("sig", Sig * len(SIGNALS)),
         ("duty_flags", ctypes.c_uint8),
         ("tel_flags", ctypes.c_uint8),
@@ -243,6 +245,9 @@ class NativeController:
         node.realtime = realtime
         c.n_p = float(node.ctrl.pars.motor.n_p)
         c.m_step, c.m_truth, c.m_tel = node.m_step, node.m_truth, node.m_tel
+        s_lead, t_lead = node.sample_lead(), node.truth_lead()  # after node.realtime is set
+        c.sample_lead = -1 if s_lead is None else s_lead
+        c.truth_lead = -1 if t_lead is None else t_lead
         codec = node.codec
         for j, (msg, name) in enumerate(SIGNALS):
             lo, hi, scale, offset, mod, chk_lo, chk_hi = codec.signal_table(msg)[name]
