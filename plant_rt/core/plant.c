@@ -113,7 +113,9 @@ int plant_set_legs(plant *pl, const int leg[3])
 
 void plant_currents(const plant *pl, double i[3])
 {
-    plant_currents_abc(&pl->m, &pl->x, i);
+    /* the memo is a cache of the state's angle, not state: reading the currents
+     * through it changes no result (plant_trig) */
+    plant_currents_abc(&pl->m, &pl->x, (plant_trig *)&pl->trig, i);
 }
 
 /* ---------------------------------------------------------------- helpers */
@@ -156,10 +158,10 @@ static void rk4_const(plant *pl, double h, const double v[3], double tau_L, doub
     double u_be = beta(v[1], v[2]);
     if (pl->metering)
         plant_rk4(&pl->m, &pl->x, pl->imposed, PLANT_STAGE_GENERAL, -1, h, u_al, u_be, tau_L, ua,
-                  ub, &pl->meter, v);
+                  ub, &pl->meter, v, &pl->trig);
     else
         plant_rk4(&pl->m, &pl->x, pl->imposed, PLANT_STAGE_HOT, -1, h, u_al, u_be, tau_L, ua, ub,
-                  NULL, NULL);
+                  NULL, NULL, &pl->trig);
 }
 
 /* One RK4 step with phase fx floating: its pole voltage solved at each stage. */
@@ -171,7 +173,7 @@ static void rk4_float(plant *pl, double h, const double v[3], int fx, double tau
     double u_al = alpha(vs[0], vs[1], vs[2]);
     double u_be = beta(vs[1], vs[2]);
     plant_rk4(&pl->m, &pl->x, pl->imposed, PLANT_STAGE_FLOAT, fx, h, u_al, u_be, tau_L, ua, ub,
-              pl->metering ? &pl->meter : NULL, v);
+              pl->metering ? &pl->meter : NULL, v, &pl->trig);
 }
 
 static double dw_open(const plant *pl, double tau_L, double w)
@@ -264,10 +266,10 @@ static void step_fast(plant *pl, double d_a, double d_b, double d_c, double t0)
         if (pl->metering) {
             double ua, ub;
             plant_rk4(&pl->m, &pl->x, pl->imposed, PLANT_STAGE_GENERAL, -1, h, u_al, u_be, tau_L,
-                      &ua, &ub, &pl->meter, v);
+                      &ua, &ub, &pl->meter, v, &pl->trig);
         } else {
             plant_rk4(&pl->m, &pl->x, pl->imposed, PLANT_STAGE_HOT, -1, h, u_al, u_be, tau_L, NULL,
-                      NULL, NULL, NULL);
+                      NULL, NULL, NULL, &pl->trig);
         }
     }
     pl->u_al = u_al;
@@ -663,7 +665,7 @@ static void rk4_bridge(plant *pl, double h, const double vs[3], int fx, double t
         return;
     }
     plant_rk4(&pl->m, &pl->x, pl->imposed, PLANT_STAGE_GENERAL, -1, h, alpha(vs[0], vs[1], vs[2]),
-              beta(vs[1], vs[2]), tau_L, ua, ub, pl->metering ? &pl->meter : NULL, vs);
+              beta(vs[1], vs[2]), tau_L, ua, ub, pl->metering ? &pl->meter : NULL, vs, &pl->trig);
 }
 
 /* One substep with all switches open; the mean stator voltage in alpha-beta. */

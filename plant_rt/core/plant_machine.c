@@ -228,10 +228,11 @@ double plant_machine_torque(const plant_machine *m, double i_d, double i_q)
 }
 
 /* Inverse Park and Clarke (amplitude invariant). */
-void plant_currents_abc(const plant_machine *m, const plant_state *s, double out[3])
+void plant_currents_abc(const plant_machine *m, const plant_state *s, plant_trig *t,
+                        double out[3])
 {
-    double th_e = m->n_p * s->th_m;
-    double c = cos(th_e), sn = sin(th_e);
+    double c, sn;
+    plant_trig_of(t, m->n_p * s->th_m, &c, &sn);
     double i_al = c * s->i_d - sn * s->i_q;
     double i_be = sn * s->i_d + c * s->i_q;
     out[0] = i_al;

@@ -19,6 +19,8 @@
 #define PLANT_MACHINE_H
 
 #include <math.h>
+#include <stdint.h>
+#include <string.h>
 
 /* Design parameters (plant_rt.MotorPars). */
 typedef struct {
@@ -127,8 +129,43 @@ void plant_machine_f_float(const plant_machine *m, int imposed, double i_d, doub
 /* Electromagnetic torque 1.5 n_p (psi_d i_q - psi_q i_d) (N m). */
 double plant_machine_torque(const plant_machine *m, double i_d, double i_q);
 
-/* Phase currents from the d-q currents at the rotor angle. */
-void plant_currents_abc(const plant_machine *m, const plant_state *s, double out[3]);
+/* The cosine and sine of the last electrical angle turned into them, kept by the
+ * plant so that an angle already computed is not computed again: the sensors' angle
+ * at the end of a period is the first RK4 stage's of the next, and with the speed
+ * held the two middle stages share one angle. The memo is keyed by the angle's bits
+ * and filled by the same cos() and sin() calls as before, so every result is the
+ * same bits as computing each time (the compiler may pair the two calls into one
+ * sincos, as it did where they were written out). Zeroed: empty. */
+typedef struct {
+    uint64_t key; /* the bits of the angle of c and s */
+    int full;     /* c and s hold a result */
+    double c, s;
+} plant_trig;
+
+/* cos(th_e) and sin(th_e), from the memo t when it holds th_e (t may be NULL). */
+static inline void plant_trig_of(plant_trig *t, double th_e, double *c, double *s)
+{
+    if (t == NULL) {
+        *c = cos(th_e);
+        *s = sin(th_e);
+        return;
+    }
+    uint64_t key;
+    memcpy(&key, &th_e, sizeof key);
+    if (!t->full || t->key != key) {
+        t->c = cos(th_e);
+        t->s = sin(th_e);
+        t->key = key;
+        t->full = 1;
+    }
+    *c = t->c;
+    *s = t->s;
+}
+
+/* Phase currents from the d-q currents at the rotor angle (its cos and sin through
+ * the memo t, which may be NULL). */
+void plant_currents_abc(const plant_machine *m, const plant_state *s, plant_trig *t,
+                        double out[3]);
 
 /* Remove phase x's current by projecting i_dq onto its null line. */
 void plant_zero_phase(const plant_machine *m, plant_state *s, int x);

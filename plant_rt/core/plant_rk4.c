@@ -35,7 +35,7 @@ static void meter_stage(const plant_machine *m, plant_meter *e, int imposed, dou
 /* One classic RK4 step of length h (no subdivision). */
 static void rk4_step(const plant_machine *m, plant_state *s, int imposed, int kind, int fx,
                      double h, double u_al, double u_be, double tau_L, double *ua, double *ub,
-                     plant_meter *meter, const double v[3])
+                     plant_meter *meter, const double v[3], plant_trig *t)
 {
     double vs[3] = {0.0, 0.0, 0.0};
     if (meter) {
@@ -61,9 +61,9 @@ static void rk4_step(const plant_machine *m, plant_state *s, int imposed, int ki
         }
         switch (kind) {
         case PLANT_STAGE_HOT: {
-            double th_e = n_p * th;
-            plant_machine_stage(m, i_d, i_q, w, cos(th_e), sin(th_e), u_al, u_be, tau_L, free_,
-                                d);
+            double c, sn;
+            plant_trig_of(t, n_p * th, &c, &sn);
+            plant_machine_stage(m, i_d, i_q, w, c, sn, u_al, u_be, tau_L, free_, d);
             break;
         }
         case PLANT_STAGE_GENERAL:
@@ -132,18 +132,18 @@ int plant_rk4_substeps(const plant_machine *m, const plant_state *s, int imposed
 
 void plant_rk4(const plant_machine *m, plant_state *s, int imposed, int kind, int fx, double h,
                double u_al, double u_be, double tau_L, double *ua, double *ub, plant_meter *meter,
-               const double v[3])
+               const double v[3], plant_trig *t)
 {
     int n = plant_rk4_substeps(m, s, imposed, h);
     if (n == 1) {
-        rk4_step(m, s, imposed, kind, fx, h, u_al, u_be, tau_L, ua, ub, meter, v);
+        rk4_step(m, s, imposed, kind, fx, h, u_al, u_be, tau_L, ua, ub, meter, v, t);
         return;
     }
     /* n equal steps; the interval's mean stator voltage is the mean of theirs. */
     double hn = h / n, ua_sum = 0.0, ub_sum = 0.0;
     for (int k = 0; k < n; k++) {
         double ua_k = u_al, ub_k = u_be;
-        rk4_step(m, s, imposed, kind, fx, hn, u_al, u_be, tau_L, &ua_k, &ub_k, meter, v);
+        rk4_step(m, s, imposed, kind, fx, hn, u_al, u_be, tau_L, &ua_k, &ub_k, meter, v, t);
         ua_sum += ua_k;
         ub_sum += ub_k;
     }
