@@ -409,7 +409,7 @@ static void step_average_legs(plant *pl, double d_a, double d_b, double d_c, dou
                 vf[x] = 0.0;
                 plant_machine_f_float(&pl->m, pl->imposed, pl->x.i_d, pl->x.i_q, pl->x.w_m,
                                       pl->x.th_m, alpha(vf[0], vf[1], vf[2]), beta(vf[1], vf[2]),
-                                      x, tau_L, d);
+                                      x, tau_L, &pl->trig, d);
                 if (d[4] < la[x].lo) {
                     v[x] = la[x].lo;
                     la[x].pos = la[x].pos_lo;
@@ -550,7 +550,8 @@ static void sw_interval(plant *pl, double h, const int states[3], double tau_L, 
         int x = floating[0];
         double d[5];
         plant_machine_f_float(&pl->m, pl->imposed, pl->x.i_d, pl->x.i_q, pl->x.w_m, pl->x.th_m,
-                              alpha(v[0], v[1], v[2]), beta(v[1], v[2]), x, tau_L, d);
+                              alpha(v[0], v[1], v[2]), beta(v[1], v[2]), x, tau_L,
+                              &pl->trig, d);
         double v_x = d[4];
         if (pl->leg[x] == PLANT_LEG_OPEN_PHASE) { /* open: no diode takes it again */
             fx = x;
@@ -715,7 +716,8 @@ static void substep_off(plant *pl, double h, double tau_L, double *ua, double *u
         vf[fx] = 0.0;
         double d[5];
         plant_machine_f_float(&pl->m, pl->imposed, pl->x.i_d, pl->x.i_q, pl->x.w_m, pl->x.th_m,
-                              alpha(vf[0], vf[1], vf[2]), beta(vf[1], vf[2]), fx, tau_L, d);
+                              alpha(vf[0], vf[1], vf[2]), beta(vf[1], vf[2]), fx, tau_L,
+                              &pl->trig, d);
         double v_x = d[4];
         if (v_x > u_dc) {
             sgn[fx] = -1;

@@ -12,10 +12,10 @@ static const double RK4_W[4] = {1.0, 2.0, 2.0, 1.0};
  * R_s sum_x i_x^2, air gap tau_e w_m, friction b w_m^2, load tau_L w_m. */
 static void meter_stage(const plant_machine *m, plant_meter *e, int imposed, double i_d,
                         double i_q, double w_m, double th_m, const double vs[3], double tau_e,
-                        double tau_L, double dt)
+                        double tau_L, double dt, plant_trig *t)
 {
-    double th_e = m->n_p * th_m;
-    double c = cos(th_e), sn = sin(th_e);
+    double c, sn;
+    plant_trig_of(t, m->n_p * th_m, &c, &sn);
     double i_al = c * i_d - sn * i_q;
     double i_be = sn * i_d + c * i_q;
     double i_a = i_al;
@@ -67,18 +67,19 @@ static void rk4_step(const plant_machine *m, plant_state *s, int imposed, int ki
             break;
         }
         case PLANT_STAGE_GENERAL:
-            plant_machine_f(m, imposed, i_d, i_q, w, th, u_al, u_be, tau_L, d);
+            plant_machine_f(m, imposed, i_d, i_q, w, th, u_al, u_be, tau_L, t, d);
             ua_sum += wgt * u_al;
             ub_sum += wgt * u_be;
             break;
         default:
-            plant_machine_f_float(m, imposed, i_d, i_q, w, th, u_al, u_be, fx, tau_L, d);
+            plant_machine_f_float(m, imposed, i_d, i_q, w, th, u_al, u_be, fx, tau_L, t, d);
             vs[fx] = d[4];
             ua_sum += wgt * (u_al + (2.0 / 3.0) * d[4] * PLANT_COS_PHI[fx]);
             ub_sum += wgt * (u_be + (2.0 / 3.0) * d[4] * PLANT_SIN_PHI[fx]);
             break;
         }
-        if (meter) meter_stage(m, meter, imposed, i_d, i_q, w, th, vs, d[3], tau_L, wgt * h / 6.0);
+        if (meter)
+            meter_stage(m, meter, imposed, i_d, i_q, w, th, vs, d[3], tau_L, wgt * h / 6.0, t);
         s_d += wgt * d[0];
         s_q += wgt * d[1];
         s_w += wgt * d[2];
