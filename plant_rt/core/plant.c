@@ -113,7 +113,9 @@ int plant_set_legs(plant *pl, const int leg[3])
 
 void plant_currents(const plant *pl, double i[3])
 {
-    plant_currents_abc(&pl->m, &pl->x, i);
+    /* the memo is a cache of the state's angle, not state: reading the currents
+     * through it changes no result (plant_trig) */
+    plant_currents_abc(&pl->m, &pl->x, (plant_trig *)&pl->trig, i);
 }
 
 /* ---------------------------------------------------------------- helpers */
@@ -156,10 +158,10 @@ static void rk4_const(plant *pl, double h, const double v[3], double tau_L, doub
     double u_be = beta(v[1], v[2]);
     if (pl->metering)
         plant_rk4(&pl->m, &pl->x, pl->imposed, PLANT_STAGE_GENERAL, -1, h, u_al, u_be, tau_L, ua,
-                  ub, &pl->meter, v);
+                  ub, &pl->meter, v, &pl->trig);
     else
         plant_rk4(&pl->m, &pl->x, pl->imposed, PLANT_STAGE_HOT, -1, h, u_al, u_be, tau_L, ua, ub,
-                  NULL, NULL);
+                  NULL, NULL, &pl->trig);
 }
 
 /* One RK4 step with phase fx floating: its pole voltage solved at each stage. */
@@ -171,7 +173,7 @@ static void rk4_float(plant *pl, double h, const double v[3], int fx, double tau
     double u_al = alpha(vs[0], vs[1], vs[2]);
     double u_be = beta(vs[1], vs[2]);
     plant_rk4(&pl->m, &pl->x, pl->imposed, PLANT_STAGE_FLOAT, fx, h, u_al, u_be, tau_L, ua, ub,
-              pl->metering ? &pl->meter : NULL, v);
+              pl->metering ? &pl->meter : NULL, v, &pl->trig);
 }
 
 static double dw_open(const plant *pl, double tau_L, double w)
@@ -264,10 +266,10 @@ static void step_fast(plant *pl, double d_a, double d_b, double d_c, double t0)
         if (pl->metering) {
             double ua, ub;
             plant_rk4(&pl->m, &pl->x, pl->imposed, PLANT_STAGE_GENERAL, -1, h, u_al, u_be, tau_L,
-                      &ua, &ub, &pl->meter, v);
+                      &ua, &ub, &pl->meter, v, &pl->trig);
         } else {
             plant_rk4(&pl->m, &pl->x, pl->imposed, PLANT_STAGE_HOT, -1, h, u_al, u_be, tau_L, NULL,
-                      NULL, NULL, NULL);
+                      NULL, NULL, NULL, &pl->trig);
         }
     }
     pl->u_al = u_al;
@@ -407,7 +409,7 @@ static void step_average_legs(plant *pl, double d_a, double d_b, double d_c, dou
                 vf[x] = 0.0;
                 plant_machine_f_float(&pl->m, pl->imposed, pl->x.i_d, pl->x.i_q, pl->x.w_m,
                                       pl->x.th_m, alpha(vf[0], vf[1], vf[2]), beta(vf[1], vf[2]),
-                                      x, tau_L, d);
+                                      x, tau_L, &pl->trig, d);
                 if (d[4] < la[x].lo) {
                     v[x] = la[x].lo;
                     la[x].pos = la[x].pos_lo;
@@ -548,7 +550,8 @@ static void sw_interval(plant *pl, double h, const int states[3], double tau_L, 
         int x = floating[0];
         double d[5];
         plant_machine_f_float(&pl->m, pl->imposed, pl->x.i_d, pl->x.i_q, pl->x.w_m, pl->x.th_m,
-                              alpha(v[0], v[1], v[2]), beta(v[1], v[2]), x, tau_L, d);
+                              alpha(v[0], v[1], v[2]), beta(v[1], v[2]), x, tau_L,
+                              &pl->trig, d);
         double v_x = d[4];
         if (pl->leg[x] == PLANT_LEG_OPEN_PHASE) { /* open: no diode takes it again */
             fx = x;
@@ -663,7 +666,7 @@ static void rk4_bridge(plant *pl, double h, const double vs[3], int fx, double t
         return;
     }
     plant_rk4(&pl->m, &pl->x, pl->imposed, PLANT_STAGE_GENERAL, -1, h, alpha(vs[0], vs[1], vs[2]),
-              beta(vs[1], vs[2]), tau_L, ua, ub, pl->metering ? &pl->meter : NULL, vs);
+              beta(vs[1], vs[2]), tau_L, ua, ub, pl->metering ? &pl->meter : NULL, vs, &pl->trig);
 }
 
 /* One substep with all switches open; the mean stator voltage in alpha-beta. */
@@ -713,7 +716,8 @@ static void substep_off(plant *pl, double h, double tau_L, double *ua, double *u
         vf[fx] = 0.0;
         double d[5];
         plant_machine_f_float(&pl->m, pl->imposed, pl->x.i_d, pl->x.i_q, pl->x.w_m, pl->x.th_m,
-                              alpha(vf[0], vf[1], vf[2]), beta(vf[1], vf[2]), fx, tau_L, d);
+                              alpha(vf[0], vf[1], vf[2]), beta(vf[1], vf[2]), fx, tau_L,
+                              &pl->trig, d);
         double v_x = d[4];
         if (v_x > u_dc) {
             sgn[fx] = -1;

@@ -59,6 +59,7 @@ typedef struct {
     plant_sensors sens;
     /* states */
     plant_state x;
+    plant_trig trig; /* cos and sin of the last electrical angle (plant_trig_of) */
     double u_dc;
     int imposed; /* the speed is held (dynamometer) */
     /* outputs of the last period: mean stator voltage, the delayed sample */

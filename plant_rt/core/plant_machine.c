@@ -113,11 +113,12 @@ void plant_flux_dq(const plant_machine *m, double i_d, double i_q, double out[5]
 }
 
 void plant_machine_f(const plant_machine *m, int imposed, double i_d, double i_q, double w_m,
-                     double th_m, double u_al, double u_be, double tau_L, double out[4])
+                     double th_m, double u_al, double u_be, double tau_L, plant_trig *t,
+                     double out[4])
 {
     double n_p = m->n_p;
-    double th_e = n_p * th_m;
-    double c = cos(th_e), sn = sin(th_e);
+    double c, sn;
+    plant_trig_of(t, n_p * th_m, &c, &sn);
     double u_d = c * u_al + sn * u_be;
     double u_q = c * u_be - sn * u_al;
     double w_e = n_p * w_m;
@@ -185,11 +186,11 @@ static void f_float_cross(const plant_machine *m, int imposed, double i_d, doubl
  * v_x solved from d i_x / dt = 0, i_x = i_d cos(theta_e - phi_x) - i_q sin(theta_e - phi_x). */
 void plant_machine_f_float(const plant_machine *m, int imposed, double i_d, double i_q,
                            double w_m, double th_m, double u_al0, double u_be0, int x,
-                           double tau_L, double out[5])
+                           double tau_L, plant_trig *t, double out[5])
 {
     double n_p = m->n_p;
-    double th_e = n_p * th_m;
-    double c = cos(th_e), sn = sin(th_e);
+    double c, sn;
+    plant_trig_of(t, n_p * th_m, &c, &sn);
     double u_d = c * u_al0 + sn * u_be0;
     double u_q = c * u_be0 - sn * u_al0;
     double w_e = n_p * w_m;
@@ -228,10 +229,11 @@ double plant_machine_torque(const plant_machine *m, double i_d, double i_q)
 }
 
 /* Inverse Park and Clarke (amplitude invariant). */
-void plant_currents_abc(const plant_machine *m, const plant_state *s, double out[3])
+void plant_currents_abc(const plant_machine *m, const plant_state *s, plant_trig *t,
+                        double out[3])
 {
-    double th_e = m->n_p * s->th_m;
-    double c = cos(th_e), sn = sin(th_e);
+    double c, sn;
+    plant_trig_of(t, m->n_p * s->th_m, &c, &sn);
     double i_al = c * s->i_d - sn * s->i_q;
     double i_be = sn * s->i_d + c * s->i_q;
     out[0] = i_al;

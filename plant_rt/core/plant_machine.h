@@ -19,6 +19,8 @@
 #define PLANT_MACHINE_H
 
 #include <math.h>
+#include <stdint.h>
+#include <string.h>
 
 /* Design parameters (plant_rt.MotorPars). */
 typedef struct {
@@ -61,6 +63,40 @@ typedef struct {
     double w_m;      /* rad/s */
     double th_m;     /* rad */
 } plant_state;
+
+/* The cosine and sine of the last electrical angle turned into them, kept by the
+ * plant so that an angle already computed is not computed again: the sensors' angle
+ * at the end of a period is the first RK4 stage's of the next, and with the speed
+ * held the two middle stages share one angle, and a metered stage's energy flows are
+ * taken at that stage's angle. The memo is keyed by the angle's bits
+ * and filled by the same cos() and sin() calls as before, so every result is the
+ * same bits as computing each time (the compiler may pair the two calls into one
+ * sincos, as it did where they were written out). Zeroed: empty. */
+typedef struct {
+    uint64_t key; /* the bits of the angle of c and s */
+    int full;     /* c and s hold a result */
+    double c, s;
+} plant_trig;
+
+/* cos(th_e) and sin(th_e), from the memo t when it holds th_e (t may be NULL). */
+static inline void plant_trig_of(plant_trig *t, double th_e, double *c, double *s)
+{
+    if (t == NULL) {
+        *c = cos(th_e);
+        *s = sin(th_e);
+        return;
+    }
+    uint64_t key;
+    memcpy(&key, &th_e, sizeof key);
+    if (!t->full || t->key != key) {
+        t->c = cos(th_e);
+        t->s = sin(th_e);
+        t->key = key;
+        t->full = 1;
+    }
+    *c = t->c;
+    *s = t->s;
+}
 
 void plant_machine_init(plant_machine *m, const plant_machine_pars *p);
 
@@ -115,20 +151,24 @@ void plant_flux_d(const plant_machine *m, double i_d, double *psi_d, double *L_d
 void plant_flux_dq(const plant_machine *m, double i_d, double i_q, double out[5]);
 
 
-/* Plant._f: out = (di_d, di_q, dw, tau_e). */
+/* Plant._f: out = (di_d, di_q, dw, tau_e); the angle's cos and sin through the memo t
+ * (plant_trig_of; may be NULL), as for plant_machine_f_float. */
 void plant_machine_f(const plant_machine *m, int imposed, double i_d, double i_q, double w_m,
-                     double th_m, double u_al, double u_be, double tau_L, double out[4]);
+                     double th_m, double u_al, double u_be, double tau_L, plant_trig *t,
+                     double out[4]);
 
 /* Plant._f_float: phase x floating; out = (di_d, di_q, dw, tau_e, v_x). */
 void plant_machine_f_float(const plant_machine *m, int imposed, double i_d, double i_q,
                            double w_m, double th_m, double u_al0, double u_be0, int x,
-                           double tau_L, double out[5]);
+                           double tau_L, plant_trig *t, double out[5]);
 
 /* Electromagnetic torque 1.5 n_p (psi_d i_q - psi_q i_d) (N m). */
 double plant_machine_torque(const plant_machine *m, double i_d, double i_q);
 
-/* Phase currents from the d-q currents at the rotor angle. */
-void plant_currents_abc(const plant_machine *m, const plant_state *s, double out[3]);
+/* Phase currents from the d-q currents at the rotor angle (its cos and sin through
+ * the memo t, which may be NULL). */
+void plant_currents_abc(const plant_machine *m, const plant_state *s, plant_trig *t,
+                        double out[3]);
 
 /* Remove phase x's current by projecting i_dq onto its null line. */
 void plant_zero_phase(const plant_machine *m, plant_state *s, int x);

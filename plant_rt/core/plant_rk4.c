@@ -12,10 +12,10 @@ static const double RK4_W[4] = {1.0, 2.0, 2.0, 1.0};
  * R_s sum_x i_x^2, air gap tau_e w_m, friction b w_m^2, load tau_L w_m. */
 static void meter_stage(const plant_machine *m, plant_meter *e, int imposed, double i_d,
                         double i_q, double w_m, double th_m, const double vs[3], double tau_e,
-                        double tau_L, double dt)
+                        double tau_L, double dt, plant_trig *t)
 {
-    double th_e = m->n_p * th_m;
-    double c = cos(th_e), sn = sin(th_e);
+    double c, sn;
+    plant_trig_of(t, m->n_p * th_m, &c, &sn);
     double i_al = c * i_d - sn * i_q;
     double i_be = sn * i_d + c * i_q;
     double i_a = i_al;
@@ -35,7 +35,7 @@ static void meter_stage(const plant_machine *m, plant_meter *e, int imposed, dou
 /* One classic RK4 step of length h (no subdivision). */
 static void rk4_step(const plant_machine *m, plant_state *s, int imposed, int kind, int fx,
                      double h, double u_al, double u_be, double tau_L, double *ua, double *ub,
-                     plant_meter *meter, const double v[3])
+                     plant_meter *meter, const double v[3], plant_trig *t)
 {
     double vs[3] = {0.0, 0.0, 0.0};
     if (meter) {
@@ -61,24 +61,25 @@ static void rk4_step(const plant_machine *m, plant_state *s, int imposed, int ki
         }
         switch (kind) {
         case PLANT_STAGE_HOT: {
-            double th_e = n_p * th;
-            plant_machine_stage(m, i_d, i_q, w, cos(th_e), sin(th_e), u_al, u_be, tau_L, free_,
-                                d);
+            double c, sn;
+            plant_trig_of(t, n_p * th, &c, &sn);
+            plant_machine_stage(m, i_d, i_q, w, c, sn, u_al, u_be, tau_L, free_, d);
             break;
         }
         case PLANT_STAGE_GENERAL:
-            plant_machine_f(m, imposed, i_d, i_q, w, th, u_al, u_be, tau_L, d);
+            plant_machine_f(m, imposed, i_d, i_q, w, th, u_al, u_be, tau_L, t, d);
             ua_sum += wgt * u_al;
             ub_sum += wgt * u_be;
             break;
         default:
-            plant_machine_f_float(m, imposed, i_d, i_q, w, th, u_al, u_be, fx, tau_L, d);
+            plant_machine_f_float(m, imposed, i_d, i_q, w, th, u_al, u_be, fx, tau_L, t, d);
             vs[fx] = d[4];
             ua_sum += wgt * (u_al + (2.0 / 3.0) * d[4] * PLANT_COS_PHI[fx]);
             ub_sum += wgt * (u_be + (2.0 / 3.0) * d[4] * PLANT_SIN_PHI[fx]);
             break;
         }
-        if (meter) meter_stage(m, meter, imposed, i_d, i_q, w, th, vs, d[3], tau_L, wgt * h / 6.0);
+        if (meter)
+            meter_stage(m, meter, imposed, i_d, i_q, w, th, vs, d[3], tau_L, wgt * h / 6.0, t);
         s_d += wgt * d[0];
         s_q += wgt * d[1];
         s_w += wgt * d[2];
@@ -132,18 +133,18 @@ int plant_rk4_substeps(const plant_machine *m, const plant_state *s, int imposed
 
 void plant_rk4(const plant_machine *m, plant_state *s, int imposed, int kind, int fx, double h,
                double u_al, double u_be, double tau_L, double *ua, double *ub, plant_meter *meter,
-               const double v[3])
+               const double v[3], plant_trig *t)
 {
     int n = plant_rk4_substeps(m, s, imposed, h);
     if (n == 1) {
-        rk4_step(m, s, imposed, kind, fx, h, u_al, u_be, tau_L, ua, ub, meter, v);
+        rk4_step(m, s, imposed, kind, fx, h, u_al, u_be, tau_L, ua, ub, meter, v, t);
         return;
     }
     /* n equal steps; the interval's mean stator voltage is the mean of theirs. */
     double hn = h / n, ua_sum = 0.0, ub_sum = 0.0;
     for (int k = 0; k < n; k++) {
         double ua_k = u_al, ub_k = u_be;
-        rk4_step(m, s, imposed, kind, fx, hn, u_al, u_be, tau_L, &ua_k, &ub_k, meter, v);
+        rk4_step(m, s, imposed, kind, fx, hn, u_al, u_be, tau_L, &ua_k, &ub_k, meter, v, t);
         ua_sum += ua_k;
         ub_sum += ub_k;
     }

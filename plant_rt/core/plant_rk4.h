@@ -77,9 +77,10 @@ int plant_rk4_substeps(const plant_machine *m, const plant_state *s, int imposed
  * With a meter (general and floating stages only) the energy flows are
  * integrated with the stages' weights from the pole voltages v (v[fx]
  * replaced by the floating leg's voltage at each stage). In several steps
- * the mean stator voltage is the mean of the steps' means. */
+ * the mean stator voltage is the mean of the steps' means. Every stage, and the meter
+ * at its angle, takes the cosine and sine through the memo t (plant_trig_of; may be NULL). */
 void plant_rk4(const plant_machine *m, plant_state *s, int imposed, int kind, int fx, double h,
                double u_al, double u_be, double tau_L, double *ua, double *ub, plant_meter *meter,
-               const double v[3]);
+               const double v[3], plant_trig *t);
 
 #endif

@@ -35,6 +35,7 @@ from pathlib import Path
 from typing import Any
 
 import can
+import numpy as np
 
 from bench._errors import BenchError
 from bench.nodes.native import _native
@@ -515,6 +516,11 @@ class _Sync:
         self.seen_rej = [0] * N_REJECT
         self.seen_duty_rej = [0] * N_REJECT
         self.seen_trips = [0] * 8
+        # the pending list and the duty ring as numpy views of the unit's memory: one
+        # vector copy a return instead of a ctypes access per slot (the pair returns
+        # once per bench command)
+        self.cmds = np.ctypeslib.as_array(u.cmds)
+        self.duties = np.ctypeslib.as_array(u.duties)
 
     def push_all(self) -> None:
         node, u = self.node, self.u
@@ -555,9 +561,13 @@ class _Sync:
         node, u = self.node, self.u
         q = node.commands
         pending = sorted(q.pending.items())
-        for j, (s, c) in enumerate(pending[:CMDS]):
-            u.cmds[j].step, u.cmds[j].cmd, u.cmds[j].seq = s, c.cmd, c.seq
-            u.cmds[j].load_nm = c.load_nm
+        head = pending[:CMDS]
+        if head:
+            v = self.cmds[: len(head)]
+            v["step"] = [s for s, _ in head]
+            v["cmd"] = [c.cmd for _, c in head]
+            v["seq"] = [c.seq for _, c in head]
+            v["load_nm"] = [c.load_nm for _, c in head]
         u.n_cmds = min(len(pending), CMDS)
         u.cmds_more = int(len(pending) > CMDS)
         u.applied_seq = q.applied_seq
@@ -579,8 +589,12 @@ class _Sync:
         node.latest_duty_step = u.latest_duty_step
         node.latest_duty = (u.latest[0], u.latest[1], u.latest[2], bool(u.latest_en))
         node.duty_age = u.duty_age
+        live = self.duties[self.duties["tag"] >= 0]  # in slot order, as the ring
         node.duties = {
-            int(s.tag): (s.d[0], s.d[1], s.d[2], bool(s.en)) for s in u.duties if s.tag >= 0
+            t: (d[0], d[1], d[2], bool(e))
+            for t, d, e in zip(
+                live["tag"].tolist(), live["d"].tolist(), live["en"].tolist(), strict=True
+            )
         }
         ap = u.applied
         node.applied = ((ap.d[0], ap.d[1], ap.d[2], bool(ap.en)), int(ap.tag))
