@@ -621,7 +621,7 @@ A node puts every frame it receives into exactly one counter:
 | rejected, `decode_error` | remote/error frame, or cantools could not unpack it |
 | rejected, `out_of_range` | a value outside its `[min|max]` (e.g. an undefined `cmd` enum), or a duty outside [0, 1] |
 | rejected, `stale_counter` | counter older than the receiver accepts (replayed or very late frame) |
-| rejected, `future_counter` | counter ahead of anything the sender can have produced (a duty for a period whose sample was not sent yet) |
+| rejected, `future_counter` | counter ahead of anything the sender can have produced (a duty for a period whose sample was not sent yet; in lockstep, a sample more than the latency + 1 steps ahead of the controller's next step, docs/PROTOCOL.md) |
 | rejected, `queue_full` | more than 4096 pending bench commands (a flood) |
 | repeated, `repeated_counter` | exact repeat of an accepted counter |
 | ignored / unknown | a DBC message the node does not consume / an ID not in the DBC |
@@ -758,7 +758,7 @@ sent, so a remote one is started with TLS (docs/SCALING.md).
 | `tests/test_soak_cli.py` | `bench soak` end to end: every fuzzed frame accounted for, rejections by reason, every injected fault tripped and recovered, no period lost |
 | `tests/test_protection.py` | each comparator trips with its code, latch and reset, NaN; over-current and over-speed trips in the plant node |
 | `tests/test_reliability_watchdog.py` | real time: trip in exactly the configured period after the last duty; lockstep: armed by the first duty, trip after exactly the configured rounds; the controller disables its PWM when samples stop |
-| `tests/test_lockstep_under_load.py` | the link logic under random schedules with retransmissions and a start longer than the watchdog gives the in-process trace; lockstep through `bench link` with busy processes beside it, over udp_multicast and on vcan |
+| `tests/test_lockstep_under_load.py` | the link logic under random schedules with retransmissions and a start longer than the watchdog gives the in-process trace, and so it does when samples, truth and duties are lost before and after the link (a truth frame lost before the link once stalled a run for good; a link that answered every repeated sample with every duty fell behind its input on a loaded host); lockstep through `bench link` with busy processes beside it, over udp_multicast and on vcan |
 | `tests/test_signals_process.py` | real processes: kill -9 of the controller in real time (watchdog fault frame, capture complete); SIGINT, SIGTERM mid-run and during start-up |
 | `tests/test_reliability_errors.py` | unwritable `--out`, unparsable capture lines, the scoring of a run cut short and the line that announces it, kill -9 of the controller in lockstep (named, prompt), the transport line from python-can's configuration, `duty_age` in the safe state |
 | `tests/test_scenario_plausible.py` | the physics checks of a scenario's motor, injection settings without `[motor]`, `sensored` from any scenario |
