@@ -25,7 +25,7 @@ from bench import load_scenario
 from bench.nodes._controller_node import ControllerNode
 from bench.nodes._counters import REJECT_FUTURE_COUNTER
 from bench.nodes._loops import run_inprocess
-from bench.runs._analysis import analyze_frames
+from bench.runs._analysis import Capture, analyze_frames
 from bench.scenarios._setup import build_controller, needs_truth, sample_period
 from bench.wire._codec import Codec
 from bench.wire._protocol import CMD_START, lockstep_sample_lead
@@ -236,6 +236,13 @@ def _forge_after_sample(
     return [*frames[: at + 1], forged, *frames[at + 1 :]]
 
 
+def _assert_only_the_forgery_left_out(got: Capture, clean: Capture) -> None:
+    """One frame rejected as ``future_counter``, and the clean capture's table."""
+    assert got.rejected == {REJECT_FUTURE_COUNTER: 1}
+    for col, v in clean.table.items():
+        np.testing.assert_array_equal(got.table[col], v, err_msg=col)
+
+
 def test_a_forged_duty_138_ahead_takes_no_part_in_the_table(
     capture: tuple[list[can.Message], float],
 ) -> None:
@@ -246,10 +253,8 @@ def test_a_forged_duty_138_ahead_takes_no_part_in_the_table(
     clean = analyze_frames(frames, CODEC, T_s=T_s, n_p=4)
     got = analyze_frames(forged, CODEC, T_s=T_s, n_p=4)
     assert clean.rejected == {}
-    assert got.rejected == {REJECT_FUTURE_COUNTER: 1}
+    _assert_only_the_forgery_left_out(got, clean)
     assert got.duplicates == clean.duplicates and got.out_of_order == clean.out_of_order
-    for col, v in clean.table.items():
-        np.testing.assert_array_equal(got.table[col], v, err_msg=col)
     # the genuine duty of that step is in the table, not the forged one
     row = int(np.searchsorted(clean.table["step"], newest + 138))
     assert clean.table["step"][row] == newest + 138 and clean.table["d_a"][row] != 0.9
@@ -287,9 +292,7 @@ def test_a_forged_telemetry_ahead_is_counted_and_takes_no_part(
            "cmd_ack_valid": 0, "cmd_ack": 0}  # fmt: skip
     forged = _forge_after_sample(frames, newest, "CtrlTelemetry", newest + 5000, tel)
     got = analyze_frames(forged, CODEC, T_s=T_s, n_p=4, run_id=clean.run_id)
-    assert got.rejected == {REJECT_FUTURE_COUNTER: 1}
-    for col, v in clean.table.items():
-        np.testing.assert_array_equal(got.table[col], v, err_msg=col)
+    _assert_only_the_forgery_left_out(got, clean)
 
 
 def test_a_forged_sample_31_ahead_takes_no_part_in_the_table(
@@ -303,9 +306,7 @@ def test_a_forged_sample_31_ahead_takes_no_part_in_the_table(
     forged = _forge_after_sample(frames, newest, "PhaseSamples", newest + FORGED_LEAD, smp)
     clean = analyze_frames(frames, CODEC, T_s=T_s, n_p=4)
     got = analyze_frames(forged, CODEC, T_s=T_s, n_p=4)
-    assert got.rejected == {REJECT_FUTURE_COUNTER: 1}
-    for col, v in clean.table.items():
-        np.testing.assert_array_equal(got.table[col], v, err_msg=col)
+    _assert_only_the_forgery_left_out(got, clean)
 
 
 def test_a_sample_after_frames_the_recorder_lost_is_kept(
