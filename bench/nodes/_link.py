@@ -182,13 +182,6 @@ class LockstepLink:
             s == j and m.arbitration_id == fid for s, m in self.held_b
         )
 
-    def _hold(self, j: int, msg: can.Message) -> None:
-        """Hold ``msg`` of period ``j`` in period order (after those of ``j`` held)."""
-        if not self.held_b or self.held_b[-1][0] <= j:
-            self.held_b.append((j, msg))
-        else:  # a frame of an earlier period, come after its first copy was lost
-            self.held_b = deque(sorted([*self.held_b, (j, msg)], key=lambda x: x[0]))
-
     def from_a(self, msg: can.Message) -> tuple[list[can.Message], list[can.Message]]:
         """A frame seen on A: (frames for B, frames for A).
 
@@ -230,7 +223,7 @@ class LockstepLink:
             return again_b, list(self.released_a) if j == self.latest_a else []
         elif j <= self.latest_a - self.keep:  # older than the window released_b keeps
             return [], []
-        self._hold(j, msg)
+        self.held_b = _in_order(self.held_b, j, msg)
         return self._release()
 
     def from_b(self, msg: can.Message) -> tuple[list[can.Message], list[can.Message]]:
@@ -248,10 +241,19 @@ class LockstepLink:
         if len(self.duty_seen) > 2 * self.keep:
             self.duty_seen = {s for s in self.duty_seen if s > t - self.keep}
         # duty t answers sample t - 1, which B saw when A carried sample t - 1 + N_s
-        self.held_a.append((t - 1 + self.n_s + self.n_d, msg))
-        if len(self.held_a) > 1 and self.held_a[-2][0] > self.held_a[-1][0]:
-            self.held_a = deque(sorted(self.held_a, key=lambda x: x[0]))
+        self.held_a = _in_order(self.held_a, t - 1 + self.n_s + self.n_d, msg)
         return self._release()
+
+
+def _in_order(
+    q: deque[tuple[int, can.Message]], key: int, msg: can.Message
+) -> deque[tuple[int, can.Message]]:
+    """``q`` with ``(key, msg)`` held in key order (after those of ``key`` held): at the
+    end as a rule, in its place for a frame whose first copy was lost."""
+    if not q or q[-1][0] <= key:
+        q.append((key, msg))
+        return q
+    return deque(sorted([*q, (key, msg)], key=lambda x: x[0]))
 
 
 class _Way:
