@@ -180,6 +180,12 @@ def _full_steps(
     return full
 
 
+def _keep_frames(b: Any, keep: Any) -> None:
+    """Keep only the frames ``keep`` (a mask) of one message's decoded batch ``b``."""
+    b.index = b.index[keep]
+    b.signals = {k: v[keep] for k, v in b.signals.items()}
+
+
 def _own_run(dec: Any, run_id: int | None, cap: Capture) -> None:
     """Drop the recorder frames of other runs from ``dec``, counting them in ``cap``.
 
@@ -210,8 +216,7 @@ def _own_run(dec: Any, run_id: int | None, cap: Capture) -> None:
         n_bad = int(len(keep) - np.count_nonzero(keep))
         if n_bad:
             cap.foreign[name] = n_bad
-            b.index = b.index[keep]
-            b.signals = {k: v[keep] for k, v in b.signals.items()}
+            _keep_frames(b, keep)
 
 
 def _all_full_steps(dec: Any, bits: dict[str, int]) -> dict[str, npt.NDArray[np.int64]]:
@@ -285,9 +290,7 @@ def _drop(dec: Any, fulls: dict[str, npt.NDArray[np.int64]], name: str, bad: Any
     n_bad = int(np.count_nonzero(bad))
     if n_bad:
         keep = ~bad
-        b = dec.messages[name]
-        b.index = b.index[keep]
-        b.signals = {k: v[keep] for k, v in b.signals.items()}
+        _keep_frames(dec.messages[name], keep)
         fulls[name] = fulls[name][keep]
     return n_bad
 
