@@ -14,7 +14,6 @@ genuine one of its step:
 
 from __future__ import annotations
 
-import ctypes
 from typing import Any
 
 import can
@@ -30,6 +29,7 @@ from bench.scenarios._setup import build_controller, needs_truth, sample_period
 from bench.wire._codec import Codec
 from bench.wire._protocol import CMD_START, lockstep_sample_lead
 from controller import compiled_controller_missing
+from tests.native_helpers import native_answers
 
 CODEC = Codec()
 M_STEP = 1 << CODEC.step_bits("PhaseSamples")
@@ -78,32 +78,10 @@ def _python_answers(node: ControllerNode, frames: list[can.Message]) -> list[tup
     return got
 
 
-def _native_answers(node: ControllerNode, frames: list[can.Message]) -> list[tuple[int, bytes]]:
-    from bench.nodes.native import controller_node as native
-
-    nat = native.NativeController(node, realtime=False)
-    got: list[tuple[int, bytes]] = []
-
-    @native.SINK
-    def sink(ctx: Any, f: Any) -> int:
-        got.append((f.contents.id, bytes(f.contents.data[: f.contents.len])))
-        return 0
-
-    for msg in frames:
-        f = native.Frame(id=msg.arbitration_id, len=len(msg.data), flags=0)
-        f.data[: len(msg.data)] = list(msg.data)
-        ev = nat.dll.bn_ctl_on_frame(nat.addr, ctypes.byref(f), sink, None)
-        while ev != native.EV_NONE:
-            nat.handle(ev)
-            ev = nat.dll.bn_ctl_resume(nat.addr, sink, None)
-    nat.merge()
-    return got
-
-
 ENGINES = [
     pytest.param(_python_answers, id="python"),
     pytest.param(
-        _native_answers,
+        native_answers,
         id="native",
         marks=pytest.mark.skipif(
             compiled_controller_missing() is not None

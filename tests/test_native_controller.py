@@ -15,7 +15,6 @@
 from __future__ import annotations
 
 import csv
-import ctypes
 import json
 import random
 import subprocess
@@ -33,6 +32,7 @@ from bench.wire._codec import Codec
 from bench.wire._protocol import CMD_START, CMD_STOP
 from controller import Controller, compiled_controller_missing
 from tests.conftest import require_vcan
+from tests.native_helpers import native_answers
 from tests.ports import free_port
 
 pytestmark = [
@@ -106,24 +106,9 @@ def test_the_unit_answers_as_the_python_node_byte_for_byte(native: Any) -> None:
     cn = make_controller_node(scn, "tt-dq", codec)
     assert py.ctrl.engine == cn.ctrl.engine == "compiled"
     py.run_id = cn.run_id = 4242
-    nat = native.NativeController(cn, realtime=False)
-    got: list[tuple[int, bytes]] = []
-
-    @native.SINK
-    def sink(ctx: Any, f: Any) -> int:
-        got.append((f.contents.id, bytes(f.contents.data[: f.contents.len])))
-        return 0
-
-    want: list[tuple[int, bytes]] = []
-    for msg in _frames(codec, 300):
-        want += [(m.arbitration_id, bytes(m.data)) for m in py.on_message(msg)]
-        f = native.Frame(id=msg.arbitration_id, len=len(msg.data), flags=0)
-        f.data[: len(msg.data)] = list(msg.data)
-        ev = nat.dll.bn_ctl_on_frame(nat.addr, ctypes.byref(f), sink, None)
-        while ev != native.EV_NONE:
-            nat.handle(ev)
-            ev = nat.dll.bn_ctl_resume(nat.addr, sink, None)
-    nat.merge()
+    frames = _frames(codec, 300)
+    want = [(m.arbitration_id, bytes(m.data)) for msg in frames for m in py.on_message(msg)]
+    got = native_answers(cn, frames)
     assert len(want) > 2 * 290 and got == want
     rep_py, rep_c = py.report(), cn.report()
     assert rep_c.pop("node_engine") == "native" and rep_py.pop("node_engine") == "python"

@@ -40,7 +40,7 @@ import select
 import time
 from collections import deque
 from collections.abc import Callable
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, TypeVar
 
 import can
 
@@ -161,8 +161,7 @@ class LockstepLink:
         while self.held_b and self.held_b[0][0] <= self.latest_a - self.n_s:
             j, m = self.held_b.popleft()
             self.released_b.setdefault(j, []).append(m)
-            if len(self.released_b) > 2 * self.keep:
-                self.released_b = {s: v for s, v in self.released_b.items() if s > j - self.keep}
+            self.released_b = _window(self.released_b, j, self.keep)
             if self.p_s and self.rng_s.random() < self.p_s:
                 self.dropped_samples += 1
             else:
@@ -238,11 +237,23 @@ class LockstepLink:
         if t in self.duty_seen or t <= max(self.latest_a, 0) - self.keep:
             return [], []  # seen: held, or released (resent from released_a when lost)
         self.duty_seen.add(t)
-        if len(self.duty_seen) > 2 * self.keep:
-            self.duty_seen = {s for s in self.duty_seen if s > t - self.keep}
+        self.duty_seen = _window(self.duty_seen, t, self.keep)
         # duty t answers sample t - 1, which B saw when A carried sample t - 1 + N_s
         self.held_a = _in_order(self.held_a, t - 1 + self.n_s + self.n_d, msg)
         return self._release()
+
+
+_Periods = TypeVar("_Periods", dict[int, list[can.Message]], set[int])
+
+
+def _window(c: _Periods, newest: int, keep: int) -> _Periods:
+    """``c`` (keyed by period) without the periods ``keep`` or more before ``newest``, once
+    it holds twice that many (each insert amortised O(1)); else ``c`` itself."""
+    if len(c) <= 2 * keep:
+        return c
+    if isinstance(c, dict):
+        return {s: v for s, v in c.items() if s > newest - keep}
+    return {s for s in c if s > newest - keep}
 
 
 def _in_order(
