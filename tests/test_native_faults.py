@@ -27,7 +27,12 @@ from bench.scenarios._schema import Noise, Scenario, load_scenario
 from bench.wire._bus import BusSpec
 from bench.wire._protocol import unwrap
 from tests.ports import free_port
-from tests.test_native_plant import GROUP, NATIVE, _assert_native_equals_python
+from tests.test_native_plant import (
+    GROUP,
+    NATIVE,
+    _assert_native_equals_python,
+    native_realtime_run,
+)
 from tests.trace_helpers import CODEC, short
 
 
@@ -247,23 +252,13 @@ def test_bus_faults_native_give_the_python_nodes_frames(tmp_path: Path) -> None:
     assert rep["duty_rejected"]["bad_crc"] > 0
 
 
-def _native_realtime_run(scn: Any, out: Path) -> tuple[Any, dict[str, Any]]:
-    """``scn`` (sensored) in real time over udp_multicast with the native nodes: the
-    run's result and its ``meta.json``."""
-    spec = BusSpec("udp_multicast", GROUP, free_port())
-    res = run_scenario(
-        scn, "sensored", spec=spec, out_dir=out, mode="realtime", progress=False, node_args=NATIVE
-    )
-    return res, json.loads((out / "meta.json").read_text())
-
-
 def test_silence_in_real_time_native_sends_nothing_either_way(tmp_path: Path) -> None:
     """Real time, 1 kHz: a 5-period silence: no PhaseSamples or PositionSensor of those
     instants, no duty taken (counted as the Python node counts them); what holds on a
     busy host (the counts are per instant, not per frame that arrived)."""
     scn = replace(short("wen-5.1", 0.3), f_sw=1000.0)
     scn = replace(scn, faults=(_fault(0, "silence", 0.15, 0.005),))
-    _, meta = _native_realtime_run(scn, tmp_path / "rt")
+    _, meta = native_realtime_run(scn, tmp_path / "rt")
     rep = meta["node_reports"]["plant"]
     assert meta["node_engines"]["plant"] == "native"
     assert rep["steps"] == 300
@@ -493,7 +488,7 @@ def test_a_real_time_us_delay_is_served_by_the_native_plant(tmp_path: Path) -> N
     (the fake-clock test above holds the rule), so only what a busy host keeps is asserted."""
     scn = replace(short("wen-5.1", 0.3), f_sw=1000.0)
     scn = replace(scn, faults=(_fault(0, "delay", 0.15, 0.05, message="PwmDuty", us=300.0),))
-    res, meta = _native_realtime_run(scn, tmp_path / "rt")
+    res, meta = native_realtime_run(scn, tmp_path / "rt")
     assert meta["node_engines"]["plant"] == "native"
     assert meta["node_reports"]["plant"]["steps"] == 300
     assert [f["kind"] for f in res.metrics["faults"]] == ["delay"]

@@ -18,7 +18,9 @@ import random
 import subprocess
 import sys
 from collections.abc import Sequence
+from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 import can
 import pytest
@@ -119,23 +121,20 @@ def test_native_plant_gives_the_python_nodes_lockstep_frames_vcan(tmp_path: Path
     _assert_native_equals_python(scn, "tt-dq", BusSpec("socketcan", "vcan0"), tmp_path / "vcan")
 
 
-def test_native_plant_in_real_time_completes_and_reports_its_counters(tmp_path: Path) -> None:
-    """1 kHz real time: every period run and counted; what holds on a busy host."""
-    scn = short("wen-5.1", 0.2)
-    from dataclasses import replace
-
-    scn = replace(scn, f_sw=1000.0)
+def native_realtime_run(scn: Scenario, out: Path) -> tuple[Any, dict[str, Any]]:
+    """``scn`` (sensored) in real time over udp_multicast with the native nodes: the
+    run's result and its ``meta.json``."""
     spec = BusSpec("udp_multicast", GROUP, free_port())
     res = run_scenario(
-        scn,
-        "sensored",
-        spec=spec,
-        out_dir=tmp_path / "rt",
-        mode="realtime",
-        progress=False,
-        node_args=NATIVE,
+        scn, "sensored", spec=spec, out_dir=out, mode="realtime", progress=False, node_args=NATIVE
     )
-    meta = json.loads((tmp_path / "rt" / "meta.json").read_text())
+    return res, json.loads((out / "meta.json").read_text())
+
+
+def test_native_plant_in_real_time_completes_and_reports_its_counters(tmp_path: Path) -> None:
+    """1 kHz real time: every period run and counted; what holds on a busy host."""
+    scn = replace(short("wen-5.1", 0.2), f_sw=1000.0)
+    res, meta = native_realtime_run(scn, tmp_path / "rt")
     rep = meta["node_reports"]["plant"]
     assert rep["node_engine"] == "native"
     n = round(0.2 * 1000)
