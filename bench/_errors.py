@@ -51,6 +51,13 @@ EXIT_FAULT_EXPECTATION = 6
 #: written): the plant stayed finite on the map's continuation, but that part of the
 #: run is not the modelled motor's (plant_rt/core/plant_machine.c).
 EXIT_MODEL_RANGE = 7
+#: Exit status of ``bench run`` / ``bench analyze`` when not one period was scored
+#: (``metrics.json`` ``scored_steps`` 0 and ``unscored_reason``): the controller was
+#: disabled (mode 0) throughout the scored window, the run ended before
+#: ``score_from_s``, or no plant period was recorded; every file written.  A run
+#: scored without the controller's telemetry (a drive that sends none) is scored on
+#: its speed and exits 0.
+EXIT_NOT_SCORED = 8
 #: Exit status of an interrupted command (Ctrl-C), with the files of the part that ran.
 EXIT_INTERRUPTED = 130
 

@@ -5,7 +5,9 @@ import math
 import numpy as np
 import pytest
 
+from bench._errors import EXIT_NOT_SCORED, EXIT_PLANT_TRIPPED
 from bench.runs._metrics import compute_metrics, overshoot_rpm, thd_pct, wrap_pi
+from bench.runs._results import outcome
 
 
 @pytest.mark.parametrize("f1", [6.6667, 13.3, 26.67])
@@ -115,3 +117,27 @@ def test_no_scored_row_gives_null_metrics_and_the_reason() -> None:
     assert m["speed_track_err_max_rpm"] is None and m["speed_overshoot_rpm"] is None
     assert m["scored_steps"] == 0 and m["steps"] == 2000
     assert m["unscored_reason"] == "no row to score: none from score_from_s = 3 s on"
+
+
+def test_a_run_with_no_scored_row_exits_8_and_one_without_telemetry_0() -> None:
+    """Nothing scored is a result of its own (exit status 8, with the reason's warning);
+    a drive that sends no telemetry is still scored on its speed (0)."""
+    tab = _dead_controller_table(dies_at=300)
+    m = compute_metrics(tab, T_s=1e-3, n_p=4, score_from_s=0.5)
+    status, lines = outcome(m, 1e-3)
+    assert status == 0 and len(lines) == 1 and "no CtrlTelemetry" in lines[0]
+    # the controller reported itself disabled (mode 0) throughout the scored window
+    live = _dead_controller_table(n=2500, dies_at=2000)  # telemetry on every scored row
+    off = {k: v[:2000] for k, v in live.items()}
+    off["mode"] = np.where(off["t"] >= 0.5, 0.0, 3.0)
+    m = compute_metrics(off, T_s=1e-3, n_p=4, score_from_s=0.5)
+    assert m["scored_steps"] == 0
+    status, lines = outcome(m, 1e-3)
+    assert status == EXIT_NOT_SCORED == 8
+    assert lines == [f"warning: metrics left null: {m['unscored_reason']}"]
+    assert "disabled (mode 0) from 0.5 s on" in lines[0]
+    # no plant period recorded at all (the run's metrics without a table)
+    assert outcome({"steps": 0, "unscored_reason": "no rows"}, 1e-3)[0] == EXIT_NOT_SCORED
+    # a trip is the cause of a controller that disabled itself
+    tripped = {**m, "plant_fault": "over_current", "plant_fault_step": 10}
+    assert outcome(tripped, 1e-3)[0] == EXIT_PLANT_TRIPPED

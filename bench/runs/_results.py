@@ -28,6 +28,7 @@ from bench._errors import (
     EXIT_FAULT_EXPECTATION,
     EXIT_LOCK_LOST,
     EXIT_MODEL_RANGE,
+    EXIT_NOT_SCORED,
     EXIT_PLANT_TRIPPED,
 )
 from bench.nodes._counters import REPEATED_COUNTER
@@ -639,11 +640,13 @@ def fault_active(step: Any, scn: Scenario, T_s: float) -> Any:
 def outcome(m: dict[str, Any], T_s: float) -> tuple[int, list[str]]:
     """The exit status of a finished run or analysis and its warning lines.
 
-    3 when the plant tripped a protection, 4 when the estimator lost the rotor
-    angle, 7 when the plant's current left its flux map's checked range
-    (``plant_out_of_range_s``), 0 otherwise (DESIGN.md).  A trip comes first: an
-    estimator whose inverter was switched off loses the angle as a consequence; a
-    lost angle comes before the range, whose runaway it causes.  A run with
+    3 when the plant tripped a protection, 8 when not one period was scored
+    (``scored_steps`` 0: a controller disabled throughout, nothing recorded), 4 when
+    the estimator lost the rotor angle, 7 when the plant's current left its flux
+    map's checked range (``plant_out_of_range_s``), 0 otherwise (DESIGN.md).  A trip
+    comes first: an estimator whose inverter was switched off loses the angle as a
+    consequence, and a controller that sees a trip may disable itself; a lost angle
+    comes before the range, whose runaway it causes.  A run with
     fault expectations (``[[faults]]`` ``expect``) exits 6 when one was missed
     and 0 when every one held, even when what held was a trip (the lines
     still say what happened).
@@ -676,6 +679,8 @@ def outcome(m: dict[str, Any], T_s: float) -> tuple[int, list[str]]:
         return 0, lines
     if m.get("plant_fault", "none") not in ("none", None):
         return EXIT_PLANT_TRIPPED, lines
+    if m.get("scored_steps", m.get("steps")) == 0:
+        return EXIT_NOT_SCORED, lines
     if m.get("lock_lost"):
         return EXIT_LOCK_LOST, lines
     if m.get("plant_out_of_range_s"):
