@@ -218,3 +218,30 @@ def test_a_trip_is_named_with_its_own_period_not_the_newest_status(
 
     DutWatch(Rec(), 5.0, "bus").check(20000)  # type: ignore[arg-type]
     assert "tripped watchdog in period 6776," in capsys.readouterr().err
+
+
+def test_the_dut_timeout_counts_from_the_nodes_readiness() -> None:
+    """--dut-timeout is the controller's time to answer: the nodes' start-up (seconds on a
+    loaded host) before ``start`` does not count."""
+    import can
+
+    from bench.runs._recorder import Recorder
+    from bench.runs._run import DutWatch
+
+    class Drop(can.Listener):
+        def on_message_received(self, msg: can.Message) -> None:
+            pass
+
+    class Rec:
+        def __init__(self) -> None:
+            r = Recorder(Codec(), Drop(), 1)
+            self.recorders = [r]
+            self.duty_watch = r
+
+    late = DutWatch(Rec(), 2.0, "bus")  # type: ignore[arg-type]
+    late.t0 -= 10.0  # the nodes took 10 s to start
+    assert late.check(0) is True  # counted from construction: timed out before a period
+    ready = DutWatch(Rec(), 2.0, "bus")  # type: ignore[arg-type]
+    ready.t0 -= 10.0
+    ready.start()
+    assert ready.check(0) is False

@@ -204,7 +204,8 @@ def register(sub: Any) -> None:
         type=POS_FLOAT,
         default=30.0,
         metavar="S",
-        help="--controller external: wait this long (s) for its first valid PwmDuty",
+        help="--controller external: wait this long (s) for its first valid PwmDuty, counted "
+        "from the bench nodes being ready",
     )
     p.add_argument(
         "--dut-name", help="--controller external: its name in meta.json and the plot titles"

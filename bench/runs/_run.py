@@ -240,6 +240,8 @@ def run_scenario(
                 except BenchError as e:
                     start_error = str(e)
             if start_error is None:
+                if dut is not None:
+                    dut.start()
                 pacer = CommandPacer(
                     scn,
                     codec,
@@ -599,6 +601,12 @@ class DutWatch:
         self.fault = 0
         self.late_seen = 0
         self.t_late = self.t0
+
+    def start(self) -> None:
+        """The nodes are ready: ``timeout_s`` counts from now.  The nodes' start-up (a
+        second or more on a loaded host, more with a native build) is not the
+        controller's time to answer."""
+        self.t0 = self.t_late = time.monotonic()
 
     @property
     def answered(self) -> bool:
