@@ -11,6 +11,8 @@ import json
 from pathlib import Path
 from typing import Any
 
+import pytest
+
 from bench.studies._perf import (
     NATIVE_DOC_BEGIN,
     NATIVE_DOC_END,
@@ -82,3 +84,38 @@ def test_a_transport_that_does_not_say_is_not_a_zero() -> None:
     v = native_verdicts(res)
     assert v is not None and not v["native_recorder_frames_lost"]["met"]
     assert v["native_recorder_frames_lost"]["limit"] == "not said by the transport"
+
+
+def _score(rt_rms: float, lost: bool = False) -> dict[str, Any]:
+    run = {"theta_err_abs_max_deg": 0.7, "theta_err_mean_deg": 0.38, "lock_lost": False}
+    return {
+        "scenario": "wen-5.1",
+        "estimator": "tt-dq",
+        "duration_s": 4.0,
+        "f_sw": 10000.0,
+        "tolerance_deg": 0.24,
+        "rms_diff_deg": abs(rt_rms - 0.40),
+        "scores_like_lockstep": abs(rt_rms - 0.40) <= 0.24 and not lost,
+        "lockstep": {**run, "theta_err_rms_deg": 0.40, "late_duty_pct": 0.0},
+        "realtime": {**run, "theta_err_rms_deg": rt_rms, "lock_lost": lost, "late_duty_pct": 5.4},
+    }
+
+
+def test_the_sensorless_real_time_score_says_its_verdict_and_the_late_periods() -> None:
+    res = _measured(missed_10k=1.0, frames_lost=0.0)
+    res["realtime_native_score"] = _score(0.45)
+    page = render_realtime_native(res)
+    assert "0.450 deg in real time against 0.400 deg in lockstep" in page
+    assert "it scores like it within 0.240 deg" in page and "late duty" not in page
+    res["realtime_native_score"] = _score(5.02)
+    page = render_realtime_native(res)
+    assert "**does not score like it**" in page
+    assert "5.40 % of its periods ran with a late duty" in page
+
+
+def test_the_score_tolerance_is_one_periods_angle_at_the_top_speed() -> None:
+    from bench.scenarios._schema import load_scenario
+    from bench.studies._perf import score_tolerance_deg
+
+    # wen-5.1: 100 rpm, 4 pole pairs (wen2023), 10 kHz: 360 * 4 * 100 / 60 / 1e4 deg
+    assert score_tolerance_deg(load_scenario("wen-5.1")) == pytest.approx(0.24)

@@ -691,6 +691,110 @@ def realtime_run(
     }
 
 
+#: The figures a run scores that :func:`sensorless_realtime_score` compares.
+SCORE_KEYS = ("theta_err_rms_deg", "theta_err_abs_max_deg", "theta_err_mean_deg")
+
+
+def score_tolerance_deg(scn: Any) -> float:
+    """How far a real-time run may score from the lockstep run and still score like it
+    (deg electrical): the angle the rotor turns in one PWM period at the scenario's top
+    speed.  Why: with every duty on time a real-time run applies the lockstep run's
+    duties to the same plant, so the two differ only through late duties, and a duty one
+    period late shifts the loop by that angle; a run that scores within it is the
+    lockstep result on the drive's own clock, one that does not was changed by the late
+    periods (``late_duty_pct`` says how many)."""
+    from bench.scenarios._setup import get_preset, sample_period
+
+    top_rpm = max(abs(v) for _, v in scn.speed_rpm.points)
+    w_e = top_rpm * 2.0 * math.pi / 60.0 * get_preset(scn).motor.n_p
+    return math.degrees(w_e * sample_period(scn))
+
+
+def sensorless_realtime_score(
+    out: Path, priority: int | None = RT_PRIORITY, duration: float | None = None
+) -> dict[str, Any]:
+    """wen-5.1 with tt-dq at 10 kHz (the paper's rate), whole (or its first ``duration``
+    seconds, ``--quick``: 1.2 s, scored from 1 s at 100 rpm), on the native pair: in real
+    time with ``--rt-priority`` and in lockstep over the default transport; each run's
+    position-error figures, the real-time run's late duties, and whether it scores like
+    the lockstep run within :func:`score_tolerance_deg` with the angle kept
+    (``realtime_native_score``; issue 29)."""
+    from bench.runs._run import run_scenario
+    from bench.scenarios._schema import load_scenario
+    from bench.scenarios._setup import sample_period
+    from bench.wire._bus import BusSpec, default_transport
+
+    iface, chan, _ = default_transport()
+    scn = load_scenario("wen-5.1")
+    if duration is not None:
+        scn = replace(scn, duration=duration)
+    runs: dict[str, dict[str, Any]] = {}
+    for i, mode in enumerate(("lockstep", "realtime")):
+        port = 48000 + 4 * (os.getpid() % 1000) + 2 * i if iface == "udp_multicast" else None
+        rt = [] if priority is None or mode == "lockstep" else ["--rt-priority", str(priority)]
+        res = run_scenario(
+            scn,
+            "tt-dq",
+            spec=BusSpec(iface, chan, port),
+            out_dir=out / mode,
+            mode=mode,
+            progress=False,
+            node_args={
+                "plant": ["--engine", "native", *rt],
+                "controller": ["--engine", "native", *rt],
+            },
+        )
+        m = res.metrics
+        n = max(1, int(m.get("steps") or 0))
+        runs[mode] = {
+            **{k: math.nan if m.get(k) is None else float(m[k]) for k in SCORE_KEYS},
+            "lock_lost": bool(m.get("lock_lost")),
+            "late_duty_pct": 100.0 * m.get("late_duty_periods", 0) / n,
+            "node_engines": dict(res.meta.get("node_engines") or {}),
+        }
+    tol = score_tolerance_deg(scn)
+    diff = abs(runs["realtime"]["theta_err_rms_deg"] - runs["lockstep"]["theta_err_rms_deg"])
+    return {
+        "scenario": "wen-5.1",
+        "estimator": "tt-dq",
+        "duration_s": float(scn.duration),
+        "f_sw": 1.0 / sample_period(scn),
+        "tolerance_deg": tol,
+        "rms_diff_deg": diff,
+        "scores_like_lockstep": bool(diff <= tol and not runs["realtime"]["lock_lost"]),
+        **runs,
+    }
+
+
+def score_lines(sc: dict[str, Any] | None) -> list[str]:
+    """The sentence of docs/REALTIME.md on :func:`sensorless_realtime_score` (none for a
+    ``perf.json`` written before it was measured)."""
+    if not sc:
+        return []
+    rt, ls = sc["realtime"], sc["lockstep"]
+    verdict = "scores like it" if sc["scores_like_lockstep"] else "**does not score like it**"
+    why = (
+        ""
+        if sc["scores_like_lockstep"]
+        else f": {_num(rt['late_duty_pct'], '%')} of its periods ran with a late duty on this "
+        "host, and each changes the loop (the limit is the late periods, not the model)"
+    )
+    return [
+        "",
+        f"A sensorless run on the drive's clock against the same run in lockstep "
+        f"(`realtime_native_score`): {sc['scenario']} with {sc['estimator']} at "
+        f"{sc['f_sw'] / 1e3:g} kHz, {_num(sc['duration_s'], 's')}, both nodes native, "
+        "`--rt-priority`. "
+        f"Position error rms {_num(rt['theta_err_rms_deg'], 'deg')} in real time against "
+        f"{_num(ls['theta_err_rms_deg'], 'deg')} in lockstep (max |error| "
+        f"{_num(rt['theta_err_abs_max_deg'], 'deg')} against "
+        f"{_num(ls['theta_err_abs_max_deg'], 'deg')}, angle "
+        f"{'lost' if rt['lock_lost'] else 'kept'}): it {verdict} within "
+        f"{_num(sc['tolerance_deg'], 'deg')} of rms, the angle the rotor turns in one period "
+        f"at the scenario's top speed{why}.",
+    ]
+
+
 def recorder_frames_lost(runs: dict[str, dict[str, Any]]) -> float:
     """Frames the recorder lost in ``runs`` (the native pair's real-time runs by rate), all
     rates together; -1 when a run's transport does not say (issue 29,
@@ -906,6 +1010,7 @@ def render_realtime_native(res: dict[str, Any], source: str = "docs/perf/perf.js
         rows,
     )
     lines += native_parts_lines(res["realtime_native"])
+    lines += score_lines(res.get("realtime_native_score"))
     lines += ["", NATIVE_DOC_END]
     return "\n".join(lines)
 
@@ -1246,6 +1351,10 @@ def run_perf(
             )
             nat[name] = {**r, "note": NATIVE_NOTE}
         res["realtime_native"] = {**nat, "recorder_frames_lost": recorder_frames_lost(nat)}
+        say("3c. a sensorless run on the native pair: real time against lockstep")
+        res["realtime_native_score"] = sensorless_realtime_score(
+            tmpd / "score", duration=1.2 if quick else None
+        )
         say("4. codec, and bench analyze on a large capture")
         res["codec"] = {
             **codec_figures(repeats),
