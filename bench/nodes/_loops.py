@@ -224,16 +224,19 @@ INPROCESS_LEAD = 1000
 INPROCESS_LOOPS = ("auto", "python", "native")
 
 
-def inprocess_native_unavailable(pn: PlantNode, cn: ControllerNode, *, latency: bool) -> str | None:
+def inprocess_native_unavailable(
+    pn: PlantNode, cn: ControllerNode, *, latency: bool, steps: list[int] | None = None
+) -> str | None:
     """Why the in-process loop of these nodes cannot run in C (one line), or None.
 
-    :func:`bench.nodes.native._pair.pair_unavailable`, and the library's build (no C
-    compiler, a failed build) as a reason rather than an error.
+    :func:`bench.nodes.native._pair.pair_unavailable` (``steps``: the commands' apply
+    steps, fed :data:`INPROCESS_LEAD` ahead), and the library's build (no C compiler, a
+    failed build) as a reason rather than an error.
     """
     try:
         from bench.nodes.native._pair import pair_unavailable
 
-        return pair_unavailable(pn, cn, latency=latency)
+        return pair_unavailable(pn, cn, latency=latency, steps=steps, lead=INPROCESS_LEAD)
     except (BenchError, OSError) as e:
         return str(e)
 
@@ -278,16 +281,20 @@ def run_inprocess(
     pn = make_plant_node(scn, codec, engine=engine)
     cn = make_controller_node(scn, estimator, codec, "python" if observe else None)
     lt = scn.latency
+    cmds = command_frames(scn, codec)
     if loop != "python":
         why = inprocess_native_unavailable(
-            pn, cn, latency=bool(lt.sample_delay_steps or lt.duty_delay_steps)
+            pn,
+            cn,
+            latency=bool(lt.sample_delay_steps or lt.duty_delay_steps),
+            steps=[s for s, _ in cmds],
         )
         if why is None and (plant_times is not None or observe is not None):
             why = "plant_times and observe are Python's between periods"
         if why is None:
             from bench.nodes.native._pair import run_pair
 
-            return run_pair(pn, cn, command_frames(scn, codec), INPROCESS_LEAD)
+            return run_pair(pn, cn, cmds, INPROCESS_LEAD)
         if loop == "native":
             raise BenchError(f"in-process native pair: {why}")
     link = (
@@ -296,7 +303,6 @@ def run_inprocess(
         else None
     )
     frames: list[can.Message] = []
-    cmds = command_frames(scn, codec)
     sent = 0
 
     def feed(up_to: int) -> None:
