@@ -75,6 +75,32 @@ class PairCmd(ctypes.Structure):
     ]
 
 
+#: The :class:`PairCmd` fields :func:`_schedule` writes by columns, in its tuples' order,
+#: with their numpy types (the sizes checked against the ctypes fields below).
+_SCHEDULED: dict[str, type[np.generic]] = {
+    "feed_k": np.int64,
+    "p_step": np.int64,
+    "p_horizon": np.int64,
+    "p_cmd": np.int32,
+    "p_seq": np.int32,
+    "p_load_nm": np.float64,
+    "c_step": np.int64,
+    "c_cmd": np.int32,
+    "c_seq": np.int32,
+    "c_speed_ref_rpm": np.float64,
+    "c_ack_seq": np.int32,
+}
+#: Those fields of ``bn_pair_cmd_t`` as numpy reads the rows (offsets from :class:`PairCmd`).
+_SCHEDULED_DTYPE = np.dtype(
+    {
+        "names": list(_SCHEDULED),
+        "formats": list(_SCHEDULED.values()),
+        "offsets": [getattr(PairCmd, f).offset for f in _SCHEDULED],
+        "itemsize": ctypes.sizeof(PairCmd),
+    }
+)
+
+
 class Pair(ctypes.Structure):
     """``bn_pair_t`` (``bn_pair.h``), field for field."""
 
@@ -116,7 +142,9 @@ def _lib() -> ctypes.CDLL:
         dll.bn_pair_cmd_sizeof.restype = ctypes.c_size_t
         if dll.bn_pair_sizeof() != ctypes.sizeof(Pair):
             raise BenchError("native pair: bn_pair_t and its Python mirror differ")
-        if dll.bn_pair_cmd_sizeof() != ctypes.sizeof(PairCmd):
+        if dll.bn_pair_cmd_sizeof() != ctypes.sizeof(PairCmd) or any(
+            getattr(PairCmd, f).size != np.dtype(t).itemsize for f, t in _SCHEDULED.items()
+        ):
             raise BenchError("native pair: bn_pair_cmd_t and its Python mirror differ")
         dll.bn_pair_run.argtypes = [ctypes.POINTER(Pair)]
         dll.bn_pair_run.restype = ctypes.c_int
@@ -300,6 +328,9 @@ def _schedule(
     for s, c in held_p:
         if c.cmd == CMD_STOP:
             end = min(end, s)
+    # per command fed: feed_k, p_step, p_horizon, p_cmd, p_seq, p_load_nm, c_step, c_cmd,
+    # c_seq, c_speed_ref_rpm, c_ack_seq (PairCmd's order), written by columns after
+    cols: list[tuple[int, int, int, int, int, float, int, int, int, float, int]] = []
     try:
         for (_, m), k in zip(cmds[sent:], ks[sent:], strict=True):
             if k >= end:
@@ -317,23 +348,21 @@ def _schedule(
             p_before, c_before = len(pq.pending), len(cq.pending)
             pn.on_message(m)
             cn.on_message(m)
-            r = rows[n]
-            r.feed_k = k
-            r.frame = to_frame(m)
+            rows[n + len(cols)].frame = to_frame(m)
             pc, cc = _accepted(pq, p_before), _accepted(cq, c_before)
-            r.p_step = -1 if pc is None else pc.apply_step
-            if pc is not None:
-                r.p_cmd, r.p_seq, r.p_load_nm = pc.cmd, pc.seq, pc.load_nm
-                if pc.cmd == CMD_STOP:
-                    end = min(end, pc.apply_step)
-            r.p_horizon = pn.cmd_horizon
-            r.c_step = -1 if cc is None else cc.apply_step
-            if cc is not None:
-                r.c_cmd, r.c_seq, r.c_speed_ref_rpm = cc.cmd, cc.seq, cc.speed_ref_rpm
-            r.c_ack_seq = cq.ack_seq
-            n += 1
+            if pc is not None and pc.cmd == CMD_STOP:
+                end = min(end, pc.apply_step)
+            p = (-1, 0, 0, 0.0) if pc is None else (pc.apply_step, pc.cmd, pc.seq, pc.load_nm)
+            c = (-1, 0, 0, 0.0) if cc is None else (cc.apply_step, cc.cmd, cc.seq, cc.speed_ref_rpm)
+            cols.append((k, p[0], pn.cmd_horizon, p[1], p[2], p[3], *c, cq.ack_seq))
     finally:
         plant.k, cn.next_k = k0, next0
+    if cols:
+        buf: Any = rows
+        v = np.frombuffer(buf, dtype=_SCHEDULED_DTYPE)[n : n + len(cols)]
+        for name, col in zip(_SCHEDULED, zip(*cols, strict=True), strict=True):
+            v[name] = col
+        n += len(cols)
     return rows, n, n_held
 
 

@@ -500,8 +500,7 @@ def to_frame(m: can.Message) -> Frame:
         | (BN_FD if m.is_fd else 0)
         | (BN_BRS if m.bitrate_switch else 0)
     )
-    for i, b in enumerate(m.data):
-        f.data[i] = b
+    ctypes.memmove(f.data, bytes(m.data), f.len)
     return f
 
 
