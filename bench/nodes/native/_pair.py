@@ -275,13 +275,6 @@ class _Rows:
         return FrameArray(self.rows[: self.n])
 
 
-def _accepted(q: Any, before: int) -> Any:
-    """The command ``q`` (a CommandQueue) took into its pending list since it held
-    ``before`` commands, or None: ``add`` inserts at most one, ``due`` only deletes, so
-    it is the newest key."""
-    return q.pending[next(reversed(q.pending))] if len(q.pending) > before else None
-
-
 def _schedule(
     pn: Any, cn: Any, cmds: list[tuple[int, can.Message]], sent: int, lead: int
 ) -> tuple[ctypes.Array[PairCmd], int, int]:
@@ -331,6 +324,8 @@ def _schedule(
     # per command fed: feed_k, p_step, p_horizon, p_cmd, p_seq, p_load_nm, c_step, c_cmd,
     # c_seq, c_speed_ref_rpm, c_ack_seq (PairCmd's order), written by columns after
     cols: list[tuple[int, int, int, int, int, float, int, int, int, float, int]] = []
+    cn.last_output = None  # run_inprocess drops the telemetry a command answers
+    pending_p, pending_c = pq.pending, cq.pending
     try:
         for (_, m), k in zip(cmds[sent:], ks[sent:], strict=True):
             if k >= end:
@@ -339,21 +334,29 @@ def _schedule(
             # applied; the controller at k + 1 (it answered sample k)
             plant.k = k
             cn.next_k = k + 1
-            for q in (pq, cq):
-                if settle:
-                    q.due(k)
-                else:  # add's outcome is the same (_schedule's docstring)
-                    q.applied_upto = max(q.applied_upto, k)
-            cn.last_output = None  # run_inprocess drops the telemetry a command answers
-            p_before, c_before = len(pq.pending), len(cq.pending)
+            if settle:
+                pq.due(k)
+                cq.due(k)
+            else:  # add's outcome is the same (docstring)
+                pq.applied_upto = max(pq.applied_upto, k)
+                cq.applied_upto = max(cq.applied_upto, k)
+            p_before, c_before = len(pending_p), len(pending_c)
             pn.on_message(m)
             cn.on_message(m)
             rows[n + len(cols)].frame = to_frame(m)
-            pc, cc = _accepted(pq, p_before), _accepted(cq, c_before)
-            if pc is not None and pc.cmd == CMD_STOP:
-                end = min(end, pc.apply_step)
-            p = (-1, 0, 0, 0.0) if pc is None else (pc.apply_step, pc.cmd, pc.seq, pc.load_nm)
-            c = (-1, 0, 0, 0.0) if cc is None else (cc.apply_step, cc.cmd, cc.seq, cc.speed_ref_rpm)
+            # add puts at most one command in, due only takes out: the newest key
+            if len(pending_p) > p_before:
+                pc = pending_p[next(reversed(pending_p))]
+                p = (pc.apply_step, pc.cmd, pc.seq, pc.load_nm)
+                if pc.cmd == CMD_STOP:
+                    end = min(end, pc.apply_step)
+            else:
+                p = (-1, 0, 0, 0.0)
+            if len(pending_c) > c_before:
+                cc = pending_c[next(reversed(pending_c))]
+                c = (cc.apply_step, cc.cmd, cc.seq, cc.speed_ref_rpm)
+            else:
+                c = (-1, 0, 0, 0.0)
             cols.append((k, p[0], pn.cmd_horizon, p[1], p[2], p[3], *c, cq.ack_seq))
     finally:
         plant.k, cn.next_k = k0, next0
