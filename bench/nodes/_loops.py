@@ -220,6 +220,25 @@ def command_frames(
 #: would not do: the 16-bit ``BenchCommand.step`` wraps after 65,536 periods
 #: (6.5 s at 10 kHz) and the nodes keep at most ``MAX_PENDING_COMMANDS``.
 INPROCESS_LEAD = 1000
+
+
+def feed_steps(steps: Sequence[int], lead: int) -> list[int]:
+    """The plant step after whose answers :func:`run_inprocess` feeds each command (apply
+    steps ``steps``, in the schedule's order); -1: before the run.
+
+    A command is fed once the plant is within ``lead`` periods of its step, in the
+    schedule's order (never before an earlier one); those within ``lead`` of step 0 go
+    before the run.  The Python loop and the native pair (:mod:`bench.nodes.native._pair`)
+    both feed by it.
+    """
+    out = []
+    k = -1
+    for s in steps:
+        k = max(k, s - lead) if s > lead or k >= 0 else -1
+        out.append(k)
+    return out
+
+
 #: :func:`run_inprocess`'s ``loop`` choices.
 INPROCESS_LOOPS = ("auto", "python", "native")
 
@@ -304,18 +323,20 @@ def run_inprocess(
     )
     frames: list[can.Message] = []
     sent = 0
+    at = feed_steps([s for s, _ in cmds], INPROCESS_LEAD)
 
-    def feed(up_to: int) -> None:
-        """Hand the nodes the commands up to step ``up_to``, as ``bench run`` paces them."""
+    def feed(k: int) -> None:
+        """Hand the nodes the commands fed after the answers of plant step ``k`` (-1: before
+        the run), as ``bench run`` paces them."""
         nonlocal sent
-        while sent < len(cmds) and cmds[sent][0] <= up_to:
+        while sent < len(cmds) and at[sent] <= k:
             m = cmds[sent][1]
             frames.append(m)
             pn.on_message(m)
             cn.on_message(m)
             sent += 1
 
-    feed(INPROCESS_LEAD)
+    feed(-1)
     pn.apply_commands()
     out = pn.frames_now()
     while True:
@@ -346,7 +367,7 @@ def run_inprocess(
             break
         if not pn.ready():
             raise RuntimeError(f"in-process loop stalled at step {pn.plant.k}")
-        feed(pn.plant.k + INPROCESS_LEAD)
+        feed(pn.plant.k)
         if plant_times is None:
             out = pn.advance_lockstep()
         else:

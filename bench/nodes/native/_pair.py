@@ -8,8 +8,8 @@ period.  It returns only to take the recorded frames when their buffer is full,
 and at the end.
 
 The bench commands are known before the run, and so is the plant step at which
-the Python loop feeds each (:data:`bench.nodes._loops.INPROCESS_LEAD` periods
-ahead of its apply step).  :func:`_schedule` runs the nodes' own rules on each
+the Python loop feeds each (:func:`bench.nodes._loops.feed_steps`:
+:data:`~bench.nodes._loops.INPROCESS_LEAD` periods ahead of its apply step).  :func:`_schedule` runs the nodes' own rules on each
 (:meth:`PlantNode.on_message`, :meth:`ControllerNode.on_message`: the
 :class:`~bench.nodes._counters.CommandQueue` of each) once, before the run, with
 each node's clock and applied step set to what they are at that feed, and hands
@@ -152,20 +152,6 @@ def _lib() -> ctypes.CDLL:
     return dll
 
 
-def feed_steps(steps: list[int], lead: int) -> list[int]:
-    """The plant step after whose answers the Python loop feeds each command (apply
-    steps ``steps``, in the schedule's order); -1: before the run (``feed(lead)``).
-
-    ``run_inprocess`` feeds, after the answers of plant step ``k``, the commands in
-    order up to the first whose apply step is beyond ``k + lead``."""
-    out = []
-    k = -1
-    for s in steps:
-        k = max(k, s - lead) if s > lead or k >= 0 else -1
-        out.append(k)
-    return out
-
-
 def commands_fit(steps: list[int], lead: int) -> bool:
     """True when the C lists hold every command as it comes due: the schedule in step
     order (a list holds the earliest pending commands, one comes due per step, the
@@ -276,7 +262,7 @@ class _Rows:
 
 
 def _schedule(
-    pn: Any, cn: Any, cmds: list[tuple[int, can.Message]], sent: int, lead: int
+    pn: Any, cn: Any, cmds: list[tuple[int, can.Message]], sent: int, at: list[int]
 ) -> tuple[ctypes.Array[PairCmd], int, int]:
     """The ``bn_pair_cmd_t`` rows: first the commands the nodes hold before the run
     (fed before it, the first ``sent``: the plant's pending ones, then the
@@ -294,7 +280,7 @@ def _schedule(
     from bench.nodes._counters import MAX_PENDING_COMMANDS
     from bench.nodes.native._plant_native import to_frame
 
-    ks = feed_steps([s for s, _ in cmds], lead)
+    ks = at  # the plant step of each command's feed (bench.nodes._loops.feed_steps)
     # a late command (fed at or after its step) is placed by the pending steps
     settle = len(cmds) >= MAX_PENDING_COMMANDS or any(
         s <= k for (s, _), k in zip(cmds, ks, strict=True)
@@ -386,6 +372,7 @@ def run_pair(
     ahead of the plant they are fed.  ``measure`` (when given) gets the periods, the
     returns to Python and the seconds spent in C.
     """
+    from bench.nodes._loops import feed_steps
     from bench.nodes.native._plant_native import Unit, _fill_config, _Sync
     from bench.nodes.native.controller_node import NativeController
 
@@ -397,7 +384,8 @@ def run_pair(
     #: the frames so far: about four a period
     out = _Rows(4 * pn.n_steps + len(cmds) + 64)
     sent = 0
-    while sent < len(cmds) and cmds[sent][0] <= lead:  # run_inprocess's feed(lead)
+    at = feed_steps([s for s, _ in cmds], lead)
+    while sent < len(cmds) and at[sent] < 0:  # fed before the run
         m = cmds[sent][1]
         out.message(m)
         pn.on_message(m)
@@ -410,7 +398,7 @@ def run_pair(
     sync.push_all()
     nc = NativeController(cn, realtime=False)
     t_start = time.perf_counter()  # the set-up above is not the loop's
-    sched, n_sched, n_held = _schedule(pn, cn, cmds, sent, lead)
+    sched, n_sched, n_held = _schedule(pn, cn, cmds, sent, at)
     # the lists the nodes handed over are the schedule's first rows now (bn_pair.h)
     u.n_cmds = u.cmds_more = 0
     nc.ctl.n_cmds = nc.ctl.cmds_more = 0
