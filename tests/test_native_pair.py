@@ -105,23 +105,66 @@ def test_run_inprocess_runs_the_pair_by_default(monkeypatch: pytest.MonkeyPatch)
     assert calls == [1] and len(seen) >= 400
 
 
-def test_the_pair_returns_to_python_only_at_commands_and_the_end() -> None:
-    from bench.nodes.native._pair import PairRun, run_pair
+def _pair_run(scn: Any, monkeypatch: pytest.MonkeyPatch, record: int) -> tuple[Any, Any, Any]:
+    """run_pair on ``scn`` (square-wave) with a record buffer of ``record`` frames."""
+    from bench.nodes.native import _pair
 
-    scn = load_scenario("wen-5.1").with_overrides(duration=0.3)
+    monkeypatch.setattr(_pair, "RECORD_FRAMES", record)
     codec = Codec()
     pn = loops.make_plant_node(scn, codec)
-    cn = loops.make_controller_node(scn, "tt-dq", codec)
+    cn = loops.make_controller_node(scn, "square-wave", codec)
     cmds = loops.command_frames(scn, codec)
-    m = PairRun()
-    frames = run_pair(pn, cn, cmds, loops.INPROCESS_LEAD, measure=m)
-    assert m.steps == pn.plant.k == n_steps(scn)
-    # at most: one feed and one due command per command, the buffer's returns, the end
-    assert m.calls <= 2 * len(cmds) + len(frames) // (1 << 16) + 2
-    assert m.calls < m.steps / 10
+    m = _pair.PairRun()
+    frames = _pair.run_pair(pn, cn, cmds, loops.INPROCESS_LEAD, measure=m)
+    return m, frames, cmds
+
+
+def test_the_pair_returns_to_python_only_for_a_full_buffer_and_the_end(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # xue-fig13: a command every period from step 301, more pending at a time than
+    # the C lists hold (they wait for room); each was two returns before the schedule
+    scn = load_scenario("xue-fig13").with_overrides(duration=1.0)
+    m, frames, cmds = _pair_run(scn, monkeypatch, 1 << 16)
+    assert m.steps == n_steps(scn) and len(cmds) > 500
+    assert len(frames) < (1 << 16)
+    assert m.calls == 1  # the frames fit: the end, and nothing else
+    # a buffer of 1,000 frames: one return per buffer filled (an instant's frames, at
+    # most 28, go in whole, so a return leaves between 972 and 1,000 frames), and the end
+    m, frames, _ = _pair_run(scn, monkeypatch, 1000)
+    recorded = len(frames) - 1  # the start command, fed by Python before the run
+    assert recorded // 1000 + 1 <= m.calls <= recorded // 972 + 1
     # the frames come back as one array, timed apart from C and the rest
     assert isinstance(frames, FrameArray) and len(frames) >= 3 * m.steps
     assert 0 < m.frames_seconds < m.wall_seconds - m.c_seconds
+
+
+def test_a_stop_command_ends_the_pair_where_it_ends_the_python_loop(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # wen-5.1: a set-point every 10 periods from step 3010, fed 1,000 ahead; one made a
+    # stop at 3,500: the commands fed before it applies are recorded, the later ones
+    # never fed (the schedule leaves them out), and the run ends with it
+    from bench.scenarios._setup import command_schedule
+    from bench.wire._protocol import CMD_STOP
+
+    scn = load_scenario("wen-5.1").with_overrides(duration=0.6)
+    stop_at = 3500
+    plan = [
+        replace(c, cmd=CMD_STOP) if c.apply_step == stop_at else c for c in command_schedule(scn)
+    ]
+    real = loops.command_frames
+    monkeypatch.setattr(loops, "command_frames", lambda s, c, *a, **k: real(s, c, schedule=plan))
+    py, native = _both(scn, "tt-dq")
+    assert [_key(m) for m in py] == [_key(m) for m in native]
+    codec = Codec()
+    fed = [m for m in native if m.arbitration_id == codec.frame_id("BenchCommand")]
+    d = codec.decode(fed[-1])
+    assert d is not None
+    last = d.signals["step"]
+    assert last == stop_at + loops.INPROCESS_LEAD - 10  # fed at 3,490: the last before it
+    duties = sum(m.arbitration_id == codec.frame_id("PwmDuty") for m in native)
+    assert duties == stop_at + 1  # periods 0 to 3,500 answered, none after
 
 
 def test_asking_for_the_pair_where_it_cannot_serve_names_why() -> None:

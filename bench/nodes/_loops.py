@@ -220,20 +220,42 @@ def command_frames(
 #: would not do: the 16-bit ``BenchCommand.step`` wraps after 65,536 periods
 #: (6.5 s at 10 kHz) and the nodes keep at most ``MAX_PENDING_COMMANDS``.
 INPROCESS_LEAD = 1000
+
+
+def feed_steps(steps: Sequence[int], lead: int) -> list[int]:
+    """The plant step after whose answers :func:`run_inprocess` feeds each command (apply
+    steps ``steps``, in the schedule's order); -1: before the run.
+
+    A command is fed once the plant is within ``lead`` periods of its step, in the
+    schedule's order (never before an earlier one); those within ``lead`` of step 0 go
+    before the run.  The Python loop and the native pair (:mod:`bench.nodes.native._pair`)
+    both feed by it.
+    """
+    out = []
+    k = -1
+    for s in steps:
+        k = max(k, s - lead) if s > lead or k >= 0 else -1
+        out.append(k)
+    return out
+
+
 #: :func:`run_inprocess`'s ``loop`` choices.
 INPROCESS_LOOPS = ("auto", "python", "native")
 
 
-def inprocess_native_unavailable(pn: PlantNode, cn: ControllerNode, *, latency: bool) -> str | None:
+def inprocess_native_unavailable(
+    pn: PlantNode, cn: ControllerNode, *, latency: bool, steps: list[int] | None = None
+) -> str | None:
     """Why the in-process loop of these nodes cannot run in C (one line), or None.
 
-    :func:`bench.nodes.native._pair.pair_unavailable`, and the library's build (no C
-    compiler, a failed build) as a reason rather than an error.
+    :func:`bench.nodes.native._pair.pair_unavailable` (``steps``: the commands' apply
+    steps, fed :data:`INPROCESS_LEAD` ahead), and the library's build (no C compiler, a
+    failed build) as a reason rather than an error.
     """
     try:
         from bench.nodes.native._pair import pair_unavailable
 
-        return pair_unavailable(pn, cn, latency=latency)
+        return pair_unavailable(pn, cn, latency=latency, steps=steps, lead=INPROCESS_LEAD)
     except (BenchError, OSError) as e:
         return str(e)
 
@@ -278,16 +300,20 @@ def run_inprocess(
     pn = make_plant_node(scn, codec, engine=engine)
     cn = make_controller_node(scn, estimator, codec, "python" if observe else None)
     lt = scn.latency
+    cmds = command_frames(scn, codec)
     if loop != "python":
         why = inprocess_native_unavailable(
-            pn, cn, latency=bool(lt.sample_delay_steps or lt.duty_delay_steps)
+            pn,
+            cn,
+            latency=bool(lt.sample_delay_steps or lt.duty_delay_steps),
+            steps=[s for s, _ in cmds],
         )
         if why is None and (plant_times is not None or observe is not None):
             why = "plant_times and observe are Python's between periods"
         if why is None:
             from bench.nodes.native._pair import run_pair
 
-            return run_pair(pn, cn, command_frames(scn, codec), INPROCESS_LEAD)
+            return run_pair(pn, cn, cmds, INPROCESS_LEAD)
         if loop == "native":
             raise BenchError(f"in-process native pair: {why}")
     link = (
@@ -296,20 +322,21 @@ def run_inprocess(
         else None
     )
     frames: list[can.Message] = []
-    cmds = command_frames(scn, codec)
     sent = 0
+    at = feed_steps([s for s, _ in cmds], INPROCESS_LEAD)
 
-    def feed(up_to: int) -> None:
-        """Hand the nodes the commands up to step ``up_to``, as ``bench run`` paces them."""
+    def feed(k: int) -> None:
+        """Hand the nodes the commands fed after the answers of plant step ``k`` (-1: before
+        the run), as ``bench run`` paces them."""
         nonlocal sent
-        while sent < len(cmds) and cmds[sent][0] <= up_to:
+        while sent < len(cmds) and at[sent] <= k:
             m = cmds[sent][1]
             frames.append(m)
             pn.on_message(m)
             cn.on_message(m)
             sent += 1
 
-    feed(INPROCESS_LEAD)
+    feed(-1)
     pn.apply_commands()
     out = pn.frames_now()
     while True:
@@ -340,7 +367,7 @@ def run_inprocess(
             break
         if not pn.ready():
             raise RuntimeError(f"in-process loop stalled at step {pn.plant.k}")
-        feed(pn.plant.k + INPROCESS_LEAD)
+        feed(pn.plant.k)
         if plant_times is None:
             out = pn.advance_lockstep()
         else:

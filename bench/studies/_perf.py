@@ -446,11 +446,12 @@ def inprocess_native_section(n_steps: int, repeats: int) -> dict[str, Any]:
     ``us_per_step_tt_dq``: the time inside the C calls per period (the start-up's
     periods included: one call covers many periods), median of ``repeats`` runs;
     ``wall_us_per_step_tt_dq``: the whole loop's per period, with the returns to Python
-    (a bench command fed, a command due) and the frames handed over as one
+    (the record buffer full, the end; the bench commands' schedule made before the
+    run) and the frames handed over as one
     :class:`~bench.wire._frames.FrameArray` (no :class:`can.Message` made); its split,
     from the same runs: ``frames_us_per_step`` the frames' rows written from the
-    record buffer, ``returns_us_per_step`` the rest outside C (the returns' Python, the
-    nodes built and merged); ``returns_per_1000_steps``; ``plant_us`` and
+    record buffer, ``returns_us_per_step`` the rest outside C (the commands' schedule,
+    the returns' Python, the nodes merged); ``returns_per_1000_steps``; ``plant_us`` and
     ``controller_us``: each unit's share per period, from one more run with the units
     timed (two clock reads more per frame and per period);
     ``python_loop_wall_us_per_step_tt_dq``: the Python loop's whole run per period on
@@ -1810,8 +1811,8 @@ def _missed_reasons(res: dict[str, Any]) -> list[str]:
             f"{_num(nat['controller_us'], 'us')} (the frames decoded and checked, the tt-dq "
             f"core's step, the duty and telemetry encoded); the pair's own hand-over about "
             f"{_num(rest, 'us')}. No Python runs per period "
-            f"({_num(nat['returns_per_1000_steps'])} returns per 1,000 steps, for the bench "
-            "commands): what is left is the two cores' arithmetic. The figures are "
+            f"({_num(nat['returns_per_1000_steps'])} returns per 1,000 steps): what is "
+            "left is the two cores' arithmetic. The figures are "
             "wall-clock times on a shared two-core machine (one-minute load average "
             f"{_num(load)} at the start of this run): other work on the cores lengthens "
             "every one of them."

@@ -33,13 +33,14 @@ program:
   (:class:`bench.nodes._controller_node.ControllerNode` on frames in and
   out, no transport: ``bn_ctl_on_frame``) and its loop on a bus
   (``bn_ctl_serve``), stepping the controller core Python built (its
-  ``cc_foc_t`` and ``cc_sup_t`` by address); ``controller_node.py``: the
-  Python side (set-up, the bench commands, the report) and ``bench
+  ``cc_foc_t`` and ``cc_sup_t`` by address) and applying the pending bench
+  commands at their step (``bn_ctl_apply_commands``); ``controller_node.py``:
+  the Python side (set-up, the bench commands' queue, the report) and ``bench
   controller --engine native``.
 - ``bn_pair.h``, ``bn_pair.c``: the in-process native pair: the plant unit and
   the controller unit stepped together for many periods per call, the frames
-  passed in memory (:func:`bench.nodes._loops.run_inprocess`'s loop); driven
-  by :mod:`._pair`.
+  passed in memory and the bench commands fed from a schedule made once
+  (:func:`bench.nodes._loops.run_inprocess`'s loop); driven by :mod:`._pair`.
 - ``echo.c``: answers each PhaseSamples with a PwmDuty (same step, E2E CRC),
   or pings (round-trip times): the transports, the codec and the E2E check
   end to end, from python-can or from itself.

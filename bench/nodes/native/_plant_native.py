@@ -500,8 +500,7 @@ def to_frame(m: can.Message) -> Frame:
         | (BN_FD if m.is_fd else 0)
         | (BN_BRS if m.bitrate_switch else 0)
     )
-    for i, b in enumerate(m.data):
-        f.data[i] = b
+    ctypes.memmove(f.data, bytes(m.data), f.len)
     return f
 
 
@@ -517,8 +516,7 @@ class _Sync:
         self.seen_duty_rej = [0] * N_REJECT
         self.seen_trips = [0] * 8
         # the pending list and the duty ring as numpy views of the unit's memory: one
-        # vector copy a return instead of a ctypes access per slot (the pair returns
-        # once per bench command)
+        # vector copy a return instead of a ctypes access per slot
         self.cmds = np.ctypeslib.as_array(u.cmds)
         self.duties = np.ctypeslib.as_array(u.duties)
 

@@ -23,11 +23,16 @@ void bn_ctl_reset(bn_ctl_t *ctl)
         ctl->a_k[j] = -1;
     memset(&ctl->c, 0, sizeof ctl->c);
     ctl->next_k = 0;
-    ctl->due_k = -1;
     ctl->error = 0;
     ctl->has_last = 0;
     ctl->send_ack = 0;
     ctl->stopped = 0;
+    ctl->faulted = 0;
+    ctl->n_cmds = ctl->cmds_more = 0;
+    ctl->applied_seq = -1;
+    ctl->applied_upto = -1;
+    ctl->has_w_ref = 0;
+    ctl->w_m_ref = 0.0;
     ctl->t_last = ctl->t_sample = 0;
     ctl->seen = 0;
 }
@@ -99,6 +104,41 @@ static void emit(bn_ctl_t *ctl, bn_ctl_sink_t sink, void *ctx, const bn_frame_t 
 
 static void reject(bn_ctl_t *ctl, int reason) { ctl->c.reasons[reason]++; }
 
+int bn_ctl_apply_commands(bn_ctl_t *ctl, int64_t k)
+{
+    if (k > ctl->applied_upto) ctl->applied_upto = k;
+    if (ctl->n_cmds == 0 || ctl->cmds[0].step > k) return BN_CTL_EV_NONE; /* in step order */
+    int kept = 0, rc = CC_OK;
+    for (int j = 0; j < ctl->n_cmds; j++) {
+        bn_ctl_cmd_t c = ctl->cmds[j];
+        if (c.step > k || rc != CC_OK) {
+            ctl->cmds[kept++] = c;
+            continue;
+        }
+        ctl->applied_seq = c.seq;
+        if (c.cmd == BENCH_DBC_BENCH_COMMAND_CMD_START_CHOICE
+            || c.cmd == BENCH_DBC_BENCH_COMMAND_CMD_ENABLE_CHOICE
+            || c.cmd == BENCH_DBC_BENCH_COMMAND_CMD_RESET_CHOICE) {
+            ctl->faulted = 0;
+            rc = cc_foc_set_enable(ctl->foc, 1);
+        } else if (c.cmd == BENCH_DBC_BENCH_COMMAND_CMD_STOP_CHOICE
+                   || c.cmd == BENCH_DBC_BENCH_COMMAND_CMD_DISABLE_CHOICE) {
+            rc = cc_foc_set_enable(ctl->foc, 0);
+            if (c.cmd == BENCH_DBC_BENCH_COMMAND_CMD_STOP_CHOICE) ctl->stopped = 1;
+        }
+        if (rc != CC_OK) continue; /* as Python's set_enable raises before the reference */
+        ctl->w_m_ref = c.speed_ref_rpm / ctl->rpm_per_rad_s;
+        ctl->has_w_ref = 1;
+        cc_foc_set_speed_ref(ctl->foc, ctl->w_m_ref);
+    }
+    ctl->n_cmds = kept;
+    if (rc != CC_OK) {
+        ctl->error = rc;
+        return BN_CTL_EV_ERROR;
+    }
+    return BN_CTL_EV_NONE;
+}
+
 /* ControllerNode._run_ready: the steps whose sample (and truth) are here, in order */
 static int run_ready(bn_ctl_t *ctl, bn_ctl_sink_t sink, void *ctx)
 {
@@ -107,10 +147,10 @@ static int run_ready(bn_ctl_t *ctl, bn_ctl_sink_t sink, void *ctx)
         size_t s = slot(k);
         if (ctl->s_k[s] != k || (ctl->needs_truth && ctl->t_k[s] != k))
             return BN_CTL_EV_NONE;
-        if (k >= ctl->cmd_next_step && ctl->due_k != k) {
-            ctl->due_k = k; /* Python applies the commands due at k, then resumes */
-            return BN_CTL_EV_DUE;
-        }
+        if (ctl->n_cmds == 0 && ctl->cmds_more)
+            return BN_CTL_EV_CMDS; /* Python hands the rest of its pending list */
+        int ev = bn_ctl_apply_commands(ctl, k);
+        if (ev != BN_CTL_EV_NONE) return ev;
         cc_meas_t m;
         m.k = k;
         m.i_a = ctl->s_i_a[s];

@@ -14,10 +14,15 @@
  *                 PwmDuty and CtrlTelemetry packed by the C code `bench
  *                 codegen` writes, with their E2E CRC
  *
- * The bench commands stay Python's (bench/nodes/_counters.py CommandQueue,
- * one home for their rules): a BenchCommand frame, and a step at which a
- * command is due, are events the caller hands to Python, which applies them
- * to the same core and calls again (bn_ctl_resume).  The signals' scale,
+ * A BenchCommand frame is Python's (bench/nodes/_counters.py CommandQueue:
+ * de-duplication, seq, late commands, one home for those rules): an event the
+ * caller hands to Python, which queues it and hands the pending list back
+ * (bn_ctl_t.cmds, in step order).  This unit applies the pending commands at
+ * their step to the core (bn_ctl_apply_commands: ControllerNode._apply_commands
+ * with CommandQueue.due, the rule the native node and the in-process pair
+ * share; the Python node keeps its own for the Python loop), with no return to
+ * Python; Python takes back what it applied (applied_upto, applied_seq,
+ * stopped, faulted) at its next event.  The signals' scale,
  * offset, range and modulus come from the DBC through Python's codec
  * (bn_sig_t, bn.h), so no DBC fact is written here.
  *
@@ -42,6 +47,8 @@ extern "C" {
 #define BN_CTL_RING 2048
 /* answers kept for repeated samples (the Python node's 8) */
 #define BN_CTL_ANSWERS 8
+/* pending commands handed over at a time (as bn_plant.h's BN_PLANT_CMDS) */
+#define BN_CTL_CMDS 256
 
 /* the output signals, in this order in bn_ctl_t.sig */
 enum {
@@ -81,7 +88,8 @@ enum {
 enum {
     BN_CTL_EV_NONE = 0,     /* frame handled (on_frame, resume) */
     BN_CTL_EV_COMMAND = 1,  /* a BenchCommand frame (cmd_frame): Python's queue */
-    BN_CTL_EV_DUE = 2,      /* a command is due at step due_k: apply, then resume */
+    BN_CTL_EV_CMDS = 2,     /* the pending list handed over is used up (cmds_more):
+                               Python takes back what was applied, hands more, resumes */
     BN_CTL_EV_STOPPED = 3,  /* stopped was set (a stop command ran) */
     BN_CTL_EV_IDLE = 4,     /* idle_ns without a frame */
     BN_CTL_EV_TIMEOUT = 5,  /* real time: no valid sample for sample_timeout_ns */
@@ -94,6 +102,13 @@ typedef struct {
     uint64_t reasons[BN_CTL_R_N];
     uint64_t samples_accepted, send_errors, frames_lost_on_send, steps;
 } bn_ctl_counts_t;
+
+/* one pending command (CommandQueue's Command: apply step, cmd, seq, speed_ref) */
+typedef struct {
+    int64_t step;
+    int32_t cmd, seq;
+    double speed_ref_rpm;
+} bn_ctl_cmd_t;
 
 typedef struct {
     /* set-up (Python, before the first call) */
@@ -109,21 +124,27 @@ typedef struct {
     bn_sig_t sig[BN_CTL_NSIG];
     uint8_t duty_flags, tel_flags; /* BN_FD, BN_BRS of PwmDuty and CtrlTelemetry */
     uint32_t run_id;               /* the run's nonce (CtrlTelemetry.run_id) */
-    /* the commands' state, kept by Python's CommandQueue and copied here */
-    int64_t cmd_next_step; /* apply step of the first pending command (INT64_MAX: none) */
+    double rpm_per_rad_s;  /* bench.wire._protocol.RPM_PER_RAD_S: speed_ref to rad/s */
+    /* the commands' state: CommandQueue's, copied here by Python; applied here */
     int32_t ack_seq;       /* CommandQueue.ack_seq (-1: none) */
     int32_t send_ack;      /* set by Python: send the last output's telemetry now */
-    int32_t stopped;       /* set by Python (a stop command ran) */
+    int32_t stopped;       /* a stop command ran (here, or set by Python) */
+    int32_t faulted;       /* ControllerNode.faulted: cleared by start, enable, reset */
+    int32_t n_cmds, cmds_more; /* pending list: its length; 1: Python holds more */
+    int32_t applied_seq;   /* CommandQueue.applied_seq */
+    int32_t has_w_ref;     /* 1: a command set the speed reference (w_m_ref) */
+    int64_t applied_upto;  /* CommandQueue.applied_upto */
+    double w_m_ref;        /* the speed reference the newest command set (rad/s) */
     /* loop timing (bn_ctl_serve) */
     int64_t idle_ns, sample_timeout_ns, poll_ns, return_ns;
     /* state */
     int64_t next_k;
-    int64_t due_k;
     int32_t error;
     int32_t has_last;
     cc_out_t last;
     bn_frame_t cmd_frame;
     bn_ctl_counts_t c;
+    bn_ctl_cmd_t cmds[BN_CTL_CMDS]; /* pending, by step */
     /* loop state */
     int64_t t_last, t_sample;
     uint64_t seen;
@@ -139,6 +160,13 @@ typedef int (*bn_ctl_sink_t)(void *ctx, const bn_frame_t *f);
 
 /* Empty rings and counters, next step 0 (the set-up fields are kept). */
 void bn_ctl_reset(bn_ctl_t *ctl);
+
+/* ControllerNode._apply_commands with CommandQueue.due at step k: the pending
+ * commands due at k, in step order, applied to the core (start, enable, reset:
+ * enable, faulted cleared; stop, disable: disable, a stop sets stopped; each its
+ * speed reference).  BN_CTL_EV_NONE, or BN_CTL_EV_ERROR (ctl->error) when the core
+ * refused to enable. */
+int bn_ctl_apply_commands(bn_ctl_t *ctl, int64_t k);
 
 /* Take one received frame (PhaseSamples, PlantTruth or BenchCommand); the frames
  * it answers go to sink.  BN_CTL_EV_NONE, or an event for Python. */

@@ -8,8 +8,12 @@ supervision, by address), encodes and sends, period after period.  It returns
 only for what stays Python's:
 
 - a ``BenchCommand`` frame (the rules of :class:`bench.nodes._counters.CommandQueue`
-  have one home), and a step at which a command is due: Python applies it to
-  the core through the controller, as the Python node does, and calls again;
+  have one home): Python queues it and hands the pending list to C, which applies
+  each command at its step to the core (``bn_ctl_apply_commands``, the rule the
+  in-process pair shares; the Python node keeps :meth:`ControllerNode._apply_commands`
+  for the Python loop); Python takes back what C applied at its next event
+  (:meth:`NativeController.pull_commands`), and is called again when the list
+  handed over runs dry with more pending (``EV_CMDS``);
 - a real-time sample timeout (:meth:`ControllerNode.sample_timeout`);
 - the end: a stop command ran, ``idle_s`` without a frame, or a stop of the
   process. Python's signal handlers run between two calls: a signal ends the
@@ -47,6 +51,7 @@ from bench.wire._codec import (
     REJECT_DECODE_ERROR,
     REJECT_OUT_OF_RANGE,
 )
+from bench.wire._protocol import RPM_PER_RAD_S
 
 __all__ = [
     "RETURN_S",
@@ -67,7 +72,7 @@ NATIVE_INTERFACES = ("udp_multicast", "socketcan")
 _INT64_MAX = (1 << 63) - 1
 
 # events (bn_ctl.h)
-EV_NONE, EV_COMMAND, EV_DUE, EV_STOPPED, EV_IDLE, EV_TIMEOUT, EV_POLL, EV_ERROR = range(8)
+EV_NONE, EV_COMMAND, EV_CMDS, EV_STOPPED, EV_IDLE, EV_TIMEOUT, EV_POLL, EV_ERROR = range(8)
 # bn_frame_t flags (bn.h)
 #: The rejection reasons, in the order of bn_ctl.h's BN_CTL_R_*.
 REASONS = (
@@ -129,6 +134,21 @@ class Counts(ctypes.Structure):
     ]
 
 
+#: Pending commands the C list holds (bn_ctl.h's BN_CTL_CMDS).
+CMDS = 256
+
+
+class CtlCmd(ctypes.Structure):
+    """``bn_ctl_cmd_t`` (bn_ctl.h)."""
+
+    _fields_ = [
+        ("step", ctypes.c_int64),
+        ("cmd", ctypes.c_int32),
+        ("seq", ctypes.c_int32),
+        ("speed_ref_rpm", ctypes.c_double),
+    ]
+
+
 class CtlBlock(ctypes.Structure):
     """The head of ``bn_ctl_t`` up to its counters (bn_ctl.h, field by field); the rest
     (the loop's state and rings) is C's alone. ``bn_ctl_prefix_size`` checks the layout."""
@@ -148,21 +168,28 @@ class CtlBlock(ctypes.Structure):
         ("duty_flags", ctypes.c_uint8),
         ("tel_flags", ctypes.c_uint8),
         ("run_id", ctypes.c_uint32),
-        ("cmd_next_step", ctypes.c_int64),
+        ("rpm_per_rad_s", ctypes.c_double),
         ("ack_seq", ctypes.c_int32),
         ("send_ack", ctypes.c_int32),
         ("stopped", ctypes.c_int32),
+        ("faulted", ctypes.c_int32),
+        ("n_cmds", ctypes.c_int32),
+        ("cmds_more", ctypes.c_int32),
+        ("applied_seq", ctypes.c_int32),
+        ("has_w_ref", ctypes.c_int32),
+        ("applied_upto", ctypes.c_int64),
+        ("w_m_ref", ctypes.c_double),
         ("idle_ns", ctypes.c_int64),
         ("sample_timeout_ns", ctypes.c_int64),
         ("poll_ns", ctypes.c_int64),
         ("return_ns", ctypes.c_int64),
         ("next_k", ctypes.c_int64),
-        ("due_k", ctypes.c_int64),
         ("error", ctypes.c_int32),
         ("has_last", ctypes.c_int32),
         ("last", Out),
         ("cmd_frame", Frame),
         ("c", Counts),
+        ("cmds", CtlCmd * CMDS),
     ]
 
 
@@ -256,19 +283,45 @@ class NativeController:
             spec = codec._spec(msg)
             setattr(c, attr, (BN_FD if spec.is_fd else 0) | (BN_BRS if spec.brs else 0))
         c.run_id = node.run_id
+        c.rpm_per_rad_s = RPM_PER_RAD_S  # the node's speed_ref in rad/s (_apply_commands)
         self._sync_commands()
 
     # -- what stays Python's --------------------------------------------------
     def _sync_commands(self) -> None:
-        q = self.node.commands
-        self.ctl.cmd_next_step = min(q.next_step, _INT64_MAX)
-        self.ctl.ack_seq = q.ack_seq
-        self.ctl.stopped = int(self.node.stopped)
+        """The Python queue's state to C: the acknowledgement, the stop and fault flags,
+        and the pending list (its first :data:`CMDS`, in step order; ``cmds_more`` when
+        it holds more)."""
+        node, c = self.node, self.ctl
+        q = node.commands
+        c.ack_seq = q.ack_seq
+        c.stopped = int(node.stopped)
+        c.faulted = int(node.faulted)
+        c.applied_upto = q.applied_upto
+        c.applied_seq = q.applied_seq
+        pending = sorted(q.pending.items())
+        for j, (s, cmd) in enumerate(pending[:CMDS]):
+            e = c.cmds[j]
+            e.step, e.cmd, e.seq, e.speed_ref_rpm = s, cmd.cmd, cmd.seq, cmd.speed_ref_rpm
+        c.n_cmds = min(len(pending), CMDS)
+        c.cmds_more = int(len(pending) > CMDS)
+
+    def pull_commands(self) -> None:
+        """What C applied back into the Python node: the queue's applied commands
+        (:meth:`CommandQueue.due`, nothing applied again), the stop and fault flags, and
+        the controller's speed reference attribute (the core's is C's)."""
+        node, c = self.node, self.ctl
+        if c.applied_upto >= 0:
+            node.commands.due(c.applied_upto)
+        node.stopped = bool(c.stopped)
+        node.faulted = bool(c.faulted)
+        if c.has_w_ref:
+            node.ctrl.w_m_ref = c.w_m_ref
 
     def _command(self) -> None:
         """A BenchCommand frame: ControllerNode.on_message's command branch."""
         node, c = self.node, self.ctl
         f = c.cmd_frame
+        self.pull_commands()
         node.next_k = c.next_k
         if c.next_k > 0:  # the steps C ran count as applied (CommandQueue.due)
             node.commands.applied_upto = max(node.commands.applied_upto, c.next_k - 1)
@@ -289,14 +342,14 @@ class NativeController:
             c.send_ack = 1
         self._sync_commands()
 
-    def _due(self) -> None:
-        node, c = self.node, self.ctl
-        node.next_k = c.due_k
-        node._apply_commands(c.due_k)
+    def _more_commands(self) -> None:
+        """The list handed over ran dry with more pending: the next ones."""
+        self.pull_commands()
         self._sync_commands()
 
     def _timeout(self) -> None:
         node = self.node
+        self.pull_commands()
         node.next_k = self.ctl.next_k
         node.sample_timeout()
         self._sync_commands()
@@ -305,8 +358,8 @@ class NativeController:
         """Hand event ``ev`` (not an end) to Python's node."""
         if ev == EV_COMMAND:
             self._command()
-        elif ev == EV_DUE:
-            self._due()
+        elif ev == EV_CMDS:
+            self._more_commands()
         elif ev == EV_TIMEOUT:
             self._timeout()
         elif ev == EV_ERROR:
@@ -349,6 +402,7 @@ class NativeController:
     def merge(self) -> None:
         """The C counters into the Python node's (its report), once, after the loop."""
         node, c = self.node, self.ctl
+        self.pull_commands()
         n = node.counters
         n.frames_accepted += c.c.frames_accepted
         n.frames_unknown += c.c.frames_unknown
