@@ -295,9 +295,9 @@ def _trace(name: str, plant: str, beyond: bool, n: int = 100_000) -> tuple[Plant
 
 
 # sha256 of the 100,000 periods' outputs (i_d, i_q, w_m, theta_m, u_dc, u_alpha, u_beta as
-# doubles) and the periods beyond the range, recorded with the core whose cross map tested
-# each RK4 stage's currents against the range (before the hot stage ran its stages on the
-# polynomial and took a step again only when one left it).
+# doubles) and the periods beyond the range, recorded with the core whose cross map tests
+# each RK4 stage's currents against the range (plant_flux_cross) and whose switching model
+# sorted its times with qsort: a change made for speed must keep them.
 TRACES = {
     ("wen-5.1", "ideal", False): (
         "ce795af8d5420e68bfcd8256ec69e2d59720c89686bdbd071d943bdbf9b8d0c7",
@@ -327,14 +327,14 @@ TRACES = {
 
 
 @pytest.mark.parametrize(("name", "plant", "beyond"), list(TRACES))
-def test_same_bits_as_the_stage_by_stage_range_test(name: str, plant: str, beyond: bool) -> None:
-    """The hot stage runs its four stages on the cross map's polynomial and takes the step
-    again with the continued map only when a stage left the range: 100,000 periods give the
-    same outputs, bit for bit, as the core that tested every stage (the digests), inside the
-    range and beyond it. The drive plant is the cross-saturated one; the ideal plant
-    (d-axis map) guards the other path. The digests hold for the x86_64 glibc builds they
-    were recorded on (another libm may round cos, sin or exp differently); the count of
-    periods beyond the range holds everywhere."""
+def test_same_bits_as_the_recorded_core(name: str, plant: str, beyond: bool) -> None:
+    """100,000 periods give the same outputs, bit for bit, as the core they were recorded
+    with (the digests), inside the flux map's range and beyond it, so a change made for
+    speed (the stage's range test, the order of the switching times) changes no bit. The
+    drive plant is the cross-saturated one; the ideal plant (d-axis map) guards the other
+    path. The digests hold for the x86_64 glibc builds they were recorded on (another libm
+    may round cos, sin or exp differently); the count of periods beyond the range holds
+    everywhere."""
     digest, periods = TRACES[(name, plant, beyond)]
     p, out = _trace(name, plant, beyond)
     assert p.out_of_range_periods == periods
