@@ -15,12 +15,17 @@ definite everywhere, and far out it is the d-axis model's ``diag(L_dd,sat(i_d), 
 
 from __future__ import annotations
 
+import hashlib
 import math
+import platform
 
 import pytest
 
 from bench._errors import EXIT_LOCK_LOST, EXIT_MODEL_RANGE, EXIT_PLANT_TRIPPED
 from bench.runs._results import outcome
+from bench.scenarios._schema import load_scenario
+from bench.scenarios._setup import build_plant
+from bench.studies._plants import plant_variant
 from plant_rt import InverterPars, Plant, flux_dq, preset
 from plant_rt._machine import FLUX_FADE, FLUX_RANGE
 from tests.plant_reference import ReferencePlant
@@ -247,3 +252,93 @@ def test_the_plant_node_reports_the_count() -> None:
         pn.plant.step(0.0, 1.0, 0.0)
     n = pn.plant.out_of_range_periods
     assert n > 20 and pn.report()["out_of_range_periods"] == n
+
+
+def _rotating(p: Plant, n: int, w_e: float, amp: float) -> list[tuple[float, float, float]]:
+    """Duties of a stator voltage of amplitude ``amp`` (V) turning at ``w_e`` (rad/s) from
+    the rotor's angle, 5 % amplitude modulated: a motor fed as its back-EMF, so that its
+    currents stay well inside the range."""
+    u_dc = p.inverter.u_dc
+    th = p.truth().theta_m * p.motor.n_p
+    out = []
+    for k in range(n):
+        t = th + w_e * p.T_s * (k + 0.5)
+        a = amp * (1.0 + 0.05 * math.sin(2e-3 * k))
+        u_a, u_b = -a * math.sin(t), a * math.cos(t)
+        out.append(
+            (
+                0.5 + u_a / u_dc,
+                0.5 + (-0.5 * u_a + 0.866 * u_b) / u_dc,
+                0.5 + (-0.5 * u_a - 0.866 * u_b) / u_dc,
+            )
+        )
+    return out
+
+
+def _trace(name: str, plant: str, beyond: bool, n: int = 100_000) -> tuple[Plant, bytes]:
+    """The plant of ``name`` on ``plant`` stepped ``n`` periods (``Plant.step_n``): inside
+    the range, half at an imposed speed (30 % of the link's voltage as back-EMF) and half
+    from standstill with the rotor free, dragged by a 5 Hz field at i_max / 2; beyond it,
+    full voltage on phase b for 300 periods (tens of i_max), then the legs at half duty."""
+    p = build_plant(plant_variant(load_scenario(name), plant))
+    m = p.motor
+    if beyond:
+        return p, p.step_n([(0.0, 1.0, 0.0)] * 300 + [(0.5, 0.5, 0.5)] * (n - 300)).tobytes()
+    w_e = 0.3 * (p.inverter.u_dc / math.sqrt(3.0)) / m.psi_f
+    p.impose_speed(w_e / m.n_p)
+    out = p.step_n(_rotating(p, n // 2, w_e, 1.02 * w_e * m.psi_f))
+    p.impose_speed(0.0)
+    p.impose_speed(None)
+    w_2 = 2.0 * math.pi * 5.0 * m.n_p
+    out += p.step_n(_rotating(p, n - n // 2, w_2, 0.5 * m.i_max * math.hypot(m.R_s, w_2 * m.L_d)))
+    return p, out.tobytes()
+
+
+# sha256 of the 100,000 periods' outputs (i_d, i_q, w_m, theta_m, u_dc, u_alpha, u_beta as
+# doubles) and the periods beyond the range, recorded with the core whose cross map tests
+# each RK4 stage's currents against the range (plant_flux_cross) and whose switching model
+# sorted its times with qsort: a change made for speed must keep them.
+TRACES = {
+    ("wen-5.1", "ideal", False): (
+        "ce795af8d5420e68bfcd8256ec69e2d59720c89686bdbd071d943bdbf9b8d0c7",
+        0,
+    ),
+    ("wen-5.1", "drive", False): (
+        "a3c62847c0a01b90cacba40445d75779d1bd3244cbc83e2ecea7e4865e2130a6",
+        0,
+    ),
+    ("xue-fig13", "ideal", False): (
+        "5f0bf0a5d335c9c2f12ae16109423c24b31c79e3ac897b906d053ce54e926024",
+        0,
+    ),
+    ("xue-fig13", "drive", False): (
+        "8eef8a7b1a9c831a683c96cea1bf663e2a2ed841d669636d32cbf2663b098d0f",
+        0,
+    ),
+    ("wen-5.1", "drive", True): (
+        "4b1657cefac1ccb041778ee0f4103c661fea09ffadb4e5d355ebb8e5177f27e2",
+        678,
+    ),
+    ("xue-fig13", "drive", True): (
+        "63cae8e6577e8a50a98ebd1f377dfb5fe0e06fb8eea3a356526bdd2f5fa2f18c",
+        423,
+    ),
+}
+
+
+@pytest.mark.parametrize(("name", "plant", "beyond"), list(TRACES))
+def test_same_bits_as_the_recorded_core(name: str, plant: str, beyond: bool) -> None:
+    """100,000 periods give the same outputs, bit for bit, as the core they were recorded
+    with (the digests), inside the flux map's range and beyond it, so a change made for
+    speed (the stage's range test, the order of the switching times) changes no bit. The
+    drive plant is the cross-saturated one; the ideal plant (d-axis map) guards the other
+    path. The digests hold for the x86_64 glibc builds they were recorded on (another libm
+    may round cos, sin or exp differently); the count of periods beyond the range holds
+    everywhere."""
+    digest, periods = TRACES[(name, plant, beyond)]
+    p, out = _trace(name, plant, beyond)
+    assert p.out_of_range_periods == periods
+    assert (periods > 0) == beyond
+    if platform.system() != "Linux" or platform.machine() != "x86_64":
+        pytest.skip("the digests were recorded on x86_64 Linux (glibc's libm)")
+    assert hashlib.sha256(out).hexdigest() == digest

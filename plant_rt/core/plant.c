@@ -586,10 +586,21 @@ static void sw_interval(plant *pl, double h, const int states[3], double tau_L, 
     memcpy(i_abc, i_new, sizeof i_new);
 }
 
-static int cmp_double(const void *a, const void *b)
+/* The times ascending, in place, by insertion (a few dozen at most, each leg's already in
+ * order): cheaper than qsort's calls through a comparator at this size. The times are
+ * finite and positive (plant_clamp_duty maps NaN to 0, only change points after 0 enter),
+ * so the ascending order is unique and the result is qsort's, bit for bit. */
+static void sort_times(double *a, int n)
 {
-    double x = *(const double *)a, y = *(const double *)b;
-    return (x > y) - (x < y);
+    for (int i = 1; i < n; i++) {
+        double x = a[i];
+        int j = i;
+        while (j > 0 && a[j - 1] > x) {
+            a[j] = a[j - 1];
+            j--;
+        }
+        a[j] = x;
+    }
 }
 
 static void step_switching(plant *pl, double d_a, double d_b, double d_c, double t0)
@@ -608,7 +619,7 @@ static void step_switching(plant *pl, double d_a, double d_b, double d_c, double
         for (int k = 0; k < np[x]; k++)
             if (pt[x][k] > 0.0) times[nt++] = pt[x][k];
     for (int k = 0; k < pl->n_cuts; k++) times[nt++] = pl->cuts[k];
-    qsort(times, (size_t)nt, sizeof(double), cmp_double);
+    sort_times(times, nt);
     int ja = 0, jb = 0, jc = 0;
     int st[3] = {ps[0][0], ps[1][0], ps[2][0]};
     int j = 0;
