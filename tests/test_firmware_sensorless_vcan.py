@@ -5,8 +5,8 @@ core initialised by the ``bench_controller.h`` that ``bench codegen --estimator`
 writes) runs as the controller under test of ``bench run SCENARIO --controller
 external`` on vcan0, in lockstep, with every sensorless estimator of the compiled core
 (:data:`tests.test_firmware_sensorless.SENSORLESS`). The single estimators run
-``firmware-sensorless.toml`` (the start-up and a ramp to 100 rpm, 4000 periods); the
-hybrids run ``firmware-hybrid.toml`` (the same start-up, then a ramp to 1150 rpm, 5000
+``firmware-sensorless.toml`` (the start-up and a ramp to 100 rpm, 3000 periods); the
+hybrids run ``firmware-hybrid.toml`` (the same start-up, then a ramp to 1150 rpm, 4200
 periods), whose speed crosses their whole transition band, injection below it and flux
 observer above it, which the test asserts from the trace. Its run's table
 (every column of :data:`bench.runs._analysis.COLUMNS`, decoded from the capture) is the
