@@ -10,6 +10,7 @@
 #include <Python.h>
 
 #include "core/plant.h"
+#include "core/plant_layout.h"
 #include "core/plant_protection.h"
 #include "core/plant_pwm.h" /* dead_time_error, device_drop_error */
 #include "core/plant_sensors.h"
@@ -452,6 +453,25 @@ static PyObject *mod_device_drop_error(PyObject *unused, PyObject *const *args, 
     return PyFloat_FromDouble(plant_device_drop_error(v[0], v[1], v[2], v[3]));
 }
 
+/* layout() -> (names, numbers): the plant instance's layout as this build compiled it
+ * (plant_layout.h; the native node library exports the same, _plant_native.py compares) */
+static PyObject *mod_layout(PyObject *unused, PyObject *noargs)
+{
+    size_t n = plant_layout(NULL, 0);
+    size_t *v = PyMem_Calloc(n, sizeof *v);
+    if (v == NULL) return PyErr_NoMemory();
+    plant_layout(v, n);
+    PyObject *nums = PyTuple_New((Py_ssize_t)n);
+    for (size_t i = 0; nums != NULL && i < n; i++) {
+        PyObject *x = PyLong_FromSize_t(v[i]);
+        if (x == NULL) Py_CLEAR(nums);
+        else PyTuple_SET_ITEM(nums, (Py_ssize_t)i, x);
+    }
+    PyMem_Free(v);
+    if (nums == NULL) return NULL;
+    return Py_BuildValue("(sN)", plant_layout_names(), nums);
+}
+
 static PyMethodDef module_methods[] = {
     {"machine", (PyCFunction)mod_machine, METH_VARARGS,
      "machine(n_p, L_d, L_q, psi_f, i_max, sigma, i_sat, c_dq, saturation, cross, i_d, i_q) -> "
@@ -464,6 +484,9 @@ static PyMethodDef module_methods[] = {
      "protection_check(i_trip, u_dc_trip, w_m_trip, i_a, i_b, i_c, u_dc, w_m) -> fault code"},
     {"encoder_angle", (PyCFunction)mod_encoder_angle, METH_VARARGS,
      "encoder_angle(theta_m, w_m, delay_s, counts) -> the angle a position sensor reports"},
+    {"layout", (PyCFunction)mod_layout, METH_NOARGS,
+     "layout() -> (names, numbers): sizeof(plant), its blocks' sizes and its members' offsets "
+     "as this build compiled them (plant_rt/core/plant_layout.h)"},
     {NULL, NULL, 0, NULL},
 };
 

@@ -297,6 +297,43 @@ def test_firmware_builds_sensorless_with_werror(tmp_path: Path) -> None:
     assert res.returncode != 0 and "PlantTruth" in res.stderr
 
 
+def test_a_build_for_another_estimator_compiles_only_the_program(tmp_path: Path) -> None:
+    """In one BUILD, the DBC's code and the core are compiled once (firmware/Makefile's
+    objects): `bench codegen` gives a file it writes with unchanged contents (cantools'
+    time stamp aside) its time back, so a build for another estimator compiles and links
+    the program only, and a build with nothing changed does nothing."""
+    build = tmp_path / "build"
+
+    def make(est: str) -> str:
+        res = subprocess.run(
+            [MAKE or "make", "-C", str(FIRMWARE), f"BUILD={build}", f"PYTHON={sys.executable}",
+             f"SCENARIO={SCENARIO}", f"ESTIMATOR={est}"],
+            capture_output=True, text=True, timeout=300,
+        )  # fmt: skip
+        assert res.returncode == 0, res.stdout + res.stderr
+        return res.stdout
+
+    def times() -> dict[str, int]:
+        files = [*build.glob("obj/**/*.o"), *build.glob("gen/**/*.[ch]"), build / "ref_controller"]
+        return {str(f.relative_to(build)): f.stat().st_mtime_ns for f in files}
+
+    make(SENSORLESS[0])
+    objects = sorted(build.glob("obj/**/*.o"))
+    # the DBC's code, the E2E helper and every core source
+    assert len(objects) == 2 + len(list((build / "gen" / "core").glob("cc_*.c")))
+    dbc = (build / "gen" / "bench_dbc.c").read_bytes()
+    first = times()
+    out = make(SENSORLESS[1])
+    second = times()
+    changed = {f for f in first if first[f] != second[f]}
+    assert changed == {"gen/bench_controller.h", "ref_controller"}, changed
+    assert (build / "gen" / "bench_dbc.c").read_bytes() == dbc
+    assert f'"{SENSORLESS[1]}"' in (build / "gen" / "bench_controller.h").read_text()
+    assert " -c " not in out  # no object compiled
+    make(SENSORLESS[1])
+    assert times() == second
+
+
 def test_the_sensorless_firmware_reads_no_sensor_or_truth() -> None:
     """In the sensorless build (FW_BENCH_CONTROLLER) the program names neither
     PositionSensor nor PlantTruth: every use of the encoder is outside it."""

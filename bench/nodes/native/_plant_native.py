@@ -375,6 +375,7 @@ def load_plant_lib(path: Path | None = None) -> ctypes.CDLL:
     ):
         if getattr(dll, name)() != ctypes.sizeof(want):
             raise BenchError(f"native plant: {path}: {name} differs from {want.__name__}")
+    check_plant_layout(dll)
     dll.bn_plant_on_duty.argtypes = [ctypes.POINTER(Unit), ctypes.POINTER(Frame)]
     dll.bn_plant_advance.argtypes = [ctypes.POINTER(Unit)]
     dll.bn_plant_frames_now.argtypes = [ctypes.POINTER(Unit)]
@@ -395,6 +396,66 @@ def load_plant_lib(path: Path | None = None) -> ctypes.CDLL:
     dll.bn_close.argtypes = [ctypes.c_void_p]
     dll.bn_clock_stats.argtypes = [ctypes.POINTER(Clock), ctypes.POINTER(Stats)]
     return dll
+
+
+def library_plant_layout(dll: ctypes.CDLL) -> tuple[str, tuple[int, ...]]:
+    """``(names, numbers)`` of the plant instance as the library compiled it
+    (``plant_layout``, ``plant_rt/core/plant_layout.h``)."""
+    dll.plant_layout.argtypes = [ctypes.POINTER(ctypes.c_size_t), ctypes.c_size_t]
+    dll.plant_layout.restype = ctypes.c_size_t
+    dll.plant_layout_names.restype = ctypes.c_char_p
+    n = int(dll.plant_layout(None, 0))
+    out = (ctypes.c_size_t * n)()
+    dll.plant_layout(out, n)
+    return dll.plant_layout_names().decode(), tuple(int(v) for v in out)
+
+
+def check_plant_layout(
+    dll: ctypes.CDLL, extension: tuple[str, tuple[int, ...]] | None = None
+) -> None:
+    """Refuse a library whose plant struct is not the extension's.
+
+    The library steps the instance that ``plant_rt._cplant`` allocated, by its address
+    (:meth:`plant_rt.Plant.core_address`); both compile ``plant_rt/core/`` but at
+    different times (the extension when the package is installed, the library once per
+    source change), so a stale extension beside a fresh library would be stepped with
+    the wrong offsets. Both export ``sizeof(plant)``, the sizes of the blocks it embeds
+    and the offset of each member (``plant_layout.h``); a difference is a
+    :class:`BenchError` of one line naming both files, the first number that differs
+    and what to rebuild. ``extension``: the extension's ``_cplant.layout()`` (a test's
+    fake); None asks the extension.
+    """
+    from plant_rt import _cplant
+
+    ext_file = getattr(_cplant, "__file__", "plant_rt._cplant")
+    lib_file = getattr(dll, "_name", "the native library")
+    rebuild = (
+        f"rebuild the extension from the present sources (make .venv/.installed, or "
+        f"pip install -e .), or delete {lib_file} if it is the stale one"
+    )
+    if extension is None:
+        layout = getattr(_cplant, "layout", None)
+        if layout is None:
+            raise BenchError(
+                f"native plant: {ext_file} exports no plant layout (built before "
+                f"plant_rt/core/plant_layout.h); it cannot be checked against {lib_file}: {rebuild}"
+            )
+        extension = layout()
+    ext_names, ext_nums = extension
+    lib_names, lib_nums = library_plant_layout(dll)
+    if (ext_names, ext_nums) == (lib_names, lib_nums):
+        return
+    names_e, names_l = ext_names.split(";"), lib_names.split(";")
+    for ne, nl, ve, vl in zip(names_e, names_l, ext_nums, lib_nums, strict=False):
+        if ne != nl or ve != vl:
+            what = f"{ne} {ve} against {nl} {vl}" if ne != nl else f"{ne} is {ve} against {vl}"
+            break
+    else:
+        what = f"{len(ext_nums)} numbers against {len(lib_nums)}"
+    raise BenchError(
+        f"native plant: the plant struct differs between {ext_file} and {lib_file} "
+        f"({what}): {rebuild}"
+    )
 
 
 _LIB: ctypes.CDLL | None = None
