@@ -9,6 +9,7 @@ ignored or unknown.  Bench commands are queued by the step they apply at
 from __future__ import annotations
 
 from collections import deque
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 from bench.wire._protocol import SEQ_MODULUS, unwrap
@@ -231,3 +232,20 @@ class RejectionSummary:
             return None
         when = "in the last second" if span < 1.5 * self.every_s else f"in the last {span:.0f} s"
         return f"{self.message}: {rejection_text(new)} {when}"
+
+
+def feed_steps(steps: Sequence[int], lead: int) -> list[int]:
+    """The plant step after whose answers the in-process loop feeds each command (apply
+    steps ``steps``, in the schedule's order); -1: before the run.
+
+    A command is fed once the plant is within ``lead`` periods of its step, in the
+    schedule's order (never before an earlier one); those within ``lead`` of step 0 go
+    before the run.  The Python loop (:func:`bench.nodes._loops.run_inprocess`) and the
+    native pair (:mod:`bench.nodes.native._pair`) both feed by it.
+    """
+    out = []
+    k = -1
+    for s in steps:
+        k = max(k, s - lead) if s > lead or k >= 0 else -1
+        out.append(k)
+    return out

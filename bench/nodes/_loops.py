@@ -20,6 +20,7 @@ import can
 from bench._errors import BenchError
 from bench.nodes._clock import RealTimeClock
 from bench.nodes._controller_node import ControllerNode
+from bench.nodes._counters import feed_steps
 from bench.nodes._plan import RunPlan
 from bench.nodes._plant_node import PlantNode
 from bench.nodes._plant_text import (
@@ -220,23 +221,6 @@ def command_frames(
 #: would not do: the 16-bit ``BenchCommand.step`` wraps after 65,536 periods
 #: (6.5 s at 10 kHz) and the nodes keep at most ``MAX_PENDING_COMMANDS``.
 INPROCESS_LEAD = 1000
-
-
-def feed_steps(steps: Sequence[int], lead: int) -> list[int]:
-    """The plant step after whose answers :func:`run_inprocess` feeds each command (apply
-    steps ``steps``, in the schedule's order); -1: before the run.
-
-    A command is fed once the plant is within ``lead`` periods of its step, in the
-    schedule's order (never before an earlier one); those within ``lead`` of step 0 go
-    before the run.  The Python loop and the native pair (:mod:`bench.nodes.native._pair`)
-    both feed by it.
-    """
-    out = []
-    k = -1
-    for s in steps:
-        k = max(k, s - lead) if s > lead or k >= 0 else -1
-        out.append(k)
-    return out
 
 
 #: :func:`run_inprocess`'s ``loop`` choices.

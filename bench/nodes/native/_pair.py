@@ -8,7 +8,7 @@ period.  It returns only to take the recorded frames when their buffer is full,
 and at the end.
 
 The bench commands are known before the run, and so is the plant step at which
-the Python loop feeds each (:func:`bench.nodes._loops.feed_steps`:
+the Python loop feeds each (:func:`bench.nodes._counters.feed_steps`:
 :data:`~bench.nodes._loops.INPROCESS_LEAD` periods ahead of its apply step).  :func:`_schedule` runs the nodes' own rules on each
 (:meth:`PlantNode.on_message`, :meth:`ControllerNode.on_message`: the
 :class:`~bench.nodes._counters.CommandQueue` of each) once, before the run, with
@@ -280,7 +280,7 @@ def _schedule(
     from bench.nodes._counters import MAX_PENDING_COMMANDS
     from bench.nodes.native._plant_native import to_frame
 
-    ks = at  # the plant step of each command's feed (bench.nodes._loops.feed_steps)
+    ks = at  # the plant step of each command's feed (bench.nodes._counters.feed_steps)
     # a late command (fed at or after its step) is placed by the pending steps
     settle = len(cmds) >= MAX_PENDING_COMMANDS or any(
         s <= k for (s, _), k in zip(cmds, ks, strict=True)
@@ -372,7 +372,7 @@ def run_pair(
     ahead of the plant they are fed.  ``measure`` (when given) gets the periods, the
     returns to Python and the seconds spent in C.
     """
-    from bench.nodes._loops import feed_steps
+    from bench.nodes._counters import feed_steps
     from bench.nodes.native._plant_native import Unit, _fill_config, _Sync
     from bench.nodes.native.controller_node import NativeController
 
