@@ -111,6 +111,13 @@ def test_the_sensorless_real_time_score_says_its_verdict_and_the_late_periods() 
     page = render_realtime_native(res)
     assert "**does not score like it**" in page
     assert "5.40 % of its periods ran with a late duty" in page
+    res["realtime_native_score"]["realtime"].update(
+        host_stalls=46.0, host_stall_ms_total=1001.5, plant_fault="over_current",
+        recorder_frames_lost=29881.0,
+    )  # fmt: skip
+    page = render_realtime_native(res)
+    assert "46 host stalls (1,002 ms in all), plant trip: over_current" in page
+    assert "frames the recorder lost: 29,881." in page
 
 
 def test_the_score_tolerance_is_one_periods_angle_at_the_top_speed() -> None:

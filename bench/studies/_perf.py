@@ -751,6 +751,15 @@ def sensorless_realtime_score(
             **{k: math.nan if m.get(k) is None else float(m[k]) for k in SCORE_KEYS},
             "lock_lost": bool(m.get("lock_lost")),
             "late_duty_pct": 100.0 * m.get("late_duty_periods", 0) / n,
+            "host_stalls": float(m.get("host_stalls", 0)),
+            "host_stall_ms_total": float(m.get("host_stall_ms_total", 0.0)),
+            "plant_fault": str(m.get("plant_fault") or "none"),
+            # -1: the transport does not say
+            "recorder_frames_lost": float(
+                -1
+                if res.meta.get("recorder_frames_lost") is None
+                else res.meta["recorder_frames_lost"]
+            ),
             "node_engines": dict(res.meta.get("node_engines") or {}),
         }
     tol = score_tolerance_deg(scn)
@@ -780,6 +789,17 @@ def score_lines(sc: dict[str, Any] | None) -> list[str]:
         else f": {_num(rt['late_duty_pct'], '%')} of its periods ran with a late duty on this "
         "host, and each changes the loop (the limit is the late periods, not the model)"
     )
+    host = []
+    if "host_stalls" in rt:
+        lost = rt.get("recorder_frames_lost", -1.0)
+        host = [
+            "",
+            f"In that real-time run: {rt['host_stalls']:.0f} host stalls "
+            f"({_num(rt['host_stall_ms_total'], 'ms')} in all), plant trip: "
+            f"{rt.get('plant_fault', 'none')}, frames the recorder lost: "
+            + ("not said by the transport" if lost < 0 else f"{lost:,.0f}")
+            + ".",
+        ]
     return [
         "",
         f"A sensorless run on the drive's clock against the same run in lockstep "
@@ -793,6 +813,7 @@ def score_lines(sc: dict[str, Any] | None) -> list[str]:
         f"{'lost' if rt['lock_lost'] else 'kept'}): it {verdict} within "
         f"{_num(sc['tolerance_deg'], 'deg')} of rms, the angle the rotor turns in one period "
         f"at the scenario's top speed{why}.",
+        *host,
     ]
 
 
