@@ -55,6 +55,7 @@ def _measured(missed_10k: float, frames_lost: float) -> dict[str, Any]:
     nat["4kHz"].update(missed_pct=0.5)
     res["realtime_native"] = {**nat, "recorder_frames_lost": recorder_frames_lost(nat)}
     res["lockstep_native"] = {**res["lockstep"], "steps_per_s": 25000.0, "note": NATIVE_NOTE}
+    res.pop("realtime_native_score", None)  # the rates' runs alone (the score: below)
     return res
 
 
@@ -126,3 +127,21 @@ def test_the_score_tolerance_is_one_periods_angle_at_the_top_speed() -> None:
 
     # wen-5.1: 100 rpm, 4 pole pairs (wen2023), 10 kHz: 360 * 4 * 100 / 60 / 1e4 deg
     assert score_tolerance_deg(load_scenario("wen-5.1")) == pytest.approx(0.24)
+
+
+def test_the_frames_the_recorder_lost_in_the_score_run_count_against_the_target() -> None:
+    res = _measured(missed_10k=2.0, frames_lost=0.0)
+    res["realtime_native_score"] = _score(0.45)
+    v = native_verdicts(res)
+    assert v is not None and v["native_recorder_frames_lost"]["met"]  # not measured there
+    res["realtime_native_score"]["realtime"]["recorder_frames_lost"] = 5154.0
+    v = native_verdicts(res)
+    assert v is not None and v["native_recorder_frames_lost"]["value"] == 5154.0
+    assert (
+        "5,154 in the sensorless score's real-time run" in v["native_recorder_frames_lost"]["limit"]
+    )
+    res["realtime_native_score"]["realtime"]["recorder_frames_lost"] = -1.0
+    v = native_verdicts(res)
+    assert (
+        v is not None and v["native_recorder_frames_lost"]["limit"] == "not said by the transport"
+    )
