@@ -3,8 +3,8 @@
 ``firmware/ref_controller`` built sensorless (``make SCENARIO=... ESTIMATOR=...``: the
 core initialised by the ``bench_controller.h`` that ``bench codegen --estimator``
 writes) runs as the controller under test of ``bench run SCENARIO --controller
-external`` on vcan0, in lockstep, with every sensorless estimator of the compiled core
-(:data:`tests.test_firmware_sensorless.SENSORLESS`). The single estimators run
+external`` on vcan0, in lockstep, with the sensorless estimators of :data:`ON_VCAN`
+(every one of :data:`tests.test_firmware_sensorless.SENSORLESS` is checked without CAN). The single estimators run
 ``firmware-sensorless.toml`` (the start-up and a ramp to 100 rpm, 3000 periods); the
 hybrids run ``firmware-hybrid.toml`` (the same start-up, then a ramp to 1150 rpm, 4200
 periods), whose speed crosses their whole transition band, injection below it and flux
@@ -103,7 +103,20 @@ def _assert_crosses_band(scn: Scenario, estimator: str, table: dict[str, np.ndar
     assert below[0] < above[0] and above[-1] == run[-1]  # and stays above to the end
 
 
-@pytest.mark.parametrize("estimator", SENSORLESS)
+#: The estimators run on vcan in CI: the papers' two (tt-dq, square-wave), the hybrids (the
+#: hand-over band), and the two with a demodulation of their own outside tt-dq's family
+#: (self-demod, epf). tt-ab, sfhf and square-wave-nocic passed here too (9 of 9 inside
+#: User-Mode Linux, about a minute each there) and are left out of CI for its time; every
+#: one of :data:`SENSORLESS` is checked without CAN, structs and 2500 periods, in
+#: tests/test_firmware_sensorless.py.
+ON_VCAN = [
+    e
+    for e in SENSORLESS
+    if e in ("tt-dq", "square-wave", "self-demod", "epf") or estimator_spec(e).speed_band
+]
+
+
+@pytest.mark.parametrize("estimator", ON_VCAN)
 def test_sensorless_firmware_gives_the_inprocess_trace(
     tmp_path: Path, build_dir: Path, estimator: str
 ) -> None:
