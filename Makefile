@@ -22,9 +22,11 @@ $(STAMP): pyproject.toml setup.py plant_rt/_cplant.c $(wildcard plant_rt/core/*.
 demo: $(STAMP)
 	$(BIN)/bench run wen-5.1 --estimator tt-dq --out runs/demo
 
-# The whole test suite: lint, format, types, unit and process tests, and the
-# SocketCAN tests on vcan (natively, or inside User-Mode Linux).
-test: lint unit vcan
+# The whole test suite: lint, format, types, then the unit and process tests and
+# the SocketCAN tests on vcan (natively, or inside User-Mode Linux) side by side
+# (tools/test-stages; `make unit` and `make vcan` run each alone).
+test: lint
+	MAKE="$(MAKE)" tools/test-stages
 
 lint: $(STAMP)
 	$(BIN)/ruff check .
