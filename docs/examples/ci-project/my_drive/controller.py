@@ -44,6 +44,8 @@ from typing import Any
 
 import can
 
+LSB = 2 * math.pi / 65536  # of theta_hat; a theta in the last half LSB below 2 pi is raw 0
+
 
 def crc8(data: bytes) -> int:
     """CRC-8 SAE J1850: polynomial 0x1D, initial value 0xFF, final XOR 0xFF."""
@@ -240,7 +242,7 @@ def main() -> int:
                 )
                 answers.pop(k - 16, None)  # PROTOCOL.md: keep the last 16 answers
                 tel = {
-                    "theta_hat": theta % (2 * math.pi),
+                    "theta_hat": round(theta / LSB) % 65536 * LSB,  # on the raw grid
                     "w_hat": foc.n_p * foc.w_m,
                     "err": 0.0,
                     "mode": 3 if foc.enabled else 0,
