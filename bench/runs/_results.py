@@ -735,6 +735,13 @@ METRIC_ROWS = (
     ("retransmits", ""),
 )
 
+#: What the rows measured by a clock measure (the last column): the run's wall time and
+#: the plant loop's speed are not one span, so ``sim_s / wall_s`` is not ``realtime_factor``.
+CLOCK_LABELS = {
+    "wall_s": "wall time of the whole run: node start-up and stop included",
+    "realtime_factor": "sim_s per wall second of the plant's loop alone (start-up excluded)",
+}
+
 #: Units of the per-band quantities (``band_<band>_<quantity>``).
 _BAND_UNITS = {
     "steps": "",
@@ -767,11 +774,18 @@ def format_metrics(
     numbers are not this method's) and a last line says where they apply.
     A scenario without the paper's numbers (a user's own) has no paper
     column.  The last column says what an error row measures
-    (:data:`bench.runs._metrics.METRIC_LABELS`: which ones keep their sign).
+    (:data:`bench.runs._metrics.METRIC_LABELS`: which ones keep their sign) and which
+    span a timed row covers (:data:`CLOCK_LABELS`).  A paper number compared with
+    another metric than its key's (:data:`bench.runs._metrics.PAPER_COMPARED_AS`:
+    Wen's "dtheta avg" is a mean |dtheta|) stands on that metric's row.
     """
-    from bench.runs._metrics import METRIC_LABELS
+    from bench.runs._metrics import METRIC_LABELS, PAPER_COMPARED_AS
 
     paper = paper or {}
+    paper = {
+        **{PAPER_COMPARED_AS[k]: v for k, v in paper.items() if k in PAPER_COMPARED_AS},
+        **{k: v for k, v in paper.items() if k not in PAPER_COMPARED_AS},
+    }
     note = ""
     if paper and paper_method and estimator and estimator != paper_method:
         note = f"\n(the paper's numbers are for {paper_method}; this run is {estimator})"
@@ -784,6 +798,6 @@ def format_metrics(
         v = m[key]
         vs = f"{v:12.3f}" if isinstance(v, float) else f"{'-' if v is None else v:>12}"
         ps = (f"  {paper[key]:>8}" if key in paper else f"  {'':>8}") if paper else ""
-        label = METRIC_LABELS.get(key, "")
+        label = METRIC_LABELS.get(key) or CLOCK_LABELS.get(key, "")
         lines.append(f"{key:<{wk}}{vs}{ps} {unit:<4}{f' {label}' if label else ''}".rstrip())
     return "\n".join(lines) + note
