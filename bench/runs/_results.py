@@ -52,7 +52,7 @@ from bench.scenarios._setup import (
     sample_period,
 )
 from bench.wire._codec import Codec
-from bench.wire._frames import with_ids
+from bench.wire._frames import FrameArray, with_ids
 from bench.wire._protocol import unwrap
 
 
@@ -170,7 +170,11 @@ def _replaced_preset_values(name: str, run: dict[str, Any]) -> dict[str, Any]:
     from plant_rt import PRESETS
 
     shipped = PRESETS[name]
-    own = {"motor": asdict(shipped.motor), "inverter": asdict(shipped.inverter), "f_sw": shipped.f_sw}
+    own = {
+        "motor": asdict(shipped.motor),
+        "inverter": asdict(shipped.inverter),
+        "f_sw": shipped.f_sw,
+    }
 
     def flat(d: Any, prefix: str = "") -> dict[str, Any]:
         if not isinstance(d, dict):
@@ -354,7 +358,11 @@ def finish_run(
     m["plant_out_of_range_s"] = None if n_out is None else int(n_out) * T_s
     m["faults"] = fault_metrics(
         cap.table,
-        [(f.kind, f.at_s, f.end_s(m["sim_s"]), f.expect) for f in scn.faults if f.at_s < m["sim_s"]],
+        [
+            (f.kind, f.at_s, f.end_s(m["sim_s"]), f.expect)
+            for f in scn.faults
+            if f.at_s < m["sim_s"]
+        ],
         T_s=T_s,
         plant_fault=fault,
         plant_fault_step=fault_step,
@@ -382,11 +390,13 @@ def finish_run(
     if plots:
         from bench.runs._plots import plot_run
 
+        stalls = host_stall_times(frames, codec, T_s) if m.get("host_stalls") else None
         plot_run(
             cap.table,
             out_dir,
             meta=meta,  # title, paper, its bound and the run's variations
             metrics=m,
+            stalls=stalls,
             scored_from_s=scn.score_from_s,
             f_split_hz=fundamental_corner_hz(
                 scn, str(meta.get("estimator", "")), cap.table, design
@@ -431,7 +441,9 @@ def fundamental_corner_hz(
             return None
         hf = getattr(est, "hf", est)
     n_p = get_preset(scn).motor.n_p
-    w_top = float(np.max(np.abs(table["w_m_rpm"]))) * math.pi / 30.0 * n_p if len(table["t"]) else 0.0
+    w_top = (
+        float(np.max(np.abs(table["w_m_rpm"]))) * math.pi / 30.0 * n_p if len(table["t"]) else 0.0
+    )
     try:
         return split_corner_hz(injection_floor_hz(hf, sample_period(scn), w_top))
     except ValueError:
@@ -617,7 +629,9 @@ def frames_warning(m: dict[str, Any]) -> str | None:
     parts = []
     bad = int(m.get("frames_rejected_recorded", 0))
     if bad:
-        parts.append(f"{bad:,} recorded frames failed their check (E2E CRC, length, range or counter)")
+        parts.append(
+            f"{bad:,} recorded frames failed their check (E2E CRC, length, range or counter)"
+        )
     foreign = int(m.get("frames_foreign", 0))
     if foreign:
         by = ", ".join(f"{k} {v:,}" for k, v in (m.get("frames_foreign_by_message") or {}).items())
@@ -692,10 +706,40 @@ def outcome(m: dict[str, Any], T_s: float) -> tuple[int, list[str]]:
 REALTIME_LATE_WARN = 0.01
 
 
+def late_duty_fraction(m: dict[str, Any]) -> float:
+    """The fraction of a run's periods that ran with a late or missing duty (real time)."""
+    return float(m.get("late_duty_periods", 0)) / max(1, int(m.get("steps", 0)))
+
+
+def host_stall_times(frames: Sequence[can.Message], codec: Codec, T_s: float) -> list[float]:
+    """Where a real-time plant met its host stalls, in simulated time (s): the periods after
+    which its ``PlantTruth`` frames stopped for longer than a stall (:func:`bench.nodes._clock.
+    default_stall_s`) beyond their usual spacing.  The periods a stall skipped were never
+    computed (bench/nodes/_clock.py), so in simulated time a stall is an instant."""
+    from bench.nodes._clock import default_stall_s
+
+    truth = with_ids(frames, (codec.frame_id("PlantTruth"),))
+    if isinstance(truth, FrameArray):
+        ts = np.asarray(truth.rows["timestamp"], dtype=float)
+    else:
+        truth = [f for f in truth if f.arbitration_id == codec.frame_id("PlantTruth")]
+        ts = np.fromiter((f.timestamp for f in truth), dtype=float, count=len(truth))
+    if len(ts) < 3:
+        return []
+    dt = np.diff(ts)
+    gaps = np.flatnonzero(dt > float(np.median(dt)) + default_stall_s(T_s)) + 1
+    out: list[float] = []
+    for i in gaps:
+        d = codec.decode(truth[int(i) : int(i) + 1][0])  # one frame made, not all
+        if d is not None and d.reason is None:
+            out.append(int(d.signals["step"]) * T_s)
+    return out
+
+
 def realtime_warning(m: dict[str, Any]) -> str | None:
     """One line when a real-time run did not keep time well enough to read as a drive's."""
     steps = max(1, int(m.get("steps", 0)))
-    late = m.get("late_duty_periods", 0) / steps
+    late = late_duty_fraction(m)
     over = m.get("deadline_misses", 0) / steps
     if max(late, over) <= REALTIME_LATE_WARN:
         return None
