@@ -44,6 +44,7 @@ if TYPE_CHECKING:
     import pandas
 
     from bench.runs._results import RunResult
+    from bench.runs._run import DutProcess
     from bench.scenarios._schema import Scenario
     from bench.wire._bus import BusSpec
 
@@ -338,8 +339,10 @@ def run(
         With ``controller="external"``: the command of the controller under
         test, started for the run and stopped after it (its output in
         ``dut.log`` of the run folder).  ``{interface}``, ``{channel}``,
-        ``{port}``, ``{scenario}`` (the run's effective ``scenario.json``)
-        and ``{folder}`` in its arguments are replaced; its environment
+        ``{port}``, ``{mode}`` (``lockstep`` or ``realtime``), ``{scenario}``
+        (the run's effective ``scenario.json``) and ``{folder}`` in its
+        arguments are replaced; a process that ends before its first valid
+        duty ends the run at once (its exit status and ``dut.log`` named); its environment
         carries the bus as python-can reads it (``CAN_INTERFACE``,
         ``CAN_CHANNEL``, ``CAN_CONFIG``), so ``can.Bus()`` finds it.
     dut_timeout : float
@@ -429,7 +432,7 @@ def _run_on_bus(
     kw: dict[str, Any] = {}
     if external:
         kw = {"controller": "external", "dut_timeout": dut_timeout, "dut_name": dut_name}
-    with _dut(dut, spec, scn, folder):
+    with _dut(dut, spec, scn, folder, mode) as process:
         return run_scenario(
             scn,
             est,
@@ -438,16 +441,20 @@ def _run_on_bus(
             mode=mode,
             progress=False,
             node_args={"plant": ["--engine", engine], "controller": []},
+            dut_process=process,
             **kw,
         )
 
 
 @contextlib.contextmanager
-def _dut(cmd: Sequence[str] | None, spec: BusSpec, scn: Scenario, folder: Path) -> Iterator[None]:
+def _dut(
+    cmd: Sequence[str] | None, spec: BusSpec, scn: Scenario, folder: Path, mode: str
+) -> Iterator[DutProcess | None]:
     """The controller under test's process for the run (none without ``cmd``)."""
     if not cmd:
-        yield
+        yield None
         return
+    from bench.runs._run import DutProcess
     from bench.scenarios._schema import write_effective
 
     scenario = write_effective(scn, folder / "scenario.json")  # the run writes the same
@@ -455,6 +462,7 @@ def _dut(cmd: Sequence[str] | None, spec: BusSpec, scn: Scenario, folder: Path) 
         "interface": spec.interface,
         "channel": spec.channel,
         "port": "" if spec.port is None else str(spec.port),
+        "mode": mode,
         "scenario": str(scenario),
         "folder": str(folder),
     }
@@ -476,14 +484,15 @@ def _dut(cmd: Sequence[str] | None, spec: BusSpec, scn: Scenario, folder: Path) 
         CAN_CHANNEL=spec.channel,
         CAN_CONFIG=json.dumps(conf),
     )
-    log = (folder / "dut.log").open("w")
+    log_path = folder / "dut.log"
+    log = log_path.open("w")
     try:
         proc = subprocess.Popen(argv, stdout=log, stderr=subprocess.STDOUT, env=env)
     except OSError as e:
         log.close()
         raise BenchError(f"dut: cannot start {argv[0]}: {e.strerror or e}") from None
     try:
-        yield
+        yield DutProcess(proc, log_path)
     finally:
         if proc.poll() is None:
             proc.terminate()

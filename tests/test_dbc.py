@@ -112,6 +112,21 @@ def test_protocol_version_attribute(db):
     # 2.3: the supervision's CtrlTelemetry.mode values; 2.4: PlantCurrents
 
 
+def test_the_dbc_comment_names_its_version_once(db):
+    """The DBC's own comment states no version of its own beside VERSION: every version it
+    names is a change ("Version 2.4 added ..."), the newest of them the VERSION line's."""
+    import re
+
+    text = DBC_PATH.read_text()
+    comment = re.search(r'^CM_ "(.*?)";', text, re.M | re.S)
+    assert comment is not None
+    named = re.findall(r"[Vv]ersion (\d+\.\d+)(\s+\w+)?", comment.group(1))
+    assert named, "the DBC comment names no version"
+    assert [v for v, verb in named if verb.strip() != "added"] == []
+    newest = max(named, key=lambda m: tuple(map(int, m[0].split("."))))[0]
+    assert newest == db.version
+
+
 def test_duty_one_encodes_strictly_and_above_one_is_out_of_range(db):
     """cantools' strict encoding takes duty 1.0 (issue 16); a raw value above it is
     expressible on the wire and outside the range, so the plant can reject it."""

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import ast
 import json
+import re
 import subprocess
 import sys
 import time
@@ -21,6 +22,7 @@ from typing import Any
 import numpy as np
 import pytest
 
+from bench.nodes._loops import STALL_S
 from bench.scenarios._schema import load_scenario
 from bench.scenarios._setup import get_preset
 from tests.ports import free_port
@@ -373,6 +375,15 @@ def test_each_controller_mistake_is_named(
     if status == 3:
         m = json.loads((run_dir / "metrics.json").read_text())
         assert m["plant_fault"] == {"step-k": "wrong_step", "every-other": "watchdog"}[mistake]
+    if mistake == "every-other":
+        # the trip's line gives the time the plant waited for the skipped duty, which
+        # the trip cut short: never the limit it would have given up at (STALL_S)
+        log = (run_dir / "plant.log").read_text()
+        waited = re.findall(
+            r"no valid PwmDuty for step \d+ \(the answer to sample \d+\) in (\d+) s", log
+        )
+        assert waited, log[-2000:]
+        assert int(waited[-1]) < STALL_S, log[-2000:]
 
 
 @pytest.mark.parametrize(

@@ -17,6 +17,7 @@ import pytest
 from bench.nodes._counters import RejectionSummary, rejection_text
 from bench.nodes._loops import make_plant_node, stall_text, trip_text
 from bench.nodes._plant_node import fault_name
+from bench.nodes._plant_text import tripped_text
 from bench.runs._pacing import COMMAND_BURST, PACE_EVERY, CommandPacer, command_lead
 from bench.scenarios._schema import load_scenario
 from bench.scenarios._setup import command_schedule
@@ -104,6 +105,19 @@ def test_stall_text_names_the_skipped_sample_and_the_rejections() -> None:
     s = stall_text(node, 5.0)
     assert "no valid PwmDuty for step 1 (the answer to sample 0) in 5 s" in s
     assert "skipped sample 0" in s and "PwmDuty: 1 rejected (bad_crc)" in s
+
+
+def test_a_tripped_plant_names_the_time_it_waited_on_one_clock() -> None:
+    """Both plant loops build the watchdog trip's line with ``tripped_text``: the time since
+    the plant's last progress on the monotonic clock (the native loop's ``bn_now_ns``)."""
+    import time
+
+    node = _node()
+    assert "in 5 s" in tripped_text(node, 100.0, 105.2)
+    assert "in 0 s" in tripped_text(node, time.monotonic())  # now: the same clock
+    # the native loop passes its t_progress (CLOCK_MONOTONIC ns) as seconds
+    t_ns = time.monotonic_ns() - 3_000_000_000
+    assert "in 3 s" in tripped_text(node, t_ns * 1e-9)
 
 
 def test_rejection_summary_once_a_second_with_what_is_new() -> None:

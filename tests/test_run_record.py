@@ -96,3 +96,24 @@ def test_analyze_of_a_capture_made_elsewhere_records_the_plant_it_analysed_with(
     meta = json.loads((cap.parent / "meta.json").read_text())
     assert meta["motor"]["R_s"] == 1.4 and meta["u_dc"] == 300.0 and meta["f_sw"] == 5000.0
     assert meta["preset"]["replaced"]["motor.R_s"] == PRESETS["wen2023"].motor.R_s
+
+
+def test_the_papers_mean_stands_beside_the_metric_it_is_compared_with() -> None:
+    """Wen's "dtheta avg" (``paper_result.theta_err_mean_deg``) is a mean |dtheta| (the
+    README's claims compare it so): the table shows it on that row, not the signed mean's."""
+    m = {"theta_err_mean_deg": -0.1, "theta_err_abs_mean_deg": 0.4}
+    rows = format_metrics(m, {"theta_err_mean_deg": 2.0}, "tt-dq", "tt-dq").splitlines()[1:]
+    by = {ln.split()[0]: ln.split() for ln in rows}
+    assert by["theta_err_abs_mean_deg"][:3] == ["theta_err_abs_mean_deg", "0.400", "2.0"]
+    assert by["theta_err_mean_deg"][:3] == ["theta_err_mean_deg", "-0.100", "deg"]
+
+
+def test_the_timed_rows_say_which_span_each_measures() -> None:
+    """``wall_s`` is the whole run's, ``realtime_factor`` the plant loop's alone: the table
+    says so, so 0.70 x beside 18.6 s of a 10 s run is no contradiction."""
+    rows = {
+        ln.split()[0]: ln
+        for ln in format_metrics({"wall_s": 18.6, "realtime_factor": 0.7}).splitlines()[1:]
+    }
+    assert "start-up" in rows["wall_s"] and "included" in rows["wall_s"]
+    assert "plant's loop alone" in rows["realtime_factor"]

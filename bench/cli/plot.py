@@ -84,6 +84,17 @@ def cmd_plot(args: argparse.Namespace) -> int:
             f_c = fundamental_corner_hz(scenario, str(meta.get("estimator", "")), part, design)
         out = Path(args.out) if args.out else run / "run.png"
         t = part["t"]
+        stalls = None
+        capture = run / str(meta.get("capture") or "")
+        if metrics.get("host_stalls") and meta.get("capture") and capture.is_file():
+            # where the stalls were: the gaps of the plant's frames in the capture
+            from bench.captures._read import read_capture
+            from bench.runs._results import host_stall_times
+            from bench.wire._codec import Codec
+
+            frames, _ = read_capture(capture)
+            T_s = float(meta.get("T_s") or (t[1] - t[0]))
+            stalls = host_stall_times(frames, Codec(), T_s)
         windowed = args.t_from is not None or args.t_to is not None
         plot_run(
             part,
@@ -96,6 +107,7 @@ def cmd_plot(args: argparse.Namespace) -> int:
             n_p=_pole_pairs(scenario),
             window=(float(t[0]), float(t[-1])) if windowed else None,
             name=out.name,
+            stalls=stalls,
         )
     print(f"plot: {out}")
     return 0

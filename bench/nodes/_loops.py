@@ -29,6 +29,7 @@ from bench.nodes._plant_text import (
     STATE_DONE,
     PlantDiagnostics,
     stall_text,
+    tripped_text,
 )
 from bench.nodes._plant_text import trip_text as trip_text  # where the run and tests look
 from bench.nodes._rt import no_gc
@@ -544,7 +545,7 @@ def _serve_lockstep(
             send_all(bus, node.on_duty_timeout(), node.counters)
             if node.external and node.fault == FAULT_WATCHDOG:
                 # no duty will come: the run cannot go on (bench run: exit 3)
-                print(f"plant: {stall_text(node, now - last_progress)}", file=sys.stderr)
+                print(f"plant: {tripped_text(node, last_progress, now)}", file=sys.stderr)
                 raise _RunOver
             send_all(bus, node.retransmit(), node.counters)
             t_wait = now

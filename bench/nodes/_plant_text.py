@@ -22,6 +22,7 @@ __all__ = [
     "PlantDiagnostics",
     "stall_text",
     "trip_text",
+    "tripped_text",
 ]
 
 #: ``PlantStatus.state`` of the plant's last frame: the run is over, the plant idle.
@@ -77,6 +78,15 @@ def trip_text(code: int, step: int) -> str:
     elif name == "watchdog":
         s += ": no valid PwmDuty for too long"
     return s
+
+
+def tripped_text(node: PlantNode, last_progress_s: float, now_s: float | None = None) -> str:
+    """The line of a lockstep plant whose watchdog tripped while it waited for a controller
+    under test: :func:`stall_text` with the time waited since its last progress
+    (``last_progress_s`` on ``time.monotonic()``'s clock, ``CLOCK_MONOTONIC``, the clock of
+    the native loop's ``bn_now_ns``), never the give-up limit, which it has not reached."""
+    now = time.monotonic() if now_s is None else now_s
+    return stall_text(node, now - last_progress_s)
 
 
 def stall_text(node: PlantNode, waited_s: float) -> str:

@@ -24,6 +24,14 @@ The shared panels shade the controller's start-up phases (``mode`` 1 align,
 2 polarity test, each at least :data:`MIN_SPAN` of the axis wide so a 9 ms
 test stays visible; 3 run unshaded; 4 fault) and mark the scoring start, a
 protection trip, a lost lock, and each load step (a line) or ramp (a band).
+A real-time run's periods with a late duty (:func:`late_duty_rows`: a
+``duty_age`` above the run's usual one, an older duty held) and its host stalls (an instant
+in simulated time: the periods a stall skipped were never computed) are
+marked on them too, and the metrics box gives their share and number with the
+periods the recording lacks (``steps_missing``).  When the recording lost the
+run's tail (the plant ran further than the last recorded period), the time
+axis runs on to the plant's last period and the end of the recorded data is
+marked.
 A row whose controller was disabled (``mode`` 0: before the start, the last
 row after the stop) or whose estimate is missing (an empty cell: the
 controller's telemetry stopped) draws no estimate: a gap. Legends and the
@@ -68,6 +76,8 @@ MIN_SPAN = 0.004
 #: ramp reaches the plant as a staircase at the scenario's reference rate (a step every
 #: 1 ms at the default 1 kHz), while the papers' load steps are seconds apart.
 LOAD_GAP_S = 0.05
+#: ``duty_age`` of a period without any duty (``PlantTruth.duty_age``'s "none", the DBC).
+NO_DUTY_AGE = 255
 #: The panels of :func:`run_figure` (each axes' label), top to bottom; all but the
 #: first share the time axis.
 PANELS = ("angle", "error", "speed", "current", "load")
@@ -192,12 +202,48 @@ def fundamental_a(table: dict[str, Array], T_s: float, f_c: float) -> Array:
     return out
 
 
+def late_duty_rows(table: dict[str, Array]) -> npt.NDArray[np.bool_]:
+    """Periods that ran with a late duty: a ``duty_age`` (the DBC: the applied duty's age,
+    0 without injected latency, N with N periods of it) above the run's usual one, its
+    median (``loop_latency_steps``); the periods without any duty (255) left out.  A
+    lockstep run, whose every duty has its set age, has none."""
+    if "duty_age" not in table or not len(table["duty_age"]):
+        return np.zeros(len(table["t"]), dtype=bool)
+    age = np.asarray(table["duty_age"], dtype=float)
+    ok = np.isfinite(age) & (age < NO_DUTY_AGE)
+    if not np.any(ok):
+        return np.zeros(len(age), dtype=bool)
+    out: npt.NDArray[np.bool_] = ok & (age > float(np.median(age[ok])))
+    return out
+
+
 def _markers(ax: Any, t: Array, table: dict[str, Array], m: dict[str, Any], T_s: float,
              t0: float, legend: bool, loads: tuple[list[float], list[tuple[float, float]]],
+             stalls: list[float] | None = None, t_end: float | None = None,
              ) -> None:  # fmt: skip
-    """Phases shaded, scoring start, load events, trip and lost lock on one time panel."""
+    """Phases shaded, scoring start, load events, late duties, host stalls, trip, lost lock
+    and the end of the recorded data (``t_end``: when the recording lost the run's tail)
+    on one time panel."""
     t_lo, t_hi = (float(t[0]), float(t[-1])) if len(t) else (0.0, 1.0)
     w_min = MIN_SPAN * max(t_hi - t_lo, T_s)
+    late = late_duty_rows(table)
+    n_late = int(np.count_nonzero(late))
+    for i, (a, b) in enumerate(_spans(late, t)):
+        if b - a < w_min:
+            a, b = a - 0.5 * (w_min - (b - a)), b + 0.5 * (w_min - (b - a))
+        ax.axvspan(a, b, color="tab:pink", alpha=0.35, lw=0, gid="late_duty",
+                   label=f"late duty held ({n_late} periods)" if legend and i == 0
+                   else None)  # fmt: skip
+    for i, s in enumerate(stalls or []):
+        ax.axvspan(s - 0.5 * w_min, s + 0.5 * w_min, color="0.15", alpha=0.5, lw=0,
+                   gid="host_stall",
+                   label=f"host stall ({len(stalls or [])} located; the periods it\n"
+                   "skipped were not computed: an instant here)"
+                   if legend and i == 0 else None)  # fmt: skip
+    if t_end is not None:
+        ax.axvline(t_end, color="k", lw=1.5, ls=(0, (1, 1)), gid="recorded_end",
+                   label="end of the recorded data\n(the recorder lost the rest)" if legend
+                   else None)  # fmt: skip
     if "mode" in table:
         for code, label, colour in PHASES:
             spans = _spans(table["mode"] == code, t)
@@ -246,7 +292,11 @@ def _fmt(v: Any, spec: str) -> str:
 
 
 def metrics_text(m: dict[str, Any]) -> str:
-    """The key metrics of a run, one per line (the figure's text box)."""
+    """The key metrics of a run, one per line (the figure's text box): the errors, and
+    where not zero what makes a run less than a drive's (late duties, host stalls,
+    periods the recording lacks), a trip, a lost lock and the faults' reactions."""
+    from bench.runs._results import late_duty_fraction
+
     lines = [
         f"{METRIC_LABELS['theta_err_abs_max_deg']} "
         f"{_fmt(m.get('theta_err_abs_max_deg'), '.2f')} deg "
@@ -260,6 +310,14 @@ def metrics_text(m: dict[str, Any]) -> str:
     ]
     if "thd_phase_a_pct" in m:
         lines.append(f"THD i_a {_fmt(m['thd_phase_a_pct'], '.2g')} %")
+    if m.get("late_duty_periods"):
+        lines.append(f"late duty {100 * late_duty_fraction(m):.1f} % of periods")
+    if m.get("host_stalls"):
+        lines.append(f"host stalls {int(m['host_stalls'])}, "
+                     f"longest {_fmt(m.get('host_stall_ms_max'), '.1f')} ms")  # fmt: skip
+        lines.append(f"  periods skipped {int(m.get('periods_skipped', 0))}")
+    if m.get("steps_missing"):
+        lines.append(f"steps_missing {int(m['steps_missing'])} (not recorded)")
     if m.get("plant_fault") not in (None, "none"):
         lines.append(f"TRIP: {m['plant_fault']} (not a scenario result)")
     if m.get("lock_lost"):
@@ -332,13 +390,16 @@ def run_figure(
     n_p: int | None = None,
     meta: dict[str, Any] | None = None,
     window: tuple[float, float] | None = None,
+    stalls: list[float] | None = None,
 ) -> Any:
     """The figure of :func:`plot_run` (a matplotlib ``Figure``; the caller closes it).
 
     ``table`` holds the rows to draw (a time window's, when ``window`` names it);
     ``metrics`` the whole run's. ``meta`` (a ``meta.json``) gives the title, the paper,
     its bounds and the run's variations where ``title``, ``paper`` and ``paper_result``
-    are not given.
+    are not given; with a controller under test (``meta["controller"]`` external) no
+    paper's bound is drawn (the paper's numbers are its method's, not this controller's).
+    ``stalls``: the host stalls' instants (s, :func:`bench.runs._results.host_stall_times`).
     """
     import matplotlib
 
@@ -351,10 +412,17 @@ def run_figure(
     paper = paper or str(scn.get("paper", ""))
     if paper_result is None:
         paper_result = scn.get("paper_result") or {}
+    if meta.get("controller") == "external":
+        paper_result = {}  # another method's numbers: neither its band nor its y range
     m_run = metrics or {}
     t = table["t"]
     T_s = float(t[1] - t[0]) if len(t) > 1 else 1.0
     t_lo, t_hi = (float(t[0]), float(t[-1]) + T_s) if len(t) else (0.0, 1.0)
+    # the plant ran further than the recording goes: the axis runs on to its last period
+    t_rec_end: float | None = None
+    plant_steps = (meta.get("node_reports") or {}).get("plant", {}).get("steps")
+    if window is None and plant_steps and len(t) and int(plant_steps) * T_s > t_hi + 0.5 * T_s:
+        t_rec_end, t_hi = t_hi, int(plant_steps) * T_s
     est = estimate_rows(table)
     nan = np.full(len(t), np.nan)
     theta_hat = np.where(est, table["theta_hat"], nan)
@@ -371,6 +439,10 @@ def run_figure(
     else:
         m_box, head = m_run, f"whole run, scored from {scored_from_s:g} s"
     loads = load_events(t, table["load_ref_nm"]) if "load_ref_nm" in table else ([], [])
+
+    def marks(ax: Any, legend: bool = False) -> None:
+        _markers(ax, t, table, m_run, T_s, scored_from_s, legend=legend, loads=loads,
+                 stalls=stalls, t_end=t_rec_end)  # fmt: skip
 
     fig = plt.figure(figsize=(12, 14.5))
     gs = fig.add_gridspec(5, 1, height_ratios=(0.9, 1.4, 1.0, 1.0, 0.7), hspace=0.32)
@@ -420,10 +492,10 @@ def run_figure(
     ax_err.set_ylabel(r"$\Delta\theta$ (deg, electrical)")
     ax_err.set_title("position error, scaled to the scored rows (inset: full scale)",
                      fontsize=9, loc="left")  # fmt: skip
-    _markers(ax_err, t, table, m_run, T_s, scored_from_s, legend=False, loads=loads)
+    marks(ax_err)
     inset = ax_err.inset_axes((0.6, 0.65, 0.38, 0.27))
     inset.plot(t, err, lw=0.4, color="tab:red")
-    _markers(inset, t, table, m_run, T_s, scored_from_s, legend=False, loads=loads)
+    marks(inset)
     inset.set_xlim(t_lo, t_hi)
     inset.set_title("full scale, same time axis", fontsize=7)
     inset.tick_params(labelsize=6)
@@ -437,7 +509,7 @@ def run_figure(
     ax_spd.plot(t, w_hat, lw=0.8, ls="--", label="estimated")
     ax_spd.plot(t, table["w_ref_rpm"], lw=0.8, color="k", alpha=0.5, label="reference")
     ax_spd.set_ylabel("mechanical speed (rpm)")
-    _markers(ax_spd, t, table, m_run, T_s, scored_from_s, legend=True, loads=loads)
+    marks(ax_spd, legend=True)
     if shade_zoom:
         ax_spd.axvspan(t_end - span, t_end, color="0.5", alpha=0.15, lw=0, label="angle zoom")
     ax_spd.legend(**outside)
@@ -461,7 +533,7 @@ def run_figure(
     if with_true:
         for c, colour in zip(trues, ("tab:cyan", "tab:green", "tab:red"), strict=True):
             ax_cur.plot(t, table[c], lw=0.5, color=colour, alpha=0.8, label=f"true $i_{c[2]}$")
-    _markers(ax_cur, t, table, m_run, T_s, scored_from_s, legend=False, loads=loads)
+    marks(ax_cur)
     running = np.ones(len(t), dtype=bool)
     if "mode" in table:
         running = ~np.isin(table["mode"], (1, 2))
@@ -499,9 +571,11 @@ def run_figure(
     if "load_ref_nm" in table:
         ax_load.plot(t, table["load_ref_nm"], lw=1.0, ls=":", color="k",
                      label="load commanded", zorder=4)  # fmt: skip
-    _markers(ax_load, t, table, m_run, T_s, scored_from_s, legend=False, loads=loads)
+    marks(ax_load)
     ax_load.set_ylabel("torque (N m)")
-    ax_load.set_xlabel("time (s)")
+    ax_load.set_xlabel("time (s)" if t_rec_end is None else
+                       f"time (s): the recorded data end at {t_rec_end:.3f} s, the plant ran to "
+                       f"{t_hi:.3f} s (the recorder lost the rest)")  # fmt: skip
     ax_load.legend(**outside)
 
     for a in shared:
@@ -533,6 +607,7 @@ def plot_run(
     meta: dict[str, Any] | None = None,
     window: tuple[float, float] | None = None,
     name: str = "run.png",
+    stalls: list[float] | None = None,
 ) -> Path:
     """The run's figure (see the module's docstring, :func:`run_figure`) to
     ``out_dir / name``; ``f_split_hz``: the fundamental's low-pass corner (None: no
@@ -541,7 +616,7 @@ def plot_run(
 
     fig = run_figure(table, title=title, metrics=metrics, scored_from_s=scored_from_s,
                      f_split_hz=f_split_hz, paper=paper, paper_result=paper_result, n_p=n_p,
-                     meta=meta, window=window)  # fmt: skip
+                     meta=meta, window=window, stalls=stalls)  # fmt: skip
     path = out_dir / name
     fig.savefig(path, dpi=110)
     plt.close(fig)

@@ -52,7 +52,7 @@ from bench.scenarios._setup import (
     sample_period,
 )
 from bench.wire._codec import Codec
-from bench.wire._frames import with_ids
+from bench.wire._frames import FrameArray, with_ids
 from bench.wire._protocol import unwrap
 
 
@@ -170,7 +170,11 @@ def _replaced_preset_values(name: str, run: dict[str, Any]) -> dict[str, Any]:
     from plant_rt import PRESETS
 
     shipped = PRESETS[name]
-    own = {"motor": asdict(shipped.motor), "inverter": asdict(shipped.inverter), "f_sw": shipped.f_sw}
+    own = {
+        "motor": asdict(shipped.motor),
+        "inverter": asdict(shipped.inverter),
+        "f_sw": shipped.f_sw,
+    }
 
     def flat(d: Any, prefix: str = "") -> dict[str, Any]:
         if not isinstance(d, dict):
@@ -354,7 +358,11 @@ def finish_run(
     m["plant_out_of_range_s"] = None if n_out is None else int(n_out) * T_s
     m["faults"] = fault_metrics(
         cap.table,
-        [(f.kind, f.at_s, f.end_s(m["sim_s"]), f.expect) for f in scn.faults if f.at_s < m["sim_s"]],
+        [
+            (f.kind, f.at_s, f.end_s(m["sim_s"]), f.expect)
+            for f in scn.faults
+            if f.at_s < m["sim_s"]
+        ],
         T_s=T_s,
         plant_fault=fault,
         plant_fault_step=fault_step,
@@ -382,11 +390,13 @@ def finish_run(
     if plots:
         from bench.runs._plots import plot_run
 
+        stalls = host_stall_times(frames, codec, T_s) if m.get("host_stalls") else None
         plot_run(
             cap.table,
             out_dir,
             meta=meta,  # title, paper, its bound and the run's variations
             metrics=m,
+            stalls=stalls,
             scored_from_s=scn.score_from_s,
             f_split_hz=fundamental_corner_hz(
                 scn, str(meta.get("estimator", "")), cap.table, design
@@ -431,7 +441,9 @@ def fundamental_corner_hz(
             return None
         hf = getattr(est, "hf", est)
     n_p = get_preset(scn).motor.n_p
-    w_top = float(np.max(np.abs(table["w_m_rpm"]))) * math.pi / 30.0 * n_p if len(table["t"]) else 0.0
+    w_top = (
+        float(np.max(np.abs(table["w_m_rpm"]))) * math.pi / 30.0 * n_p if len(table["t"]) else 0.0
+    )
     try:
         return split_corner_hz(injection_floor_hz(hf, sample_period(scn), w_top))
     except ValueError:
@@ -617,7 +629,9 @@ def frames_warning(m: dict[str, Any]) -> str | None:
     parts = []
     bad = int(m.get("frames_rejected_recorded", 0))
     if bad:
-        parts.append(f"{bad:,} recorded frames failed their check (E2E CRC, length, range or counter)")
+        parts.append(
+            f"{bad:,} recorded frames failed their check (E2E CRC, length, range or counter)"
+        )
     foreign = int(m.get("frames_foreign", 0))
     if foreign:
         by = ", ".join(f"{k} {v:,}" for k, v in (m.get("frames_foreign_by_message") or {}).items())
@@ -692,10 +706,40 @@ def outcome(m: dict[str, Any], T_s: float) -> tuple[int, list[str]]:
 REALTIME_LATE_WARN = 0.01
 
 
+def late_duty_fraction(m: dict[str, Any]) -> float:
+    """The fraction of a run's periods that ran with a late or missing duty (real time)."""
+    return float(m.get("late_duty_periods", 0)) / max(1, int(m.get("steps", 0)))
+
+
+def host_stall_times(frames: Sequence[can.Message], codec: Codec, T_s: float) -> list[float]:
+    """Where a real-time plant met its host stalls, in simulated time (s): the periods after
+    which its ``PlantTruth`` frames stopped for longer than a stall (:func:`bench.nodes._clock.
+    default_stall_s`) beyond their usual spacing.  The periods a stall skipped were never
+    computed (bench/nodes/_clock.py), so in simulated time a stall is an instant."""
+    from bench.nodes._clock import default_stall_s
+
+    truth = with_ids(frames, (codec.frame_id("PlantTruth"),))
+    if isinstance(truth, FrameArray):
+        ts = np.asarray(truth.rows["timestamp"], dtype=float)
+    else:
+        truth = [f for f in truth if f.arbitration_id == codec.frame_id("PlantTruth")]
+        ts = np.fromiter((f.timestamp for f in truth), dtype=float, count=len(truth))
+    if len(ts) < 3:
+        return []
+    dt = np.diff(ts)
+    gaps = np.flatnonzero(dt > float(np.median(dt)) + default_stall_s(T_s)) + 1
+    out: list[float] = []
+    for i in gaps:
+        d = codec.decode(truth[int(i) : int(i) + 1][0])  # one frame made, not all
+        if d is not None and d.reason is None:
+            out.append(int(d.signals["step"]) * T_s)
+    return out
+
+
 def realtime_warning(m: dict[str, Any]) -> str | None:
     """One line when a real-time run did not keep time well enough to read as a drive's."""
     steps = max(1, int(m.get("steps", 0)))
-    late = m.get("late_duty_periods", 0) / steps
+    late = late_duty_fraction(m)
     over = m.get("deadline_misses", 0) / steps
     if max(late, over) <= REALTIME_LATE_WARN:
         return None
@@ -735,6 +779,13 @@ METRIC_ROWS = (
     ("retransmits", ""),
 )
 
+#: What the rows measured by a clock measure (the last column): the run's wall time and
+#: the plant loop's speed are not one span, so ``sim_s / wall_s`` is not ``realtime_factor``.
+CLOCK_LABELS = {
+    "wall_s": "wall time of the whole run: node start-up and stop included",
+    "realtime_factor": "sim_s per wall second of the plant's loop alone (start-up excluded)",
+}
+
 #: Units of the per-band quantities (``band_<band>_<quantity>``).
 _BAND_UNITS = {
     "steps": "",
@@ -767,11 +818,18 @@ def format_metrics(
     numbers are not this method's) and a last line says where they apply.
     A scenario without the paper's numbers (a user's own) has no paper
     column.  The last column says what an error row measures
-    (:data:`bench.runs._metrics.METRIC_LABELS`: which ones keep their sign).
+    (:data:`bench.runs._metrics.METRIC_LABELS`: which ones keep their sign) and which
+    span a timed row covers (:data:`CLOCK_LABELS`).  A paper number compared with
+    another metric than its key's (:data:`bench.runs._metrics.PAPER_COMPARED_AS`:
+    Wen's "dtheta avg" is a mean |dtheta|) stands on that metric's row.
     """
-    from bench.runs._metrics import METRIC_LABELS
+    from bench.runs._metrics import METRIC_LABELS, PAPER_COMPARED_AS
 
     paper = paper or {}
+    paper = {
+        **{PAPER_COMPARED_AS[k]: v for k, v in paper.items() if k in PAPER_COMPARED_AS},
+        **{k: v for k, v in paper.items() if k not in PAPER_COMPARED_AS},
+    }
     note = ""
     if paper and paper_method and estimator and estimator != paper_method:
         note = f"\n(the paper's numbers are for {paper_method}; this run is {estimator})"
@@ -784,6 +842,6 @@ def format_metrics(
         v = m[key]
         vs = f"{v:12.3f}" if isinstance(v, float) else f"{'-' if v is None else v:>12}"
         ps = (f"  {paper[key]:>8}" if key in paper else f"  {'':>8}") if paper else ""
-        label = METRIC_LABELS.get(key, "")
+        label = METRIC_LABELS.get(key) or CLOCK_LABELS.get(key, "")
         lines.append(f"{key:<{wk}}{vs}{ps} {unit:<4}{f' {label}' if label else ''}".rstrip())
     return "\n".join(lines) + note

@@ -31,6 +31,7 @@ import sys
 import time
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -70,7 +71,7 @@ from bench.wire._protocol import SHARED_RUN_FRAMES, new_run_id, unwrap
 
 LOG_SUFFIX = {"blf": ".blf", "asc": ".asc", "log": ".log"}
 
-__all__ = ["DUT_TIMEOUT_S", "EXTERNAL", "PACE_EVERY", "DutWatch", "run_scenario"]
+__all__ = ["DUT_TIMEOUT_S", "EXTERNAL", "PACE_EVERY", "DutProcess", "DutWatch", "run_scenario"]
 
 #: ``bench run --controller external``: the controller is a node on the bus.
 EXTERNAL = "external"
@@ -154,6 +155,7 @@ def run_scenario(
     dut_timeout: float = DUT_TIMEOUT_S,
     dut_name: str | None = None,
     check: Callable[[], object] | None = None,
+    dut_process: DutProcess | None = None,
 ) -> RunResult:
     """Run ``scn`` with ``estimator`` between two processes on ``spec``'s bus.
 
@@ -165,6 +167,9 @@ def run_scenario(
         (named ``dut_name`` in the labels) must send its first valid duty within
         ``dut_timeout`` seconds, else the run ends with a :class:`BenchError`
         naming the duty frames the bench rejected.
+        ``dut_process``: the controller under test's process when the caller started
+        it (``bench.run(dut=...)``): its exit before its first valid duty ends the run
+        at once, with a line naming its exit status and its log.
         ``check``: a check of the run's settings that takes a while (e.g. building the
         controller, :func:`bench.scenarios._setup.build_controller_check`; ``bench run``
         builds it before any process starts, so a misfit is refused first),
@@ -219,7 +224,7 @@ def run_scenario(
     ended: str | None = None
     asked: set[str] = set()
     rec = Recording([spec, spec_b] if link else [spec], capture, codec, watch_duties=external)
-    dut = DutWatch(rec, dut_timeout, spec_b.describe(), dut_name) if external else None
+    dut = DutWatch(rec, dut_timeout, spec_b.describe(), dut_name, dut_process) if external else None
     t_wall0 = time.perf_counter()
     start_error: str | None = None
     pacer: CommandPacer | None = None
@@ -573,12 +578,34 @@ def _drive(
     return ended
 
 
+@dataclass(frozen=True)
+class DutProcess:
+    """The controller under test's process, started for the run, and the file of its output."""
+
+    proc: subprocess.Popen[bytes]
+    log: Path
+
+    def exit_text(self) -> str | None:
+        """None while it runs; else how it ended (``exit status 1``, ``killed by SIGKILL``)."""
+        code = self.proc.poll()
+        if code is None:
+            return None
+        if code < 0:
+            try:
+                return f"killed by {signal.Signals(-code).name}"
+            except ValueError:
+                return f"killed by signal {-code}"
+        return f"exit status {code}"
+
+
 class DutWatch:
     """What ``bench run --controller external`` says on stderr about the controller under test.
 
     - Until its first valid ``PwmDuty``: a progress line (every 5 s; in place
       on a terminal) naming the bus and the time left of ``timeout_s``, and the
-      duty frames rejected so far.
+      duty frames rejected so far.  When the run started its process
+      (``process``) and that process has ended, the run ends at once
+      (:meth:`failure_text` names its exit status and its log): nothing will answer.
     - While the run goes on: once a second, the ``PwmDuty`` frames the bench's
       codec rejected (``PwmDuty: 722 rejected (bad_crc) in the last second``),
       the growth of the plant's ``PlantStatus.late_frames``, and a plant trip
@@ -586,9 +613,17 @@ class DutWatch:
     """
 
     def __init__(
-        self, rec: Recording, timeout_s: float, transport: str, name: str | None = None
+        self,
+        rec: Recording,
+        timeout_s: float,
+        transport: str,
+        name: str | None = None,
+        process: DutProcess | None = None,
     ) -> None:
         self.rec = rec
+        self.process = process
+        #: How its process ended before its first valid duty (None: it did not).
+        self.exited: str | None = None
         self.timeout_s = timeout_s
         self.transport = transport
         self.name = name or "the controller under test"
@@ -623,6 +658,9 @@ class DutWatch:
             if watch.duties_ok:
                 self.first_duty_s = now - self.t0
                 self._say(f"{self.name}: first valid PwmDuty after {self.first_duty_s:.1f} s")
+            elif self.process is not None and (how := self.process.exit_text()) is not None:
+                self.exited = how
+                return True
             elif now - self.t0 > self.timeout_s:
                 return True
             elif self.line.due(now):
@@ -663,6 +701,11 @@ class DutWatch:
 
     def failure_text(self) -> str:
         """The one line of a controller that never answered."""
+        if self.exited is not None and self.process is not None:
+            return (
+                f"{self.name} ended ({self.exited}) before its first valid PwmDuty; "
+                f"its output: {self.process.log}"
+            )
         rej = self.rec.duty_watch.duty_rejected
         why = (
             f"PwmDuty: {rejection_text(rej)} (docs/PROTOCOL.md, what the plant rejects)"

@@ -1037,6 +1037,7 @@ def plant_loop_native(
         PlantDiagnostics,
         stall_text,
         trip_text,
+        tripped_text,
     )
 
     dll = _lib()
@@ -1145,7 +1146,7 @@ def plant_loop_native(
                         f"{watchdog_s:.0f} s; its newest CtrlTelemetry.cmd_ack is {node.ctrl_ack}"
                     )
                 elif ev == EV_TRIPPED:
-                    print(f"plant: {stall_text(node, watchdog_s)}", file=sys.stderr)
+                    print(f"plant: {tripped_text(node, loop.t_progress * 1e-9)}", file=sys.stderr)
                     break
                 else:
                     raise BenchError(f"plant: native loop: {os.strerror(-loop.err)}")

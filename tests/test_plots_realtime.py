@@ -1,0 +1,116 @@
+"""run.png of a real-time run and of a controller under test: the late periods, the host
+stalls, the periods the recording lacks and a lost tail are on the figure; another
+method's paper band is not (the synthetic run of tests/test_plots.py)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import pytest
+
+from bench.runs._plots import late_duty_rows, metrics_text
+from bench.runs._results import host_stall_times
+from bench.wire._codec import Codec
+from tests.test_plots import META, T_S, draw, figs, table
+
+__all__ = ["figs"]  # the fixture, used by name
+
+RT_META: dict[str, Any] = {**META, "mode": "realtime"}
+
+
+def late_table() -> dict[str, Any]:
+    """The synthetic run with duties 3 periods stale over 1.5-1.6 s and one at 2.2 s; no
+    duty at all (255) in the first 50 periods."""
+    tab = table()
+    age = np.zeros(len(tab["t"]))
+    age[:50] = 255.0
+    age[(tab["t"] >= 1.5) & (tab["t"] < 1.6)] = 3.0
+    age[int(round(2.2 / T_S))] = 1.0
+    tab["duty_age"] = age
+    return tab
+
+
+def _spans(ax: Any, gid: str) -> list[tuple[float, float]]:
+    """The (start, end) of the bands ``ax.axvspan`` drew with ``gid``."""
+    return sorted((p.get_x(), p.get_x() + p.get_width()) for p in ax.patches if p.get_gid() == gid)
+
+
+def test_late_duty_rows_are_those_older_than_the_runs_usual_duty() -> None:
+    tab = late_table()
+    late = late_duty_rows(tab)
+    assert int(np.count_nonzero(late)) == 1000 + 1  # 0.1 s at 10 kHz, and the one at 2.2 s
+    assert not late[:50].any()  # no duty (255) is not a late one
+    # a lockstep run with one period of injected delay: every duty has its set age
+    tab["duty_age"] = np.where(tab["duty_age"] == 255.0, 255.0, 1.0)
+    assert not late_duty_rows(tab).any()
+
+
+def test_the_late_periods_and_the_stalls_are_shaded_on_every_time_panel(
+    figs: list[Any],
+) -> None:
+    m = {"late_duty_periods": 1001, "steps": 40000, "host_stalls": 2, "host_stall_ms_max": 19.3,
+         "periods_skipped": 300}  # fmt: skip
+    ax = draw(figs, late_table(), meta=RT_META, metrics=m, stalls=[0.7, 3.1])
+    for name in ("error", "speed", "current", "load"):
+        late = _spans(ax[name], "late_duty")
+        assert late[0] == pytest.approx((1.5, 1.6), abs=2 * T_S), name
+        assert len(late) == 2, name  # the lone period is widened to be seen, not dropped
+        stalls = _spans(ax[name], "host_stall")
+        assert [0.5 * (a + b) for a, b in stalls] == pytest.approx([0.7, 3.1]), name
+    labels = [t.get_text() for t in ax["speed"].get_legend().get_texts()]
+    assert any("late duty held (1001 periods)" in s for s in labels), labels
+    assert any(s.startswith("host stall (2 located") for s in labels), labels
+
+
+def test_the_box_names_late_duties_stalls_and_missing_periods_where_not_zero() -> None:
+    base = {"theta_err_abs_max_deg": 1.0}
+    assert "late duty" not in metrics_text({**base, "late_duty_periods": 0, "steps": 10})
+    text = metrics_text({**base, "late_duty_periods": 568, "steps": 10001, "host_stalls": 13,
+                         "host_stall_ms_max": 19.306, "periods_skipped": 1396,
+                         "steps_missing": 12})  # fmt: skip
+    assert "late duty 5.7 % of periods" in text
+    assert "host stalls 13, longest 19.3 ms" in text and "periods skipped 1396" in text
+    assert "steps_missing 12" in text
+
+
+def test_a_lost_tail_is_marked_and_the_axis_runs_to_the_plants_last_period(
+    figs: list[Any],
+) -> None:
+    tab = {k: v[:30000] for k, v in table().items()}  # the recorder kept 3 of 4 s
+    meta = {**RT_META, "node_reports": {"plant": {"steps": 40000}}}
+    ax = draw(figs, tab, meta=meta, metrics={"steps_missing": 10000})
+    assert ax["speed"].get_xlim() == pytest.approx((0.0, 4.0))
+    ends = [ln.get_xdata()[0] for ln in ax["speed"].get_lines() if ln.get_gid() == "recorded_end"]
+    assert ends == pytest.approx([3.0])
+    assert "the recorder lost the rest" in ax["load"].get_xlabel()
+    # a run the plant ended where the recording does: nothing marked
+    meta = {**RT_META, "node_reports": {"plant": {"steps": 30000}}}
+    ax = draw(figs, tab, meta=meta)
+    assert ax["speed"].get_xlim() == pytest.approx((0.0, 3.0))
+    assert not [ln for ln in ax["speed"].get_lines() if ln.get_gid() == "recorded_end"]
+
+
+def test_no_paper_band_for_a_controller_under_test(figs: list[Any]) -> None:
+    """An external controller is not the paper's method: no band of its numbers, and the
+    error panel is scaled to the run's own error (0.3 deg here), not to the band's 4 deg."""
+    meta = {**META, "controller": "external", "controller_name": "ext-py"}
+    ax = draw(figs, table(), meta=meta)
+    assert not [ln for ln in ax["error"].get_lines() if ln.get_gid() == "paper_bound"]
+    lo, hi = ax["error"].get_ylim()
+    assert hi < 4.0 and lo > -4.0
+
+
+def test_host_stalls_are_the_gaps_in_the_plants_frames() -> None:
+    codec = Codec()
+    msg = codec.message("PlantTruth")
+    frames = []
+    t = 100.0
+    for k in range(200):
+        t += T_S + (0.02 if k in (50, 120) else 0.0)  # two 20 ms stalls before 50 and 120
+        sig = {s.name: 0.0 for s in msg.signals if s.name != "crc"}
+        sig["step"] = float(k)
+        f = codec.encode("PlantTruth", sig)
+        f.timestamp = t
+        frames.append(f)
+    assert host_stall_times(frames, codec, T_S) == pytest.approx([50 * T_S, 120 * T_S])
