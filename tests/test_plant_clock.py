@@ -7,7 +7,15 @@ import time
 
 import pytest
 
-from bench.nodes._clock import STALL_MIN_S, STALL_PERIODS, RealTimeClock, default_stall_s
+from bench.nodes._clock import (
+    SPIN_MAX_S,
+    SPIN_SHARE,
+    STALL_MIN_S,
+    STALL_PERIODS,
+    RealTimeClock,
+    default_spin_s,
+    default_stall_s,
+)
 
 
 def test_clock_counts_overruns_when_caller_is_late() -> None:
@@ -84,3 +92,15 @@ def test_the_default_stall_threshold() -> None:
     assert RealTimeClock(1e-3).stall_s == default_stall_s(1e-3)
     with pytest.raises(ValueError):
         RealTimeClock(1e-3, stall_s=0.0)
+
+
+@pytest.mark.parametrize("rate_hz", [1_000, 4_000, 10_000, 20_000])
+def test_the_clock_sleeps_in_every_period(rate_hz: int) -> None:
+    """The busy-wait margin stays a quarter period at most: a SCHED_FIFO loop that
+    spins through whole periods is throttled by the kernel (50 ms of every second)."""
+    T = 1.0 / rate_hz
+    spin = default_spin_s(T)
+    assert 0.0 < spin <= SPIN_SHARE * T < T and spin <= SPIN_MAX_S
+    assert spin == min(SPIN_MAX_S, SPIN_SHARE * T)
+    assert RealTimeClock(T).spin == spin
+    assert RealTimeClock(T, spin=0.0).spin == 0.0

@@ -80,9 +80,27 @@ class JitterStats:
     skipped: int = 0
 
 
-#: Busy-wait margin before each deadline (s): the OS wakes a sleeping thread tens to
-#: hundreds of microseconds late; the native loop's clock takes the same (bn_clock_t).
-DEFAULT_SPIN_S = 200e-6
+#: Longest busy-wait margin before each deadline (s): the OS wakes a sleeping thread tens
+#: to hundreds of microseconds late, and the margin absorbs that at the price of its CPU.
+SPIN_MAX_S = 200e-6
+
+#: Largest share of a period spent in that margin.  A loop under SCHED_FIFO must sleep in
+#: every period: the kernel's real-time throttling (``sched_rt_runtime_us`` over
+#: ``sched_rt_period_us``, 950 ms of every 1 s by default) takes a real-time thread that
+#: keeps its CPU off it for the rest of the second.  With the whole 200 us margin at 10 kHz
+#: (and at 4 kHz beside the plant's 45-50 us of work) the loop never slept, and the native
+#: clock alone (``bn_timing_run``, SCHED_FIFO, 4 s) met stalls of 52-153 ms that skipped
+#: 1,563-2,276 periods; with a quarter period it met none (0.43-0.69 % of the periods
+#: woke more than half a period late).  A quarter leaves the loop's work (about half a
+#: period at 10 kHz) and its margin three quarters of the CPU, 20 points below the throttle.
+SPIN_SHARE = 0.25
+
+
+def default_spin_s(T_s: float) -> float:
+    """The busy-wait margin before each deadline of a ``T_s`` period (s):
+    :data:`SPIN_MAX_S`, at most :data:`SPIN_SHARE` of the period.  The Python clock
+    (:class:`RealTimeClock`) and the native loop's (``bn_clock_t``) both take it."""
+    return min(SPIN_MAX_S, SPIN_SHARE * T_s)
 
 
 class RealTimeClock:
@@ -93,7 +111,7 @@ class RealTimeClock:
     T_s : float
         Period (s).
     spin : float, optional
-        Busy-wait margin before each deadline (s).
+        Busy-wait margin before each deadline (s); default :func:`default_spin_s`.
     keep : int, optional
         Number of most recent lateness values kept for the statistics.
     stall_s : float, optional
@@ -112,7 +130,7 @@ class RealTimeClock:
     def __init__(
         self,
         T_s: float,
-        spin: float = DEFAULT_SPIN_S,
+        spin: float | None = None,
         keep: int = 100_000,
         stall_s: float | None = None,
     ) -> None:
@@ -122,7 +140,7 @@ class RealTimeClock:
         self.stall_s = default_stall_s(self.T_s) if stall_s is None else float(stall_s)
         if not self.stall_s > 0.0:
             raise ValueError(f"stall_s must be > 0, got {stall_s}")
-        self.spin = float(spin)
+        self.spin = default_spin_s(self.T_s) if spin is None else float(spin)
         self.keep = int(keep)
         self.overruns = 0
         self.n = 0

@@ -1030,7 +1030,7 @@ def plant_loop_native(
     from then on (a command sent before the node is ready included); closed
     here.  The node's python-can bus stays open beside it and is not read.
     """
-    from bench.nodes._clock import DEFAULT_SPIN_S, default_stall_s
+    from bench.nodes._clock import default_spin_s, default_stall_s
     from bench.nodes._plant_text import (
         LAST_ANSWER_S,
         STATE_DONE,
@@ -1093,7 +1093,7 @@ def plant_loop_native(
             n = max(1, node.n_steps if node.n_steps > 0 else 1_000_000)
             busy = (ctypes.c_uint32 * n)()
             loop.period_ns = round(T * 1e9)
-            loop.busy_tail_ns = round(DEFAULT_SPIN_S * 1e9)
+            loop.busy_tail_ns = round(default_spin_s(T) * 1e9)
             loop.stall_ns = round(default_stall_s(T) * 1e9)
             loop.busy = ctypes.cast(busy, ctypes.POINTER(ctypes.c_uint32))
             loop.busy_cap = n
