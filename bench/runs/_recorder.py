@@ -18,7 +18,7 @@ from typing import Any
 import can
 
 from bench.nodes._loops import STATE_DONE
-from bench.wire._bus import UDP_DEFAULT_PORT, BusSpec
+from bench.wire._bus import UDP_DEFAULT_PORT, BusSpec, quiet_receive
 from bench.wire._codec import Codec
 from bench.wire._protocol import SHARED_RUN_FRAMES
 
@@ -415,34 +415,3 @@ def _native_readers(
         return [], f"the native recorder could not open its socket ({e.strerror or e})"
     return readers, None
 
-
-def quiet_receive(bus: can.BusABC, group: str) -> None:
-    """Stop delivery to a python-can udp_multicast bus that only sends (the native recorder
-    reads its ``group``): it leaves the group, takes no other group's datagrams
-    (``IP(V6)_MULTICAST_ALL`` off) and keeps the smallest receive buffer, so the kernel
-    does not copy every frame of the bus into a socket nobody reads (best effort)."""
-    import socket
-
-    sock = getattr(getattr(bus, "_multicast", None), "_socket", None)
-    if not isinstance(sock, socket.socket):
-        return
-    v6 = sock.family == socket.AF_INET6
-    try:
-        if v6:
-            addr = socket.inet_pton(socket.AF_INET6, group)
-            # IPV6_MULTICAST_ALL is 29 on Linux; Python does not name it
-            sock.setsockopt(socket.IPPROTO_IPV6, 29, 0)
-            mreq = addr + (0).to_bytes(4, "little")
-            sock.setsockopt(socket.IPPROTO_IPV6, socket.IPV6_LEAVE_GROUP, mreq)
-        else:
-            addr = socket.inet_aton(group)
-            sock.setsockopt(socket.IPPROTO_IP, 49, 0)  # IP_MULTICAST_ALL
-            sock.setsockopt(
-                socket.IPPROTO_IP, socket.IP_DROP_MEMBERSHIP, addr + socket.inet_aton("0.0.0.0")
-            )
-    except (OSError, ValueError, AttributeError):
-        pass
-    try:
-        sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 0)  # the kernel's minimum
-    except OSError:
-        pass

@@ -146,6 +146,7 @@ static int drain_once(bn_rec_t *r)
 static void *run(void *arg)
 {
     bn_rec_t *r = arg;
+    (void)pthread_setname_np(pthread_self(), "bn-recorder"); /* its line in top, /proc */
     if (r->priority > 0) {
         struct sched_param sp;
         memset(&sp, 0, sizeof sp);
