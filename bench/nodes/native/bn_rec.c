@@ -157,16 +157,28 @@ static void *run(void *arg)
     }
     while (!__atomic_load_n(&r->stop, __ATOMIC_ACQUIRE)) {
         int got = drain_once(r);
+        r->st.calls++;
         if (got < 0) {
             r->st.errors++;
         }
-        if (got != 0) {
+        if (got == REC_BATCH) {
+            continue; /* more may wait */
+        }
+        if (got > 0) {
+            /* the socket is empty: let the next datagrams gather for a while (one
+             * recvmmsg for them, not one wake-up each) */
+            struct timespec nap = {0, BN_REC_NAP_NS};
+            (void)clock_nanosleep(CLOCK_MONOTONIC, 0, &nap, NULL);
             continue;
         }
         /* empty: wait for the next datagram, looking at the stop flag each poll period */
         struct pollfd p = {r->bus.fd, POLLIN, 0};
         struct timespec ts = {0, BN_REC_POLL_NS};
         (void)ppoll(&p, 1, &ts, NULL);
+    }
+    struct timespec cpu;
+    if (clock_gettime(CLOCK_THREAD_CPUTIME_ID, &cpu) == 0) {
+        r->st.cpu_ns = (int64_t)cpu.tv_sec * 1000000000 + cpu.tv_nsec;
     }
     return NULL;
 }

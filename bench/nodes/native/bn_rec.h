@@ -14,6 +14,13 @@ extern "C" {
  * (ns): bn_rec_stop returns within about this long. */
 #define BN_REC_POLL_NS 50000000L
 
+/* After a receive call that emptied the socket, the thread sleeps this long (ns) before
+ * the next one, so that the datagrams of about ten 10 kHz periods (some 40, fewer than
+ * one recvmmsg batch of 64) come in one call rather than one wake-up each: its CPU time
+ * per frame falls several-fold (docs/REALTIME.md), and the kernel's buffer (64 MB) and
+ * the ring hold seconds of the bus, not one millisecond. */
+#define BN_REC_NAP_NS 1000000L
+
 /* One datagram as the socket gave it. */
 typedef struct {
     int64_t sec, nsec;        /* SO_TIMESTAMPNS receive stamp; sec -1: none */
@@ -28,6 +35,8 @@ typedef struct {
     uint64_t ring_lost;       /* datagrams read while the ring was full (dropped) */
     uint64_t unread;          /* datagrams still in the socket when it was closed */
     uint64_t errors;          /* failed receive calls */
+    uint64_t calls;           /* receive calls (recvmmsg) */
+    int64_t cpu_ns;           /* the thread's CPU time, when it has ended */
     int32_t fifo;             /* 1: the thread runs under SCHED_FIFO */
     int32_t err_sched;        /* errno of a refused SCHED_FIFO (0: granted or not asked) */
     int32_t fd;               /* the socket (for /proc/net/udp's drops) */
