@@ -301,6 +301,7 @@ class Recording:
             "asked for the Python recorder" if engine == "python" else None
         )
         self.native: list[Any] = []
+        self._native_final: list[dict[str, Any]] = []
         if engine != "python":
             self.native, self.engine_note = _native_readers(
                 specs, self.recorders, rt_priority, RECEIVE_BUFFER
@@ -318,8 +319,9 @@ class Recording:
 
     @property
     def native_stats(self) -> list[dict[str, Any]]:
-        """The native readers' counters (one per bus; empty with the Python recorder)."""
-        return [nr.stats() for nr in self.native]
+        """The native readers' counters (one per bus; empty with the Python recorder); after
+        :meth:`close`, their final values."""
+        return self._native_final or [nr.stats() for nr in self.native]
 
     @property
     def plant_bus(self) -> can.BusABC:
@@ -378,6 +380,7 @@ class Recording:
             for nr in self.native:
                 nr.stop()  # the rest of its ring recorded; what the socket still held counted
                 st = nr.stats()
+                self._native_final.append(st)
                 kernel = fd_drops(st["fd"])
                 drops.append(None if kernel is None else kernel + st["unread"] + st["ring_lost"])
                 nr.close()

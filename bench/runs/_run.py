@@ -351,6 +351,12 @@ def run_scenario(
     meta["recorder_frames_lost"] = rec.frames_lost
     # which recorder read the bus (native: bench/nodes/native/bn_rec.c), and why not native
     meta["recorder"] = {"engine": rec.engine, "note": rec.engine_note}
+    if rec.native:
+        # per bus: datagrams kept, its receive calls, its CPU time, SCHED_FIFO granted
+        meta["recorder"]["native"] = [
+            {k: st[k] for k in ("received", "ring_lost", "unread", "calls", "cpu_ns", "fifo")}
+            for st in rec.native_stats
+        ]
     if rec.frames_lost:
         print(
             f"warning: the recorder lost {rec.frames_lost} frames (its receive buffer "
