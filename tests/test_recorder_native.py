@@ -228,3 +228,26 @@ def test_the_python_bus_beside_a_native_reader_stops_receiving(tmp_path: Path) -
         sender.shutdown()
         rec.close()
     assert len(rec.frames()) == 30
+
+
+def test_a_datagram_that_is_no_message_is_counted_and_the_rest_recorded(tmp_path: Path) -> None:
+    import socket
+
+    spec = BusSpec("udp_multicast", udp_multicast_group(), free_port())
+    rec = Recording([spec], tmp_path / "capture.blf", Codec())
+    sender = can.Bus(interface="udp_multicast", channel=spec.channel, port=spec.port, fd=True)
+    v6 = ":" in spec.channel
+    raw = socket.socket(socket.AF_INET6 if v6 else socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        if v6:
+            raw.setsockopt(socket.IPPROTO_IPV6, socket.IPV6_MULTICAST_HOPS, 1)
+        raw.sendto(b"\xc1 not msgpack", (spec.channel, spec.port))
+        for i in range(10):
+            sender.send(can.Message(arbitration_id=0x7F0, data=bytes([i])))
+        _wait_for(lambda: len(rec.frames()) >= 10)
+    finally:
+        raw.close()
+        sender.shutdown()
+        rec.close()
+    assert [m.data[0] for m in rec.frames()] == list(range(10))
+    assert rec.native_stats[0]["malformed"] == 1 and rec.native_stats[0]["received"] == 11

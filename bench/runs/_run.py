@@ -352,9 +352,13 @@ def run_scenario(
     # which recorder read the bus (native: bench/nodes/native/bn_rec.c), and why not native
     meta["recorder"] = {"engine": rec.engine, "note": rec.engine_note}
     if rec.native:
-        # per bus: datagrams kept, its receive calls, its CPU time, SCHED_FIFO granted
+        # per bus: datagrams kept, lost, not python-can messages; its receive calls, its
+        # CPU time, SCHED_FIFO granted
         meta["recorder"]["native"] = [
-            {k: st[k] for k in ("received", "ring_lost", "unread", "calls", "cpu_ns", "fifo")}
+            {
+                k: st[k]
+                for k in ("received", "ring_lost", "unread", "malformed", "calls", "cpu_ns", "fifo")
+            }
             for st in rec.native_stats
         ]
     if rec.frames_lost:
