@@ -28,13 +28,14 @@ from bench.nodes.native._native import library
 
 __all__ = ["RING_CAPACITY", "NativeReader", "unavailable"]
 
-#: The ring's datagrams.  A 10 kHz native pair puts about 39,000 datagrams a second on
-#: the recorder's bus (wen-5.1 with tt-dq, measured: the plant's samples, truth and
-#: status, the controller's duty and telemetry); the Python side turns one into a
-#: recorded frame in about 11 us of CPU, so it keeps up only with a good part of a
-#: core to itself.  2**18 datagrams hold 6.7 s of that bus while the Python side
-#: does not run at all (beside two SCHED_FIFO nodes on 2 cores), longer than the
-#: real-time runs of ``bench perf``; about 90 MB (bn_rec_slot_t: 344 bytes).
+#: The ring's datagrams.  A 10 kHz native pair puts 4 datagrams a period on the
+#: recorder's bus (wen-5.1 with tt-dq, measured: 160,050 in 40,000 periods: the plant's
+#: samples and truth, the controller's duty and telemetry, the status), 40,000 a second
+#: while the clock keeps time; the Python side turns one into a recorded frame in about
+#: 15 us of CPU (python-can's unpack, the Recorder's checks, the BLF writer), 60 % of a
+#: core, which it does not get beside two SCHED_FIFO nodes on 2 cores.  2**18 datagrams
+#: hold 6.6 s of that bus with the Python side not running at all, longer than the
+#: real-time runs of ``bench perf`` (4 s); about 90 MB (bn_rec_slot_t: 344 bytes).
 RING_CAPACITY = 1 << 18
 
 #: Datagrams taken from the ring per call (one ctypes call per batch).
