@@ -251,3 +251,23 @@ def test_a_datagram_that_is_no_message_is_counted_and_the_rest_recorded(tmp_path
         rec.close()
     assert [m.data[0] for m in rec.frames()] == list(range(10))
     assert rec.native_stats[0]["malformed"] == 1 and rec.native_stats[0]["received"] == 11
+
+
+def test_bench_perf_names_the_recorder_that_lost_frames() -> None:
+    import json
+
+    from bench.studies._perf import _native_limit
+
+    root = Path(__file__).resolve().parents[1]
+    res = json.loads((root / "docs" / "perf" / "perf.json").read_text())
+    res["realtime_native"]["recorder_frames_lost"] = 0.0
+    score = res.setdefault("realtime_native_score", {}).setdefault("realtime", {})
+    score["recorder_frames_lost"] = 12.0
+    for r in res["realtime_native"].values():
+        if isinstance(r, dict):
+            r["recorder_engine"] = "native"
+    score["recorder_engine"] = "native"
+    native = _native_limit("native_recorder_frames_lost", res)
+    assert "native recorder" in native and "12 in the sensorless" in native
+    score["recorder_engine"] = "python"  # one run had python-can's reader
+    assert "Python thread" in _native_limit("native_recorder_frames_lost", res)

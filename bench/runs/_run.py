@@ -364,7 +364,8 @@ def run_scenario(
     if rec.frames_lost:
         print(
             f"warning: the recorder lost {rec.frames_lost} frames (its receive buffer "
-            "overflowed, or it had not read them when the run ended); signals.csv lacks them",
+            + ("or its ring " if rec.engine == "native" else "")
+            + "overflowed, or it had not read them when the run ended); signals.csv lacks them",
             file=sys.stderr,
             flush=True,
         )
