@@ -128,7 +128,7 @@ static int drain_once(bn_rec_t *r)
         return (errno == EAGAIN || errno == EWOULDBLOCK) ? 0 : -errno;
     }
     if (full) {
-        r->st.ring_lost += (uint64_t)got;
+        __atomic_fetch_add(&r->st.ring_lost, (uint64_t)got, __ATOMIC_RELAXED);
         return got;
     }
     uint64_t at = head % r->cap;
@@ -138,7 +138,7 @@ static int drain_once(bn_rec_t *r)
         s->len = (uint16_t)r->msg[j].msg_len;
         s->truncated = (r->msg[j].msg_hdr.msg_flags & MSG_TRUNC) != 0;
     }
-    r->st.received += (uint64_t)got;
+    __atomic_fetch_add(&r->st.received, (uint64_t)got, __ATOMIC_RELAXED);
     __atomic_store_n(&r->head, head + (uint64_t)got, __ATOMIC_RELEASE);
     return got;
 }
@@ -214,11 +214,12 @@ uint64_t bn_rec_take(bn_rec_t *r, bn_rec_slot_t *out, uint64_t max)
 uint64_t bn_rec_pending(bn_rec_t *r)
 {
     uint64_t head = __atomic_load_n(&r->head, __ATOMIC_ACQUIRE);
+    uint64_t tail = __atomic_load_n(&r->tail, __ATOMIC_ACQUIRE); /* another thread takes */
     int queued = 0;
     if (ioctl(r->bus.fd, FIONREAD, &queued) != 0) {
         queued = 0;
     }
-    return (head - r->tail) + (queued > 0 ? 1u : 0u);
+    return (head - tail) + (queued > 0 ? 1u : 0u);
 }
 
 void bn_rec_stop(bn_rec_t *r)
@@ -234,7 +235,12 @@ void bn_rec_stop(bn_rec_t *r)
     }
 }
 
-void bn_rec_stats(const bn_rec_t *r, bn_rec_stats_t *out) { *out = r->st; }
+void bn_rec_stats(const bn_rec_t *r, bn_rec_stats_t *out)
+{
+    *out = r->st; /* the other counters are final once the thread has stopped */
+    out->received = __atomic_load_n(&r->st.received, __ATOMIC_RELAXED);
+    out->ring_lost = __atomic_load_n(&r->st.ring_lost, __ATOMIC_RELAXED);
+}
 
 void bn_rec_close(bn_rec_t *r)
 {

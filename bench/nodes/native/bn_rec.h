@@ -30,6 +30,7 @@ typedef struct {
     uint8_t data[BN_DGRAM];
 } bn_rec_slot_t;
 
+/* received and ring_lost may be read while the thread runs; the rest once it has stopped. */
 typedef struct {
     uint64_t received;        /* datagrams put in the ring */
     uint64_t ring_lost;       /* datagrams read while the ring was full (dropped) */
