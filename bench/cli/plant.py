@@ -142,14 +142,13 @@ def cmd_plant(args: argparse.Namespace) -> int:
     if node.node_engine == "native":
         from bench.nodes._loops import RETRANSMIT_S, STALL_S
         from bench.nodes.native._plant_native import open_native_bus, plant_loop_native
+        from bench.wire._bus import quiet_receive
 
         nbus = open_native_bus(spec)  # where the Python node opens its bus: no frame missed
-        return serve_node(
-            args,
-            spec,
-            "plant",
-            node,
-            lambda bus: plant_loop_native(
+
+        def native_loop(bus: Any) -> None:
+            quiet_receive(bus, spec.channel)  # serve_node's python-can bus is not read here
+            plant_loop_native(
                 spec,
                 node,
                 realtime=plan.mode == "realtime",
@@ -159,8 +158,9 @@ def cmd_plant(args: argparse.Namespace) -> int:
                 dut_timeout_s=plan.dut_timeout_s,
                 retransmit_s=RETRANSMIT_S,
                 bus=nbus,
-            ),
-        )
+            )
+
+        return serve_node(args, spec, "plant", node, native_loop)
     return serve_node(
         args,
         spec,

@@ -11,12 +11,14 @@ from __future__ import annotations
 
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import can
 
 from bench.nodes._loops import STATE_DONE
-from bench.wire._bus import BusSpec
+from bench.wire._bus import UDP_DEFAULT_PORT, BusSpec, quiet_receive
 from bench.wire._codec import Codec
 from bench.wire._protocol import SHARED_RUN_FRAMES
 
@@ -148,17 +150,11 @@ def socket_drops(bus: can.BusABC) -> int | None:
     has stopped (a drain that gave up: :func:`drain`'s limit).
 
     The drops are the ``drops`` column of ``/proc/net/udp`` (``udp6``) for the
-    socket's inode; the queued ones are read out here and counted.  None where
-    the bus has no UDP socket or the system does not say (not Linux).
+    socket's inode (:func:`fd_drops`); the queued ones are read out here and counted.
+    None where the bus has no UDP socket or the system does not say (not Linux).
     """
-    import os
-
     sock = getattr(getattr(bus, "_multicast", None), "_socket", None)
     if sock is None:
-        return None
-    try:
-        inode = str(os.fstat(sock.fileno()).st_ino)
-    except OSError:
         return None
     unread = 0
     sock.setblocking(False)
@@ -168,6 +164,20 @@ def socket_drops(bus: can.BusABC) -> int | None:
             unread += 1
     except OSError:  # BlockingIOError: empty
         pass
+    drops = fd_drops(sock.fileno())
+    return None if drops is None else drops + unread
+
+
+def fd_drops(fd: int) -> int | None:
+    """The ``drops`` column of ``/proc/net/udp`` (``udp6``) for the UDP socket ``fd``: the
+    datagrams the kernel dropped for it (its receive buffer was full); None where the
+    system does not say."""
+    import os
+
+    try:
+        inode = str(os.fstat(fd).st_ino)
+    except OSError:
+        return None
     for table in ("/proc/net/udp", "/proc/net/udp6"):
         try:
             lines = Path(table).read_text().splitlines()[1:]
@@ -176,7 +186,7 @@ def socket_drops(bus: can.BusABC) -> int | None:
         for line in lines:
             cols = line.split()
             if len(cols) >= 13 and cols[9] == inode:
-                return int(cols[12]) + unread
+                return int(cols[12])
     return None
 
 
@@ -208,6 +218,7 @@ def drain(
     quiet_s: float = 0.5,
     limit_s: float = 10.0,
     buses: list[can.BusABC] | None = None,
+    pending: list[Callable[[], int | None]] | None = None,
 ) -> None:
     """Wait until the recorders have read what is still queued in their sockets.
 
@@ -218,6 +229,8 @@ def drain(
     (:data:`DRAIN_POLL_S`): a frame the recorder thread has taken from its socket
     is recorded before its notifier's ``stop()`` lets it end.  Where a socket
     cannot say: once no frame came in for ``quiet_s``.  At most ``limit_s``.
+    ``pending``: one call per reader that says what it has not yet recorded in place of
+    a socket's :func:`queued_bytes` (:meth:`NativeReader.pending`: 0 once recorded).
     """
     t0 = time.monotonic()
     last, t_last = -1, t0
@@ -228,6 +241,7 @@ def drain(
             last, t_last = n, now
         else:
             queued = [queued_bytes(b) for b in buses or []]
+            queued += [p() for p in pending or []]
             empty = bool(queued) and all(q == 0 for q in queued)
             if now - t_last >= (DRAIN_POLL_S if empty else quiet_s):
                 return
@@ -239,12 +253,30 @@ class Recording:
 
     Opening the buses comes first, so a bus that cannot be opened leaves no
     empty capture behind.  :meth:`close` drains what is still queued, then
-    stops the notifiers, the writer and the buses.
+    stops the readers, the writer and the buses.
+
+    Each bus is read by the native recorder (:mod:`bench.nodes.native._recorder_native`:
+    a C thread drains its socket into a ring, a Python thread hands the frames to
+    its :class:`Recorder`) where it can serve (udp_multicast, the native library
+    built), else by python-can's :class:`can.Notifier`; :attr:`engine` says which,
+    :attr:`engine_note` why not native.  The python-can bus stays open for what the
+    bench sends (commands); where the native recorder reads, its own receive side is
+    quieted (:func:`quiet_receive`).  ``engine``: ``"auto"`` (native where it can),
+    ``"python"``.  ``rt_priority``: the native receive thread's ``SCHED_FIFO`` priority.
     """
 
     def __init__(
-        self, specs: list[BusSpec], capture: Path, codec: Codec, *, watch_duties: bool = False
+        self,
+        specs: list[BusSpec],
+        capture: Path,
+        codec: Codec,
+        *,
+        watch_duties: bool = False,
+        engine: str = "auto",
+        rt_priority: int | None = None,
     ) -> None:
+        from bench.wire._bus import RECEIVE_BUFFER
+
         self.buses: list[can.BusABC] = []
         try:
             for spec in specs:
@@ -263,10 +295,33 @@ class Recording:
         self.frames_lost: int | None = None
         for r in self.recorders[1:]:
             r.lock = self.recorders[0].lock  # one writer: one lock, or the capture is corrupted
-        self.notifiers = [
-            can.Notifier(b, [r], timeout=DRAIN_POLL_S)
-            for b, r in zip(self.buses, self.recorders, strict=True)
-        ]
+        #: Which recorder reads the buses: ``native`` or ``python``; and why not native.
+        self.engine = "python"
+        self.engine_note: str | None = (
+            "asked for the Python recorder" if engine == "python" else None
+        )
+        self.native: list[Any] = []
+        self._native_final: list[dict[str, Any]] = []
+        if engine != "python":
+            self.native, self.engine_note = _native_readers(
+                specs, self.recorders, rt_priority, RECEIVE_BUFFER
+            )
+        if self.native:
+            self.engine = "native"
+            for b, spec in zip(self.buses, specs, strict=True):
+                quiet_receive(b, spec.channel)
+            self.notifiers: list[can.Notifier] = []
+        else:
+            self.notifiers = [
+                can.Notifier(b, [r], timeout=DRAIN_POLL_S)
+                for b, r in zip(self.buses, self.recorders, strict=True)
+            ]
+
+    @property
+    def native_stats(self) -> list[dict[str, Any]]:
+        """The native readers' counters (one per bus; empty with the Python recorder); after
+        :meth:`close`, their final values."""
+        return self._native_final or [nr.stats() for nr in self.native]
 
     @property
     def plant_bus(self) -> can.BusABC:
@@ -319,13 +374,47 @@ class Recording:
         return sorted((m for r in self.recorders for m in r.frames), key=lambda m: m.timestamp)
 
     def close(self) -> None:
-        drain(self.recorders, buses=self.buses)
-        for nt in self.notifiers:
-            nt.stop()
-        drops = [socket_drops(b) for b in self.buses]
-        #: Frames the recorder's sockets lost (their receive buffers overflowed),
-        #: None where the transport does not say (:func:`socket_drops`).
+        if self.native:
+            drain(self.recorders, pending=[nr.pending for nr in self.native])
+            drops: list[int | None] = []
+            for nr in self.native:
+                nr.stop()  # the rest of its ring recorded; what the socket still held counted
+                st = nr.stats()
+                self._native_final.append(st)
+                kernel = fd_drops(st["fd"])
+                drops.append(None if kernel is None else kernel + st["unread"] + st["ring_lost"])
+                nr.close()
+        else:
+            drain(self.recorders, buses=self.buses)
+            for nt in self.notifiers:
+                nt.stop()
+            drops = [socket_drops(b) for b in self.buses]
+        #: Frames the recorder's sockets lost (their receive buffers overflowed, or the
+        #: native recorder's ring), None where the transport does not say (:func:`socket_drops`).
         self.frames_lost = None if None in drops else sum(d for d in drops if d is not None)
         self.writer.stop()
         for b in self.buses:
             b.shutdown()
+
+
+def _native_readers(
+    specs: list[BusSpec], recorders: list[Recorder], rt_priority: int | None, rcvbuf: int
+) -> tuple[list[Any], str | None]:
+    """One native reader per bus, each feeding its recorder; or none, and why (a bus the
+    native recorder cannot read, the library not built, a socket it cannot open)."""
+    from bench.nodes.native._recorder_native import NativeReader, unavailable
+
+    for spec in specs:
+        if why := unavailable(spec.interface):
+            return [], why
+    readers: list[Any] = []
+    try:
+        for spec, r in zip(specs, recorders, strict=True):
+            port = spec.port if spec.port is not None else UDP_DEFAULT_PORT
+            readers.append(NativeReader(spec.channel, port, r, priority=rt_priority, rcvbuf=rcvbuf))
+    except OSError as e:
+        for nr in readers:
+            nr.close()
+        return [], f"the native recorder could not open its socket ({e.strerror or e})"
+    return readers, None
+

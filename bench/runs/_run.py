@@ -140,6 +140,23 @@ def build_native_libraries() -> None:
         pass
 
 
+def recorder_priority(node_args: dict[str, list[str]] | None) -> int | None:
+    """The native recorder thread's ``SCHED_FIFO`` priority: one below the lower of the
+    nodes' (``--rt-priority`` of the plant and the controller), so that it never delays
+    a node's deadline and no normal process delays it; None when no node asked for one.
+
+    Its work is a ``recvmmsg`` per batch of datagrams (a few microseconds), so it takes
+    little of the time the nodes leave; under it, a normal thread beside two
+    ``SCHED_FIFO`` nodes on 2 cores falls behind a 10 kHz pair (docs/REALTIME.md).
+    """
+    prios: list[int] = []
+    for args in (node_args or {}).values():
+        for flag, value in zip(args, args[1:], strict=False):
+            if flag == "--rt-priority" and value.isdigit():
+                prios.append(int(value))
+    return max(1, min(prios) - 1) if prios else None
+
+
 def run_scenario(
     scn: Scenario,
     estimator: str,
@@ -223,7 +240,13 @@ def run_scenario(
     procs: list[tuple[str, subprocess.Popen[str]]] = []
     ended: str | None = None
     asked: set[str] = set()
-    rec = Recording([spec, spec_b] if link else [spec], capture, codec, watch_duties=external)
+    rec = Recording(
+        [spec, spec_b] if link else [spec],
+        capture,
+        codec,
+        watch_duties=external,
+        rt_priority=recorder_priority(node_args),
+    )
     dut = DutWatch(rec, dut_timeout, spec_b.describe(), dut_name, dut_process) if external else None
     t_wall0 = time.perf_counter()
     start_error: str | None = None
@@ -331,10 +354,23 @@ def run_scenario(
     }
     meta["exit_codes"] = {role: p.returncode for role, p in procs}
     meta["recorder_frames_lost"] = rec.frames_lost
+    # which recorder read the bus (native: bench/nodes/native/bn_rec.c), and why not native
+    meta["recorder"] = {"engine": rec.engine, "note": rec.engine_note}
+    if rec.native:
+        # per bus: datagrams kept, lost, not python-can messages; its receive calls, its
+        # CPU time, SCHED_FIFO granted
+        meta["recorder"]["native"] = [
+            {
+                k: st[k]
+                for k in ("received", "ring_lost", "unread", "malformed", "calls", "cpu_ns", "fifo")
+            }
+            for st in rec.native_stats
+        ]
     if rec.frames_lost:
         print(
             f"warning: the recorder lost {rec.frames_lost} frames (its receive buffer "
-            "overflowed, or it had not read them when the run ended); signals.csv lacks them",
+            + ("or its ring " if rec.engine == "native" else "")
+            + "overflowed, or it had not read them when the run ended); signals.csv lacks them",
             file=sys.stderr,
             flush=True,
         )

@@ -689,6 +689,7 @@ def realtime_run(
         "recorder_frames_lost": float(
             -1 if res.meta.get("recorder_frames_lost") is None else res.meta["recorder_frames_lost"]
         ),
+        "recorder_engine": str((res.meta.get("recorder") or {}).get("engine", "python")),
     }
 
 
@@ -761,6 +762,8 @@ def sensorless_realtime_score(
                 else res.meta["recorder_frames_lost"]
             ),
             "node_engines": dict(res.meta.get("node_engines") or {}),
+            # which recorder read the bus (native: bench/nodes/native/bn_rec.c, or python)
+            "recorder_engine": str((res.meta.get("recorder") or {}).get("engine", "python")),
         }
     tol = score_tolerance_deg(scn)
     diff = abs(runs["realtime"]["theta_err_rms_deg"] - runs["lockstep"]["theta_err_rms_deg"])
@@ -917,11 +920,26 @@ def _native_limit(key: str, res: dict[str, Any]) -> str:
         score = ((res.get("realtime_native_score") or {}).get("realtime") or {}).get(
             "recorder_frames_lost", 0.0
         )
-        return (
-            "the recorder's receive buffer overflowed: its Python thread, at normal "
-            "priority beside the two SCHED_FIFO loops on 2 cores, fell behind "
+        where = (
             f"({rates:,.0f} frames in the rates' runs, {score:,.0f} in the sensorless "
             "score's real-time run)"
+        )
+        engines = {
+            str(r.get("recorder_engine", "python"))
+            for r in (
+                *(v for v in res["realtime_native"].values() if isinstance(v, dict)),
+                ((res.get("realtime_native_score") or {}).get("realtime") or {}),
+            )
+            if "recorder_frames_lost" in r
+        }
+        if engines == {"native"}:
+            return (
+                "the native recorder's ring was full or the kernel dropped datagrams before "
+                "its SCHED_FIFO thread ran (bench/nodes/native/bn_rec.c) " + where
+            )
+        return (
+            "the recorder's receive buffer overflowed: its Python thread, at normal "
+            "priority beside the two SCHED_FIFO loops on 2 cores, fell behind " + where
         )
     if key == "native_busy_us_p50_10khz":
         r = res["realtime_native"]["10kHz"]

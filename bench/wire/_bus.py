@@ -471,6 +471,36 @@ def grow_receive_buffer(bus: can.BusABC) -> None:
             continue
 
 
+def quiet_receive(bus: can.BusABC, group: str) -> None:
+    """Stop delivery to a python-can udp_multicast bus that nobody reads (a native reader
+    reads its ``group``: the recorder's, a native node's): it leaves the group, takes no
+    other group's datagrams (``IP(V6)_MULTICAST_ALL`` off) and keeps the smallest receive
+    buffer, so the kernel does not copy every frame of the bus into it (best effort)."""
+    sock = getattr(getattr(bus, "_multicast", None), "_socket", None)
+    if not isinstance(sock, socket.socket):
+        return
+    v6 = sock.family == socket.AF_INET6
+    try:
+        if v6:
+            addr = socket.inet_pton(socket.AF_INET6, group)
+            # IPV6_MULTICAST_ALL is 29 on Linux; Python does not name it
+            sock.setsockopt(socket.IPPROTO_IPV6, 29, 0)
+            mreq = addr + (0).to_bytes(4, "little")
+            sock.setsockopt(socket.IPPROTO_IPV6, socket.IPV6_LEAVE_GROUP, mreq)
+        else:
+            addr = socket.inet_aton(group)
+            sock.setsockopt(socket.IPPROTO_IP, 49, 0)  # IP_MULTICAST_ALL
+            sock.setsockopt(
+                socket.IPPROTO_IP, socket.IP_DROP_MEMBERSHIP, addr + socket.inet_aton("0.0.0.0")
+            )
+    except (OSError, ValueError, AttributeError):
+        pass
+    try:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 0)  # the kernel's minimum
+    except OSError:
+        pass
+
+
 def bus_of(transport: str | None, *, known_port: bool = False) -> BusSpec:
     """The bus of ``transport=``: ``"socketcan:vcan0"``, ``"udp_multicast"`` (its group, on a
     port of the run's own), ``"udp_multicast:GROUP:PORT"``, any python-can interface as

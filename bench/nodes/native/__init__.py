@@ -41,6 +41,10 @@ program:
   the controller unit stepped together for many periods per call, the frames
   passed in memory and the bench commands fed from a schedule made once
   (:func:`bench.nodes._loops.run_inprocess`'s loop); driven by :mod:`._pair`.
+- ``bn_rec.h``, ``bn_rec.c``: the native recorder: a receive thread of its own
+  (``SCHED_FIFO`` when asked) that keeps every udp_multicast datagram of a run's
+  bus, with its kernel time stamp, in a ring allocated at open; Python takes the
+  ring in batches (:mod:`._recorder_native`, :class:`bench.runs._recorder.Recording`).
 - ``echo.c``: answers each PhaseSamples with a PwmDuty (same step, E2E CRC),
   or pings (round-trip times): the transports, the codec and the E2E check
   end to end, from python-can or from itself.
@@ -63,5 +67,5 @@ What is left for the loop of issue 29:
 - the plant faults, sensor noise and load profiles in the plant core, so the
   native plant serves the runs that have them (today: the Python node, with
   a line saying why);
-- the recorder's throughput at 10 kHz beside a native pair.
+- the recorder on SocketCAN (python-can's reader serves there).
 """

@@ -44,10 +44,10 @@ __all__ = [
 HERE = Path(__file__).resolve().parent
 #: The library's sources (beside this file).
 LIB_SOURCES = ("bn_bus.c", "bn_msgpack.c", "bn_clock.c")
-#: The plant node's and the controller node's units and loops, and the in-process pair
-#: (beside this file); the library links them with the DBC's C code and the controller
+#: The plant node's and the controller node's units and loops, the in-process pair and
+#: the recorder's receive thread (beside this file); the library links them with the DBC's C code and the controller
 #: core that ``bench codegen`` writes (``gen/``, ``gen/core/``) and the plant core.
-NODE_SOURCES = ("bn_plant.c", "bn_plant_loop.c", "bn_ctl.c", "bn_pair.c")
+NODE_SOURCES = ("bn_plant.c", "bn_plant_loop.c", "bn_ctl.c", "bn_pair.c", "bn_rec.c")
 #: The plant core's sources (the ones ``plant_rt._cplant`` is built from).
 PLANT_CORE_DIR = HERE.parents[2] / "plant_rt" / "core"
 #: Flags of every compile: C99 (with the POSIX and Linux calls), warnings as errors; no
@@ -110,6 +110,7 @@ def build(out_dir: Path) -> NativeBuild:
             *gen_src,
             *node_src,
             "-lm",
+            "-pthread",
         ],
         "compile",
     )

@@ -1,0 +1,78 @@
+/* The native recorder (bn_rec.c): python-can's udp_multicast datagrams, every one,
+ * with the kernel's receive stamp, kept by a thread of its own in a ring that
+ * Python empties in batches (bench/runs/_native_rec.py mirrors these structs). */
+#ifndef BN_REC_H
+#define BN_REC_H
+
+#include "bn.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/* How long the thread waits for a datagram before it looks at its stop flag again
+ * (ns): bn_rec_stop returns within about this long. */
+#define BN_REC_POLL_NS 50000000L
+
+/* After a receive call that emptied the socket, the thread sleeps this long (ns) before
+ * the next one, so that the datagrams of about ten 10 kHz periods (some 40, fewer than
+ * one recvmmsg batch of 64) come in one call rather than one wake-up each: its CPU time
+ * per frame falls several-fold (docs/REALTIME.md), and the kernel's buffer (64 MB) and
+ * the ring hold seconds of the bus, not one millisecond. */
+#define BN_REC_NAP_NS 1000000L
+
+/* One datagram as the socket gave it. */
+typedef struct {
+    int64_t sec, nsec;        /* SO_TIMESTAMPNS receive stamp; sec -1: none */
+    uint16_t len;             /* bytes of data */
+    uint8_t truncated;        /* longer than data: malformed */
+    uint8_t pad[5];
+    uint8_t data[BN_DGRAM];
+} bn_rec_slot_t;
+
+/* received and ring_lost may be read while the thread runs; the rest once it has stopped. */
+typedef struct {
+    uint64_t received;        /* datagrams put in the ring */
+    uint64_t ring_lost;       /* datagrams read while the ring was full (dropped) */
+    uint64_t unread;          /* datagrams still in the socket when it was closed */
+    uint64_t errors;          /* failed receive calls */
+    uint64_t calls;           /* receive calls (recvmmsg) */
+    int64_t cpu_ns;           /* the thread's CPU time, when it has ended */
+    int32_t fifo;             /* 1: the thread runs under SCHED_FIFO */
+    int32_t err_sched;        /* errno of a refused SCHED_FIFO (0: granted or not asked) */
+    int32_t fd;               /* the socket (for /proc/net/udp's drops) */
+    int32_t pad;
+} bn_rec_stats_t;
+
+typedef struct bn_rec bn_rec_t;
+
+size_t bn_rec_slot_size(void);
+
+/* Join python-can's udp_multicast bus on group/port with a receive buffer of rcvbuf
+ * bytes, and a ring of capacity datagrams (allocated and touched here); priority > 0:
+ * the thread asks for SCHED_FIFO at it.  NULL with *err = -errno on failure. */
+bn_rec_t *bn_rec_open(const char *group, uint16_t port, int rcvbuf, uint64_t capacity,
+                      int priority, int *err);
+
+/* Start the receive thread.  0 or -errno. */
+int bn_rec_start(bn_rec_t *r);
+
+/* Move up to max datagrams, oldest first, from the ring into out; how many. */
+uint64_t bn_rec_take(bn_rec_t *r, bn_rec_slot_t *out, uint64_t max);
+
+/* Datagrams in the ring, plus 1 when the socket holds any: 0 when all is taken. */
+uint64_t bn_rec_pending(bn_rec_t *r);
+
+/* Stop the thread (waits for it); then count and drop what is left in the socket. */
+void bn_rec_stop(bn_rec_t *r);
+
+void bn_rec_stats(const bn_rec_t *r, bn_rec_stats_t *out);
+
+/* Stop, close the socket and free the ring. */
+void bn_rec_close(bn_rec_t *r);
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif /* BN_REC_H */

@@ -1,0 +1,273 @@
+"""The native recorder (bench/nodes/native/bn_rec.c, ``_recorder_native.py``): the same
+capture as python-can's reader, every lost frame counted, and the Python recorder where
+the native one cannot serve."""
+
+from __future__ import annotations
+
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+import can
+import pytest
+
+from bench.nodes.native import _recorder_native
+from bench.runs import _recorder
+from bench.runs._recorder import Recording, fd_drops
+from bench.wire._bus import BusSpec, udp_multicast_group
+from bench.wire._codec import Codec
+from tests.ports import free_port
+
+pytestmark = pytest.mark.skipif(
+    _recorder_native.unavailable("udp_multicast") is not None,
+    reason="the native library does not build here",
+)
+
+
+def _known_frames(codec: Codec) -> list[can.Message]:
+    """Frames of every kind the capture keeps: the bench's own (valid E2E: the recorder's
+    step and status follow them), extended, remote, CAN FD with and without BRS/ESI."""
+    out: list[can.Message] = []
+    for step in range(40):
+        out.append(
+            codec.encode(
+                "PhaseSamples",
+                {"i_a": 0.5, "i_b": -0.25, "u_dc": 300.0, "status": 0, "step": step},
+            )
+        )
+    out += [
+        can.Message(arbitration_id=0x1ABCDE0, is_extended_id=True, data=b"\x01\x02\x03"),
+        can.Message(arbitration_id=0x123, is_remote_frame=True, dlc=4, data=b""),
+        can.Message(arbitration_id=0x7FF, data=b""),
+        can.Message(arbitration_id=0x55, is_fd=True, bitrate_switch=True, data=bytes(range(64))),
+        can.Message(
+            arbitration_id=0x56, is_fd=True, error_state_indicator=True, data=bytes(range(12))
+        ),
+    ]
+    return out
+
+
+def _fields(m: can.Message) -> tuple[Any, ...]:
+    return (
+        m.timestamp,
+        m.arbitration_id,
+        m.is_extended_id,
+        m.is_remote_frame,
+        m.is_error_frame,
+        m.is_fd,
+        m.bitrate_switch,
+        m.error_state_indicator,
+        m.dlc,
+        bytes(m.data),
+        m.channel,
+        m.is_rx,
+    )
+
+
+def _wait_for(cond: Any, timeout_s: float = 30.0) -> None:
+    t_end = time.monotonic() + timeout_s
+    while not cond() and time.monotonic() < t_end:
+        time.sleep(0.01)
+
+
+def test_native_and_python_recorders_write_the_same_capture(tmp_path: Path) -> None:
+    codec = Codec()
+    spec = BusSpec("udp_multicast", udp_multicast_group(), free_port())
+    # both listen at once: the kernel stamps each datagram once, for every socket
+    native = Recording([spec], tmp_path / "native.blf", codec)
+    python = Recording([spec], tmp_path / "python.blf", codec, engine="python")
+    frames = _known_frames(codec)
+    sender = can.Bus(interface="udp_multicast", channel=spec.channel, port=spec.port, fd=True)
+    try:
+        assert native.engine == "native" and native.engine_note is None
+        assert python.engine == "python"
+        for m in frames:
+            sender.send(m)
+        _wait_for(lambda: min(len(native.frames()), len(python.frames())) >= len(frames))
+    finally:
+        sender.shutdown()
+        native.close()
+        python.close()
+    assert len(native.frames()) == len(python.frames()) == len(frames)
+    assert native.frames_lost == python.frames_lost == 0
+    # what the run's checks compute from the frames as they come
+    assert native.recorders[0].step == python.recorders[0].step == 39
+    # in memory and in the file, field by field (time stamps to the bit)
+    assert [_fields(m) for m in native.frames()] == [_fields(m) for m in python.frames()]
+    a = [_fields(m) for m in can.BLFReader(str(tmp_path / "native.blf"))]
+    b = [_fields(m) for m in can.BLFReader(str(tmp_path / "python.blf"))]
+    assert len(a) == len(frames) and a == b
+    # the frames sent, in order
+    assert [(m.arbitration_id, bytes(m.data)) for m in native.frames()] == [
+        (m.arbitration_id, bytes(m.data)) for m in frames
+    ]
+
+
+class _Held(can.Listener):
+    """A listener that holds its first frame until released (a Python side that lags)."""
+
+    def __init__(self) -> None:
+        self.release = threading.Event()
+        self.got: list[can.Message] = []
+
+    def on_message_received(self, msg: can.Message) -> None:
+        self.release.wait(30.0)
+        self.got.append(msg)
+
+
+def test_a_full_ring_counts_every_frame_it_drops() -> None:
+    spec = BusSpec("udp_multicast", udp_multicast_group(), free_port())
+    held = _Held()
+    reader = _recorder_native.NativeReader(spec.channel, spec.port or 0, held, capacity=16)
+    sender = can.Bus(interface="udp_multicast", channel=spec.channel, port=spec.port, fd=True)
+    n = 400
+    try:
+        for i in range(n):
+            sender.send(can.Message(arbitration_id=0x10, data=i.to_bytes(2, "little")))
+            if i % 50 == 49:
+                time.sleep(0.005)  # no more than the socket's buffer holds at once
+        _wait_for(lambda: reader.stats()["received"] + reader.stats()["ring_lost"] >= n, 10.0)
+        held.release.set()
+        reader.stop()
+        st = reader.stats()
+        kernel = fd_drops(st["fd"])
+    finally:
+        sender.shutdown()
+        reader.close()
+    assert kernel is not None
+    assert st["ring_lost"] > 0  # the ring held 16 (and one batch taken) while the listener lagged
+    # every datagram is recorded or counted as lost, none twice
+    assert len(held.got) + st["ring_lost"] + st["unread"] + kernel == n
+    assert len(held.got) == st["received"]
+    # the ones kept are in the order they were sent
+    seq = [int.from_bytes(m.data, "little") for m in held.got]
+    assert seq == sorted(seq) and len(set(seq)) == len(seq)
+
+
+def test_the_recording_reports_what_its_ring_lost(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setattr(_recorder_native, "RING_CAPACITY", 8)
+    spec = BusSpec("udp_multicast", udp_multicast_group(), free_port())
+    rec = Recording([spec], tmp_path / "capture.blf", Codec())
+    sender = can.Bus(interface="udp_multicast", channel=spec.channel, port=spec.port, fd=True)
+    n = 300
+    try:
+        assert rec.engine == "native"
+        with rec.recorders[0].lock:  # the Python side cannot record: the ring fills
+            for i in range(n):
+                sender.send(can.Message(arbitration_id=0x7F0, data=i.to_bytes(2, "little")))
+                if i % 50 == 49:
+                    time.sleep(0.005)
+            _wait_for(lambda: sum(rec.native_stats[0][k] for k in ("received", "ring_lost")) >= n)
+    finally:
+        sender.shutdown()
+        rec.close()
+    got = [m for m in rec.frames() if m.arbitration_id == 0x7F0]
+    assert rec.frames_lost is not None and rec.frames_lost > 0
+    assert len(got) + rec.frames_lost == n
+
+
+def test_where_the_native_recorder_cannot_serve_the_python_one_records(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from bench._errors import BenchError
+
+    def no_library() -> Any:
+        raise BenchError("native loop: no C compiler (set CC, or install gcc)")
+
+    monkeypatch.setattr(_recorder_native, "_DECLARED", [])
+    monkeypatch.setattr(_recorder_native, "_lib", no_library)
+    spec = BusSpec("udp_multicast", udp_multicast_group(), free_port())
+    rec = Recording([spec], tmp_path / "capture.blf", Codec())
+    sender = can.Bus(interface="udp_multicast", channel=spec.channel, port=spec.port, fd=True)
+    try:
+        assert rec.engine == "python"
+        assert rec.engine_note is not None and "no C compiler" in rec.engine_note
+        for i in range(20):
+            sender.send(can.Message(arbitration_id=0x7F0, data=bytes([i])))
+        _wait_for(lambda: len(rec.frames()) >= 20)
+    finally:
+        sender.shutdown()
+        rec.close()
+    assert [m.data[0] for m in rec.frames()] == list(range(20)) and rec.frames_lost == 0
+
+
+def test_only_udp_multicast_is_read_natively() -> None:
+    assert _recorder_native.unavailable("udp_multicast") is None
+    why = _recorder_native.unavailable("socketcan")
+    assert why is not None and "socketcan" in why
+
+
+def test_the_recorder_thread_runs_below_both_nodes() -> None:
+    from bench.runs._run import recorder_priority
+
+    args = {
+        "plant": ["--engine", "native", "--rt-priority", "80"],
+        "controller": ["--rt-priority", "79"],
+    }
+    assert recorder_priority(args) == 78
+    assert recorder_priority({"plant": ["--rt-priority", "1"]}) == 1
+    assert recorder_priority({"plant": ["--engine", "native"]}) is None
+    assert recorder_priority(None) is None
+
+
+def test_the_python_bus_beside_a_native_reader_stops_receiving(tmp_path: Path) -> None:
+    spec = BusSpec("udp_multicast", udp_multicast_group(), free_port())
+    rec = Recording([spec], tmp_path / "capture.blf", Codec())
+    sender = can.Bus(interface="udp_multicast", channel=spec.channel, port=spec.port, fd=True)
+    try:
+        for i in range(30):
+            sender.send(can.Message(arbitration_id=0x7F0, data=bytes([i])))
+        _wait_for(lambda: len(rec.frames()) >= 30)
+        # the bench's own bus, kept for its commands: nothing queued for it
+        assert _recorder.queued_bytes(rec.plant_bus) == 0
+        assert rec.plant_bus.recv(0.05) is None
+    finally:
+        sender.shutdown()
+        rec.close()
+    assert len(rec.frames()) == 30
+
+
+def test_a_datagram_that_is_no_message_is_counted_and_the_rest_recorded(tmp_path: Path) -> None:
+    import socket
+
+    spec = BusSpec("udp_multicast", udp_multicast_group(), free_port())
+    rec = Recording([spec], tmp_path / "capture.blf", Codec())
+    sender = can.Bus(interface="udp_multicast", channel=spec.channel, port=spec.port, fd=True)
+    v6 = ":" in spec.channel
+    raw = socket.socket(socket.AF_INET6 if v6 else socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        if v6:
+            raw.setsockopt(socket.IPPROTO_IPV6, socket.IPV6_MULTICAST_HOPS, 1)
+        raw.sendto(b"\xc1 not msgpack", (spec.channel, spec.port))
+        for i in range(10):
+            sender.send(can.Message(arbitration_id=0x7F0, data=bytes([i])))
+        _wait_for(lambda: len(rec.frames()) >= 10)
+    finally:
+        raw.close()
+        sender.shutdown()
+        rec.close()
+    assert [m.data[0] for m in rec.frames()] == list(range(10))
+    assert rec.native_stats[0]["malformed"] == 1 and rec.native_stats[0]["received"] == 11
+
+
+def test_bench_perf_names_the_recorder_that_lost_frames() -> None:
+    import json
+
+    from bench.studies._perf import _native_limit
+
+    root = Path(__file__).resolve().parents[1]
+    res = json.loads((root / "docs" / "perf" / "perf.json").read_text())
+    res["realtime_native"]["recorder_frames_lost"] = 0.0
+    score = res.setdefault("realtime_native_score", {}).setdefault("realtime", {})
+    score["recorder_frames_lost"] = 12.0
+    for r in res["realtime_native"].values():
+        if isinstance(r, dict):
+            r["recorder_engine"] = "native"
+    score["recorder_engine"] = "native"
+    native = _native_limit("native_recorder_frames_lost", res)
+    assert "native recorder" in native and "12 in the sensorless" in native
+    score["recorder_engine"] = "python"  # one run had python-can's reader
+    assert "Python thread" in _native_limit("native_recorder_frames_lost", res)
