@@ -804,5 +804,7 @@ PyMODINIT_FUNC PyInit__cctl(void)
     PyModule_AddIntConstant(m, "KIND_SELF_DEMOD", CC_EST_SELF_DEMOD);
     PyModule_AddIntConstant(m, "KIND_EPF", CC_EST_EPF);
     PyModule_AddIntConstant(m, "KIND_EXTERNAL", CC_EST_EXTERNAL);
+    /* the longest CIC delay line, the square-wave estimators' option M's maximum */
+    PyModule_AddIntConstant(m, "CIC_MAX", CC_CIC_MAX);
     return m;
 }

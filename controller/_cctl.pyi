@@ -12,6 +12,7 @@ KIND_HYB_SQW: int
 KIND_SELF_DEMOD: int
 KIND_EPF: int
 KIND_EXTERNAL: int
+CIC_MAX: int
 
 def hypot(x: float, y: float) -> float: ...
 
