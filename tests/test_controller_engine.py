@@ -339,6 +339,25 @@ def test_every_engine_name_runs_the_core() -> None:
             Controller(replace(cic, estimator_options={"M": CIC_MAX + 1}))
 
 
+def test_the_python_step_is_only_the_oracles() -> None:
+    """The controller's period runs in the core and nowhere else in ``controller/``: its
+    instance's ``step`` is the core's (a C function, no Python frame), the Python step's
+    methods are the oracle's alone, and the reference model keeps only its design."""
+    from controller._controller import ReferenceModel
+    from tests.oracle.blocks import OracleReferenceModel
+
+    c = build_controller(load_scenario("wen-5.1"), "tt-dq", "python")
+    assert type(c.step).__name__ == "builtin_function_or_method"
+    assert c.step.__self__ is c._core
+    python_step = ("_step", "_polarity_step", "_advance_mode", "_restart")
+    assert not any(hasattr(Controller, name) for name in python_step)
+    assert all(callable(getattr(OracleController, name)) for name in python_step)
+    assert not hasattr(ReferenceModel, "update") and not hasattr(ReferenceModel, "reset")
+    assert callable(OracleReferenceModel.update)
+    o = oracle.build(load_scenario("wen-5.1"), "tt-dq", "oracle")
+    assert (o.engine, o._core) == ("oracle", None)
+
+
 def test_the_environment_carries_the_engine_name(monkeypatch: pytest.MonkeyPatch) -> None:
     """``--engine`` reaches the controllers built without an engine through the environment:
     each known name builds the core, an unknown one is refused."""

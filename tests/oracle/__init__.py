@@ -7,9 +7,11 @@ accepted names for it, kept for compatibility. The Python step that was the
 ``"python"`` engine lives here, in ``tests/``, as a readable reference model
 (:class:`tests.oracle.controller.OracleController`), not as a second product.
 The oracle tests (``tests/test_controller_engine.py``, ``tests/test_accel_ff.py``,
-``tests/test_c_estimator.py``, ``tests/test_supervision.py``,
-``tests/test_closed_form_flux_observer.py``) run both on the same
-measurements and compare at :data:`TOLERANCE`.
+``tests/test_c_estimator.py``) run both on the same measurements and compare
+at :data:`TOLERANCE`; ``tests/test_compensation.py``,
+``tests/test_closed_form_flux_observer.py`` and
+``tests/test_native_controller.py`` use the oracle where they read the
+step's Python objects.
 
 Inventory of the controller's per-period kernels and decisions
 --------------------------------------------------------------
