@@ -8,7 +8,8 @@ so an install without a C compiler or Python's headers stops with one line
 saying so (``tools/need-cc`` installs them).
 ``-ffp-contract=off`` keeps the compiler from fusing a multiply and an add
 (one rounding instead of two, as on aarch64 by default), so that the C step
-rounds as the Python step does and the two engines agree bit for bit.
+rounds as the tests' Python reference models do (``tests/oracle/``,
+``tests/plant_reference.py``) and agrees with them bit for bit.
 """
 
 from __future__ import annotations
