@@ -722,6 +722,8 @@ static PyMemberDef Core_members[] = {
     M_("hf_w_hat", est.hyb.hf.w_hat, T_DOUBLE),
     M_("obs_theta_hat", est.hyb.obs.theta_hat, T_DOUBLE),
     M_("obs_w_hat", est.hyb.obs.w_hat, T_DOUBLE),
+    M_("e_alpha", est.sqw.e_alpha, T_DOUBLE),
+    M_("e_beta", est.sqw.e_beta, T_DOUBLE),
     {"sup_latched", T_LONGLONG, offsetof(Core, sup.latched), READONLY, NULL},
     {"sup_detected_k", T_LONGLONG, offsetof(Core, sup.detected_k), READONLY, NULL},
     {NULL, 0, 0, 0, NULL},

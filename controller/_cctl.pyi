@@ -19,6 +19,8 @@ def hypot(x: float, y: float) -> float: ...
 class Core:
     kind: int
     calls_python: int
+    e_alpha: float
+    e_beta: float
     mode: int
     w_m_ref: float
     w_m_hat: float

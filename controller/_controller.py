@@ -114,7 +114,7 @@ from controller._compensation import (
     offset_periods,
 )
 from controller._compiled import build_core
-from controller._engine import KIND_EXTERNAL, resolve_controller_engine
+from controller._engine import KIND_EXTERNAL, _cctl, resolve_controller_engine
 from controller._filters import lpf_first_order
 from controller._hybrid import HybridEstimator
 from controller._params import MotorModel
@@ -571,6 +571,15 @@ class Controller:
         elif isinstance(est, HybridEstimator):  # a plug-in's hybrid: its own states
             out.update(hybrid_states(est))
         return out
+
+    def quadrature(self) -> tuple[float, float]:
+        """The square-wave estimators' position quadrature signal ``(e_alpha, e_beta)`` (A),
+        interpolated or held (Xue Figs. 11-12; the hybrid-square-wave's injection
+        estimator's), read from the core; ``(0, 0)`` for another estimator."""
+        c = self._core
+        if c.kind not in (_cctl.KIND_SQW, _cctl.KIND_HYB_SQW):
+            return 0.0, 0.0
+        return float(c.e_alpha), float(c.e_beta)
 
     def injection(self) -> tuple[float, float]:
         """The HF voltage (alpha, beta) (V) the estimator adds to the command of the next

@@ -230,6 +230,9 @@ def test_commands_and_reads_between_engines_keep_the_trace(
     # one design for both engines: the same gains, bandwidths and corners
     assert c_cc.gains() == c_py.gains()
     assert [type(v) for v in s_cc.values()] == [type(v) for v in s_py.values()]
+    # the square-wave's quadrature signal (the CIC study reads it) is the oracle's too
+    assert c_cc.quadrature() == c_py.quadrature()
+    assert (c_cc.quadrature() != (0.0, 0.0)) == (SPECS[estimator].family == "square")
     # and the run was a closed loop that ran: speed control reached, the estimate moved
     assert s_py["mode"] == 3 and s_py["w_hat"] != 0.0
 

@@ -27,6 +27,7 @@ from controller._api import (
 from controller._compensation import cross_saturation_offset
 from controller._controller import STATE_NAMES, hybrid_states
 from controller._hybrid import HybridEstimator
+from controller._square_wave import SquareWaveEstimator
 from controller._svpwm import svpwm
 from tests.oracle.blocks import OracleReferenceModel
 
@@ -120,6 +121,13 @@ class OracleController(Controller):
         if isinstance(est, HybridEstimator):
             out.update(hybrid_states(est))
         return out
+
+    def quadrature(self) -> tuple[float, float]:
+        est: Any = self.estimator
+        sqw = est.hf if isinstance(est, HybridEstimator) else est
+        if not isinstance(sqw, SquareWaveEstimator):
+            return 0.0, 0.0
+        return float(sqw.e_alpha), float(sqw.e_beta)
 
     def injection(self) -> tuple[float, float]:
         u_a, u_b = self.estimator.injection()
