@@ -2,14 +2,14 @@
 (``plant_rt/core/*.c``) and ``controller/_cctl.c`` with the controller's core
 (``controller/core/*.c``) (the rest is in pyproject.toml).
 
-The plant's core is required: the plant's equations exist only in C, so an
-install without a C compiler or Python's headers stops with one line saying
-so (``tools/need-cc`` installs them). The controller's extension is optional:
-without it one line says that it was not built and the controller runs in
-pure Python (:mod:`controller._engine`).
+Both cores are required: the plant's and the controller's per-period
+equations exist only in C (:mod:`plant_rt._engine`, :mod:`controller._engine`),
+so an install without a C compiler or Python's headers stops with one line
+saying so (``tools/need-cc`` installs them).
 ``-ffp-contract=off`` keeps the compiler from fusing a multiply and an add
 (one rounding instead of two, as on aarch64 by default), so that the C step
-rounds as the Python step does and the two engines agree bit for bit.
+rounds as the tests' Python reference models do (``tests/oracle/``,
+``tests/plant_reference.py``) and agrees with them bit for bit.
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ from pathlib import Path
 from setuptools import Extension, setup
 from setuptools.command.build_ext import build_ext
 
-_REQUIRED = {"plant_rt._cplant"}
+_REQUIRED = {"plant_rt._cplant", "controller._cctl"}
 _WHAT = {
     "plant_rt._cplant": ("plant_rt", "plant"),
     "controller._cctl": ("controller", "controller"),
@@ -48,7 +48,8 @@ class OptionalBuildExt(build_ext):
         except Exception as e:
             if _REQUIRED:
                 raise SystemExit(
-                    f"can-hil-bench: the plant core cannot be built ({type(e).__name__}: {e}); "
+                    f"can-hil-bench: the plant and controller cores cannot be built "
+                    f"({type(e).__name__}: {e}); "
                     "it needs a C compiler and Python's headers: run tools/need-cc, then "
                     "install again"
                 ) from None
@@ -60,7 +61,7 @@ class OptionalBuildExt(build_ext):
         except Exception as e:
             if ext.name in _REQUIRED:
                 raise SystemExit(
-                    f"can-hil-bench: the plant core ({ext.name}) cannot be built "
+                    f"can-hil-bench: the {_WHAT[ext.name][1]} core ({ext.name}) cannot be built "
                     f"({type(e).__name__}: {e}); it needs a C compiler and Python's headers: "
                     "run tools/need-cc, then install again"
                 ) from None

@@ -1,5 +1,5 @@
-"""The controller on the compiled engine: the controller core (``controller/core/``) built
-from a designed :class:`controller.Controller`.
+"""The controller's engine: the controller core (``controller/core/``) built from a designed
+:class:`controller.Controller`.
 
 Python designs every gain, filter and threshold (each with its derivation, in
 :mod:`controller._controller` and the estimators' modules); :func:`build_core`
@@ -18,7 +18,7 @@ from typing import Any
 
 from controller._api import ControlOutput, EstimatorInput, Measurement
 from controller._cplugin import CEstimator
-from controller._engine import KIND_EXTERNAL, _cctl, compiled_cover
+from controller._engine import KIND_EXTERNAL, _cctl, core_kind
 from controller._epf import EPFEstimator
 from controller._filters import Biquad2, FirstOrder, FirstOrder2
 from controller._hybrid import HybridEstimator
@@ -104,8 +104,9 @@ def _slots(cls: type) -> tuple[Any, ...]:
 
 
 def build_core(ctrl: Any, core_type: Any = None) -> tuple[Any, str | None]:
-    """The core for the designed controller ``ctrl`` (a :class:`controller.Controller`),
-    or ``(None, why)`` when the core does not cover it.
+    """``(core, None)``: the core for the designed controller ``ctrl`` (a
+    :class:`controller.Controller`); the pair's second item, once the reason a controller
+    ran in Python, is kept for :mod:`bench.wire._ctlgen` and is always None.
 
     A plug-in's estimator, or a plug-in registered under a compiled estimator's name,
     is the core's external estimator: the core calls its Python methods.
@@ -113,12 +114,10 @@ def build_core(ctrl: Any, core_type: Any = None) -> tuple[Any, str | None]:
     methods): ``bench codegen`` records them as C for a firmware (:mod:`bench.wire._ctlgen`).
     """
     pars = ctrl.pars
-    kind, why = compiled_cover(pars)
+    kind = core_kind(pars)
     est = ctrl.estimator
-    if core_type is None and _cctl is not None:
+    if core_type is None:
         core_type = _cctl.Core
-    if core_type is None or not kind:
-        return None, why
     if kind != KIND_EXTERNAL and not _kind_of(kind, est):
         kind = KIND_EXTERNAL
     core = core_type(kind, Measurement, _slots(Measurement), ControlOutput, _slots(ControlOutput))

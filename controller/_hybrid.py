@@ -341,6 +341,11 @@ class _MechanicalTracker(_LuenbergerTracker):
 class HybridEstimator:
     """Injection estimator below the band, flux observer above, blended in between.
 
+    Kept in Python as a public block a user may call per period (a plug-in's
+    estimator composes it; the core calls a plug-in's Python each period), and
+    as the tests' oracle of ``controller/core/cc_hybrid.c``, which the controller's
+    one engine runs with the same operations (``tests/oracle/``, tolerance 0).
+
     Parameters
     ----------
     hf : Estimator

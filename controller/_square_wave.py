@@ -142,6 +142,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from controller._api import EstimatorInput, option_field
+from controller._cctl import CIC_MAX
 from controller._cic import CicInterpolator
 from controller._design import PM_TARGET_DEG, margins, solve_largest
 from controller._luenberger import LuenbergerObserver, observer_response
@@ -209,17 +210,27 @@ class SquareWaveOptions:
         Observer triple pole (rad/s); None derives it from ``pm_deg``
         (:func:`observer_pole`).
     M : int
-        CIC differential delay (PWM periods).
+        CIC differential delay (PWM periods), at most the core's delay line (64).
     delay_comp : float or None
         Delay compensation of the injection angle (periods); None uses the
         derived 1.5. Zero disables it (for tests and comparisons).
     pm_deg : float
         Phase-margin target of the observer loop (deg), used when ``a`` is None.
+
+    Notes
+    -----
+    ``M`` is at most ``CIC_MAX`` (64): the core's delay line is a fixed array
+    (``controller/core/cc_cic.h``, no allocation), and a longer one buys
+    nothing. The CIC adds ``M T_s / 2`` of delay to the observer loop, so the
+    derived pole (:func:`observer_pole`, ``pm_deg``) falls as ``M`` grows:
+    50.8 rad/s at ``M = 2``, 15.2 at 16 and 4.45 at 64 with ``T_s`` = 1 ms
+    (ten times each at 10 kHz); at 64 the observer is already seven times
+    slower than the speed loop's 31.4 rad/s target, which it must follow.
     """
 
     U_h: float = option_field(20.0, positive=True, limit="inverter_linear")
     a: float | None = option_field(None, positive=True)
-    M: int = option_field(2, kind="int", minimum=1)
+    M: int = option_field(2, kind="int", minimum=1, maximum=CIC_MAX)
     delay_comp: float | None = option_field(None, minimum=0.0)  # 0 disables it
     pm_deg: float = option_field(PM_TARGET_DEG, positive=True)
 
@@ -261,6 +272,8 @@ class SquareWaveEstimator:
             raise ValueError(f"T_s must be > 0, got {T_s}")
         if not U_h > 0.0:
             raise ValueError(f"U_h must be > 0, got {U_h}")
+        if not 1 <= M <= CIC_MAX:
+            raise ValueError(f"M (the CIC delay) must be in 1 .. {CIC_MAX}, got {M}")
         if not motor.L_q > motor.L_d:
             raise ValueError(
                 f"square-wave injection needs saliency L_q > L_d, got "

@@ -81,8 +81,8 @@ def test_the_runs_quadrature_signal_has_the_holds_image_and_the_cic_removes_it(
 
 
 def test_observing_the_controller_changes_no_frame() -> None:
-    """The recording hook runs the controller in Python: the frames are the compiled
-    engine's (or the Python engine's, where none is built) all the same."""
+    """The recording hook reads the core's quadrature signal between periods (what the
+    study records, ``Controller.quadrature``): the frames are the same, and it moves."""
     from bench.nodes._loops import run_inprocess
     from bench.scenarios._schema import load_scenario
     from bench.wire._codec import Codec
@@ -90,7 +90,9 @@ def test_observing_the_controller_changes_no_frame() -> None:
     scn = load_scenario(SCENARIO).with_overrides(duration=0.6)
     seen: list[float] = []
     plain = run_inprocess(scn, WITH_CIC, Codec())
-    watched = run_inprocess(scn, WITH_CIC, Codec(), observe=lambda c: seen.append(c.estimator.err))
+    watched = run_inprocess(
+        scn, WITH_CIC, Codec(), observe=lambda c: seen.append(c.quadrature()[0])
+    )
     assert [(m.arbitration_id, bytes(m.data)) for m in plain] == [
         (m.arbitration_id, bytes(m.data)) for m in watched
     ]

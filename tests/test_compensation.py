@@ -41,6 +41,7 @@ from controller._square_wave import SquareWaveEstimator
 from plant_rt import InverterPars, preset
 from plant_rt._inverter import dead_time_error
 from tests.loop_helpers import RPM, make_loop, motor_model, run
+from tests.oracle import OracleController
 from tests.test_controller_square_wave import MOTOR as XUE_MODEL
 
 WEN = preset("wen2023")
@@ -270,11 +271,10 @@ def test_the_hybrid_corrects_its_injection_estimate_only(weight: float) -> None:
     follows the corrected angle."""
     model = dataclasses.replace(motor_model(WEN), k_dq=-2e-3)
     cp = CompensationPars(cross_saturation=True)
-    ctrl = Controller(  # the Python engine: the test sets and reads the estimator's objects
+    ctrl = OracleController(  # the Python step: the test sets and reads the estimator's objects
         ControllerPars(
             motor=model, T_s=T_WEN, estimator="hybrid-tt-dq", startup=False, compensation=cp
-        ),
-        engine="python",
+        )
     )
     est = ctrl.estimator
     ctrl.set_enable(True)
@@ -324,9 +324,8 @@ def test_offset_calibration_removes_a_known_offset() -> None:
     noise = 0.01
     offs = (0.12, -0.07, 0.03)
     cp = CompensationPars(offset_calibration=True, current_noise=noise, adc_lsb=q)
-    ctrl = Controller(  # the Python engine: the test reads the calibration's object
-        ControllerPars(motor=motor_model(WEN), T_s=T_WEN, estimator="sensored", compensation=cp),
-        engine="python",
+    ctrl = OracleController(  # the Python step: the test reads the calibration's object
+        ControllerPars(motor=motor_model(WEN), T_s=T_WEN, estimator="sensored", compensation=cp)
     )
     n = ctrl.calibration.n  # type: ignore[union-attr]
     sigma = math.sqrt(noise**2 + q * q / 12)
