@@ -307,15 +307,13 @@ class NativeController:
 
     def pull_commands(self) -> None:
         """What C applied back into the Python node: the queue's applied commands
-        (:meth:`CommandQueue.due`, nothing applied again), the stop and fault flags, and
-        the controller's speed reference attribute (the core's is C's)."""
+        (:meth:`CommandQueue.due`, nothing applied again), the stop and fault flags (the
+        speed reference is the core's, which the controller reads)."""
         node, c = self.node, self.ctl
         if c.applied_upto >= 0:
             node.commands.due(c.applied_upto)
         node.stopped = bool(c.stopped)
         node.faulted = bool(c.faulted)
-        if c.has_w_ref:
-            node.ctrl.w_m_ref = c.w_m_ref
 
     def _command(self) -> None:
         """A BenchCommand frame: ControllerNode.on_message's command branch."""
