@@ -11,9 +11,7 @@ command, a repeat, and a stop.
 
 from __future__ import annotations
 
-import ctypes
 import shutil
-from typing import Any
 
 import can
 import pytest
@@ -24,6 +22,7 @@ from bench.scenarios._setup import build_controller, needs_truth
 from bench.wire._codec import Codec
 from bench.wire._protocol import CMD_NONE, CMD_START, CMD_STOP
 from controller import compiled_controller_missing
+from tests.native_helpers import native_answers
 
 pytestmark = pytest.mark.skipif(
     compiled_controller_missing() is not None or not any(shutil.which(c) for c in ("cc", "gcc")),
@@ -80,25 +79,9 @@ def _native(node: ControllerNode, frames: list[can.Message]) -> tuple[list[tuple
     """The answers, and how many times C returned for the pending list (EV_CMDS)."""
     from bench.nodes.native import controller_node as native
 
-    nat = native.NativeController(node, realtime=False)
-    got: list[tuple[int, bytes]] = []
-    refills = 0
-
-    @native.SINK
-    def sink(ctx: Any, f: Any) -> int:
-        got.append((f.contents.id, bytes(f.contents.data[: f.contents.len])))
-        return 0
-
-    for msg in frames:
-        f = native.Frame(id=msg.arbitration_id, len=len(msg.data), flags=0)
-        f.data[: len(msg.data)] = list(msg.data)
-        ev = nat.dll.bn_ctl_on_frame(nat.addr, ctypes.byref(f), sink, None)
-        while ev != native.EV_NONE:
-            refills += ev == native.EV_CMDS
-            nat.handle(ev)
-            ev = nat.dll.bn_ctl_resume(nat.addr, sink, None)
-    nat.merge()
-    return got, refills
+    events: list[int] = []
+    got = native_answers(node, frames, events.append)
+    return got, events.count(native.EV_CMDS)
 
 
 def test_the_native_node_applies_the_commands_as_the_python_node() -> None:
