@@ -394,9 +394,12 @@ class Controller:
         cp = pars.compensation
         self.raw_feedback = pars.current_feedback == "raw"
         self.dead_time: DeadTimeCompensator | None = None
-        hf_next = getattr(self.estimator, "hf_current_next", None)
-        self._hf_next: Callable[[], tuple[float, float]] | None = (
-            hf_next if cp.dead_time and callable(hf_next) else None
+        #: The dead-time feed-forward adds the HF current the estimator predicts for the
+        #: next period: a shipped estimator's design says so (``predicts_hf``), a plug-in's
+        #: Python estimator by having ``hf_current_next``.
+        self._predicts_hf = cp.dead_time and bool(
+            getattr(self.estimator, "predicts_hf", False)
+            or callable(getattr(self.estimator, "hf_current_next", None))
         )
         if cp.dead_time:
             band, sine = self._dead_time_sign_model()
@@ -492,7 +495,7 @@ class Controller:
         est = self.estimator
         if self.family == "rotating":
             I_p = float(getattr(est, "I_p", 0.0))
-            if self._hf_next is not None:
+            if self._predicts_hf:
                 return 0.5 * I_p * float(getattr(est, "wT", 0.0)), False
             return I_p, True
         if self.family == "square":

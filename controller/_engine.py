@@ -87,15 +87,19 @@ def core_sources() -> list[Path]:
 
 
 def compiled_controller_missing() -> str | None:
-    """None: the controller's core is always built (``import controller`` fails without it);
-    kept for compatibility."""
+    """None: the controller's core is always built (``import controller`` fails without it).
+
+    Public API kept for the scripts that call it (as :func:`plant_rt.compiled_engine_missing`);
+    nothing in the bench branches on it."""
     return None
 
 
 def core_kind(pars: Any) -> int:
-    """The core's kind of the estimator ``pars`` describes (a ``ControllerPars``): the
-    registry's compiled kind of a shipped estimator, :data:`KIND_EXTERNAL` for a plug-in
-    (the core calls its Python methods each period, with the options it takes itself)."""
+    """The core's kind of the estimator ``pars`` names (a ``ControllerPars``): the
+    registry's compiled kind of a shipped estimator's name, :data:`KIND_EXTERNAL` for a
+    plug-in's name. The kind a controller runs is its estimator's as built
+    (:func:`controller._compiled.instance_kind`): a plug-in that returns a shipped
+    estimator unchanged runs as that estimator's kind."""
     return _KINDS.get(pars.estimator, KIND_EXTERNAL)
 
 

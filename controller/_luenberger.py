@@ -140,22 +140,6 @@ class LuenbergerObserver:
         self.w_hat = w0
         self.x = x0
 
-    def step(self, e: float, tau_e: float) -> None:
-        """Advance one period with position error ``e`` (rad) and torque ``tau_e`` (N m)."""
-        w = self.w_hat
-        th = self.theta_hat + self.T_s * w + self._g3 * e
-        if th >= _TWO_PI:
-            th -= _TWO_PI
-            if th >= _TWO_PI:
-                th %= _TWO_PI
-        elif th < 0.0:
-            th += _TWO_PI
-            if th < 0.0:
-                th %= _TWO_PI
-        self.theta_hat = th
-        self.w_hat = w + self.T_s * self.x + self._g2 * e + self._gt * tau_e
-        self.x += self._g1 * e
-
 
 def observer_response(
     a: float, T_s: float, z: np.ndarray, b: float | None = None

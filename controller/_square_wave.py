@@ -141,7 +141,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from controller._api import EstimatorInput, option_field
+from controller._api import option_field
 from controller._cctl import CIC_MAX
 from controller._cic import CicInterpolator
 from controller._design import PM_TARGET_DEG, margins, solve_largest
@@ -357,110 +357,6 @@ class SquareWaveEstimator:
         self._reset_state()
 
     # -- per step ------------------------------------------------------------
-
-    def injection(self) -> tuple[float, float]:
-        """HF voltage (alpha, beta) (V) for period ``k + 1``, along ``theta(k + 1.5)``."""
-        return self._u_next
-
-    def update(self, x: EstimatorInput) -> None:
-        """Take sample ``k``: extract the envelope, interpolate, correct the observer."""
-        i_a = x.i_alpha
-        i_b = x.i_beta
-        n = self._n
-        fresh = False
-        E_a = E_b = u_c = u_s = 0.0
-        if n >= 1:
-            # eq. (7): response to the voltage of period k-1
-            h_a = 0.5 * (i_a - self._ia1)
-            h_b = 0.5 * (i_b - self._ib1)
-            if n >= 3 and self._sg1 < 0.0:
-                # rate conversion R = 0.5: periods k-2 (+U_h) and k-1 (-U_h) give one
-                # envelope sample, mid-point k-1; the fundamental's linear drift cancels
-                E_a = 0.5 * (self._ha1 - h_a)
-                E_b = 0.5 * (self._hb1 - h_b)
-                u_c = 0.5 * (self._c1 + self._c2)
-                u_s = 0.5 * (self._s1 + self._s2)
-                fresh = True
-            self._ha1 = h_a
-            self._hb1 = h_b
-
-        err = 0.0
-        if fresh and self._env_n == 0:
-            for f, v in zip(self._interp, (E_a, E_b, u_c, u_s), strict=True):
-                f.prime(v)
-        if fresh:
-            self._env_n += 1
-        if self._env_n:
-            if self.cic:
-                ip = self._interp
-                if fresh:
-                    e_a = ip[0].step(E_a)
-                    e_b = ip[1].step(E_b)
-                    v_c = ip[2].step(u_c)
-                    v_s = ip[3].step(u_s)
-                else:
-                    e_a = ip[0].step(None)
-                    e_b = ip[1].step(None)
-                    v_c = ip[2].step(None)
-                    v_s = ip[3].step(None)
-            else:
-                if fresh:
-                    self._held = (E_a, E_b, u_c, u_s)
-                e_a, e_b, v_c, v_s = self._held
-            self.e_alpha = e_a
-            self.e_beta = e_b
-            # normalisation and quadrature PLL error against the injection direction
-            den = math.sqrt((e_a * e_a + e_b * e_b) * (v_c * v_c + v_s * v_s))
-            if den > 0.0:
-                err = (e_b * v_c - e_a * v_s) / den * self._k_err
-        self.err = err
-
-        obs = self.observer
-        obs.step(err, x.torque)
-        th = obs.theta_hat
-        w = obs.w_hat
-        self.theta_hat = th
-        self.w_hat = w
-
-        # injection for period k+1 (eq. 3) along the angle of its mid-point k + 1.5
-        sgn = -self._sg0 if self._sg0 != 0.0 else 1.0
-        phi = th + self._t_comp * w
-        c = math.cos(phi)
-        s = math.sin(phi)
-        uh = sgn * self.U_h
-        self._u_next = (uh * c, uh * s)
-        self._sg2 = self._sg1
-        self._c2 = self._c1
-        self._s2 = self._s1
-        self._sg1 = self._sg0
-        self._c1 = self._c0
-        self._s1 = self._s0
-        self._sg0 = sgn
-        self._c0 = c
-        self._s0 = s
-
-        # fundamental current at k with the square-wave response removed, in the
-        # estimated rotor frame (where the response alternates along a fixed axis)
-        ct = math.cos(th)
-        st = math.sin(th)
-        i_d = ct * i_a + st * i_b
-        i_q = ct * i_b - st * i_a
-        if self._n_tot >= 2:
-            i_df = 0.25 * (3.0 * i_d + 2.0 * self._id1 - self._id2)
-            i_qf = 0.25 * (3.0 * i_q + 2.0 * self._iq1 - self._iq2)
-        else:
-            i_df = i_d
-            i_qf = i_q
-        self.i_alpha_f = ct * i_df - st * i_qf
-        self.i_beta_f = st * i_df + ct * i_qf
-        self._id2 = self._id1
-        self._iq2 = self._iq1
-        self._id1 = i_d
-        self._iq1 = i_q
-        self._ia1 = i_a
-        self._ib1 = i_b
-        self._n = n + 1
-        self._n_tot += 1
 
 
 def create(motor: MotorModel, T_s: float, cic: bool = True, **options: Any) -> SquareWaveEstimator:

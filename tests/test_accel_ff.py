@@ -13,7 +13,7 @@ import pytest
 
 from bench.scenarios._schema import load_scenario
 from bench.scenarios._setup import build_plant
-from controller import EstimatorInput, Measurement, make_estimator
+from controller import EstimatorInput, Measurement
 from controller._engine import core_kind
 from controller._pll import PositionObserver, open_loop
 from controller._rotating import in_loop_response
@@ -21,6 +21,7 @@ from plant_rt import preset
 from tests import oracle
 from tests.loop_helpers import motor_model
 from tests.oracle.blocks import OracleReferenceModel
+from tests.oracle.estimators import make_oracle_estimator
 
 P = preset("wen2023")
 T_S = P.T_s
@@ -42,8 +43,8 @@ def _noise_gain(est: object) -> float:
 
 
 def test_the_loop_keeps_its_margin_and_noise_gain() -> None:
-    plain = make_estimator("tt-dq", MODEL, T_S)
-    ff = make_estimator("tt-dq", MODEL, T_S, accel_ff=True)
+    plain = make_oracle_estimator("tt-dq", MODEL, T_S)
+    ff = make_oracle_estimator("tt-dq", MODEL, T_S, accel_ff=True)
     assert ff.w_o == plain.w_o  # type: ignore[attr-defined]
     assert ff.phase_margin() == plain.phase_margin()  # type: ignore[attr-defined]
     pm, _ = ff.phase_margin()  # type: ignore[attr-defined]
@@ -74,7 +75,7 @@ def test_the_feed_forward_is_beside_the_loop() -> None:
 def _ramp_error(accel_ff: bool, a: float, n: int) -> float:
     """tt-dq's |theta_e - theta_hat| at the end of a constant acceleration ``a`` (rad/s^2,
     electrical) from standstill, on the synthetic currents of Wen eq. (4)."""
-    est = make_estimator("tt-dq", MODEL, T_S, accel_ff=accel_ff)
+    est = make_oracle_estimator("tt-dq", MODEL, T_S, accel_ff=accel_ff)
     I_p, I_n = est.I_p, est.I_n  # type: ignore[attr-defined]
     est.reset(0.0)
     for k in range(n):
@@ -91,7 +92,7 @@ def _ramp_error(accel_ff: bool, a: float, n: int) -> float:
 
 def test_a_known_acceleration_leaves_no_lag() -> None:
     a, n = 100.0, 5000  # 0.5 s: w_e reaches 50 rad/s, within the BPF's passband
-    plain = make_estimator("tt-dq", MODEL, T_S)
+    plain = make_oracle_estimator("tt-dq", MODEL, T_S)
     lag = a / plain.w_o**2  # type: ignore[attr-defined]
     without = _ramp_error(False, a, n)
     with_ff = _ramp_error(True, a, n)
@@ -119,9 +120,9 @@ def test_reference_model_is_the_designed_response() -> None:
 
 def test_options_where_it_applies() -> None:
     with pytest.raises(ValueError, match="accel_ff"):
-        make_estimator("sfhf", MODEL, T_S, accel_ff=True)
+        make_oracle_estimator("sfhf", MODEL, T_S, accel_ff=True)
     with pytest.raises(ValueError, match="accel_ff"):
-        make_estimator("tt-dq", MODEL, T_S, accel_ff=True, observer="mechanical")
+        make_oracle_estimator("tt-dq", MODEL, T_S, accel_ff=True, observer="mechanical")
 
     from types import SimpleNamespace
 

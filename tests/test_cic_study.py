@@ -20,7 +20,7 @@ from bench.studies._cic import (
     spectrum_metrics,
 )
 from bench.studies._report import NOT_REPRODUCED, NOT_RUN, REPRODUCED, evaluate_claims
-from controller._cic import CicInterpolator
+from tests.oracle.blocks import OracleCicInterpolator
 
 T_S = 1e-3  # Xue: 1 kHz PWM, 500 Hz injection
 F_E = 20.0  # 300 rpm, 4 pole pairs
@@ -30,7 +30,7 @@ HOLD_IMAGE = abs(math.cos(math.pi * IMAGE_HZ * T_S))  # a two-period hold's gain
 
 def _envelope(n: int, cic: bool) -> np.ndarray:
     """A 20 Hz sinusoid sampled every second period, held or held and CIC-interpolated."""
-    ip = CicInterpolator(2, 2)
+    ip = OracleCicInterpolator(2, 2)
     ip.prime(1.0)  # the first sample, as the estimator primes it: no start-up step
     out, held = [], 0.0
     for k in range(n):

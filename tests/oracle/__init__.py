@@ -45,38 +45,36 @@ The controller's period (moved here, called by nothing else):
   (4.45 rad/s at ``M = 64`` and 1 ms), already seven times slower than the
   speed loop it must follow.
 
-The blocks' kernels still in ``controller/`` (called per period by the oracle
-above, and by others, so they stay as they are for this change; each is the
-readable twin of a core file):
+The blocks' kernels still in ``controller/`` (public blocks a user may call per
+period, ``controller/__init__.py``; each is the readable twin of a core file):
+``PIController.output``/``update`` (cc_pi), ``PositionObserver.update``
+(cc_pll), ``FluxObserver.update``/``update_slaved`` (cc_flux_observer),
+``PolarityTest.start``/``step`` (cc_startup), ``Supervisor.check``/``wrap``
+(cc_supervision), ``svpwm`` (cc_foc), ``clarke``, ``park``, ``inv_park``,
+``inv_clarke``, ``wrap_pi``, ``wrap_2pi``. Besides the oracle, their callers
+are the tests of each block (``tests/test_controller_foc.py``,
+``test_supervision.py``, ``test_closed_form_*.py``, ``test_firmware.py``), and
+a plug-in may compose them (``docs/ESTIMATORS.md``: a plug-in's estimator
+runs in the core through its callbacks, so its own Python is called per
+period).
 
-- Public blocks a user may call per period (``controller/__init__.py``):
-  ``PIController.output``/``update`` (cc_pi), ``PositionObserver.update``
-  (cc_pll), ``FluxObserver.update``/``update_slaved`` (cc_flux_observer),
-  ``HybridEstimator.update``/``injection``/``hf_current_next`` (cc_hybrid),
-  ``PolarityTest.start``/``step`` (cc_startup), ``Supervisor.check``/``wrap``
-  (cc_supervision), ``svpwm`` (cc_foc), ``clarke``, ``park``, ``inv_park``,
-  ``inv_clarke``, ``wrap_pi``, ``wrap_2pi``. Besides the oracle, their callers
-  are the tests of each block (``tests/test_controller_foc.py``,
-  ``test_supervision.py``, ``test_closed_form_*.py``,
-  ``tests/hybrid_helpers.py``, ``test_firmware.py``), and a plug-in may
-  compose them (``docs/ESTIMATORS.md``: a plug-in's estimator runs in the
-  core through its callbacks, so its own Python is called per period).
-- The shipped estimators' ``update``/``injection``/``hf_current_next``
-  (``_tt_dq``, ``_tt_ab``, ``_sfhf``, ``_self_demod``, ``_epf``,
-  ``_rotating``, ``_square_wave``, ``_sensored``, ``_hybrid``) and their
-  blocks (``_filters`` ``FirstOrder``/``FirstOrder2``/``Biquad2.update``,
-  ``_cic`` ``CicFilter``/``CicInterpolator.step``, ``_luenberger.step``,
-  ``_compensation`` ``DeadTimeCompensator.duties``/``OffsetCalibration.add``):
-  called by the oracle, by a
-  plug-in that returns or subclasses a shipped estimator (the core then calls
-  its Python methods, :data:`controller._engine.KIND_EXTERNAL`), and directly
-  by the estimator tests (``test_controller_rotating.py``,
-  ``test_controller_square_wave*.py``, ``test_compensation.py``,
-  ``test_gain_design.py``, ``test_mechanical_observer.py``,
-  ``test_accel_ff.py``, ``test_closed_form_*.py``). Moving these into
-  ``tests/oracle/`` as subclasses of the design classes is the next slice; a
-  plug-in that subclasses a shipped estimator would then be refused or mapped
-  to the core's kind.
+Moved here (:mod:`tests.oracle.estimators`, :mod:`tests.oracle.blocks`): the
+shipped estimators' ``update``/``injection``/``hf_current_next`` (``_tt_dq``,
+``_tt_ab``, ``_sfhf``, ``_self_demod``, ``_epf``, ``_rotating``,
+``_square_wave``, ``_sensored``, ``_hybrid``) and their blocks' steps
+(``_filters`` ``FirstOrder``/``FirstOrder2``/``Biquad2.update``, ``_cic``
+``CicFilter``/``CicInterpolator.step`` and ``prime``, ``_luenberger.step``,
+``_compensation`` ``DeadTimeCompensator.duties``/``OffsetCalibration.add``).
+Each oracle class subclasses its design (gains, derivations, coefficients,
+option dataclasses and the ``__init__`` that computes them stay in
+``controller/``, with ``reset``, the state the core starts from) and adds the
+step; :func:`tests.oracle.blocks.oracle` turns a built design into its oracle
+in place. Whether the dead-time feed-forward adds a predicted HF current is a
+fact of the design (``predicts_hf``: the rotating estimators and the hybrids),
+no longer the presence of a method. A plug-in that returns a shipped
+estimator unchanged runs in the core as that estimator's kind; one that
+subclasses a shipped estimator is an external Python estimator calling its own
+methods (:func:`controller._compiled.instance_kind`, docs/ESTIMATORS.md).
 """
 
 from __future__ import annotations

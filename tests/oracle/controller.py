@@ -29,7 +29,14 @@ from controller._controller import STATE_NAMES, hybrid_states
 from controller._hybrid import HybridEstimator
 from controller._square_wave import SquareWaveEstimator
 from controller._svpwm import svpwm
-from tests.oracle.blocks import OracleReferenceModel
+from tests.oracle.blocks import (
+    OracleDeadTimeCompensator,
+    OracleFirstOrder,
+    OracleOffsetCalibration,
+    OracleReferenceModel,
+    oracle,
+)
+from tests.oracle.estimators import oracle_estimator
 
 _TWO_PI = 2.0 * math.pi
 _SQRT3_INV = 1.0 / math.sqrt(3.0)
@@ -51,12 +58,21 @@ class OracleController(Controller):
     """A :class:`controller.Controller` whose periods run in Python (module docstring)."""
 
     engine = "oracle"
+    # the design's blocks, made oracles by _attach_engine
+    lpf_w: OracleFirstOrder
+    dead_time: OracleDeadTimeCompensator | None
+    calibration: OracleOffsetCalibration | None
 
     def __init__(self, pars: ControllerPars) -> None:
         super().__init__(pars)
 
     def _attach_engine(self) -> Any:
-        """No core: the Python step below, with the supervision after it."""
+        """No core: the Python step below, with the supervision after it; the design's
+        estimator and blocks made oracles (their steps added, :mod:`tests.oracle.blocks`)."""
+        oracle_estimator(self.estimator)
+        oracle(self.lpf_w)
+        oracle(self.dead_time)
+        oracle(self.calibration)
         self.oracle_ref_model = OracleReferenceModel.of(self.ref_model)
         self.mode = MODE_DISABLED
         self.w_m_ref = 0.0
@@ -271,9 +287,8 @@ class OracleController(Controller):
             # plus the injection's HF current where the estimator predicts it
             i_ar = c_u * i_d_ref - s_u * i_q_ref
             i_br = s_u * i_d_ref + c_u * i_q_ref
-            hf = self._hf_next
-            if hf is not None:
-                h_a, h_b = hf()
+            if self._predicts_hf:
+                h_a, h_b = est.hf_current_next()  # type: ignore[attr-defined]
                 i_ar += h_a
                 i_br += h_b
             h = 0.5 * math.sqrt(3.0) * i_br
