@@ -131,7 +131,7 @@ def test_the_fallback_says_why_in_one_line(native: Any) -> None:
     assert Controller(node.ctrl.pars, "python")._core is not None
     py = ControllerNode(codec, OracleController(node.ctrl.pars))
     why = native.native_unavailable(py, "udp_multicast")
-    assert why is not None and "\n" not in why and "Python engine" in why
+    assert why is not None and "\n" not in why and "controller's core" in why
 
 
 # ---------------------------------------------------------------- beside a Python plant

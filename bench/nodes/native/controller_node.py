@@ -236,9 +236,8 @@ def native_unavailable(node: ControllerNode, interface: str | None) -> str | Non
     else one line saying why not (:func:`bench.cli._common.choose_node_engine` says what
     follows: the Python node, or a refusal)."""
     ctrl = node.ctrl
-    if ctrl._core is None:
-        why = ctrl.engine_note or "the controller runs on the Python engine"
-        return f"the native controller node needs the compiled controller ({why})"
+    if ctrl._core is None:  # a controller without the core: the tests' oracle
+        return "the native controller node needs the controller's core"
     if ctrl.external_estimator:
         return f"the {ctrl.pars.estimator} estimator is Python code, which needs the Python process"
     if interface is not None and interface not in NATIVE_INTERFACES:
