@@ -37,7 +37,8 @@ class CicFilter:
     Realised as written: ``c[n] = x[n] - x[n-M]``, ``y[n] = y[n-1] + c[n]``,
     output ``y[n] / M``.  Integer and binary-fraction inputs are summed
     exactly; for general floats the integrator's rounding is bounded by
-    the recomputation in :meth:`step` every ``4096`` steps.
+    the recomputation in the step every ``4096`` steps (``controller/core/cc_cic.c``;
+    its Python, the tests' oracle: ``tests/oracle/blocks.py``).
 
     Parameters
     ----------
@@ -69,8 +70,8 @@ class CicFilter:
 class CicInterpolator:
     """Sample-and-hold rate conversion by ``R`` followed by :class:`CicFilter` (Xue Figs. 4, 7-9).
 
-    Call :meth:`step` once per fast step; pass the new slow sample on the
-    step it arrives, ``None`` on the other ``R - 1`` steps.
+    The step (``controller/core/cc_cic.c``) runs once per fast step, with the new slow
+    sample on the step it arrives and none on the other ``R - 1`` steps.
 
     Parameters
     ----------

@@ -483,7 +483,7 @@ class Controller:
         """Smoothing band (A) and law (sinusoid: True) of the current sign for the dead time.
 
         Rotating injection whose estimator predicts its HF current
-        (``hf_current_next``): the sign is that of the reference plus the
+        (``predicts_hf``): the sign is that of the reference plus the
         predicted HF current at the mid-point of the period, and the band is
         how far the HF current moves in half a period, ``I_p w_h T_s / 2``
         (triangle law). Rotating injection without that prediction: the HF

@@ -368,7 +368,7 @@ class HybridEstimator:
         Schedule speed after the play (rad/s).
     saliency_offset : float
         Angle (rad) by which the injection estimator's saliency axis leads the
-        rotor's, set by the controller before each :meth:`update` when it
+        rotor's, set by the controller before each period's ``update`` when it
         corrects cross-saturation (:func:`controller._compensation.cross_saturation_offset`).
         It is a property of the saliency the injection sees, not of the flux
         the observer models, so it is subtracted from the injection estimate

@@ -144,7 +144,7 @@ class LuenbergerObserver:
 def observer_response(
     a: float, T_s: float, z: np.ndarray, b: float | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
-    """``(Theta/E, W/E)`` of :meth:`LuenbergerObserver.step` at ``z`` (module docstring);
+    """``(Theta/E, W/E)`` of the observer's step (``controller/core/cc_luenberger.c``) at ``z`` (module docstring);
     ``b`` as in :class:`LuenbergerObserver`."""
     zi = 1.0 / np.asarray(z, complex)
     d = 1.0 - zi
