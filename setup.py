@@ -2,43 +2,29 @@
 (``plant_rt/core/*.c``) and ``controller/_cctl.c`` with the controller's core
 (``controller/core/*.c``) (the rest is in pyproject.toml).
 
-The plant's core is required: the plant's equations exist only in C, so an
-install without a C compiler or Python's headers stops with one line saying
-so (``tools/need-cc`` installs them). The controller's extension is optional:
-without it one line says that it was not built and the controller runs in
-pure Python (:mod:`controller._engine`).
+Both cores are required: the plant's and the controller's per-period
+equations exist only in C (:mod:`plant_rt._engine`, :mod:`controller._engine`),
+so an install without a C compiler or Python's headers stops with one line
+saying so (``tools/need-cc`` installs them).
 ``-ffp-contract=off`` keeps the compiler from fusing a multiply and an add
 (one rounding instead of two, as on aarch64 by default), so that the C step
-rounds as the Python step does and the two engines agree bit for bit.
+rounds as the tests' Python reference models do (``tests/oracle/``,
+``tests/plant_reference.py``) and agrees with them bit for bit.
 """
 
 from __future__ import annotations
 
 import glob
-import sys
 from pathlib import Path
 
 from setuptools import Extension, setup
 from setuptools.command.build_ext import build_ext
 
-_REQUIRED = {"plant_rt._cplant"}
-_WHAT = {
-    "plant_rt._cplant": ("plant_rt", "plant"),
-    "controller._cctl": ("controller", "controller"),
-}
+_WHAT = {"plant_rt._cplant": "plant", "controller._cctl": "controller"}
 
 
-def _not_built(e: Exception, name: str | None = None) -> None:
-    pkg, what = _WHAT.get(name or "", ("can-hil-bench", "plant and controller"))
-    print(
-        f"{pkg}: the compiled {what} engine was not built ({type(e).__name__}: {e}); "
-        f"the {what} runs in pure Python",
-        file=sys.stderr,
-    )
-
-
-class OptionalBuildExt(build_ext):
-    """``build_ext`` that leaves the extension out, with one line, when it cannot build."""
+class RequiredBuildExt(build_ext):
+    """``build_ext`` that stops the install with one line when a core cannot build."""
 
     def run(self) -> None:
         try:
@@ -46,25 +32,22 @@ class OptionalBuildExt(build_ext):
         except SystemExit:
             raise
         except Exception as e:
-            if _REQUIRED:
-                raise SystemExit(
-                    f"can-hil-bench: the plant core cannot be built ({type(e).__name__}: {e}); "
-                    "it needs a C compiler and Python's headers: run tools/need-cc, then "
-                    "install again"
-                ) from None
-            _not_built(e)
+            raise SystemExit(
+                f"can-hil-bench: the plant and controller cores cannot be built "
+                f"({type(e).__name__}: {e}); "
+                "it needs a C compiler and Python's headers: run tools/need-cc, then "
+                "install again"
+            ) from None
 
     def build_extension(self, ext: Extension) -> None:
         try:
             super().build_extension(ext)
         except Exception as e:
-            if ext.name in _REQUIRED:
-                raise SystemExit(
-                    f"can-hil-bench: the plant core ({ext.name}) cannot be built "
-                    f"({type(e).__name__}: {e}); it needs a C compiler and Python's headers: "
-                    "run tools/need-cc, then install again"
-                ) from None
-            _not_built(e, ext.name)
+            raise SystemExit(
+                f"can-hil-bench: the {_WHAT.get(ext.name, ext.name)} core ({ext.name}) cannot be "
+                f"built ({type(e).__name__}: {e}); it needs a C compiler and Python's headers: "
+                "run tools/need-cc, then install again"
+            ) from None
 
 
 setup(
@@ -83,5 +66,5 @@ setup(
             extra_compile_args=["-O2", "-std=c99", "-ffp-contract=off", "-fno-fast-math"],
         ),
     ],
-    cmdclass={"build_ext": OptionalBuildExt},
+    cmdclass={"build_ext": RequiredBuildExt},
 )

@@ -247,7 +247,6 @@ def _engine(engine: str) -> Iterator[str]:
     controllers built meanwhile (:data:`bench.scenarios._setup.ENGINE_ENV`, which node
     processes inherit)."""
     from bench.scenarios._setup import ENGINE_ENV
-    from controller import compiled_controller_missing
     from plant_rt import resolve_engine
 
     _choice("--engine", engine, ENGINES)
@@ -255,8 +254,6 @@ def _engine(engine: str) -> Iterator[str]:
         resolve_engine(engine)
     except ValueError as e:
         raise BenchError(f"--engine {engine}: {e}") from None
-    if engine == "compiled" and (why := compiled_controller_missing()):
-        raise BenchError(f"--engine {engine}: {why}")
     before = os.environ.get(ENGINE_ENV)
     os.environ[ENGINE_ENV] = engine
     try:

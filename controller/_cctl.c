@@ -722,6 +722,8 @@ static PyMemberDef Core_members[] = {
     M_("hf_w_hat", est.hyb.hf.w_hat, T_DOUBLE),
     M_("obs_theta_hat", est.hyb.obs.theta_hat, T_DOUBLE),
     M_("obs_w_hat", est.hyb.obs.w_hat, T_DOUBLE),
+    M_("e_alpha", est.sqw.e_alpha, T_DOUBLE),
+    M_("e_beta", est.sqw.e_beta, T_DOUBLE),
     {"sup_latched", T_LONGLONG, offsetof(Core, sup.latched), READONLY, NULL},
     {"sup_detected_k", T_LONGLONG, offsetof(Core, sup.detected_k), READONLY, NULL},
     {NULL, 0, 0, 0, NULL},
@@ -804,5 +806,7 @@ PyMODINIT_FUNC PyInit__cctl(void)
     PyModule_AddIntConstant(m, "KIND_SELF_DEMOD", CC_EST_SELF_DEMOD);
     PyModule_AddIntConstant(m, "KIND_EPF", CC_EST_EPF);
     PyModule_AddIntConstant(m, "KIND_EXTERNAL", CC_EST_EXTERNAL);
+    /* the longest CIC delay line, the square-wave estimators' option M's maximum */
+    PyModule_AddIntConstant(m, "CIC_MAX", CC_CIC_MAX);
     return m;
 }

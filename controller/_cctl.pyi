@@ -12,12 +12,15 @@ KIND_HYB_SQW: int
 KIND_SELF_DEMOD: int
 KIND_EPF: int
 KIND_EXTERNAL: int
+CIC_MAX: int
 
 def hypot(x: float, y: float) -> float: ...
 
 class Core:
     kind: int
     calls_python: int
+    e_alpha: float
+    e_beta: float
     mode: int
     w_m_ref: float
     w_m_hat: float

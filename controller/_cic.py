@@ -37,7 +37,8 @@ class CicFilter:
     Realised as written: ``c[n] = x[n] - x[n-M]``, ``y[n] = y[n-1] + c[n]``,
     output ``y[n] / M``.  Integer and binary-fraction inputs are summed
     exactly; for general floats the integrator's rounding is bounded by
-    the recomputation in :meth:`step` every ``4096`` steps.
+    the recomputation in the step every ``4096`` steps (``controller/core/cc_cic.c``;
+    its Python, the tests' oracle: ``tests/oracle/blocks.py``).
 
     Parameters
     ----------
@@ -65,26 +66,12 @@ class CicFilter:
         self._acc = 0.0
         self._n = 0
 
-    def step(self, x: float) -> float:
-        """Filter one fast-rate sample ``x`` and return the output."""
-        buf = self._buf
-        i = self._i
-        self._acc += x - buf[i]  # comb H_1 then integrator H_2
-        buf[i] = x
-        i += 1
-        self._i = 0 if i == self.M else i
-        self._n += 1
-        if self._n >= 4096:  # re-anchor the integrator on the delay line
-            self._n = 0
-            self._acc = sum(buf)
-        return self._acc * self._inv_M
-
 
 class CicInterpolator:
     """Sample-and-hold rate conversion by ``R`` followed by :class:`CicFilter` (Xue Figs. 4, 7-9).
 
-    Call :meth:`step` once per fast step; pass the new slow sample on the
-    step it arrives, ``None`` on the other ``R - 1`` steps.
+    The step (``controller/core/cc_cic.c``) runs once per fast step, with the new slow
+    sample on the step it arrives and none on the other ``R - 1`` steps.
 
     Parameters
     ----------
@@ -119,16 +106,3 @@ class CicInterpolator:
         """Empty the filter and hold ``x0``."""
         self._cic.reset()
         self._held = x0
-
-    def prime(self, x0: float) -> None:
-        """Fill the delay line with ``x0`` so the output starts at ``x0`` (no start-up ramp)."""
-        self._cic.reset()
-        self._held = x0
-        for _ in range(self._cic.M):
-            self._cic.step(x0)
-
-    def step(self, x: float | None) -> float:
-        """One fast step; ``x`` is a new slow sample or None. Returns the interpolated value."""
-        if x is not None:
-            self._held = x
-        return self._cic.step(self._held)

@@ -234,23 +234,6 @@ class DeadTimeCompensator:
         off = d_x * self.v_f + (1.0 - d_x) * self.v_ce  # i < 0: upper diode, lower transistor
         return -s * self._k_dt * u_dc - 0.5 * (1.0 + s) * on + 0.5 * (1.0 - s) * off
 
-    def duties(
-        self,
-        d_a: float,
-        d_b: float,
-        d_c: float,
-        i_a: float,
-        i_b: float,
-        i_c: float,
-        u_dc: float,
-    ) -> tuple[float, float, float]:
-        """Duties with the expected error of each leg added back, clipped to [0, 1]."""
-        inv = 1.0 / u_dc
-        d_a2 = d_a - self.voltage(i_a, u_dc, d_a) * inv
-        d_b2 = d_b - self.voltage(i_b, u_dc, d_b) * inv
-        d_c2 = d_c - self.voltage(i_c, u_dc, d_c) * inv
-        return _clip01(d_a2), _clip01(d_b2), _clip01(d_c2)
-
 
 def _clip01(d: float) -> float:
     return 1.0 if d > 1.0 else (0.0 if d < 0.0 else d)
@@ -307,15 +290,3 @@ class OffsetCalibration:
         """Start a new calibration; the offsets in use stay until it ends."""
         self.k = 0
         self._s_a = self._s_b = self._s_c = 0.0
-
-    def add(self, i_a: float, i_b: float, i_c: float) -> None:
-        """Take one standstill sample; the offsets are updated when the ``n``-th arrives."""
-        self._s_a += i_a
-        self._s_b += i_b
-        self._s_c += i_c
-        self.k += 1
-        if self.k == self.n:
-            inv = 1.0 / self.n
-            self.o_a = self._s_a * inv
-            self.o_b = self._s_b * inv
-            self.o_c = self._s_c * inv

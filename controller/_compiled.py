@@ -1,5 +1,5 @@
-"""The controller on the compiled engine: the controller core (``controller/core/``) built
-from a designed :class:`controller.Controller`.
+"""The controller's engine: the controller core (``controller/core/``) built from a designed
+:class:`controller.Controller`.
 
 Python designs every gain, filter and threshold (each with its derivation, in
 :mod:`controller._controller` and the estimators' modules); :func:`build_core`
@@ -18,28 +18,15 @@ from typing import Any
 
 from controller._api import ControlOutput, EstimatorInput, Measurement
 from controller._cplugin import CEstimator
-from controller._engine import KIND_EXTERNAL, _cctl, compiled_cover
+from controller._engine import KIND_EXTERNAL, _cctl
 from controller._epf import EPFEstimator
 from controller._filters import Biquad2, FirstOrder, FirstOrder2
 from controller._hybrid import HybridEstimator
 from controller._luenberger import LuenbergerObserver
 from controller._pll import PositionObserver
+from controller._registry import shipped_kind
 from controller._rotating import RotatingHFEstimator
-from controller._self_demod import SelfDemodEstimator
-from controller._sensored import SensoredEstimator
 from controller._square_wave import SquareWaveEstimator
-from controller._tt_dq import TTDQEstimator
-
-#: The estimator class each kind of the core mirrors (kinds 2 and 3: by module).
-_KIND_CLASS: dict[int, type] = {
-    1: TTDQEstimator,
-    4: SquareWaveEstimator,
-    5: SensoredEstimator,
-    6: HybridEstimator,
-    7: HybridEstimator,
-    8: SelfDemodEstimator,
-    9: EPFEstimator,
-}
 
 
 def _fo(f: FirstOrder | FirstOrder2) -> tuple[float, float, float]:
@@ -84,17 +71,12 @@ def _square_wave(core: Any, est: SquareWaveEstimator) -> None:
     )
 
 
-def _kind_of(kind: int, est: object) -> bool:
-    """The estimator built is the class the core's kind mirrors (a plug-in registered under
-    a compiled estimator's name is not)."""
-    mod = {2: "controller._tt_ab", 3: "controller._sfhf"}.get(kind)
-    if mod is not None:
-        return type(est).__module__ == mod
-    if kind in (6, 7):
-        hf = getattr(est, "hf", None)
-        want = TTDQEstimator if kind == 6 else SquareWaveEstimator
-        return type(est) is HybridEstimator and type(hf) is want
-    return type(est) is _KIND_CLASS[kind]
+def instance_kind(est: object) -> int:
+    """The core's kind that runs ``est``: a shipped estimator's, exactly as its factory
+    builds it (:func:`controller._registry.shipped_kind`), else :data:`KIND_EXTERNAL` (a
+    plug-in's Python estimator, a subclass of a shipped one that brings its own period)."""
+    kind = shipped_kind(est)
+    return KIND_EXTERNAL if kind is None else kind
 
 
 def _slots(cls: type) -> tuple[Any, ...]:
@@ -104,23 +86,22 @@ def _slots(cls: type) -> tuple[Any, ...]:
 
 
 def build_core(ctrl: Any, core_type: Any = None) -> tuple[Any, str | None]:
-    """The core for the designed controller ``ctrl`` (a :class:`controller.Controller`),
-    or ``(None, why)`` when the core does not cover it.
+    """``(core, None)``: the core for the designed controller ``ctrl`` (a
+    :class:`controller.Controller`); the pair's second item, once the reason a controller
+    ran in Python, is kept for :mod:`bench.wire._ctlgen` and is always None.
 
-    A plug-in's estimator, or a plug-in registered under a compiled estimator's name,
-    is the core's external estimator: the core calls its Python methods.
+    A shipped estimator runs as its kind whoever built it (the registry by name, or a
+    plug-in that returns it unchanged); any other estimator, a subclass of a shipped one
+    among them, is the core's external estimator: the core calls its Python methods
+    (:func:`instance_kind`).
     ``core_type`` takes the binding's calls instead of ``_cctl.Core`` (same constructor and
     methods): ``bench codegen`` records them as C for a firmware (:mod:`bench.wire._ctlgen`).
     """
     pars = ctrl.pars
-    kind, why = compiled_cover(pars)
     est = ctrl.estimator
-    if core_type is None and _cctl is not None:
+    kind = instance_kind(est)
+    if core_type is None:
         core_type = _cctl.Core
-    if core_type is None or not kind:
-        return None, why
-    if kind != KIND_EXTERNAL and not _kind_of(kind, est):
-        kind = KIND_EXTERNAL
     core = core_type(kind, Measurement, _slots(Measurement), ControlOutput, _slots(ControlOutput))
     m = ctrl.motor
     core.foc(
@@ -192,7 +173,7 @@ def _compensation(core: Any, ctrl: Any, est: Any, external: bool) -> None:
     core.compensation(
         None
         if dt is None
-        else (dt.T_s, dt.t_dead, dt.v_ce, dt.v_f, dt.i_band, dt.sine, ctrl._hf_next is not None),
+        else (dt.T_s, dt.t_dead, dt.v_ce, dt.v_f, dt.i_band, dt.sine, ctrl._predicts_hf),
         (ctrl.motor.k_dq, ctrl._sal_own) if ctrl.cross_sat else None,
         None if cal is None else cal.n,
         (hf.I_p, hf.I_n) if rot else None,

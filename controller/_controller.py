@@ -1,5 +1,11 @@
 """Field-oriented speed controller with a pluggable rotor-position estimator.
 
+Python designs the controller (every gain, filter, limit and delay below,
+with its derivation); its one engine, the portable C core
+(``controller/core/cc_foc.c`` and the blocks it calls, :mod:`controller._engine`),
+runs the periods. The same step in Python is the tests' oracle
+(``tests/oracle/``), which the core matches bit for bit.
+
 Structure per PWM period (the motulator template: measure, compute output,
 update states)::
 
@@ -98,23 +104,17 @@ from typing import Any
 import numpy as np
 
 from controller._api import (
-    MODE_ALIGN,
-    MODE_DISABLED,
-    MODE_POLARITY,
-    MODE_RUN,
     ControlOutput,
-    EstimatorInput,
     Measurement,
 )
 from controller._compensation import (
     CompensationPars,
     DeadTimeCompensator,
     OffsetCalibration,
-    cross_saturation_offset,
     offset_periods,
 )
 from controller._compiled import build_core
-from controller._engine import KIND_EXTERNAL, resolve_controller_engine
+from controller._engine import KIND_EXTERNAL, _cctl, resolve_controller_engine
 from controller._filters import lpf_first_order
 from controller._hybrid import HybridEstimator
 from controller._params import MotorModel
@@ -122,10 +122,8 @@ from controller._pi import PIController
 from controller._registry import estimator_family, injection_family, make_estimator
 from controller._startup import PolarityTest
 from controller._supervision import SupervisionPars, Supervisor
-from controller._svpwm import svpwm
 
 _TWO_PI = 2.0 * math.pi
-_SQRT3_INV = 1.0 / math.sqrt(3.0)
 
 #: The states :meth:`Controller.states` reports (the compiled core's readable members).
 STATE_NAMES = (
@@ -317,39 +315,25 @@ class ReferenceModel:
     alpha_s)`` for a rigid inertia (module docstring). This model runs that
     response on the reference alone (forward Euler, the same step as the
     PI's integrator): its state ``w`` is the speed the loop is designed to
-    reach, and :meth:`update` returns its slope times ``n_p``, the electrical
+    reach, and its step returns the slope times ``n_p``, the electrical
     acceleration the loop is designed to give the rotor. Limited to what the
     torque limit can give the model's inertia, ``n_p tau_max / J``, since the
     loop cannot give more. It reads no estimate, so whatever takes it as a
     feed-forward keeps its own loop as it was (tt-dq's ``accel_ff``,
     :mod:`controller._rotating`).
+
+    This class holds the design (``alpha_s``, ``n_p``, ``a_max``, ``T_s``);
+    the step runs in the core (``controller/core/cc_reference.c``), and in
+    Python in the tests' oracle (``tests/oracle/blocks.py``).
     """
 
-    __slots__ = ("T_s", "a_max", "alpha_s", "n_p", "w")
+    __slots__ = ("T_s", "a_max", "alpha_s", "n_p")
 
     def __init__(self, alpha_s: float, n_p: int, J: float, tau_max: float, T_s: float) -> None:
         self.alpha_s = alpha_s
         self.n_p = n_p
         self.a_max = n_p * tau_max / J if tau_max > 0.0 else math.inf
         self.T_s = T_s
-        self.w = 0.0
-
-    def reset(self, w0: float = 0.0) -> None:
-        """Start from the speed ``w0`` (rad/s, mechanical)."""
-        self.w = w0
-
-    def update(self, w_ref: float) -> float:
-        """Advance one period with the reference ``w_ref`` (rad/s, mechanical); return the
-        designed electrical acceleration (rad/s^2) of the period."""
-        dw = self.alpha_s * (w_ref - self.w)
-        a = self.n_p * dw
-        a_max = self.a_max
-        if a > a_max:
-            a, dw = a_max, a_max / self.n_p
-        elif a < -a_max:
-            a, dw = -a_max, -a_max / self.n_p
-        self.w += self.T_s * dw
-        return a
 
 
 class Controller:
@@ -360,21 +344,25 @@ class Controller:
     pars : ControllerPars
         Settings.
     engine : {"auto", "compiled", "python"}, optional
-        Which implementation runs the periods (:mod:`controller._engine`):
-        ``"compiled"`` (C, the same trace bit for bit) where it covers the
-        estimator and settings, else Python; ``"auto"`` (default) the same,
-        and Python when the compiled engine is not built. The engine in use is
-        :attr:`engine`, and :attr:`engine_note` says why it is Python.
+        Kept for compatibility (:mod:`controller._engine`): every choice runs the
+        periods on the controller core (C), with the bits the Python step gave
+        when it was an engine (``tests/oracle/`` checks them).
     """
 
-    #: The engine the periods run on, ``"compiled"`` or ``"python"``.
-    engine: str = "python"
-    #: Why the controller runs in Python although the compiled engine was asked for.
+    #: The engine the periods run on: ``"compiled"``, the core, whatever the choice.
+    engine: str = "compiled"
+    #: Why the controller would run outside the core: None (kept for the node reports).
     engine_note: str | None = None
-    #: The compiled core calls the estimator's Python methods each period (a plug-in's
-    #: Python estimator, :data:`controller._engine.KIND_EXTERNAL`): the periods need
-    #: Python. False for a plug-in's estimator in C (:func:`controller.c_estimator`).
-    external_estimator: bool = False
+    # the core's states, read-only (properties made by _state below)
+    mode: int
+    w_m_ref: float
+    w_m_hat: float
+    i_d_ref: float
+    i_q_ref: float
+    tau_ref: float
+    #: Realised fundamental voltage of the last step, estimated frame (V).
+    u_d: float
+    u_q: float
 
     def __init__(self, pars: ControllerPars, engine: str = "auto") -> None:
         self.pars = pars
@@ -406,9 +394,12 @@ class Controller:
         cp = pars.compensation
         self.raw_feedback = pars.current_feedback == "raw"
         self.dead_time: DeadTimeCompensator | None = None
-        hf_next = getattr(self.estimator, "hf_current_next", None)
-        self._hf_next: Callable[[], tuple[float, float]] | None = (
-            hf_next if cp.dead_time and callable(hf_next) else None
+        #: The dead-time feed-forward adds the HF current the estimator predicts for the
+        #: next period: a shipped estimator's design says so (``predicts_hf``), a plug-in's
+        #: Python estimator by having ``hf_current_next``.
+        self._predicts_hf = cp.dead_time and bool(
+            getattr(self.estimator, "predicts_hf", False)
+            or callable(getattr(self.estimator, "hf_current_next", None))
         )
         if cp.dead_time:
             band, sine = self._dead_time_sign_model()
@@ -428,237 +419,47 @@ class Controller:
                     tol = 0.5 * cp.adc_lsb if cp.adc_lsb > 0.0 else 1e-3 * self.i_max
                 n_cal = offset_periods(cp.current_noise, cp.adc_lsb, tol)
             self.calibration = OffsetCalibration(n_cal)
-        self.mode = MODE_DISABLED
-        self.w_m_ref = 0.0
-        self.i_d_ref = 0.0
-        self.i_q_ref = 0.0
-        self.tau_ref = 0.0
-        self.w_m_hat = 0.0
-        #: Realised fundamental voltage of the last step, estimated frame (V).
-        self.u_d = 0.0
-        self.u_q = 0.0
-        # stator-voltage commands (V, stationary): *_1 computed from the last
-        # sample (acting now), *_2 from the one before (acted until this sample)
-        self._u_a1 = self._u_b1 = self._u_a2 = self._u_b2 = 0.0
-        self._n_mode = 0
-        self._settled = False
-        self._i_ref: tuple[float, float] | None = None
-        self._theta_pol = 0.0
-        # the engine: the controller core (controller/core/, by composition) where it
-        # covers this controller, else the Python step below
-        self._core: Any = None
-        used, why = resolve_controller_engine(engine, pars)
-        if used == "compiled":
-            self._core, why = build_core(self)
-        self.engine_note = why
-        if self._core is not None:
-            self.engine = "compiled"
-            self.external_estimator = bool(
-                self._core.kind == KIND_EXTERNAL and self._core.calls_python
-            )
-            # the core's step is called directly (no Python frame per period)
-            self.step = self._core.step  # type: ignore[method-assign]
-        # the supervision hook: the step (the core's or Python's) with
-        # controller._supervision after it
+        # the supervision: the core runs it after its own step (controller/core/cc_supervision.c)
         self.supervisor = None if pars.supervision is None else Supervisor(pars.supervision)
-        self.__dict__["step"] = self._supervised(self.step)
+        resolve_controller_engine(engine, pars)  # an unknown engine name is refused
+        self._core: Any = self._attach_engine()
+        #: The core calls the estimator's Python methods each period (a plug-in's Python
+        #: estimator, :data:`controller._engine.KIND_EXTERNAL`).
+        self.external_estimator = bool(
+            self._core is not None and self._core.kind == KIND_EXTERNAL and self._core.calls_python
+        )
 
-    def _supervised(self, step: Callable[[Measurement], ControlOutput]) -> Any:
-        """``step`` with the supervision after it, or ``step`` without one (the compiled
-        core runs it in C, controller/core/cc_supervision.c, after its own step)."""
-        sup = self.supervisor
-        if sup is not None and self._core is not None:
-            self._core.supervision(*sup.args())
-            return step
-        return step if sup is None else sup.wrap(step, lambda: self.set_enable(False))
+    def _attach_engine(self) -> Any:
+        """The core built from this design (:func:`controller._compiled.build_core`), its
+        supervision set, and its step taken as the instance's (called directly: no Python
+        frame per period)."""
+        core, _ = build_core(self)
+        if self.supervisor is not None:
+            core.supervision(*self.supervisor.args())
+        self.step = core.step  # type: ignore[method-assign]
+        return core
 
-    # -- commands ---------------------------------------------------------------
+    # -- commands (forwarded to the core) ------------------------------------------
     def set_speed_ref(self, w_m_ref: float) -> None:
         """Mechanical speed reference (rad/s)."""
-        w = float(w_m_ref)
-        self.w_m_ref = w
-        if self._core is not None:
-            self._core.set_speed_ref(w)
+        self._core.set_speed_ref(float(w_m_ref))
 
     def set_current_ref(self, i_dq_ref: tuple[float, float] | None) -> None:
         """Current control: hold ``(i_d, i_q)`` references (A) in ``MODE_RUN``, bypassing
         the speed loop; ``None`` returns to speed control."""
-        self._i_ref = None if i_dq_ref is None else (float(i_dq_ref[0]), float(i_dq_ref[1]))
-        self.pi_w.reset()
-        if self._core is not None:
-            self._core.set_current_ref(self._i_ref)
+        ref = None if i_dq_ref is None else (float(i_dq_ref[0]), float(i_dq_ref[1]))
+        self._core.set_current_ref(ref)
 
     def set_enable(self, enable: bool) -> None:
         """Enable (start-up sequence, then speed control) or disable the inverter."""
-        if self._core is not None:
-            self._core.set_enable(bool(enable))
-            return
-        if enable and self.mode == MODE_DISABLED:
-            self._restart()
-        elif not enable:
-            self.mode = MODE_DISABLED
-
-    def _restart(self) -> None:
-        self.pi_d.reset()
-        self.pi_q.reset()
-        self.pi_w.reset()
-        self.lpf_w.reset()
-        self.ref_model.reset()
-        self.estimator.reset(self.pars.theta0)
-        self.i_d_ref = self.i_q_ref = self.tau_ref = 0.0
-        self._u_a1 = self._u_b1 = self._u_a2 = self._u_b2 = 0.0
-        self._n_mode = 0
-        self._settled = False
-        if self.calibration is not None:
-            self.calibration.restart()
-        if self.family == "none" or not self.pars.startup:
-            self.mode = MODE_RUN
-        else:
-            self.mode = MODE_ALIGN
+        self._core.set_enable(bool(enable))
 
     # -- one PWM period -----------------------------------------------------------
     def step(self, meas: Measurement) -> ControlOutput:
-        """Compute the duties for period ``k + 1`` from the samples of period ``k``."""
-        k = meas.k
-        mode = self.mode
-        est = self.estimator
-        if mode == MODE_DISABLED:
-            return ControlOutput(
-                k, 0.5, 0.5, 0.5, False, est.theta_hat % _TWO_PI, est.w_hat, 0.0, mode
-            )
-        # Measure (amplitude-invariant Clarke), offsets removed when calibrated.
-        i_a = meas.i_a
-        i_b = meas.i_b
-        i_c = meas.i_c
-        cal = self.calibration
-        if cal is not None:
-            if not cal.done:
-                cal.add(i_a, i_b, i_c)
-                return ControlOutput(
-                    k, 0.5, 0.5, 0.5, False, est.theta_hat % _TWO_PI, 0.0, 0.0, MODE_ALIGN
-                )
-            i_a -= cal.o_a
-            i_b -= cal.o_b
-            i_c -= cal.o_c
-        i_alpha = (2.0 * i_a - i_b - i_c) / 3.0
-        i_beta = (i_b - i_c) * _SQRT3_INV
-        u_dc = meas.u_dc
-        m = self.motor
-        if mode == MODE_POLARITY:
-            return self._polarity_step(k, i_alpha, i_beta, u_dc)
-        if self._sal_own:
-            # the hybrid corrects its injection estimate only (controller._hybrid)
-            est.saliency_offset = cross_saturation_offset(  # type: ignore[attr-defined]
-                m.k_dq, self.i_q_ref, m.L_d, m.L_q
-            )
-        speed_loop = mode == MODE_RUN and self._i_ref is None
-        est.update(
-            EstimatorInput(
-                k,
-                i_alpha,
-                i_beta,
-                self.tau_ref,
-                meas.theta_e,
-                meas.w_e,
-                self._u_a2,
-                self._u_b2,
-                mode == MODE_RUN,
-                self.ref_model.update(self.w_m_ref) if speed_loop else 0.0,
-            )
-        )
-        th = est.theta_hat
-        if self.cross_sat and not self._sal_own:
-            th -= cross_saturation_offset(m.k_dq, self.i_q_ref, m.L_d, m.L_q)
-        w = est.w_hat
-        c = math.cos(th)
-        s = math.sin(th)
-        i_af = est.i_alpha_f
-        i_bf = est.i_beta_f
-        i_d = c * i_af + s * i_bf
-        i_q = c * i_bf - s * i_af
-        if self.raw_feedback:
-            i_d_pi = c * i_alpha + s * i_beta
-            i_q_pi = c * i_beta - s * i_alpha
-        else:
-            i_d_pi = i_d
-            i_q_pi = i_q
-        # Compute output: speed loop.
-        w_m = self.lpf_w.update(w / m.n_p)
-        self.w_m_hat = w_m
-        i_ref = self._i_ref
-        if mode == MODE_RUN and i_ref is not None:
-            i_d_ref, i_q_ref = i_ref
-            tau = self.k_tau * i_q_ref
-        elif mode == MODE_RUN:
-            tau_u = self.pi_w.output(self.w_m_ref, w_m)
-            tau_max = self.tau_max
-            tau = tau_max if tau_u > tau_max else (-tau_max if tau_u < -tau_max else tau_u)
-            i_d_ref = 0.0
-            i_q_ref = tau / self.k_tau
-            i_q_max = math.sqrt(max(self.i_max * self.i_max - i_d_ref * i_d_ref, 0.0))
-            if i_q_ref > i_q_max:
-                i_q_ref = i_q_max
-            elif i_q_ref < -i_q_max:
-                i_q_ref = -i_q_max
-            tau = self.k_tau * i_q_ref
-        else:
-            i_d_ref = i_q_ref = tau = 0.0
-        # Current loop with decoupling (estimated speed, filtered).
-        w_e = m.n_p * w_m
-        u_d = self.pi_d.output(i_d_ref, i_d_pi, -w_e * m.L_q * i_q)
-        u_q = self.pi_q.output(i_q_ref, i_q_pi, w_e * (m.L_d * i_d + m.psi_f))
-        u_ah, u_bh = est.injection()
-        u_lim = u_dc * _SQRT3_INV - math.sqrt(u_ah * u_ah + u_bh * u_bh)
-        mag2 = u_d * u_d + u_q * u_q
-        if mag2 > u_lim * u_lim:
-            r = u_lim / math.sqrt(mag2)
-            u_dl = u_d * r
-            u_ql = u_q * r
-        else:
-            u_dl = u_d
-            u_ql = u_q
-        # Inverse Park at the mid-point of period k + 1, then the HF voltage.
-        th_u = th + self.t_delay * w
-        c_u = math.cos(th_u)
-        s_u = math.sin(th_u)
-        u_a = c_u * u_dl - s_u * u_ql + u_ah
-        u_b = s_u * u_dl + c_u * u_ql + u_bh
-        d_a, d_b, d_c = svpwm(u_a, u_b, u_dc)
-        # the voltage commanded for period k + 1 (the dead-time feed-forward below
-        # makes the inverter give it), which a model-based estimator integrates
-        self._u_a2 = self._u_a1
-        self._u_b2 = self._u_b1
-        self._u_a1 = u_a
-        self._u_b1 = u_b
-        dt = self.dead_time
-        if dt is not None:
-            # phase currents expected at the mid-point of period k + 1: the reference,
-            # plus the injection's HF current where the estimator predicts it
-            i_ar = c_u * i_d_ref - s_u * i_q_ref
-            i_br = s_u * i_d_ref + c_u * i_q_ref
-            hf = self._hf_next
-            if hf is not None:
-                h_a, h_b = hf()
-                i_ar += h_a
-                i_br += h_b
-            h = 0.5 * math.sqrt(3.0) * i_br
-            d_a, d_b, d_c = dt.duties(d_a, d_b, d_c, i_ar, -0.5 * i_ar + h, -0.5 * i_ar - h, u_dc)
-        # The speed reported is the filtered estimate the speed loop uses, not
-        # the observer's raw output (which carries the demodulation ripple).
-        out = ControlOutput(
-            k, d_a, d_b, d_c, True, th % _TWO_PI, w_m * m.n_p, est.err, mode, i_d, i_q
-        )
-        # Update states with the realised outputs.
-        self.pi_d.update(u_dl)
-        self.pi_q.update(u_ql)
-        self.u_d = u_dl
-        self.u_q = u_ql
-        if mode == MODE_RUN and i_ref is None:
-            self.pi_w.update(tau)
-        self.i_d_ref = i_d_ref
-        self.i_q_ref = i_q_ref
-        self.tau_ref = tau
-        self._advance_mode(i_alpha, i_beta, u_dc)
+        """Compute the duties for period ``k + 1`` from the samples of period ``k``: the
+        core's step (module docstring), which an instance calls directly, without this
+        Python frame."""
+        out: ControlOutput = self._core.step(meas)
         return out
 
     def _speed_loop_design(self) -> tuple[float, float]:
@@ -682,7 +483,7 @@ class Controller:
         """Smoothing band (A) and law (sinusoid: True) of the current sign for the dead time.
 
         Rotating injection whose estimator predicts its HF current
-        (``hf_current_next``): the sign is that of the reference plus the
+        (``predicts_hf``): the sign is that of the reference plus the
         predicted HF current at the mid-point of the period, and the band is
         how far the HF current moves in half a period, ``I_p w_h T_s / 2``
         (triangle law). Rotating injection without that prediction: the HF
@@ -694,7 +495,7 @@ class Controller:
         est = self.estimator
         if self.family == "rotating":
             I_p = float(getattr(est, "I_p", 0.0))
-            if self._hf_next is not None:
+            if self._predicts_hf:
                 return 0.5 * I_p * float(getattr(est, "wT", 0.0)), False
             return I_p, True
         if self.family == "square":
@@ -757,7 +558,7 @@ class Controller:
         return out
 
     def states(self) -> dict[str, float]:
-        """The controller's present states, from whichever engine keeps them: ``mode``,
+        """The controller's present states, read from the core: ``mode``,
         ``w_m_ref``, ``w_m_hat``, the references ``i_d_ref``, ``i_q_ref``, ``tau_ref``,
         the realised voltage ``u_d``, ``u_q``, the PI integrators ``pi_d_u_i``,
         ``pi_q_u_i``, ``pi_w_u_i``, the last polarity test's outcome ``polarity_flip``
@@ -765,103 +566,34 @@ class Controller:
         HF voltage for the next period ``u_h_alpha``, ``u_h_beta``
         (:meth:`injection`) and, for a hybrid estimator, :data:`HYBRID_STATE_NAMES`."""
         c = self._core
-        hybrid = isinstance(self.estimator, HybridEstimator)
-        u_h = self.injection()
+        out = {name: getattr(c, name) for name in STATE_NAMES}
+        out["u_h_alpha"], out["u_h_beta"] = self.injection()
         est = self.estimator
-        if c is not None:
-            out = {name: getattr(c, name) for name in STATE_NAMES}
-            out["u_h_alpha"], out["u_h_beta"] = u_h
-            if hybrid and c.kind != KIND_EXTERNAL:
-                out.update({name: getattr(c, name) for name in HYBRID_STATE_NAMES})
-            elif isinstance(est, HybridEstimator):  # a plug-in's hybrid: its own states
-                out.update(_hybrid_states(est))
-            return out
-        out = {
-            "mode": self.mode,
-            "w_m_ref": self.w_m_ref,
-            "w_m_hat": self.w_m_hat,
-            "i_d_ref": self.i_d_ref,
-            "i_q_ref": self.i_q_ref,
-            "tau_ref": self.tau_ref,
-            "u_d": self.u_d,
-            "u_q": self.u_q,
-            "pi_d_u_i": self.pi_d.u_i,
-            "pi_q_u_i": self.pi_q.u_i,
-            "pi_w_u_i": self.pi_w.u_i,
-            "polarity_flip": int(self.polarity.flip),
-            "theta_hat": est.theta_hat,
-            "w_hat": est.w_hat,
-            "err": est.err,
-            "u_h_alpha": u_h[0],
-            "u_h_beta": u_h[1],
-        }
-        if isinstance(est, HybridEstimator):
-            out.update(_hybrid_states(est))
+        if isinstance(est, HybridEstimator) and c.kind != KIND_EXTERNAL:
+            out.update({name: getattr(c, name) for name in HYBRID_STATE_NAMES})
+        elif isinstance(est, HybridEstimator):  # a plug-in's hybrid: its own states
+            out.update(hybrid_states(est))
         return out
+
+    def quadrature(self) -> tuple[float, float]:
+        """The square-wave estimators' position quadrature signal ``(e_alpha, e_beta)`` (A),
+        interpolated or held (Xue Figs. 11-12; the hybrid-square-wave's injection
+        estimator's), read from the core; ``(0, 0)`` for another estimator."""
+        c = self._core
+        if c.kind not in (_cctl.KIND_SQW, _cctl.KIND_HYB_SQW):
+            return 0.0, 0.0
+        return float(c.e_alpha), float(c.e_beta)
 
     def injection(self) -> tuple[float, float]:
         """The HF voltage (alpha, beta) (V) the estimator adds to the command of the next
-        period, from whichever engine runs the periods."""
-        c = self._core
-        if c is not None:
-            u_a, u_b = c.injection()
-            return float(u_a), float(u_b)
-        u_a, u_b = self.estimator.injection()
+        period, read from the core."""
+        u_a, u_b = self._core.injection()
         return float(u_a), float(u_b)
 
-    def _advance_mode(self, i_alpha: float, i_beta: float, u_dc: float) -> None:
-        if self.mode != MODE_ALIGN:
-            return
-        self._n_mode += 1
-        if not self._settled and self._n_mode >= self.n_align:
-            th = self.estimator.theta_hat
-            i_d0 = math.cos(th) * i_alpha + math.sin(th) * i_beta
-            self.polarity.start(u_dc, i_d0)
-            self._theta_pol = th
-            self.mode = MODE_POLARITY
-            self._n_mode = 0
-        elif self._settled and self._n_mode >= self.n_settle:
-            self.pi_w.reset()
-            self.mode = MODE_RUN
-            self._n_mode = 0
 
-    def _polarity_step(self, k: int, i_alpha: float, i_beta: float, u_dc: float) -> ControlOutput:
-        th = self._theta_pol
-        c = math.cos(th)
-        s = math.sin(th)
-        i_d = c * i_alpha + s * i_beta
-        i_q = c * i_beta - s * i_alpha
-        pt = self.polarity
-        u_d = pt.step(i_d)
-        if pt.done:
-            th_new = (th + math.pi) % _TWO_PI if pt.flip else th
-            self.estimator.reset(th_new)
-            self.pi_d.reset()
-            self.pi_q.reset()
-            self.mode = MODE_ALIGN
-            self._settled = True
-            self._n_mode = 0
-        u_a = c * u_d
-        u_b = s * u_d
-        d_a, d_b, d_c = svpwm(u_a, u_b, u_dc)
-        dt = self.dead_time
-        if dt is not None:
-            # the pulses get the same feed-forward as every other voltage: uncompensated,
-            # the bridge's drops oppose the rise and aid the return of each pulse, which
-            # leaves a current offset of the order of the saturation asymmetry the test
-            # measures; the sign is the present pulse current's, along the pulse axis
-            i_a = c * i_d
-            h = 0.5 * math.sqrt(3.0) * s * i_d
-            d_a, d_b, d_c = dt.duties(d_a, d_b, d_c, i_a, -0.5 * i_a + h, -0.5 * i_a - h, u_dc)
-        self._u_a2 = self._u_a1
-        self._u_b2 = self._u_b1
-        self._u_a1 = u_a
-        self._u_b1 = u_b
-        return ControlOutput(k, d_a, d_b, d_c, True, th, 0.0, 0.0, MODE_POLARITY, i_d, i_q)
-
-
-def _hybrid_states(est: HybridEstimator) -> dict[str, float]:
-    """:data:`HYBRID_STATE_NAMES` of a hybrid estimator the Python engine steps."""
+def hybrid_states(est: HybridEstimator) -> dict[str, float]:
+    """:data:`HYBRID_STATE_NAMES` of a hybrid estimator whose methods Python runs (a plug-in's,
+    which the core calls)."""
     return {
         "weight": est.weight,
         "gain": est.gain,
@@ -874,17 +606,12 @@ def _hybrid_states(est: HybridEstimator) -> dict[str, float]:
 
 
 def _state(name: str) -> property:
-    """The controller's state ``name``: the compiled core's when it runs the periods, else
-    the Python step's."""
+    """The controller's state ``name``, read from the core."""
 
     def get(self: Controller) -> Any:
-        core = self.__dict__.get("_core")
-        return getattr(core, name) if core is not None else self.__dict__[name]
+        return getattr(self._core, name)
 
-    def put(self: Controller, value: Any) -> None:
-        self.__dict__[name] = value
-
-    return property(get, put, doc=f"``{name}`` (read from the compiled core when it runs)")
+    return property(get, doc=f"``{name}`` (read from the core)")
 
 
 for _name in STATE_NAMES[:8]:

@@ -1,88 +1,71 @@
-"""The controller's engines: the per-period step in pure Python or compiled.
+"""The controller's engine: the portable C core ``controller/core/``, whatever the name.
 
-``"python"``: :meth:`controller.Controller.step` as written in
-:mod:`controller._controller` and the estimators' modules. ``"compiled"``:
-the same step in the portable C core ``controller/core/`` (C99, no
-``Python.h``, one file per block: PI, filters, PLL, Luenberger, CIC, each
-demodulator, the flux observer, the hybrid band, the polarity test, FOC),
-bound to Python by ``controller/_cctl.c`` and built by ``pip install``
-beside the plant's engine when the machine has a C compiler and Python's
-headers. It repeats the Python blocks operation for operation and gives the
-same trace bit for bit (``tests/test_controller_engine.py``).
-``"auto"``: compiled when it is built and covers the controller, else Python.
-
-What it covers (:func:`compiled_cover`): the speed and current control of
-the alignment and run modes with the shipped estimators of
-:data:`COMPILED_ESTIMATORS`: ``tt-dq``,
-``tt-ab``, ``sfhf``, ``self-demod`` and ``epf`` (Wen's references [27] and
-[25]), each with the model or the measured normalisation (``normalise``;
-the core's ``cc_hypot`` rounds as CPython's ``math.hypot``) and the PLL or
-the mechanical position observer (``observer``), ``square-wave``,
-``square-wave-nocic``, ``sensored``, and the hybrids ``hybrid-tt-dq`` and
-``hybrid-square-wave`` (flux observer, hand-over band, trackers: tt-dq's
-PLL or mechanical observer, square-wave's Luenberger observer), with the
-current fed to the PIs filtered or raw, and the drive countermeasures of
-:mod:`controller._compensation` (dead-time feed-forward, cross-saturation
-correction, offset calibration: ``controller/core/cc_compensation.c``), and
-tt-dq's acceleration feed-forward (``accel_ff``, with the speed loop's
-reference model ``controller/core/cc_reference.c``). A user's Python
-estimator (a plug-in, :data:`KIND_EXTERNAL`) runs in it too: the core runs
-the controller and calls the estimator's ``update``, ``injection`` and
-``reset`` through the estimator interface (``controller/core/cc_estimator.h``),
-so the trace is the Python engine's bit for bit, and an exception the
-estimator raises leaves the step as it leaves the Python step. A user's
-estimator in C (:func:`controller.c_estimator`, a shared library) is
-called by the core directly, with no Python in the period. A controller
-outside it runs in
-Python whatever the choice, and says why in one line
-(:attr:`controller.Controller.engine_note`; ``bench run`` and ``bench
-controller`` print it, and the controller node's report keeps it): of the
-shipped estimators' options only a CIC delay line longer than the core's
-(square-wave's ``M`` above 64). Inside it the core runs every period,
-the start-up included, and keeps every state; the
+Every per-period equation of the controller lives once, in C99
+(``controller/core/``, no ``Python.h``, one file per block: PI, filters,
+PLL, Luenberger, CIC, each demodulator, the flux observer, the hybrid band,
+the polarity test, the countermeasures, the supervision, FOC), bound to
+Python by ``controller/_cctl.c`` and built by ``pip install`` beside the
+plant's core (both need a C compiler and Python's headers, ``tools/need-cc``;
+without the built core ``import controller`` fails with one line saying so).
+Python designs every gain, filter and threshold (:mod:`controller._compiled`
+hands the designed values to the core's ``_init`` functions); the core runs
+every period, the start-up included, and keeps every state. The
 :class:`controller.Controller` holds it by composition and forwards its
-commands (:mod:`controller._compiled`).
+commands.
 
-Equal means equal bits, not a tolerance: the C functions repeat the Python
-operations in the same order (Python's float ``%`` included), without fused
-multiply-adds, and call the same ``libm``; the CIC's re-anchoring sums its
-delay line left to right as Python 3.11's ``sum`` does. Purity is
-kept: the core reads a measurement's ``theta_e`` and ``w_e`` only for the
-sensored baseline.
+The ``engine`` choice of :class:`controller.Controller` (and ``bench run
+--engine``) is kept for compatibility, as the plant's (:mod:`plant_rt._engine`):
+``"auto"``, ``"compiled"`` and ``"python"`` all run the core, with the same
+bits the Python step gave when it was an engine. That Python step, the
+readable reference, is the oracle of the tests (``tests/oracle/``): the core
+is checked against it bit for bit, tolerance 0.
 
-Why C, as for the plant (:mod:`plant_rt._engine`): the Python step costs
-about 5.5 us per period at 10 kHz with tt-dq, of which 1.2 us is only the
+Every shipped estimator has its kind in the core (:data:`COMPILED_ESTIMATORS`,
+from the registry): ``tt-dq``, ``tt-ab``, ``sfhf``, ``self-demod`` and
+``epf`` (Wen's references [27] and [25]) with either normalisation and
+either position observer, ``square-wave``, ``square-wave-nocic``,
+``sensored``, and the hybrids ``hybrid-tt-dq`` and ``hybrid-square-wave``.
+Their options all fit it: the square-wave estimators' CIC delay ``M`` is a
+typed option range, ``1 .. CIC_MAX`` (the core's fixed delay line,
+:class:`controller._square_wave.SquareWaveOptions`), so a longer one is a
+scenario error of one line rather than a controller outside the core. A
+user's Python estimator (a plug-in, :data:`KIND_EXTERNAL`) runs in the core
+too: the core runs the controller and calls the estimator's ``update``,
+``injection`` and ``reset`` through the estimator interface
+(``controller/core/cc_estimator.h``); an exception the estimator raises
+leaves the step unchanged. A user's estimator in C
+(:func:`controller.c_estimator`, a shared library) is called by the core
+directly, with no Python in the period.
+
+Purity is kept: the core reads a measurement's ``theta_e`` and ``w_e`` only
+for the sensored baseline.
+
+Why C, as for the plant (:mod:`plant_rt._engine`): the Python step cost
+about 5.5 us per period at 10 kHz with tt-dq, of which 1.2 us was only the
 construction of the frozen :class:`controller.ControlOutput`; mypyc on the
 unchanged modules gave 1.4x on the whole loop. The C step (0.24 us against
-5.1 us for Python in the same ``bench perf`` run, docs/BENCHMARKS.md) fills
-the output's slots directly, reads the measurement's the same way, and is
-called without a Python frame.
+5.1 us for the Python step in the same ``bench perf`` run,
+docs/BENCHMARKS.md) fills the output's slots directly, reads the
+measurement's the same way, and is called without a Python frame.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
-from types import ModuleType
 from typing import Any
 
-from controller._registry import SPECS
+try:
+    import controller._cctl as _cctl
+except ImportError as e:  # not built on this machine
+    raise ImportError(
+        f"controller: the controller core (controller/core, C) is not built ({e}): install a C "
+        "compiler and Python's headers (tools/need-cc) and reinstall the project (pip install -e .)"
+    ) from None
+
+from controller._registry import SPECS  # the estimators, the square-wave's CIC_MAX among them
 
 ENGINES: tuple[str, ...] = ("auto", "compiled", "python")
-"""The engine choices of :class:`controller.Controller` (``engine=``)."""
-
-_cctl: ModuleType | None
-_why_not: str | None
-try:
-    import controller._cctl as _built
-except ImportError as e:  # not built on this machine
-    _cctl = None
-    _why_not = (
-        f"the compiled controller engine is not built ({e}; it needs a C compiler and Python's "
-        "headers when the project is installed): the controller runs in pure Python"
-    )
-else:
-    _cctl = _built
-    _why_not = None
+"""The engine choices of :class:`controller.Controller` (``engine=``); each runs the core."""
 
 #: estimator name -> the kind of the compiled core (controller/_cctl.c), from the registry
 _KINDS = {s.name: s.compiled_kind for s in SPECS.values() if s.compiled_kind is not None}
@@ -94,12 +77,7 @@ COMPILED_ESTIMATORS: tuple[str, ...] = tuple(_KINDS)
 #: The core's kind of an estimator outside it, a user's Python estimator: the core calls
 #: its ``update``, ``injection`` and ``reset`` each period (``controller/core/cc_estimator.h``,
 #: adapted by ``controller/_cctl.c``).
-KIND_EXTERNAL = 10
-
-#: The kinds with tt-dq's PLL, which take ``accel_ff`` (tt-dq, hybrid-tt-dq). The core runs
-#: every rotating-injection demodulator (tt-dq, tt-ab, sfhf, hybrid-tt-dq, self-demod, epf)
-#: with either ``normalise`` and either ``observer``.
-_ACCEL_FF_KINDS = (1, 6)
+KIND_EXTERNAL: int = _cctl.KIND_EXTERNAL
 
 
 def core_sources() -> list[Path]:
@@ -109,53 +87,40 @@ def core_sources() -> list[Path]:
 
 
 def compiled_controller_missing() -> str | None:
-    """None when the compiled engine is built, else one line saying why the controller runs
-    in Python."""
-    return _why_not
+    """None: the controller's core is always built (``import controller`` fails without it).
+
+    Public API kept for the scripts that call it (as :func:`plant_rt.compiled_engine_missing`);
+    nothing in the bench branches on it."""
+    return None
 
 
-def compiled_cover(pars: Any) -> tuple[int, str | None]:
-    """``(kind, None)`` when the compiled core covers the controller ``pars`` describes,
-    else ``(0, why)``: the one line saying what keeps it in Python.
-
-    An estimator the registry gives no compiled kind (a plug-in) is
-    :data:`KIND_EXTERNAL`: the core runs the controller and calls the estimator's
-    Python methods each period, with the options the plug-in takes itself."""
-    name = pars.estimator
-    kind = _KINDS.get(name, KIND_EXTERNAL)
-    if kind == KIND_EXTERNAL:
-        return kind, None
-    opts = dict(pars.estimator_options)
-    if kind not in _ACCEL_FF_KINDS and opts.get("accel_ff", False):
-        return 0, f"{name} with accel_ff is not compiled: the controller runs in Python"
-    if kind in (4, 7) and int(opts.get("M", 2)) > 64:
-        return 0, f"{name} with a CIC delay M > 64 is not compiled: Python"
-    return kind, None
+def core_kind(pars: Any) -> int:
+    """The core's kind of the estimator ``pars`` names (a ``ControllerPars``): the
+    registry's compiled kind of a shipped estimator's name, :data:`KIND_EXTERNAL` for a
+    plug-in's name. The kind a controller runs is its estimator's as built
+    (:func:`controller._compiled.instance_kind`): a plug-in that returns a shipped
+    estimator unchanged runs as that estimator's kind."""
+    return _KINDS.get(pars.estimator, KIND_EXTERNAL)
 
 
 def resolve_controller_engine(engine: str, pars: Any) -> tuple[str, str | None]:
-    """The engine a controller runs on, ``"compiled"`` or ``"python"``, and why not compiled.
+    """The engine a controller runs on: ``("compiled", None)`` (its C core) for every known
+    choice; the pair is kept for compatibility (the second item said why a controller ran
+    in Python).
 
     Parameters
     ----------
     engine : {"auto", "compiled", "python"}
-        The choice; ``"auto"`` and ``"compiled"`` take the compiled engine
-        when it is built and covers ``pars`` (:func:`compiled_cover`).
+        The choice, kept for compatibility.
     pars : ControllerPars
-        The controller's settings.
+        The controller's settings (every shipped estimator and option, and every plug-in,
+        runs in the core).
 
     Raises
     ------
     ValueError
-        For an unknown name, or ``"compiled"`` when the engine is not built.
+        For an unknown name.
     """
     if engine not in ENGINES:
         raise ValueError(f"unknown controller engine {engine!r} (known: {', '.join(ENGINES)})")
-    if engine == "python":
-        return "python", None
-    if _why_not is not None:
-        if engine == "compiled":
-            raise ValueError(_why_not)
-        return "python", _why_not
-    kind, why = compiled_cover(pars)
-    return ("compiled", None) if kind else ("python", why)
+    return "compiled", None

@@ -63,7 +63,6 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from controller._api import EstimatorInput
 from controller._filters import Biquad2, FirstOrder2
 from controller._params import MotorModel
 from controller._rotating import RotatingHFEstimator, RotatingInjectionPars
@@ -92,41 +91,6 @@ class EPFEstimator(RotatingHFEstimator):
         self._lpf_p.reset()
         self._lpf_n.reset()
         self._lpf_m.reset()
-
-    def update(self, x: EstimatorInput) -> None:
-        """Demodulate sample ``k`` with the two demodulation signals; advance the observer."""
-        self._k = x.k
-        th = self.pll.theta_hat
-        c = math.cos(th)
-        s = math.sin(th)
-        i_a = x.i_alpha
-        i_b = x.i_beta
-        i_d = c * i_a + s * i_b
-        i_q = c * i_b - s * i_a
-        i_dh, i_qh = self._bpf.update(i_d, i_q)
-        psi = (x.k * self.wT) % _TWO_PI - th
-        c_p = math.cos(psi)
-        s_p = math.sin(psi)
-        dc = i_dh * c_p
-        qs = i_qh * s_p
-        qc = i_qh * c_p
-        ds = i_dh * s_p
-        # i_dqh exp(-j psi) -> positive sequence, i_dqh exp(+j psi) -> negative sequence
-        p_r, p_i = self._lpf_p.update(dc + qs, qc - ds)
-        n_r, n_i = self._lpf_n.update(dc - qs, qc + ds)
-        # P_p P_n = I_p I_n exp(j 2 dtheta)
-        f = p_r * n_i + p_i * n_r
-        if self.measured:
-            # the amplitude I_p I_n from the product and its quadrature, low-passed once
-            # more: each LPF leaves a tenth of the other sequence at 2 w_h, which would
-            # make the instantaneous hypot ripple; f itself stays as the loop is designed
-            a_f, a_g = self._lpf_m.update(f, p_r * n_r - p_i * n_i)
-            err = f / (2.0 * max(math.hypot(a_f, a_g), self._floor))
-        else:
-            err = f * self._inv_norm
-        i_df = i_d - i_dh
-        i_qf = i_q - i_qh
-        self._publish(th, f, err, c * i_df - s * i_qf, s * i_df + c * i_qf, x.torque)
 
 
 def create(motor: MotorModel, T_s: float, **options: Any) -> EPFEstimator:

@@ -76,14 +76,6 @@ class FirstOrder2:
         self._s1 = 0.0
         self._s2 = 0.0
 
-    def update(self, x_1: float, x_2: float) -> tuple[float, float]:
-        """Filter one sample of each signal and return the outputs."""
-        y_1 = self.b0 * x_1 + self._s1
-        y_2 = self.b0 * x_2 + self._s2
-        self._s1 = self.b1 * x_1 - self.a1 * y_1
-        self._s2 = self.b1 * x_2 - self.a1 * y_2
-        return y_1, y_2
-
     def reset(self) -> None:
         """Zero the states."""
         self._s1 = self._s2 = 0.0
@@ -99,12 +91,6 @@ class FirstOrder:
         self.b0, self.b1 = float(b[0]), float(b[1])
         self.a1 = float(a[1])
         self._s = 0.0
-
-    def update(self, x: float) -> float:
-        """Filter one sample and return the output."""
-        y = self.b0 * x + self._s
-        self._s = self.b1 * x - self.a1 * y
-        return y
 
     def reset(self) -> None:
         """Zero the state."""
@@ -124,16 +110,6 @@ class Biquad2:
         self.b0, self.b1, self.b2 = (float(x) for x in b[:3])
         self.a1, self.a2 = float(a[1]), float(a[2])
         self._p1 = self._p2 = self._q1 = self._q2 = 0.0
-
-    def update(self, x_1: float, x_2: float) -> tuple[float, float]:
-        """Filter one sample of each signal and return the outputs."""
-        y_1 = self.b0 * x_1 + self._p1
-        y_2 = self.b0 * x_2 + self._q1
-        self._p1 = self.b1 * x_1 - self.a1 * y_1 + self._p2
-        self._q1 = self.b1 * x_2 - self.a1 * y_2 + self._q2
-        self._p2 = self.b2 * x_1 - self.a2 * y_1
-        self._q2 = self.b2 * x_2 - self.a2 * y_2
-        return y_1, y_2
 
     def reset(self) -> None:
         """Zero the states."""

@@ -132,6 +132,11 @@ def pll_gains(alpha_o: float, T_s: float) -> tuple[float, float]:
 class FluxObserver:
     """Reduced-order flux observer with a PLL (Hinkkanen et al. 2018), per PWM period.
 
+    Kept in Python as a public block a user may call per period (a plug-in's
+    estimator composes it; the core calls a plug-in's Python each period), and
+    as the tests' oracle of ``controller/core/cc_flux_observer.c``, which the controller's
+    one engine runs with the same operations (``tests/oracle/``, tolerance 0).
+
     Parameters
     ----------
     motor : MotorModel

@@ -120,11 +120,11 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, fields
-from typing import Any, Protocol
+from typing import Any, ClassVar, Protocol
 
 import numpy as np
 
-from controller._api import Estimator, EstimatorInput, option_field
+from controller._api import option_field
 from controller._flux_observer import FluxObserver
 from controller._luenberger import LuenbergerObserver
 from controller._params import MotorModel
@@ -341,9 +341,15 @@ class _MechanicalTracker(_LuenbergerTracker):
 class HybridEstimator:
     """Injection estimator below the band, flux observer above, blended in between.
 
+    The design (the band, the flux observer, the trackers that slave the
+    injection estimator); the period runs in the controller's core
+    (``controller/core/cc_hybrid.c``) with a shipped injection estimator, tt-dq
+    or square-wave. Its readable Python is the tests' oracle
+    (``tests/oracle/estimators.py``, tolerance 0).
+
     Parameters
     ----------
-    hf : Estimator
+    hf : TTDQEstimator or SquareWaveEstimator
         The injection estimator (built by this module's :func:`create`).
     tracker : _Tracker
         Access to ``hf``'s tracker.
@@ -362,7 +368,7 @@ class HybridEstimator:
         Schedule speed after the play (rad/s).
     saliency_offset : float
         Angle (rad) by which the injection estimator's saliency axis leads the
-        rotor's, set by the controller before each :meth:`update` when it
+        rotor's, set by the controller before each period's ``update`` when it
         corrects cross-saturation (:func:`controller._compensation.cross_saturation_offset`).
         It is a property of the saliency the injection sees, not of the flux
         the observer models, so it is subtracted from the injection estimate
@@ -373,8 +379,12 @@ class HybridEstimator:
         to the output plus the offset, where it will lock.
     """
 
+    #: The period predicts the injection's HF current for the dead-time feed-forward
+    #: (its injection estimator's, times the fade; zero for one that predicts none).
+    predicts_hf: ClassVar[bool] = True
+
     def __init__(
-        self, hf: Estimator, tracker: _Tracker, observer: FluxObserver, band: TransitionBand
+        self, hf: Any, tracker: _Tracker, observer: FluxObserver, band: TransitionBand
     ) -> None:
         self.hf = hf
         #: The injection family of its injection estimator (``controller._registry``).
@@ -412,14 +422,6 @@ class HybridEstimator:
     def U_h(self) -> float:
         return float(getattr(self.hf, "U_h", 0.0))
 
-    def hf_current_next(self) -> tuple[float, float]:
-        """The injection estimator's predicted HF current, scaled by the injection's fade."""
-        predict = getattr(self.hf, "hf_current_next", None)
-        if predict is None:
-            return 0.0, 0.0
-        h_a, h_b = predict()
-        return self.gain * h_a, self.gain * h_b
-
     def reset(self, theta0: float) -> None:
         """Restart both estimators at ``theta0`` (rad), standstill, injection on."""
         self.hf.reset(theta0)
@@ -447,70 +449,6 @@ class HybridEstimator:
             "observer.k_p": obs.k_p,
             "observer.k_i": obs.k_i,
         }
-
-    def injection(self) -> tuple[float, float]:
-        """The injection estimator's HF voltage times ``g``; exactly zero above the band."""
-        g = self.gain
-        if g == 0.0:
-            return 0.0, 0.0
-        u_a, u_b = self.hf.injection()
-        if g == 1.0:
-            return u_a, u_b
-        return g * u_a, g * u_b
-
-    def update(self, x: EstimatorInput) -> None:
-        """Both estimators take sample ``k``; blend; schedule the next period."""
-        hf = self.hf
-        obs = self.observer
-        tr = self.tracker
-        hf.update(x)
-        lam = self.weight
-        off = self.saliency_offset
-        if lam == 0.0:
-            w_s = tr.w_smooth
-            th = (hf.theta_hat - off) % _TWO_PI if off else hf.theta_hat
-            obs.update_slaved(x.i_alpha, x.i_beta, x.u_alpha, x.u_beta, th, w_s)
-            w = hf.w_hat
-            err = hf.err
-        else:
-            obs.update(x.i_alpha, x.i_beta, x.u_alpha, x.u_beta)
-            w_o = obs.w_hat
-            if lam == 1.0:
-                th = obs.theta_hat
-                w = w_o
-                w_s = w_o
-                err = obs.eps
-                tr.sync(th + off, w_o, obs.accel, x.torque)
-            else:
-                th_h = hf.theta_hat - off
-                d = (obs.theta_hat - th_h + math.pi) % _TWO_PI - math.pi
-                th = (th_h + lam * d) % _TWO_PI
-                w_h = hf.w_hat
-                w = w_h + lam * (w_o - w_h)
-                w_t = tr.w_smooth
-                w_s = w_t + lam * (w_o - w_t)
-                e_h = hf.err
-                err = e_h + lam * (obs.eps - e_h)
-        self.theta_hat = th
-        self.w_hat = w
-        self.err = err
-        g = self.gain
-        if g == 1.0:
-            self.i_alpha_f = hf.i_alpha_f
-            self.i_beta_f = hf.i_beta_f
-        elif g == 0.0:
-            self.i_alpha_f = x.i_alpha
-            self.i_beta_f = x.i_beta
-        else:
-            self.i_alpha_f = x.i_alpha + g * (hf.i_alpha_f - x.i_alpha)
-            self.i_beta_f = x.i_beta + g * (hf.i_beta_f - x.i_beta)
-        # schedule: play operator on |w|, then the weight and the injection factor;
-        # held below the band during the start-up at standstill (not running),
-        # where the injection estimator's convergence transients are not a speed
-        band = self.band
-        y = band.play(self.y, w_s) if x.running else 0.0
-        self.y = y
-        self.weight, self.gain = band.weights(y)
 
 
 @dataclass(frozen=True)
@@ -590,7 +528,7 @@ def _own(options: dict[str, Any]) -> dict[str, Any]:
 
 
 def _compose(
-    motor: MotorModel, T_s: float, est: Estimator, tracker: _Tracker, own: dict[str, Any]
+    motor: MotorModel, T_s: float, est: Any, tracker: _Tracker, own: dict[str, Any]
 ) -> HybridEstimator:
     """The hybrid of the injection estimator ``est`` and the flux observer :func:`design` gives."""
     alpha_o = own.pop("alpha_o", None)

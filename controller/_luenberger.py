@@ -140,27 +140,11 @@ class LuenbergerObserver:
         self.w_hat = w0
         self.x = x0
 
-    def step(self, e: float, tau_e: float) -> None:
-        """Advance one period with position error ``e`` (rad) and torque ``tau_e`` (N m)."""
-        w = self.w_hat
-        th = self.theta_hat + self.T_s * w + self._g3 * e
-        if th >= _TWO_PI:
-            th -= _TWO_PI
-            if th >= _TWO_PI:
-                th %= _TWO_PI
-        elif th < 0.0:
-            th += _TWO_PI
-            if th < 0.0:
-                th %= _TWO_PI
-        self.theta_hat = th
-        self.w_hat = w + self.T_s * self.x + self._g2 * e + self._gt * tau_e
-        self.x += self._g1 * e
-
 
 def observer_response(
     a: float, T_s: float, z: np.ndarray, b: float | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
-    """``(Theta/E, W/E)`` of :meth:`LuenbergerObserver.step` at ``z`` (module docstring);
+    """``(Theta/E, W/E)`` of the observer's step (``controller/core/cc_luenberger.c``) at ``z`` (module docstring);
     ``b`` as in :class:`LuenbergerObserver`."""
     zi = 1.0 / np.asarray(z, complex)
     d = 1.0 - zi

@@ -6,6 +6,11 @@ from __future__ import annotations
 class PIController:
     """2DOF PI controller, the motulator template.
 
+    Kept in Python as a public block a user may call per period (a plug-in's
+    estimator composes it; the core calls a plug-in's Python each period), and
+    as the tests' oracle of ``controller/core/cc_pi.c``, which the controller's
+    one engine runs with the same operations (``tests/oracle/``, tolerance 0).
+
     Control law (sample ``k``)::
 
         u   = k_t r - k_p y + u_i + u_ff        (output, before limiting)

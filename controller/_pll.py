@@ -14,6 +14,11 @@ _TWO_PI = 2.0 * math.pi
 class PositionObserver:
     """PI regulator driving the normalised position error to zero, then an integrator.
 
+    Kept in Python as a public block a user may call per period (a plug-in's
+    estimator composes it; the core calls a plug-in's Python each period), and
+    as the tests' oracle of ``controller/core/cc_pll.c``, which the controller's
+    one engine runs with the same operations (``tests/oracle/``, tolerance 0).
+
     Wen Fig. 4 (and below eqs. (9), (28), (34)): ``w_hat = k_p err + k_i int(err)``,
     ``theta_hat = int(w_hat)``. With the error normalised to ``err ~ theta -
     theta_hat`` the loop is ``s^2 + k_p s + k_i`` (ignoring the demodulation

@@ -31,8 +31,12 @@ polarity test) before the speed loop: a plug-in that declares none takes its
 estimator's (:func:`estimator_family`), so a plug-in that returns a shipped
 estimator runs as that estimator does, start-up and designed gains included;
 a declaration and an estimator that disagree are an error.  A plug-in never
-receives the plant's truth and never runs on the compiled core (a plug-in's
-spec that asks for either is an error).
+receives the plant's truth and its spec names no compiled kind (a plug-in's
+spec that asks for either is an error).  The shipped estimators' periods run
+in the core alone (their Python is the tests' oracle): a plug-in that returns
+one unchanged runs as its kind (:func:`shipped_kind`); one built on a shipped
+class without a period of its own, or that returns the sensored baseline, is
+refused with one line (docs/ESTIMATORS.md).
 
 Options (:func:`declared_options`, :func:`hand_over`).  A declared estimator
 (every shipped one, a plug-in with options) receives the scenario's options it
@@ -54,7 +58,17 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from controller import _epf, _hybrid, _self_demod, _sensored, _sfhf, _square_wave, _tt_ab, _tt_dq
+from controller import (
+    _epf,
+    _hybrid,
+    _rotating,
+    _self_demod,
+    _sensored,
+    _sfhf,
+    _square_wave,
+    _tt_ab,
+    _tt_dq,
+)
 from controller._api import OPTION_KINDS, OPTION_LIMITS, Estimator, Option
 from controller._params import MotorModel
 from controller._rotating import RotatingInjectionPars
@@ -566,6 +580,75 @@ def check_estimator(name: str) -> str:
     return injection_family(name)
 
 
+#: The shipped estimators' design classes, each with the registry entry whose core kind
+#: runs it (``square-wave-nocic`` is square-wave's class with ``cic`` False, the same kind).
+_CLASS_SPEC: dict[type, str] = {
+    _tt_dq.TTDQEstimator: "tt-dq",
+    _tt_ab.TTABEstimator: "tt-ab",
+    _sfhf.SFHFEstimator: "sfhf",
+    _self_demod.SelfDemodEstimator: "self-demod",
+    _epf.EPFEstimator: "epf",
+    _square_wave.SquareWaveEstimator: "square-wave",
+    _sensored.SensoredEstimator: "sensored",
+}
+#: A hybrid's entry, by the class of its injection estimator.
+_HYBRID_SPEC: dict[type, str] = {
+    _tt_dq.TTDQEstimator: "hybrid-tt-dq",
+    _square_wave.SquareWaveEstimator: "hybrid-square-wave",
+}
+#: The classes whose period runs only in the core (their Python is the tests' oracle).
+_SHIPPED_CLASSES: tuple[type, ...] = (
+    _rotating.RotatingHFEstimator,
+    _square_wave.SquareWaveEstimator,
+    _sensored.SensoredEstimator,
+    _hybrid.HybridEstimator,
+)
+
+
+def shipped_spec(est: object) -> EstimatorSpec | None:
+    """The registry entry of ``est`` when it is a shipped estimator exactly as its factory
+    builds it (its design class, not a subclass; a hybrid of a shipped injection
+    estimator), else None."""
+    t = type(est)
+    if t is _hybrid.HybridEstimator:
+        name = _HYBRID_SPEC.get(type(getattr(est, "hf", None)))
+    else:
+        name = _CLASS_SPEC.get(t)
+    return None if name is None else SPECS[name]
+
+
+def shipped_kind(est: object) -> int | None:
+    """The core's kind of ``est`` when it is a shipped estimator exactly as its factory
+    builds it (:func:`shipped_spec`), else None.
+
+    A shipped estimator's period runs in the core alone (``controller/core/``; its Python
+    step is the tests' oracle, ``tests/oracle/``), so its design object has no per-period
+    methods: the core runs it as this kind, whoever built it (docs/ESTIMATORS.md).
+    """
+    s = shipped_spec(est)
+    return None if s is None else s.compiled_kind
+
+
+def _refuse_shipped(est: object, missing: list[str]) -> str | None:
+    """Why a plug-in's shipped estimator cannot run (None: it can)."""
+    s = shipped_spec(est)
+    if s is not None and not s.needs_truth:
+        return None  # runs as that kind
+    if s is not None:
+        return (
+            f"it returns the {type(est).__name__}, which reads the plant's truth a plug-in "
+            "never receives"
+        )
+    if not isinstance(est, _SHIPPED_CLASSES) or not missing:
+        return None
+    return (
+        f"{type(est).__name__} is built on a shipped estimator, whose period runs only in the "
+        f"core, and has no per-period methods of its own (missing: {', '.join(missing)}): "
+        "return the shipped estimator unchanged (it runs as that estimator) or implement "
+        "update, injection and reset"
+    )
+
+
 def missing_members(est: object) -> list[str]:
     """The members of the Estimator protocol ``est`` lacks (empty: it meets it)."""
     missing = [
@@ -607,7 +690,10 @@ def make_estimator(name: str, motor: MotorModel, T_s: float, **options: Any) -> 
     except TypeError as e:
         raise TypeError(f"estimator plug-in {name!r}: {e}") from None
     missing = missing_members(obj)
-    if missing:
+    why = _refuse_shipped(obj, missing)
+    if why is not None:
+        raise _fail(name, why)
+    if missing and shipped_kind(obj) is None:
         raise _fail(
             name,
             f"{type(obj).__name__} does not meet the Estimator protocol: "

@@ -79,7 +79,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from controller._api import EstimatorInput, option_field
+from controller._api import option_field
 from controller._design import PM_TARGET_DEG, freq_response
 from controller._filters import BPF_WEN, HPF_WEN, LPF_WEN, bandpass_coefficients, discretize
 from controller._luenberger import LuenbergerObserver, design_pole, observer_response
@@ -397,10 +397,14 @@ def mechanical_design(
 class RotatingHFEstimator:
     """Common part: injection, discrete filters, observer, estimator attributes.
 
-    Subclasses implement :meth:`update` (demodulation) and use
-    ``self.pll``, ``self._bpf_b/_bpf_a`` etc. What each quantity refers to
+    The design: the injection, the discrete filters and the observer with
+    their derivations. The period (each demodulator's ``update``, the
+    ``injection`` and the predicted HF current) runs in the controller's core
+    (``controller/core/cc_rotating.c`` and one file per demodulator); its
+    readable Python is the tests' oracle (``tests/oracle/estimators.py``).
+    What each quantity refers to
     in time: ``theta_hat`` and ``err`` belong to the sample instant
-    ``k T_s`` of the last :meth:`update`; :meth:`injection` is the voltage
+    ``k T_s`` of the last ``update``; ``injection`` is the voltage
     averaged over period ``k + 1``.
 
     Parameters
@@ -421,6 +425,12 @@ class RotatingHFEstimator:
     """
 
     injection_family: ClassVar[str] = "rotating"
+
+    #: The period predicts its HF current at the mid-point of the next one (eq. 4/7 with
+    #: the model amplitudes and ``theta_hat``): the dead-time compensation adds it to the
+    #: reference's current for the sign of each phase current
+    #: (:mod:`controller._compensation`).
+    predicts_hf: ClassVar[bool] = True
 
     #: What of the demodulation lies between ``theta_hat`` and ``err``
     #: (:func:`in_loop_response`): ``"none"``, ``"lpf"`` or ``"bpf+lpf"``.
@@ -507,31 +517,6 @@ class RotatingHFEstimator:
         self.i_beta_f = 0.0
         self._k = 0
 
-    def update(self, x: EstimatorInput) -> None:  # pragma: no cover - abstract
-        """Take sample ``k`` and advance the estimate."""
-        raise NotImplementedError
-
-    def _publish(
-        self, th: float, f: float, err: float, i_af: float, i_bf: float, torque: float
-    ) -> None:
-        """End of every demodulator's update: outputs of sample ``k``, then the observer step
-        (``torque``: the controller's torque, N m, the mechanical observer's feed-forward)."""
-        self.i_alpha_f = i_af
-        self.i_beta_f = i_bf
-        self.theta_hat = th
-        self.f = f
-        self.err = err
-        pll = self.pll
-        if isinstance(pll, PositionObserver):
-            pll.update(err, self.accel)
-            self.w_hat = pll.w_hat
-        else:
-            # the rate this step gives the angle, as the PLL's ``w_hat``: the
-            # speed state before the step plus the proportional correction
-            w = pll.w_hat
-            pll.step(err, torque)
-            self.w_hat = w + self._l3 * err
-
     def gains(self) -> dict[str, float]:
         """Every gain and corner of the estimator (rad/s unless named otherwise)."""
         pm, w_c = self.phase_margin()
@@ -617,27 +602,6 @@ class RotatingHFEstimator:
             return 1.0 + r_e * (g_m - g) * T / ((z - 1.0) * (1.0 + g * th_e))
         c_w = pll.k_p + T * pll.k_i * z / (z - 1.0)
         return c_w * g_m * T / ((z - 1.0) * (1.0 + g * open_loop(self.w_o, T, w)))
-
-    def hf_current_next(self) -> tuple[float, float]:
-        """Model HF current (alpha, beta) (A) at the mid-point of period ``k + 1``.
-
-        Eq. (4)/(7) in alpha-beta at ``t = (k + 1.5) T_s`` with the model
-        amplitudes and ``theta_hat``: what the dead-time compensation needs to
-        know the sign of each phase current in the period its duties act in
-        (:mod:`controller._compensation`).
-        """
-        ph = (self._k + 1.5) * self.wT
-        ng = 2.0 * self.pll.theta_hat - ph
-        # I_p e^{j(ph - pi/2)} + I_n e^{j(ng + pi/2)}
-        return (
-            self.I_p * math.sin(ph) - self.I_n * math.sin(ng),
-            -self.I_p * math.cos(ph) + self.I_n * math.cos(ng),
-        )
-
-    def injection(self) -> tuple[float, float]:
-        """HF voltage (V) for period ``k + 1``: eq. (3) at ``t = (k + 1.5) T_s``."""
-        ph = (self._k + 1.5) * self.wT
-        return self.V_h * math.cos(ph), self.V_h * math.sin(ph)
 
     def _reset_filters(self) -> None:
         raise NotImplementedError

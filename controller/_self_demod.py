@@ -56,10 +56,8 @@ Time stamps: ``err`` and ``theta_hat`` refer to the sample instant ``k T_s``.
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
-from controller._api import EstimatorInput
 from controller._filters import Biquad2, FirstOrder, FirstOrder2, discretize
 from controller._params import MotorModel
 from controller._rotating import RotatingHFEstimator, RotatingInjectionPars
@@ -87,33 +85,6 @@ class SelfDemodEstimator(RotatingHFEstimator):
         self._quad.reset()
         self._lpf.reset()
         self._lpf2.reset()
-
-    def update(self, x: EstimatorInput) -> None:
-        """Separate, self-demodulate and heterodyne sample ``k``; advance the observer."""
-        self._k = x.k
-        th = self.pll.theta_hat
-        i_a = x.i_alpha
-        i_b = x.i_beta
-        d_a, d_b = self._bpf.update(i_a, i_b)
-        q_a, q_b = self._quad.update(i_a, i_b)
-        # 2 i_p = d - j q = (d_a + q_b) + j (d_b - q_a), 2 i_n = d + j q
-        p_r = d_a + q_b
-        p_i = d_b - q_a
-        n_r = d_a - q_b
-        n_i = d_b + q_a
-        # i_p i_n = I_p I_n exp(j(2 theta_e + phi_p + phi_n))
-        m_r = 0.25 * (p_r * n_r - p_i * n_i)
-        m_i = 0.25 * (p_r * n_i + p_i * n_r)
-        c_2 = math.cos(2.0 * th)
-        s_2 = math.sin(2.0 * th)
-        if self.measured:
-            # quadrature: Re{i_p i_n exp(-j 2 theta_hat)} = I_p I_n cos(2 dtheta + ...)
-            f, g = self._lpf2.update(m_i * c_2 - m_r * s_2, m_r * c_2 + m_i * s_2)
-            err = f / (2.0 * max(math.hypot(f, g), self._floor))
-        else:
-            f = self._lpf.update(m_i * c_2 - m_r * s_2)
-            err = f * self._inv_norm
-        self._publish(th, f, err, i_a - d_a, i_b - d_b, x.torque)
 
 
 def create(motor: MotorModel, T_s: float, **options: Any) -> SelfDemodEstimator:

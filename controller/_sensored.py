@@ -5,7 +5,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
-from controller._api import EstimatorInput
 from controller._params import MotorModel
 
 
@@ -31,19 +30,6 @@ class SensoredEstimator:
         self.err = 0.0
         self.i_alpha_f = 0.0
         self.i_beta_f = 0.0
-
-    def update(self, x: EstimatorInput) -> None:
-        """Take sample ``k`` (angle and speed at ``k T_s``)."""
-        if x.theta_e is None or x.w_e is None:
-            raise ValueError("the sensored estimator needs Measurement.theta_e and w_e")
-        self.theta_hat = x.theta_e
-        self.w_hat = x.w_e
-        self.i_alpha_f = x.i_alpha
-        self.i_beta_f = x.i_beta
-
-    def injection(self) -> tuple[float, float]:
-        """No HF injection."""
-        return 0.0, 0.0
 
     def gains(self) -> dict[str, float]:
         """No gains: the angle and speed come from the sensor."""

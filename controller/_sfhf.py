@@ -27,10 +27,8 @@ and ``theta_hat`` refer to ``k T_s``.
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
-from controller._api import EstimatorInput
 from controller._filters import Biquad2, FirstOrder, FirstOrder2
 from controller._params import MotorModel
 from controller._rotating import RotatingHFEstimator, RotatingInjectionPars
@@ -55,31 +53,6 @@ class SFHFEstimator(RotatingHFEstimator):
         self._hpf.reset()
         self._lpf.reset()
         self._lpf2.reset()
-
-    def update(self, x: EstimatorInput) -> None:
-        """Demodulate sample ``k`` (Fig. 3, eq. 9) and advance the observer."""
-        self._k = x.k
-        th = self.pll.theta_hat
-        ph = (x.k * self.wT) % (2.0 * math.pi)
-        c_h = math.cos(ph)
-        s_h = math.sin(ph)
-        i_a = x.i_alpha
-        i_b = x.i_beta
-        i_ah, i_bh = self._bpf.update(i_a, i_b)
-        x_p, y_p = self._hpf.update(c_h * i_ah + s_h * i_bh, c_h * i_bh - s_h * i_ah)
-        i_an = c_h * x_p - s_h * y_p
-        i_bn = s_h * x_p + c_h * y_p
-        ref = 2.0 * th - ph
-        c_r = math.cos(ref)
-        s_r = math.sin(ref)
-        if self.measured:
-            # quadrature: Re{...} = i_bn cos(ref) - i_an sin(ref) = I_n cos(2 dtheta)
-            f, g = self._lpf2.update(-(i_an * c_r + i_bn * s_r), i_bn * c_r - i_an * s_r)
-            err = f / (2.0 * max(math.hypot(f, g), self._floor))
-        else:
-            f = self._lpf.update(-(i_an * c_r + i_bn * s_r))
-            err = f * self._inv_norm
-        self._publish(th, f, err, i_a - i_ah, i_b - i_bh, x.torque)
 
 
 def create(motor: MotorModel, T_s: float, **options: Any) -> SFHFEstimator:

@@ -141,7 +141,8 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from controller._api import EstimatorInput, option_field
+from controller._api import option_field
+from controller._cctl import CIC_MAX
 from controller._cic import CicInterpolator
 from controller._design import PM_TARGET_DEG, margins, solve_largest
 from controller._luenberger import LuenbergerObserver, observer_response
@@ -209,17 +210,27 @@ class SquareWaveOptions:
         Observer triple pole (rad/s); None derives it from ``pm_deg``
         (:func:`observer_pole`).
     M : int
-        CIC differential delay (PWM periods).
+        CIC differential delay (PWM periods), at most the core's delay line (64).
     delay_comp : float or None
         Delay compensation of the injection angle (periods); None uses the
         derived 1.5. Zero disables it (for tests and comparisons).
     pm_deg : float
         Phase-margin target of the observer loop (deg), used when ``a`` is None.
+
+    Notes
+    -----
+    ``M`` is at most ``CIC_MAX`` (64): the core's delay line is a fixed array
+    (``controller/core/cc_cic.h``, no allocation), and a longer one buys
+    nothing. The CIC adds ``M T_s / 2`` of delay to the observer loop, so the
+    derived pole (:func:`observer_pole`, ``pm_deg``) falls as ``M`` grows:
+    50.8 rad/s at ``M = 2``, 15.2 at 16 and 4.45 at 64 with ``T_s`` = 1 ms
+    (ten times each at 10 kHz); at 64 the observer is already seven times
+    slower than the speed loop's 31.4 rad/s target, which it must follow.
     """
 
     U_h: float = option_field(20.0, positive=True, limit="inverter_linear")
     a: float | None = option_field(None, positive=True)
-    M: int = option_field(2, kind="int", minimum=1)
+    M: int = option_field(2, kind="int", minimum=1, maximum=CIC_MAX)
     delay_comp: float | None = option_field(None, minimum=0.0)  # 0 disables it
     pm_deg: float = option_field(PM_TARGET_DEG, positive=True)
 
@@ -261,6 +272,8 @@ class SquareWaveEstimator:
             raise ValueError(f"T_s must be > 0, got {T_s}")
         if not U_h > 0.0:
             raise ValueError(f"U_h must be > 0, got {U_h}")
+        if not 1 <= M <= CIC_MAX:
+            raise ValueError(f"M (the CIC delay) must be in 1 .. {CIC_MAX}, got {M}")
         if not motor.L_q > motor.L_d:
             raise ValueError(
                 f"square-wave injection needs saliency L_q > L_d, got "
@@ -344,110 +357,6 @@ class SquareWaveEstimator:
         self._reset_state()
 
     # -- per step ------------------------------------------------------------
-
-    def injection(self) -> tuple[float, float]:
-        """HF voltage (alpha, beta) (V) for period ``k + 1``, along ``theta(k + 1.5)``."""
-        return self._u_next
-
-    def update(self, x: EstimatorInput) -> None:
-        """Take sample ``k``: extract the envelope, interpolate, correct the observer."""
-        i_a = x.i_alpha
-        i_b = x.i_beta
-        n = self._n
-        fresh = False
-        E_a = E_b = u_c = u_s = 0.0
-        if n >= 1:
-            # eq. (7): response to the voltage of period k-1
-            h_a = 0.5 * (i_a - self._ia1)
-            h_b = 0.5 * (i_b - self._ib1)
-            if n >= 3 and self._sg1 < 0.0:
-                # rate conversion R = 0.5: periods k-2 (+U_h) and k-1 (-U_h) give one
-                # envelope sample, mid-point k-1; the fundamental's linear drift cancels
-                E_a = 0.5 * (self._ha1 - h_a)
-                E_b = 0.5 * (self._hb1 - h_b)
-                u_c = 0.5 * (self._c1 + self._c2)
-                u_s = 0.5 * (self._s1 + self._s2)
-                fresh = True
-            self._ha1 = h_a
-            self._hb1 = h_b
-
-        err = 0.0
-        if fresh and self._env_n == 0:
-            for f, v in zip(self._interp, (E_a, E_b, u_c, u_s), strict=True):
-                f.prime(v)
-        if fresh:
-            self._env_n += 1
-        if self._env_n:
-            if self.cic:
-                ip = self._interp
-                if fresh:
-                    e_a = ip[0].step(E_a)
-                    e_b = ip[1].step(E_b)
-                    v_c = ip[2].step(u_c)
-                    v_s = ip[3].step(u_s)
-                else:
-                    e_a = ip[0].step(None)
-                    e_b = ip[1].step(None)
-                    v_c = ip[2].step(None)
-                    v_s = ip[3].step(None)
-            else:
-                if fresh:
-                    self._held = (E_a, E_b, u_c, u_s)
-                e_a, e_b, v_c, v_s = self._held
-            self.e_alpha = e_a
-            self.e_beta = e_b
-            # normalisation and quadrature PLL error against the injection direction
-            den = math.sqrt((e_a * e_a + e_b * e_b) * (v_c * v_c + v_s * v_s))
-            if den > 0.0:
-                err = (e_b * v_c - e_a * v_s) / den * self._k_err
-        self.err = err
-
-        obs = self.observer
-        obs.step(err, x.torque)
-        th = obs.theta_hat
-        w = obs.w_hat
-        self.theta_hat = th
-        self.w_hat = w
-
-        # injection for period k+1 (eq. 3) along the angle of its mid-point k + 1.5
-        sgn = -self._sg0 if self._sg0 != 0.0 else 1.0
-        phi = th + self._t_comp * w
-        c = math.cos(phi)
-        s = math.sin(phi)
-        uh = sgn * self.U_h
-        self._u_next = (uh * c, uh * s)
-        self._sg2 = self._sg1
-        self._c2 = self._c1
-        self._s2 = self._s1
-        self._sg1 = self._sg0
-        self._c1 = self._c0
-        self._s1 = self._s0
-        self._sg0 = sgn
-        self._c0 = c
-        self._s0 = s
-
-        # fundamental current at k with the square-wave response removed, in the
-        # estimated rotor frame (where the response alternates along a fixed axis)
-        ct = math.cos(th)
-        st = math.sin(th)
-        i_d = ct * i_a + st * i_b
-        i_q = ct * i_b - st * i_a
-        if self._n_tot >= 2:
-            i_df = 0.25 * (3.0 * i_d + 2.0 * self._id1 - self._id2)
-            i_qf = 0.25 * (3.0 * i_q + 2.0 * self._iq1 - self._iq2)
-        else:
-            i_df = i_d
-            i_qf = i_q
-        self.i_alpha_f = ct * i_df - st * i_qf
-        self.i_beta_f = st * i_df + ct * i_qf
-        self._id2 = self._id1
-        self._iq2 = self._iq1
-        self._id1 = i_d
-        self._iq1 = i_q
-        self._ia1 = i_a
-        self._ib1 = i_b
-        self._n = n + 1
-        self._n_tot += 1
 
 
 def create(motor: MotorModel, T_s: float, cic: bool = True, **options: Any) -> SquareWaveEstimator:

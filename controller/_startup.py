@@ -38,6 +38,11 @@ import math
 class PolarityTest:
     """State machine of the magnet-polarity test (see module docstring).
 
+    Kept in Python as a public block a user may call per period (a plug-in's
+    estimator composes it; the core calls a plug-in's Python each period), and
+    as the tests' oracle of ``controller/core/cc_startup.c``, which the controller's
+    one engine runs with the same operations (``tests/oracle/``, tolerance 0).
+
     Parameters
     ----------
     L_d : float

@@ -269,6 +269,11 @@ class SupervisionPars:
 class Supervisor:
     """The supervision's state; :meth:`step` checks one period (module docstring).
 
+    Kept in Python as a public block a user may call per period (a plug-in's
+    estimator composes it; the core calls a plug-in's Python each period), and
+    as the tests' oracle of ``controller/core/cc_supervision.c``, which the controller's
+    one engine runs with the same operations (``tests/oracle/``, tolerance 0).
+
     Parameters
     ----------
     pars : SupervisionPars

@@ -1,4 +1,9 @@
-"""Voltage limiting and space-vector PWM by min-max zero-sequence injection."""
+"""Voltage limiting and space-vector PWM by min-max zero-sequence injection.
+
+Kept in Python as public functions a user may call per period, and as the
+tests' oracle of ``controller/core/cc_svpwm.c``, which the controller's one
+engine runs with the same operations (``tests/oracle/``, tolerance 0).
+"""
 
 from __future__ import annotations
 

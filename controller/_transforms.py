@@ -1,6 +1,10 @@
 """Space-vector transforms (amplitude-invariant Clarke and Park) and angle wrapping.
 
-All functions work on Python floats; they are called every PWM period.
+All functions work on Python floats; they are called every PWM period. Kept
+in Python as public functions a user may call per period (a plug-in's
+estimator composes them) and for the closed-form tests of each block; the
+controller's core writes the same operations inline in its step
+(``controller/core/cc_foc.c``; the angle wrap is ``cc_math.h``'s).
 """
 
 from __future__ import annotations

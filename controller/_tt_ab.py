@@ -23,10 +23,8 @@ Time stamps: ``err`` and ``theta_hat`` refer to the sample instant ``k T_s``.
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
-from controller._api import EstimatorInput
 from controller._filters import Biquad2, FirstOrder2
 from controller._params import MotorModel
 from controller._rotating import RotatingHFEstimator, RotatingInjectionPars
@@ -47,21 +45,6 @@ class TTABEstimator(RotatingHFEstimator):
     def _reset_filters(self) -> None:
         self._bpf.reset()
         self._lpf.reset()
-
-    def update(self, x: EstimatorInput) -> None:
-        """Demodulate sample ``k`` (eqs. 25-28) and advance the observer."""
-        self._k = x.k
-        th = self.pll.theta_hat
-        i_a = x.i_alpha
-        i_b = x.i_beta
-        i_ah, i_bh = self._bpf.update(i_a, i_b)
-        s_2, c_2 = self._lpf.update(i_ah * i_bh, 0.5 * (i_ah * i_ah - i_bh * i_bh))
-        f = s_2 * math.cos(2.0 * th) - c_2 * math.sin(2.0 * th)
-        if self.measured:
-            err = f / (2.0 * max(math.hypot(s_2, c_2), self._floor))
-        else:
-            err = f * self._inv_norm
-        self._publish(th, f, err, i_a - i_ah, i_b - i_bh, x.torque)
 
 
 def create(motor: MotorModel, T_s: float, **options: Any) -> TTABEstimator:

@@ -30,13 +30,10 @@ Time stamps: the sample ``k`` is rotated with ``theta_hat`` at ``k T_s``;
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
-from controller._api import EstimatorInput
-from controller._filters import Biquad2, FirstOrder, FirstOrder2, bandpass_coefficients
+from controller._filters import Biquad2, FirstOrder, FirstOrder2
 from controller._params import MotorModel
-from controller._pll import PositionObserver
 from controller._rotating import RotatingHFEstimator, RotatingInjectionPars
 
 
@@ -61,42 +58,6 @@ class TTDQEstimator(RotatingHFEstimator):
         self._bpf.reset()
         self._lpf.reset()
         self._lpf2.reset()
-
-    def update(self, x: EstimatorInput) -> None:
-        """Demodulate sample ``k`` (eqs. 31-34) and advance the observer."""
-        self._k = x.k
-        th = self.pll.theta_hat
-        c = math.cos(th)
-        s = math.sin(th)
-        i_a = x.i_alpha
-        i_b = x.i_beta
-        i_d = c * i_a + s * i_b
-        i_q = c * i_b - s * i_a
-        bpf = self._bpf
-        if self.bpf_tracking:
-            pll = self.pll
-            w_t = pll.w_i if isinstance(pll, PositionObserver) else pll.w_hat
-            w_0 = self.w_h - w_t
-            if w_0 < 0.0:
-                w_0 = -w_0
-            if w_0 < self._w0_min:
-                w_0 = self._w0_min
-            b0, bpf.a1, bpf.a2 = bandpass_coefficients(w_0, self.bpf_B, self.T_s)
-            bpf.b0 = b0
-            bpf.b2 = -b0
-        i_dh, i_qh = bpf.update(i_d, i_q)
-        if self.measured:
-            # quadrature: LPF((i_dh^2 - i_qh^2)/2) = I_p I_n cos(2 dtheta)
-            f, g = self._lpf2.update(i_dh * i_qh, 0.5 * (i_dh * i_dh - i_qh * i_qh))
-            err = f / (2.0 * max(math.hypot(f, g), self._floor))
-        else:
-            f = self._lpf.update(i_dh * i_qh)
-            err = f * self._inv_norm
-        i_df = i_d - i_dh
-        i_qf = i_q - i_qh
-        if self.accel_ff:
-            self.accel = x.accel_ref
-        self._publish(th, f, err, c * i_df - s * i_qf, s * i_df + c * i_qf, x.torque)
 
 
 def create(motor: MotorModel, T_s: float, **options: Any) -> TTDQEstimator:

@@ -12,14 +12,16 @@ import numpy as np
 import pytest
 
 from bench.scenarios._schema import load_scenario
-from bench.scenarios._setup import build_controller, build_plant
-from controller import EstimatorInput, Measurement, compiled_controller_missing, make_estimator
-from controller._controller import ReferenceModel
-from controller._engine import compiled_cover
+from bench.scenarios._setup import build_plant
+from controller import EstimatorInput, Measurement
+from controller._engine import core_kind
 from controller._pll import PositionObserver, open_loop
 from controller._rotating import in_loop_response
 from plant_rt import preset
+from tests import oracle
 from tests.loop_helpers import motor_model
+from tests.oracle.blocks import OracleReferenceModel
+from tests.oracle.estimators import make_oracle_estimator
 
 P = preset("wen2023")
 T_S = P.T_s
@@ -41,8 +43,8 @@ def _noise_gain(est: object) -> float:
 
 
 def test_the_loop_keeps_its_margin_and_noise_gain() -> None:
-    plain = make_estimator("tt-dq", MODEL, T_S)
-    ff = make_estimator("tt-dq", MODEL, T_S, accel_ff=True)
+    plain = make_oracle_estimator("tt-dq", MODEL, T_S)
+    ff = make_oracle_estimator("tt-dq", MODEL, T_S, accel_ff=True)
     assert ff.w_o == plain.w_o  # type: ignore[attr-defined]
     assert ff.phase_margin() == plain.phase_margin()  # type: ignore[attr-defined]
     pm, _ = ff.phase_margin()  # type: ignore[attr-defined]
@@ -73,7 +75,7 @@ def test_the_feed_forward_is_beside_the_loop() -> None:
 def _ramp_error(accel_ff: bool, a: float, n: int) -> float:
     """tt-dq's |theta_e - theta_hat| at the end of a constant acceleration ``a`` (rad/s^2,
     electrical) from standstill, on the synthetic currents of Wen eq. (4)."""
-    est = make_estimator("tt-dq", MODEL, T_S, accel_ff=accel_ff)
+    est = make_oracle_estimator("tt-dq", MODEL, T_S, accel_ff=accel_ff)
     I_p, I_n = est.I_p, est.I_n  # type: ignore[attr-defined]
     est.reset(0.0)
     for k in range(n):
@@ -90,7 +92,7 @@ def _ramp_error(accel_ff: bool, a: float, n: int) -> float:
 
 def test_a_known_acceleration_leaves_no_lag() -> None:
     a, n = 100.0, 5000  # 0.5 s: w_e reaches 50 rad/s, within the BPF's passband
-    plain = make_estimator("tt-dq", MODEL, T_S)
+    plain = make_oracle_estimator("tt-dq", MODEL, T_S)
     lag = a / plain.w_o**2  # type: ignore[attr-defined]
     without = _ramp_error(False, a, n)
     with_ff = _ramp_error(True, a, n)
@@ -104,7 +106,7 @@ def test_a_known_acceleration_leaves_no_lag() -> None:
 
 def test_reference_model_is_the_designed_response() -> None:
     alpha_s, n_p, J = 18.8, 4, 0.003
-    m = ReferenceModel(alpha_s, n_p, J, 100.0, T_S)  # a limit that does not act
+    m = OracleReferenceModel(alpha_s, n_p, J, 100.0, T_S)  # a limit that does not act
     acc = np.array([m.update(10.0) for _ in range(20000)])
     k = np.arange(20000)
     # the step response of alpha_s / (s + alpha_s), forward Euler, differentiated
@@ -112,33 +114,29 @@ def test_reference_model_is_the_designed_response() -> None:
         n_p * alpha_s * 10.0 * (1.0 - alpha_s * T_S) ** k, rel=1e-9, abs=1e-9
     )
     assert np.sum(acc) * T_S == pytest.approx(n_p * 10.0, rel=1e-3)
-    lim = ReferenceModel(alpha_s, n_p, J, 0.1, T_S)  # 0.1 N m: at most n_p 0.1 / J
+    lim = OracleReferenceModel(alpha_s, n_p, J, 0.1, T_S)  # 0.1 N m: at most n_p 0.1 / J
     assert max(lim.update(10.0) for _ in range(100)) == pytest.approx(n_p * 0.1 / J)
 
 
 def test_options_where_it_applies() -> None:
     with pytest.raises(ValueError, match="accel_ff"):
-        make_estimator("sfhf", MODEL, T_S, accel_ff=True)
+        make_oracle_estimator("sfhf", MODEL, T_S, accel_ff=True)
     with pytest.raises(ValueError, match="accel_ff"):
-        make_estimator("tt-dq", MODEL, T_S, accel_ff=True, observer="mechanical")
+        make_oracle_estimator("tt-dq", MODEL, T_S, accel_ff=True, observer="mechanical")
 
     from types import SimpleNamespace
 
-    # tt-dq's and the hybrid's tt-dq's feed-forward is in the compiled core
+    # tt-dq's and the hybrid's tt-dq's feed-forward is in the core, with their kinds
     for name, kind in (("tt-dq", 1), ("hybrid-tt-dq", 6)):
         pars = SimpleNamespace(estimator=name, estimator_options={"accel_ff": True})
-        assert compiled_cover(pars) == (kind, None)
-    kind, why = compiled_cover(
-        SimpleNamespace(estimator="sfhf", estimator_options={"accel_ff": True})
-    )
-    assert kind == 0 and why is not None and "accel_ff" in why
+        assert core_kind(pars) == kind
 
 
 def _trace(scn: Any, estimator: str, engine: str, n: int) -> tuple[list[tuple[float, ...]], Any]:
     """A closed loop on the compiled plant: start-up, then speed steps up and down; every
     output of every period."""
     sim = build_plant(scn, "compiled")
-    ctrl = build_controller(scn, estimator, engine)
+    ctrl = oracle.build(scn, estimator, engine)
     ctrl.set_enable(True)
     d = (0.5, 0.5, 0.5, False)
     out = []
@@ -154,19 +152,18 @@ def _trace(scn: Any, estimator: str, engine: str, n: int) -> tuple[list[tuple[fl
 
 
 @pytest.mark.parametrize("estimator", ["tt-dq", "hybrid-tt-dq"])
-def test_accel_ff_is_the_same_on_both_engines(tmp_path: Path, estimator: str) -> None:
-    """wen-5.1's start-up and two speed steps with ``accel_ff``: the compiled core gives the
-    Python engine's output bit for bit in every period, and the feed-forward acts (the
-    trace without it differs once the speed loop runs)."""
-    if compiled_controller_missing() is not None:
-        pytest.skip(str(compiled_controller_missing()))
+def test_accel_ff_is_the_oracles(tmp_path: Path, estimator: str) -> None:
+    """wen-5.1's start-up and two speed steps with ``accel_ff``: the core gives the oracle's
+    output (tests/oracle, tolerance 0: bit for bit) in every period, and the feed-forward
+    acts (the trace without it differs once the speed loop runs)."""
+    assert oracle.TOLERANCE == 0.0  # the outputs' values are compared exactly
     f = tmp_path / "ff.toml"
     f.write_text('extends = "wen-5.1"\n[estimator_options]\naccel_ff = true\n')
     scn = load_scenario(str(f))
     n = 6000
-    py, c_py = _trace(scn, estimator, "python", n)
+    py, c_py = _trace(scn, estimator, "oracle", n)
     cc, c_cc = _trace(scn, estimator, "compiled", n)
-    assert (c_py.engine, c_cc.engine, c_cc.engine_note) == ("python", "compiled", None)
+    assert (c_py.engine, c_cc.engine, c_cc.engine_note) == ("oracle", "compiled", None)
     first = next((k for k in range(n) if py[k] != cc[k]), None)
     assert first is None, f"the engines part at period {first}"
     plain, _ = _trace(load_scenario("wen-5.1"), estimator, "compiled", n)

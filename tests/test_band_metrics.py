@@ -318,7 +318,7 @@ def test_inprocess_hybrid_run_has_consistent_band_metrics(
     lo, hi = est.band.edges
     assert m["band_lo_rpm"] == pytest.approx(lo / n_p / RPM)
     assert m["band_hi_rpm"] == pytest.approx(hi / n_p / RPM)
-    I_h = est.hf.U_h * 1e-3 / (2.0 * motor.L_d)  # type: ignore[attr-defined]
+    I_h = est.hf.U_h * 1e-3 / (2.0 * motor.L_d)
     below = m["band_below_injection_loss_w"]
     assert below == pytest.approx(0.5 * motor.R_s * I_h**2, rel=0.01)
     assert 0.1 * below < m["band_inside_injection_loss_w"] < below

@@ -3,9 +3,10 @@ named through a plug-in's factory, :func:`controller.c_estimator`).
 
 docs/examples/my_estimator_c.c is docs/examples/my_estimator.py's flux observer and
 PLL in C, operation for operation. Built here with the system's C compiler, it gives
-the Python example's trace bit for bit on both engines; on the compiled engine the
-core calls its functions with no Python in the period, so the native controller node
-serves it. A function that fails is the same one error on both engines.
+the Python example's trace bit for bit, in the controller's core and in the oracle
+(tests/oracle, the Python step, tolerance 0); the core calls its functions with no
+Python in the period, so the native controller node serves it. A function that fails
+is the same one error in both.
 """
 
 from __future__ import annotations
@@ -23,10 +24,11 @@ import pytest
 
 from bench.nodes._controller_node import ControllerNode
 from bench.scenarios._schema import load_scenario
-from bench.scenarios._setup import build_controller, build_plant
+from bench.scenarios._setup import build_plant
 from bench.wire._codec import Codec
-from controller import Measurement, c_estimator, compiled_controller_missing, core_sources
+from controller import Measurement, c_estimator, core_sources
 from controller._cplugin import C_ESTIMATOR_FAILED
+from tests import oracle
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = ROOT / "docs" / "examples"
@@ -79,10 +81,10 @@ def _build(src: Path, out: Path) -> Path:
 
 @pytest.fixture
 def c_plugin(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[Path]:
-    if CC is None or compiled_controller_missing() is not None:
+    if CC is None:
         if os.environ.get("CI"):
             pytest.fail("needs a C compiler and the compiled controller")
-        pytest.skip("needs a C compiler and the compiled controller")
+        pytest.skip("needs a C compiler")
     lib = _build(EXAMPLES / "my_estimator_c.c", tmp_path / "libmy_estimator_c.so")
     monkeypatch.setenv("MY_ESTIMATOR_C_LIB", str(lib))
     monkeypatch.syspath_prepend(str(EXAMPLES))
@@ -95,7 +97,7 @@ def _loop(estimator: str, engine: str, n: int) -> tuple[list[tuple[Any, ...]], A
     """flux-known-angle on the compiled plant: a start, a speed step, a second start."""
     scn = load_scenario(str(EXAMPLES / "flux-known-angle.toml"))
     sim = build_plant(scn, "compiled")
-    ctrl = build_controller(scn, estimator, engine)
+    ctrl = oracle.build(scn, estimator, engine)
     ctrl.set_enable(True)
     ctrl.set_speed_ref(2.0 * math.pi)
     d = (0.5, 0.5, 0.5, False)
@@ -115,18 +117,18 @@ def _loop(estimator: str, engine: str, n: int) -> tuple[list[tuple[Any, ...]], A
     return out, ctrl
 
 
-def test_the_c_estimator_gives_the_python_examples_trace_on_both_engines(c_plugin: Path) -> None:
-    """The C port, on the Python and on the compiled engine, against the Python example on
-    the Python engine: every output of every period equal, bit for bit; the compiled core
+def test_the_c_estimator_gives_the_python_examples_trace_in_core_and_oracle(c_plugin: Path) -> None:
+    """The C port, in the oracle (tests/oracle) and in the core, against the Python example
+    in the oracle: every output of every period equal, bit for bit (tolerance 0); the core
     calls no Python (``external_estimator`` False), and the design is the example's."""
     n = 4000
-    ref, c_ref = _loop("my_estimator:create", "python", n)
-    py, c_py = _loop("my_estimator_c:create", "python", n)
+    ref, c_ref = _loop("my_estimator:create", "oracle", n)
+    py, c_py = _loop("my_estimator_c:create", "oracle", n)
     cc, c_cc = _loop("my_estimator_c:create", "compiled", n)
-    assert (c_py.engine, c_cc.engine, c_cc.engine_note) == ("python", "compiled", None)
+    assert (c_py.engine, c_cc.engine, c_cc.engine_note) == ("oracle", "compiled", None)
     assert not c_cc.external_estimator
     assert c_cc.gains() == c_ref.gains()
-    for name, got in (("python", py), ("compiled", cc)):
+    for name, got in (("oracle", py), ("compiled", cc)):
         first = next((k for k in range(n) if got[k] != ref[k]), None)
         assert first is None, f"the C estimator on the {name} engine parts at period {first}"
     assert len(set(ref)) > n // 2  # the trace moves
@@ -138,17 +140,17 @@ def test_the_native_node_serves_a_c_estimator(c_plugin: Path) -> None:
     from bench.nodes.native.controller_node import native_unavailable
 
     scn = load_scenario(str(EXAMPLES / "flux-known-angle.toml"))
-    node = ControllerNode(Codec(), build_controller(scn, "my_estimator_c:create", "compiled"))
+    node = ControllerNode(Codec(), oracle.build(scn, "my_estimator_c:create", "compiled"))
     assert native_unavailable(node, "udp_multicast") is None
 
 
 def test_a_failing_c_estimator_is_the_same_error_on_both_engines(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    """update returns nonzero from period 40: both engines raise the same RuntimeError in that
+    """update returns nonzero from period 40: the core and the oracle raise the same RuntimeError in that
     period, after the same outputs; a design init refuses is one line naming the library."""
-    if CC is None or compiled_controller_missing() is not None:
-        pytest.skip("needs a C compiler and the compiled controller")
+    if CC is None:
+        pytest.skip("needs a C compiler")
     src = tmp_path / "failing.c"
     src.write_text(FAILING)
     lib = _build(src, tmp_path / "libfailing.so")
@@ -158,8 +160,8 @@ def test_a_failing_c_estimator_is_the_same_error_on_both_engines(
     monkeypatch.syspath_prepend(str(tmp_path))
     scn = load_scenario(str(EXAMPLES / "flux-known-angle.toml"))
     got = {}
-    for engine in ("python", "compiled"):
-        ctrl = build_controller(scn, "failing_c:create", engine)
+    for engine in ("oracle", "compiled"):
+        ctrl = oracle.build(scn, "failing_c:create", engine)
         ctrl.set_enable(True)
         outs = []
         with pytest.raises(RuntimeError) as e:
@@ -167,12 +169,12 @@ def test_a_failing_c_estimator_is_the_same_error_on_both_engines(
                 m = Measurement(k, 0.1 * math.sin(0.2 * k), 0.0, -0.1 * math.sin(0.2 * k), 300.0)
                 outs.append(ctrl.step(m))
         got[engine] = (str(e.value), outs, ctrl.engine)
-    assert got["python"][0] == got["compiled"][0] == C_ESTIMATOR_FAILED
-    assert got["python"][1] == got["compiled"][1] and len(got["python"][1]) == 40
-    assert (got["python"][2], got["compiled"][2]) == ("python", "compiled")
+    assert got["oracle"][0] == got["compiled"][0] == C_ESTIMATOR_FAILED
+    assert got["oracle"][1] == got["compiled"][1] and len(got["oracle"][1]) == 40
+    assert (got["oracle"][2], got["compiled"][2]) == ("oracle", "compiled")
     refusing = tmp_path / "refusing.c"
     refusing.write_text(FAILING.replace("(void)d;", "(void)d;\n    if (d->T_s > 0.0) return 3;"))
-    motor = build_controller(scn, "tt-dq", "python").motor
+    motor = oracle.build(scn, "tt-dq", "oracle").motor
     with pytest.raises(ValueError, match="refused the design") as r:
         c_estimator(_build(refusing, tmp_path / "librefusing.so"))(motor, 1e-4)
     assert "librefusing.so" in str(r.value) and "\n" not in str(r.value)
@@ -248,12 +250,12 @@ def test_a_c_estimators_optional_members_are_wired_on_both_engines(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """``hf_current_next`` and ``set_saliency_offset`` of cc_est_if_t: with dead-time and
-    cross-saturation compensation on, both engines call them (the offset handed is the
+    cross-saturation compensation on, the core and the oracle call them (the offset handed is the
     estimator's ``err``, nonzero once the speed loop asks for torque; the predicted HF
     current moves the duties) and give the same trace bit for bit; a library with either
     NULL gives another trace, and its estimator has no such member."""
-    if CC is None or compiled_controller_missing() is not None:
-        pytest.skip("needs a C compiler and the compiled controller")
+    if CC is None:
+        pytest.skip("needs a C compiler")
     src = tmp_path / "optional.c"
     src.write_text(OPTIONAL)
     scn_path = tmp_path / "comp.toml"
@@ -275,8 +277,8 @@ def test_a_c_estimators_optional_members_are_wired_on_both_engines(
         )
         monkeypatch.syspath_prepend(str(tmp_path))
         traces[variant] = {}
-        for engine in ("python", "compiled"):
-            ctrl = build_controller(scn, f"opt_{variant}:create", engine)
+        for engine in ("oracle", "compiled"):
+            ctrl = oracle.build(scn, f"opt_{variant}:create", engine)
             assert ctrl.engine == engine and not ctrl.external_estimator
             assert ctrl.dead_time is not None and ctrl.cross_sat
             est = ctrl.estimator
@@ -291,9 +293,9 @@ def test_a_c_estimators_optional_members_are_wired_on_both_engines(
                 rows.append((o.d_a, o.d_b, o.d_c, o.theta_hat, o.err, o.i_d, o.i_q))
             traces[variant][engine] = rows
     for variant, by_engine in traces.items():
-        assert by_engine["python"] == by_engine["compiled"], variant
-    both = traces["both"]["python"]
+        assert by_engine["oracle"] == by_engine["compiled"], variant
+    both = traces["both"]["oracle"]
     assert any(r[4] != 0.0 for r in both)  # the offset reached the library
-    assert all(r[4] == 0.0 for r in traces["no_sal"]["python"])
-    assert traces["no_hf"]["python"] != both
-    assert [r[:3] for r in traces["no_sal"]["python"]] != [r[:3] for r in both]
+    assert all(r[4] == 0.0 for r in traces["no_sal"]["oracle"])
+    assert traces["no_hf"]["oracle"] != both
+    assert [r[:3] for r in traces["no_sal"]["oracle"]] != [r[:3] for r in both]

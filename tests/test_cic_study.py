@@ -20,7 +20,7 @@ from bench.studies._cic import (
     spectrum_metrics,
 )
 from bench.studies._report import NOT_REPRODUCED, NOT_RUN, REPRODUCED, evaluate_claims
-from controller._cic import CicInterpolator
+from tests.oracle.blocks import OracleCicInterpolator
 
 T_S = 1e-3  # Xue: 1 kHz PWM, 500 Hz injection
 F_E = 20.0  # 300 rpm, 4 pole pairs
@@ -30,7 +30,7 @@ HOLD_IMAGE = abs(math.cos(math.pi * IMAGE_HZ * T_S))  # a two-period hold's gain
 
 def _envelope(n: int, cic: bool) -> np.ndarray:
     """A 20 Hz sinusoid sampled every second period, held or held and CIC-interpolated."""
-    ip = CicInterpolator(2, 2)
+    ip = OracleCicInterpolator(2, 2)
     ip.prime(1.0)  # the first sample, as the estimator primes it: no start-up step
     out, held = [], 0.0
     for k in range(n):
@@ -81,8 +81,8 @@ def test_the_runs_quadrature_signal_has_the_holds_image_and_the_cic_removes_it(
 
 
 def test_observing_the_controller_changes_no_frame() -> None:
-    """The recording hook runs the controller in Python: the frames are the compiled
-    engine's (or the Python engine's, where none is built) all the same."""
+    """The recording hook reads the core's quadrature signal between periods (what the
+    study records, ``Controller.quadrature``): the frames are the same, and it moves."""
     from bench.nodes._loops import run_inprocess
     from bench.scenarios._schema import load_scenario
     from bench.wire._codec import Codec
@@ -90,7 +90,9 @@ def test_observing_the_controller_changes_no_frame() -> None:
     scn = load_scenario(SCENARIO).with_overrides(duration=0.6)
     seen: list[float] = []
     plain = run_inprocess(scn, WITH_CIC, Codec())
-    watched = run_inprocess(scn, WITH_CIC, Codec(), observe=lambda c: seen.append(c.estimator.err))
+    watched = run_inprocess(
+        scn, WITH_CIC, Codec(), observe=lambda c: seen.append(c.quadrature()[0])
+    )
     assert [(m.arbitration_id, bytes(m.data)) for m in plain] == [
         (m.arbitration_id, bytes(m.data)) for m in watched
     ]

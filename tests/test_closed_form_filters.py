@@ -28,11 +28,12 @@ import pytest
 from scipy import signal
 
 from bench.scenarios._setup import motor_model
-from controller import BPF_WEN, HPF_WEN, LPF_WEN, EstimatorInput, make_estimator
-from controller._filters import Biquad2, FirstOrder, FirstOrder2, lpf_first_order
+from controller import BPF_WEN, HPF_WEN, LPF_WEN, EstimatorInput
+from controller._filters import lpf_first_order
 from controller._rotating import RotatingInjectionPars
-from controller._sfhf import SFHFEstimator
 from plant_rt import preset
+from tests.oracle.blocks import OracleBiquad2, OracleFirstOrder, OracleFirstOrder2, oracle
+from tests.oracle.estimators import OracleSFHFEstimator, make_oracle_estimator
 
 T_S = 1e-4  # wen2023: 10 kHz
 W_H = 2.0 * math.pi * 500.0  # Wen's injection (rad/s)
@@ -55,7 +56,7 @@ def _n_skip(a: tuple[float, ...]) -> int:
     return math.ceil(math.log(1e-12) / math.log(r)) + 10
 
 
-def _gain_single(filt: FirstOrder, a: tuple[float, ...], w: float, T_s: float) -> complex:
+def _gain_single(filt: OracleFirstOrder, a: tuple[float, ...], w: float, T_s: float) -> complex:
     """Fit y = Re{G e^{j w k T}} for the input cos(w k T)."""
     n0 = _n_skip(a)
     n1 = n0 + max(1000, math.ceil(4.0 * math.pi / (w * T_s)))
@@ -68,7 +69,9 @@ def _gain_single(filt: FirstOrder, a: tuple[float, ...], w: float, T_s: float) -
     return complex(g_re, g_im)
 
 
-def _gain_pair(filt: FirstOrder2 | Biquad2, a: tuple[float, ...], w: float, T_s: float) -> complex:
+def _gain_pair(
+    filt: OracleFirstOrder2 | OracleBiquad2, a: tuple[float, ...], w: float, T_s: float
+) -> complex:
     """Input the space vector e^{j w k T} as (cos, sin); return mean(y e^{-j w k T})."""
     n0 = _n_skip(a)
     n1 = n0 + max(1000, math.ceil(4.0 * math.pi / abs(w * T_s)))
@@ -81,8 +84,8 @@ def _gain_pair(filt: FirstOrder2 | Biquad2, a: tuple[float, ...], w: float, T_s:
     return acc / (n1 - n0)
 
 
-def _estimator() -> SFHFEstimator:
-    return SFHFEstimator(MODEL, T_S, RotatingInjectionPars(w_o=0.0))
+def _estimator() -> OracleSFHFEstimator:
+    return OracleSFHFEstimator(MODEL, T_S, RotatingInjectionPars(w_o=0.0))
 
 
 def test_estimators_share_wen_prototypes() -> None:
@@ -90,7 +93,7 @@ def test_estimators_share_wen_prototypes() -> None:
     pre-warped at w_h, LPF at its corner 628 rad/s (what the closed forms below assume)."""
     ref = _estimator()
     for name in ("sfhf", "tt-ab", "tt-dq"):
-        est = make_estimator(name, MODEL, T_S)
+        est = make_oracle_estimator(name, MODEL, T_S)
         for attr in ("bpf_z", "hpf_z", "lpf_z"):
             assert getattr(est, attr) == getattr(ref, attr)
     for proto, coefs, w_p in (
@@ -112,7 +115,7 @@ def test_pair_filter_response(which: str, f: float) -> None:
     different response), channels mixed in the pair filter (the -w response would not
     be the conjugate), and a one-sample delay (phase -w T: 18 degrees at 500 Hz)."""
     est = _estimator()
-    cases: dict[str, tuple[FirstOrder2 | Biquad2, Proto, Proto, float]] = {
+    cases: dict[str, tuple[OracleFirstOrder2 | OracleBiquad2, Proto, Proto, float]] = {
         "bpf": (est._bpf, BPF_WEN, est.bpf_z, W_H),
         "hpf": (est._hpf, HPF_WEN, est.hpf_z, W_H),
         "lpf2": (est._lpf2, LPF_WEN, est.lpf_z, 628.0),
@@ -152,7 +155,7 @@ def test_speed_lpf_response(T_s: float, w_c: float) -> None:
     pre-warped at w_c: exactly 1/sqrt(2) at -45 degrees at the corner, unity at DC, and
     the warped closed form at 0.3 w_c and 3 w_c. Without pre-warping the corner gain is
     0.7 % low (-45.4 deg) at 1 kHz and 400 rad/s; forward Euler is further off."""
-    filt = lpf_first_order(w_c, T_s)
+    filt = oracle(lpf_first_order(w_c, T_s))
     a = (1.0, filt.a1)
     proto = ((w_c,), (1.0, w_c))
     for w in (0.3 * w_c, w_c, 3.0 * w_c):

@@ -18,9 +18,10 @@ import numpy as np
 import pytest
 
 from bench.scenarios._setup import motor_model
-from controller import Controller, FluxObserver, Measurement, MotorModel, pll_gains
+from controller import FluxObserver, Measurement, MotorModel, pll_gains
 from plant_rt import ConstantLoad, preset
 from tests.loop_helpers import RPM, make_loop
+from tests.oracle import OracleController
 
 XUE = motor_model(preset("xue2022"))
 WEN = motor_model(preset("wen2023"))
@@ -236,9 +237,9 @@ def test_observer_on_the_plant_beside_the_sensored_drive() -> None:
     0.3 degrees (what is left: the plant's saturation and the trapezoid on ``R_s i``)."""
     P = preset("xue2022")
     plant, ctrl = make_loop(P, "sensored", theta_e0=0.3)
-    # the Python engine: its bookkept voltages (``_u_a2``, ``_u_b2``) are attributes the
-    # test reads each period; the compiled core keeps them in C (same trace)
-    ctrl = Controller(ctrl.pars, "python")
+    # the oracle (tests/oracle): its bookkept voltages (``_u_a2``, ``_u_b2``) are attributes
+    # the test reads each period; the core keeps them in C (same trace)
+    ctrl = OracleController(ctrl.pars)
     ctrl.set_enable(True)
     # the hybrid's gains for this motor (controller/_hybrid.py): alpha_o, zeta_f, w_lo
     obs = FluxObserver(XUE, P.T_s, 405.0, ZETA, 23.4)

@@ -22,10 +22,11 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from controller import EstimatorInput, make_estimator
+from controller import EstimatorInput
 from controller._rotating import in_loop_response, separation_gains
 from plant_rt import preset
 from tests.loop_helpers import motor_model
+from tests.oracle.estimators import make_oracle_estimator
 
 P = preset("wen2023")
 T_S = P.T_s
@@ -50,7 +51,7 @@ def _h(z: tuple[tuple[float, ...], tuple[float, ...]], w: float) -> complex:
 def _settled_error(name: str, w_e: float, n: int = 12000, **options: float) -> float:
     """Mean of ``theta_hat - theta_e`` (rad, modulo pi) over the last 0.2 s of a run on the
     synthetic currents at the electrical speed ``w_e``, the PLL designed and running."""
-    est = make_estimator(name, MODEL, T_S, **options)
+    est = make_oracle_estimator(name, MODEL, T_S, **options)
     I_p, I_n = est.I_p, est.I_n  # type: ignore[attr-defined]
     theta0 = 0.7
     est.reset(theta0)
@@ -71,7 +72,7 @@ def _settled_error(name: str, w_e: float, n: int = 12000, **options: float) -> f
 
 def _table3_self_demod(w_e: float) -> float:
     """Table 3's [27] error, ``(phi_p + phi_n) / 2`` (rad), with the estimator's own BPF."""
-    bpf_z = make_estimator(SELF_DEMOD, MODEL, T_S).bpf_z  # type: ignore[attr-defined]
+    bpf_z = make_oracle_estimator(SELF_DEMOD, MODEL, T_S).bpf_z  # type: ignore[attr-defined]
     return 0.5 * (cmath.phase(_h(bpf_z, W_H)) + cmath.phase(_h(bpf_z, -W_H + 2.0 * w_e)))
 
 
@@ -108,7 +109,7 @@ def test_the_error_signal_is_the_closed_form_at_speed(name: str) -> None:
     [25] (the estimated frame)."""
     w_e = _w_e(200.0)
     dtheta = 0.2
-    est = make_estimator(name, MODEL, T_S, w_o=0.0)
+    est = make_oracle_estimator(name, MODEL, T_S, w_o=0.0)
     I_p, I_n = est.I_p, est.I_n  # type: ignore[attr-defined]
     bpf_z = est.bpf_z  # type: ignore[attr-defined]
     fs = []
@@ -140,7 +141,7 @@ def test_the_separation_is_exact_at_the_injection_frequency() -> None:
     s_p, s_n = separation_gains(np.array([W_H, -W_H]), W_H, T_S)
     assert s_p == pytest.approx([1.0, 0.0], abs=1e-12)
     assert s_n == pytest.approx([0.0, 1.0], abs=1e-12)
-    est = make_estimator(SELF_DEMOD, MODEL, T_S, w_o=0.0)
+    est = make_oracle_estimator(SELF_DEMOD, MODEL, T_S, w_o=0.0)
     quad_z = est.quad_z  # type: ignore[attr-defined]
     bpf_z = est.bpf_z  # type: ignore[attr-defined]
     # q = j (W / w_h) d: +j at +w_h, -j at -w_h
@@ -155,12 +156,12 @@ def test_designed_like_the_others(name: str) -> None:
     """The PLL is designed for the target phase margin with the estimator's filters in the
     loop (no gain of its own): epf has tt-dq's in-loop response and so tt-dq's bandwidth;
     self-demod's is ``|H_B(w_h) H_B(-w_h)|`` times the LPF, as sfhf's with its own gain."""
-    est = make_estimator(name, MODEL, T_S)
+    est = make_oracle_estimator(name, MODEL, T_S)
     g = est.gains()
     assert g["pm_deg"] == pytest.approx(g["pm_target_deg"], abs=0.05)
     assert g["w_c"] <= g["lpf_corner"] * (1 + 1e-9)
     if name == EPF:
-        assert g["w_o"] == make_estimator("tt-dq", MODEL, T_S).w_o  # type: ignore[attr-defined]
+        assert g["w_o"] == make_oracle_estimator("tt-dq", MODEL, T_S).w_o  # type: ignore[attr-defined]
     else:
         w = np.array([0.0, 300.0])
         f = est.filters_z  # type: ignore[attr-defined]

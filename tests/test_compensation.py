@@ -28,19 +28,19 @@ from controller import (
     ControllerPars,
     EstimatorInput,
     Measurement,
-    make_estimator,
 )
 from controller._compensation import (
-    DeadTimeCompensator,
     cross_saturation_offset,
     dead_time_voltage,
     offset_periods,
     smooth_sign,
 )
-from controller._square_wave import SquareWaveEstimator
 from plant_rt import InverterPars, preset
 from plant_rt._inverter import dead_time_error
 from tests.loop_helpers import RPM, make_loop, motor_model, run
+from tests.oracle import OracleController
+from tests.oracle.blocks import OracleDeadTimeCompensator
+from tests.oracle.estimators import OracleSquareWaveEstimator, make_oracle_estimator
 from tests.test_controller_square_wave import MOTOR as XUE_MODEL
 
 WEN = preset("wen2023")
@@ -58,7 +58,7 @@ def test_dead_time_model_equals_the_plants(u_dc: float, i_x: float) -> None:
     plant = dead_time_error(i_x, u_dc, t_dead, T_WEN)
     assert plant == pytest.approx(-math.copysign(t_dead / T_WEN * u_dc, i_x), rel=1e-12)
     assert dead_time_voltage(i_x, u_dc, 0.5, t_dead, T_WEN) == pytest.approx(plant, rel=1e-12)
-    comp = DeadTimeCompensator(T_WEN, t_dead, 0.0, 0.0, i_band=0.1, sine=False)
+    comp = OracleDeadTimeCompensator(T_WEN, t_dead, 0.0, 0.0, i_band=0.1, sine=False)
     assert comp.voltage(i_x, u_dc, 0.5) == pytest.approx(plant, rel=1e-12)
     d = comp.duties(0.5, 0.5, 0.5, i_x, -i_x, 0.0, u_dc)
     assert d[0] - 0.5 == pytest.approx(math.copysign(t_dead / T_WEN, i_x), rel=1e-12)
@@ -102,7 +102,7 @@ def test_dead_time_and_device_drops_against_a_switching_leg(d: float, i_x: float
     u_dc, t_dead, v_ce, v_f = 540.0, 2e-6, 1.6, 1.2
     err = _leg_mean_voltage(d, i_x, u_dc, t_dead, v_ce, v_f) - d * u_dc
     assert dead_time_voltage(i_x, u_dc, d, t_dead, T_WEN, v_ce, v_f) == pytest.approx(err, abs=0.02)
-    comp = DeadTimeCompensator(T_WEN, t_dead, v_ce, v_f, i_band=0.0, sine=False)
+    comp = OracleDeadTimeCompensator(T_WEN, t_dead, v_ce, v_f, i_band=0.0, sine=False)
     assert comp.voltage(i_x, u_dc, d) == pytest.approx(err, abs=0.02)
 
 
@@ -150,7 +150,7 @@ def test_controller_adds_the_feedforward_to_its_duties() -> None:
 def test_rotating_estimator_predicts_its_hf_current() -> None:
     """hf_current_next is eq. (7) at t = (k + 1.5) T_s: one step later the sampled HF
     current (the model at (k + 1) T_s) and two steps later (k + 2) bracket it."""
-    est = make_estimator("tt-dq", motor_model(WEN), T_WEN, w_o=0.0)
+    est = make_oracle_estimator("tt-dq", motor_model(WEN), T_WEN, w_o=0.0)
     theta = 0.9
     est.reset(theta)
     w_h = 2 * math.pi * 500.0
@@ -216,10 +216,10 @@ def test_estimators_lock_at_the_cross_saturation_offset(name: str) -> None:
     theta = 0.8
     if name == "square-wave":
         model, T_s, n = XUE_MODEL, 1e-3, 3000
-        est = SquareWaveEstimator(model, T_s)
+        est = OracleSquareWaveEstimator(model, T_s)
     else:
         model, T_s, n = motor_model(WEN), T_WEN, 20000
-        est = make_estimator(name, model, T_s)  # type: ignore[assignment]
+        est = make_oracle_estimator(name, model, T_s)  # type: ignore[assignment]
     k_dq = -0.15 * (model.L_q - model.L_d) / 8.0  # L_dq = -15 % of L_q - L_d at 8 A
     i_q = 8.0
     delta = cross_saturation_offset(k_dq, i_q, model.L_d, model.L_q)
@@ -270,11 +270,10 @@ def test_the_hybrid_corrects_its_injection_estimate_only(weight: float) -> None:
     follows the corrected angle."""
     model = dataclasses.replace(motor_model(WEN), k_dq=-2e-3)
     cp = CompensationPars(cross_saturation=True)
-    ctrl = Controller(  # the Python engine: the test sets and reads the estimator's objects
+    ctrl = OracleController(  # the Python step: the test sets and reads the estimator's objects
         ControllerPars(
             motor=model, T_s=T_WEN, estimator="hybrid-tt-dq", startup=False, compensation=cp
-        ),
-        engine="python",
+        )
     )
     est = ctrl.estimator
     ctrl.set_enable(True)
@@ -324,9 +323,8 @@ def test_offset_calibration_removes_a_known_offset() -> None:
     noise = 0.01
     offs = (0.12, -0.07, 0.03)
     cp = CompensationPars(offset_calibration=True, current_noise=noise, adc_lsb=q)
-    ctrl = Controller(  # the Python engine: the test reads the calibration's object
-        ControllerPars(motor=motor_model(WEN), T_s=T_WEN, estimator="sensored", compensation=cp),
-        engine="python",
+    ctrl = OracleController(  # the Python step: the test reads the calibration's object
+        ControllerPars(motor=motor_model(WEN), T_s=T_WEN, estimator="sensored", compensation=cp)
     )
     n = ctrl.calibration.n  # type: ignore[union-attr]
     sigma = math.sqrt(noise**2 + q * q / 12)

@@ -1,26 +1,25 @@
-"""The controller's two engines give the same trace bit for bit.
+"""Oracle tests: the controller's core gives the oracle's trace, at tolerance 0.
 
-The controller's step is the portable C core (``controller/core/``, bound by
-``controller/_cctl.c``); the Python step of :mod:`controller._controller` and
-the estimators' modules is the readable reference it is checked against,
-the oracle of these tests, for every estimator the core covers. Equal means equal bits (not 1e-9 rad or A): the
-C functions repeat the Python operations in the same order, built without
-fused multiply-adds, and call the same ``libm`` ``sin``/``cos``/``sqrt``.
-Every shipped scenario's first second, each of its estimators, in the
-in-process loop (alignment, polarity test, speed steps), on the papers' plant
-and on the suite's ``drive`` plant with the drive's countermeasures on
-(dead-time feed-forward, cross-saturation correction, offset calibration):
-the same :class:`controller.ControlOutput` in every period. Then commands in the
-middle of a run, the states read back, the CIC's re-anchoring, the seam's
-records as structs, and the cover: what runs compiled and what says why it
-runs in Python.
+The controller runs on one engine, the portable C core (``controller/core/``,
+bound by ``controller/_cctl.c``); the Python step of ``tests/oracle/``
+(:class:`tests.oracle.OracleController`, with the estimators' modules) is the
+readable reference it is checked against, for every shipped estimator and a
+plug-in's. The tolerance is :data:`tests.oracle.TOLERANCE`, 0: equal bits
+(not 1e-9 rad or A): the C functions repeat the Python operations in the same
+order, built without fused multiply-adds, and call the same ``libm``
+``sin``/``cos``/``sqrt``. Every shipped scenario's first second, each of its
+estimators, in the in-process loop (alignment, polarity test, speed steps), on
+the papers' plant and on the suite's ``drive`` plant with the drive's
+countermeasures on (dead-time feed-forward, cross-saturation correction,
+offset calibration): the same :class:`controller.ControlOutput` in every
+period. Then commands in the middle of a run, the states read back, the CIC's
+re-anchoring, the seam's records as structs, and the engine names: each runs
+the core.
 """
 
 from __future__ import annotations
 
-import json
 import math
-import os
 import struct
 from dataclasses import fields, replace
 from pathlib import Path
@@ -41,10 +40,11 @@ from controller import (
     ControllerPars,
     ControlOutput,
     Measurement,
-    compiled_controller_missing,
     resolve_controller_engine,
 )
 from controller._registry import SPECS
+from tests import oracle
+from tests.oracle import TOLERANCE, OracleController
 
 SCENARIOS = sorted(p.stem for p in (Path(loops.__file__).parents[1] / "scenarios").glob("*.toml"))
 COMPILED = (
@@ -61,19 +61,10 @@ COMPILED = (
 )
 
 
-@pytest.fixture(autouse=True)
-def _compiled_built() -> None:
-    """The compiled engine must be built: a skip off CI, a failure in CI (never a silent pass)."""
-    why = compiled_controller_missing()
-    if why is None:
-        return
-    if os.environ.get("CI"):
-        pytest.fail(why)
-    pytest.skip(why)
-
-
 def _bits(o: ControlOutput) -> bytes:
-    """Every field of an output as bits (and its types: an int stays an int)."""
+    """Every field of an output as bits (and its types: an int stays an int): the
+    comparison at the oracle's tolerance, 0."""
+    assert TOLERANCE == 0.0  # a tolerance > 0 would compare the values, not the bits
     vals = [getattr(o, f.name) for f in fields(o)]
     types = "".join(type(v).__name__[0] for v in vals)
     return types.encode() + struct.pack(f"{len(vals)}d", *(float(v) for v in vals))
@@ -110,17 +101,16 @@ def test_every_scenario_first_second_same_on_both_engines(
     same output in every period, bit for bit, and the same frames."""
     scn = _scenario(name, plant).with_overrides(duration=1.0)
     codec = Codec()
-    build = loops.build_controller
     runs: dict[str, tuple[list[bytes], list[tuple[int, bytes]], str]] = {}
     comp: dict[str, float] = {}
-    for engine in ("python", "compiled"):
+    for engine in ("oracle", "compiled"):
         outs: list[bytes] = []
         used: list[str] = []
 
         def build_recorded(
             s: Any, e: str, *a: Any, eng: str = engine, outs: list[bytes] = outs, used: Any = used
         ) -> Controller:
-            ctrl = build(s, e, eng)
+            ctrl = oracle.build(s, e, eng)
             step = ctrl.step
 
             def recorded(meas: Measurement, step: Any = step) -> ControlOutput:
@@ -128,7 +118,7 @@ def test_every_scenario_first_second_same_on_both_engines(
                 outs.append(_bits(o))
                 return o
 
-            ctrl.step = recorded  # type: ignore[method-assign]
+            ctrl.step = recorded
             used.append(ctrl.engine)
             comp.update({k: ctrl.gains()[k] for k in COMP_KEYS})
             return ctrl
@@ -136,9 +126,9 @@ def test_every_scenario_first_second_same_on_both_engines(
         monkeypatch.setattr(loops, "build_controller", build_recorded)
         frames = loops.run_inprocess(scn, estimator, codec, engine="compiled", loop="python")
         runs[engine] = (outs, [(m.arbitration_id, bytes(m.data)) for m in frames], used[0])
-    (py, f_py, e_py), (cc, f_cc, e_cc) = runs["python"], runs["compiled"]
-    assert e_py == "python"
-    assert e_cc == ("compiled" if estimator in COMPILED else "python")
+    (py, f_py, e_py), (cc, f_cc, e_cc) = runs["oracle"], runs["compiled"]
+    assert e_py == "oracle"
+    assert e_cc == "compiled"
     assert len(py) >= 0.99 / sample_period(scn)  # every period of the second
     # on the drive plant the countermeasures ran (cross-saturation: the HF estimators)
     on = 1.0 if plant == "drive" else 0.0
@@ -162,7 +152,7 @@ def _loop(
     """A closed loop on the compiled plant; ``events[k](ctrl)`` runs before period ``k``."""
     scn = _scenario(scn_name, plant)
     sim = build_plant(scn, "compiled")
-    ctrl = build_controller(scn, estimator, engine)
+    ctrl = oracle.build(scn, estimator, engine)
     ctrl.set_enable(True)
     ctrl.set_speed_ref(speed_rpm * 2.0 * math.pi / 60.0)
     d = (0.5, 0.5, 0.5, False)
@@ -225,9 +215,9 @@ def test_commands_and_reads_between_engines_keep_the_trace(
     on both engines (the core runs the start-up, the polarity test, the CIC's
     re-anchoring and the offset calibration itself), and the states read from the core
     are Python's."""
-    py, c_py = _loop(scn_name, estimator, "python", n, _events(n), plant=plant)
+    py, c_py = _loop(scn_name, estimator, "oracle", n, _events(n), plant=plant)
     cc, c_cc = _loop(scn_name, estimator, "compiled", n, _events(n), plant=plant)
-    assert (c_py.engine, c_cc.engine) == ("python", "compiled")
+    assert (c_py.engine, c_cc.engine) == ("oracle", "compiled")
     first = next((k for k in range(n) if py[k] != cc[k]), None)
     assert first is None, f"the engines part at period {first}"
     # the states after the run, read from the compiled core, are the same bits
@@ -240,6 +230,9 @@ def test_commands_and_reads_between_engines_keep_the_trace(
     # one design for both engines: the same gains, bandwidths and corners
     assert c_cc.gains() == c_py.gains()
     assert [type(v) for v in s_cc.values()] == [type(v) for v in s_py.values()]
+    # the square-wave's quadrature signal (the CIC study reads it) is the oracle's too
+    assert c_cc.quadrature() == c_py.quadrature()
+    assert (c_cc.quadrature() != (0.0, 0.0)) == (SPECS[estimator].family == "square")
     # and the run was a closed loop that ran: speed control reached, the estimate moved
     assert s_py["mode"] == 3 and s_py["w_hat"] != 0.0
 
@@ -295,15 +288,15 @@ def test_hybrids_through_their_band_and_back_same_on_both_engines(
     def set_ref(k: int) -> Any:
         def ev(c: Controller) -> None:
             c.set_speed_ref(ref(k) * rpm)
-            if c.engine == "python":
+            if c.engine == "oracle":
                 weights.append(c.estimator.weight)  # type: ignore[attr-defined]
 
         return ev
 
     events = {k: set_ref(k) for k in range(0, n, every)}
-    py, c_py = _loop(scn_name, estimator, "python", n, events, speed_rpm=0.0, plant=plant)
+    py, c_py = _loop(scn_name, estimator, "oracle", n, events, speed_rpm=0.0, plant=plant)
     cc, c_cc = _loop(scn_name, estimator, "compiled", n, events, speed_rpm=0.0, plant=plant)
-    assert (c_py.engine, c_cc.engine) == ("python", "compiled")
+    assert (c_py.engine, c_cc.engine) == ("oracle", "compiled")
     if observer is not None:  # the option reached the injection estimator
         hf: Any = c_py.estimator.hf  # type: ignore[attr-defined]
         assert hf.mechanical == (observer == "mechanical")
@@ -314,68 +307,85 @@ def test_hybrids_through_their_band_and_back_same_on_both_engines(
     assert weights[-1] < 1.0
 
 
-def test_the_cover_and_the_reasons() -> None:
-    """Compiled for the covered estimators; Python, with one line saying why, for the rest;
-    the choices are the CLI's and an unknown one is refused."""
-    scn = load_scenario("wen-5.1")
+def test_every_engine_name_runs_the_core() -> None:
+    """Every estimator of every shipped scenario, under every engine name (kept for
+    compatibility, the CLI's), runs in the core with no note; an unknown name is refused;
+    the square-wave estimators' CIC delay M is a typed range, 1 .. the core's delay line."""
+    from controller._cctl import CIC_MAX
+
     assert ENGINES == CLI_ENGINES
     for name in SCENARIOS:
         for est in load_scenario(name).estimators:
-            c = build_controller(load_scenario(name), est, "compiled")
-            if est in COMPILED:
-                assert (c.engine, c.engine_note) == ("compiled", None), (name, est)
-            else:  # a scenario may list an estimator without a C twin: it says so
-                assert c.engine == "python" and f"the {est} estimator" in str(c.engine_note)
-    c = build_controller(scn, "tt-dq", "python")
-    assert (c.engine, c.engine_note) == ("python", None)
-    pars = build_controller(scn, "tt-dq", "python").pars
-    measured = replace(pars, estimator_options={"normalise": "measured"})
-    assert resolve_controller_engine("auto", measured) == ("compiled", None)
-    # the mechanical observer is in the core, the hybrid's tt-dq's included
-    mech = replace(pars, estimator_options={"observer": "mechanical"})
-    assert resolve_controller_engine("auto", mech) == ("compiled", None)
-    hyb = replace(pars, estimator="hybrid-tt-dq", estimator_options={"observer": "mechanical"})
-    assert resolve_controller_engine("auto", hyb) == ("compiled", None)
-    # every shipped estimator and option runs compiled but a CIC delay line longer than the
-    # core's (square-wave's M): that one runs in Python with the line saying why
-    for est in ("square-wave", "hybrid-square-wave"):
-        cic = replace(pars, estimator=est, estimator_options={"M": 64})
-        assert resolve_controller_engine("auto", cic) == ("compiled", None)
-        used, why = resolve_controller_engine("auto", replace(cic, estimator_options={"M": 65}))
-        assert used == "python" and f"{est} with a CIC delay M > 64" in str(why)
-    # the countermeasures are in the core
+            for engine in ENGINES:
+                c = build_controller(load_scenario(name), est, engine)
+                assert (c.engine, c.engine_note, c._core is not None) == ("compiled", None, True)
+    scn = load_scenario("wen-5.1")
+    pars = build_controller(scn, "tt-dq").pars
+    for opts in ({"normalise": "measured"}, {"observer": "mechanical"}):
+        assert resolve_controller_engine("python", replace(pars, estimator_options=opts)) == (
+            "compiled",
+            None,
+        )
     comp = CompensationPars(dead_time=True, cross_saturation=True, offset_calibration=True)
-    drive = replace(pars, compensation=comp)
-    assert resolve_controller_engine("compiled", drive) == ("compiled", None)
-    c = Controller(drive, "compiled")
+    c = Controller(replace(pars, compensation=comp), "python")
     assert (c.engine, c.engine_note) == ("compiled", None)
     with pytest.raises(ValueError, match="unknown controller engine"):
         resolve_controller_engine("fast", pars)
+    with pytest.raises(ValueError, match="unknown controller engine"):
+        Controller(pars, "fast")
+    assert CIC_MAX == 64
+    xue = build_controller(load_scenario("xue-fig13"), "square-wave").pars
+    for est in ("square-wave", "square-wave-nocic", "hybrid-square-wave"):
+        cic = replace(xue, estimator=est, estimator_options={"M": CIC_MAX})
+        assert Controller(cic).engine == "compiled"
+        with pytest.raises(ValueError, match=r"M \(the CIC delay\) must be in 1 \.\. 64, got 65"):
+            Controller(replace(cic, estimator_options={"M": CIC_MAX + 1}))
 
 
-def test_the_environment_carries_the_engine(monkeypatch: pytest.MonkeyPatch) -> None:
-    """``--engine`` reaches the controllers built without an engine (and a run's controller
-    process) through the environment."""
+def test_the_python_step_is_only_the_oracles() -> None:
+    """The controller's period runs in the core and nowhere else in ``controller/``: its
+    instance's ``step`` is the core's (a C function, no Python frame), the Python step's
+    methods are the oracle's alone, and the reference model keeps only its design."""
+    from controller._controller import ReferenceModel
+    from tests.oracle.blocks import OracleReferenceModel
+
+    c = build_controller(load_scenario("wen-5.1"), "tt-dq", "python")
+    assert type(c.step).__name__ == "builtin_function_or_method"
+    assert getattr(c.step, "__self__", None) is c._core
+    python_step = ("_step", "_polarity_step", "_advance_mode", "_restart")
+    assert not any(hasattr(Controller, name) for name in python_step)
+    assert all(callable(getattr(OracleController, name)) for name in python_step)
+    assert not hasattr(ReferenceModel, "update") and not hasattr(ReferenceModel, "reset")
+    assert callable(OracleReferenceModel.update)
+    o = oracle.build(load_scenario("wen-5.1"), "tt-dq", "oracle")
+    assert (o.engine, o._core) == ("oracle", None)
+
+
+def test_the_environment_carries_the_engine_name(monkeypatch: pytest.MonkeyPatch) -> None:
+    """``--engine`` reaches the controllers built without an engine through the environment:
+    each known name builds the core, an unknown one is refused."""
     scn = load_scenario("wen-5.1")
-    monkeypatch.setenv(ENGINE_ENV, "python")
-    assert build_controller(scn, "tt-dq").engine == "python"
-    monkeypatch.setenv(ENGINE_ENV, "compiled")
-    assert build_controller(scn, "tt-dq").engine == "compiled"
+    for name in ENGINES:
+        monkeypatch.setenv(ENGINE_ENV, name)
+        assert build_controller(scn, "tt-dq").engine == "compiled"
+    monkeypatch.setenv(ENGINE_ENV, "fast")
+    with pytest.raises(ValueError, match="unknown controller engine 'fast'"):
+        build_controller(scn, "tt-dq")
     monkeypatch.delenv(ENGINE_ENV)
-    assert build_controller(scn, "tt-dq").engine == "compiled"  # auto, built
+    assert build_controller(scn, "tt-dq").engine == "compiled"
 
 
 def test_purity_the_core_never_reads_the_truth_of_a_sensorless_measurement() -> None:
     """A sensorless estimator's compiled step does not use ``theta_e``/``w_e``: a
     measurement whose truth is garbage steps as one without truth, bit for bit."""
     pars = ControllerPars(
-        motor=build_controller(load_scenario("wen-5.1"), "tt-dq", "python").pars.motor,
+        motor=build_controller(load_scenario("wen-5.1"), "tt-dq").pars.motor,
         T_s=1e-4,
         startup=False,
     )
     ctrl = Controller(pars, "compiled")
     ctrl.set_enable(True)
-    ref = Controller(pars, "python")
+    ref = OracleController(pars)
     ref.set_enable(True)
     for k in range(50):
         m = Measurement(k, 0.1 * math.sin(k), -0.05, 0.05 - 0.1 * math.sin(k), 300.0)
@@ -432,9 +442,9 @@ def test_the_mechanical_observer_same_on_both_engines(estimator: str, tmp_path: 
         n // 3: lambda c: c.set_speed_ref(30.0),
         (2 * n) // 3: lambda c: c.set_speed_ref(-20.0),
     }
-    py, c_py = _loop(str(f), estimator, "python", n, events, speed_rpm=0.0)
+    py, c_py = _loop(str(f), estimator, "oracle", n, events, speed_rpm=0.0)
     cc, c_cc = _loop(str(f), estimator, "compiled", n, events, speed_rpm=0.0)
-    assert (c_py.engine, c_cc.engine, c_cc.engine_note) == ("python", "compiled", None)
+    assert (c_py.engine, c_cc.engine, c_cc.engine_note) == ("oracle", "compiled", None)
     first = next((k for k in range(n) if py[k] != cc[k]), None)
     assert first is None, f"the engines part at period {first}"
     pll, _ = _loop("wen-5.1", estimator, "compiled", n, events, speed_rpm=0.0)
@@ -473,9 +483,9 @@ def test_normalise_measured_same_on_both_engines(
         (2 * n) // 3: lambda c: c.set_enable(False),
         (2 * n) // 3 + 20: lambda c: c.set_enable(True),
     }
-    py, c_py = _loop(str(f), estimator, "python", n, events, speed_rpm=0.0)
+    py, c_py = _loop(str(f), estimator, "oracle", n, events, speed_rpm=0.0)
     cc, c_cc = _loop(str(f), estimator, "compiled", n, events, speed_rpm=0.0)
-    assert (c_py.engine, c_cc.engine, c_cc.engine_note) == ("python", "compiled", None)
+    assert (c_py.engine, c_cc.engine, c_cc.engine_note) == ("oracle", "compiled", None)
     first = next((k for k in range(n) if py[k] != cc[k]), None)
     assert first is None, f"the engines part at period {first}"
     assert c_cc.states() == c_py.states()
@@ -538,9 +548,9 @@ def test_a_plugin_estimator_runs_in_the_core_bit_for_bit(
         2600: lambda c: c.set_enable(True),
     }
     cc, c = _loop(path, est, "compiled", n, events, speed_rpm=60.0)
-    py, ref = _loop(path, est, "python", n, events, speed_rpm=60.0)
+    py, ref = _loop(path, est, "oracle", n, events, speed_rpm=60.0)
     assert (c.engine, c.engine_note, c.external_estimator) == ("compiled", None, True)
-    assert (ref.engine, ref.external_estimator) == ("python", False)
+    assert (ref.engine, ref.external_estimator) == ("oracle", False)
     first = next((k for k in range(n) if py[k] != cc[k]), None)
     assert first is None, f"the engines part at period {first}"
     assert len({o for o in cc}) > n // 2  # the trace moves
@@ -564,8 +574,8 @@ def test_a_plugin_that_raises_raises_the_same_on_both_engines(
     (tmp_path / "raising_plugin.py").write_text(RAISING)
     scn = load_scenario(str(examples / "flux-known-angle.toml"))
     got = {}
-    for engine in ("python", "compiled"):
-        c = build_controller(scn, "raising_plugin:create", engine)
+    for engine in ("oracle", "compiled"):
+        c = oracle.build(scn, "raising_plugin:create", engine)
         assert c.engine == engine
         c.set_enable(True)
         c.set_speed_ref(10.0)
@@ -580,17 +590,17 @@ def test_a_plugin_that_raises_raises_the_same_on_both_engines(
         with pytest.raises(ValueError) as v:
             c.injection()
         got[engine] = (str(e.value), outs, str(v.value))
-    assert got["python"][0] == got["compiled"][0] == "flux lost at k=40"
-    assert got["python"][2] == got["compiled"][2] == "too many values to unpack (expected 2)"
-    assert got["python"][1] == got["compiled"][1] and len(got["python"][1]) == 40
+    assert got["oracle"][0] == got["compiled"][0] == "flux lost at k=40"
+    assert got["oracle"][2] == got["compiled"][2] == "too many values to unpack (expected 2)"
+    assert got["oracle"][1] == got["compiled"][1] and len(got["oracle"][1]) == 40
 
 
-def test_bench_run_says_in_one_line_that_the_controller_runs_in_python(
+def test_bench_run_refuses_a_cic_delay_longer_than_the_cores_in_one_line(
     tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """``bench run`` of square-wave with a CIC delay ``M = 65`` (longer than the core's
-    delay line, the one option outside the core) on ``--engine compiled``: the run
-    completes (exit 0) on the Python controller, and stderr has the one line saying why."""
+    delay line, once the one option outside the core): a scenario error of one line naming
+    the file, the field and the bound, exit code 2, and no run started."""
     from bench.cli import main
     from tests.ports import free_port
 
@@ -598,11 +608,9 @@ def test_bench_run_says_in_one_line_that_the_controller_runs_in_python(
     out = tmp_path / "run"
     scn = tmp_path / "long-cic.toml"
     scn.write_text('extends = "xue-fig13"\n[estimator_options]\nM = 65\n')
-    argv = ["run", str(scn), "-e", "square-wave", "--engine", "compiled", "--duration", "0.05"]
+    argv = ["run", str(scn), "-e", "square-wave", "--engine", "python", "--duration", "0.05"]
     argv += ["--port", str(free_port()), "--out", str(out), "--quiet"]
-    assert main(argv) == 0
-    err = capsys.readouterr().err
-    line = "controller: square-wave with a CIC delay M > 64 is not compiled: Python"
-    assert line in err.splitlines()
-    meta = json.loads((out / "meta.json").read_text())
-    assert meta["node_reports"]["controller"]["engine"] == "python"
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"bench: error: {scn}: field 'estimator_options.M': must be <= 64, got 65"]
+    assert not (out / "meta.json").exists()

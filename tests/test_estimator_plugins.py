@@ -11,7 +11,7 @@ from bench._errors import ScenarioError
 from bench.cli import main
 from bench.scenarios._setup import motor_model
 from controller import EstimatorPluginError, UnknownEstimatorError, make_estimator
-from controller._registry import ENTRY_POINT_GROUP, entry_point_names, injection_family
+from controller._registry import ENTRY_POINT_GROUP, SPECS, entry_point_names, injection_family
 from plant_rt import preset
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "docs" / "examples"
@@ -240,6 +240,9 @@ def test_a_plugin_wrapping_tt_dq_runs_bit_for_bit_like_it(
     name = f"{module}:create"
     shipped, wrapped = build_controller(scn, "tt-dq"), build_controller(scn, name)
     assert wrapped.family == "rotating" and wrapped.gains() == shipped.gains()
+    # it runs as tt-dq's kind in the core, not as a Python estimator
+    assert wrapped._core.kind == shipped._core.kind == SPECS["tt-dq"].compiled_kind
+    assert not wrapped.external_estimator
     assert wrapped.gains()["estimator.V_h"] == 40.0
     a, b = _frames(scn, "tt-dq"), _frames(scn, name)
     assert len(a) == len(b) > 4 * 4500
@@ -259,6 +262,99 @@ def test_a_factory_whose_family_contradicts_its_estimator_is_one_line(
     msg = str(e.value)
     assert "\n" not in msg and "wrap_none:create" in msg
     assert "declares injection_family 'none'" in msg and "TTDQEstimator is a 'rotating'" in msg
+
+
+# -- a plug-in built on a shipped estimator brings its own period, or is refused --------------
+
+OWN_PERIOD = """
+from controller import make_estimator
+from controller._tt_dq import TTDQEstimator
+
+
+class Held(TTDQEstimator):
+    \"\"\"tt-dq's design with a period of its own: the angle it was reset to, held.\"\"\"
+
+    calls = 0
+
+    def update(self, x):
+        self.calls += 1
+        self.err = 0.25
+        self.i_alpha_f = x.i_alpha
+        self.i_beta_f = x.i_beta
+
+    def injection(self):
+        return (3.0, -2.0)
+
+
+def create(motor, T_s, **options):
+    e = make_estimator("tt-dq", motor, T_s, **options)
+    e.__class__ = Held
+    return e
+"""
+
+
+def test_a_plugin_subclassing_a_shipped_estimator_runs_its_own_period(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A subclass of tt-dq that overrides its per-period methods is an external Python
+    estimator: the core calls its ``update`` every period (never tt-dq's kind, which would
+    ignore them) and adds its ``injection``; the oracle's step gives the same bits."""
+    from bench.scenarios._schema import load_scenario
+    from bench.scenarios._setup import build_controller, controller_pars
+    from controller import Measurement
+    from controller._engine import KIND_EXTERNAL
+    from tests.oracle import OracleController
+
+    _write(tmp_path, "held_est", OWN_PERIOD)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    scn = load_scenario("wen-5.1")
+    name = "held_est:create"
+    ctrl = build_controller(scn, name)
+    ref = OracleController(controller_pars(scn, name))
+    assert ctrl._core.kind == KIND_EXTERNAL and ctrl.external_estimator
+    n = 60
+    outs = []
+    for c in (ctrl, ref):
+        c.set_enable(True)
+        outs.append([c.step(Measurement(k, 0.5, -0.2, -0.3, 300.0, None, None)) for k in range(n)])
+    assert outs[0] == outs[1]
+    assert ctrl.estimator.calls == ref.estimator.calls == n  # type: ignore[attr-defined]
+    assert ctrl.injection() == (3.0, -2.0)
+    assert {o.err for o in outs[0][-10:]} == {0.25}
+
+
+@pytest.mark.parametrize(
+    ("module", "body", "why"),
+    [
+        # a subclass with no period of its own: tt-dq's is the core's alone
+        (
+            "bare_est",
+            "from controller._tt_dq import TTDQEstimator\n"
+            "class Bare(TTDQEstimator):\n    pass\n"
+            "def create(motor, T_s, **options):\n"
+            "    e = make_estimator('tt-dq', motor, T_s, **options)\n"
+            "    e.__class__ = Bare\n    return e\n",
+            "Bare is built on a shipped estimator, whose period runs only in the core, and has "
+            "no per-period methods of its own (missing: update(), injection())",
+        ),
+        # the sensored baseline reads the plant's truth, which a plug-in never receives
+        (
+            "truth_est",
+            "def create(motor, T_s, **options):\n"
+            "    return make_estimator('sensored', motor, T_s)\n",
+            "it returns the SensoredEstimator, which reads the plant's truth",
+        ),
+    ],
+)
+def test_a_plugin_a_shipped_estimator_cannot_run_is_one_line(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, module: str, body: str, why: str
+) -> None:
+    _write(tmp_path, module, "from controller import make_estimator\n" + body)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    with pytest.raises(EstimatorPluginError) as e:
+        make_estimator(f"{module}:create", motor_model(preset("wen2023")), T_S)
+    msg = str(e.value)
+    assert "\n" not in msg and f"{module}:create" in msg and why in msg
 
 
 # -- a plug-in gets the options it declares ----------------------------------------------------

@@ -28,15 +28,14 @@ from controller import (
     Controller,
     ControllerPars,
     EstimatorInput,
-    make_estimator,
 )
-from controller._luenberger import LuenbergerObserver
 from controller._pll import PositionObserver
 from controller._registry import injection_family
 from controller._rotating import in_loop_response
-from controller._square_wave import SquareWaveEstimator
 from plant_rt import preset
 from tests.loop_helpers import motor_model
+from tests.oracle.blocks import OracleLuenbergerObserver
+from tests.oracle.estimators import OracleSquareWaveEstimator, make_oracle_estimator
 from tests.test_controller_square_wave import MOTOR as XUE_MODEL
 from tests.test_controller_square_wave import HFPlant
 
@@ -92,7 +91,7 @@ def _luenberger_ss(a: float, T_s: float) -> tuple[np.ndarray, np.ndarray]:
     th0 = 1.0
 
     def step(x: np.ndarray, e: float) -> np.ndarray:
-        obs = LuenbergerObserver(J=XUE_MODEL.J, n_p=XUE_MODEL.n_p, a=a, T_s=T_s)
+        obs = OracleLuenbergerObserver(J=XUE_MODEL.J, n_p=XUE_MODEL.n_p, a=a, T_s=T_s)
         obs.reset(th0 + x[0], x[1], x[2])
         obs.step(e, 0.0)
         return np.array([obs.theta_hat - th0, obs.w_hat, obs.x])
@@ -120,7 +119,7 @@ def _square_wave_loop(a: float, T_s: float, w: np.ndarray, cic: bool, c: float) 
 def test_square_wave_observer_pole_meets_phase_margin(cic: bool) -> None:
     """The default pole gives the target margin (45 deg) at 1 kHz, the loop stays stable
     with 3x more or 4x less gain, and the old 0.1 / (3.5 T_s) had 57 degrees."""
-    est = SquareWaveEstimator(XUE_MODEL, T_XUE, cic=cic)
+    est = OracleSquareWaveEstimator(XUE_MODEL, T_XUE, cic=cic)
     a = est.observer.a
     w = np.geomspace(0.05 * a, 0.999 * math.pi / (2 * T_XUE), 60000)
     L = _square_wave_loop(a, T_XUE, w, cic, 1.5)
@@ -144,10 +143,10 @@ def test_square_wave_observer_pole_meets_phase_margin(cic: bool) -> None:
 
 
 def test_square_wave_pm_target_and_pole_are_overridable() -> None:
-    est50 = SquareWaveEstimator(XUE_MODEL, T_XUE, pm_deg=50.0)
+    est50 = OracleSquareWaveEstimator(XUE_MODEL, T_XUE, pm_deg=50.0)
     assert est50.gains()["pm_deg"] == pytest.approx(50.0, abs=0.05)
-    assert est50.observer.a < SquareWaveEstimator(XUE_MODEL, T_XUE).observer.a
-    assert SquareWaveEstimator(XUE_MODEL, T_XUE, a=40.0).observer.a == 40.0
+    assert est50.observer.a < OracleSquareWaveEstimator(XUE_MODEL, T_XUE).observer.a
+    assert OracleSquareWaveEstimator(XUE_MODEL, T_XUE, a=40.0).observer.a == 40.0
 
 
 class _Prescribed:
@@ -177,7 +176,7 @@ def test_square_wave_chain_timing_matches_the_design_model(cic: bool) -> None:
     n = 400
     k = np.arange(n + 1)
     th_hat = theta - 0.05 + 0.02 * np.sin(2 * math.pi * k / 37.0) + 0.01 * np.sin(k / 5.0)
-    est = SquareWaveEstimator(XUE_MODEL, T_XUE, cic=cic, delay_comp=0.0)
+    est = OracleSquareWaveEstimator(XUE_MODEL, T_XUE, cic=cic, delay_comp=0.0)
     est.reset(float(th_hat[0]))
     est.observer = _Prescribed(th_hat)  # type: ignore[assignment]
     plant = HFPlant(theta)
@@ -251,7 +250,7 @@ def _pll_loop(est: object, w: np.ndarray, w_o: float | None = None) -> np.ndarra
 def test_pll_bandwidth_meets_phase_margin(name: str) -> None:
     """Each demodulator's PLL reaches the target margin with its in-loop filters, unless
     its crossover reached the LPF's -3 dB corner first (tt-ab: nothing in its loop)."""
-    est = make_estimator(name, WEN_MODEL, T_WEN)
+    est = make_oracle_estimator(name, WEN_MODEL, T_WEN)
     w = np.geomspace(1e-2 * est.w_o, 0.999 * math.pi / T_WEN, 80000)  # type: ignore[attr-defined]
     pm, w_c = _margin(_pll_loop(est, w), w, 2)
     g = est.gains()
@@ -272,7 +271,7 @@ def test_pll_bandwidth_meets_phase_margin(name: str) -> None:
 def test_old_tt_dq_bandwidth_had_21_degrees() -> None:
     """The issue's figure: w_o = 2 pi 20 through tt-dq's BPF and LPF leaves about 21 degrees
     (the model reproduces it), and the complementary sensitivity peaks near 2.9."""
-    est = make_estimator("tt-dq", WEN_MODEL, T_WEN)
+    est = make_oracle_estimator("tt-dq", WEN_MODEL, T_WEN)
     w = np.geomspace(1.0, 0.999 * math.pi / T_WEN, 80000)
     L = _pll_loop(est, w, w_o=2 * math.pi * 20)
     pm, _ = _margin(L, w, 2)
@@ -291,7 +290,7 @@ def test_pll_in_loop_chain_matches_the_code(name: str, f_mod: float) -> None:
     0.5 %, phase within 0.2 deg). sfhf locks off the rotor by half the phase of its
     negative sequence through BPF and HPF (Table 3, conventional); there, and only there,
     its error has the slope ``|H_B H_H|`` of the design."""
-    est = make_estimator(name, WEN_MODEL, T_WEN, w_o=0.0)
+    est = make_oracle_estimator(name, WEN_MODEL, T_WEN, w_o=0.0)
     theta = 1.1
     centre = theta
     if name == "sfhf":
@@ -329,13 +328,13 @@ def test_pll_in_loop_chain_matches_the_code(name: str, f_mod: float) -> None:
 
 
 def test_pll_options_override_the_design() -> None:
-    est = make_estimator("tt-dq", WEN_MODEL, T_WEN, w_o=100.0)
+    est = make_oracle_estimator("tt-dq", WEN_MODEL, T_WEN, w_o=100.0)
     assert est.w_o == 100.0 and est.pll.k_p == 200.0  # type: ignore[attr-defined]
-    est50 = make_estimator("tt-dq", WEN_MODEL, T_WEN, pm_deg=50.0)
+    est50 = make_oracle_estimator("tt-dq", WEN_MODEL, T_WEN, pm_deg=50.0)
     assert est50.gains()["pm_deg"] == pytest.approx(50.0, abs=0.05)
-    assert est50.w_o < make_estimator("tt-dq", WEN_MODEL, T_WEN).w_o  # type: ignore[attr-defined]
+    assert est50.w_o < make_oracle_estimator("tt-dq", WEN_MODEL, T_WEN).w_o  # type: ignore[attr-defined]
     with pytest.raises(ValueError):
-        make_estimator("tt-dq", WEN_MODEL, T_WEN, w_o=-1.0)
+        make_oracle_estimator("tt-dq", WEN_MODEL, T_WEN, w_o=-1.0)
 
 
 # ------------------------------------------------------------------------ gains() complete
@@ -417,7 +416,7 @@ def test_speed_response_matches_the_code(name: str, w_mod: float) -> None:
     """The PLL's speed estimate on eq. (7) currents whose angle carries a speed wobble of
     0.5 rad/s at ``w_mod``: amplitude within 2 %, phase within 1.5 degrees of
     ``speed_response`` (the design model of the speed loop)."""
-    est = make_estimator(name, WEN_MODEL, T_WEN)
+    est = make_oracle_estimator(name, WEN_MODEL, T_WEN)
     th0 = 1.1
     est.reset(th0)
     I_p, I_n = est.I_p, est.I_n  # type: ignore[attr-defined]

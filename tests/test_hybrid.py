@@ -47,7 +47,7 @@ def test_registry_gives_the_injection_family_and_checks_options() -> None:
     m = motor_model(preset("wen2023"))
     est = make_estimator("hybrid-tt-dq", m, 1e-4, V_h=30.0, theta_max=math.radians(4.0))
     assert isinstance(est, HybridEstimator)
-    assert est.hf.V_h == 30.0  # type: ignore[attr-defined]
+    assert est.hf.V_h == 30.0
     assert est.band.w_lo == pytest.approx(design(m, theta_max=math.radians(4.0)).band.w_lo)
     with pytest.raises(TypeError):
         make_estimator("hybrid-tt-dq", m, 1e-4, U_h=20.0)

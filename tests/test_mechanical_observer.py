@@ -17,11 +17,12 @@ import pytest
 
 from controller._api import EstimatorInput
 from controller._design import PM_TARGET_DEG
-from controller._luenberger import LuenbergerObserver, observer_response
+from controller._luenberger import observer_response
 from controller._rotating import LOAD_POLE_RATIO, RotatingInjectionPars, in_loop_response
-from controller._tt_dq import TTDQEstimator
 from plant_rt import preset
 from tests.loop_helpers import motor_model
+from tests.oracle.blocks import OracleLuenbergerObserver
+from tests.oracle.estimators import OracleTTDQEstimator
 
 WEN = preset("wen2023")
 T_S = WEN.T_s
@@ -34,7 +35,7 @@ def _obs_matrix(a: float, b: float) -> np.ndarray:
     for j in range(3):
         x0 = np.zeros(3)
         x0[j] = 1e-3
-        o = LuenbergerObserver(J=MODEL.J, n_p=MODEL.n_p, a=a, T_s=T_S, b=b)
+        o = OracleLuenbergerObserver(J=MODEL.J, n_p=MODEL.n_p, a=a, T_s=T_S, b=b)
         o.reset(1.0 + x0[0], x0[1], x0[2])
         o.step(-x0[0], 0.0)
         cols.append((np.array([o.theta_hat - 1.0, o.w_hat, o.x])) / 1e-3)
@@ -52,9 +53,9 @@ def test_load_pole_places_double_angle_pole_and_load_pole() -> None:
 
 def test_triple_pole_default_unchanged() -> None:
     """``b = None`` is Xue's triple pole with Xue's gains, bit for bit."""
-    o = LuenbergerObserver(J=0.01, n_p=3, a=50.0, T_s=1e-3)
+    o = OracleLuenbergerObserver(J=0.01, n_p=3, a=50.0, T_s=1e-3)
     assert (o.K_1, o.K_2, o.K_3) == (50.0**3 * 0.01, 3.0 * 50.0**2 * 0.01, 3.0 * 50.0 * 0.01)
-    o2 = LuenbergerObserver(J=0.01, n_p=3, a=50.0, T_s=1e-3, b=50.0)
+    o2 = OracleLuenbergerObserver(J=0.01, n_p=3, a=50.0, T_s=1e-3, b=50.0)
     assert pytest.approx((o.K_1, o.K_2, o.K_3), rel=1e-12) == (o2.K_1, o2.K_2, o2.K_3)
 
 
@@ -63,7 +64,7 @@ def test_observer_response_is_the_codes_transfer_function() -> None:
     a, b = 60.0, 6.0
     A = _obs_matrix(a, b)
     # input vector: response to e = 1e-3 from the zero state
-    o = LuenbergerObserver(J=MODEL.J, n_p=MODEL.n_p, a=a, T_s=T_S, b=b)
+    o = OracleLuenbergerObserver(J=MODEL.J, n_p=MODEL.n_p, a=a, T_s=T_S, b=b)
     o.reset(1.0, 0.0, 0.0)
     o.step(1e-3, 0.0)
     B = np.array([o.theta_hat - 1.0, o.w_hat, o.x]) / 1e-3
@@ -78,8 +79,8 @@ def test_observer_response_is_the_codes_transfer_function() -> None:
         assert x[1] == pytest.approx(w_c, rel=1e-6)
 
 
-def _tt_dq(observer: str) -> TTDQEstimator:
-    return TTDQEstimator(MODEL, T_S, RotatingInjectionPars(observer=observer))
+def _tt_dq(observer: str) -> OracleTTDQEstimator:
+    return OracleTTDQEstimator(MODEL, T_S, RotatingInjectionPars(observer=observer))
 
 
 def test_design_meets_phase_margin_with_tt_dq_filters() -> None:
@@ -113,7 +114,7 @@ def test_speed_response_is_one_for_tt_dq() -> None:
     assert abs(pll[-1]) < 0.9 or abs(np.angle(pll[-1])) > 0.3
 
 
-def _hf_current(est: TTDQEstimator, k: int, theta: float) -> tuple[float, float]:
+def _hf_current(est: OracleTTDQEstimator, k: int, theta: float) -> tuple[float, float]:
     """The HF current of eq. (4)/(7) at sample ``k`` for the rotor angle ``theta``
     (the model amplitudes: what the estimator expects, so ``err`` is exact)."""
     ph = k * est.wT

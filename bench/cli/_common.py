@@ -172,11 +172,10 @@ def add_controller_engine(p: argparse.ArgumentParser) -> None:
 def plant_engine(args: argparse.Namespace) -> str:
     """``--engine``, checked: one line when auto falls back to Python, an error when compiled
     cannot run. It also becomes the controller's (``ENGINE_ENV``, which the controller
-    processes of a run inherit): a controller outside the compiled cover runs in Python."""
+    processes of a run inherit; every name runs the controller's core)."""
     import os
 
     from bench.scenarios._setup import ENGINE_ENV
-    from controller import compiled_controller_missing
     from plant_rt import compiled_engine_missing, resolve_engine
 
     core = "auto" if args.engine == "native" else str(args.engine)
@@ -184,14 +183,9 @@ def plant_engine(args: argparse.Namespace) -> str:
         resolve_engine(core)
     except ValueError as e:
         raise BenchError(f"--engine {args.engine}: {e}") from None
-    c_why = compiled_controller_missing()
-    if core == "compiled" and c_why:
-        raise BenchError(f"--engine {args.engine}: {c_why}")
     why = compiled_engine_missing()
-    if core == "auto":
-        for line in (why, c_why):
-            if line:
-                print(line, file=sys.stderr)
+    if core == "auto" and why:
+        print(why, file=sys.stderr)
     os.environ[ENGINE_ENV] = core
     return core
 

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import sys
 from collections.abc import Callable
 from typing import Any
 
@@ -41,8 +40,6 @@ def cmd_controller(args: argparse.Namespace) -> int:
     plan = node_plan(args, "controller")
     codec = Codec()
     node = controller_node(plan, codec)
-    if node.ctrl.engine_note:  # e.g. an estimator the compiled core lacks
-        print(f"controller: {node.ctrl.engine_note}", file=sys.stderr)
     node.run_id = plan.run_id
     spec = plan.bus("controller")
     # the same rule as the plant node's (choose_node_engine); without --engine, the

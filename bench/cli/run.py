@@ -138,8 +138,6 @@ def cmd_run(args: argparse.Namespace) -> int:
     for role, rep in res.meta.get("node_reports", {}).items():
         for why in ((rep or {}).get("rt") or {}).get("refused", []):
             print(f"{role}: real-time setting refused: {why}", file=sys.stderr)
-    if note := (res.meta.get("node_reports", {}).get("controller") or {}).get("engine_note"):
-        print(f"controller: {note}", file=sys.stderr)  # e.g. an estimator the core lacks
     print(format_metrics(res.metrics, scn.paper_result, scn.estimator, est))
     print(f"countermeasures: {countermeasures_text(res.meta.get('countermeasures'))}")
     if engines := res.meta.get("node_engines"):  # which loop served each node

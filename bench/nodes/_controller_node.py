@@ -265,13 +265,14 @@ class ControllerNode:
         return out
 
     def report(self) -> dict[str, object]:
-        """Counters, for the node's JSON report; the controller's ``engine`` and, when it runs
-        in Python although the compiled engine was asked for, why (``engine_note``); the
+        """Counters, for the node's JSON report; the controller's ``engine`` (``compiled``: its
+        one engine, the core, whatever the name) and ``engine_note`` (None, kept for the
+        readers of the report: it said why a controller ran in Python); the
         loop that ran the periods (``node_engine``: ``python`` or ``native``); its
         design as built (``design``, :func:`controller_design`)."""
         out = self.counters.as_dict()
         out.update(steps=self.next_k, sample_timeouts=self.sample_timeouts)
-        out.update(engine=self.ctrl.engine, engine_note=self.ctrl.engine_note)
+        out.update(engine=self.ctrl.engine, engine_note=None)
         out["node_engine"] = self.node_engine
         out["design"] = controller_design(self.ctrl)
         return out

@@ -109,8 +109,8 @@ def record_quadrature(scn: Scenario, estimator: str) -> np.ndarray:
     rows: list[tuple[float, float, float]] = []
 
     def keep(ctrl: Any) -> None:
-        est = ctrl.estimator
-        rows.append((est.e_alpha, est.e_beta, float(ctrl.mode)))
+        e_a, e_b = ctrl.quadrature()  # the core's (controller.Controller.quadrature)
+        rows.append((e_a, e_b, float(ctrl.mode)))
 
     run_inprocess(scn, estimator, Codec(), observe=keep)
     return np.asarray(rows, dtype=float)

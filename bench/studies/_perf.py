@@ -294,14 +294,18 @@ def inprocess_loop(
 
 
 def plant_and_controller_alone(profile: str, n_steps: int, repeats: int) -> dict[str, float]:
-    """Seconds per period of the plant alone and of the tt-dq controller alone (each engine).
+    """Seconds per period of the plant alone (each engine) and of the tt-dq controller alone
+    (``controller_compiled``: its one engine, the C core).
 
     One closed loop (``wen-5.1``'s motor at 10 kHz, tt-dq) is recorded once;
     the plant alone is a fresh plant fed the recorded duties (``sample()`` and
     ``step()``), the controller alone a fresh controller fed the recorded
     measurements.  Both engines give the same trace bit for bit, so each does
     exactly its work inside the loop, without the other; the start-up's
-    periods are replayed too but not timed.
+    periods are replayed too but not timed.  The controller has one engine
+    whatever the name (:mod:`controller._engine`): timing it under another name
+    would compare the core with itself, and its Python step is the tests' oracle
+    (``tests/oracle/``), not a product the bench runs, so it has no second figure.
     """
     from bench.scenarios._setup import build_controller, build_plant
 
@@ -333,7 +337,7 @@ def plant_and_controller_alone(profile: str, n_steps: int, repeats: int) -> dict
         return (time.perf_counter() - t0) / n_steps
 
     fns = {f"plant_{e}": functools.partial(plant_alone, e) for e in eng}
-    fns.update({f"controller_{e}": functools.partial(ctrl_alone, e) for e in eng})
+    fns["controller_compiled"] = functools.partial(ctrl_alone, "compiled")
     return _medians_interleaved(fns, repeats)
 
 
@@ -424,10 +428,8 @@ def inprocess_section(quick: bool, repeats: int, n_steps: int) -> dict[str, Any]
             row["compiled_over_python"] = a["plant_python"] / a["plant_compiled"]
         alone[key] = row
         if profile == "ideal":
-            ctrl: dict[str, Any] = {e: 1e6 * a[f"controller_{e}"] for e in eng}
-            if "compiled" in eng:
-                ctrl["compiled_over_python"] = a["controller_python"] / a["controller_compiled"]
-            alone["controller_tt_dq"] = ctrl
+            # the controller's one engine, the core (plant_and_controller_alone)
+            alone["controller_tt_dq"] = {"compiled": 1e6 * a["controller_compiled"]}
     inproc["alone_us_per_period"] = alone
     periods = 1000 if quick else 4000
     node = {}
@@ -1339,7 +1341,6 @@ def run_perf(
 
     ``echo`` gets one line as each section starts (progress).
     """
-    from controller import compiled_controller_missing
     from plant_rt import compiled_engine_missing
 
     say = echo or (lambda s: None)
@@ -1358,7 +1359,8 @@ def run_perf(
         "engines": {
             "measured": list(engines()),
             "compiled_missing": compiled_engine_missing(),
-            "controller_compiled_missing": compiled_controller_missing(),
+            # kept for readers of perf.json: the controller's core is always built
+            "controller_compiled_missing": None,
         },
         "targets": TARGETS,
     }
@@ -1575,13 +1577,15 @@ def _engine_rows(res: dict[str, Any]) -> list[list[str]]:
             )
         )
     c = alone["controller_tt_dq"]
+    # one engine, the core, whatever the name: no Python figure to set beside it (an older
+    # perf.json's was the Python step, now the tests' oracle, not a product engine)
     out.append(
-        row(
-            "tt-dq controller alone per step, 10 kHz",
-            {e: c[e] for e in eng},
-            "us",
-            c.get("compiled_over_python"),
-        )
+        [
+            "tt-dq controller alone per step, 10 kHz (one engine: the C core)",
+            "n/a",
+            _num(c["compiled"], "us"),
+            "",
+        ]
     )
     node = inp["plant_node_10khz"]
     out.append(
@@ -1821,8 +1825,7 @@ def _missed_reasons(res: dict[str, Any]) -> list[str]:
     out: list[str] = []
     alone = inp["alone_us_per_period"]
     e_loop, loop = _fastest(inp["tt_dq_10khz"])
-    ctrl = alone["controller_tt_dq"]
-    ctrl_us = ctrl.get(e_loop, math.nan)
+    ctrl_us = alone["controller_tt_dq"]["compiled"]  # one engine, the core
     plant_us = alone["average"].get(e_loop, math.nan)
     rest_us = loop["us_per_step"] - plant_us - ctrl_us
     load = res["machine"].get("loadavg_1min_start", math.nan)
@@ -1845,10 +1848,12 @@ def _missed_reasons(res: dict[str, Any]) -> list[str]:
         py = inp["tt_dq_10khz"]["python"]["us_per_step"]
         out.append(
             f"- **Compiled against Python.** The compiled engine runs the plant "
-            f"{_num(alone['average'].get('compiled_over_python', math.nan), 'x')} and the "
-            f"controller {_num(ctrl.get('compiled_over_python', math.nan), 'x')} faster than "
-            f"Python, the loop only {_num(inp['tt_dq_10khz']['compiled_over_python'], 'x')}: "
-            "what is Python on both engines is the same on both and bounds the ratio. That "
+            f"{_num(alone['average'].get('compiled_over_python', math.nan), 'x')} faster "
+            f"than Python, the loop only {_num(inp['tt_dq_10khz']['compiled_over_python'], 'x')}; "
+            "the controller has one engine on both, its C core (its Python step is the "
+            "tests' oracle, `tests/oracle/`, not an engine the bench runs, and not timed "
+            "here): what is Python on both engines is the same on both and bounds the "
+            "ratio. That "
             f"is the loop's own Python ({_num(rest_us, 'us')} per step on the compiled "
             f"engine; with it alone the bound is {_num(py / rest_us, 'x')}, the Python loop "
             f"of {_num(py, 'us')} over it) and the Python of the plant's `sample()` and "
@@ -1879,7 +1884,7 @@ def _missed_reasons(res: dict[str, Any]) -> list[str]:
     if not v["switching_rtf_10khz"]["met"]:
         e_sw, sw = _fastest(inp["switching_10khz"])
         sw_plant = alone["switching"].get(e_sw, math.nan)
-        c_sw = ctrl.get(e_sw, math.nan)
+        c_sw = ctrl_us
         out.append(
             f"- **Switching plant.** The loop takes {_num(sw['us_per_step'], 'us')} per step on "
             f"the {e_sw} engine, of which the switching plant alone {_num(sw_plant, 'us')} "
@@ -1891,7 +1896,7 @@ def _missed_reasons(res: dict[str, Any]) -> list[str]:
     if not v["lockstep_periods_per_s"]["met"]:
         budget = 1e6 / TARGETS["lockstep_periods_per_s"]
         e_n = "compiled" if "compiled" in inp["plant_node_10khz"] else "python"
-        nodes_us = inp["plant_node_10khz"][e_n]["us_p50"] + ctrl.get(e_n, math.nan)
+        nodes_us = inp["plant_node_10khz"][e_n]["us_p50"] + ctrl_us
         text = (
             f"- **Two-process lockstep.** The target leaves {_num(budget, 'us')} per period for "
             f"everything; the sample -> duty round trip on the bus alone has a median of "

@@ -236,9 +236,8 @@ def native_unavailable(node: ControllerNode, interface: str | None) -> str | Non
     else one line saying why not (:func:`bench.cli._common.choose_node_engine` says what
     follows: the Python node, or a refusal)."""
     ctrl = node.ctrl
-    if ctrl._core is None:
-        why = ctrl.engine_note or "the controller runs on the Python engine"
-        return f"the native controller node needs the compiled controller ({why})"
+    if ctrl._core is None:  # a controller without the core: the tests' oracle
+        return "the native controller node needs the controller's core"
     if ctrl.external_estimator:
         return f"the {ctrl.pars.estimator} estimator is Python code, which needs the Python process"
     if interface is not None and interface not in NATIVE_INTERFACES:
@@ -307,15 +306,13 @@ class NativeController:
 
     def pull_commands(self) -> None:
         """What C applied back into the Python node: the queue's applied commands
-        (:meth:`CommandQueue.due`, nothing applied again), the stop and fault flags, and
-        the controller's speed reference attribute (the core's is C's)."""
+        (:meth:`CommandQueue.due`, nothing applied again), the stop and fault flags (the
+        speed reference is the core's, which the controller reads)."""
         node, c = self.node, self.ctl
         if c.applied_upto >= 0:
             node.commands.due(c.applied_upto)
         node.stopped = bool(c.stopped)
         node.faulted = bool(c.faulted)
-        if c.has_w_ref:
-            node.ctrl.w_m_ref = c.w_m_ref
 
     def _command(self) -> None:
         """A BenchCommand frame: ControllerNode.on_message's command branch."""
