@@ -121,6 +121,19 @@ def test_the_sensorless_real_time_score_says_its_verdict_and_the_late_periods() 
     assert "frames the recorder lost: 29,881." in page
 
 
+def test_a_failed_real_time_score_run_is_said_with_its_line() -> None:
+    from bench.studies._perf import _failed_score_run
+
+    res = _measured(missed_10k=1.0, frames_lost=0.0)
+    res["realtime_native_score"] = _score(0.45)
+    line = "node process failed (controller: killed by SIGKILL); files in /tmp/x/realtime"
+    res["realtime_native_score"]["realtime"] = _failed_score_run(line)
+    res["realtime_native_score"]["scores_like_lockstep"] = False
+    page = render_realtime_native(res)
+    assert f"**The real-time run failed on this host**: {line}." in page
+    assert "rms in lockstep 0.400 deg" in page and "scores like it" not in page
+
+
 def test_the_score_tolerance_is_one_periods_angle_at_the_top_speed() -> None:
     from bench.scenarios._schema import load_scenario
     from bench.studies._perf import score_tolerance_deg

@@ -737,18 +737,26 @@ def sensorless_realtime_score(
     for i, mode in enumerate(("lockstep", "realtime")):
         port = 48000 + 4 * (os.getpid() % 1000) + 2 * i if iface == "udp_multicast" else None
         rt = [] if priority is None or mode == "lockstep" else ["--rt-priority", str(priority)]
-        res = run_scenario(
-            scn,
-            "tt-dq",
-            spec=BusSpec(iface, chan, port),
-            out_dir=out / mode,
-            mode=mode,
-            progress=False,
-            node_args={
-                "plant": ["--engine", "native", *rt],
-                "controller": ["--engine", "native", *rt],
-            },
-        )
+        try:
+            res = run_scenario(
+                scn,
+                "tt-dq",
+                spec=BusSpec(iface, chan, port),
+                out_dir=out / mode,
+                mode=mode,
+                progress=False,
+                node_args={
+                    "plant": ["--engine", "native", *rt],
+                    "controller": ["--engine", "native", *rt],
+                },
+            )
+        except BenchError as e:
+            if mode == "lockstep":
+                raise
+            # a real-time run that failed on this host (a node that missed its stop and was
+            # killed, a trip before anything was scored) is this host's result: kept, said
+            runs[mode] = _failed_score_run(str(e))
+            continue
         m = res.metrics
         n = max(1, int(m.get("steps") or 0))
         runs[mode] = {
@@ -782,12 +790,31 @@ def sensorless_realtime_score(
     }
 
 
+def _failed_score_run(error: str) -> dict[str, Any]:
+    """The real-time score run's figures when it failed: the bench's line, nothing scored."""
+    return {
+        **{k: math.nan for k in SCORE_KEYS},
+        "lock_lost": True,
+        "error": error,
+        "node_engines": {},
+    }
+
+
 def score_lines(sc: dict[str, Any] | None) -> list[str]:
     """The sentence of docs/REALTIME.md on :func:`sensorless_realtime_score` (none for a
     ``perf.json`` written before it was measured)."""
     if not sc:
         return []
     rt, ls = sc["realtime"], sc["lockstep"]
+    if "error" in rt:
+        return [
+            "",
+            f"A sensorless run on the drive's clock against the same run in lockstep "
+            f"(`realtime_native_score`): {sc['scenario']} with {sc['estimator']} at "
+            f"{sc['f_sw'] / 1e3:g} kHz, both nodes native, `--rt-priority`. "
+            f"**The real-time run failed on this host**: {rt['error']}. "
+            f"Position error rms in lockstep {_num(ls['theta_err_rms_deg'], 'deg')}.",
+        ]
     verdict = "scores like it" if sc["scores_like_lockstep"] else "**does not score like it**"
     why = (
         ""
