@@ -692,3 +692,8 @@ def fault_metrics(
             }
         )
     return out
+
+
+def late_duty_fraction(m: Mapping[str, Any]) -> float:
+    """The fraction of a run's periods that ran with a late or missing duty (real time)."""
+    return float(m.get("late_duty_periods", 0)) / max(1, int(m.get("steps", 0)))

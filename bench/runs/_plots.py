@@ -295,7 +295,7 @@ def metrics_text(m: dict[str, Any]) -> str:
     """The key metrics of a run, one per line (the figure's text box): the errors, and
     where not zero what makes a run less than a drive's (late duties, host stalls,
     periods the recording lacks), a trip, a lost lock and the faults' reactions."""
-    from bench.runs._results import late_duty_fraction
+    from bench.runs._metrics import late_duty_fraction
 
     lines = [
         f"{METRIC_LABELS['theta_err_abs_max_deg']} "

@@ -417,4 +417,3 @@ def _native_readers(
             nr.close()
         return [], f"the native recorder could not open its socket ({e.strerror or e})"
     return readers, None
-

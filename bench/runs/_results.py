@@ -9,11 +9,10 @@ the warning lines that go with it.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-
 import json
 import math
 import platform
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -22,8 +21,6 @@ import can
 import numpy as np
 
 from bench import _jsonio as jsonio
-from plant_rt import FLUX_RANGE
-
 from bench._errors import (
     EXIT_FAULT_EXPECTATION,
     EXIT_LOCK_LOST,
@@ -40,6 +37,7 @@ from bench.runs._metrics import (
     band_metrics,
     compute_metrics,
     fault_metrics,
+    late_duty_fraction,
     split_corner_hz,
 )
 from bench.scenarios._schema import Scenario
@@ -54,6 +52,7 @@ from bench.scenarios._setup import (
 from bench.wire._codec import Codec
 from bench.wire._frames import FrameArray, with_ids
 from bench.wire._protocol import unwrap
+from plant_rt import FLUX_RANGE
 
 
 @dataclass(slots=True)
@@ -704,11 +703,6 @@ def outcome(m: dict[str, Any], T_s: float) -> tuple[int, list[str]]:
 
 #: Real-time runs with more late periods than this get a warning (fraction).
 REALTIME_LATE_WARN = 0.01
-
-
-def late_duty_fraction(m: dict[str, Any]) -> float:
-    """The fraction of a run's periods that ran with a late or missing duty (real time)."""
-    return float(m.get("late_duty_periods", 0)) / max(1, int(m.get("steps", 0)))
 
 
 def host_stall_times(frames: Sequence[can.Message], codec: Codec, T_s: float) -> list[float]:
