@@ -194,10 +194,11 @@ def test_where_the_native_recorder_cannot_serve_the_python_one_records(
     assert [m.data[0] for m in rec.frames()] == list(range(20)) and rec.frames_lost == 0
 
 
-def test_only_udp_multicast_is_read_natively() -> None:
+def test_udp_multicast_and_socketcan_are_read_natively() -> None:
     assert _recorder_native.unavailable("udp_multicast") is None
-    why = _recorder_native.unavailable("socketcan")
-    assert why is not None and "socketcan" in why
+    assert _recorder_native.unavailable("socketcan") is None
+    why = _recorder_native.unavailable("virtual")
+    assert why is not None and "virtual" in why
 
 
 def test_the_recorder_thread_runs_below_both_nodes() -> None:
@@ -271,3 +272,29 @@ def test_bench_perf_names_the_recorder_that_lost_frames() -> None:
     assert "native recorder" in native and "12 in the sensorless" in native
     score["recorder_engine"] = "python"  # one run had python-can's reader
     assert "Python thread" in _native_limit("native_recorder_frames_lost", res)
+
+
+def test_a_socketcan_frame_becomes_the_message_python_can_makes() -> None:
+    """``can_message`` on ``struct can(fd)_frame`` bytes: the fields python-can's socketcan
+    bus sets (its ``dissect_can_frame`` and ``capture_message``), for each kind of frame."""
+    from bench.nodes.native._recorder_native import can_message
+
+    def raw(can_id: int, data: bytes, flags: int = 0, fd: bool = False, len8: int = 0) -> bytes:
+        head = can_id.to_bytes(4, "little") + bytes([len(data), flags, 0, len8])
+        return head + data.ljust(64 if fd else 8, b"\0")
+
+    m = can_message(raw(0x123, b"\x01\x02"), 5.25, True, "vcan0")
+    assert (m.arbitration_id, m.is_extended_id, m.dlc, bytes(m.data)) == (0x123, False, 2, b"\1\2")
+    assert (m.timestamp, m.channel, m.is_rx, m.is_fd) == (5.25, "vcan0", False, False)
+    m = can_message(raw(0x80000000 | 0x1ABCDE0, b"\x09"), 0.0, False, "can0")
+    assert (m.arbitration_id, m.is_extended_id, m.is_rx) == (0x1ABCDE0, True, True)
+    m = can_message(raw(0x40000000 | 0x7FF, b"\0" * 4), 0.0, True, "can0")
+    assert m.is_remote_frame and m.dlc == 4
+    m = can_message(raw(0x20000000 | 0x4, b"\0" * 8), 0.0, True, "can0")
+    assert m.is_error_frame
+    m = can_message(raw(0x55, bytes(range(12)), flags=0x01 | 0x02, fd=True), 0.0, True, "can0")
+    assert m.is_fd and m.bitrate_switch and m.error_state_indicator and m.dlc == 12
+    assert bytes(m.data) == bytes(range(12))
+    # a classic frame's flags byte means nothing (python-can clears it)
+    m = can_message(raw(0x56, bytes(8), flags=0x01), 0.0, True, "can0")
+    assert not m.bitrate_switch and not m.is_fd

@@ -49,6 +49,9 @@ def test_two_processes_on_vcan0_equal_inprocess(lockstep_run: tuple[Scenario, Ru
     assert res.metrics["steps"] == len(ref["step"])
     assert res.metrics["frames_rejected"] == 0
     assert res.meta["transport"] == "socketcan:vcan0"
+    # the native recorder reads SocketCAN, and says what it lost (python-can's bus cannot)
+    assert res.meta["recorder"]["engine"] == "native", res.meta["recorder"]
+    assert res.meta["recorder_frames_lost"] == 0
     # a closed loop that moves: the motor turns under sensored FOC
     assert ref["w_m_rpm"][-1] > 20.0
 

@@ -381,7 +381,8 @@ class Recording:
                 nr.stop()  # the rest of its ring recorded; what the socket still held counted
                 st = nr.stats()
                 self._native_final.append(st)
-                kernel = fd_drops(st["fd"])
+                # SocketCAN: the kernel's count came with the frames (SO_RXQ_OVFL)
+                kernel = st["kernel_drops"] if nr.interface == "socketcan" else fd_drops(st["fd"])
                 drops.append(None if kernel is None else kernel + st["unread"] + st["ring_lost"])
                 nr.close()
         else:
@@ -411,7 +412,16 @@ def _native_readers(
     try:
         for spec, r in zip(specs, recorders, strict=True):
             port = spec.port if spec.port is not None else UDP_DEFAULT_PORT
-            readers.append(NativeReader(spec.channel, port, r, priority=rt_priority, rcvbuf=rcvbuf))
+            readers.append(
+                NativeReader(
+                    spec.channel,
+                    port,
+                    r,
+                    interface=spec.interface,
+                    priority=rt_priority,
+                    rcvbuf=rcvbuf,
+                )
+            )
     except OSError as e:
         for nr in readers:
             nr.close()

@@ -362,7 +362,16 @@ def run_scenario(
         meta["recorder"]["native"] = [
             {
                 k: st[k]
-                for k in ("received", "ring_lost", "unread", "malformed", "calls", "cpu_ns", "fifo")
+                for k in (
+                    "received",
+                    "ring_lost",
+                    "unread",
+                    "kernel_drops",
+                    "malformed",
+                    "calls",
+                    "cpu_ns",
+                    "fifo",
+                )
             }
             for st in rec.native_stats
         ]

@@ -475,7 +475,19 @@ def quiet_receive(bus: can.BusABC, group: str) -> None:
     """Stop delivery to a python-can udp_multicast bus that nobody reads (a native reader
     reads its ``group``: the recorder's, a native node's): it leaves the group, takes no
     other group's datagrams (``IP(V6)_MULTICAST_ALL`` off) and keeps the smallest receive
-    buffer, so the kernel does not copy every frame of the bus into it (best effort)."""
+    buffer, so the kernel does not copy every frame of the bus into it (best effort).
+    A python-can socketcan bus takes no frame at all (an empty ``CAN_RAW_FILTER``, the
+    kernel's way to disable reception; python-can's ``set_filters([])`` means every
+    frame); it still sends."""
+    can_sock = getattr(bus, "socket", None)
+    af_can = getattr(socket, "AF_CAN", None)
+    if isinstance(can_sock, socket.socket) and af_can is not None and can_sock.family == af_can:
+        try:
+            can_sock.setsockopt(socket.SOL_CAN_RAW, socket.CAN_RAW_FILTER, b"")
+            can_sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 0)
+        except OSError:
+            pass
+        return
     sock = getattr(getattr(bus, "_multicast", None), "_socket", None)
     if not isinstance(sock, socket.socket):
         return

@@ -1,13 +1,16 @@
-"""The native recorder's receive side (``bn_rec.c``): a C thread keeps every datagram.
+"""The native recorder's receive side (``bn_rec.c``): a C thread keeps every frame.
 
 A run's recorder (:class:`bench.runs._recorder.Recording`) reads python-can's
-``udp_multicast`` bus through :class:`NativeReader` where the native library
-loads: a C thread without the GIL, under ``SCHED_FIFO`` when asked for, drains
-the socket into a ring preallocated at open, with each datagram's kernel
-receive stamp; a Python thread takes the ring in batches and turns each
-datagram into the :class:`can.Message` python-can's bus would have returned
-(python-can's own ``unpack_message``, the time stamp computed as python-can
-computes it), which it hands to its listener as :class:`can.Notifier` does.
+``udp_multicast`` bus, or a SocketCAN interface, through :class:`NativeReader`
+where the native library loads: a C thread without the GIL, under ``SCHED_FIFO``
+when asked for, drains the socket into a ring preallocated at open, with each
+frame's kernel receive stamp; a Python thread takes the ring in batches and turns
+each into the :class:`can.Message` python-can's bus would have returned
+(udp_multicast: python-can's own ``unpack_message``; SocketCAN: its
+``dissect_can_frame`` and the fields its ``capture_message`` sets; the time stamp
+computed as python-can computes it), which it hands to its listener as
+:class:`can.Notifier` does.  On SocketCAN the kernel's drops for the socket are
+counted too (``SO_RXQ_OVFL``), which python-can's bus does not say.
 The socket is emptied at C speed, so the kernel's buffer no longer overflows
 while the Python side is descheduled or slower than the bus: the ring absorbs
 the lag, and a datagram that finds it full is counted (:attr:`NativeReader.lost`).
@@ -22,11 +25,20 @@ import time
 from typing import Any
 
 import can
+from can.interfaces.socketcan.constants import (
+    CAN_EFF_FLAG,
+    CAN_ERR_FLAG,
+    CAN_RTR_FLAG,
+    CANFD_BRS,
+    CANFD_ESI,
+    CANFD_MTU,
+)
+from can.interfaces.socketcan.socketcan import dissect_can_frame
 from can.interfaces.udp_multicast.utils import unpack_message
 
 from bench.nodes.native._native import library
 
-__all__ = ["RING_CAPACITY", "NativeReader", "unavailable"]
+__all__ = ["INTERFACES", "RING_CAPACITY", "NativeReader", "can_message", "unavailable"]
 
 #: The ring's datagrams.  A 10 kHz native pair puts 4 datagrams a period on the
 #: recorder's bus (wen-5.1 with tt-dq, measured: 160,050 in 40,000 periods: the plant's
@@ -37,6 +49,9 @@ __all__ = ["RING_CAPACITY", "NativeReader", "unavailable"]
 #: hold 6.6 s of that bus with the Python side not running at all, longer than the
 #: real-time runs of ``bench perf`` (4 s); about 90 MB (bn_rec_slot_t: 344 bytes).
 RING_CAPACITY = 1 << 18
+
+#: The python-can interfaces the native recorder reads.
+INTERFACES = ("udp_multicast", "socketcan")
 
 #: Datagrams taken from the ring per call (one ctypes call per batch).
 TAKE_BATCH = 4096
@@ -55,7 +70,8 @@ class _Stats(ctypes.Structure):
         ("fifo", ctypes.c_int32),
         ("err_sched", ctypes.c_int32),
         ("fd", ctypes.c_int32),
-        ("pad", ctypes.c_int32),
+        ("kind", ctypes.c_int32),
+        ("kernel_drops", ctypes.c_uint64),
     ]
 
 
@@ -68,7 +84,8 @@ def _slot_type(dgram: int) -> type[ctypes.Structure]:
             ("nsec", ctypes.c_int64),
             ("len", ctypes.c_uint16),
             ("truncated", ctypes.c_uint8),
-            ("pad", ctypes.c_uint8 * 5),
+            ("local", ctypes.c_uint8),
+            ("pad", ctypes.c_uint8 * 4),
             ("data", ctypes.c_uint8 * dgram),
         ]
 
@@ -97,6 +114,15 @@ def _lib() -> tuple[ctypes.CDLL, type[ctypes.Structure]]:
         ctypes.POINTER(ctypes.c_int),
     ]
     dll.bn_rec_open.restype = ctypes.c_void_p
+    dll.bn_rec_open_can.argtypes = [
+        ctypes.c_char_p,
+        ctypes.c_int,
+        ctypes.c_int,
+        ctypes.c_uint64,
+        ctypes.c_int,
+        ctypes.POINTER(ctypes.c_int),
+    ]
+    dll.bn_rec_open_can.restype = ctypes.c_void_p
     dll.bn_rec_start.argtypes = [ctypes.c_void_p]
     dll.bn_rec_start.restype = ctypes.c_int
     dll.bn_rec_take.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_uint64]
@@ -117,8 +143,8 @@ def unavailable(interface: str) -> str | None:
     """Why the native recorder cannot read ``interface`` here (None: it can)."""
     from bench._errors import BenchError
 
-    if interface != "udp_multicast":
-        return f"the native recorder reads udp_multicast only, not {interface}"
+    if interface not in INTERFACES:
+        return f"the native recorder reads udp_multicast and socketcan only, not {interface}"
     try:
         _lib()
     except (BenchError, OSError) as e:
@@ -126,13 +152,39 @@ def unavailable(interface: str) -> str | None:
     return None
 
 
+def can_message(frame: bytes, ts: float, local: bool, channel: str) -> can.Message:
+    """The :class:`can.Message` python-can's socketcan bus on ``channel`` returns for the
+    ``struct can(fd)_frame`` bytes ``frame`` received at ``ts`` (``local``: the kernel's
+    ``MSG_DONTROUTE``, a frame sent on this host): the fields of python-can's
+    ``capture_message``, the channel its bus fills in."""
+    can_id, dlc, flags, data = dissect_can_frame(frame)
+    ext = bool(can_id & CAN_EFF_FLAG)
+    return can.Message(
+        timestamp=ts,
+        channel=channel,
+        arbitration_id=can_id & (0x1FFFFFFF if ext else 0x7FF),
+        is_extended_id=ext,
+        is_remote_frame=bool(can_id & CAN_RTR_FLAG),
+        is_error_frame=bool(can_id & CAN_ERR_FLAG),
+        is_fd=len(frame) == CANFD_MTU,
+        is_rx=not local,
+        bitrate_switch=bool(flags & CANFD_BRS),
+        error_state_indicator=bool(flags & CANFD_ESI),
+        dlc=dlc,
+        data=data,
+    )
+
+
 class NativeReader:
-    """Reads python-can's udp_multicast bus ``group``/``port`` in C and hands each frame to
-    ``listener`` from a Python thread (the part of :class:`can.Notifier` a recorder uses).
+    """Reads python-can's udp_multicast bus ``group``/``port`` (``interface``
+    ``udp_multicast``) or the SocketCAN interface ``group`` (``socketcan``; ``port`` unused)
+    in C, and hands each frame to ``listener`` from a Python thread (the part of
+    :class:`can.Notifier` a recorder uses).
 
     ``priority``: the C thread's ``SCHED_FIFO`` priority (None: normal scheduling).
     ``rcvbuf``: the socket's receive buffer (bytes); ``capacity``: the ring's datagrams
-    (default :data:`RING_CAPACITY`).  :class:`OSError` when the socket cannot be opened.
+    (default :data:`RING_CAPACITY`); ``fd``: SocketCAN, receive CAN FD frames too (as
+    the bench's buses do).  :class:`OSError` when the socket cannot be opened.
     """
 
     def __init__(
@@ -141,6 +193,8 @@ class NativeReader:
         port: int,
         listener: can.Listener,
         *,
+        interface: str = "udp_multicast",
+        fd: bool = True,
         priority: int | None = None,
         rcvbuf: int = 0,
         capacity: int | None = None,
@@ -148,11 +202,20 @@ class NativeReader:
     ) -> None:
         self._dll, slot = _lib()
         self.listener = listener
+        self.interface = interface
+        self._channel = group
         err = ctypes.c_int(0)
         cap = RING_CAPACITY if capacity is None else capacity
-        handle = self._dll.bn_rec_open(
-            group.encode(), port, rcvbuf, cap, priority or 0, ctypes.byref(err)
-        )
+        if interface == "socketcan":
+            handle = self._dll.bn_rec_open_can(
+                group.encode(), int(fd), rcvbuf, cap, priority or 0, ctypes.byref(err)
+            )
+        elif interface == "udp_multicast":
+            handle = self._dll.bn_rec_open(
+                group.encode(), port, rcvbuf, cap, priority or 0, ctypes.byref(err)
+            )
+        else:
+            raise OSError(0, f"the native recorder cannot read {interface}")
         if not handle:
             raise OSError(-err.value, f"native recorder: {os.strerror(-err.value)}")
         self._h: int | None = handle
@@ -179,6 +242,7 @@ class NativeReader:
         n = int(self._dll.bn_rec_take(self._h, self._buf, TAKE_BATCH))
         buf = self._buf
         on = self.listener.on_message_received
+        can_bus = self.interface == "socketcan"
         for i in range(n):
             s = buf[i]
             length = int(s.len)
@@ -190,7 +254,10 @@ class NativeReader:
             # python-can's bus: seconds + nanoseconds * 1.0e-9 of SO_TIMESTAMPNS
             ts = sec + int(s.nsec) * 1.0e-9 if sec >= 0 else time.time()
             try:
-                msg = unpack_message(data, replace={"timestamp": ts}, check=True)
+                if can_bus:
+                    msg = can_message(data, ts, bool(s.local), self._channel)
+                else:
+                    msg = unpack_message(data, replace={"timestamp": ts}, check=True)
             except Exception:  # python-can's bus raises CanOperationError on it
                 self.malformed += 1
                 continue
@@ -240,6 +307,7 @@ class NativeReader:
             "fifo": bool(st.fifo),
             "err_sched": int(st.err_sched),
             "fd": int(st.fd),
+            "kernel_drops": int(st.kernel_drops),
             "malformed": self.malformed,
             "frames": self.frames,
         }

@@ -1,13 +1,15 @@
 /* The native recorder: a receive thread without the GIL that keeps every datagram
- * of python-can's udp_multicast bus, with its kernel receive stamp, in a ring
- * preallocated at open (bn_rec.h).
+ * of python-can's udp_multicast bus, or every frame of a SocketCAN interface, with
+ * its kernel receive stamp, in a ring preallocated at open (bn_rec.h).
  *
  * The thread blocks in ppoll on the socket and drains it with recvmmsg straight
  * into the ring's free slots (no copy, no allocation); Python takes the slots in
- * batches (bn_rec_take) and turns each datagram into a can.Message with
- * python-can's own unpack_message, so the capture holds what python-can's bus
- * would have returned.  A datagram that finds the ring full is counted
- * (ring_lost) and its slot reused: the loss is reported, never silent.
+ * batches (bn_rec_take) and turns each into a can.Message as python-can's bus does
+ * (udp_multicast: its own unpack_message; SocketCAN: its dissect_can_frame and the
+ * fields of its capture_message), so the capture holds what python-can's bus would
+ * have returned.  A datagram that finds the ring full is counted (ring_lost) and its
+ * slot reused; on SocketCAN the kernel's own drops for the socket are counted too
+ * (SO_RXQ_OVFL): the loss is reported, never silent.
  */
 #include <errno.h>
 #include <stdbool.h>
@@ -20,6 +22,8 @@
 #include <sys/socket.h>
 #include <time.h>
 #include <unistd.h>
+
+#include <linux/can/raw.h>
 
 #include "bn_rec.h"
 
@@ -46,8 +50,8 @@ struct bn_rec {
 
 size_t bn_rec_slot_size(void) { return sizeof(bn_rec_slot_t); }
 
-bn_rec_t *bn_rec_open(const char *group, uint16_t port, int rcvbuf, uint64_t capacity,
-                      int priority, int *err)
+/* The recorder with its ring (allocated and touched here: no page fault in the loop). */
+static bn_rec_t *rec_alloc(uint64_t capacity, int priority, int *err)
 {
     bn_rec_t *r = calloc(1, sizeof *r);
     if (r == NULL) {
@@ -55,28 +59,68 @@ bn_rec_t *bn_rec_open(const char *group, uint16_t port, int rcvbuf, uint64_t cap
         return NULL;
     }
     r->cap = capacity < 1 ? 1 : capacity;
-    r->ring = calloc(r->cap, sizeof *r->ring); /* touched here: no page fault in the loop */
+    r->ring = calloc(r->cap, sizeof *r->ring);
     if (r->ring == NULL) {
         free(r);
         *err = -ENOMEM;
         return NULL;
     }
     memset(r->ring, 0, r->cap * sizeof *r->ring);
-    int e = bn_udp_open(&r->bus, group, port, 1, rcvbuf);
-    if (e != 0) {
-        free(r->ring);
-        free(r);
-        *err = e;
-        return NULL;
-    }
     r->priority = priority;
-    r->st.fd = r->bus.fd;
     *err = 0;
     return r;
 }
 
-/* The kernel's receive stamp (SO_TIMESTAMPNS) of one datagram into its slot. */
-static void stamp(struct msghdr *h, bn_rec_slot_t *s)
+static bn_rec_t *rec_fail(bn_rec_t *r, int e, int *err)
+{
+    free(r->ring);
+    free(r);
+    *err = e;
+    return NULL;
+}
+
+bn_rec_t *bn_rec_open(const char *group, uint16_t port, int rcvbuf, uint64_t capacity,
+                      int priority, int *err)
+{
+    bn_rec_t *r = rec_alloc(capacity, priority, err);
+    if (r == NULL) {
+        return NULL;
+    }
+    int e = bn_udp_open(&r->bus, group, port, 1, rcvbuf);
+    if (e != 0) {
+        return rec_fail(r, e, err);
+    }
+    r->st.fd = r->bus.fd;
+    r->st.kind = BN_BUS_UDP;
+    return r;
+}
+
+bn_rec_t *bn_rec_open_can(const char *ifname, int fd, int rcvbuf, uint64_t capacity,
+                          int priority, int *err)
+{
+    bn_rec_t *r = rec_alloc(capacity, priority, err);
+    if (r == NULL) {
+        return NULL;
+    }
+    int e = bn_can_open(&r->bus, ifname, fd != 0);
+    if (e != 0) {
+        return rec_fail(r, e, err);
+    }
+    int one = 1;
+    /* the kernel's count of the frames it dropped for this socket, with each frame */
+    (void)setsockopt(r->bus.fd, SOL_SOCKET, SO_RXQ_OVFL, &one, sizeof one);
+    if (rcvbuf > 0 &&
+        setsockopt(r->bus.fd, SOL_SOCKET, SO_RCVBUFFORCE, &rcvbuf, sizeof rcvbuf) != 0) {
+        (void)setsockopt(r->bus.fd, SOL_SOCKET, SO_RCVBUF, &rcvbuf, sizeof rcvbuf);
+    }
+    r->st.fd = r->bus.fd;
+    r->st.kind = BN_BUS_CAN;
+    return r;
+}
+
+/* The kernel's receive stamp (SO_TIMESTAMPNS) of one datagram into its slot, and its
+ * count of the socket's drops (SO_RXQ_OVFL, SocketCAN) into the counters. */
+static void stamp(bn_rec_t *r, struct msghdr *h, bn_rec_slot_t *s)
 {
     s->sec = -1;
     s->nsec = 0;
@@ -86,8 +130,13 @@ static void stamp(struct msghdr *h, bn_rec_slot_t *s)
             memcpy(&ts, CMSG_DATA(c), sizeof ts);
             s->sec = (int64_t)ts.tv_sec;
             s->nsec = (int64_t)ts.tv_nsec;
+        } else if (c->cmsg_level == SOL_SOCKET && c->cmsg_type == SO_RXQ_OVFL) {
+            uint32_t drops;
+            memcpy(&drops, CMSG_DATA(c), sizeof drops);
+            __atomic_store_n(&r->st.kernel_drops, (uint64_t)drops, __ATOMIC_RELAXED);
         }
     }
+    s->local = (h->msg_flags & MSG_DONTROUTE) != 0;
 }
 
 /* Drain the socket once: the datagrams taken, 0 (none), -errno. */
@@ -134,7 +183,7 @@ static int drain_once(bn_rec_t *r)
     uint64_t at = head % r->cap;
     for (int j = 0; j < got; j++) {
         bn_rec_slot_t *s = &r->ring[at + (uint64_t)j];
-        stamp(&r->msg[j].msg_hdr, s);
+        stamp(r, &r->msg[j].msg_hdr, s);
         s->len = (uint16_t)r->msg[j].msg_len;
         s->truncated = (r->msg[j].msg_hdr.msg_flags & MSG_TRUNC) != 0;
     }
@@ -228,8 +277,20 @@ void bn_rec_stop(bn_rec_t *r)
         __atomic_store_n(&r->stop, 1, __ATOMIC_RELEASE);
         pthread_join(r->thread, NULL);
         r->started = 0;
-        uint8_t sink[BN_DGRAM];
-        while (recv(r->bus.fd, sink, sizeof sink, MSG_DONTWAIT) >= 0) {
+        /* counted, and their SO_RXQ_OVFL read: the kernel's drops before the last of them */
+        bn_rec_slot_t *s = &r->spare;
+        for (;;) {
+            struct iovec iov = {s->data, sizeof s->data};
+            struct msghdr h;
+            memset(&h, 0, sizeof h);
+            h.msg_iov = &iov;
+            h.msg_iovlen = 1;
+            h.msg_control = r->ctl[0];
+            h.msg_controllen = sizeof r->ctl[0];
+            if (recvmsg(r->bus.fd, &h, MSG_DONTWAIT) < 0) {
+                break;
+            }
+            stamp(r, &h, s);
             r->st.unread++;
         }
     }
@@ -240,6 +301,7 @@ void bn_rec_stats(const bn_rec_t *r, bn_rec_stats_t *out)
     *out = r->st; /* the other counters are final once the thread has stopped */
     out->received = __atomic_load_n(&r->st.received, __ATOMIC_RELAXED);
     out->ring_lost = __atomic_load_n(&r->st.ring_lost, __ATOMIC_RELAXED);
+    out->kernel_drops = __atomic_load_n(&r->st.kernel_drops, __ATOMIC_RELAXED);
 }
 
 void bn_rec_close(bn_rec_t *r)

@@ -1,6 +1,7 @@
-/* The native recorder (bn_rec.c): python-can's udp_multicast datagrams, every one,
- * with the kernel's receive stamp, kept by a thread of its own in a ring that
- * Python empties in batches (bench/runs/_native_rec.py mirrors these structs). */
+/* The native recorder (bn_rec.c): every datagram of python-can's udp_multicast bus, or
+ * every frame of a SocketCAN interface, with the kernel's receive stamp, kept by a thread
+ * of its own in a ring that Python empties in batches (bench/nodes/native/_recorder_native.py
+ * mirrors these structs). */
 #ifndef BN_REC_H
 #define BN_REC_H
 
@@ -21,12 +22,14 @@ extern "C" {
  * the ring hold seconds of the bus, not one millisecond. */
 #define BN_REC_NAP_NS 1000000L
 
-/* One datagram as the socket gave it. */
+/* One datagram (udp_multicast) or one struct can(fd)_frame (SocketCAN) as the socket
+ * gave it. */
 typedef struct {
     int64_t sec, nsec;        /* SO_TIMESTAMPNS receive stamp; sec -1: none */
-    uint16_t len;             /* bytes of data */
+    uint16_t len;             /* bytes of data (SocketCAN: CAN_MTU 16 or CANFD_MTU 72) */
     uint8_t truncated;        /* longer than data: malformed */
-    uint8_t pad[5];
+    uint8_t local;            /* SocketCAN: MSG_DONTROUTE, sent by a socket of this host */
+    uint8_t pad[4];
     uint8_t data[BN_DGRAM];
 } bn_rec_slot_t;
 
@@ -41,7 +44,10 @@ typedef struct {
     int32_t fifo;             /* 1: the thread runs under SCHED_FIFO */
     int32_t err_sched;        /* errno of a refused SCHED_FIFO (0: granted or not asked) */
     int32_t fd;               /* the socket (for /proc/net/udp's drops) */
-    int32_t pad;
+    int32_t kind;             /* BN_BUS_UDP or BN_BUS_CAN */
+    uint64_t kernel_drops;    /* SocketCAN: frames the kernel dropped for the socket (its
+                               * receive queue was full: SO_RXQ_OVFL's count, as of the
+                               * last frame received); udp_multicast: 0, /proc/net/udp says */
 } bn_rec_stats_t;
 
 typedef struct bn_rec bn_rec_t;
@@ -53,6 +59,11 @@ size_t bn_rec_slot_size(void);
  * the thread asks for SCHED_FIFO at it.  NULL with *err = -errno on failure. */
 bn_rec_t *bn_rec_open(const char *group, uint16_t port, int rcvbuf, uint64_t capacity,
                       int priority, int *err);
+
+/* Read SocketCAN interface ifname (CAN FD frames too when fd), with a receive buffer of
+ * rcvbuf bytes (0: the system's default; as root beyond rmem_max), as bn_rec_open. */
+bn_rec_t *bn_rec_open_can(const char *ifname, int fd, int rcvbuf, uint64_t capacity,
+                          int priority, int *err);
 
 /* Start the receive thread.  0 or -errno. */
 int bn_rec_start(bn_rec_t *r);
