@@ -1,18 +1,22 @@
 """run.png of a real-time run and of a controller under test: the late periods, the host
-stalls, the periods the recording lacks and a lost tail are on the figure; another
-method's paper band is not (the synthetic run of tests/test_plots.py)."""
+stalls, the periods the recording lacks and a lost tail (in ``bench plot --from/--to``'s
+window too) are on the figure; another method's paper band is not (the synthetic run of
+tests/test_plots.py)."""
 
 from __future__ import annotations
 
+import json
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
 
+from bench.cli import main
 from bench.runs._plots import late_duty_rows, metrics_text
 from bench.runs._results import host_stall_times
 from bench.wire._codec import Codec
-from tests.test_plots import META, T_S, draw, figs, table
+from tests.test_plots import META, T_S, axes, draw, figs, table, write_run
 
 __all__ = ["figs"]  # the fixture, used by name
 
@@ -114,3 +118,52 @@ def test_host_stalls_are_the_gaps_in_the_plants_frames() -> None:
         f.timestamp = t
         frames.append(f)
     assert host_stall_times(frames, codec, T_S) == pytest.approx([50 * T_S, 120 * T_S])
+
+
+def lost_tail_run(d: Path) -> None:
+    """A run folder whose recorder kept 3 of the plant's 4 s."""
+    write_run(d, {k: v[:30000] for k, v in table().items()})
+    meta = json.loads((d / "meta.json").read_text())
+    meta.update(RT_META, node_reports={"plant": {"steps": 40000}}, T_s=T_S)
+    (d / "meta.json").write_text(json.dumps(meta))
+
+
+def test_a_window_over_the_lost_tail_marks_it_and_runs_to_the_windows_end(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import matplotlib.pyplot as plt
+
+    lost_tail_run(tmp_path)
+    made: list[Any] = []
+    monkeypatch.setattr(plt, "close", made.append)
+
+    def ends(ax: Any) -> list[float]:
+        return [ln.get_xdata()[0] for ln in ax.get_lines() if ln.get_gid() == "recorded_end"]
+
+    assert main(["plot", str(tmp_path), "--from", "2.5", "--to", "3.5"]) == 0
+    ax = axes(made[-1])
+    assert ax["speed"].get_xlim() == pytest.approx((2.5, 3.5))
+    assert ends(ax["speed"]) == pytest.approx([3.0]) and ends(ax["load"]) == pytest.approx([3.0])
+    assert "the recorder lost the rest" in ax["load"].get_xlabel()
+    assert "window 2.5-3.5 s" in made[-1]._suptitle.get_text()
+    # without --to: on to the plant's last period
+    assert main(["plot", str(tmp_path), "--from", "2.5"]) == 0
+    ax = axes(made[-1])
+    assert ax["speed"].get_xlim() == pytest.approx((2.5, 4.0))
+    assert ends(ax["speed"]) == pytest.approx([3.0])
+    # a window that ends before the recorded data do: nothing marked
+    assert main(["plot", str(tmp_path), "--from", "1.5", "--to", "2.5"]) == 0
+    ax = axes(made[-1])
+    assert ax["speed"].get_xlim()[1] == pytest.approx(2.5, abs=2 * T_S)
+    assert not ends(ax["speed"]) and "lost" not in ax["load"].get_xlabel()
+
+
+def test_a_window_past_the_recorded_data_says_where_they_end(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    lost_tail_run(tmp_path)
+    assert main(["plot", str(tmp_path), "--from", "3.2", "--to", "3.5"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1, err
+    assert "no rows between --from and --to: the recorded data end at 3.000 s" in err[0]
+    assert "the plant ran to 4.000 s" in err[0]
