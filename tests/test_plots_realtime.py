@@ -167,3 +167,54 @@ def test_a_window_past_the_recorded_data_says_where_they_end(
     assert len(err) == 1, err
     assert "no rows between --from and --to: the recorded data end at 3.000 s" in err[0]
     assert "the plant ran to 4.000 s" in err[0]
+
+
+def test_the_stalls_instants_are_kept_in_metrics_json(tmp_path: Path) -> None:
+    """A real-time run's stalls, located in its capture, are written beside their count, so
+    that a run folder without its capture still knows where they were."""
+    from bench.nodes._loops import run_inprocess
+    from bench.runs._results import finish_run
+    from bench.scenarios._schema import load_scenario
+    from bench.scenarios._setup import sample_period
+
+    scn = load_scenario("wen-5.1").with_overrides(duration=0.05)
+    codec = Codec()
+    T_s = sample_period(scn)
+    frames = list(run_inprocess(scn, "sensored", codec, loop="python"))
+    truth_id = codec.frame_id("PlantTruth")
+    # the wire's times: one period per PlantTruth, and a 20 ms stall before the 300th
+    k = -1
+    for f in frames:
+        k += f.arbitration_id == truth_id
+        f.timestamp = 100.0 + max(k, 0) * T_s + (0.02 if k >= 300 else 0.0)
+    report = {"jitter": {"stalls": 1, "stall_total": 2e4, "stall_max": 2e4, "skipped": 200}}
+    res = finish_run(frames, codec, scn, tmp_path, wall_s=1.0, capture=None, plots=False,
+                     meta={"estimator": "sensored", "node_reports": {"plant": report}})  # fmt: skip
+    written = json.loads((tmp_path / "metrics.json").read_text())
+    assert res.metrics["host_stall_at_s"] == pytest.approx([300 * T_s])
+    assert written["host_stall_at_s"] == pytest.approx([300 * T_s])
+
+
+def test_bench_plot_marks_the_stalls_of_a_folder_without_its_capture(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    import matplotlib.pyplot as plt
+
+    write_run(tmp_path, late_table())
+    (tmp_path / "meta.json").write_text(json.dumps({**RT_META, "capture": "capture.blf"}))
+    m = {"host_stalls": 2, "host_stall_ms_max": 19.3, "host_stall_at_s": [0.7, 3.1]}
+    (tmp_path / "metrics.json").write_text(json.dumps(m))
+    assert not (tmp_path / "capture.blf").exists()
+    made: list[Any] = []
+    monkeypatch.setattr(plt, "close", made.append)
+    assert main(["plot", str(tmp_path)]) == 0
+    for name in ("error", "speed", "current", "load"):
+        stalls = _spans(axes(made[-1])[name], "host_stall")
+        assert [0.5 * (a + b) for a, b in stalls] == pytest.approx([0.7, 3.1]), name
+    # a folder of an older run, without the instants nor the capture: said, not guessed
+    (tmp_path / "metrics.json").write_text(json.dumps({"host_stalls": 2}))
+    capsys.readouterr()
+    assert main(["plot", str(tmp_path)]) == 0
+    assert not _spans(axes(made[-1])["speed"], "host_stall")
+    err = capsys.readouterr().err
+    assert f"note: 2 host stalls not marked: {tmp_path} has no capture" in err, err

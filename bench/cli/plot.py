@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -39,6 +40,30 @@ def _pole_pairs(scenario: Any) -> int | None:
     from bench.scenarios._setup import get_preset
 
     return int(get_preset(scenario).motor.n_p)
+
+
+def _stalls(run: Path, meta: dict[str, Any], metrics: dict[str, Any], T_s: float) -> Any:
+    """Where the run's host stalls were (s): ``metrics.json``'s ``host_stall_at_s``, else
+    (a folder written before that key) the gaps of the plant's frames in its capture;
+    None, with a note, when the folder has neither."""
+    if not metrics.get("host_stalls"):
+        return None
+    if isinstance(at := metrics.get("host_stall_at_s"), list):
+        return [float(s) for s in at]
+    capture = run / str(meta.get("capture") or "")
+    if not (meta.get("capture") and capture.is_file()):
+        print(
+            f"note: {int(metrics['host_stalls'])} host stalls not marked: {run} has no capture "
+            "and its metrics.json no host_stall_at_s",
+            file=sys.stderr,
+        )
+        return None
+    from bench.captures._read import read_capture
+    from bench.runs._results import host_stall_times
+    from bench.wire._codec import Codec
+
+    frames, _ = read_capture(capture)
+    return host_stall_times(frames, Codec(), T_s)
 
 
 def cmd_plot(args: argparse.Namespace) -> int:
@@ -101,16 +126,7 @@ def cmd_plot(args: argparse.Namespace) -> int:
             float(t[0]) if args.t_from is None else float(args.t_from),
             run_end if args.t_to is None else min(float(args.t_to), run_end),
         )
-        stalls = None
-        capture = run / str(meta.get("capture") or "")
-        if metrics.get("host_stalls") and meta.get("capture") and capture.is_file():
-            # where the stalls were: the gaps of the plant's frames in the capture
-            from bench.captures._read import read_capture
-            from bench.runs._results import host_stall_times
-            from bench.wire._codec import Codec
-
-            frames, _ = read_capture(capture)
-            stalls = host_stall_times(frames, Codec(), T_s)
+        stalls = _stalls(run, meta, metrics, T_s)
         windowed = args.t_from is not None or args.t_to is not None
         plot_run(
             part,
