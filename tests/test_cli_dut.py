@@ -71,6 +71,7 @@ def test_the_example_controller_started_with_dut_is_scored(tmp_path: Path) -> No
     # the run's own port reached the controller through {port}: it answered on it
     assert meta["dut_first_duty_s"] is not None
     assert (out / "dut.log").is_file()
+    assert "dut.log" in next(ln for ln in p.stdout.splitlines() if ln.startswith("files: "))
 
 
 @pytest.mark.timeout(DUT_TIMEOUT_S + 300)

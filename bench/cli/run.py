@@ -189,6 +189,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         "signals.md",
         "metrics.json",
         "meta.json",
+        "dut.log",  # the controller under test's output, when --dut started it
     ]
     written = [n for n in [*names, "run.png"] if (out / n).is_file()]
     print(f"files: {out}/ ({', '.join(written)})")
