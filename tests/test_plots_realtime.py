@@ -9,6 +9,7 @@ import json
 from pathlib import Path
 from typing import Any
 
+import can
 import numpy as np
 import pytest
 
@@ -105,19 +106,26 @@ def test_no_paper_band_for_a_controller_under_test(figs: list[Any]) -> None:
     assert hi < 4.0 and lo > -4.0
 
 
-def test_host_stalls_are_the_gaps_in_the_plants_frames() -> None:
-    codec = Codec()
+def stalled_truth(codec: Codec) -> list[can.Message]:
+    """200 periods of ``PlantTruth`` with two 20 ms stalls, before periods 50 and 120."""
     msg = codec.message("PlantTruth")
     frames = []
     t = 100.0
     for k in range(200):
-        t += T_S + (0.02 if k in (50, 120) else 0.0)  # two 20 ms stalls before 50 and 120
+        t += T_S + (0.02 if k in (50, 120) else 0.0)
         sig = {s.name: 0.0 for s in msg.signals if s.name != "crc"}
         sig["step"] = float(k)
         f = codec.encode("PlantTruth", sig)
         f.timestamp = t
         frames.append(f)
-    assert host_stall_times(frames, codec, T_S) == pytest.approx([50 * T_S, 120 * T_S])
+    return frames
+
+
+def test_host_stalls_are_the_gaps_in_the_plants_frames() -> None:
+    codec = Codec()
+    assert host_stall_times(stalled_truth(codec), codec, T_S) == pytest.approx(
+        [50 * T_S, 120 * T_S]
+    )
 
 
 def lost_tail_run(d: Path) -> None:
@@ -211,7 +219,16 @@ def test_bench_plot_marks_the_stalls_of_a_folder_without_its_capture(
     for name in ("error", "speed", "current", "load"):
         stalls = _spans(axes(made[-1])[name], "host_stall")
         assert [0.5 * (a + b) for a, b in stalls] == pytest.approx([0.7, 3.1]), name
-    # a folder of an older run, without the instants nor the capture: said, not guessed
+    # a folder of an older run, without the instants: from its capture
+    (tmp_path / "metrics.json").write_text(json.dumps({"host_stalls": 2}))
+    with can.BLFWriter(str(tmp_path / "capture.blf")) as w:
+        for f in stalled_truth(Codec()):
+            w.on_message_received(f)
+    assert main(["plot", str(tmp_path)]) == 0
+    stalls = _spans(axes(made[-1])["speed"], "host_stall")
+    assert [0.5 * (a + b) for a, b in stalls] == pytest.approx([50 * T_S, 120 * T_S])
+    (tmp_path / "capture.blf").unlink()
+    # without the instants nor the capture: said, not guessed
     (tmp_path / "metrics.json").write_text(json.dumps({"host_stalls": 2}))
     capsys.readouterr()
     assert main(["plot", str(tmp_path)]) == 0
