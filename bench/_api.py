@@ -28,7 +28,6 @@ import contextlib
 import json
 import os
 import shutil
-import subprocess
 import sys
 import tempfile
 from collections.abc import Iterator, Mapping, Sequence
@@ -44,7 +43,6 @@ if TYPE_CHECKING:
     import pandas
 
     from bench.runs._results import RunResult
-    from bench.runs._run import DutProcess
     from bench.scenarios._schema import Scenario
     from bench.wire._bus import BusSpec
 
@@ -429,7 +427,9 @@ def _run_on_bus(
     kw: dict[str, Any] = {}
     if external:
         kw = {"controller": "external", "dut_timeout": dut_timeout, "dut_name": dut_name}
-    with _dut(dut, spec, scn, folder, mode) as process:
+    from bench.runs._dut import started_dut
+
+    with started_dut(dut, spec, scn, folder, mode) as process:
         return run_scenario(
             scn,
             est,
@@ -441,64 +441,6 @@ def _run_on_bus(
             dut_process=process,
             **kw,
         )
-
-
-@contextlib.contextmanager
-def _dut(
-    cmd: Sequence[str] | None, spec: BusSpec, scn: Scenario, folder: Path, mode: str
-) -> Iterator[DutProcess | None]:
-    """The controller under test's process for the run (none without ``cmd``)."""
-    if not cmd:
-        yield None
-        return
-    from bench.runs._run import DutProcess
-    from bench.scenarios._schema import write_effective
-
-    scenario = write_effective(scn, folder / "scenario.json")  # the run writes the same
-    fill = {
-        "interface": spec.interface,
-        "channel": spec.channel,
-        "port": "" if spec.port is None else str(spec.port),
-        "mode": mode,
-        "scenario": str(scenario),
-        "folder": str(folder),
-    }
-    try:
-        argv = [str(a).format(**fill) for a in cmd]
-    except (KeyError, IndexError, ValueError) as e:
-        raise BenchError(
-            f"dut: {list(cmd)}: unknown placeholder {e} (known: "
-            + ", ".join("{" + k + "}" for k in fill)
-            + ")"
-        ) from None
-    conf: dict[str, Any] = {"fd": True}
-    if spec.port is not None:
-        conf["port"] = spec.port
-    env = dict(
-        os.environ,
-        PYTHONUNBUFFERED="1",
-        CAN_INTERFACE=spec.interface,
-        CAN_CHANNEL=spec.channel,
-        CAN_CONFIG=json.dumps(conf),
-    )
-    log_path = folder / "dut.log"
-    log = log_path.open("w")
-    try:
-        proc = subprocess.Popen(argv, stdout=log, stderr=subprocess.STDOUT, env=env)
-    except OSError as e:
-        log.close()
-        raise BenchError(f"dut: cannot start {argv[0]}: {e.strerror or e}") from None
-    try:
-        yield DutProcess(proc, log_path)
-    finally:
-        if proc.poll() is None:
-            proc.terminate()
-            try:
-                proc.wait(timeout=5.0)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait()
-        log.close()
 
 
 def analyze(

@@ -5,15 +5,14 @@ the run's metrics into the JUnit XML."""
 
 from __future__ import annotations
 
-import os
 import re
 import shutil
-import subprocess
-import sys
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import pytest
+
+from tests.inner_pytest import run_pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 GUIDE = ROOT / "docs" / "TESTING.md"
@@ -46,36 +45,16 @@ def test_the_guide_installs_the_bench_from_a_checkout() -> None:
 def test_the_guides_controller_test_passes(tmp_path: Path) -> None:
     (tmp_path / "test_my_controller.py").write_text(guide_test_block())
     shutil.copy(CONTROLLER, tmp_path / "my_controller.py")
-    report = tmp_path / "report.xml"
-    env = {k: v for k, v in os.environ.items() if not k.startswith("PYTEST_")}
-    env.pop("PYTHONPATH", None)  # the bench as installed
     # PATH without this environment's bin: the controller must call the bench as the
     # guide says (sys.executable -m bench), not rely on an activated environment
-    bin_dir = str(Path(sys.executable).parent)
-    env["PATH"] = os.pathsep.join(
-        d for d in env.get("PATH", "").split(os.pathsep) if d and d != bin_dir
-    )
-    p = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "pytest",
-            "-p",
-            "no:cacheprovider",
-            "-q",
-            "--hil-interface",
-            "udp_multicast",
-            f"--junitxml={report}",
-            f"--basetemp={tmp_path}/runs",
-            "-o",
-            "junit_family=xunit1",
-            "test_my_controller.py",
-        ],
-        cwd=tmp_path,
-        env=env,
-        capture_output=True,
-        text=True,
+    p, report = run_pytest(
+        tmp_path,
+        tmp_path,
+        "-o",
+        "junit_family=xunit1",
+        "test_my_controller.py",
         timeout=TIMEOUT_S,
+        path_without_bin=True,
     )
     assert p.returncode == 0, p.stdout[-4000:] + p.stderr[-2000:]
     props = {str(e.get("name")): str(e.get("value")) for e in ET.parse(report).iter("property")}

@@ -5,14 +5,13 @@ when the runner has no vcan), pass, and its report names what ran where."""
 from __future__ import annotations
 
 import json
-import os
 import shutil
-import subprocess
-import sys
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import pytest
+
+from tests.inner_pytest import run_pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLE = ROOT / "docs" / "examples" / "ci-project"
@@ -29,25 +28,7 @@ OUTER_TIMEOUT_S = 3 * INNER_TIMEOUT_S + 120
 def test_the_example_projects_tests_pass(tmp_path: Path) -> None:
     project = tmp_path / "my-drive"
     shutil.copytree(EXAMPLE, project, ignore=shutil.ignore_patterns("__pycache__", ".*cache"))
-    report = tmp_path / "report.xml"
-    env = {k: v for k, v in os.environ.items() if not k.startswith("PYTEST_")}
-    env.pop("PYTHONPATH", None)  # the bench as installed, not this checkout's path
-    args = ["-p", "no:cacheprovider", "-q", "--hil-interface", "udp_multicast"]
-    p = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "pytest",
-            *args,
-            f"--junitxml={report}",
-            f"--basetemp={tmp_path}/runs",
-        ],
-        cwd=project,
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=OUTER_TIMEOUT_S,
-    )
+    p, report = run_pytest(project, tmp_path, timeout=OUTER_TIMEOUT_S)
     assert p.returncode == 0, p.stdout[-4000:] + p.stderr[-2000:]
     root = ET.parse(report).getroot()
     suite = root if root.tag == "testsuite" else root.find("testsuite")

@@ -17,21 +17,7 @@ import pytest
 from bench.wire._batch_decode import decode_batch
 from bench.wire._codec import Codec
 from bench.wire._frames import FrameArray, with_ids
-
-
-def _fields(m: can.Message) -> tuple[object, ...]:
-    return (
-        m.timestamp,
-        m.arbitration_id,
-        m.is_extended_id,
-        m.is_remote_frame,
-        m.is_error_frame,
-        m.is_fd,
-        m.bitrate_switch,
-        m.dlc,
-        bytes(m.data),
-        m.channel,
-    )
+from tests.frame_helpers import message_fields
 
 
 def _sample_frames() -> list[can.Message]:
@@ -62,10 +48,10 @@ def test_a_frame_array_reads_as_its_messages() -> None:
     msgs = _sample_frames()
     fa = FrameArray.from_messages(msgs)
     assert len(fa) == len(msgs)
-    assert [_fields(m) for m in fa] == [_fields(m) for m in msgs]
-    assert _fields(fa[3]) == _fields(msgs[3])
-    assert _fields(fa[-1]) == _fields(msgs[-1])
-    assert [_fields(m) for m in fa[2:5]] == [_fields(m) for m in msgs[2:5]]
+    assert [message_fields(m) for m in fa] == [message_fields(m) for m in msgs]
+    assert message_fields(fa[3]) == message_fields(msgs[3])
+    assert message_fields(fa[-1]) == message_fields(msgs[-1])
+    assert [message_fields(m) for m in fa[2:5]] == [message_fields(m) for m in msgs[2:5]]
     with pytest.raises(IndexError):
         fa[len(msgs)]
     with pytest.raises(IndexError):
@@ -75,7 +61,9 @@ def test_a_frame_array_reads_as_its_messages() -> None:
     duty = Codec().frame_id("PwmDuty")
     picked = with_ids(FrameArray.from_messages(msgs), (duty,))
     assert isinstance(picked, FrameArray)
-    assert [_fields(m) for m in picked] == [_fields(m) for m in msgs if m.arbitration_id == duty]
+    assert [message_fields(m) for m in picked] == [
+        message_fields(m) for m in msgs if m.arbitration_id == duty
+    ]
     assert with_ids(msgs, (duty,)) is msgs
     # once made, the messages are kept: a time stamp set stays (a capture's writer),
     # and readers of the whole block take them, not the rows

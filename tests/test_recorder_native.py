@@ -19,6 +19,7 @@ from bench.runs._recorder import Recording, fd_drops
 from bench.wire._bus import BusSpec, udp_multicast_group
 from bench.wire._codec import Codec
 from tests.conftest import require_vcan
+from tests.frame_helpers import message_fields
 from tests.ports import free_port
 
 pytestmark = pytest.mark.skipif(
@@ -48,23 +49,6 @@ def _known_frames(codec: Codec) -> list[can.Message]:
         ),
     ]
     return out
-
-
-def _fields(m: can.Message) -> tuple[Any, ...]:
-    return (
-        m.timestamp,
-        m.arbitration_id,
-        m.is_extended_id,
-        m.is_remote_frame,
-        m.is_error_frame,
-        m.is_fd,
-        m.bitrate_switch,
-        m.error_state_indicator,
-        m.dlc,
-        bytes(m.data),
-        m.channel,
-        m.is_rx,
-    )
 
 
 def _wait_for(cond: Any, timeout_s: float = 30.0) -> None:
@@ -105,9 +89,11 @@ def test_native_and_python_recorders_write_the_same_capture(tmp_path: Path, inte
     # what the run's checks compute from the frames as they come
     assert native.recorders[0].step == python.recorders[0].step == 39
     # in memory and in the file, field by field (time stamps to the bit)
-    assert [_fields(m) for m in native.frames()] == [_fields(m) for m in python.frames()]
-    a = [_fields(m) for m in can.BLFReader(str(tmp_path / "native.blf"))]
-    b = [_fields(m) for m in can.BLFReader(str(tmp_path / "python.blf"))]
+    assert [message_fields(m) for m in native.frames()] == [
+        message_fields(m) for m in python.frames()
+    ]
+    a = [message_fields(m) for m in can.BLFReader(str(tmp_path / "native.blf"))]
+    b = [message_fields(m) for m in can.BLFReader(str(tmp_path / "python.blf"))]
     assert len(a) == len(frames) and a == b
     # the frames sent, in order
     assert [(m.arbitration_id, bytes(m.data), m.is_fd) for m in native.frames()] == [

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -41,6 +42,30 @@ def _pole_pairs(scenario: Any) -> int | None:
     return int(get_preset(scenario).motor.n_p)
 
 
+def _stalls(run: Path, meta: dict[str, Any], metrics: dict[str, Any], T_s: float) -> Any:
+    """Where the run's host stalls were (s): ``metrics.json``'s ``host_stall_at_s``, else
+    (a folder written before that key) the gaps of the plant's frames in its capture;
+    None, with a note, when the folder has neither."""
+    if not metrics.get("host_stalls"):
+        return None
+    if isinstance(at := metrics.get("host_stall_at_s"), list):
+        return [float(s) for s in at]
+    capture = run / str(meta.get("capture") or "")
+    if not (meta.get("capture") and capture.is_file()):
+        print(
+            f"note: {int(metrics['host_stalls'])} host stalls not marked: {run} has no capture "
+            "and its metrics.json no host_stall_at_s",
+            file=sys.stderr,
+        )
+        return None
+    from bench.captures._read import read_capture
+    from bench.runs._results import host_stall_times
+    from bench.wire._codec import Codec
+
+    frames, _ = read_capture(capture)
+    return host_stall_times(frames, Codec(), T_s)
+
+
 def cmd_plot(args: argparse.Namespace) -> int:
     from bench.runs._analysis import COLUMNS, read_csv
     from bench.runs._plots import controller_label, plot_run, plot_signals
@@ -59,8 +84,21 @@ def cmd_plot(args: argparse.Namespace) -> int:
     sel = table["t"] >= (args.t_from if args.t_from is not None else -1e300)
     if args.t_to is not None:
         sel &= table["t"] <= args.t_to
+    t_all = table["t"]
+    T_s = float(meta.get("T_s") or (t_all[1] - t_all[0] if len(t_all) > 1 else 1.0))
+    recorded_end = float(t_all[-1]) + T_s if len(t_all) else 0.0
+    plant_steps = ((meta.get("node_reports") or {}).get("plant") or {}).get("steps")
+    run_end = max(recorded_end, int(plant_steps or 0) * T_s)
     if not sel.any():
-        raise BenchError(f"{csv}: no rows between --from and --to")
+        lost = (
+            f": the recorded data end at {recorded_end:.3f} s, the plant ran to "
+            f"{run_end:.3f} s (the recorder lost the rest)"
+            if run_end > recorded_end + 0.5 * T_s
+            and args.t_from is not None
+            and args.t_from >= recorded_end
+            else ""
+        )
+        raise BenchError(f"{csv}: no rows between --from and --to{lost}")
     if args.signals:
         names = [s.strip() for s in args.signals.split(",") if s.strip()]
         unknown = [s for s in names if s not in table]
@@ -84,17 +122,11 @@ def cmd_plot(args: argparse.Namespace) -> int:
             f_c = fundamental_corner_hz(scenario, str(meta.get("estimator", "")), part, design)
         out = Path(args.out) if args.out else run / "run.png"
         t = part["t"]
-        stalls = None
-        capture = run / str(meta.get("capture") or "")
-        if metrics.get("host_stalls") and meta.get("capture") and capture.is_file():
-            # where the stalls were: the gaps of the plant's frames in the capture
-            from bench.captures._read import read_capture
-            from bench.runs._results import host_stall_times
-            from bench.wire._codec import Codec
-
-            frames, _ = read_capture(capture)
-            T_s = float(meta.get("T_s") or (t[1] - t[0]))
-            stalls = host_stall_times(frames, Codec(), T_s)
+        window = (
+            float(t[0]) if args.t_from is None else float(args.t_from),
+            run_end if args.t_to is None else min(float(args.t_to), run_end),
+        )
+        stalls = _stalls(run, meta, metrics, T_s)
         windowed = args.t_from is not None or args.t_to is not None
         plot_run(
             part,
@@ -105,9 +137,10 @@ def cmd_plot(args: argparse.Namespace) -> int:
             scored_from_s=float(meta.get("scored_from_s", scn.get("score_from_s", 0.0)) or 0.0),
             f_split_hz=f_c,
             n_p=_pole_pairs(scenario),
-            window=(float(t[0]), float(t[-1])) if windowed else None,
+            window=window if windowed else None,
             name=out.name,
             stalls=stalls,
+            recorded_end_s=recorded_end,
         )
     print(f"plot: {out}")
     return 0

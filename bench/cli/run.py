@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import shlex
 import sys
 import threading
 from pathlib import Path
@@ -68,13 +69,30 @@ def _start_monitor(spec: Any, scn: Any, est: str, mode: str, out: Path) -> _View
     return _View(spec, scenario, f"{scn.name} {est} {mode}")
 
 
+def dut_command(args: argparse.Namespace) -> list[str] | None:
+    """``--dut COMMAND`` as an argument list (split as a POSIX shell splits it), or None."""
+    if args.dut is None:
+        return None
+    if args.controller != "external":
+        raise BenchError("--dut: only with --controller external (the controller under test)")
+    try:
+        argv = shlex.split(args.dut)
+    except ValueError as e:  # an unclosed quote
+        raise BenchError(f"--dut: {args.dut!r}: {e}") from None
+    if not argv:
+        raise BenchError("--dut: an empty command (give the controller's command line)")
+    return argv
+
+
 def cmd_run(args: argparse.Namespace) -> int:
+    from bench.runs._dut import started_dut
     from bench.runs._export import EXPORT_FILES, check_formats, export_signals, parse_formats
     from bench.runs._local import exit_status
     from bench.runs._results import format_metrics, frames_warning, realtime_warning
     from bench.runs._run import run_scenario
     from bench.scenarios._setup import countermeasures_text, sample_period
 
+    dut = dut_command(args)
     scn = scenario_from_args(args)
     external = args.controller == "external"
     if external:
@@ -93,8 +111,9 @@ def cmd_run(args: argparse.Namespace) -> int:
     plant_engine(args)
     if args.monitor and not (sys.stdin.isatty() and sys.stdout.isatty() and sys.stderr.isatty()):
         raise BenchError("--monitor: needs a terminal (run bench monitor beside it instead)")
-    if external and args.interface is None and args.port is None:
-        # a controller under test must find the bus: python-can's own default port
+    if external and dut is None and args.interface is None and args.port is None:
+        # a controller under test told nothing must find the bus: python-can's own
+        # default port (one started with --dut is told the run's own port)
         from bench.wire._bus import UDP_DEFAULT_PORT
 
         args.port = UDP_DEFAULT_PORT
@@ -119,19 +138,21 @@ def cmd_run(args: argparse.Namespace) -> int:
         (out / name).unlink(missing_ok=True)
     view = _start_monitor(spec, scn, est, args.mode, out) if args.monitor else None
     try:
-        res = run_scenario(
-            scn,
-            est,
-            spec=spec,
-            out_dir=out,
-            mode=args.mode,
-            log_format=args.log_format,
-            progress=not (args.quiet or args.monitor),
-            node_args=run_node_args(args),
-            controller=args.controller,
-            dut_timeout=args.dut_timeout,
-            dut_name=args.dut_name,
-        )
+        with started_dut(dut, spec, scn, out, args.mode, label="--dut") as process:
+            res = run_scenario(
+                scn,
+                est,
+                spec=spec,
+                out_dir=out,
+                mode=args.mode,
+                log_format=args.log_format,
+                progress=not (args.quiet or args.monitor),
+                node_args=run_node_args(args),
+                controller=args.controller,
+                dut_timeout=args.dut_timeout,
+                dut_name=args.dut_name,
+                dut_process=process,
+            )
     finally:
         if view is not None:
             view.close()
@@ -168,6 +189,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         "signals.md",
         "metrics.json",
         "meta.json",
+        "dut.log",  # the controller under test's output, when --dut started it
     ]
     written = [n for n in [*names, "run.png"] if (out / n).is_file()]
     print(f"files: {out}/ ({', '.join(written)})")
@@ -196,6 +218,13 @@ def register(sub: Any) -> None:
         default="bench",
         help="external: start no controller; the controller under test is any node on the bus "
         "(docs/PROTOCOL.md)",
+    )
+    p.add_argument(
+        "--dut",
+        metavar="COMMAND",
+        help="--controller external: the controller under test's command, started for the run "
+        "and stopped after it (one string, split as a shell splits it; {interface}, {channel}, "
+        "{port}, {mode}, {scenario}, {folder} replaced; its output in dut.log)",
     )
     p.add_argument(
         "--dut-timeout",

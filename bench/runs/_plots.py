@@ -30,8 +30,8 @@ in simulated time: the periods a stall skipped were never computed) are
 marked on them too, and the metrics box gives their share and number with the
 periods the recording lacks (``steps_missing``).  When the recording lost the
 run's tail (the plant ran further than the last recorded period), the time
-axis runs on to the plant's last period and the end of the recorded data is
-marked.
+axis runs on to the plant's last period (a time window's: to the window's end)
+and the end of the recorded data is marked.
 A row whose controller was disabled (``mode`` 0: before the start, the last
 row after the stop) or whose estimate is missing (an empty cell: the
 controller's telemetry stopped) draws no estimate: a gap. Legends and the
@@ -391,11 +391,16 @@ def run_figure(
     meta: dict[str, Any] | None = None,
     window: tuple[float, float] | None = None,
     stalls: list[float] | None = None,
+    recorded_end_s: float | None = None,
 ) -> Any:
     """The figure of :func:`plot_run` (a matplotlib ``Figure``; the caller closes it).
 
-    ``table`` holds the rows to draw (a time window's, when ``window`` names it);
-    ``metrics`` the whole run's. ``meta`` (a ``meta.json``) gives the title, the paper,
+    ``table`` holds the rows to draw (a time window's, when ``window`` names it:
+    its start and end, s, as asked for); ``metrics`` the whole run's.
+    ``recorded_end_s``: where the whole run's recorded data end (its last row's
+    period's end; default the table's), so that a window reaching past them marks
+    a lost tail as the whole run's figure does and runs on to the window's end or
+    the plant's last period. ``meta`` (a ``meta.json``) gives the title, the paper,
     its bounds and the run's variations where ``title``, ``paper`` and ``paper_result``
     are not given; with a controller under test (``meta["controller"]`` external) no
     paper's bound is drawn (the paper's numbers are its method's, not this controller's).
@@ -419,10 +424,18 @@ def run_figure(
     T_s = float(t[1] - t[0]) if len(t) > 1 else 1.0
     t_lo, t_hi = (float(t[0]), float(t[-1]) + T_s) if len(t) else (0.0, 1.0)
     # the plant ran further than the recording goes: the axis runs on to its last period
+    # (or the window's end), when the rows drawn reach the end of the recorded data
     t_rec_end: float | None = None
     plant_steps = (meta.get("node_reports") or {}).get("plant", {}).get("steps")
-    if window is None and plant_steps and len(t) and int(plant_steps) * T_s > t_hi + 0.5 * T_s:
-        t_rec_end, t_hi = t_hi, int(plant_steps) * T_s
+    rec_end = t_hi if recorded_end_s is None else float(recorded_end_s)
+    w_hi = math.inf if window is None else float(window[1])
+    if (
+        plant_steps
+        and len(t)
+        and abs(t_hi - rec_end) < 0.5 * T_s
+        and min(int(plant_steps) * T_s, w_hi) > rec_end + 0.5 * T_s
+    ):
+        t_rec_end, t_hi = rec_end, min(int(plant_steps) * T_s, w_hi)
     est = estimate_rows(table)
     nan = np.full(len(t), np.nan)
     theta_hat = np.where(est, table["theta_hat"], nan)
@@ -608,6 +621,7 @@ def plot_run(
     window: tuple[float, float] | None = None,
     name: str = "run.png",
     stalls: list[float] | None = None,
+    recorded_end_s: float | None = None,
 ) -> Path:
     """The run's figure (see the module's docstring, :func:`run_figure`) to
     ``out_dir / name``; ``f_split_hz``: the fundamental's low-pass corner (None: no
@@ -616,7 +630,8 @@ def plot_run(
 
     fig = run_figure(table, title=title, metrics=metrics, scored_from_s=scored_from_s,
                      f_split_hz=f_split_hz, paper=paper, paper_result=paper_result, n_p=n_p,
-                     meta=meta, window=window, stalls=stalls)  # fmt: skip
+                     meta=meta, window=window, stalls=stalls,
+                     recorded_end_s=recorded_end_s)  # fmt: skip
     path = out_dir / name
     fig.savefig(path, dpi=110)
     plt.close(fig)

@@ -344,6 +344,8 @@ def finish_run(
         m["host_stall_ms_total"] = 1e-3 * float(jit.get("stall_total", 0.0))
         m["host_stall_ms_max"] = 1e-3 * float(jit.get("stall_max", 0.0))
         m["periods_skipped"] = int(jit.get("skipped", 0))
+        # where they were (the capture's gaps): a run folder without its capture keeps them
+        m["host_stall_at_s"] = host_stall_times(frames, codec, T_s) if m["host_stalls"] else []
     # the first trip, from the capture; the plant's report (its latched, so
     # last, fault) only when the capture lost the status frame
     fault, fault_step = plant_fault(frames, codec)
@@ -389,13 +391,12 @@ def finish_run(
     if plots:
         from bench.runs._plots import plot_run
 
-        stalls = host_stall_times(frames, codec, T_s) if m.get("host_stalls") else None
         plot_run(
             cap.table,
             out_dir,
             meta=meta,  # title, paper, its bound and the run's variations
             metrics=m,
-            stalls=stalls,
+            stalls=m.get("host_stall_at_s"),
             scored_from_s=scn.score_from_s,
             f_split_hz=fundamental_corner_hz(
                 scn, str(meta.get("estimator", "")), cap.table, design
