@@ -27,7 +27,9 @@
 
 #include "core/cc_design.h"
 #include "core/cc_foc.h"
+#include "core/cc_pi.h"
 #include "core/cc_supervision.h"
+#include "core/cc_svpwm.h"
 
 #define N_MEAS 7 /* k, i_a, i_b, i_c, u_dc, theta_e, w_e */
 #define N_OUT 11 /* k, d_a, d_b, d_c, enable, theta_hat, w_hat, err, mode, i_d, i_q */
@@ -746,6 +748,161 @@ static PyTypeObject CoreType = {
     .tp_members = Core_members,
 };
 
+/* ---------------------------------------------------------------- the public blocks */
+/* The blocks a user may call per period (controller/__init__.py; a plug-in's estimator
+ * composes them): each a small type holding one core struct, whose methods call the
+ * core's _init/_step/_reset and whose members are the struct's fields (design values
+ * read-only, states writable).  The Python classes (controller/_pi.py, ...) subclass
+ * these types and keep the design, the docstrings and the argument checks. */
+
+/* The doubles of a fast call into v: n positional arguments, then the keywords kw (as
+ * the Python signature names[] allows), at least lo and at most hi of them (v's defaults
+ * stay for the rest). */
+static int block_args(PyObject *const *args, Py_ssize_t n, PyObject *kw, const char *const *names,
+                      Py_ssize_t lo, Py_ssize_t hi, double *v, const char *what)
+{
+    int given[8] = {0};
+    Py_ssize_t nk = kw == NULL ? 0 : PyTuple_GET_SIZE(kw);
+    if (n > hi) {
+        PyErr_Format(PyExc_TypeError, "%s takes at most %zd arguments (%zd given)", what, hi,
+                     n + nk);
+        return -1;
+    }
+    for (Py_ssize_t j = 0; j < n + nk; j++) {
+        Py_ssize_t at = j;
+        if (j >= n) { /* a keyword: its position in the signature */
+            PyObject *name = PyTuple_GET_ITEM(kw, j - n);
+            for (at = 0; at < hi; at++)
+                if (PyUnicode_CompareWithASCIIString(name, names[at]) == 0)
+                    break;
+            if (at == hi || given[at]) {
+                PyErr_Format(PyExc_TypeError, "%s got %s keyword argument '%U'", what,
+                             at == hi ? "an unexpected" : "multiple values for", name);
+                return -1;
+            }
+        }
+        given[at] = 1;
+        v[at] = PyFloat_AsDouble(args[j]);
+        if (v[at] == -1.0 && PyErr_Occurred())
+            return -1;
+    }
+    for (Py_ssize_t j = 0; j < lo; j++)
+        if (!given[j]) {
+            PyErr_Format(PyExc_TypeError, "%s missing required argument '%s'", what, names[j]);
+            return -1;
+        }
+    return 0;
+}
+
+/* a block's type: its object T holds the core struct s; Python's classes subclass it */
+#define BLOCK_TYPE(var, name, T, doc, init, methods, members)                      \
+    static PyTypeObject var = {                                                    \
+        PyVarObject_HEAD_INIT(NULL, 0).tp_name = "controller._cctl." name,        \
+        .tp_basicsize = sizeof(T), .tp_flags = Py_TPFLAGS_DEFAULT | Py_TPFLAGS_BASETYPE, \
+        .tp_doc = doc, .tp_new = PyType_GenericNew, .tp_init = (initproc)init,    \
+        .tp_methods = methods, .tp_members = members,                              \
+    }
+
+/* a member of a block's core struct ST (field s of the block's type T) */
+#define BLOCK_M(name, T, ST, field, type, flags) \
+    {name, type, offsetof(T, s) + offsetof(ST, field), flags, NULL}
+
+/* -- PI (core/cc_pi.h) */
+typedef struct {
+    PyObject_HEAD
+    cc_pi_t s;
+} PiBlock;
+
+static int Pi_init(PiBlock *self, PyObject *args, PyObject *kwds)
+{
+    double k_p, k_i, T_s, k_t;
+    (void)kwds;
+    if (!PyArg_ParseTuple(args, "dddd", &k_p, &k_i, &T_s, &k_t))
+        return -1;
+    cc_pi_init(&self->s, k_p, k_i, T_s, k_t);
+    return 0;
+}
+
+static PyObject *Pi_output(PiBlock *self, PyObject *const *args, Py_ssize_t n, PyObject *kw)
+{
+    static const char *const names[] = {"r", "y", "u_ff"};
+    double v[3] = {0.0, 0.0, 0.0};
+    if (block_args(args, n, kw, names, 2, 3, v, "output()") < 0)
+        return NULL;
+    return PyFloat_FromDouble(cc_pi_output(&self->s, v[0], v[1], v[2]));
+}
+
+static PyObject *Pi_update(PiBlock *self, PyObject *const *args, Py_ssize_t n, PyObject *kw)
+{
+    static const char *const names[] = {"u_lim"};
+    double v[1];
+    if (block_args(args, n, kw, names, 1, 1, v, "update()") < 0)
+        return NULL;
+    cc_pi_update(&self->s, v[0]);
+    Py_RETURN_NONE;
+}
+
+static PyObject *Pi_reset(PiBlock *self, PyObject *const *args, Py_ssize_t n, PyObject *kw)
+{
+    static const char *const names[] = {"u_i"};
+    double v[1] = {0.0};
+    if (block_args(args, n, kw, names, 0, 1, v, "reset()") < 0)
+        return NULL;
+    cc_pi_reset(&self->s);
+    self->s.u_i = v[0]; /* the integral state given (cc_pi_reset zeroes it) */
+    Py_RETURN_NONE;
+}
+
+static PyMethodDef Pi_methods[] = {
+    {"output", (PyCFunction)(void (*)(void))Pi_output, METH_FASTCALL | METH_KEYWORDS,
+     "output($self, /, r, y, u_ff=0.0)\n--\n\n"
+     "Unlimited controller output for reference ``r`` and measurement ``y`` (cc_pi_output)."},
+    {"update", (PyCFunction)(void (*)(void))Pi_update, METH_FASTCALL | METH_KEYWORDS,
+     "update($self, /, u_lim)\n--\n\n"
+     "Advance the integrator with the realised (limited) output ``u_lim`` (cc_pi_update)."},
+    {"reset", (PyCFunction)(void (*)(void))Pi_reset, METH_FASTCALL | METH_KEYWORDS,
+     "reset($self, /, u_i=0.0)\n--\n\nSet the integral state (cc_pi_reset, then ``u_i``)."},
+    {NULL, NULL, 0, NULL},
+};
+
+static PyMemberDef Pi_members[] = {
+    BLOCK_M("k_p", PiBlock, cc_pi_t, k_p, T_DOUBLE, READONLY),
+    BLOCK_M("k_i", PiBlock, cc_pi_t, k_i, T_DOUBLE, READONLY),
+    BLOCK_M("k_t", PiBlock, cc_pi_t, k_t, T_DOUBLE, READONLY),
+    BLOCK_M("T_s", PiBlock, cc_pi_t, T_s, T_DOUBLE, READONLY),
+    BLOCK_M("u_i", PiBlock, cc_pi_t, u_i, T_DOUBLE, 0),
+    BLOCK_M("_e", PiBlock, cc_pi_t, e, T_DOUBLE, 0),
+    BLOCK_M("_u", PiBlock, cc_pi_t, u, T_DOUBLE, 0),
+    {NULL, 0, 0, 0, NULL},
+};
+
+BLOCK_TYPE(PiType, "Pi", PiBlock, "Pi(k_p, k_i, T_s, k_t): a cc_pi_t (controller.PIController)",
+           Pi_init, Pi_methods, Pi_members);
+
+/* svpwm(u_alpha, u_beta, u_dc): cc_svpwm's duties */
+static PyObject *cctl_svpwm(PyObject *Py_UNUSED(m), PyObject *const *args, Py_ssize_t n,
+                            PyObject *kw)
+{
+    static const char *const names[] = {"u_alpha", "u_beta", "u_dc"};
+    double v[3], d[3];
+    if (block_args(args, n, kw, names, 3, 3, v, "svpwm()") < 0)
+        return NULL;
+    cc_svpwm(v[0], v[1], v[2], d);
+    return Py_BuildValue("(ddd)", d[0], d[1], d[2]);
+}
+
+/* limit_magnitude(x_1, x_2, x_max): cc_limit_magnitude's vector */
+static PyObject *cctl_limit_magnitude(PyObject *Py_UNUSED(m), PyObject *const *args,
+                                      Py_ssize_t n, PyObject *kw)
+{
+    static const char *const names[] = {"x_1", "x_2", "x_max"};
+    double v[3];
+    if (block_args(args, n, kw, names, 3, 3, v, "limit_magnitude()") < 0)
+        return NULL;
+    cc_limit_magnitude(&v[0], &v[1], v[2]);
+    return Py_BuildValue("(dd)", v[0], v[1]);
+}
+
 /* hypot(x, y): the core's cc_hypot (cc_math.h), for its test against math.hypot */
 static PyObject *cctl_hypot(PyObject *Py_UNUSED(m), PyObject *const *args, Py_ssize_t n)
 {
@@ -765,6 +922,10 @@ static PyObject *cctl_hypot(PyObject *Py_UNUSED(m), PyObject *const *args, Py_ss
 static PyMethodDef module_methods[] = {
     {"hypot", (PyCFunction)(void (*)(void))cctl_hypot, METH_FASTCALL,
      "hypot(x, y): the core's cc_hypot, rounded as CPython 3.12+'s math.hypot"},
+    {"svpwm", (PyCFunction)(void (*)(void))cctl_svpwm, METH_FASTCALL | METH_KEYWORDS,
+     "svpwm($module, /, u_alpha, u_beta, u_dc)\n--\n\ncc_svpwm's duties (d_a, d_b, d_c)"},
+    {"limit_magnitude", (PyCFunction)(void (*)(void))cctl_limit_magnitude, METH_FASTCALL | METH_KEYWORDS,
+     "limit_magnitude($module, /, x_1, x_2, x_max)\n--\n\ncc_limit_magnitude's vector"},
     {NULL, NULL, 0, NULL},
 };
 
@@ -796,6 +957,12 @@ PyMODINIT_FUNC PyInit__cctl(void)
         Py_DECREF(m);
         return NULL;
     }
+    PyTypeObject *blocks[] = {&PiType};
+    for (size_t j = 0; j < sizeof blocks / sizeof blocks[0]; j++)
+        if (PyModule_AddType(m, blocks[j]) < 0) { /* readies the type too */
+            Py_DECREF(m);
+            return NULL;
+        }
     PyModule_AddIntConstant(m, "KIND_TTDQ", CC_EST_TT_DQ);
     PyModule_AddIntConstant(m, "KIND_TTAB", CC_EST_TT_AB);
     PyModule_AddIntConstant(m, "KIND_SFHF", CC_EST_SFHF);

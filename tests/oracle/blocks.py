@@ -21,8 +21,10 @@ from controller._compensation import DeadTimeCompensator, OffsetCalibration, _cl
 from controller._controller import ReferenceModel
 from controller._filters import Biquad2, FirstOrder, FirstOrder2
 from controller._luenberger import LuenbergerObserver
+from controller._pi import PIController
 
 _TWO_PI = 2.0 * math.pi
+_SQRT3_HALF = 0.5 * math.sqrt(3.0)
 
 #: design class -> its oracle (:func:`oracle`), filled by :func:`oracle_of`.
 ORACLES: dict[type, type] = {}
@@ -273,3 +275,60 @@ class OracleReferenceModel(ReferenceModel):
             a, dw = -a_max, -a_max / self.n_p
         self.w += self.T_s * dw
         return a
+
+
+@oracle_of(PIController)
+class OraclePIController(PIController):
+    """:class:`controller.PIController`'s step (``controller/core/cc_pi.c``)."""
+
+    __slots__ = ()
+
+    def output(self, r: float, y: float, u_ff: float = 0.0) -> float:
+        """Unlimited controller output for reference ``r`` and measurement ``y``."""
+        self._e = r - y
+        self._u = self.k_t * r - self.k_p * y + self.u_i + u_ff
+        return self._u
+
+    def update(self, u_lim: float) -> None:
+        """Advance the integrator with the realised (limited) output ``u_lim``."""
+        self.u_i += self.T_s * self.k_i * (self._e + (u_lim - self._u) / self.k_t)
+
+    def reset(self, u_i: float = 0.0) -> None:
+        """Set the integral state."""
+        self.u_i = float(u_i)
+        self._e = 0.0
+        self._u = 0.0
+
+
+def limit_magnitude(x_1: float, x_2: float, x_max: float) -> tuple[float, float]:
+    """:func:`controller._svpwm.limit_magnitude` (``cc_limit_magnitude``)."""
+    m2 = x_1 * x_1 + x_2 * x_2
+    if m2 > x_max * x_max:
+        s = x_max / math.sqrt(m2)
+        return x_1 * s, x_2 * s
+    return x_1, x_2
+
+
+def svpwm(u_alpha: float, u_beta: float, u_dc: float) -> tuple[float, float, float]:
+    """:func:`controller.svpwm` (``controller/core/cc_svpwm.c``)."""
+    u_a = u_alpha
+    u_b = -0.5 * u_alpha + _SQRT3_HALF * u_beta
+    u_c = -0.5 * u_alpha - _SQRT3_HALF * u_beta
+    if u_a > u_b:
+        hi = u_a
+        lo = u_b
+    else:
+        hi = u_b
+        lo = u_a
+    if u_c > hi:
+        hi = u_c
+    elif u_c < lo:
+        lo = u_c
+    k = 1.0 / u_dc
+    off = 0.5 - 0.5 * (hi + lo) * k
+    d_a = off + u_a * k
+    d_b = off + u_b * k
+    d_c = off + u_c * k
+    if (hi - lo) * k > 1.0 - 1e-12:  # at or beyond the linear range: clip
+        return _clip01(d_a), _clip01(d_b), _clip01(d_c)
+    return d_a, d_b, d_c
