@@ -38,8 +38,11 @@ class PIController(_cctl.Pi):
     k_t : float, optional
         Reference gain; defaults to ``k_p``. Not zero (the anti-windup divides by it).
 
-    Attributes
-    ----------
+    Notes
+    -----
+    Its members, the core struct's fields (design values read-only, states
+    writable):
+
     k_p, k_i, k_t, T_s : float
         The design values, read-only.
     u_i : float

@@ -24,7 +24,6 @@ from controller._api import (
     EstimatorInput,
     Measurement,
 )
-from controller._compensation import cross_saturation_offset
 from controller._controller import STATE_NAMES, hybrid_states
 from controller._hybrid import HybridEstimator
 from controller._square_wave import SquareWaveEstimator
@@ -33,6 +32,7 @@ from tests.oracle.blocks import (
     OracleFirstOrder,
     OracleOffsetCalibration,
     OracleReferenceModel,
+    cross_saturation_offset,
     oracle,
     svpwm,
 )
@@ -71,7 +71,7 @@ class OracleController(Controller):
         estimator and blocks made oracles (their steps added, :mod:`tests.oracle.blocks`)."""
         oracle_estimator(self.estimator)
         oracle(self.lpf_w)
-        oracle((self.pi_d, self.pi_q, self.pi_w))
+        oracle((self.pi_d, self.pi_q, self.pi_w, self.polarity, self.supervisor))
         oracle(self.dead_time)
         oracle(self.calibration)
         self.oracle_ref_model = OracleReferenceModel.of(self.ref_model)
