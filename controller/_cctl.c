@@ -763,8 +763,9 @@ static PyTypeObject CoreType = {
 /* The doubles of a fast call into v: n positional arguments, then the keywords kw (as
  * the Python signature names[] allows), at least lo and at most hi of them (v's defaults
  * stay for the rest). */
-static int block_args(PyObject *const *args, Py_ssize_t n, PyObject *kw, const char *const *names,
-                      Py_ssize_t lo, Py_ssize_t hi, double *v, const char *what)
+static int block_args(PyObject *const *args, Py_ssize_t n, PyObject *kw,
+                      const char *const *names, Py_ssize_t lo, Py_ssize_t hi, double *v,
+                      const char *what)
 {
     int given[8] = {0};
     Py_ssize_t nk = kw == NULL ? 0 : PyTuple_GET_SIZE(kw);
@@ -1341,7 +1342,8 @@ static PyMethodDef module_methods[] = {
      "cross_saturation_offset($module, /, k_dq, i_q, L_d, L_q)\n--\n\ncc_cross_saturation_offset"},
     {"svpwm", (PyCFunction)(void (*)(void))cctl_svpwm, METH_FASTCALL | METH_KEYWORDS,
      "svpwm($module, /, u_alpha, u_beta, u_dc)\n--\n\ncc_svpwm's duties (d_a, d_b, d_c)"},
-    {"limit_magnitude", (PyCFunction)(void (*)(void))cctl_limit_magnitude, METH_FASTCALL | METH_KEYWORDS,
+    {"limit_magnitude", (PyCFunction)(void (*)(void))cctl_limit_magnitude,
+     METH_FASTCALL | METH_KEYWORDS,
      "limit_magnitude($module, /, x_1, x_2, x_max)\n--\n\ncc_limit_magnitude's vector"},
     {NULL, NULL, 0, NULL},
 };
