@@ -9,6 +9,17 @@ starts from (``reset``); its oracle adds the period's step. :func:`oracle` turns
 design (a block, an estimator, everything it holds) into its oracle in place: the same
 object, the same values, the step added, so that shared blocks stay shared (a hybrid's
 tracker and its injection estimator hold one observer).
+
+The public blocks (``PIController``, ``PositionObserver``, ``FluxObserver``,
+``PolarityTest``, ``Supervisor``, ``TransitionBand``) are bindings of the core: their
+class subclasses a type of ``controller/_cctl.c`` whose members are the core struct's
+fields and whose methods are the core's steps. Their oracle overrides those methods with
+the Python below, which reads and writes the same members (storage only: every operation
+is Python's), so one object can be turned into its oracle in place as the others are; the
+supervisor's windows, which the struct holds as arrays, live in the oracle's
+``__dict__`` (:meth:`OracleSupervisor.oracle_start`). The free functions (``svpwm``,
+``limit_magnitude``, ``smooth_sign``, ``cross_saturation_offset``) are the Python of the
+core's functions of those names.
 """
 
 from __future__ import annotations
