@@ -25,9 +25,16 @@
 #include <stdint.h>
 #include <structmember.h>
 
+#include "core/cc_compensation.h"
 #include "core/cc_design.h"
 #include "core/cc_foc.h"
+#include "core/cc_flux_observer.h"
+#include "core/cc_hybrid.h"
+#include "core/cc_pi.h"
+#include "core/cc_pll.h"
+#include "core/cc_startup.h"
 #include "core/cc_supervision.h"
+#include "core/cc_svpwm.h"
 
 #define N_MEAS 7 /* k, i_a, i_b, i_c, u_dc, theta_e, w_e */
 #define N_OUT 11 /* k, d_a, d_b, d_c, enable, theta_hat, w_hat, err, mode, i_d, i_q */
@@ -746,6 +753,565 @@ static PyTypeObject CoreType = {
     .tp_members = Core_members,
 };
 
+/* ---------------------------------------------------------------- the public blocks */
+/* The blocks a user may call per period (controller/__init__.py; a plug-in's estimator
+ * composes them): each a small type holding one core struct, whose methods call the
+ * core's _init/_step/_reset and whose members are the struct's fields (design values
+ * read-only, states writable).  The Python classes (controller/_pi.py, ...) subclass
+ * these types and keep the design, the docstrings and the argument checks. */
+
+/* The doubles of a fast call into v: n positional arguments, then the keywords kw (as
+ * the Python signature names[] allows), at least lo and at most hi of them (v's defaults
+ * stay for the rest). */
+static int block_args(PyObject *const *args, Py_ssize_t n, PyObject *kw,
+                      const char *const *names, Py_ssize_t lo, Py_ssize_t hi, double *v,
+                      const char *what)
+{
+    int given[8] = {0};
+    Py_ssize_t nk = kw == NULL ? 0 : PyTuple_GET_SIZE(kw);
+    if (n > hi) {
+        PyErr_Format(PyExc_TypeError, "%s takes at most %zd arguments (%zd given)", what, hi,
+                     n + nk);
+        return -1;
+    }
+    for (Py_ssize_t j = 0; j < n + nk; j++) {
+        Py_ssize_t at = j;
+        if (j >= n) { /* a keyword: its position in the signature */
+            PyObject *name = PyTuple_GET_ITEM(kw, j - n);
+            for (at = 0; at < hi; at++)
+                if (PyUnicode_CompareWithASCIIString(name, names[at]) == 0)
+                    break;
+            if (at == hi || given[at]) {
+                PyErr_Format(PyExc_TypeError, "%s got %s keyword argument '%U'", what,
+                             at == hi ? "an unexpected" : "multiple values for", name);
+                return -1;
+            }
+        }
+        given[at] = 1;
+        v[at] = PyFloat_AsDouble(args[j]);
+        if (v[at] == -1.0 && PyErr_Occurred())
+            return -1;
+    }
+    for (Py_ssize_t j = 0; j < lo; j++)
+        if (!given[j]) {
+            PyErr_Format(PyExc_TypeError, "%s missing required argument '%s'", what, names[j]);
+            return -1;
+        }
+    return 0;
+}
+
+/* a block's type: its object T holds the core struct s; Python's classes subclass it */
+#define BLOCK_TYPE(var, name, T, doc, init, methods, members, getset)              \
+    static PyTypeObject var = {                                                    \
+        PyVarObject_HEAD_INIT(NULL, 0).tp_name = "controller._cctl." name,        \
+        .tp_basicsize = sizeof(T), .tp_flags = Py_TPFLAGS_DEFAULT | Py_TPFLAGS_BASETYPE, \
+        .tp_doc = doc, .tp_new = PyType_GenericNew, .tp_init = (initproc)init,    \
+        .tp_methods = methods, .tp_members = members, .tp_getset = getset,         \
+    }
+
+/* a member of a block's core struct ST (field s of the block's type T) */
+#define BLOCK_M(name, T, ST, field, type, flags) \
+    {name, type, offsetof(T, s) + offsetof(ST, field), flags, NULL}
+
+/* -- PI (core/cc_pi.h) */
+typedef struct {
+    PyObject_HEAD
+    cc_pi_t s;
+} PiBlock;
+
+static int Pi_init(PiBlock *self, PyObject *args, PyObject *kwds)
+{
+    double k_p, k_i, T_s, k_t;
+    (void)kwds;
+    if (!PyArg_ParseTuple(args, "dddd", &k_p, &k_i, &T_s, &k_t))
+        return -1;
+    cc_pi_init(&self->s, k_p, k_i, T_s, k_t);
+    return 0;
+}
+
+static PyObject *Pi_output(PiBlock *self, PyObject *const *args, Py_ssize_t n, PyObject *kw)
+{
+    static const char *const names[] = {"r", "y", "u_ff"};
+    double v[3] = {0.0, 0.0, 0.0};
+    if (block_args(args, n, kw, names, 2, 3, v, "output()") < 0)
+        return NULL;
+    return PyFloat_FromDouble(cc_pi_output(&self->s, v[0], v[1], v[2]));
+}
+
+static PyObject *Pi_update(PiBlock *self, PyObject *const *args, Py_ssize_t n, PyObject *kw)
+{
+    static const char *const names[] = {"u_lim"};
+    double v[1];
+    if (block_args(args, n, kw, names, 1, 1, v, "update()") < 0)
+        return NULL;
+    cc_pi_update(&self->s, v[0]);
+    Py_RETURN_NONE;
+}
+
+static PyObject *Pi_reset(PiBlock *self, PyObject *const *args, Py_ssize_t n, PyObject *kw)
+{
+    static const char *const names[] = {"u_i"};
+    double v[1] = {0.0};
+    if (block_args(args, n, kw, names, 0, 1, v, "reset()") < 0)
+        return NULL;
+    cc_pi_reset(&self->s);
+    self->s.u_i = v[0]; /* the integral state given (cc_pi_reset zeroes it) */
+    Py_RETURN_NONE;
+}
+
+static PyMethodDef Pi_methods[] = {
+    {"output", (PyCFunction)(void (*)(void))Pi_output, METH_FASTCALL | METH_KEYWORDS,
+     "output($self, /, r, y, u_ff=0.0)\n--\n\n"
+     "Unlimited controller output for reference ``r`` and measurement ``y`` (cc_pi_output)."},
+    {"update", (PyCFunction)(void (*)(void))Pi_update, METH_FASTCALL | METH_KEYWORDS,
+     "update($self, /, u_lim)\n--\n\n"
+     "Advance the integrator with the realised (limited) output ``u_lim`` (cc_pi_update)."},
+    {"reset", (PyCFunction)(void (*)(void))Pi_reset, METH_FASTCALL | METH_KEYWORDS,
+     "reset($self, /, u_i=0.0)\n--\n\nSet the integral state (cc_pi_reset, then ``u_i``)."},
+    {NULL, NULL, 0, NULL},
+};
+
+static PyMemberDef Pi_members[] = {
+    BLOCK_M("k_p", PiBlock, cc_pi_t, k_p, T_DOUBLE, READONLY),
+    BLOCK_M("k_i", PiBlock, cc_pi_t, k_i, T_DOUBLE, READONLY),
+    BLOCK_M("k_t", PiBlock, cc_pi_t, k_t, T_DOUBLE, READONLY),
+    BLOCK_M("T_s", PiBlock, cc_pi_t, T_s, T_DOUBLE, READONLY),
+    BLOCK_M("u_i", PiBlock, cc_pi_t, u_i, T_DOUBLE, 0),
+    BLOCK_M("_e", PiBlock, cc_pi_t, e, T_DOUBLE, 0),
+    BLOCK_M("_u", PiBlock, cc_pi_t, u, T_DOUBLE, 0),
+    {NULL, 0, 0, 0, NULL},
+};
+
+BLOCK_TYPE(PiType, "Pi", PiBlock, "Pi(k_p, k_i, T_s, k_t): a cc_pi_t (controller.PIController)",
+           Pi_init, Pi_methods, Pi_members, NULL);
+
+/* -- PLL (core/cc_pll.h) */
+typedef struct {
+    PyObject_HEAD
+    cc_pll_t s;
+} PllBlock;
+
+static int Pll_init(PllBlock *self, PyObject *args, PyObject *kwds)
+{
+    double k_p, k_i, T_s;
+    (void)kwds;
+    if (!PyArg_ParseTuple(args, "ddd", &k_p, &k_i, &T_s))
+        return -1;
+    cc_pll_init(&self->s, k_p, k_i, T_s);
+    return 0;
+}
+
+static PyObject *Pll_update(PllBlock *self, PyObject *const *args, Py_ssize_t n, PyObject *kw)
+{
+    static const char *const names[] = {"err", "accel"};
+    double v[2] = {0.0, 0.0};
+    if (block_args(args, n, kw, names, 1, 2, v, "update()") < 0)
+        return NULL;
+    cc_pll_step(&self->s, v[0], v[1]);
+    Py_RETURN_NONE;
+}
+
+static PyObject *Pll_reset(PllBlock *self, PyObject *const *args, Py_ssize_t n, PyObject *kw)
+{
+    static const char *const names[] = {"theta0", "w0"};
+    double v[2] = {0.0, 0.0};
+    if (block_args(args, n, kw, names, 1, 2, v, "reset()") < 0)
+        return NULL;
+    cc_pll_reset(&self->s, v[0], v[1]);
+    Py_RETURN_NONE;
+}
+
+static PyMethodDef Pll_methods[] = {
+    {"update", (PyCFunction)(void (*)(void))Pll_update, METH_FASTCALL | METH_KEYWORDS,
+     "update($self, /, err, accel=0.0)\n--\n\n"
+     "Take the error of sample ``k``; advance ``theta_hat`` to ``(k+1) T_s`` (cc_pll_step).\n\n"
+     "``accel`` (rad/s^2): a known acceleration fed forward into the integral, so\n"
+     "that the speed follows it without the error ``accel / w_o^2`` the loop\n"
+     "needs otherwise. It is an input beside the loop, not in it: the transfer\n"
+     "function from ``err`` to the angle (:func:`open_loop`) stays what it is."},
+    {"reset", (PyCFunction)(void (*)(void))Pll_reset, METH_FASTCALL | METH_KEYWORDS,
+     "reset($self, /, theta0, w0=0.0)\n--\n\n"
+     "Restart at angle ``theta0`` (rad) and speed ``w0`` (rad/s) (cc_pll_reset)."},
+    {NULL, NULL, 0, NULL},
+};
+
+static PyMemberDef Pll_members[] = {
+    BLOCK_M("k_p", PllBlock, cc_pll_t, k_p, T_DOUBLE, READONLY),
+    BLOCK_M("k_i", PllBlock, cc_pll_t, k_i, T_DOUBLE, READONLY),
+    BLOCK_M("T_s", PllBlock, cc_pll_t, T_s, T_DOUBLE, READONLY),
+    BLOCK_M("theta_hat", PllBlock, cc_pll_t, theta_hat, T_DOUBLE, 0),
+    BLOCK_M("w_hat", PllBlock, cc_pll_t, w_hat, T_DOUBLE, 0),
+    BLOCK_M("w_i", PllBlock, cc_pll_t, w_i, T_DOUBLE, 0),
+    {NULL, 0, 0, 0, NULL},
+};
+
+BLOCK_TYPE(PllType, "Pll", PllBlock, "Pll(k_p, k_i, T_s): a cc_pll_t (controller.PositionObserver)",
+           Pll_init, Pll_methods, Pll_members, NULL);
+
+/* -- polarity test (core/cc_startup.h) */
+typedef struct {
+    PyObject_HEAD
+    cc_polarity_t s;
+} PolarityBlock;
+
+static int Polarity_init(PolarityBlock *self, PyObject *args, PyObject *kwds)
+{
+    double L_d, T_s, i_pulse, u_frac;
+    (void)kwds;
+    if (!PyArg_ParseTuple(args, "dddd", &L_d, &T_s, &i_pulse, &u_frac))
+        return -1;
+    cc_polarity_init(&self->s, L_d, T_s, i_pulse, u_frac);
+    return 0;
+}
+
+/* start(u_dc, i_d0): the Python class refuses the values for which it is undefined */
+static PyObject *Polarity_start(PolarityBlock *self, PyObject *const *args, Py_ssize_t n,
+                                PyObject *kw)
+{
+    static const char *const names[] = {"u_dc", "i_d0"};
+    double v[2];
+    if (block_args(args, n, kw, names, 2, 2, v, "start()") < 0)
+        return NULL;
+    cc_polarity_start(&self->s, v[0], v[1]);
+    Py_RETURN_NONE;
+}
+
+static PyObject *Polarity_step(PolarityBlock *self, PyObject *const *args, Py_ssize_t n,
+                               PyObject *kw)
+{
+    static const char *const names[] = {"i_d"};
+    double v[1];
+    if (block_args(args, n, kw, names, 1, 1, v, "step()") < 0)
+        return NULL;
+    return PyFloat_FromDouble(cc_polarity_step(&self->s, v[0]));
+}
+
+/* done and flip: the core's ints as Python's bools (writable: the oracle's step sets them) */
+static PyObject *Polarity_get_flag(PolarityBlock *self, void *which)
+{
+    return PyBool_FromLong(which ? self->s.flip : self->s.done);
+}
+
+static int Polarity_set_flag(PolarityBlock *self, PyObject *v, void *which)
+{
+    int on = v == NULL ? -1 : PyObject_IsTrue(v);
+    if (on < 0) {
+        if (v == NULL)
+            PyErr_SetString(PyExc_AttributeError, "cannot delete a polarity test's flag");
+        return -1;
+    }
+    *(which ? &self->s.flip : &self->s.done) = on;
+    return 0;
+}
+
+static PyGetSetDef Polarity_getset[] = {
+    {"done", (getter)Polarity_get_flag, (setter)Polarity_set_flag,
+     "whether the test has ended", NULL},
+    {"flip", (getter)Polarity_get_flag, (setter)Polarity_set_flag,
+     "whether the estimated d axis points south (flip by pi)", (void *)1},
+    {NULL, NULL, NULL, NULL, NULL},
+};
+
+static PyMethodDef Polarity_methods[] = {
+    {"start", (PyCFunction)(void (*)(void))Polarity_start, METH_FASTCALL | METH_KEYWORDS,
+     "start($self, /, u_dc, i_d0)\n--\n\ncc_polarity_start"},
+    {"step", (PyCFunction)(void (*)(void))Polarity_step, METH_FASTCALL | METH_KEYWORDS,
+     "step($self, /, i_d)\n--\n\n"
+     "Take the d current of sample ``k`` (A); return ``u_d`` (V) for period ``k + 1`` "
+     "(cc_polarity_step)."},
+    {NULL, NULL, 0, NULL},
+};
+
+static PyMemberDef Polarity_members[] = {
+    BLOCK_M("L_d", PolarityBlock, cc_polarity_t, L_d, T_DOUBLE, READONLY),
+    BLOCK_M("T_s", PolarityBlock, cc_polarity_t, T_s, T_DOUBLE, READONLY),
+    BLOCK_M("i_pulse", PolarityBlock, cc_polarity_t, i_pulse, T_DOUBLE, READONLY),
+    BLOCK_M("u_frac", PolarityBlock, cc_polarity_t, u_frac, T_DOUBLE, READONLY),
+    BLOCK_M("U", PolarityBlock, cc_polarity_t, U, T_DOUBLE, 0),
+    BLOCK_M("N", PolarityBlock, cc_polarity_t, N, T_LONGLONG, 0),
+    BLOCK_M("_n", PolarityBlock, cc_polarity_t, n, T_LONGLONG, 0),
+    BLOCK_M("_i0", PolarityBlock, cc_polarity_t, i0, T_DOUBLE, 0),
+    BLOCK_M("_i1", PolarityBlock, cc_polarity_t, i1, T_DOUBLE, 0),
+    BLOCK_M("d_i_pos", PolarityBlock, cc_polarity_t, d_i_pos, T_DOUBLE, 0),
+    BLOCK_M("d_i_neg", PolarityBlock, cc_polarity_t, d_i_neg, T_DOUBLE, 0),
+    {NULL, 0, 0, 0, NULL},
+};
+
+BLOCK_TYPE(PolarityType, "Polarity", PolarityBlock,
+           "Polarity(L_d, T_s, i_pulse, u_frac): a cc_polarity_t (controller.PolarityTest)",
+           Polarity_init, Polarity_methods, Polarity_members, Polarity_getset);
+
+/* -- flux observer (core/cc_flux_observer.h); R_s, zeta_f and alpha_o, which the struct
+ * keeps only as derived constants, kept beside it as given */
+typedef struct {
+    PyObject_HEAD
+    cc_flux_t s;
+    double R_s, zeta_f, alpha_o;
+} FluxBlock;
+
+static int Flux_init(FluxBlock *self, PyObject *args, PyObject *kwds)
+{
+    double R_s, L_d, L_q, psi_f, T_s, zeta_f, w_min, k_p, k_i, alpha_o;
+    (void)kwds;
+    if (!PyArg_ParseTuple(args, "dddddddddd", &R_s, &L_d, &L_q, &psi_f, &T_s, &zeta_f, &w_min,
+                          &k_p, &k_i, &alpha_o))
+        return -1;
+    cc_flux_init(&self->s, R_s, L_d, L_q, psi_f, T_s, zeta_f, w_min, k_p, k_i);
+    self->R_s = R_s;
+    self->zeta_f = zeta_f;
+    self->alpha_o = alpha_o;
+    return 0;
+}
+
+static PyObject *Flux_update(FluxBlock *self, PyObject *const *args, Py_ssize_t n, PyObject *kw)
+{
+    static const char *const names[] = {"i_alpha", "i_beta", "u_alpha", "u_beta"};
+    double v[4];
+    if (block_args(args, n, kw, names, 4, 4, v, "update()") < 0)
+        return NULL;
+    cc_flux_step(&self->s, v[0], v[1], v[2], v[3]);
+    Py_RETURN_NONE;
+}
+
+static PyObject *Flux_update_slaved(FluxBlock *self, PyObject *const *args, Py_ssize_t n,
+                                    PyObject *kw)
+{
+    static const char *const names[] = {"i_alpha", "i_beta", "u_alpha", "u_beta", "theta", "w"};
+    double v[6];
+    if (block_args(args, n, kw, names, 6, 6, v, "update_slaved()") < 0)
+        return NULL;
+    cc_flux_step_slaved(&self->s, v[0], v[1], v[2], v[3], v[4], v[5]);
+    Py_RETURN_NONE;
+}
+
+static PyObject *Flux_reset(FluxBlock *self, PyObject *const *args, Py_ssize_t n, PyObject *kw)
+{
+    static const char *const names[] = {"theta0", "w0"};
+    double v[2] = {0.0, 0.0};
+    if (block_args(args, n, kw, names, 1, 2, v, "reset()") < 0)
+        return NULL;
+    cc_flux_reset(&self->s, v[0], v[1]);
+    Py_RETURN_NONE;
+}
+
+static PyObject *Flux_set_state(FluxBlock *self, PyObject *const *args, Py_ssize_t n,
+                                PyObject *kw)
+{
+    static const char *const names[] = {"psi_alpha", "psi_beta", "i_alpha", "i_beta"};
+    double v[4];
+    if (block_args(args, n, kw, names, 4, 4, v, "set_state()") < 0)
+        return NULL;
+    cc_flux_set_state(&self->s, v[0], v[1], v[2], v[3]);
+    Py_RETURN_NONE;
+}
+
+static PyMethodDef Flux_methods[] = {
+    {"update", (PyCFunction)(void (*)(void))Flux_update, METH_FASTCALL | METH_KEYWORDS,
+     "update($self, /, i_alpha, i_beta, u_alpha, u_beta)\n--\n\n"
+     "Sensorless step: sample ``k`` (A) and the voltage of ``[(k-1) T_s, k T_s]`` (V) "
+     "(cc_flux_step)."},
+    {"update_slaved", (PyCFunction)(void (*)(void))Flux_update_slaved,
+     METH_FASTCALL | METH_KEYWORDS,
+     "update_slaved($self, /, i_alpha, i_beta, u_alpha, u_beta, theta, w)\n--\n\n"
+     "Sensored step at a given angle ``theta`` (rad) and speed ``w`` (rad/s): the flux\n"
+     "is corrected with ``k_1 e`` (``k_2 = 0``); the PLL state follows ``theta, w`` "
+     "(cc_flux_step_slaved)."},
+    {"reset", (PyCFunction)(void (*)(void))Flux_reset, METH_FASTCALL | METH_KEYWORDS,
+     "reset($self, /, theta0, w0=0.0)\n--\n\n"
+     "Restart at angle ``theta0`` (rad) and speed ``w0`` (rad/s); the next sample\n"
+     "sets the flux estimate to the current model at that angle (cc_flux_reset)."},
+    {"set_state", (PyCFunction)(void (*)(void))Flux_set_state, METH_FASTCALL | METH_KEYWORDS,
+     "set_state($self, /, psi_alpha, psi_beta, i_alpha, i_beta)\n--\n\n"
+     "Set the flux estimate (Wb) and the current sample (A) of the last sample, from\n"
+     "which the next :meth:`update` integrates (instead of the current model) "
+     "(cc_flux_set_state)."},
+    {NULL, NULL, 0, NULL},
+};
+
+#define FLUX_M(name, field, type, flags) BLOCK_M(name, FluxBlock, cc_flux_t, field, type, flags)
+static PyMemberDef Flux_members[] = {
+    {"R_s", T_DOUBLE, offsetof(FluxBlock, R_s), READONLY, NULL},
+    {"zeta_f", T_DOUBLE, offsetof(FluxBlock, zeta_f), READONLY, NULL},
+    {"alpha_o", T_DOUBLE, offsetof(FluxBlock, alpha_o), READONLY, NULL},
+    FLUX_M("L_d", L_d, T_DOUBLE, READONLY),
+    FLUX_M("L_q", L_q, T_DOUBLE, READONLY),
+    FLUX_M("psi_f", psi_f, T_DOUBLE, READONLY),
+    FLUX_M("T_s", T_s, T_DOUBLE, READONLY),
+    FLUX_M("w_min", w_min, T_DOUBLE, READONLY),
+    FLUX_M("k_p", kp, T_DOUBLE, READONLY),
+    FLUX_M("k_i", k_i, T_DOUBLE, READONLY),
+    FLUX_M("_ki_T", ki_T, T_DOUBLE, READONLY),
+    FLUX_M("_zT", zT, T_DOUBLE, READONLY),
+    FLUX_M("_rT2", rT2, T_DOUBLE, READONLY),
+    FLUX_M("_dL", dL, T_DOUBLE, READONLY),
+    FLUX_M("psi_alpha", psi_alpha, T_DOUBLE, 0),
+    FLUX_M("psi_beta", psi_beta, T_DOUBLE, 0),
+    FLUX_M("theta_hat", theta_hat, T_DOUBLE, 0),
+    FLUX_M("w_hat", w_hat, T_DOUBLE, 0),
+    FLUX_M("eps", eps, T_DOUBLE, 0),
+    FLUX_M("accel", accel, T_DOUBLE, 0),
+    FLUX_M("_ia1", ia1, T_DOUBLE, 0),
+    FLUX_M("_ib1", ib1, T_DOUBLE, 0),
+    FLUX_M("_th_next", th_next, T_DOUBLE, 0),
+    FLUX_M("_init", init, T_INT, 0),
+    {NULL, 0, 0, 0, NULL},
+};
+#undef FLUX_M
+
+BLOCK_TYPE(FluxType, "Flux", FluxBlock,
+           "Flux(R_s, L_d, L_q, psi_f, T_s, zeta_f, w_min, k_p, k_i, alpha_o): a cc_flux_t "
+           "(controller.FluxObserver)",
+           Flux_init, Flux_methods, Flux_members, NULL);
+
+/* -- supervision (core/cc_supervision.h) */
+typedef struct {
+    PyObject_HEAD
+    cc_sup_t s;
+} SupBlock;
+
+/* Sup(*Supervisor.args()): the thresholds in the order of cc_sup_init */
+static int Sup_init(SupBlock *self, PyObject *args, PyObject *kwds)
+{
+    double T_s, i_rail, i_res, du_stuck, i_min, rho_open, u_uv, u_ov, u_hyst;
+    long long n_range, n_stuck, n_open_min, n_open_max, n_dc;
+    (void)kwds;
+    if (!PyArg_ParseTuple(args, "ddLddLddLLdddL", &T_s, &i_rail, &n_range, &i_res, &du_stuck,
+                          &n_stuck, &i_min, &rho_open, &n_open_min, &n_open_max, &u_uv, &u_ov,
+                          &u_hyst, &n_dc))
+        return -1;
+    cc_sup_init(&self->s, T_s, i_rail, n_range, i_res, du_stuck, n_stuck, i_min, rho_open,
+                n_open_min, n_open_max, u_uv, u_ov, u_hyst, n_dc);
+    return 0;
+}
+
+/* _check(i_a, i_b, u_dc, d_a, d_b, d_c, enable, mode, w_hat): cc_sup_check on the fields of
+ * the ControlOutput that Supervisor.check hands over */
+static PyObject *Sup_check(SupBlock *self, PyObject *args)
+{
+    double i_a, i_b, u_dc;
+    cc_out_t o = {0};
+    if (!PyArg_ParseTuple(args, "ddddddpLd", &i_a, &i_b, &u_dc, &o.d_a, &o.d_b, &o.d_c,
+                          &o.enable, &o.mode, &o.w_hat))
+        return NULL;
+    return PyLong_FromLongLong(cc_sup_check(&self->s, i_a, i_b, u_dc, &o));
+}
+
+static PyObject *Sup_release_ok(SupBlock *self, PyObject *const *args, Py_ssize_t n,
+                                PyObject *kw)
+{
+    static const char *const names[] = {"u_dc"};
+    double v[1];
+    if (block_args(args, n, kw, names, 1, 1, v, "release_ok()") < 0)
+        return NULL;
+    return PyBool_FromLong(cc_sup_release_ok(&self->s, v[0]));
+}
+
+static PyObject *Sup_reset_windows(SupBlock *self, PyObject *Py_UNUSED(ignored))
+{
+    cc_sup_reset_windows(&self->s);
+    Py_RETURN_NONE;
+}
+
+static PyMethodDef Sup_methods[] = {
+    {"_check", (PyCFunction)Sup_check, METH_VARARGS,
+     "_check(i_a, i_b, u_dc, d_a, d_b, d_c, enable, mode, w_hat): cc_sup_check"},
+    {"release_ok", (PyCFunction)(void (*)(void))Sup_release_ok, METH_FASTCALL | METH_KEYWORDS,
+     "release_ok($self, /, u_dc)\n--\n\n"
+     "Whether the latched detection may clear on a new enable (cc_sup_release_ok)."},
+    {"_reset_windows", (PyCFunction)Sup_reset_windows, METH_NOARGS,
+     "the detection windows emptied (cc_sup_reset_windows)"},
+    {NULL, NULL, 0, NULL},
+};
+
+static PyMemberDef Sup_members[] = {
+    BLOCK_M("latched", SupBlock, cc_sup_t, latched, T_LONGLONG, 0),
+    BLOCK_M("detected_k", SupBlock, cc_sup_t, detected_k, T_LONGLONG, 0),
+    {NULL, 0, 0, 0, NULL},
+};
+
+BLOCK_TYPE(SupType, "Sup", SupBlock, "Sup(*thresholds): a cc_sup_t (controller.Supervisor)",
+           Sup_init, Sup_methods, Sup_members, NULL);
+
+/* band_play(w_lo, w_mid, w_hi, h, y, w) and band_weights(w_lo, w_mid, w_hi, h, y): the
+ * hybrids' band (cc_hybrid.h) for TransitionBand, whose fields are the cc_band_t's */
+static int band_args(PyObject *const *args, Py_ssize_t n, Py_ssize_t want, cc_band_t *b,
+                     double *v, const char *what)
+{
+    static const char *const names[] = {"w_lo", "w_mid", "w_hi", "h", "y", "w"};
+    double a[6];
+    if (block_args(args, n, NULL, names, want, want, a, what) < 0)
+        return -1;
+    cc_band_init(b, a[0], a[1], a[2], a[3]);
+    for (Py_ssize_t j = 4; j < want; j++)
+        v[j - 4] = a[j];
+    return 0;
+}
+
+static PyObject *cctl_band_play(PyObject *Py_UNUSED(m), PyObject *const *args, Py_ssize_t n)
+{
+    cc_band_t b;
+    double v[2];
+    if (band_args(args, n, 6, &b, v, "band_play()") < 0)
+        return NULL;
+    return PyFloat_FromDouble(cc_band_play(&b, v[0], v[1]));
+}
+
+static PyObject *cctl_band_weights(PyObject *Py_UNUSED(m), PyObject *const *args, Py_ssize_t n)
+{
+    cc_band_t b;
+    double v[1], lam, g;
+    if (band_args(args, n, 5, &b, v, "band_weights()") < 0)
+        return NULL;
+    cc_band_weights(&b, v[0], &lam, &g);
+    return Py_BuildValue("(dd)", lam, g);
+}
+
+/* smooth_sign(i_x, i_band, sine) and cross_saturation_offset(k_dq, i_q, L_d, L_q): the
+ * compensation's per-period laws (core/cc_compensation.h) */
+static PyObject *cctl_smooth_sign(PyObject *Py_UNUSED(m), PyObject *const *args, Py_ssize_t n,
+                                  PyObject *kw)
+{
+    static const char *const names[] = {"i_x", "i_band", "sine"};
+    double v[3];
+    if (block_args(args, n, kw, names, 3, 3, v, "smooth_sign()") < 0)
+        return NULL;
+    return PyFloat_FromDouble(cc_smooth_sign(v[0], v[1], v[2] != 0.0));
+}
+
+static PyObject *cctl_cross_saturation_offset(PyObject *Py_UNUSED(m), PyObject *const *args,
+                                              Py_ssize_t n, PyObject *kw)
+{
+    static const char *const names[] = {"k_dq", "i_q", "L_d", "L_q"};
+    double v[4];
+    if (block_args(args, n, kw, names, 4, 4, v, "cross_saturation_offset()") < 0)
+        return NULL;
+    return PyFloat_FromDouble(cc_cross_saturation_offset(v[0], v[1], v[2], v[3]));
+}
+
+/* svpwm(u_alpha, u_beta, u_dc): cc_svpwm's duties */
+static PyObject *cctl_svpwm(PyObject *Py_UNUSED(m), PyObject *const *args, Py_ssize_t n,
+                            PyObject *kw)
+{
+    static const char *const names[] = {"u_alpha", "u_beta", "u_dc"};
+    double v[3], d[3];
+    if (block_args(args, n, kw, names, 3, 3, v, "svpwm()") < 0)
+        return NULL;
+    cc_svpwm(v[0], v[1], v[2], d);
+    return Py_BuildValue("(ddd)", d[0], d[1], d[2]);
+}
+
+/* limit_magnitude(x_1, x_2, x_max): cc_limit_magnitude's vector */
+static PyObject *cctl_limit_magnitude(PyObject *Py_UNUSED(m), PyObject *const *args,
+                                      Py_ssize_t n, PyObject *kw)
+{
+    static const char *const names[] = {"x_1", "x_2", "x_max"};
+    double v[3];
+    if (block_args(args, n, kw, names, 3, 3, v, "limit_magnitude()") < 0)
+        return NULL;
+    cc_limit_magnitude(&v[0], &v[1], v[2]);
+    return Py_BuildValue("(dd)", v[0], v[1]);
+}
+
 /* hypot(x, y): the core's cc_hypot (cc_math.h), for its test against math.hypot */
 static PyObject *cctl_hypot(PyObject *Py_UNUSED(m), PyObject *const *args, Py_ssize_t n)
 {
@@ -765,6 +1331,20 @@ static PyObject *cctl_hypot(PyObject *Py_UNUSED(m), PyObject *const *args, Py_ss
 static PyMethodDef module_methods[] = {
     {"hypot", (PyCFunction)(void (*)(void))cctl_hypot, METH_FASTCALL,
      "hypot(x, y): the core's cc_hypot, rounded as CPython 3.12+'s math.hypot"},
+    {"band_play", (PyCFunction)(void (*)(void))cctl_band_play, METH_FASTCALL,
+     "band_play(w_lo, w_mid, w_hi, h, y, w): cc_band_play"},
+    {"band_weights", (PyCFunction)(void (*)(void))cctl_band_weights, METH_FASTCALL,
+     "band_weights(w_lo, w_mid, w_hi, h, y): cc_band_weights's (lam, g)"},
+    {"smooth_sign", (PyCFunction)(void (*)(void))cctl_smooth_sign, METH_FASTCALL | METH_KEYWORDS,
+     "smooth_sign($module, /, i_x, i_band, sine)\n--\n\ncc_smooth_sign"},
+    {"cross_saturation_offset", (PyCFunction)(void (*)(void))cctl_cross_saturation_offset,
+     METH_FASTCALL | METH_KEYWORDS,
+     "cross_saturation_offset($module, /, k_dq, i_q, L_d, L_q)\n--\n\ncc_cross_saturation_offset"},
+    {"svpwm", (PyCFunction)(void (*)(void))cctl_svpwm, METH_FASTCALL | METH_KEYWORDS,
+     "svpwm($module, /, u_alpha, u_beta, u_dc)\n--\n\ncc_svpwm's duties (d_a, d_b, d_c)"},
+    {"limit_magnitude", (PyCFunction)(void (*)(void))cctl_limit_magnitude,
+     METH_FASTCALL | METH_KEYWORDS,
+     "limit_magnitude($module, /, x_1, x_2, x_max)\n--\n\ncc_limit_magnitude's vector"},
     {NULL, NULL, 0, NULL},
 };
 
@@ -796,6 +1376,12 @@ PyMODINIT_FUNC PyInit__cctl(void)
         Py_DECREF(m);
         return NULL;
     }
+    PyTypeObject *blocks[] = {&PiType, &PllType, &PolarityType, &FluxType, &SupType};
+    for (size_t j = 0; j < sizeof blocks / sizeof blocks[0]; j++)
+        if (PyModule_AddType(m, blocks[j]) < 0) { /* readies the type too */
+            Py_DECREF(m);
+            return NULL;
+        }
     PyModule_AddIntConstant(m, "KIND_TTDQ", CC_EST_TT_DQ);
     PyModule_AddIntConstant(m, "KIND_TTAB", CC_EST_TT_AB);
     PyModule_AddIntConstant(m, "KIND_SFHF", CC_EST_SFHF);

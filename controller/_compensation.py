@@ -96,7 +96,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-_TWO_OVER_PI = 2.0 / math.pi
+from controller._built import _cctl
 
 
 @dataclass(frozen=True, slots=True)
@@ -189,13 +189,9 @@ def smooth_sign(i_x: float, i_band: float, sine: bool) -> float:
 
     ``sine``: sinusoidal ripple, ``(2/pi) asin(i_x / i_band)``; otherwise
     triangular, ``i_x / i_band``; +-1 outside the band, hard sign if ``i_band`` is 0.
+    The core's ``cc_smooth_sign`` (``controller/core/cc_compensation.c``).
     """
-    if i_x >= i_band:
-        return 1.0 if i_x > 0.0 else 0.0
-    if i_x <= -i_band:
-        return -1.0 if i_x < 0.0 else 0.0
-    r = i_x / i_band
-    return _TWO_OVER_PI * math.asin(r) if sine else r
+    return _cctl.smooth_sign(i_x, i_band, sine)
 
 
 class DeadTimeCompensator:
@@ -226,17 +222,8 @@ class DeadTimeCompensator:
         self.sine = sine
         self._k_dt = t_dead / T_s
 
-    def voltage(self, i_x: float, u_dc: float, d_x: float) -> float:
-        """Expected mean pole-voltage error (V) of a leg with duty ``d_x`` for the current ``i_x``
-        (A), sign smoothed; between the two hard-sign values of :func:`dead_time_voltage`."""
-        s = smooth_sign(i_x, self.i_band, self.sine)
-        on = d_x * self.v_ce + (1.0 - d_x) * self.v_f  # i > 0: upper transistor, lower diode
-        off = d_x * self.v_f + (1.0 - d_x) * self.v_ce  # i < 0: upper diode, lower transistor
-        return -s * self._k_dt * u_dc - 0.5 * (1.0 + s) * on + 0.5 * (1.0 - s) * off
-
-
-def _clip01(d: float) -> float:
-    return 1.0 if d > 1.0 else (0.0 if d < 0.0 else d)
+    # the expected pole-voltage error of a leg and the duties it corrects: the core's
+    # cc_deadtime_voltage and cc_deadtime_duties (the controller's step runs them)
 
 
 # ------------------------------------------------------------------------ cross-saturation
@@ -245,9 +232,10 @@ def _clip01(d: float) -> float:
 def cross_saturation_offset(k_dq: float, i_q: float, L_d: float, L_q: float) -> float:
     """Angle (rad) the HF estimators lock away from the rotor: ``theta_hat - theta_e``.
 
-    ``-1/2 atan(2 L_dq / (L_q - L_d))`` with ``L_dq = k_dq i_q`` (module docstring).
+    ``-1/2 atan(2 L_dq / (L_q - L_d))`` with ``L_dq = k_dq i_q`` (module docstring); the
+    core's ``cc_cross_saturation_offset`` (``controller/core/cc_compensation.c``).
     """
-    return -0.5 * math.atan2(2.0 * k_dq * i_q, L_q - L_d)
+    return _cctl.cross_saturation_offset(k_dq, i_q, L_d, L_q)
 
 
 # --------------------------------------------------------------------- offset calibration

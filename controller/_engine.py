@@ -54,14 +54,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-try:
-    import controller._cctl as _cctl
-except ImportError as e:  # not built on this machine
-    raise ImportError(
-        f"controller: the controller core (controller/core, C) is not built ({e}): install a C "
-        "compiler and Python's headers (tools/need-cc) and reinstall the project (pip install -e .)"
-    ) from None
-
+from controller._built import _cctl
 from controller._registry import SPECS  # the estimators, the square-wave's CIC_MAX among them
 
 ENGINES: tuple[str, ...] = ("auto", "compiled", "python")

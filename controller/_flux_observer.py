@@ -116,9 +116,8 @@ from __future__ import annotations
 
 import math
 
+from controller._built import _cctl
 from controller._params import MotorModel
-
-_TWO_PI = 2.0 * math.pi
 
 
 def pll_gains(alpha_o: float, T_s: float) -> tuple[float, float]:
@@ -129,13 +128,14 @@ def pll_gains(alpha_o: float, T_s: float) -> tuple[float, float]:
     return (1.0 - p * p) / T_s, (1.0 - p) * (1.0 - p) / (T_s * T_s)
 
 
-class FluxObserver:
+class FluxObserver(_cctl.Flux):
     """Reduced-order flux observer with a PLL (Hinkkanen et al. 2018), per PWM period.
 
-    Kept in Python as a public block a user may call per period (a plug-in's
-    estimator composes it; the core calls a plug-in's Python each period), and
-    as the tests' oracle of ``controller/core/cc_flux_observer.c``, which the controller's
-    one engine runs with the same operations (``tests/oracle/``, tolerance 0).
+    A public block a user may call per period (a plug-in's estimator composes
+    it): a binding of the core's ``controller/core/cc_flux_observer.c``, the one
+    implementation the controller's engine runs too: :meth:`update`,
+    :meth:`update_slaved`, :meth:`reset` and :meth:`set_state`. Its readable
+    Python is the tests' oracle (``tests/oracle/blocks.py``, tolerance 0).
 
     Parameters
     ----------
@@ -150,8 +150,13 @@ class FluxObserver:
     w_min : float
         Speed below which ``k_1`` stays at ``zeta_f w_min`` (rad/s, electrical).
 
-    Attributes
-    ----------
+    Notes
+    -----
+    Its members, the core struct's fields (design values read-only, states
+    writable):
+
+    R_s, L_d, L_q, psi_f, T_s, alpha_o, zeta_f, w_min, k_p, k_i : float
+        The design values (the motor model's, the arguments', the PLL's gains), read-only.
     theta_hat : float
         Angle estimate at the last sample (rad, [0, 2 pi)).
     w_hat : float
@@ -165,181 +170,18 @@ class FluxObserver:
         Stator flux estimate after the last correction (Wb, stationary).
     """
 
-    __slots__ = (
-        "L_d",
-        "L_q",
-        "R_s",
-        "T_s",
-        "_dL",
-        "_ia1",
-        "_ib1",
-        "_init",
-        "_ki_T",
-        "_kp",
-        "_rT2",
-        "_th_next",
-        "_zT",
-        "accel",
-        "alpha_o",
-        "eps",
-        "k_i",
-        "k_p",
-        "psi_alpha",
-        "psi_beta",
-        "psi_f",
-        "theta_hat",
-        "w_hat",
-        "w_min",
-        "zeta_f",
-    )
+    __slots__ = ()
 
     def __init__(
         self, motor: MotorModel, T_s: float, alpha_o: float, zeta_f: float, w_min: float
     ) -> None:
         if not (zeta_f > 0.0 and w_min > 0.0):
             raise ValueError(f"need zeta_f, w_min > 0; got zeta_f={zeta_f}, w_min={w_min}")
-        self.R_s = motor.R_s
-        self.L_d = motor.L_d
-        self.L_q = motor.L_q
-        self.psi_f = motor.psi_f
-        self.T_s = T_s
-        self.alpha_o = alpha_o
-        self.zeta_f = zeta_f
-        self.w_min = w_min
-        self.k_p, self.k_i = pll_gains(alpha_o, T_s)
-        self._kp = self.k_p
-        self._ki_T = self.k_i * T_s
-        self._zT = zeta_f * T_s
-        self._rT2 = 0.5 * motor.R_s * T_s
-        self._dL = motor.L_d - motor.L_q
-        self.theta_hat = 0.0
-        self.w_hat = 0.0
-        self.eps = 0.0
-        self.accel = 0.0
-        self.psi_alpha = motor.psi_f
-        self.psi_beta = 0.0
-        self._th_next = 0.0
-        self._ia1 = self._ib1 = 0.0
-        self._init = True
+        k_p, k_i = pll_gains(alpha_o, T_s)
+        super().__init__(
+            motor.R_s, motor.L_d, motor.L_q, motor.psi_f, T_s, zeta_f, w_min, k_p, k_i, alpha_o
+        )
 
-    def reset(self, theta0: float, w0: float = 0.0) -> None:
-        """Restart at angle ``theta0`` (rad) and speed ``w0`` (rad/s); the next sample
-        sets the flux estimate to the current model at that angle."""
-        self._th_next = theta0 % _TWO_PI
-        self.theta_hat = self._th_next
-        self.w_hat = w0
-        self.eps = 0.0
-        self.accel = 0.0
-        self._init = True
-
-    def set_state(self, psi_alpha: float, psi_beta: float, i_alpha: float, i_beta: float) -> None:
-        """Set the flux estimate (Wb) and the current sample (A) of the last sample, from
-        which the next :meth:`update` integrates (instead of the current model)."""
-        self.psi_alpha = psi_alpha
-        self.psi_beta = psi_beta
-        self._ia1 = i_alpha
-        self._ib1 = i_beta
-        self._init = False
-
-    def _k1T(self, w: float) -> float:
-        """``k_1 T_s`` at the speed ``w``: ``zeta_f max(|w|, w_min) T_s``, at most 0.5."""
-        a = w if w >= 0.0 else -w
-        if a < self.w_min:
-            a = self.w_min
-        g = self._zT * a
-        return g if g < 0.5 else 0.5
-
-    def _predict(self, i_a: float, i_b: float, u_a: float, u_b: float, c: float, s: float) -> None:
-        """Voltage model over the period that ended at this sample (stationary frame)."""
-        if self._init:
-            # current model at the present angle: psi = e^{j theta} psi_m(i)
-            i_d = c * i_a + s * i_b
-            i_q = c * i_b - s * i_a
-            p_d = self.psi_f + self.L_d * i_d
-            p_q = self.L_q * i_q
-            self.psi_alpha = c * p_d - s * p_q
-            self.psi_beta = s * p_d + c * p_q
-            self._init = False
-        else:
-            T = self.T_s
-            r = self._rT2
-            self.psi_alpha += T * u_a - r * (i_a + self._ia1)
-            self.psi_beta += T * u_b - r * (i_b + self._ib1)
-        self._ia1 = i_a
-        self._ib1 = i_b
-
-    def _flux_error(
-        self, i_alpha: float, i_beta: float, c: float, s: float
-    ) -> tuple[float, float, float, float, float]:
-        """In the frame at ``(c, s)``: the flux error ``e`` (model minus estimate), the
-        active flux ``psi_a`` (both d, q; Wb) and ``|psi_a|^2``."""
-        i_d = c * i_alpha + s * i_beta
-        i_q = c * i_beta - s * i_alpha
-        pa = self.psi_alpha
-        pb = self.psi_beta
-        e_d = self.psi_f + self.L_d * i_d - (c * pa + s * pb)
-        e_q = self.L_q * i_q - (c * pb - s * pa)
-        a_d = self.psi_f + self._dL * i_d
-        a_q = -self._dL * i_q
-        return e_d, e_q, a_d, a_q, a_d * a_d + a_q * a_q
-
-    def update(self, i_alpha: float, i_beta: float, u_alpha: float, u_beta: float) -> None:
-        """Sensorless step: sample ``k`` (A) and the voltage of ``[(k-1) T_s, k T_s]`` (V)."""
-        th = self._th_next
-        c = math.cos(th)
-        s = math.sin(th)
-        self._predict(i_alpha, i_beta, u_alpha, u_beta, c, s)
-        pa = self.psi_alpha
-        pb = self.psi_beta
-        e_d, e_q, a_d, a_q, den = self._flux_error(i_alpha, i_beta, c, s)
-        if den > 0.0:
-            inv = 1.0 / den
-            x = (e_d * a_d + e_q * a_q) * inv  # Re(e / psi_a)
-            eps = (e_d * a_q - e_q * a_d) * inv  # -Im(e / psi_a)
-        else:  # pragma: no cover - psi_a = 0 needs i_d = psi_f / (L_q - L_d)
-            x = eps = 0.0
-        # k_1 e + k_2 conj(e) = 2 k_1 psi_a Re(e / psi_a), rotated to stationary
-        g = 2.0 * self._k1T(self.w_hat) * x
-        cd = g * a_d
-        cq = g * a_q
-        self.psi_alpha = pa + c * cd - s * cq
-        self.psi_beta = pb + s * cd + c * cq
-        w_i = self.w_hat + self._ki_T * eps
-        self.w_hat = w_i
-        self.eps = eps
-        self.accel = self.k_i * eps
-        self.theta_hat = th
-        th += self.T_s * (w_i + self._kp * eps)
-        if th >= _TWO_PI or th < 0.0:
-            th %= _TWO_PI
-        self._th_next = th
-
-    def update_slaved(
-        self,
-        i_alpha: float,
-        i_beta: float,
-        u_alpha: float,
-        u_beta: float,
-        theta: float,
-        w: float,
-    ) -> None:
-        """Sensored step at a given angle ``theta`` (rad) and speed ``w`` (rad/s): the flux
-        is corrected with ``k_1 e`` (``k_2 = 0``); the PLL state follows ``theta, w``."""
-        c = math.cos(theta)
-        s = math.sin(theta)
-        self._predict(i_alpha, i_beta, u_alpha, u_beta, c, s)
-        pa = self.psi_alpha
-        pb = self.psi_beta
-        e_d, e_q, a_d, a_q, den = self._flux_error(i_alpha, i_beta, c, s)
-        self.eps = (e_d * a_q - e_q * a_d) / den if den > 0.0 else 0.0
-        self.accel = 0.0
-        g = self._k1T(w)
-        self.psi_alpha = pa + g * (c * e_d - s * e_q)
-        self.psi_beta = pb + g * (s * e_d + c * e_q)
-        self.w_hat = w
-        th = theta % _TWO_PI
-        self.theta_hat = th
-        th += self.T_s * w
-        if th >= _TWO_PI or th < 0.0:
-            th %= _TWO_PI
-        self._th_next = th
+    # update(i_alpha, i_beta, u_alpha, u_beta), update_slaved(..., theta, w),
+    # reset(theta0, w0=0.0), set_state(psi_alpha, psi_beta, i_alpha, i_beta): the core's
+    # (_cctl.Flux)

@@ -125,6 +125,7 @@ from typing import Any, ClassVar, Protocol
 import numpy as np
 
 from controller._api import option_field
+from controller._built import _cctl
 from controller._flux_observer import FluxObserver
 from controller._luenberger import LuenbergerObserver
 from controller._params import MotorModel
@@ -192,23 +193,15 @@ class TransitionBand:
 
     def play(self, y: float, w: float) -> float:
         """Schedule speed after the play operator: ``y`` follows ``|w|`` down at once
-        and up with a lag of ``h`` (rad/s)."""
-        s = w if w >= 0.0 else -w
-        if s < y:
-            return s
-        if s - self.h > y:
-            return s - self.h
-        return y
+        and up with a lag of ``h`` (rad/s) (``cc_band_play``, ``controller/core/cc_hybrid.c``)."""
+        return _cctl.band_play(self.w_lo, self.w_mid, self.w_hi, self.h, y, w)
 
     def weights(self, y: float) -> tuple[float, float]:
         """``(lam, g)`` for the schedule speed ``y``: the observer's weight and the
-        injection's amplitude factor, each in [0, 1], exactly 0 or 1 outside the ramps."""
-        lam = (y - self.w_lo) / (self.w_mid - self.w_lo)
-        g = (self.w_hi - y) / (self.w_hi - self.w_mid)
-        return (
-            0.0 if lam <= 0.0 else (1.0 if lam >= 1.0 else lam),
-            0.0 if g <= 0.0 else (1.0 if g >= 1.0 else g),
-        )
+        injection's amplitude factor, each in [0, 1], exactly 0 or 1 outside the ramps:
+        ``lam = (y - w_lo) / (w_mid - w_lo)`` and ``g = (w_hi - y) / (w_hi - w_mid)``,
+        clipped (``cc_band_weights``)."""
+        return _cctl.band_weights(self.w_lo, self.w_mid, self.w_hi, self.h, y)
 
     def band_of(self, w_e: float) -> int:
         """:data:`BELOW`, :data:`INSIDE` or :data:`ABOVE` the band (:attr:`edges`) for

@@ -2,14 +2,16 @@
 
 from __future__ import annotations
 
+from controller._built import _cctl
 
-class PIController:
+
+class PIController(_cctl.Pi):
     """2DOF PI controller, the motulator template.
 
-    Kept in Python as a public block a user may call per period (a plug-in's
-    estimator composes it; the core calls a plug-in's Python each period), and
-    as the tests' oracle of ``controller/core/cc_pi.c``, which the controller's
-    one engine runs with the same operations (``tests/oracle/``, tolerance 0).
+    A public block a user may call per period (a plug-in's estimator composes
+    it): a binding of the core's ``controller/core/cc_pi.c``, the one
+    implementation the controller's engine runs too. Its readable Python is
+    the tests' oracle (``tests/oracle/blocks.py``, tolerance 0).
 
     Control law (sample ``k``)::
 
@@ -34,32 +36,25 @@ class PIController:
     T_s : float
         Sampling period (s).
     k_t : float, optional
-        Reference gain; defaults to ``k_p``.
+        Reference gain; defaults to ``k_p``. Not zero (the anti-windup divides by it).
+
+    Notes
+    -----
+    Its members, the core struct's fields (design values read-only, states
+    writable):
+
+    k_p, k_i, k_t, T_s : float
+        The design values, read-only.
+    u_i : float
+        The integral state (writable).
     """
 
-    __slots__ = ("T_s", "_e", "_u", "k_i", "k_p", "k_t", "u_i")
+    __slots__ = ()
 
     def __init__(self, k_p: float, k_i: float, T_s: float, k_t: float | None = None) -> None:
-        self.k_p = float(k_p)
-        self.k_i = float(k_i)
-        self.k_t = float(k_p if k_t is None else k_t)
-        self.T_s = float(T_s)
-        self.u_i = 0.0
-        self._e = 0.0
-        self._u = 0.0
+        k_t = k_p if k_t is None else k_t
+        if k_t == 0.0:
+            raise ValueError(f"PIController: k_t must not be zero (got k_p={k_p}, k_t={k_t})")
+        super().__init__(float(k_p), float(k_i), float(T_s), float(k_t))
 
-    def output(self, r: float, y: float, u_ff: float = 0.0) -> float:
-        """Unlimited controller output for reference ``r`` and measurement ``y``."""
-        self._e = r - y
-        self._u = self.k_t * r - self.k_p * y + self.u_i + u_ff
-        return self._u
-
-    def update(self, u_lim: float) -> None:
-        """Advance the integrator with the realised (limited) output ``u_lim``."""
-        self.u_i += self.T_s * self.k_i * (self._e + (u_lim - self._u) / self.k_t)
-
-    def reset(self, u_i: float = 0.0) -> None:
-        """Set the integral state."""
-        self.u_i = float(u_i)
-        self._e = 0.0
-        self._u = 0.0
+    # output(r, y, u_ff=0.0), update(u_lim), reset(u_i=0.0): the core's (_cctl.Pi)

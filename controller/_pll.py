@@ -6,18 +6,17 @@ import math
 
 import numpy as np
 
+from controller._built import _cctl
 from controller._design import LoopResponse, largest_with_margin
 
-_TWO_PI = 2.0 * math.pi
 
-
-class PositionObserver:
+class PositionObserver(_cctl.Pll):
     """PI regulator driving the normalised position error to zero, then an integrator.
 
-    Kept in Python as a public block a user may call per period (a plug-in's
-    estimator composes it; the core calls a plug-in's Python each period), and
-    as the tests' oracle of ``controller/core/cc_pll.c``, which the controller's
-    one engine runs with the same operations (``tests/oracle/``, tolerance 0).
+    A public block a user may call per period (a plug-in's estimator composes
+    it): a binding of the core's ``controller/core/cc_pll.c``, the one
+    implementation the controller's engine runs too. Its readable Python is
+    the tests' oracle (``tests/oracle/blocks.py``, tolerance 0).
 
     Wen Fig. 4 (and below eqs. (9), (28), (34)): ``w_hat = k_p err + k_i int(err)``,
     ``theta_hat = int(w_hat)``. With the error normalised to ``err ~ theta -
@@ -39,37 +38,24 @@ class PositionObserver:
         Observer bandwidth (rad/s); 0 freezes the observer.
     T_s : float
         Sampling period (s).
+
+    Notes
+    -----
+    Its members, the core struct's fields (design values read-only, states
+    writable):
+
+    k_p, k_i, T_s : float
+        The gains ``2 w_o``, ``w_o^2`` and the period, read-only.
+    theta_hat, w_hat, w_i : float
+        The angle (rad, [0, 2 pi)), the speed (rad/s) and the integral state (writable).
     """
 
-    __slots__ = ("T_s", "k_i", "k_p", "theta_hat", "w_hat", "w_i")
+    __slots__ = ()
 
     def __init__(self, w_o: float, T_s: float) -> None:
-        self.k_p = 2.0 * w_o
-        self.k_i = w_o * w_o
-        self.T_s = T_s
-        self.theta_hat = 0.0
-        self.w_hat = 0.0
-        self.w_i = 0.0
+        super().__init__(2.0 * w_o, w_o * w_o, T_s)
 
-    def update(self, err: float, accel: float = 0.0) -> None:
-        """Take the error of sample ``k``; advance ``theta_hat`` to ``(k+1) T_s``.
-
-        ``accel`` (rad/s^2): a known acceleration fed forward into the integral, so
-        that the speed follows it without the error ``accel / w_o^2`` the loop
-        needs otherwise. It is an input beside the loop, not in it: the transfer
-        function from ``err`` to the angle (:func:`open_loop`) stays what it is.
-        """
-        self.w_i += self.T_s * self.k_i * err
-        if accel != 0.0:
-            self.w_i += self.T_s * accel
-        self.w_hat = self.k_p * err + self.w_i
-        self.theta_hat = (self.theta_hat + self.T_s * self.w_hat) % _TWO_PI
-
-    def reset(self, theta0: float, w0: float = 0.0) -> None:
-        """Restart at angle ``theta0`` (rad) and speed ``w0`` (rad/s)."""
-        self.theta_hat = theta0 % _TWO_PI
-        self.w_hat = w0
-        self.w_i = w0
+    # update(err, accel=0.0) and reset(theta0, w0=0.0): the core's (_cctl.Pll)
 
 
 def open_loop(w_o: float, T_s: float, w: np.ndarray) -> np.ndarray:

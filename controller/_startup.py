@@ -32,16 +32,16 @@ one-period delay.
 
 from __future__ import annotations
 
-import math
+from controller._built import _cctl
 
 
-class PolarityTest:
+class PolarityTest(_cctl.Polarity):
     """State machine of the magnet-polarity test (see module docstring).
 
-    Kept in Python as a public block a user may call per period (a plug-in's
-    estimator composes it; the core calls a plug-in's Python each period), and
-    as the tests' oracle of ``controller/core/cc_startup.c``, which the controller's
-    one engine runs with the same operations (``tests/oracle/``, tolerance 0).
+    A public block a user may call per period (a plug-in's estimator composes
+    it): a binding of the core's ``controller/core/cc_startup.c``, the one
+    implementation the controller's engine runs too. Its readable Python is
+    the tests' oracle (``tests/oracle/blocks.py``, tolerance 0).
 
     Parameters
     ----------
@@ -53,79 +53,47 @@ class PolarityTest:
         Peak pulse current in the linear model (A).
     u_frac : float
         Pulse voltage as a fraction of ``u_dc / sqrt(3)``.
+
+    Notes
+    -----
+    Its members, the core struct's fields (design values read-only, states
+    writable):
+
+    L_d, T_s, i_pulse, u_frac : float
+        The design values, read-only.
+    U, N : float, int
+        The pulse voltage (V) and length (periods) of the test :meth:`start` began.
+    d_i_pos, d_i_neg : float
+        The peaks of the two halves (A).
+    done, flip : bool
+        Whether the test has ended, and whether its result is a flip by pi.
     """
 
-    __slots__ = (
-        "L_d",
-        "N",
-        "T_s",
-        "U",
-        "_i0",
-        "_i1",
-        "_n",
-        "d_i_neg",
-        "d_i_pos",
-        "done",
-        "flip",
-        "i_pulse",
-        "u_frac",
-    )
+    __slots__ = ()
 
     def __init__(self, L_d: float, T_s: float, i_pulse: float, u_frac: float = 0.5) -> None:
-        self.L_d = L_d
-        self.T_s = T_s
-        self.i_pulse = i_pulse
-        self.u_frac = u_frac
-        self.U = 0.0
-        self.N = 1
-        self._n = 0
-        self._i0 = 0.0
-        self._i1 = 0.0
-        self.d_i_pos = 0.0
-        self.d_i_neg = 0.0
-        self.done = False
-        self.flip = False
+        super().__init__(L_d, T_s, i_pulse, u_frac)
 
     def start(self, u_dc: float, i_d0: float) -> None:
-        """Begin a test at DC-link voltage ``u_dc`` (V) and d current ``i_d0`` (A)."""
-        flux = self.L_d * self.i_pulse
-        self.U = min(self.u_frac * u_dc / math.sqrt(3.0), flux / (2.0 * self.T_s))
-        self.N = max(2, math.ceil(flux / (self.U * self.T_s) - 1e-9))
-        self._n = 0
-        self._i0 = i_d0
-        self._i1 = i_d0
-        self.d_i_pos = 0.0
-        self.d_i_neg = 0.0
-        self.done = False
-        self.flip = False
+        """Begin a test at DC-link voltage ``u_dc`` (V) and d current ``i_d0`` (A).
+
+        The pulse needs a positive ``u_dc``, ``L_d``, ``T_s``, ``i_pulse`` and ``u_frac``
+        (``U`` and ``N`` are undefined otherwise): a ValueError names the first that is not.
+        """
+        for name, v in (
+            ("u_dc", u_dc),
+            ("L_d", self.L_d),
+            ("T_s", self.T_s),
+            ("i_pulse", self.i_pulse),
+            ("u_frac", self.u_frac),
+        ):
+            if not v > 0.0:
+                raise ValueError(f"PolarityTest.start: {name} must be positive (got {v})")
+        super().start(u_dc, i_d0)
 
     @property
     def n_steps(self) -> int:
         """Length of the whole test (periods)."""
         return 6 * self.N
 
-    def step(self, i_d: float) -> float:
-        """Take the d current of sample ``k`` (A); return ``u_d`` (V) for period ``k + 1``."""
-        n = self._n
-        N = self.N
-        if n < 3 * N:
-            d = i_d - self._i0
-            if d > self.d_i_pos:
-                self.d_i_pos = d
-        else:
-            if n == 3 * N:  # start of the second half: its own reference
-                self._i1 = i_d
-            d = self._i1 - i_d
-            if d > self.d_i_neg:
-                self.d_i_neg = d
-        self._n = n + 1
-        if n >= 6 * N:
-            self.done = True
-            self.flip = self.d_i_pos < self.d_i_neg
-            return 0.0
-        phase = n // N
-        if phase in (0, 4):
-            return self.U
-        if phase in (1, 3):
-            return -self.U
-        return 0.0
+    # step(i_d): the core's (_cctl.Polarity)

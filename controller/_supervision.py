@@ -6,10 +6,11 @@ i_b`` as the DBC computes it, the DC-link sample ``u_dc``) against what it
 commanded (the duties of its :class:`controller.ControlOutput`). It never
 reads plant truth. Each detection is a controller mode (``CtrlTelemetry.mode``,
 dbc/bench.dbc) and stops the switching; docs/PROTECTION.md is its prose.
-Python designs the thresholds (:meth:`SupervisionPars.design`); the compiled
-controller runs the per-period check in C (``controller/core/cc_supervision.c``,
-:meth:`Supervisor.args` hands it the thresholds), operation for operation as
-:meth:`Supervisor.check` and :meth:`Supervisor.wrap` do here.
+Python designs the thresholds (:meth:`SupervisionPars.design`); the per-period
+check is C, ``controller/core/cc_supervision.c`` (:meth:`Supervisor.args` hands
+it the thresholds): the controller's core runs it after each step, and
+:class:`Supervisor` is its binding (:meth:`Supervisor.check`), which
+:meth:`Supervisor.wrap` puts after a step as the core does.
 
 Checks, each with its threshold derived in :meth:`SupervisionPars.design`:
 
@@ -70,7 +71,8 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass, fields
 
-from controller._api import MODE_DISABLED, MODE_RUN, ControlOutput, Measurement
+from controller._api import MODE_DISABLED, ControlOutput, Measurement
+from controller._built import _cctl
 
 #: A current sensor's reading is implausible (out of range, or stuck).
 MODE_CURRENT_SENSOR = 5
@@ -266,41 +268,32 @@ class SupervisionPars:
         )
 
 
-class Supervisor:
-    """The supervision's state; :meth:`step` checks one period (module docstring).
+class Supervisor(_cctl.Sup):
+    """The supervision's state; :meth:`check` checks one period (module docstring).
 
-    Kept in Python as a public block a user may call per period (a plug-in's
-    estimator composes it; the core calls a plug-in's Python each period), and
-    as the tests' oracle of ``controller/core/cc_supervision.c``, which the controller's
-    one engine runs with the same operations (``tests/oracle/``, tolerance 0).
+    A public block a user may call per period (a plug-in's estimator composes
+    it): a binding of the core's ``controller/core/cc_supervision.c``, the one
+    implementation the controller's engine runs too (:meth:`check`,
+    :meth:`release_ok` and the windows' reset). Its readable Python is the
+    tests' oracle (``tests/oracle/blocks.py``, tolerance 0).
 
     Parameters
     ----------
     pars : SupervisionPars
+
+    Notes
+    -----
+    Its members, the core struct's fields (writable):
+
+    latched : int
+        The latched detection mode (0: none).
+    detected_k : int
+        The period of the latest detection (-1: none).
     """
 
     def __init__(self, pars: SupervisionPars) -> None:
         self.pars = pars
-        #: The latched detection mode (0: none).
-        self.latched = 0
-        #: The period of the latest detection (-1: none).
-        self.detected_k = -1
-        self._reset_windows()
-
-    def _reset_windows(self) -> None:
-        self._n_rail = [0, 0]
-        self._stuck_n = 0
-        self._stuck_lo = [math.inf, math.inf]
-        self._stuck_hi = [-math.inf, -math.inf]
-        self._du_lo = [math.inf, math.inf]
-        self._du_hi = [-math.inf, -math.inf]
-        self._blk_n = 0
-        self._blk_len = self.pars.n_open_min
-        self._blk_scored = False
-        self._ms = [0.0, 0.0, 0.0]
-        self._s = [0.0, 0.0, 0.0]
-        self._u_sum = 0.0
-        self._u_n = 0
+        super().__init__(*self.args())
 
     def check(self, i_a: float, i_b: float, u_dc: float, out: ControlOutput) -> int:
         """The detection of this period (a mode of :data:`DETECTION_MODES`, or 0).
@@ -309,93 +302,10 @@ class Supervisor:
         the controller answered to them. The current checks run while it
         switches in ``MODE_RUN``; the DC-link check always.
         """
-        p = self.pars
-        self._u_sum += u_dc
-        self._u_n += 1
-        if self._u_n >= p.n_dc:
-            u = self._u_sum / self._u_n
-            self._u_sum = 0.0
-            self._u_n = 0
-            if u < p.u_uv:
-                return MODE_DC_UNDERVOLTAGE
-            if u > p.u_ov:
-                return MODE_DC_OVERVOLTAGE
-        if not (out.enable and out.mode == MODE_RUN):
-            self._n_rail = [0, 0]
-            self._stuck_n = 0
-            self._blk_n = 0
-            self._ms = [0.0, 0.0, 0.0]
-            self._s = [0.0, 0.0, 0.0]
-            return 0
-        # out of range
-        for j, i in enumerate((i_a, i_b)):
-            self._n_rail[j] = self._n_rail[j] + 1 if abs(i) >= p.i_rail else 0
-            if self._n_rail[j] >= p.n_range:
-                return MODE_CURRENT_SENSOR
-        # stuck: reading range against the commanded phase voltage's range
-        mean = (out.d_a + out.d_b + out.d_c) / 3.0
-        for j, (i, d) in enumerate(((i_a, out.d_a), (i_b, out.d_b))):
-            u = (d - mean) * u_dc
-            self._stuck_lo[j] = min(self._stuck_lo[j], i)
-            self._stuck_hi[j] = max(self._stuck_hi[j], i)
-            self._du_lo[j] = min(self._du_lo[j], u)
-            self._du_hi[j] = max(self._du_hi[j], u)
-        self._stuck_n += 1
-        if self._stuck_n >= p.n_stuck:
-            lo, hi = self._stuck_lo, self._stuck_hi
-            held = [
-                j
-                for j in (0, 1)
-                if hi[j] - lo[j] <= p.i_res
-                and self._du_hi[j] - self._du_lo[j] >= p.du_stuck
-                and hi[1 - j] - lo[1 - j] > p.i_res
-            ]
-            # held within a resolution step of zero: the phase carries nothing (an open
-            # phase, or a sensor reading zero); held elsewhere: a stuck sensor
-            hit = 0
-            if held:
-                j = held[0]
-                zero = abs(0.5 * (hi[j] + lo[j])) <= p.i_res
-                hit = MODE_OPEN_PHASE if zero else MODE_CURRENT_SENSOR
-            self._stuck_n = 0
-            self._stuck_lo = [math.inf, math.inf]
-            self._stuck_hi = [-math.inf, -math.inf]
-            self._du_lo = [math.inf, math.inf]
-            self._du_hi = [-math.inf, -math.inf]
-            if hit:
-                return hit
-        # open phase: mean squares about the block's mean over one electrical period of
-        # the estimated speed
-        if self._blk_n == 0:
-            w = abs(out.w_hat) * p.T_s  # electrical angle per period
-            # below one electrical period per n_open_max the block is not scored (0)
-            n = 0 if w * p.n_open_max < 2.0 * math.pi else round(2.0 * math.pi / w)
-            self._blk_len = max(p.n_open_min, n)
-            self._blk_scored = n > 0
-        i_c = -i_a - i_b
-        ms, sm = self._ms, self._s
-        ms[0] += i_a * i_a
-        ms[1] += i_b * i_b
-        ms[2] += i_c * i_c
-        sm[0] += i_a
-        sm[1] += i_b
-        sm[2] += i_c
-        self._blk_n += 1
-        if self._blk_n >= self._blk_len:
-            n = self._blk_n
-            self._blk_n = 0
-            ac = [ms[j] - sm[j] * sm[j] / n for j in range(3)]
-            self._ms = [0.0, 0.0, 0.0]
-            self._s = [0.0, 0.0, 0.0]
-            if not self._blk_scored:
-                return 0
-            floor2 = p.i_min * p.i_min * n
-            r2 = p.rho_open * p.rho_open
-            for j in range(3):
-                others = 0.5 * (ac[(j + 1) % 3] + ac[(j + 2) % 3])
-                if others >= floor2 and ac[j] <= r2 * others:
-                    return MODE_OPEN_PHASE
-        return 0
+        hit: int = self._check(
+            i_a, i_b, u_dc, out.d_a, out.d_b, out.d_c, out.enable, out.mode, out.w_hat
+        )
+        return hit
 
     def args(self) -> tuple[float | int, ...]:
         """The thresholds in the order of ``cc_sup_init`` (controller/core/cc_supervision.h)."""
@@ -422,14 +332,7 @@ class Supervisor:
         p = self.pars
         return {f.name: float(getattr(p, f.name)) for f in fields(p) if f.name != "T_s"}
 
-    def release_ok(self, u_dc: float) -> bool:
-        """Whether the latched detection may clear on a new enable (module docstring)."""
-        p = self.pars
-        if self.latched == MODE_DC_UNDERVOLTAGE:
-            return u_dc >= p.u_uv + p.u_hyst
-        if self.latched == MODE_DC_OVERVOLTAGE:
-            return u_dc <= p.u_ov - p.u_hyst
-        return False
+    # release_ok(u_dc) and _reset_windows(): the core's (_cctl.Sup)
 
     def wrap(
         self,

@@ -1,25 +1,24 @@
 """Voltage limiting and space-vector PWM by min-max zero-sequence injection.
 
-Kept in Python as public functions a user may call per period, and as the
-tests' oracle of ``controller/core/cc_svpwm.c``, which the controller's one
-engine runs with the same operations (``tests/oracle/``, tolerance 0).
+Public functions a user may call per period: bindings of the core's
+``controller/core/cc_svpwm.c``, the one implementation the controller's
+engine runs too. Their readable Python is the tests' oracle
+(``tests/oracle/blocks.py``, tolerance 0).
 """
 
 from __future__ import annotations
 
 import math
 
+from controller._built import _cctl
+
 _SQRT3 = math.sqrt(3.0)
-_SQRT3_HALF = 0.5 * math.sqrt(3.0)
 
 
 def limit_magnitude(x_1: float, x_2: float, x_max: float) -> tuple[float, float]:
-    """Scale the vector ``(x_1, x_2)`` down to magnitude ``x_max`` if it is longer."""
-    m2 = x_1 * x_1 + x_2 * x_2
-    if m2 > x_max * x_max:
-        s = x_max / math.sqrt(m2)
-        return x_1 * s, x_2 * s
-    return x_1, x_2
+    """Scale the vector ``(x_1, x_2)`` down to magnitude ``x_max`` if it is longer
+    (``cc_limit_magnitude``: ``x <- x x_max / |x|`` when ``|x|^2 > x_max^2``)."""
+    return _cctl.limit_magnitude(x_1, x_2, x_max)
 
 
 def u_max_linear(u_dc: float) -> float:
@@ -28,7 +27,7 @@ def u_max_linear(u_dc: float) -> float:
 
 
 def svpwm(u_alpha: float, u_beta: float, u_dc: float) -> tuple[float, float, float]:
-    """Phase duty cycles for the stator-voltage reference ``u_ab``.
+    """Phase duty cycles for the stator-voltage reference ``u_ab`` (``cc_svpwm``).
 
     Phase references of the amplitude-invariant inverse Clarke transform get
     the min-max zero sequence ``-(max + min)/2``, which centres them in
@@ -44,35 +43,14 @@ def svpwm(u_alpha: float, u_beta: float, u_dc: float) -> tuple[float, float, flo
     u_alpha, u_beta : float
         Voltage reference, stationary frame (V), averaged over the period.
     u_dc : float
-        DC-link voltage (V).
+        DC-link voltage (V), positive (a ValueError otherwise).
 
     Returns
     -------
     d_a, d_b, d_c : float
         Duty cycles in [0, 1].
     """
-    u_a = u_alpha
-    u_b = -0.5 * u_alpha + _SQRT3_HALF * u_beta
-    u_c = -0.5 * u_alpha - _SQRT3_HALF * u_beta
-    if u_a > u_b:
-        hi = u_a
-        lo = u_b
-    else:
-        hi = u_b
-        lo = u_a
-    if u_c > hi:
-        hi = u_c
-    elif u_c < lo:
-        lo = u_c
-    k = 1.0 / u_dc
-    off = 0.5 - 0.5 * (hi + lo) * k
-    d_a = off + u_a * k
-    d_b = off + u_b * k
-    d_c = off + u_c * k
-    if (hi - lo) * k > 1.0 - 1e-12:  # at or beyond the linear range: clip
-        return _clip(d_a), _clip(d_b), _clip(d_c)
-    return d_a, d_b, d_c
-
-
-def _clip(d: float) -> float:
-    return 0.0 if d < 0.0 else (1.0 if d > 1.0 else d)
+    if not u_dc > 0.0:
+        raise ValueError(f"svpwm: u_dc must be positive (got {u_dc} V)")
+    d: tuple[float, float, float] = _cctl.svpwm(u_alpha, u_beta, u_dc)
+    return d

@@ -29,6 +29,7 @@ from controller._supervision import (
     SupervisionPars,
     Supervisor,
 )
+from tests.oracle.blocks import oracle
 
 T_S = 1e-4
 U_DC = 540.0
@@ -417,9 +418,10 @@ def _sequence(p: SupervisionPars, fault: str) -> list[Measurement]:
     ],
 )
 def test_the_compiled_check_is_the_python_check_bit_for_bit(fault: str, mode: int) -> None:
-    """controller/core/cc_supervision.c against Supervisor.wrap, on the same compiled
-    controller step: every output of every period equal, through the detection, its latch,
-    the re-enables and (DC link) the release."""
+    """controller/core/cc_supervision.c against Supervisor.wrap with the check's oracle
+    (tests/oracle/blocks.py), on the same compiled controller step: every output of every
+    period equal, through the detection, its latch, the re-enables and (DC link) the
+    release."""
     from dataclasses import replace
 
     from controller import Controller
@@ -431,7 +433,8 @@ def test_the_compiled_check_is_the_python_check_bit_for_bit(fault: str, mode: in
     c_ctl = Controller(pars, "compiled")
     py_ctl = Controller(replace(pars, supervision=None), "compiled")
     assert c_ctl.engine == py_ctl.engine == "compiled"
-    py_sup = Supervisor(sup_pars)
+    py_sup = oracle(Supervisor(sup_pars))
+    assert type(py_sup).__module__ == "tests.oracle.blocks"
     py_step = py_sup.wrap(py_ctl.step, lambda: py_ctl.set_enable(False))
     modes = []
     for ctl in (c_ctl, py_ctl):

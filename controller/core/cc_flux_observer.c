@@ -34,6 +34,16 @@ void cc_flux_reset(cc_flux_t *o, double theta0, double w0)
     o->init = 1;
 }
 
+void cc_flux_set_state(cc_flux_t *o, double psi_alpha, double psi_beta, double i_alpha,
+                       double i_beta)
+{
+    o->psi_alpha = psi_alpha;
+    o->psi_beta = psi_beta;
+    o->ia1 = i_alpha;
+    o->ib1 = i_beta;
+    o->init = 0;
+}
+
 static double flux_k1T(const cc_flux_t *o, double w)
 {
     double a = w >= 0.0 ? w : -w;

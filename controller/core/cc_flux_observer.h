@@ -22,6 +22,10 @@ typedef struct {
 void cc_flux_init(cc_flux_t *o, double R_s, double L_d, double L_q, double psi_f, double T_s,
                   double zeta_f, double w_min, double k_p, double k_i);
 void cc_flux_reset(cc_flux_t *o, double theta0, double w0);
+/* the flux estimate (Wb) and the current sample (A) of the last sample, from which the
+ * next step integrates (instead of the current model) */
+void cc_flux_set_state(cc_flux_t *o, double psi_alpha, double psi_beta, double i_alpha,
+                       double i_beta);
 void cc_flux_step(cc_flux_t *o, double i_alpha, double i_beta, double u_alpha, double u_beta);
 void cc_flux_step_slaved(cc_flux_t *o, double i_alpha, double i_beta, double u_alpha,
                          double u_beta, double theta, double w);

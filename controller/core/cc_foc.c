@@ -411,16 +411,8 @@ int cc_foc_step(cc_foc_t *c, const cc_meas_t *m, cc_out_t *o)
     if (cc_estim_injection(&c->est, &u_ah, &u_bh))
         return CC_ERR_ESTIMATOR;
     double u_lim = u_dc * CC_SQRT3_INV - sqrt(u_ah * u_ah + u_bh * u_bh);
-    double mag2 = u_d * u_d + u_q * u_q;
-    double u_dl, u_ql;
-    if (mag2 > u_lim * u_lim) {
-        double r = u_lim / sqrt(mag2);
-        u_dl = u_d * r;
-        u_ql = u_q * r;
-    } else {
-        u_dl = u_d;
-        u_ql = u_q;
-    }
+    double u_dl = u_d, u_ql = u_q;
+    cc_limit_magnitude(&u_dl, &u_ql, u_lim);
     /* inverse Park at the mid-point of period k + 1, then the HF voltage */
     double th_u = th + c->t_delay * w;
     double c_u = cos(th_u);

@@ -4,7 +4,7 @@
 
 #include "cc_math.h"
 
-static void reset_windows(cc_sup_t *s)
+void cc_sup_reset_windows(cc_sup_t *s)
 {
     for (int j = 0; j < 2; j++) {
         s->n_rail[j] = 0;
@@ -44,7 +44,7 @@ void cc_sup_init(cc_sup_t *s, double T_s, double i_rail, long long n_range, doub
     s->n_dc = n_dc;
     s->latched = 0;
     s->detected_k = -1;
-    reset_windows(s);
+    cc_sup_reset_windows(s);
 }
 
 long long cc_sup_check(cc_sup_t *s, double i_a, double i_b, double u_dc, const cc_out_t *o)
@@ -170,7 +170,7 @@ void cc_sup_after(cc_sup_t *s, cc_foc_t *c, const cc_meas_t *m, cc_out_t *o)
     if (s->latched) {
         if (o->mode != CC_MODE_DISABLED && cc_sup_release_ok(s, m->u_dc)) {
             s->latched = 0; /* enabled again, the condition gone */
-            reset_windows(s);
+            cc_sup_reset_windows(s);
         } else {
             if (o->mode != CC_MODE_DISABLED)
                 cc_foc_set_enable(c, 0);

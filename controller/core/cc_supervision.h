@@ -39,6 +39,8 @@ void cc_sup_init(cc_sup_t *s, double T_s, double i_rail, long long n_range, doub
 /* the detection of this period (a CC_MODE_* above, or 0): samples i_a, i_b, u_dc and what
  * the controller answered to them (Supervisor.check) */
 long long cc_sup_check(cc_sup_t *s, double i_a, double i_b, double u_dc, const cc_out_t *o);
+/* the detection windows emptied (on init, and when a latched detection clears) */
+void cc_sup_reset_windows(cc_sup_t *s);
 /* whether the latched detection may clear on a new enable (Supervisor.release_ok) */
 int cc_sup_release_ok(const cc_sup_t *s, double u_dc);
 /* the supervision after the controller's step (Supervisor.wrap): o is the step's output

@@ -30,3 +30,13 @@ void cc_svpwm(double u_alpha, double u_beta, double u_dc, double d[3])
         d[2] = cc_clip01(d[2]);
     }
 }
+
+void cc_limit_magnitude(double *x_1, double *x_2, double x_max)
+{
+    double m2 = *x_1 * *x_1 + *x_2 * *x_2;
+    if (m2 > x_max * x_max) {
+        double r = x_max / sqrt(m2);
+        *x_1 *= r;
+        *x_2 *= r;
+    }
+}

@@ -11,4 +11,8 @@
 
 void cc_svpwm(double u_alpha, double u_beta, double u_dc, double d[3]);
 
+/* the vector (x_1, x_2) scaled down to the magnitude x_max if it is longer: the current
+ * loop's voltage limit |u_dq| <= u_dc / sqrt(3) - |u_h| (cc_foc.c) */
+void cc_limit_magnitude(double *x_1, double *x_2, double x_max);
+
 #endif

@@ -45,18 +45,25 @@ The controller's period (moved here, called by nothing else):
   (4.45 rad/s at ``M = 64`` and 1 ms), already seven times slower than the
   speed loop it must follow.
 
-The blocks' kernels still in ``controller/`` (public blocks a user may call per
-period, ``controller/__init__.py``; each is the readable twin of a core file):
-``PIController.output``/``update`` (cc_pi), ``PositionObserver.update``
-(cc_pll), ``FluxObserver.update``/``update_slaved`` (cc_flux_observer),
-``PolarityTest.start``/``step`` (cc_startup), ``Supervisor.check``/``wrap``
-(cc_supervision), ``svpwm`` (cc_foc), ``clarke``, ``park``, ``inv_park``,
-``inv_clarke``, ``wrap_pi``, ``wrap_2pi``. Besides the oracle, their callers
-are the tests of each block (``tests/test_controller_foc.py``,
-``test_supervision.py``, ``test_closed_form_*.py``, ``test_firmware.py``), and
-a plug-in may compose them (``docs/ESTIMATORS.md``: a plug-in's estimator
-runs in the core through its callbacks, so its own Python is called per
-period).
+The public blocks a user may call per period (``controller/__init__.py``; a
+plug-in may compose them, ``docs/ESTIMATORS.md``) are bindings of the core:
+``PIController`` (cc_pi), ``PositionObserver`` (cc_pll), ``FluxObserver``
+(cc_flux_observer), ``PolarityTest`` (cc_startup), ``Supervisor``'s check,
+release and windows (cc_supervision), ``TransitionBand.play``/``weights``
+(cc_hybrid), ``svpwm`` and ``limit_magnitude`` (cc_svpwm), each a small type of
+``controller/_cctl.c`` holding the core's struct or a function calling the core's;
+so are the compensation's laws ``smooth_sign`` and ``cross_saturation_offset``
+(cc_compensation), and ``DeadTimeCompensator.voltage``, which only the oracle's
+duties called, moved here with them. Their Python steps moved
+here (:mod:`tests.oracle.blocks`, ``Oracle*`` classes and the functions
+``svpwm``, ``limit_magnitude``, ``smooth_sign``, ``cross_saturation_offset``), checked by ``tests/test_controller_blocks.py``;
+``Supervisor.wrap`` stays in ``controller/`` (it orders a Python step, the
+check and the release, as ``cc_sup_after`` does in the core). The hybrids'
+trackers' ``sync`` stays too: its C twin is static in ``cc_hybrid.c`` and works
+on the whole hybrid, and the Python one is a ``reset`` call of a bound block
+(the PLL) or of a design (the Luenberger observer). The transforms
+(``clarke``, ``park``, ``inv_park``, ``inv_clarke``, ``wrap_pi``,
+``wrap_2pi``) stay Python by decision (docs/DEVELOPMENT.md, "The engines").
 
 Moved here (:mod:`tests.oracle.estimators`, :mod:`tests.oracle.blocks`): the
 shipped estimators' ``update``/``injection``/``hf_current_next`` (``_tt_dq``,

@@ -24,17 +24,17 @@ from controller._api import (
     EstimatorInput,
     Measurement,
 )
-from controller._compensation import cross_saturation_offset
 from controller._controller import STATE_NAMES, hybrid_states
 from controller._hybrid import HybridEstimator
 from controller._square_wave import SquareWaveEstimator
-from controller._svpwm import svpwm
 from tests.oracle.blocks import (
     OracleDeadTimeCompensator,
     OracleFirstOrder,
     OracleOffsetCalibration,
     OracleReferenceModel,
+    cross_saturation_offset,
     oracle,
+    svpwm,
 )
 from tests.oracle.estimators import oracle_estimator
 
@@ -71,6 +71,7 @@ class OracleController(Controller):
         estimator and blocks made oracles (their steps added, :mod:`tests.oracle.blocks`)."""
         oracle_estimator(self.estimator)
         oracle(self.lpf_w)
+        oracle((self.pi_d, self.pi_q, self.pi_w, self.polarity, self.supervisor))
         oracle(self.dead_time)
         oracle(self.calibration)
         self.oracle_ref_model = OracleReferenceModel.of(self.ref_model)
