@@ -214,3 +214,48 @@ def test_a_send_batch_reaches_python_can_and_is_not_received_back() -> None:
             assert dll.bn_recv(nb.ptr, ctypes.byref(f), 0) == 0
         finally:
             nb.close()
+
+
+def test_the_native_bus_sends_for_this_host_only_and_python_can_still_gets_every_frame() -> None:
+    """bn_udp_open sends with hop limit (TTL) 0, BN_UDP_HOPS: the kernel's loop-back copy
+    reaches every socket of the group on this host, python-can's (hop limit 1) included,
+    and no network device sends the datagram (in a VM each would be a transmit the
+    hypervisor handles, docs/REALTIME.md); python-can's frames still reach it."""
+    import os
+    import socket
+
+    from bench.nodes.native._plant_native import NativeBus, _lib
+
+    dll = _lib()
+    group, port = udp_multicast_group(), free_port()
+    with can.Bus(interface="udp_multicast", channel=group, port=port, fd=True) as py:
+        nb = NativeBus(dll, BusSpec("udp_multicast", group, port))
+        addr = nb.ptr.value
+        assert addr is not None
+        fd = ctypes.c_int.from_address(addr + ctypes.sizeof(ctypes.c_int)).value
+        sock = socket.socket(fileno=os.dup(fd))  # bn_bus_t: kind, then the socket
+        try:
+            if sock.family == socket.AF_INET6:
+                hops = sock.getsockopt(socket.IPPROTO_IPV6, socket.IPV6_MULTICAST_HOPS)
+                loop = sock.getsockopt(socket.IPPROTO_IPV6, socket.IPV6_MULTICAST_LOOP)
+            else:
+                hops = sock.getsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL)
+                loop = sock.getsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_LOOP)
+            assert (hops, loop) == (0, 1)
+            frames = [Frame() for _ in range(20)]
+            for j, f in enumerate(frames):
+                f.id, f.len, f.data[0] = 0x40 + j, 1, j
+                assert dll.bn_send(nb.ptr, ctypes.byref(f)) == 0
+            got = [py.recv(2.0) for _ in frames]
+            assert [(m.arbitration_id, m.data[0]) for m in got if m is not None] == [
+                (0x40 + j, j) for j in range(20)
+            ]
+            py.send(can.Message(arbitration_id=0x22, data=b"\x09", is_extended_id=False))
+            f = Frame()
+            assert dll.bn_recv(nb.ptr, ctypes.byref(f), int(2e9)) == 1
+            while f.id != 0x22:  # the native bus's own copies come back to it first
+                assert dll.bn_recv(nb.ptr, ctypes.byref(f), int(2e9)) == 1
+            assert bytes(f.data[: f.len]) == b"\x09"
+        finally:
+            sock.close()
+            nb.close()

@@ -381,13 +381,7 @@ def load_plant_lib(path: Path | None = None) -> ctypes.CDLL:
     dll.bn_plant_frames_now.argtypes = [ctypes.POINTER(Unit)]
     dll.bn_plant_loop.argtypes = [ctypes.POINTER(Loop)]
     dll.bn_plant_loop.restype = ctypes.c_int
-    dll.bn_udp_open.argtypes = [
-        ctypes.c_void_p,
-        ctypes.c_char_p,
-        ctypes.c_uint16,
-        ctypes.c_int,
-        ctypes.c_int,
-    ]
+    dll.bn_udp_open.argtypes = [ctypes.c_void_p, ctypes.c_char_p, ctypes.c_uint16, ctypes.c_int]
     dll.bn_can_open.argtypes = [ctypes.c_void_p, ctypes.c_char_p, ctypes.c_bool]
     dll.bn_bus_size.restype = ctypes.c_size_t
     dll.bn_recv.argtypes = [ctypes.c_void_p, ctypes.POINTER(Frame), ctypes.c_int64]
@@ -516,7 +510,7 @@ class NativeBus:
         self.ptr = ctypes.cast(self.buf, ctypes.c_void_p)
         if spec.interface == "udp_multicast":
             port = spec.port if spec.port is not None else UDP_DEFAULT_PORT
-            rc = dll.bn_udp_open(self.ptr, spec.channel.encode(), port, 1, RECEIVE_BUFFER)
+            rc = dll.bn_udp_open(self.ptr, spec.channel.encode(), port, RECEIVE_BUFFER)
         else:
             rc = dll.bn_can_open(self.ptr, spec.channel.encode(), True)
         if rc != 0:

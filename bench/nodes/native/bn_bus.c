@@ -65,9 +65,9 @@ static int fail(bn_bus_t *b)
     return -e;
 }
 
-int bn_udp_open(bn_bus_t *b, const char *group, uint16_t port, int hop_limit, int rcvbuf)
+int bn_udp_open(bn_bus_t *b, const char *group, uint16_t port, int rcvbuf)
 {
-    int one = 1;
+    int one = 1, hop_limit = BN_UDP_HOPS;
     bool v6 = strchr(group, ':') != NULL;
     bus_reset(b, BN_BUS_UDP);
     b->fd = socket(v6 ? AF_INET6 : AF_INET, SOCK_DGRAM | SOCK_NONBLOCK | SOCK_CLOEXEC, 0);

@@ -62,7 +62,7 @@ bn_rec_t *bn_rec_open(const char *group, uint16_t port, int rcvbuf, uint64_t cap
         return NULL;
     }
     memset(r->ring, 0, r->cap * sizeof *r->ring);
-    int e = bn_udp_open(&r->bus, group, port, 1, rcvbuf);
+    int e = bn_udp_open(&r->bus, group, port, rcvbuf);
     if (e != 0) {
         free(r->ring);
         free(r);
