@@ -124,7 +124,7 @@ size_t bn_bus_size(void);
  * python-can's 1 each datagram also leaves on the host's network interface:
  * in a virtual machine every one is a transmit the hypervisor handles (tens
  * of microseconds of the sender's sendmmsg, and host CPU time charged to the
- * VM: a native pair at 10 kHz, 50,000 datagrams a second, had the whole VM
+ * VM: a native pair at 10 kHz, 40,000 datagrams a second, had the whole VM
  * descheduled by its host for about 16 ms of every 100 ms, docs/REALTIME.md).
  * udp_multicast is the bus of the nodes of one host (docs/HARDWARE.md). */
 #define BN_UDP_HOPS 0
