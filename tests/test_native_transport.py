@@ -216,7 +216,10 @@ def test_a_send_batch_reaches_python_can_and_is_not_received_back() -> None:
             nb.close()
 
 
-def test_the_native_bus_sends_for_this_host_only_and_python_can_still_gets_every_frame() -> None:
+@pytest.mark.parametrize("group", [None, "239.74.163.2"], ids=["default-group", "ipv4"])
+def test_the_native_bus_sends_for_this_host_only_and_python_can_still_gets_every_frame(
+    group: str | None,
+) -> None:
     """bn_udp_open sends with hop limit (TTL) 0, BN_UDP_HOPS: the kernel's loop-back copy
     reaches every socket of the group on this host, python-can's (hop limit 1) included,
     and no network device sends the datagram (in a VM each would be a transmit the
@@ -227,7 +230,7 @@ def test_the_native_bus_sends_for_this_host_only_and_python_can_still_gets_every
     from bench.nodes.native._plant_native import NativeBus, _lib
 
     dll = _lib()
-    group, port = udp_multicast_group(), free_port()
+    group, port = group or udp_multicast_group(), free_port()
     with can.Bus(interface="udp_multicast", channel=group, port=port, fd=True) as py:
         nb = NativeBus(dll, BusSpec("udp_multicast", group, port))
         addr = nb.ptr.value
