@@ -16,8 +16,8 @@ program:
   datagram, no network device sends it).  Non-blocking
   receive up to an absolute deadline (``bn_recv_until``), the socket drained
   by ``recvmmsg``; send, and an instant's frames in one ``sendmmsg``
-  (``bn_send_many``), whose copies the kernel loops back to the sending
-  socket are dropped unread.
+  (``bn_send_many``), from a socket of its own whose datagrams the
+  receiving socket's filter drops (the kernel's loop-back copies).
 - ``bn_msgpack.c``: python-can's udp_multicast datagram, the msgpack map of
   ``can/interfaces/udp_multicast/utils.py`` (eleven keys), written and read
   without allocation.
