@@ -185,14 +185,22 @@ def test_echo_reports_a_bus_it_cannot_open(built: _native.NativeBuild, tmp_path:
     assert res.stderr.startswith("echo: udp_multicast not-a-group: ")
 
 
-def test_a_send_batch_reaches_python_can_and_is_not_received_back() -> None:
-    """bn_send_many: one sendmmsg, each datagram python-can's; the kernel loops the batch
-    back to the sending socket too, and the receive side drops those copies undecoded."""
-    from bench.nodes.native._plant_native import NativeBus, _lib
+def _send_many_lib() -> ctypes.CDLL:
+    """The plant node's library with ``bn_send_many`` declared."""
+    from bench.nodes.native._plant_native import _lib
 
     dll = _lib()
     dll.bn_send_many.argtypes = [ctypes.c_void_p, ctypes.POINTER(Frame), ctypes.c_int]
     dll.bn_send_many.restype = ctypes.c_int
+    return dll
+
+
+def test_a_send_batch_reaches_python_can_and_is_not_received_back() -> None:
+    """bn_send_many: one sendmmsg, each datagram python-can's; the kernel loops the batch
+    back to the sending socket too, and the receive side drops those copies undecoded."""
+    from bench.nodes.native._plant_native import NativeBus
+
+    dll = _send_many_lib()
     group, port = udp_multicast_group(), free_port()
     with can.Bus(interface="udp_multicast", channel=group, port=port, fd=True) as py:
         nb = NativeBus(dll, BusSpec("udp_multicast", group, port))
@@ -214,3 +222,85 @@ def test_a_send_batch_reaches_python_can_and_is_not_received_back() -> None:
             assert dll.bn_recv(nb.ptr, ctypes.byref(f), 0) == 0
         finally:
             nb.close()
+
+
+@pytest.mark.parametrize("group", [None, "239.74.163.2"], ids=["default-group", "ipv4"])
+def test_the_native_bus_sends_for_this_host_only_and_python_can_still_gets_every_frame(
+    group: str | None,
+) -> None:
+    """bn_udp_open sends with hop limit (TTL) 0, BN_UDP_HOPS: the kernel's loop-back copy
+    reaches every socket of the group on this host, python-can's (hop limit 1) included,
+    and no network device sends the datagram (in a VM each would be a transmit the
+    hypervisor handles, docs/REALTIME.md); python-can's frames still reach it."""
+    import os
+    import socket
+
+    from bench.nodes.native._plant_native import NativeBus, _lib
+
+    dll = _lib()
+    group, port = group or udp_multicast_group(), free_port()
+    with can.Bus(interface="udp_multicast", channel=group, port=port, fd=True) as py:
+        nb = NativeBus(dll, BusSpec("udp_multicast", group, port))
+        addr = nb.ptr.value
+        assert addr is not None
+        fd = ctypes.c_int.from_address(addr + ctypes.sizeof(ctypes.c_int)).value
+        sock = socket.socket(fileno=os.dup(fd))  # bn_bus_t: kind, then the socket
+        try:
+            if sock.family == socket.AF_INET6:
+                hops = sock.getsockopt(socket.IPPROTO_IPV6, socket.IPV6_MULTICAST_HOPS)
+                loop = sock.getsockopt(socket.IPPROTO_IPV6, socket.IPV6_MULTICAST_LOOP)
+            else:
+                hops = sock.getsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL)
+                loop = sock.getsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_LOOP)
+            assert (hops, loop) == (0, 1)
+            frames = [Frame() for _ in range(20)]
+            for j, f in enumerate(frames):
+                f.id, f.len, f.data[0] = 0x40 + j, 1, j
+                assert dll.bn_send(nb.ptr, ctypes.byref(f)) == 0
+            got = [py.recv(2.0) for _ in frames]
+            assert [(m.arbitration_id, m.data[0]) for m in got if m is not None] == [
+                (0x40 + j, j) for j in range(20)
+            ]
+            py.send(can.Message(arbitration_id=0x22, data=b"\x09", is_extended_id=False))
+            f = Frame()
+            assert dll.bn_recv(nb.ptr, ctypes.byref(f), int(2e9)) == 1
+            while f.id != 0x22:  # the native bus's own copies come back to it first
+                assert dll.bn_recv(nb.ptr, ctypes.byref(f), int(2e9)) == 1
+            assert bytes(f.data[: f.len]) == b"\x09"
+        finally:
+            sock.close()
+            nb.close()
+
+
+def test_two_native_buses_get_each_others_frames_and_not_their_own() -> None:
+    """Each native bus sends from a socket of its own (an ephemeral source port) and
+    its receiving socket's filter drops only that port's datagrams: a second native
+    bus on the group (the plant's and the controller's) and python-can's get every
+    frame, single sends and batches; the sender gets none of its own back."""
+    from bench.nodes.native._plant_native import NativeBus
+
+    dll = _send_many_lib()
+    group, port = udp_multicast_group(), free_port()
+    with can.Bus(interface="udp_multicast", channel=group, port=port, fd=True) as py:
+        a = NativeBus(dll, BusSpec("udp_multicast", group, port))
+        b = NativeBus(dll, BusSpec("udp_multicast", group, port))
+        try:
+            frames = (Frame * 4)()
+            for j, f in enumerate(frames):
+                f.id, f.len, f.data[0] = 0x50 + j, 1, j
+            assert dll.bn_send(a.ptr, ctypes.byref(frames[0])) == 0
+            assert dll.bn_send_many(a.ptr, ctypes.byref(frames[1]), 3) == 3
+            want = [(0x50 + j, j) for j in range(4)]
+            got = [b.recv(2.0) for _ in range(4)]
+            assert [(f.id, f.data[0]) for f in got if f is not None] == want
+            msgs = [py.recv(2.0) for _ in range(4)]
+            assert [(m.arbitration_id, m.data[0]) for m in msgs if m is not None] == want
+            assert a.recv(0.2) is None  # none of its own
+            back = Frame()
+            back.id, back.len, back.data[0] = 0x60, 1, 7
+            assert dll.bn_send(b.ptr, ctypes.byref(back)) == 0
+            f = a.recv(2.0)
+            assert f is not None and (f.id, f.data[0]) == (0x60, 7)
+        finally:
+            a.close()
+            b.close()

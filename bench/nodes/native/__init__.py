@@ -10,12 +10,14 @@ program:
 - ``bn_bus.c``: the transports.  SocketCAN raw sockets, classic and CAN FD
   (``CAN_RAW_FD_FRAMES``), for vcan and real adapters; python-can's
   ``udp_multicast`` bus (the default transport of a host without CAN): the
-  same multicast group, port, hop limit 1 and ``SO_REUSEADDR``/``SO_REUSEPORT``
-  as python-can, so C and python-can nodes meet on one port.  Non-blocking
+  same multicast group, port and ``SO_REUSEADDR``/``SO_REUSEPORT`` as
+  python-can, so C and python-can nodes meet on one port; sent with hop limit
+  0 (``BN_UDP_HOPS``: every socket of the group on this host gets each
+  datagram, no network device sends it).  Non-blocking
   receive up to an absolute deadline (``bn_recv_until``), the socket drained
   by ``recvmmsg``; send, and an instant's frames in one ``sendmmsg``
-  (``bn_send_many``), whose copies the kernel loops back to the sending
-  socket are dropped unread.
+  (``bn_send_many``), from a socket of its own whose datagrams the
+  receiving socket's filter drops (the kernel's loop-back copies).
 - ``bn_msgpack.c``: python-can's udp_multicast datagram, the msgpack map of
   ``can/interfaces/udp_multicast/utils.py`` (eleven keys), written and read
   without allocation.

@@ -381,13 +381,7 @@ def load_plant_lib(path: Path | None = None) -> ctypes.CDLL:
     dll.bn_plant_frames_now.argtypes = [ctypes.POINTER(Unit)]
     dll.bn_plant_loop.argtypes = [ctypes.POINTER(Loop)]
     dll.bn_plant_loop.restype = ctypes.c_int
-    dll.bn_udp_open.argtypes = [
-        ctypes.c_void_p,
-        ctypes.c_char_p,
-        ctypes.c_uint16,
-        ctypes.c_int,
-        ctypes.c_int,
-    ]
+    dll.bn_udp_open.argtypes = [ctypes.c_void_p, ctypes.c_char_p, ctypes.c_uint16, ctypes.c_int]
     dll.bn_can_open.argtypes = [ctypes.c_void_p, ctypes.c_char_p, ctypes.c_bool]
     dll.bn_bus_size.restype = ctypes.c_size_t
     dll.bn_recv.argtypes = [ctypes.c_void_p, ctypes.POINTER(Frame), ctypes.c_int64]
@@ -516,7 +510,7 @@ class NativeBus:
         self.ptr = ctypes.cast(self.buf, ctypes.c_void_p)
         if spec.interface == "udp_multicast":
             port = spec.port if spec.port is not None else UDP_DEFAULT_PORT
-            rc = dll.bn_udp_open(self.ptr, spec.channel.encode(), port, 1, RECEIVE_BUFFER)
+            rc = dll.bn_udp_open(self.ptr, spec.channel.encode(), port, RECEIVE_BUFFER)
         else:
             rc = dll.bn_can_open(self.ptr, spec.channel.encode(), True)
         if rc != 0:
@@ -634,15 +628,28 @@ class _Sync:
         u.cmd_horizon = node.cmd_horizon
         u.ctrl_ack = -1 if node.ctrl_ack is None else node.ctrl_ack
 
+    def pull_poll(self) -> None:
+        """What a poll of a real-time loop reads (its trip line and the rejected-duty
+        summary): the fault and the duties rejected.  :meth:`pull` takes the rest at
+        the next event and at the end; the whole of it in the slack of a 10 kHz period
+        took longer than the period."""
+        node, u = self.node, self.u
+        node.fault, node.fault_step = u.fault, u.fault_step
+        for j, reason in enumerate(self.reasons):
+            n = int(u.duty_rejected[j]) - self.seen_duty_rej[j]
+            self.seen_duty_rej[j] += n
+            if n:
+                node.duty_rejected[reason] = node.duty_rejected.get(reason, 0) + n
+
     def pull(self) -> None:
         from bench.nodes._plant_node import fault_name
 
         node, u = self.node, self.u
+        self.pull_poll()
         node.plant.adopt_core(u.k, u.meas_k)
         if u.applied_upto >= 0:
             node.commands.due(u.applied_upto)  # the ones C applied
         node.started, node.stopped = bool(u.started), bool(u.stopped)
-        node.fault, node.fault_step = u.fault, u.fault_step
         node.dut_answered = bool(u.dut_answered)
         node.last_duty_k, node.rounds_waiting = u.last_duty_k, u.rounds_waiting
         node.latest_duty_step = u.latest_duty_step
@@ -680,10 +687,6 @@ class _Sync:
             self.seen_rej[j] += n
             for _ in range(n):
                 c.reject(reason)
-            n = int(u.duty_rejected[j]) - self.seen_duty_rej[j]
-            self.seen_duty_rej[j] += n
-            if n:
-                node.duty_rejected[reason] = node.duty_rejected.get(reason, 0) + n
         for code in range(8):
             n = int(u.trips[code]) - self.seen_trips[code]
             self.seen_trips[code] += n
@@ -1108,8 +1111,11 @@ def plant_loop_native(
         try:
             while True:
                 ev = dll.bn_plant_loop(ctypes.byref(loop))
-                sync.pull()
-                faults.pull(u, node.plant)
+                if ev == EV_POLL and realtime:
+                    sync.pull_poll()
+                else:
+                    sync.pull()
+                    faults.pull(u, node.plant)
                 if node.fault != said_fault:
                     said_fault = node.fault
                     if node.fault:

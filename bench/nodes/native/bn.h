@@ -90,6 +90,7 @@ enum { BN_BUS_UDP = 1, BN_BUS_CAN = 2 };
 typedef struct {
     int kind;                       /* BN_BUS_UDP or BN_BUS_CAN */
     int fd;                         /* socket, -1 when closed */
+    int tx_fd;                      /* UDP: the socket sending (-1: fd sends), see bn_udp_open */
     bool can_fd;                    /* SocketCAN: CAN_RAW_FD_FRAMES granted */
     struct sockaddr_storage dest;   /* UDP: the group and port */
     socklen_t dest_len;
@@ -104,8 +105,8 @@ typedef struct {
     struct mmsghdr rx_msg[BN_BATCH];
     struct iovec rx_iov[BN_BATCH];
     uint64_t rx_ctl[BN_BATCH][8];
-    /* the send batch of bn_send_many; UDP: its tx_n datagrams, looped back to this
-     * socket by the kernel, are dropped on receipt without decoding (rx_own) */
+    /* the send batch of bn_send_many; UDP without tx_fd: its tx_n datagrams, looped
+     * back to this socket by the kernel, are dropped on receipt undecoded (rx_own) */
     int32_t tx_n;
     uint8_t tx_buf[BN_BATCH][BN_DGRAM];
     struct mmsghdr tx_msg[BN_BATCH];
@@ -117,11 +118,28 @@ typedef struct {
 /* sizeof(bn_bus_t): the room Python allocates for one. */
 size_t bn_bus_size(void);
 
+/* The hop limit (IPv6) or TTL (IPv4) the native nodes send with: 0, the host.
+ * The kernel still loops each datagram back to every socket of the group on
+ * this host (IPV6_MULTICAST_LOOP / IP_MULTICAST_LOOP, on as python-can leaves
+ * it), python-can's included, but sends none on a network device.  With
+ * python-can's 1 each datagram also leaves on the host's network interface:
+ * in a virtual machine every one is a transmit the hypervisor handles (tens
+ * of microseconds of the sender's sendmmsg, and host CPU time charged to the
+ * VM: a native pair at 10 kHz, 40,000 datagrams a second, had the whole VM
+ * descheduled by its host for about 16 ms of every 100 ms, docs/REALTIME.md).
+ * udp_multicast is the bus of the nodes of one host (docs/HARDWARE.md). */
+#define BN_UDP_HOPS 0
+
 /* Join python-can's udp_multicast bus: group (IPv6 "ff15:..." or IPv4
- * "239.74.163.2"), port, hop limit / TTL (python-can: 1).  SO_REUSEADDR and
- * SO_REUSEPORT as python-can sets them, so python-can nodes share the port.
- * rcvbuf: receive buffer asked for (bytes, 0: the system's).  0 or -errno. */
-int bn_udp_open(bn_bus_t *b, const char *group, uint16_t port, int hop_limit, int rcvbuf);
+ * "239.74.163.2"), port; send with hop limit / TTL BN_UDP_HOPS.  SO_REUSEADDR
+ * and SO_REUSEPORT as python-can sets them, so python-can nodes share the port.
+ * rcvbuf: receive buffer asked for (bytes, 0: the system's).  The datagrams
+ * are sent from a second socket (tx_fd, an ephemeral source port), and a
+ * socket filter on the receiving one drops the kernel's loop-back copies of
+ * them (that source port) before they are queued; where either cannot be
+ * had, fd sends and the copies are dropped after reading (rx_own).
+ * 0 or -errno. */
+int bn_udp_open(bn_bus_t *b, const char *group, uint16_t port, int rcvbuf);
 
 /* A SocketCAN raw socket on ifname (vcan0, can0); fd: also CAN FD frames
  * (CAN_RAW_FD_FRAMES; -EPROTONOSUPPORT... when the kernel or device refuses).

@@ -7,6 +7,7 @@
 #include <arpa/inet.h>
 #include <errno.h>
 #include <fcntl.h>
+#include <linux/filter.h>
 #include <net/if.h>
 #include <netinet/in.h>
 #include <poll.h>
@@ -41,7 +42,7 @@ static void bus_reset(bn_bus_t *b, int kind)
 {
     memset(b, 0, sizeof *b);
     b->kind = kind;
-    b->fd = -1;
+    b->fd = b->tx_fd = -1;
     b->send_wait_ns = 1000000;
     for (int j = 0; j < BN_BATCH; j++) { /* once: the batches' headers point at their buffers */
         b->rx_iov[j].iov_base = b->rx_buf[j];
@@ -58,16 +59,54 @@ static void bus_reset(bn_bus_t *b, int kind)
 static int fail(bn_bus_t *b)
 {
     int e = errno;
-    if (b->fd >= 0) {
-        close(b->fd);
-        b->fd = -1;
-    }
+    bn_close(b);
     return -e;
 }
 
-int bn_udp_open(bn_bus_t *b, const char *group, uint16_t port, int hop_limit, int rcvbuf)
+/* The sending socket of a UDP bus (bn_udp_open): bound to an ephemeral port, the
+ * bus's hop limit; the receiving socket's filter drops what comes from that port
+ * (the loop-back copies of this bus's own datagrams).  Best effort: on any refusal
+ * tx_fd stays -1 and fd sends. */
+static void open_sender(bn_bus_t *b, int family, int hop_limit)
 {
-    int one = 1;
+    struct sockaddr_storage me;
+    socklen_t n = sizeof me;
+    int s = socket(family, SOCK_DGRAM | SOCK_NONBLOCK | SOCK_CLOEXEC, 0);
+    if (s < 0) return;
+    int sndbuf = 1 << 20;
+    (void)setsockopt(s, SOL_SOCKET, SO_SNDBUFFORCE, &sndbuf, sizeof sndbuf);
+    memset(&me, 0, sizeof me);
+    me.ss_family = (sa_family_t)family;
+    int ok = (family == AF_INET6
+                  ? setsockopt(s, IPPROTO_IPV6, IPV6_MULTICAST_HOPS, &hop_limit, sizeof hop_limit)
+                  : setsockopt(s, IPPROTO_IP, IP_MULTICAST_TTL, &hop_limit, sizeof hop_limit)) == 0 &&
+             bind(s, (struct sockaddr *)&me,
+                  family == AF_INET6 ? sizeof(struct sockaddr_in6) : sizeof(struct sockaddr_in)) ==
+                 0 &&
+             getsockname(s, (struct sockaddr *)&me, &n) == 0;
+    if (ok) {
+        uint16_t port = ntohs(family == AF_INET6 ? ((struct sockaddr_in6 *)&me)->sin6_port
+                                                 : ((struct sockaddr_in *)&me)->sin_port);
+        /* the filter sees the datagram from its UDP header: the source port first */
+        struct sock_filter code[] = {
+            BPF_STMT(BPF_LD | BPF_H | BPF_ABS, 0),
+            BPF_JUMP(BPF_JMP | BPF_JEQ | BPF_K, port, 0, 1),
+            BPF_STMT(BPF_RET | BPF_K, 0),
+            BPF_STMT(BPF_RET | BPF_K, 0xFFFFFFFFu),
+        };
+        struct sock_fprog prog = {(unsigned short)(sizeof code / sizeof code[0]), code};
+        ok = setsockopt(b->fd, SOL_SOCKET, SO_ATTACH_FILTER, &prog, sizeof prog) == 0;
+    }
+    if (ok) {
+        b->tx_fd = s;
+    } else {
+        close(s);
+    }
+}
+
+int bn_udp_open(bn_bus_t *b, const char *group, uint16_t port, int rcvbuf)
+{
+    int one = 1, hop_limit = BN_UDP_HOPS;
     bool v6 = strchr(group, ':') != NULL;
     bus_reset(b, BN_BUS_UDP);
     b->fd = socket(v6 ? AF_INET6 : AF_INET, SOCK_DGRAM | SOCK_NONBLOCK | SOCK_CLOEXEC, 0);
@@ -136,6 +175,7 @@ int bn_udp_open(bn_bus_t *b, const char *group, uint16_t port, int hop_limit, in
             return fail(b);
         }
     }
+    open_sender(b, v6 ? AF_INET6 : AF_INET, hop_limit);
     return 0;
 }
 
@@ -213,10 +253,11 @@ int bn_send(bn_bus_t *b, const bn_frame_t *f)
     size_t n;
     int r = encode(b, f, &fr, &p, &n);
     int64_t deadline = 0;
+    int sfd = b->tx_fd >= 0 ? b->tx_fd : b->fd;
     while (r == 0) {
         ssize_t got = b->kind == BN_BUS_UDP
-                          ? sendto(b->fd, p, n, 0, (struct sockaddr *)&b->dest, b->dest_len)
-                          : write(b->fd, p, n);
+                          ? sendto(sfd, p, n, 0, (struct sockaddr *)&b->dest, b->dest_len)
+                          : write(sfd, p, n);
         if (got == (ssize_t)n) {
             b->tx++;
             return 0;
@@ -235,7 +276,7 @@ int bn_send(bn_bus_t *b, const bn_frame_t *f)
         }
         /* ENOBUFS (a full CAN queue) does not wake poll: look again within 50 us */
         int64_t wait = deadline - now < 50000 ? deadline - now : 50000;
-        struct pollfd pf = {b->fd, POLLOUT, 0};
+        struct pollfd pf = {sfd, POLLOUT, 0};
         struct timespec ts = {0, (long)wait};
         (void)ppoll(&pf, 1, &ts, NULL);
         r = 0;
@@ -276,7 +317,7 @@ int bn_send_many(bn_bus_t *b, const bn_frame_t *f, int n)
     if (n == 0) {
         return 0;
     }
-    int got = sendmmsg(b->fd, b->tx_msg, (unsigned)n, MSG_DONTWAIT);
+    int got = sendmmsg(b->tx_fd >= 0 ? b->tx_fd : b->fd, b->tx_msg, (unsigned)n, MSG_DONTWAIT);
     if (got < 0) {
         return 0;
     }
@@ -408,5 +449,8 @@ void bn_close(bn_bus_t *b)
     if (b->fd >= 0) {
         close(b->fd);
     }
-    b->fd = -1;
+    if (b->tx_fd >= 0) {
+        close(b->tx_fd);
+    }
+    b->fd = b->tx_fd = -1;
 }

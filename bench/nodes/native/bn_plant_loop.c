@@ -242,8 +242,15 @@ static int loop_realtime(bn_plant_loop_t *L)
             t0 = t1;
             if (u->n_cmds == 0 && u->cmds_more) return BN_EV_CMDS;
             bn_plant_advance(u);
-            L->part_ns[BN_PART_STEP] += bn_now_ns() - t0;
+            t1 = bn_now_ns();
+            L->part_ns[BN_PART_STEP] += t1 - t0;
             L->phase = 3;
+            /* Python's poll in the slack of a period whose work is done, not at the start
+             * of the next one: a poll at the wake-up made the period it delayed late */
+            if (t1 >= L->t_poll) {
+                L->t_poll = t1 + ns(L->poll_s);
+                return BN_EV_POLL;
+            }
         }
         uint64_t p = L->clock.st.periods;
         if (L->parts != NULL && p < L->busy_cap) {
@@ -258,11 +265,6 @@ static int loop_realtime(bn_plant_loop_t *L)
         if (L->late != NULL && L->n_late < L->late_cap)
             L->late[L->n_late++] = (uint32_t)(late > (int64_t)UINT32_MAX ? UINT32_MAX : late);
         L->phase = 1;
-        int64_t now = bn_now_ns();
-        if (now >= L->t_poll) {
-            L->t_poll = now + ns(L->poll_s);
-            return BN_EV_POLL;
-        }
     }
 }
 

@@ -86,7 +86,7 @@ bn_rec_t *bn_rec_open(const char *group, uint16_t port, int rcvbuf, uint64_t cap
     if (r == NULL) {
         return NULL;
     }
-    int e = bn_udp_open(&r->bus, group, port, 1, rcvbuf);
+    int e = bn_udp_open(&r->bus, group, port, rcvbuf);
     if (e != 0) {
         return rec_fail(r, e, err);
     }

@@ -223,7 +223,7 @@ def _declare(dll: ctypes.CDLL) -> None:
     dll.bn_ctl_resume.restype = ctypes.c_int
     dll.bn_ctl_serve.argtypes = [vp, vp]
     dll.bn_ctl_serve.restype = ctypes.c_int
-    dll.bn_udp_open.argtypes = [vp, ctypes.c_char_p, ctypes.c_uint16, ctypes.c_int, ctypes.c_int]
+    dll.bn_udp_open.argtypes = [vp, ctypes.c_char_p, ctypes.c_uint16, ctypes.c_int]
     dll.bn_udp_open.restype = ctypes.c_int
     dll.bn_can_open.argtypes = [vp, ctypes.c_char_p, ctypes.c_bool]
     dll.bn_can_open.restype = ctypes.c_int
@@ -426,7 +426,7 @@ def open_bus(dll: ctypes.CDLL, spec: Any) -> ctypes.Array[ctypes.c_char]:
     bus = ctypes.create_string_buffer(int(dll.bn_ctl_bus_size()))
     if spec.interface == "udp_multicast":
         port = spec.port or UDP_DEFAULT_PORT
-        rc = dll.bn_udp_open(bus, spec.channel.encode(), port, 1, 4 << 20)
+        rc = dll.bn_udp_open(bus, spec.channel.encode(), port, 4 << 20)
     elif spec.interface == "socketcan":
         rc = dll.bn_can_open(bus, spec.channel.encode(), True)
     else:

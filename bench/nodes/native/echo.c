@@ -214,7 +214,7 @@ int main(int argc, char **argv)
     sigaction(SIGTERM, &sa, NULL);
     static bn_bus_t bus;
     int r = iface ? bn_can_open(&bus, iface, true)
-                  : bn_udp_open(&bus, group, (uint16_t)port, 1, 4 << 20);
+                  : bn_udp_open(&bus, group, (uint16_t)port, 4 << 20);
     if (r != 0) {
         fprintf(stderr, "echo: %s %s: %s\n", iface ? "socketcan" : "udp_multicast",
                 iface ? iface : group, strerror(-r));
