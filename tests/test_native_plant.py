@@ -180,7 +180,8 @@ def test_native_plant_polls_python_between_periods_and_sends_each_sample_once(
 
 def test_raw_values_are_the_codecs(lib: ctypes.CDLL) -> None:
     """``bn_plant_raw`` against :meth:`Codec.encode` on every signal the unit encodes,
-    at random values, at the clip limits and on exact half-LSB ties (half to even)."""
+    at random values, at the clip limits, on whole multiples of the scale and on exact
+    half-LSB ties (half to even)."""
     lib.bn_plant_raw.argtypes = [ctypes.POINTER(_plant_native.Sig), ctypes.c_double]
     lib.bn_plant_raw.restype = ctypes.c_int64
     rng = random.Random(7)
@@ -194,6 +195,8 @@ def test_raw_values_are_the_codecs(lib: ctypes.CDLL) -> None:
         values = [rng.uniform(lo - 0.1 * (hi - lo), hi + 0.1 * (hi - lo)) for _ in range(300)]
         values += [lo, hi, 0.0 if lo <= 0 <= hi else lo]
         values += [(math.floor(v / scale) + 0.5) * scale for v in values[:50]]  # ties
+        # whole multiples of the scale: cantools' divmod has a remainder of 0 there
+        values += [math.floor(v / scale) * scale for v in values[:50]]
         for v in values:
             want = {n: 0.0 for n in CODEC.signal_names(msg)}
             want[sig] = v

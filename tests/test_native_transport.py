@@ -304,3 +304,17 @@ def test_two_native_buses_get_each_others_frames_and_not_their_own() -> None:
         finally:
             a.close()
             b.close()
+
+
+def test_a_build_step_that_fails_with_the_lto_flags_is_tried_without() -> None:
+    """A compiler that cannot link with link-time optimisation (clang without its linker
+    plug-in) still builds the library: the flags that only make it faster are dropped."""
+    import sys
+
+    from bench._errors import BenchError
+
+    refuses_lto = [sys.executable, "-c", "import sys; sys.exit('-flto' in sys.argv)"]
+    _native._run([*refuses_lto, *_native.LTO_FLAGS], "compile", retry_without=_native.LTO_FLAGS)
+    with pytest.raises(BenchError, match="native loop: compile failed"):
+        _native._run([*refuses_lto, *_native.LTO_FLAGS], "compile")
+    assert set(_native.LTO_FLAGS) <= set(_native.CFLAGS)

@@ -40,6 +40,14 @@ def run_node_args(args: argparse.Namespace) -> dict[str, list[str]]:
     return out
 
 
+def _import_figure_library() -> None:
+    """Import what ``run.png`` is drawn with (matplotlib, about a third of a second)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot
+
+
 class _View:
     """``bench run --monitor``: the live view in a thread of its own while the run goes on."""
 
@@ -137,6 +145,9 @@ def cmd_run(args: argparse.Namespace) -> int:
     for name in EXPORT_FILES:  # an earlier run's, which this run would not replace
         (out / name).unlink(missing_ok=True)
     view = _start_monitor(spec, scn, est, args.mode, out) if args.monitor else None
+    # matplotlib is imported while the nodes start and run (the parent mostly waits
+    # then), so that run.png is drawn at once when the run ends
+    threading.Thread(target=_import_figure_library, daemon=True).start()
     try:
         with started_dut(dut, spec, scn, out, args.mode, label="--dut") as process:
             res = run_scenario(

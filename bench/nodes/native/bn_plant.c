@@ -46,30 +46,6 @@ static double py_mod(double x, double m)
 /* Python's round() of a float: half to even (the default rounding mode). */
 static double py_round(double x) { return nearbyint(x); }
 
-/* divmod(x, s)[0] and [1] as Python's float_divmod computes them. */
-static void py_divmod(double x, double s, double *q, double *m)
-{
-    double mod = fmod(x, s);
-    double div = (x - mod) / s;
-    if (mod != 0.0) {
-        if ((s < 0.0) != (mod < 0.0)) {
-            mod += s;
-            div -= 1.0;
-        }
-    } else {
-        mod = copysign(0.0, s);
-    }
-    double fl;
-    if (div != 0.0) {
-        fl = floor(div);
-        if (div - fl > 0.5) fl += 1.0;
-    } else {
-        fl = copysign(0.0, x / s);
-    }
-    *q = fl;
-    *m = mod;
-}
-
 int64_t bn_plant_raw(const bn_sig_t *s, double v)
 {
     /* Codec.encode: wrap or clip the physical value */
@@ -90,16 +66,13 @@ int64_t bn_plant_raw(const bn_sig_t *s, double v)
     } else if (v > s->hi) {
         v = s->hi;
     }
-    /* bench.wire._hotcodec._raw_expr: cantools' numeric_scaled_to_raw */
+    /* bench.wire._hotcodec._raw_expr: cantools' numeric_scaled_to_raw, x = v - offset,
+     * q, m = divmod(x, scale), round(q if m == 0 else x / scale), is round(x / scale):
+     * a remainder of 0 (fmod is exact) makes x a whole multiple of scale, so x / scale
+     * rounds to a whole number, which Python's float floor division then returns as q
+     * (floor of (x - m) / scale = x / scale); bench_wire_raw (bench_wire.h) says the same */
     if (s->scale == 1.0 && s->offset == 0.0) return (int64_t)py_round(v);
-    double x = v - s->offset, q, m;
-    /* x / scale not a whole number: x is no whole multiple of scale (one would divide
-     * exactly), so divmod's remainder is not 0 and the raw value is round(x / scale);
-     * the remainder (fmod) only for a quotient that is whole */
-    double d = x / s->scale;
-    if (d != floor(d)) return (int64_t)py_round(d);
-    py_divmod(x, s->scale, &q, &m);
-    return (int64_t)py_round(m == 0.0 ? q : x / s->scale);
+    return (int64_t)py_round((v - s->offset) / s->scale);
 }
 
 #define RAW(u, idx, v) bn_plant_raw(&(u)->sig[idx], (v))
