@@ -140,7 +140,8 @@ def test_without_the_tls_configuration_one_line(
 
 
 def test_udp_multicast_stays_on_the_local_link() -> None:
-    """docs/RELIABILITY.md: the bench's udp_multicast buses keep python-can's hop limit of 1."""
+    """docs/RELIABILITY.md: the bench's udp_multicast buses send for this host only (hop
+    limit 0, ``UDP_HOP_LIMIT``), python-can's as the native nodes'."""
     import socket
 
     from bench.wire._bus import BusSpec, own_udp_port, udp_multicast_group
@@ -153,6 +154,6 @@ def test_udp_multicast_stays_on_the_local_link() -> None:
             hops = sock.getsockopt(socket.IPPROTO_IPV6, socket.IPV6_MULTICAST_HOPS)
         else:
             hops = sock.getsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL)
-        assert hops == 1
+        assert hops == 0
     finally:
         bus.shutdown()

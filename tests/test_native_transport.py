@@ -19,7 +19,7 @@ from can.interfaces.udp_multicast.utils import pack_message, unpack_message
 
 from bench.nodes.native import _native
 from bench.nodes.native._native import BN_BRS, BN_ESI, BN_EXT, BN_FD, Frame
-from bench.wire._bus import BusSpec, udp_multicast_group
+from bench.wire._bus import UDP_HOP_LIMIT, BusSpec, udp_multicast_group
 from bench.wire._codec import Codec
 from tests.ports import free_port
 
@@ -228,8 +228,9 @@ def test_a_send_batch_reaches_python_can_and_is_not_received_back() -> None:
 def test_the_native_bus_sends_for_this_host_only_and_python_can_still_gets_every_frame(
     group: str | None,
 ) -> None:
-    """bn_udp_open sends with hop limit (TTL) 0, BN_UDP_HOPS: the kernel's loop-back copy
-    reaches every socket of the group on this host, python-can's (hop limit 1) included,
+    """bn_udp_open sends with hop limit (TTL) 0, BN_UDP_HOPS (the bench's UDP_HOP_LIMIT):
+    the kernel's loop-back copy reaches every socket of the group on this host, a plain
+    python-can bus's (hop limit 1) included,
     and no network device sends the datagram (in a VM each would be a transmit the
     hypervisor handles, docs/REALTIME.md); python-can's frames still reach it."""
     import os
@@ -252,7 +253,7 @@ def test_the_native_bus_sends_for_this_host_only_and_python_can_still_gets_every
             else:
                 hops = sock.getsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL)
                 loop = sock.getsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_LOOP)
-            assert (hops, loop) == (0, 1)
+            assert (hops, loop) == (UDP_HOP_LIMIT, 1) == (0, 1)
             frames = [Frame() for _ in range(20)]
             for j, f in enumerate(frames):
                 f.id, f.len, f.data[0] = 0x40 + j, 1, j

@@ -743,11 +743,11 @@ above).  They do not protect against a hostile host on the same link: the
 CRC is not a secret (its data IDs are in the DBC), so a valid frame with a
 fresh counter is accepted from anyone who can send on the bus, and
 udp_multicast has neither authentication nor encryption.  The bus is a
-trusted link, as a CAN bus in a drive is.  udp_multicast keeps python-can's
-hop limit of 1 in the Python nodes and sends with 0 in the native ones
-(this host only; `tests/test_dask_tls.py` and `tests/test_native_transport.py`
-check them), so its frames do not leave the local link; run on a link (a
-host, a lab network, a CI runner) that only trusted machines share.  A Dask
+trusted link, as a CAN bus in a drive is.  udp_multicast sends with hop
+limit 0, the Python nodes' buses and the native ones alike (`UDP_HOP_LIMIT`
+of `bench/wire/_bus.py`; `tests/test_dask_tls.py` and
+`tests/test_native_transport.py` check them), so its frames do not leave
+the host; run it on a host that only trusted users share.  A Dask
 cluster for sweeps is another matter: its scheduler runs the code it is
 sent, so a remote one is started with TLS (docs/SCALING.md).
 

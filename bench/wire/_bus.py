@@ -220,7 +220,7 @@ def open_bus(
             raise InterfaceError(
                 f"interface udp_multicast channel {channel}: receive_own_messages unsupported"
             )
-        args.update(fd=fd)
+        args.update(fd=fd, hop_limit=UDP_HOP_LIMIT)
     elif interface == "virtual":
         args.update(receive_own_messages=receive_own_messages)
     else:
@@ -450,6 +450,20 @@ class BusSpec:
 #: overflow). A lockstep plant is paced to at most the command lead (3000
 #: periods, about 15,000 frames of about 1 kB in the kernel) ahead of it.
 RECEIVE_BUFFER = 64 << 20
+
+#: The hop limit (IPv6) or TTL (IPv4) every udp_multicast bus of the bench sends with,
+#: python-can's (``hop_limit``) and the native nodes' (bench/nodes/native, compiled with
+#: it as ``BN_UDP_HOPS``): 0, this host.  The kernel still gives each datagram to every
+#: socket of the group on this host (multicast loop-back, on as python-can leaves it),
+#: but no network device sends it.  With python-can's default of 1 each datagram also
+#: left on the host's network interface; in a virtual machine each is a transmit the
+#: hypervisor does for the VM, and at a node pair's tens of thousands of datagrams a
+#: second the host descheduled the whole VM for about 16 ms of every 100 ms (the host
+#: stalls of docs/REALTIME.md).  Measured with ``bench perf``'s real-time run (the Python
+#: nodes, 4 kHz, ``--rt-priority``, 2 s, two runs each, interleaved): 45-52 % of the
+#: periods missed with 1, 1.0-4.5 % with 0.  udp_multicast is the bus of the nodes of
+#: one host (docs/HARDWARE.md); between hosts the bench runs on CAN.
+UDP_HOP_LIMIT = 0
 
 
 def grow_receive_buffer(bus: can.BusABC) -> None:

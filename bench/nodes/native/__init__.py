@@ -12,7 +12,7 @@ program:
   ``udp_multicast`` bus (the default transport of a host without CAN): the
   same multicast group, port and ``SO_REUSEADDR``/``SO_REUSEPORT`` as
   python-can, so C and python-can nodes meet on one port; sent with hop limit
-  0 (``BN_UDP_HOPS``: every socket of the group on this host gets each
+  0 (``BN_UDP_HOPS``, the bench's ``UDP_HOP_LIMIT``: every socket of the group on this host gets each
   datagram, no network device sends it).  Non-blocking
   receive up to an absolute deadline (``bn_recv_until``), the socket drained
   by ``recvmmsg``; send, and an instant's frames in one ``sendmmsg``

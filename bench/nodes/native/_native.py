@@ -26,6 +26,7 @@ from pathlib import Path
 from typing import Any
 
 from bench._errors import BenchError
+from bench.wire._bus import UDP_HOP_LIMIT
 
 __all__ = [
     "HERE",
@@ -69,6 +70,7 @@ CFLAGS = (
     "-Werror",
     "-ffp-contract=off",
     "-fno-fast-math",
+    f"-DBN_UDP_HOPS={UDP_HOP_LIMIT}",  # bn.h: the bench's one hop limit (bench/wire/_bus.py)
 )
 #: The flags of :data:`CFLAGS` that only make the build faster: left out when it fails with them.
 LTO_FLAGS = ("-flto", "-fno-semantic-interposition")

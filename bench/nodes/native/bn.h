@@ -118,17 +118,12 @@ typedef struct {
 /* sizeof(bn_bus_t): the room Python allocates for one. */
 size_t bn_bus_size(void);
 
-/* The hop limit (IPv6) or TTL (IPv4) the native nodes send with: 0, the host.
- * The kernel still loops each datagram back to every socket of the group on
- * this host (IPV6_MULTICAST_LOOP / IP_MULTICAST_LOOP, on as python-can leaves
- * it), python-can's included, but sends none on a network device.  With
- * python-can's 1 each datagram also leaves on the host's network interface:
- * in a virtual machine every one is a transmit the hypervisor handles (tens
- * of microseconds of the sender's sendmmsg, and host CPU time charged to the
- * VM: a native pair at 10 kHz, 40,000 datagrams a second, had the whole VM
- * descheduled by its host for about 16 ms of every 100 ms, docs/REALTIME.md).
- * udp_multicast is the bus of the nodes of one host (docs/HARDWARE.md). */
-#define BN_UDP_HOPS 0
+/* The hop limit (IPv6) or TTL (IPv4) the native nodes send with: the bench's one
+ * value, UDP_HOP_LIMIT of bench/wire/_bus.py (0, this host: why there), which the
+ * build passes as -DBN_UDP_HOPS (bench/nodes/native/_native.py CFLAGS). */
+#ifndef BN_UDP_HOPS
+#error "BN_UDP_HOPS: build with -DBN_UDP_HOPS=<bench.wire._bus.UDP_HOP_LIMIT>"
+#endif
 
 /* Join python-can's udp_multicast bus: group (IPv6 "ff15:..." or IPv4
  * "239.74.163.2"), port; send with hop limit / TTL BN_UDP_HOPS.  SO_REUSEADDR
