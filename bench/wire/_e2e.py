@@ -86,7 +86,8 @@ def e2e_crc(start: int, data: bytes | bytearray, crc_index: int) -> int:
     """
     table = CRC8_J1850_TABLE
     reg = start
-    for i, byte in enumerate(data):
-        if i != crc_index:
-            reg = table[reg ^ byte]
+    for byte in data[:crc_index]:
+        reg = table[reg ^ byte]
+    for byte in data[crc_index + 1 :]:
+        reg = table[reg ^ byte]
     return reg ^ _XOROUT
