@@ -232,3 +232,45 @@ def test_bench_run_defaults_to_a_native_pair_with_the_python_pairs_trace(
 def test_the_same_lockstep_trace_on_vcan(tmp_path: Path) -> None:
     require_vcan("vcan0")
     _same_trace(tmp_path, "wen-5.1", ["--interface", "socketcan", "--channel", "vcan0"])
+
+
+def test_a_real_time_controller_whose_samples_stopped_still_stops_when_asked(
+    native: Any,
+) -> None:
+    """Without samples every ``bn_ctl_serve`` call in real time ends in a sample timeout
+    (none in a poll); the node must still see its stop flag (a SIGTERM's): it stopped
+    only at the stop command or SIGKILL before."""
+    import threading
+    import time
+
+    from bench.wire._bus import BusSpec
+
+    codec = Codec()
+    node = make_controller_node(load_scenario("wen-5.1"), "tt-dq", codec)
+    spec = BusSpec("udp_multicast", GROUP, free_port())
+    stop, ready, ended = threading.Event(), threading.Event(), threading.Event()
+
+    def serve() -> None:
+        try:
+            native.native_controller_loop(
+                spec,
+                node,
+                realtime=True,
+                on_ready=ready.set,
+                stop=stop.is_set,
+                sample_timeout_s=0.02,
+            )
+        finally:
+            ended.set()
+
+    threading.Thread(target=serve, daemon=True).start()
+    assert ready.wait(60.0)
+    with can.Bus(interface="udp_multicast", channel=GROUP, port=spec.port, fd=True) as bus:
+        for k in range(30):  # samples for a while, then none: sample timeouts from then on
+            sample = {"i_a": 0.0, "i_b": 0.0, "u_dc": 540.0, "status": 1, "step": k}
+            bus.send(codec.encode("PhaseSamples", sample))
+            time.sleep(0.01)
+    assert not ended.wait(0.5)  # it serves on through the timeouts
+    stop.set()
+    assert ended.wait(10.0), "the node did not see its stop flag"
+    assert node.samples_accepted > 0  # it had samples, so it was in the timeouts

@@ -377,6 +377,9 @@ int bn_ctl_serve(bn_ctl_t *ctl, bn_bus_t *bus)
     for (;;) {
         if (ctl->stopped)
             return BN_CTL_EV_STOPPED;
+        now = bn_now_ns();
+        if (now >= t_return)
+            return BN_CTL_EV_POLL; /* also while frames keep coming: Python looks in time */
         bn_frame_t in;
         int64_t deadline = bn_now_ns() + ctl->poll_ns;
         if (deadline > t_return)

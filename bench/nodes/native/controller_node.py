@@ -388,11 +388,12 @@ class NativeController:
                 ev = self.dll.bn_ctl_serve(self.addr, ctypes.addressof(bus))
                 if ev in (EV_STOPPED, EV_IDLE):
                     return
-                if ev == EV_POLL:
-                    if stop():
-                        return
-                    continue
-                self.handle(ev)
+                if ev != EV_POLL:
+                    self.handle(ev)
+                # after every event: in real time without samples every call ends in a
+                # sample timeout, never in a poll, and a stop must still be seen
+                if stop():
+                    return
         finally:
             self.merge()
 
