@@ -119,8 +119,20 @@ def test_capture_starting_mid_run_lines_up_all_messages(run: Path, tmp_path: Pat
     for col in ("i_a", "theta_hat", "theta_e", "d_a"):
         np.testing.assert_array_equal(live[col][idx], got[col], err_msg=col)
     assert len(got["step"]) >= 2001 - cap.first_step - 1
-    # the start command is before the cut: no speed reference until the stop command
-    assert np.isnan(got["w_ref_rpm"][0])
+    # the reference in force comes only from the commands the cut holds, by their apply
+    # step: none applied by its first step (the schedule, and the copies the bench sends
+    # again while the run goes on, are before the cut or not, by timing): no reference
+    cid = CODEC.frame_id("BenchCommand")
+    decoded = [CODEC.decode(m) for m in cut if m.arbitration_id == cid]
+    applied = sorted(
+        (d.signals["step"], d.signals["speed_ref"])
+        for d in decoded
+        if d is not None and d.signals["step"] <= got["step"][0]
+    )
+    if applied:
+        assert got["w_ref_rpm"][0] == applied[-1][1]  # rpm on the wire and in the table
+    else:
+        assert np.isnan(got["w_ref_rpm"][0])
     # and through the files
     with can.Logger(str(tmp_path / "cut.blf")) as w:
         for m in cut:

@@ -45,6 +45,10 @@ def _pids(d: Path, stage: str) -> list[int]:
     return [int(x) for x in f.read_text().split()] if f.is_file() else []
 
 
+def _default_sigint() -> None:
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 @pytest.mark.skipif(shutil.which("setsid") is None, reason="needs setsid (util-linux)")
 @pytest.mark.parametrize(("sig", "status"), [(signal.SIGTERM, 143), (signal.SIGINT, 130)])
 @pytest.mark.timeout(120)
@@ -58,8 +62,12 @@ def test_a_signal_ends_every_process_of_both_stages(
     make.write_text(FAKE_MAKE.format(python=sys.executable, dir=tmp_path))
     make.chmod(0o755)
     env = dict(os.environ, MAKE=str(make), STOP_GRACE_S="10")
+    # SIGINT as a terminal's Ctrl-C finds it: this test may itself run under
+    # tools/test-stages (make test), whose stages bash starts with SIGINT ignored, and a
+    # shell cannot trap a signal that was ignored when it started
     p = subprocess.Popen([str(script)], env=env, stdout=subprocess.PIPE,
-                         stderr=subprocess.STDOUT, text=True)  # fmt: skip
+                         stderr=subprocess.STDOUT, text=True,
+                         preexec_fn=_default_sigint)  # fmt: skip
     pids: list[int] = []
     try:
         t_end = time.monotonic() + 60
