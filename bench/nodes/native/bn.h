@@ -91,6 +91,7 @@ typedef struct {
     int kind;                       /* BN_BUS_UDP or BN_BUS_CAN */
     int fd;                         /* socket, -1 when closed */
     int tx_fd;                      /* UDP: the socket sending (-1: fd sends), see bn_udp_open */
+    bool tx_connected;              /* UDP: tx_fd is connect()ed to dest (sends name no address) */
     bool can_fd;                    /* SocketCAN: CAN_RAW_FD_FRAMES granted */
     struct sockaddr_storage dest;   /* UDP: the group and port */
     socklen_t dest_len;
@@ -132,7 +133,9 @@ size_t bn_bus_size(void);
  * are sent from a second socket (tx_fd, an ephemeral source port), and a
  * socket filter on the receiving one drops the kernel's loop-back copies of
  * them (that source port) before they are queued; where either cannot be
- * had, fd sends and the copies are dropped after reading (rx_own).
+ * had, fd sends and the copies are dropped after reading (rx_own).  The
+ * sending socket is connect()ed to the group (tx_connected), so the kernel
+ * routes a datagram without a lookup of its own.
  * 0 or -errno. */
 int bn_udp_open(bn_bus_t *b, const char *group, uint16_t port, int rcvbuf);
 
