@@ -143,6 +143,48 @@ def test_each_command_goes_out_a_third_time_a_resend_interval_later() -> None:
     assert len(sent) == 3 * n  # once only
 
 
+def test_in_real_time_commands_follow_the_plants_clock_not_the_hosts_lagging_view() -> None:
+    """The host's view of the plant's step lags by what its recorder has yet to decode (a
+    second on a loaded host): in real time the bench's commands go out by the plant's
+    clock since the host first saw it, REALTIME_AHEAD_S ahead, COMMAND_BURST per call,
+    so none reaches the controller after its step."""
+    from bench.runs._pacing import COMMAND_BURST, REALTIME_AHEAD_S
+    from bench.scenarios._schema import load_scenario
+
+    scn = load_scenario("wen-5.1")  # speed ramp from 0.3 s to 0.8 s: a command every 10 periods
+    p = CommandPacer(scn, Codec(), mode="realtime")
+    T_s = p._T_s
+    assert p.lead == round(REALTIME_AHEAD_S / T_s)
+
+    class Sink:
+        def send(self, m: object) -> None:
+            pass
+
+    p.send_due(Sink(), 0, 10.0)  # type: ignore[arg-type]  # the first sample seen at 10 s
+    assert p.sent == COMMAND_BURST  # one burst (the start among it), not the whole lead
+    for _ in range(100):  # the view stays at 0 while the plant's clock reaches step 3000
+        p.send_due(Sink(), 0, 10.0 + 3000 * T_s)  # type: ignore[arg-type]
+    steps = [k for k, _ in p.frames]
+    assert p.sent == sum(k <= 3000 + p.lead for k in steps) > COMMAND_BURST
+    assert steps[p.sent - 1] <= 3000 + p.lead < steps[p.sent]
+    # the view, when it catches up, changes nothing
+    sent = p.sent
+    p.send_due(Sink(), 3000, 10.0 + 3000 * T_s)  # type: ignore[arg-type]
+    assert p.sent == sent
+
+
+def test_a_controller_under_test_is_paced_by_the_hosts_view_alone() -> None:
+    """A plant may wait for a controller under test after its first sample: its step is
+    not its clock's, and only what the host sees paces the commands."""
+    from bench.scenarios._schema import load_scenario
+
+    p = CommandPacer(load_scenario("wen-5.1"), Codec(), mode="realtime", external=True)
+    assert p.plant_step_at(0, 10.0) == 0 and p.plant_step_at(0, 11.0) == 0
+    q = CommandPacer(load_scenario("wen-5.1"), Codec(), mode="realtime")
+    assert q.plant_step_at(-1, 9.0) == 0  # nothing seen yet: no clock
+    assert q.plant_step_at(5, 10.0) == 5 and q.plant_step_at(5, 11.0) == 5 + 10_000
+
+
 def _signals(run_dir: Path) -> str:
     return (run_dir / "signals.csv").read_text()
 

@@ -121,6 +121,17 @@ def test_the_sensorless_real_time_score_says_its_verdict_and_the_late_periods() 
     assert "frames the recorder lost: 29,881." in page
 
 
+def test_the_score_says_the_commands_its_nodes_held_after_their_step() -> None:
+    """A command held after its step applies a set-point later than in lockstep: the run
+    differs with no late duty, and the score says so beside the late periods."""
+    res = _measured(missed_10k=1.0, frames_lost=0.0)
+    res["realtime_native_score"] = _score(2.77)
+    assert "after their step" not in render_realtime_native(res)
+    res["realtime_native_score"]["realtime"].update(late_commands=497.0, commands_sent=501.0)
+    page = render_realtime_native(res)
+    assert "its controller held 497 of the 501 bench commands only after their step" in page
+
+
 def test_a_failed_real_time_score_run_is_said_with_its_line() -> None:
     from bench.studies._perf import _failed_score_run
 

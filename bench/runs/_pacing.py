@@ -10,7 +10,11 @@ of a real-time run makes the plant's first periods late.  :class:`CommandPacer`
 sends each command (twice, same ``seq``) once the plant is within
 :attr:`CommandPacer.lead` periods of it, as the host sees the plant's step
 (``PhaseSamples.step``, unwrapped; this run's ``PlantTruth.step`` while a fault
-loses the samples: :attr:`bench.runs._recorder.Recording.plant_step`).  In lockstep it also sends a keep-alive
+loses the samples: :attr:`bench.runs._recorder.Recording.plant_step`); in real
+time with the bench's own controller, the plant's step on its clock since the
+host first saw it when that is further (the host's view lags by what its
+recorder has yet to decode, up to a second on a loaded host, and a command sent
+after its step changes the run).  In lockstep it also sends a keep-alive
 (``cmd`` 0) at least every :data:`PACE_EVERY` periods: a paced plant
 (``bench plant --pace-every``) runs no period beyond the newest command it
 holds, so it never outruns the host's recorder.  ``bench run`` uses it with
@@ -45,13 +49,22 @@ from collections.abc import Sequence
 
 import can
 
+from bench.nodes._counters import MAX_PENDING_COMMANDS
 from bench.nodes._loops import command_frames
 from bench.scenarios._schema import Scenario
 from bench.scenarios._setup import PlannedCommand, sample_period
 from bench.wire._codec import Codec
 from bench.wire._protocol import ACK_WINDOW, SEQ_MODULUS
 
-__all__ = ["AGAIN_S", "COMMAND_BURST", "PACE_EVERY", "RESEND_S", "CommandPacer", "command_lead"]
+__all__ = [
+    "AGAIN_S",
+    "COMMAND_BURST",
+    "PACE_EVERY",
+    "REALTIME_AHEAD_S",
+    "RESEND_S",
+    "CommandPacer",
+    "command_lead",
+]
 
 #: Lockstep pacing: a bench command (a keep-alive when nothing changes) at
 #: least every this many periods; see :attr:`bench.nodes._plant_node.PlantNode.pace_every`.
@@ -69,6 +82,17 @@ DEFAULT_SOCKET_FRAMES = 256
 #: 3 periods) and to a reader that falls behind.  One command per period over a
 #: whole ramp then reaches the controller 32 at a time, never 1,579 frames in a burst.
 COMMAND_BURST = DEFAULT_SOCKET_FRAMES // 4 // 2
+#: Real time with the bench's own controller: commands go out this far ahead of their
+#: step (s).  The bench's process sends them at normal priority beside its recorder,
+#: which decodes every frame of a 10 kHz pair in Python, on the 2 cores of the two
+#: ``SCHED_FIFO`` nodes that each command frame wakes: there a send took 0.57 ms (three
+#: per command), 500-600 commands/s, while wen-5.1's ramp needs 1,000/s for 0.5 s; with
+#: 20 ms ahead the ramp reached the nodes up to a second late, a different run
+#: (docs/REALTIME.md).  The bench's nodes open the bus with
+#: :data:`bench.wire._bus.RECEIVE_BUFFER` and queue
+#: :data:`bench.nodes._counters.MAX_PENDING_COMMANDS`: they hold what this sends ahead
+#: (:attr:`CommandPacer.window`: a quarter of that).
+REALTIME_AHEAD_S = 0.5
 #: Telemetry frames without an acknowledgement after which a controller under test
 #: counts as one that does not report (2.1), and the commands go on without it: a
 #: 2.2 controller holds the start before its first sample (the plant sends sample 0
@@ -97,7 +121,8 @@ def command_lead(T_s: float, mode: str) -> int:
     User-Mode Linux, and a late command would change the trace); the plant
     is paced, so it cannot run away.  Real time: 20 ms and at least 20
     periods (the plant's clock runs regardless; a short lead keeps the first
-    periods free of a burst).
+    periods free of a burst); with the bench's own controller
+    :class:`CommandPacer` sends :data:`REALTIME_AHEAD_S` ahead, a burst at a time.
     """
     if mode == "lockstep":
         return max(3000, int(0.5 / T_s))
@@ -151,6 +176,14 @@ class CommandPacer:
         self._steps = [k for k, _ in self.frames]
         #: Commands sent beyond the plant's step at most.
         self.window = ACK_WINDOW if external and mode == "lockstep" else COMMAND_BURST
+        #: Real time with the bench's own controller: the plant's step is read from its
+        #: clock (:meth:`plant_step_at`), not only from the host's lagging view, and the
+        #: commands go :data:`REALTIME_AHEAD_S` ahead, :data:`COMMAND_BURST` per call.
+        self._clock = mode == "realtime" and not external
+        self._T_s = sample_period(scn)
+        if self._clock:
+            self.lead = max(self.lead, int(REALTIME_AHEAD_S / self._T_s))
+            self.window = MAX_PENDING_COMMANDS // 4
         #: Whether acknowledgements are followed: only within :data:`ACK_WINDOW`,
         #: i.e. for a controller under test, can a 4-bit seq name one command.
         self.external = external
@@ -166,6 +199,8 @@ class CommandPacer:
         self.resends = 0
         self._t_ack = 0.0
         self._n_taken = 0
+        #: (step, when) the host first saw the plant's step; None before.
+        self._first_seen: tuple[int, float] | None = None
         #: (when, index) of the commands to send a third time (:data:`AGAIN_S`).
         self._again: collections.deque[tuple[float, int]] = collections.deque()
 
@@ -211,9 +246,11 @@ class CommandPacer:
         and the ones beyond it again every :data:`RESEND_S` while it does not move.
         """
         n = 0
-        step = max(0, plant_step)
+        step = self.plant_step_at(plant_step, now)
         limit = step + self.lead
         cap = self._first_beyond(step) + self.window
+        if self._clock:
+            cap = min(cap, self.sent + COMMAND_BURST)  # no burst of a whole lead at once
         if self.acked is None:
             if self.external and self.silent_reports < SILENT_REPORTS:
                 cap = min(cap, ACK_WINDOW)  # until it says whether it acknowledges
@@ -247,6 +284,24 @@ class CommandPacer:
         if n and now is not None and self.acked is not None and self.sent == self.acked + 1 + n:
             self._t_ack = now  # the resend clock starts with the first unacknowledged command
         return n
+
+    def plant_step_at(self, plant_step: int, now: float | None) -> int:
+        """The plant's step the commands are sent after: ``plant_step`` (the host's view);
+        in real time with the bench's own controller, the step the plant's clock has
+        reached by ``now`` when that is further: the step the host first saw (0 before
+        the plant's first sample: the first call sends the start) plus the periods
+        since.  It is ahead of the plant by the periods host stalls skipped
+        (bench/nodes/_clock.py) and by the plant's start after the first call, behind
+        it by the host's lag at that first sight (nothing yet to decode): a command
+        goes out that much early (it carries its step, a node queues it), never late
+        because the host's recorder lags later in the run."""
+        step = max(0, plant_step)
+        if not self._clock or now is None or plant_step < 0:
+            return step
+        if self._first_seen is None:
+            self._first_seen = (plant_step, now)
+        s0, t0 = self._first_seen
+        return max(step, s0 + int((now - t0) / self._T_s))
 
     def _first_beyond(self, step: int) -> int:
         """Index of the first command that applies after ``step``."""

@@ -763,6 +763,16 @@ def sensorless_realtime_score(
             **{k: math.nan if m.get(k) is None else float(m[k]) for k in SCORE_KEYS},
             "lock_lost": bool(m.get("lock_lost")),
             "late_duty_pct": 100.0 * m.get("late_duty_periods", 0) / n,
+            # bench commands the controller held only after their step: set-points applied
+            # later than in lockstep, a run that differs with no late duty; and the rows
+            # scored (the same window in both modes)
+            "late_commands": float(
+                ((res.meta.get("node_reports") or {}).get("controller") or {}).get(
+                    "late_commands", 0
+                )
+            ),
+            "commands_sent": float((res.meta.get("commands") or {}).get("commands_sent", 0)),
+            "scored_steps": float(m.get("scored_steps", 0)),
             "host_stalls": float(m.get("host_stalls", 0)),
             "host_stall_ms_total": float(m.get("host_stall_ms_total", 0.0)),
             "plant_fault": str(m.get("plant_fault") or "none"),
@@ -816,12 +826,19 @@ def score_lines(sc: dict[str, Any] | None) -> list[str]:
             f"Position error rms in lockstep {_num(ls['theta_err_rms_deg'], 'deg')}.",
         ]
     verdict = "scores like it" if sc["scores_like_lockstep"] else "**does not score like it**"
+    late_cmds = rt.get("late_commands", 0.0)
     why = (
         ""
         if sc["scores_like_lockstep"]
         else f": {_num(rt['late_duty_pct'], '%')} of its periods ran with a late duty on this "
         "host, and each changes the loop (the limit is the late periods, not the model)"
     )
+    if late_cmds > 0:
+        why += (
+            f"; its controller held {late_cmds:,.0f} of the "
+            f"{rt.get('commands_sent', 0.0):,.0f} bench commands only after their step: "
+            "set-points applied later than in lockstep, a different run"
+        )
     host = []
     if "host_stalls" in rt:
         lost = rt.get("recorder_frames_lost", -1.0)
