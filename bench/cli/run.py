@@ -23,7 +23,7 @@ from bench.cli._common import (
     scenario_from_args,
     writable_dir,
 )
-from bench.scenarios._setup import check_estimator_fits, check_estimator_name
+from bench.scenarios._setup import check_estimator_name, checked_design
 
 
 def run_node_args(args: argparse.Namespace) -> dict[str, list[str]]:
@@ -103,6 +103,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     dut = dut_command(args)
     scn = scenario_from_args(args)
     external = args.controller == "external"
+    design = None
     if external:
         if args.estimator:
             raise BenchError(
@@ -113,8 +114,10 @@ def cmd_run(args: argparse.Namespace) -> int:
         est = args.estimator or scn.estimator
         check_estimator_name(est)
         # a misfit (e.g. an injection estimator on a motor without saliency) is one
-        # line before any process starts: the controller is built here once
-        if note := check_estimator_fits(scn, est):
+        # line before any process starts: the controller is built and designed here
+        # once, and its node gets the design in the run's plan
+        note, design = checked_design(scn, est)
+        if note:
             print(note, file=sys.stderr)
     plant_engine(args)
     if args.monitor and not (sys.stdin.isatty() and sys.stdout.isatty() and sys.stderr.isatty()):
@@ -163,6 +166,7 @@ def cmd_run(args: argparse.Namespace) -> int:
                 dut_timeout=args.dut_timeout,
                 dut_name=args.dut_name,
                 dut_process=process,
+                design=design,
             )
     finally:
         if view is not None:

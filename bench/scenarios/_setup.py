@@ -20,7 +20,14 @@ from bench.scenarios._schema import (
     split_options,
 )
 from bench.wire._protocol import CMD_START, CMD_STOP, RPM_PER_RAD_S
-from controller import CompensationPars, Controller, ControllerPars, MotorModel, SupervisionPars
+from controller import (
+    CompensationPars,
+    Controller,
+    ControllerPars,
+    DesignRecord,
+    MotorModel,
+    SupervisionPars,
+)
 from controller._registry import EstimatorSpec, UnknownEstimatorError, check_estimator
 from controller._registry import spec as _spec
 from plant_rt import (
@@ -547,12 +554,20 @@ def check_estimator_fits(scn: Scenario, est: str) -> str | None:
     return options_note(scn, est)
 
 
-def build_controller_check(scn: Scenario, est: str) -> None:
+def checked_design(scn: Scenario, est: str) -> tuple[str | None, DesignRecord]:
+    """:func:`check_estimator_fits`, and the design of the controller it built
+    (:meth:`controller.Controller.design_record`), which ``bench run`` hands its
+    controller node in the run's plan so that the design is made once."""
+    check_estimator_name(est)
+    ctrl = build_controller_check(scn, est)
+    return options_note(scn, est), ctrl.design_record()
+
+
+def build_controller_check(scn: Scenario, est: str) -> Controller:
     """Build the controller once; a misfit is a :class:`ScenarioError` of one line
-    (:func:`check_estimator_fits` without its note; ``bench run`` does it while its
-    nodes start)."""
+    (:func:`check_estimator_fits` without its note); returns the controller."""
     try:
-        build_controller(scn, est)
+        return build_controller(scn, est)
     except (ValueError, TypeError) as e:
         raise ScenarioError(
             f"--estimator {est}: cannot run scenario {scn.name} ({e}); "
