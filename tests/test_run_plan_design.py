@@ -20,10 +20,10 @@ import pytest
 from bench.nodes._loops import controller_node
 from bench.nodes._plan import make_plan, read_plan
 from bench.scenarios import _setup
-from bench.scenarios._schema import load_scenario
+from bench.scenarios._schema import Scenario, load_scenario
 from bench.wire._bus import BusSpec
 from bench.wire._codec import Codec
-from controller import Controller
+from controller import Controller, DesignRecord
 
 BUS = BusSpec("udp_multicast", "239.0.0.1", 44100)
 
@@ -111,3 +111,47 @@ def test_the_settings_digest_survives_the_plans_json(tmp_path: Path) -> None:
         assert plan.controller is not None and plan.design is not None
         assert settings_digest(plan.controller) == plan.design.settings
         assert settings_digest(_setup.controller_pars(scn, est)) == plan.design.settings
+
+
+def _kept_once(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> tuple[Scenario, DesignRecord]:
+    """wen-5.1's tt-dq design, made once with the cache in ``tmp_path``."""
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    scn = load_scenario("wen-5.1")
+    return scn, _setup.checked_design(scn, "tt-dq")[1]
+
+
+def test_a_design_is_kept_for_the_next_run_of_the_same_settings(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from bench.scenarios._designs import cache_dir
+
+    scn, first = _kept_once(tmp_path, monkeypatch)
+    assert len(list(cache_dir().glob("*.json"))) == 1
+    _no_search(monkeypatch)  # the second run of the same settings searches nothing
+    assert _setup.checked_design(scn, "tt-dq")[1] == first
+    # other settings are another design, and need their own search
+    with pytest.raises(AssertionError, match="searched its design again"):
+        _setup.checked_design(scn.with_overrides(f_sw=8000.0), "tt-dq")
+
+
+def test_the_design_cache_can_be_turned_off(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from bench.scenarios._designs import CACHE_ENV, cache_dir
+
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    monkeypatch.setenv(CACHE_ENV, "off")
+    _setup.checked_design(load_scenario("wen-5.1"), "tt-dq")
+    assert not cache_dir().exists()
+
+
+def test_a_kept_design_that_cannot_be_read_is_made_again(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from bench.scenarios._designs import cache_dir
+
+    scn, first = _kept_once(tmp_path, monkeypatch)
+    (kept,) = cache_dir().glob("*.json")
+    kept.write_text("{not json")
+    assert _setup.checked_design(scn, "tt-dq")[1] == first
+    assert kept.read_text().startswith('{"settings"')

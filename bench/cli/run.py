@@ -40,12 +40,15 @@ def run_node_args(args: argparse.Namespace) -> dict[str, list[str]]:
     return out
 
 
-def _import_figure_library() -> None:
-    """Import what ``run.png`` is drawn with (matplotlib, about a third of a second)."""
+def _import_scoring_libraries() -> None:
+    """Import what ``run.png`` is drawn with (matplotlib, about a third of a second) and
+    what the scoring filters with (scipy.signal, as long: a controller built from a kept
+    design imported none of it, :mod:`bench.scenarios._designs`)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot
+    import scipy.signal  # noqa: F401 (imported for the scoring, in this thread)
 
 
 class _View:
@@ -148,9 +151,9 @@ def cmd_run(args: argparse.Namespace) -> int:
     for name in EXPORT_FILES:  # an earlier run's, which this run would not replace
         (out / name).unlink(missing_ok=True)
     view = _start_monitor(spec, scn, est, args.mode, out) if args.monitor else None
-    # matplotlib is imported while the nodes start and run (the parent mostly waits
-    # then), so that run.png is drawn at once when the run ends
-    threading.Thread(target=_import_figure_library, daemon=True).start()
+    # matplotlib and scipy.signal are imported while the nodes start and run (the
+    # parent mostly waits then), so that the run is scored and drawn at once when it ends
+    threading.Thread(target=_import_scoring_libraries, daemon=True).start()
     try:
         with started_dut(dut, spec, scn, out, args.mode, label="--dut") as process:
             res = run_scenario(
