@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import argparse
+import atexit
+import gc
 import shlex
 import sys
 import threading
@@ -213,7 +215,10 @@ def cmd_run(args: argparse.Namespace) -> int:
     print(f"files: {out}/ ({', '.join(written)})")
     if res.meta.get("interrupted"):
         print("bench: interrupted", file=sys.stderr)
-    # every file is written; the status says the run is not a scenario result
+    # every file is written and closed: at the interpreter's exit its collector need not
+    # walk the run's objects again (the frames, the figure's; a few tenths of a second)
+    atexit.register(gc.freeze)
+    # the status says the run is not a scenario result
     return status
 
 
