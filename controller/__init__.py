@@ -19,7 +19,7 @@ from controller._api import (
 from controller._compensation import CompensationPars
 from controller._controller import Controller, ControllerPars
 from controller._cplugin import CEstimator, c_estimator
-from controller._design import PM_TARGET_DEG
+from controller._design import PM_TARGET_DEG, DesignRecord
 from controller._engine import (
     ENGINES,
     compiled_controller_missing,
@@ -68,6 +68,7 @@ __all__ = [
     "ControlOutput",
     "Controller",
     "ControllerPars",
+    "DesignRecord",
     "Estimator",
     "EstimatorInput",
     "EstimatorPluginError",

@@ -96,6 +96,7 @@ the controller uses, the estimator's included.
 
 from __future__ import annotations
 
+import json
 import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
@@ -114,6 +115,7 @@ from controller._compensation import (
     offset_periods,
 )
 from controller._compiled import build_core
+from controller._design import DesignRecord, designed, designing, settings_digest
 from controller._engine import KIND_EXTERNAL, _cctl, resolve_controller_engine
 from controller._filters import lpf_first_order
 from controller._hybrid import HybridEstimator
@@ -257,6 +259,7 @@ class ControllerPars:
             object.__setattr__(self, "i_pulse", 0.5 * float(self.i_max or 0.0))
 
 
+@designed
 def speed_loop_margin(
     alpha_s: float,
     alpha_c: float,
@@ -281,6 +284,7 @@ def speed_loop_margin(
     return margins(loop, 1e-3 * alpha_s, 0.999 * math.pi / T_s, 2)
 
 
+@designed
 def speed_bandwidth(
     target: float,
     alpha_c: float,
@@ -347,6 +351,11 @@ class Controller:
         Kept for compatibility (:mod:`controller._engine`): every choice runs the
         periods on the controller core (C), with the bits the Python step gave
         when it was an engine (``tests/oracle/`` checks them).
+    design : DesignRecord, optional
+        The design of these settings made before (:meth:`design_record`, e.g. in
+        the process that wrote a run's plan): its searches are not run again
+        (:mod:`controller._design`). A record made for other settings is not
+        used: the controller designs itself and :attr:`design_refused` says why.
     """
 
     #: The engine the periods run on: ``"compiled"``, the core, whatever the choice.
@@ -364,8 +373,33 @@ class Controller:
     u_d: float
     u_q: float
 
-    def __init__(self, pars: ControllerPars, engine: str = "auto") -> None:
+    def __init__(
+        self, pars: ControllerPars, engine: str = "auto", design: DesignRecord | None = None
+    ) -> None:
         self.pars = pars
+        digest = settings_digest(pars)
+        #: Why the given ``design`` was not used (made for other settings), else None.
+        self.design_refused: str | None = None
+        book: dict[str, Any] = {}
+        if design is not None:
+            if design.settings == digest:
+                book = dict(design.results)
+            else:
+                self.design_refused = "the design given was made for other controller settings"
+        self._design_book = book
+        self._design_digest = digest
+        with designing(book):
+            self._build(pars, engine)
+
+    def design_record(self) -> DesignRecord:
+        """This controller's design (its searches' results, :mod:`controller._design`), to
+        build the same controller elsewhere without them: its gains' margins included."""
+        self.gains()
+        # as JSON keeps it (tuples as lists, floats as floats): equal once written and read
+        results = json.loads(json.dumps(self._design_book))
+        return DesignRecord(self._design_digest, results)
+
+    def _build(self, pars: ControllerPars, engine: str) -> None:
         m = pars.motor
         T_s = pars.T_s
         self.T_s = T_s
@@ -512,6 +546,10 @@ class Controller:
         countermeasures (``comp.*``; flags as 0/1), the current fed to the PIs
         (``raw_current_feedback``), and the estimator's own (``estimator.*``).
         """
+        with designing(self._design_book):
+            return self._gains()
+
+    def _gains(self) -> dict[str, float]:
         p = self.pars
         cp = p.compensation
         out: dict[str, float] = {

@@ -24,12 +24,34 @@ degrees per integrator of the loop.
 Design happens once per estimator and runs on numpy (vectorised
 frequency responses) and :func:`scipy.optimize.brentq`. The results are
 cached, because tests build many estimators with the same settings.
+
+The design record. A controller's design is a pure function of its
+settings (:class:`controller.ControllerPars`): every search and
+discretisation on its way (the steps marked :func:`designed`: the filters'
+bilinear transforms, the PLL's and the speed loop's phase-margin searches,
+the margins its gains report) is kept in a :class:`DesignRecord` of the
+controller, keyed by the step and its plain arguments (numbers, strings,
+tuples of them). An argument of another kind (the estimator's speed
+response, the estimator itself) is left out of the key: within one
+controller's design it is itself made from the settings, which the record
+is tied to by their digest (:func:`settings_digest`). A controller built
+with a record of the same digest takes each step's result from it and runs
+no search (no scipy import: a node handed its design starts in a fraction of
+the time); a step the record lacks is computed as without one. A record of
+another digest is never used (:class:`controller.Controller`).
 """
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
+import functools
+import hashlib
+import json
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Iterator, Mapping
+from dataclasses import dataclass, fields, is_dataclass
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -150,3 +172,96 @@ def largest_with_margin(
     p = min(p_pm, p_bw)
     pm, w_c = margins(loop_of(p), 1e-3 * p, w_hi, n_int)
     return p, pm, w_c
+
+
+_F = TypeVar("_F", bound=Callable[..., Any])
+
+#: The design book of the controller being built or asked its gains in this thread
+#: (its results by key, :func:`designed`); None: no book, every step computes.
+_BOOK: contextvars.ContextVar[dict[str, Any] | None] = contextvars.ContextVar(
+    "controller_design_book", default=None
+)
+
+
+@dataclass(frozen=True, slots=True)
+class DesignRecord:
+    """A controller's design (module docstring): the results of its design steps, by key.
+
+    ``settings`` is the digest of the settings it was made for
+    (:func:`settings_digest`); ``results`` maps a step's key (its name and
+    plain arguments) to its result, as JSON keeps it (tuples as lists).
+    """
+
+    settings: str
+    results: Mapping[str, Any]
+
+
+def settings_digest(pars: Any) -> str:
+    """The digest of a controller's settings (a :class:`controller.ControllerPars`): equal for
+    settings written to JSON and read back (numbers as floats, tuples as lists)."""
+    text = json.dumps(_canonical(pars), sort_keys=True)
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def _canonical(v: Any) -> Any:
+    if is_dataclass(v) and not isinstance(v, type):
+        return {f.name: _canonical(getattr(v, f.name)) for f in fields(v)}
+    if isinstance(v, Mapping):
+        return {str(k): _canonical(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [_canonical(x) for x in v]
+    if isinstance(v, bool) or v is None or isinstance(v, str):
+        return v
+    if isinstance(v, (int, float, np.integer, np.floating)):
+        return float.__repr__(float(v))
+    return repr(v)
+
+
+def _key_part(v: Any) -> Any:
+    """``v`` in a step's key: a plain value as itself, any other kind left out (None)."""
+    if isinstance(v, bool) or v is None or isinstance(v, str):
+        return v
+    if isinstance(v, (int, float, np.integer, np.floating)):
+        return float.__repr__(float(v))
+    if isinstance(v, (list, tuple)):
+        return tuple(_key_part(x) for x in v)
+    return None
+
+
+def _as_tuples(v: Any) -> Any:
+    """A result read back from JSON: its lists as the tuples the steps return."""
+    return tuple(_as_tuples(x) for x in v) if isinstance(v, list) else v
+
+
+@contextlib.contextmanager
+def designing(book: dict[str, Any]) -> Iterator[None]:
+    """Run the design steps inside on ``book`` (a controller's; module docstring)."""
+    token = _BOOK.set(book)
+    try:
+        yield
+    finally:
+        _BOOK.reset(token)
+
+
+def designed(fn: _F) -> _F:
+    """Mark ``fn`` a design step: inside :func:`designing` its result is kept in (and taken
+    from) the book under its name and plain arguments; the steps it calls are part of it."""
+    name = f"{fn.__module__}.{fn.__qualname__}"
+
+    @functools.wraps(fn)
+    def step(*args: Any, **kwargs: Any) -> Any:
+        book = _BOOK.get()
+        if book is None:
+            return fn(*args, **kwargs)
+        key = json.dumps([name, _key_part(args), _key_part(sorted(kwargs.items()))])
+        if key in book:
+            return _as_tuples(book[key])
+        token = _BOOK.set(None)
+        try:
+            out = fn(*args, **kwargs)
+        finally:
+            _BOOK.reset(token)
+        book[key] = out
+        return out
+
+    return step  # type: ignore[return-value]

@@ -24,6 +24,8 @@ import math
 
 import numpy as np
 
+from controller._design import designed
+
 #: Coefficients (numerator, denominator) of Wen eqs. (11)-(13), highest power first.
 BPF_WEN: tuple[tuple[float, ...], tuple[float, ...]] = ((628.0, 0.0), (1.0, 628.0, 9859600.0))
 #: The high-pass filter of Wen eqs. (11)-(13), as :data:`BPF_WEN`.
@@ -32,6 +34,7 @@ HPF_WEN: tuple[tuple[float, ...], tuple[float, ...]] = ((1.0, 0.0), (1.0, 1256.0
 LPF_WEN: tuple[tuple[float, ...], tuple[float, ...]] = ((628.0,), (1.0, 628.0))
 
 
+@designed
 def discretize(
     b: tuple[float, ...] | list[float],
     a: tuple[float, ...] | list[float],

@@ -80,7 +80,7 @@ from typing import ClassVar
 import numpy as np
 
 from controller._api import option_field
-from controller._design import PM_TARGET_DEG, freq_response
+from controller._design import PM_TARGET_DEG, designed, freq_response
 from controller._filters import BPF_WEN, HPF_WEN, LPF_WEN, bandpass_coefficients, discretize
 from controller._luenberger import LuenbergerObserver, design_pole, observer_response
 from controller._params import MotorModel
@@ -231,6 +231,7 @@ def hf_amplitudes(motor: MotorModel, V_h: float, w_h: float, T_s: float) -> tupl
     return k * (motor.L_d + motor.L_q), k * (motor.L_q - motor.L_d)
 
 
+@designed
 def lpf_corner(lpf_z: tuple[tuple[float, ...], tuple[float, ...]], T_s: float) -> float:
     """-3 dB corner (rad/s) of the discrete low-pass ``lpf_z`` (unity DC gain assumed)."""
     from scipy.optimize import brentq
@@ -344,6 +345,7 @@ def separation_gains(w: np.ndarray, w_h: float, T_s: float) -> tuple[np.ndarray,
     return 0.5 * (1.0 + r), 0.5 * (1.0 - r)
 
 
+@designed
 @functools.lru_cache(maxsize=64)
 def pll_design(
     loop: str,
@@ -375,6 +377,7 @@ def pll_design(
 LOAD_POLE_RATIO = 0.1
 
 
+@designed
 @functools.lru_cache(maxsize=64)
 def mechanical_design(
     loop: str,
@@ -391,6 +394,40 @@ def mechanical_design(
         pm_deg,
         lpf_corner(filters[2], T_s),
         LOAD_POLE_RATIO,
+    )
+
+
+@designed
+def observer_margins(
+    loop: str,
+    T: float,
+    w_h: float,
+    filters: tuple[tuple[tuple[float, ...], tuple[float, ...]], ...],
+    w_o: float,
+    mechanical: bool,
+) -> tuple[float, float]:
+    """Phase margin (deg) and crossover (rad/s) of a demodulator's angle loop with its
+    observer at ``w_o`` (the PLL, or the mechanical observer; NaN if frozen)."""
+    from controller._design import margins
+    from controller._pll import open_loop
+
+    if w_o <= 0.0:
+        return math.nan, math.nan
+    if mechanical:
+        return margins(
+            lambda w: (
+                observer_response(w_o, T, np.exp(1j * w * T), LOAD_POLE_RATIO * w_o)[0]
+                * in_loop_response(loop, T, w_h, filters, w)
+            ),
+            1e-3 * w_o,
+            0.999 * math.pi / T,
+            3,
+        )
+    return margins(
+        lambda w: open_loop(w_o, T, w) * in_loop_response(loop, T, w_h, filters, w),
+        1e-3 * w_o,
+        0.999 * math.pi / T,
+        2,
     )
 
 
@@ -540,32 +577,8 @@ class RotatingHFEstimator:
 
     def phase_margin(self) -> tuple[float, float]:
         """Phase margin (deg) and crossover (rad/s) of the PLL loop as built (NaN if frozen)."""
-        from controller._design import margins
-        from controller._pll import open_loop
-
-        if self.w_o <= 0.0:
-            return math.nan, math.nan
-        T = self.T_s
-        if self.mechanical:
-            return margins(
-                lambda w: (
-                    observer_response(self.w_o, T, np.exp(1j * w * T), LOAD_POLE_RATIO * self.w_o)[
-                        0
-                    ]
-                    * in_loop_response(self.IN_LOOP, T, self.w_h, self.filters_z, w)
-                ),
-                1e-3 * self.w_o,
-                0.999 * math.pi / T,
-                3,
-            )
-        return margins(
-            lambda w: (
-                open_loop(self.w_o, T, w)
-                * in_loop_response(self.IN_LOOP, T, self.w_h, self.filters_z, w)
-            ),
-            1e-3 * self.w_o,
-            0.999 * math.pi / T,
-            2,
+        return observer_margins(
+            self.IN_LOOP, self.T_s, self.w_h, self.filters_z, self.w_o, self.mechanical
         )
 
     def speed_response(self, w: np.ndarray) -> np.ndarray:

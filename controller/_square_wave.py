@@ -144,7 +144,7 @@ import numpy as np
 from controller._api import option_field
 from controller._cctl import CIC_MAX
 from controller._cic import CicInterpolator
-from controller._design import PM_TARGET_DEG, margins, solve_largest
+from controller._design import PM_TARGET_DEG, designed, margins, solve_largest
 from controller._luenberger import LuenbergerObserver, observer_response
 from controller._params import MotorModel
 
@@ -177,6 +177,7 @@ def open_loop(
     return 0.5 * (f(z) + f(-z))
 
 
+@designed
 def loop_margins(
     a: float, T_s: float, cic: bool = True, M: int = 2, delay_comp: float = DELAY_COMP_PERIODS
 ) -> tuple[float, float]:
@@ -186,6 +187,7 @@ def loop_margins(
     )
 
 
+@designed
 @functools.lru_cache(maxsize=64)
 def observer_pole(T_s: float, cic: bool, M: int, delay_comp: float, pm_deg: float) -> float:
     """Largest triple pole ``a`` (rad/s) whose loop keeps the phase margin ``pm_deg`` (deg)."""

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import argparse
+import atexit
+import gc
 import shlex
 import sys
 import threading
@@ -23,7 +25,7 @@ from bench.cli._common import (
     scenario_from_args,
     writable_dir,
 )
-from bench.scenarios._setup import check_estimator_fits, check_estimator_name
+from bench.scenarios._setup import check_estimator_name, checked_design
 
 
 def run_node_args(args: argparse.Namespace) -> dict[str, list[str]]:
@@ -40,12 +42,15 @@ def run_node_args(args: argparse.Namespace) -> dict[str, list[str]]:
     return out
 
 
-def _import_figure_library() -> None:
-    """Import what ``run.png`` is drawn with (matplotlib, about a third of a second)."""
+def _import_scoring_libraries() -> None:
+    """Import what ``run.png`` is drawn with (matplotlib, about a third of a second) and
+    what the scoring filters with (scipy.signal, as long: a controller built from a kept
+    design imported none of it, :mod:`bench.scenarios._designs`)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot
+    import scipy.signal  # noqa: F401 (imported for the scoring, in this thread)
 
 
 class _View:
@@ -103,6 +108,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     dut = dut_command(args)
     scn = scenario_from_args(args)
     external = args.controller == "external"
+    design = None
     if external:
         if args.estimator:
             raise BenchError(
@@ -113,8 +119,10 @@ def cmd_run(args: argparse.Namespace) -> int:
         est = args.estimator or scn.estimator
         check_estimator_name(est)
         # a misfit (e.g. an injection estimator on a motor without saliency) is one
-        # line before any process starts: the controller is built here once
-        if note := check_estimator_fits(scn, est):
+        # line before any process starts: the controller is built and designed here
+        # once, and its node gets the design in the run's plan
+        note, design = checked_design(scn, est)
+        if note:
             print(note, file=sys.stderr)
     plant_engine(args)
     if args.monitor and not (sys.stdin.isatty() and sys.stdout.isatty() and sys.stderr.isatty()):
@@ -145,9 +153,9 @@ def cmd_run(args: argparse.Namespace) -> int:
     for name in EXPORT_FILES:  # an earlier run's, which this run would not replace
         (out / name).unlink(missing_ok=True)
     view = _start_monitor(spec, scn, est, args.mode, out) if args.monitor else None
-    # matplotlib is imported while the nodes start and run (the parent mostly waits
-    # then), so that run.png is drawn at once when the run ends
-    threading.Thread(target=_import_figure_library, daemon=True).start()
+    # matplotlib and scipy.signal are imported while the nodes start and run (the
+    # parent mostly waits then), so that the run is scored and drawn at once when it ends
+    threading.Thread(target=_import_scoring_libraries, daemon=True).start()
     try:
         with started_dut(dut, spec, scn, out, args.mode, label="--dut") as process:
             res = run_scenario(
@@ -163,6 +171,7 @@ def cmd_run(args: argparse.Namespace) -> int:
                 dut_timeout=args.dut_timeout,
                 dut_name=args.dut_name,
                 dut_process=process,
+                design=design,
             )
     finally:
         if view is not None:
@@ -206,7 +215,10 @@ def cmd_run(args: argparse.Namespace) -> int:
     print(f"files: {out}/ ({', '.join(written)})")
     if res.meta.get("interrupted"):
         print("bench: interrupted", file=sys.stderr)
-    # every file is written; the status says the run is not a scenario result
+    # every file is written and closed: at the interpreter's exit its collector need not
+    # walk the run's objects again (the frames, the figure's; a few tenths of a second)
+    atexit.register(gc.freeze)
+    # the status says the run is not a scenario result
     return status
 
 

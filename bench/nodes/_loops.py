@@ -160,9 +160,16 @@ def controller_node(plan: RunPlan, codec: Codec) -> ControllerNode:
     if engine == NATIVE:
         engine = "auto"
     try:
-        ctrl = Controller(plan.controller, engine)
+        ctrl = Controller(plan.controller, engine, design=plan.design)
     except TypeError as e:
         raise BenchError(f"plan of {plan.scenario}: estimator options: {e}") from None
+    if ctrl.design_refused:
+        print(
+            f"plan of {plan.scenario}: field 'design': {ctrl.design_refused} than its field "
+            "'controller'; designed for 'controller' here",
+            file=sys.stderr,
+            flush=True,
+        )
     return ControllerNode(
         codec,
         ctrl,

@@ -43,7 +43,7 @@ from bench.scenarios._setup import (
     sample_period,
 )
 from bench.wire._bus import BusSpec
-from controller import ControllerPars
+from controller import ControllerPars, DesignRecord
 
 __all__ = ["PLAN_FILE", "PLAN_VERSION", "LinkPlan", "RunPlan", "make_plan", "read_plan"]
 
@@ -81,7 +81,14 @@ class RunPlan:
     latency link the controller's is the link's second bus.  ``dut_timeout_s``
     > 0: the plant serves a controller under test (``bench plant
     --dut-timeout``).  ``commands`` is the schedule the bench sends
-    (:func:`bench.scenarios._setup.command_schedule`).
+    (:func:`bench.scenarios._setup.command_schedule`).  ``design`` is the
+    controller's design as the process that wrote the plan made it
+    (:meth:`controller.Controller.design_record`: its searches' results), so
+    that the controller node builds the same controller without searching
+    again; None: the node designs it (a plan made by ``bench controller
+    SCENARIO``).  A design made for other settings than ``controller`` (a plan
+    edited by hand) is not used: the node designs for ``controller`` itself and
+    says so on one line.
     """
 
     scenario: str
@@ -101,6 +108,7 @@ class RunPlan:
     link: LinkPlan | None
     seed: int
     faults: tuple[Fault, ...] = ()
+    design: DesignRecord | None = None
     version: int = PLAN_VERSION
 
     def bus(self, role: str) -> BusSpec:
@@ -122,11 +130,13 @@ def make_plan(
     run_id: int,
     pace_every: int = 0,
     dut_timeout_s: float = 0.0,
+    design: DesignRecord | None = None,
 ) -> RunPlan:
     """The plan of a run of ``scn`` (effective: every override in place) with ``estimator``.
 
     ``controller_bus``: the controller's bus when a latency link stands between
     (default: the plant's).  ``estimator`` None: no controller of the bench's.
+    ``design``: the controller's design made beforehand (:attr:`RunPlan.design`).
     """
     lt = scn.latency
     link = None
@@ -161,6 +171,7 @@ def make_plan(
         link=link,
         seed=scn.seed,
         faults=tuple(scn.faults),
+        design=design if estimator else None,
     )
 
 

@@ -42,6 +42,7 @@ from bench._errors import BenchError, CommandsLost
 from bench.nodes._counters import RejectionSummary, rejection_text
 from bench.nodes._loops import STALL_S, trip_text
 from bench.nodes._plan import PLAN_FILE, make_plan
+from controller import DesignRecord
 from bench.runs._analysis import NoRowsError
 from bench.runs._busfit import check_bus_rate
 from bench.runs._pacing import PACE_EVERY, CommandPacer
@@ -173,6 +174,7 @@ def run_scenario(
     dut_name: str | None = None,
     check: Callable[[], object] | None = None,
     dut_process: DutProcess | None = None,
+    design: DesignRecord | None = None,
 ) -> RunResult:
     """Run ``scn`` with ``estimator`` between two processes on ``spec``'s bus.
 
@@ -194,6 +196,9 @@ def run_scenario(
         controller before its ``READY`` and fails on the same misfit, which the
         check then names in its own line (its :class:`BenchError`) in place of the
         node's exit; nothing is recorded.
+        ``design``: the controller's design made by the caller (that check's
+        controller, :func:`bench.scenarios._setup.checked_design`), handed to the
+        controller node in the plan (:attr:`bench.nodes._plan.RunPlan.design`).
     """
     codec = codec or Codec()
     if mode == "lockstep" and (err := lockstep_error(scn.faults, scn.source)):
@@ -233,6 +238,7 @@ def run_scenario(
         run_id=run_id,
         pace_every=pace,
         dut_timeout_s=dut_timeout + 10.0 if external else 0.0,
+        design=None if external else design,
     )
     plan_file = plan.write(out_dir / PLAN_FILE)
     roles = node_roles(plan, node_args)

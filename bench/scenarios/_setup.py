@@ -20,7 +20,14 @@ from bench.scenarios._schema import (
     split_options,
 )
 from bench.wire._protocol import CMD_START, CMD_STOP, RPM_PER_RAD_S
-from controller import CompensationPars, Controller, ControllerPars, MotorModel, SupervisionPars
+from controller import (
+    CompensationPars,
+    Controller,
+    ControllerPars,
+    DesignRecord,
+    MotorModel,
+    SupervisionPars,
+)
 from controller._registry import EstimatorSpec, UnknownEstimatorError, check_estimator
 from controller._registry import spec as _spec
 from plant_rt import (
@@ -286,16 +293,32 @@ def proposed_methods() -> dict[str, str]:
     return {s.proposed_in: name for name, s in SPECS.items() if s.proposed_in}
 
 
-def build_controller(scn: Scenario, estimator: str, engine: str | None = None) -> Controller:
+def build_controller(
+    scn: Scenario, estimator: str, engine: str | None = None, *, cached: bool = False
+) -> Controller:
     """The scenario's controller for ``estimator`` (:func:`controller_pars`).
 
     ``engine`` as :class:`controller.Controller`'s (compiled where the
     compiled controller covers the estimator, else Python); None takes
-    :data:`ENGINE_ENV` (``--engine``), else ``"auto"``.
+    :data:`ENGINE_ENV` (``--engine``), else ``"auto"``. ``cached``: built from
+    the design kept for its settings when there is one, and its design kept
+    (:mod:`bench.scenarios._designs`).
     """
     pars = controller_pars(scn, estimator)
+    design = None
+    if cached:
+        from bench.scenarios._designs import load_design
+
+        design = load_design(pars)
     try:
-        return Controller(pars, engine or os.environ.get(ENGINE_ENV) or "auto")
+        ctrl = Controller(pars, engine or os.environ.get(ENGINE_ENV) or "auto", design=design)
+        if cached:
+            from bench.scenarios._designs import store_design
+
+            made = ctrl.design_record()
+            if made != design:
+                store_design(pars, made)
+        return ctrl
     except TypeError as e:
         raise ScenarioError(f"{scn.source}: field 'estimator_options': {e}") from None
 
@@ -547,12 +570,22 @@ def check_estimator_fits(scn: Scenario, est: str) -> str | None:
     return options_note(scn, est)
 
 
-def build_controller_check(scn: Scenario, est: str) -> None:
+def checked_design(scn: Scenario, est: str) -> tuple[str | None, DesignRecord]:
+    """:func:`check_estimator_fits`, and the design of the controller it built
+    (:meth:`controller.Controller.design_record`), which ``bench run`` hands its
+    controller node in the run's plan so that the design is made once; made
+    once for the same settings and code, too (:mod:`bench.scenarios._designs`)."""
+    check_estimator_name(est)
+    ctrl = build_controller_check(scn, est, cached=True)
+    return options_note(scn, est), ctrl.design_record()
+
+
+def build_controller_check(scn: Scenario, est: str, *, cached: bool = False) -> Controller:
     """Build the controller once; a misfit is a :class:`ScenarioError` of one line
-    (:func:`check_estimator_fits` without its note; ``bench run`` does it while its
-    nodes start)."""
+    (:func:`check_estimator_fits` without its note); returns the controller.
+    ``cached``: as :func:`build_controller`'s."""
     try:
-        build_controller(scn, est)
+        return build_controller(scn, est, cached=cached)
     except (ValueError, TypeError) as e:
         raise ScenarioError(
             f"--estimator {est}: cannot run scenario {scn.name} ({e}); "

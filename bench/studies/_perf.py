@@ -1269,19 +1269,38 @@ def demo_section(folder: Path, *, quick: bool) -> dict[str, Any]:
     ``nodes_s = run_s - loop_s`` is the nodes' start-up and stop, and
     ``outside_run_s = wall_s - run_s`` the command's own work before and after
     (imports, the scenario's checks, scoring, the figure, the files).
+
+    ``design_kept``: whether that run found its controller's design kept from an
+    earlier one (:mod:`bench.scenarios._designs`: any run after the first with the
+    same code); ``wall_s_designing``: the same command run once more with no kept
+    design (``CAN_HIL_BENCH_DESIGN_CACHE=off``), as the first run after a change
+    of the controller's code is.
     """
     import subprocess
     import sys
 
+    from bench.scenarios._designs import CACHE_ENV, load_design
+    from bench.scenarios._schema import load_scenario
+    from bench.scenarios._setup import controller_pars
+
     cmd = [sys.executable, "-m", "bench", *DEMO_COMMAND, "--out", str(folder), "--quiet"]
     if quick:
         cmd += ["--duration", repr(DEMO_QUICK_DURATION_S)]
-    t0 = time.perf_counter()
-    r = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
-    wall = time.perf_counter() - t0
-    if r.returncode != 0:
-        tail = (r.stderr.strip().splitlines() or ["no output"])[-1]
-        raise BenchError(f"bench perf: make demo's command failed (exit {r.returncode}): {tail}")
+    kept = load_design(controller_pars(load_scenario(DEMO_COMMAND[1]), DEMO_COMMAND[3]))
+
+    def timed(env: dict[str, str]) -> float:
+        t0 = time.perf_counter()
+        r = subprocess.run(cmd, capture_output=True, text=True, timeout=600, env=env)
+        wall = time.perf_counter() - t0
+        if r.returncode != 0:
+            tail = (r.stderr.strip().splitlines() or ["no output"])[-1]
+            raise BenchError(
+                f"bench perf: make demo's command failed (exit {r.returncode}): {tail}"
+            )
+        return wall
+
+    designing = timed({**os.environ, CACHE_ENV: "off"})
+    wall = timed(dict(os.environ))  # its files are the ones read below
     metrics = json.loads((folder / "metrics.json").read_text())
     meta = json.loads((folder / "meta.json").read_text())
     plant = (meta.get("node_reports") or {}).get("plant") or {}
@@ -1298,6 +1317,8 @@ def demo_section(folder: Path, *, quick: bool) -> dict[str, Any]:
         "steps": int(metrics["steps"]),
         "loop_steps_per_s": metrics["steps"] / loop_s if loop_s > 0 else math.nan,
         "node_engines": meta.get("node_engines", {}),
+        "design_kept": kept is not None,
+        "wall_s_designing": designing,
         "issue_s": DEMO_ISSUE_S,
         "target_s": DEMO_TARGET_S,
         "met": wall <= DEMO_TARGET_S,
@@ -1367,13 +1388,22 @@ def demo_lines(res: dict[str, Any]) -> list[str]:
             )
             + f"; it needs {_num(d['steps'] / d['target_s'], 'periods/s')} to fit the whole "
             "target by itself. In lockstep the plant runs no further than the commands "
-            "`bench run` sends ahead of it, as its recorder (a Python thread that receives and "
-            "decodes every frame of the bus) sees the plant's step. The command's own work is "
-            "mostly the controller's design, done once in `bench run` before any process "
-            "starts so that a misfit is one line (scipy.signal's import and the loops' "
-            "margin searches; the controller node designs it again while it starts), then "
-            "scoring the capture and drawing run.png (matplotlib is imported while the nodes "
-            "run). The machine's load average "
+            "`bench run` sends ahead of it, as its recorder sees the plant's step. The "
+            "controller is designed once, in `bench run` before any process starts so that a "
+            "misfit is one line, and handed to the controller node in plan.json; "
+            + (
+                f"this run found the design kept from an earlier one (without it, "
+                f"{_num(d['wall_s_designing'], 's')}: scipy's import and the loops' margin "
+                "searches before the nodes start). "
+                if d.get("design_kept") and "wall_s_designing" in d
+                else "this run made it (scipy's import and the loops' margin searches). "
+            )
+            + "The rest of the command's own work is Python's start and the imports, "
+            "listening to the bus before the nodes start, then decoding the capture, "
+            "writing signals.csv and drawing run.png (matplotlib's text and axes, mostly; "
+            "matplotlib and scipy.signal are imported while the nodes start). "
+            "The nodes' start-up is two Python processes' imports at once on the shared "
+            "cores. The machine's load average "
             f"was "
             f"{_num(res['machine'].get('loadavg_1min_start', math.nan))} on "
             f"{res['machine'].get('cpus')} cores at the start of `bench perf`."
