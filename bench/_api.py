@@ -45,6 +45,7 @@ if TYPE_CHECKING:
     from bench.runs._results import RunResult
     from bench.scenarios._schema import Scenario
     from bench.wire._bus import BusSpec
+    from controller import DesignRecord
 
 __all__ = [
     "CONTROLLERS",
@@ -352,7 +353,7 @@ def run(
         prints (its subclasses :class:`~bench._errors.ScenarioError`,
         :class:`~bench._errors.InterfaceError`, ...).
     """
-    from bench.scenarios._setup import check_estimator_fits, check_estimator_name
+    from bench.scenarios._setup import check_estimator_name, checked_design
 
     _choice("--mode", mode, MODES)
     _choice("--controller", controller, CONTROLLERS)
@@ -378,10 +379,13 @@ def run(
                 "--estimator: not with --controller external (the estimator is the device's)"
             )
         est = "external"
+        design = None
     else:
         est = estimator or scn.estimator
         check_estimator_name(est)
-        if note := check_estimator_fits(scn, est):
+        # designed once, here: the controller node gets it in the run's plan (as bench run)
+        note, design = checked_design(scn, est)
+        if note:
             print(note, file=sys.stderr)
     local = transport is None and not external and mode == "lockstep"
     spec = None if local else bus_of(transport, known_port=external and not dut)
@@ -392,7 +396,9 @@ def run(
 
             res = run_local(scn, est, where, engine=engine, plots=folder is not None)
         else:
-            res = _run_on_bus(scn, est, spec, where, mode, engine, dut, dut_timeout, dut_name)
+            res = _run_on_bus(
+                scn, est, spec, where, mode, engine, dut, dut_timeout, dut_name, design
+            )
         return _run_from(res, folder)
 
 
@@ -419,8 +425,10 @@ def _run_on_bus(
     dut: Sequence[str] | None,
     dut_timeout: float,
     dut_name: str | None,
+    design: DesignRecord | None,
 ) -> RunResult:
-    """The run as ``bench run`` runs it: nodes as processes on ``spec``'s bus."""
+    """The run as ``bench run`` runs it: nodes as processes on ``spec``'s bus, the
+    controller node built from ``design`` (the one :func:`run` made)."""
     from bench.runs._run import run_scenario
 
     external = est == "external"
@@ -439,6 +447,7 @@ def _run_on_bus(
             progress=False,
             node_args={"plant": ["--engine", engine], "controller": []},
             dut_process=process,
+            design=design,
             **kw,
         )
 

@@ -134,6 +134,9 @@ def test_over_a_bus_and_analyzed_again(tmp_path: Path) -> None:
     assert run.exit_status == 0 and run.transport == f"udp_multicast:{GROUP} port {port}"
     assert run.folder is not None and (run.folder / "capture.blf").is_file()
     assert run.metrics["steps"] == 3001 and run.metrics["frames_rejected"] == 0
+    # the controller was designed once, by bench.run, and handed to its node (as bench run)
+    design = json.loads((run.folder / "plan.json").read_text()).get("design")
+    assert design and design["results"]
     again = bench.analyze(run.folder / "capture.blf", out=tmp_path / "again", plots=False)
     assert again.exit_status == 0 and again.folder == tmp_path / "again"
     for key in ("theta_err_max_deg", "speed_err_max_rpm", "steps", "lock_lost"):
