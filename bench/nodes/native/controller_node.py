@@ -44,7 +44,7 @@ from bench.nodes._counters import (
     REPEATED_COUNTER,
 )
 from bench.nodes.native import _native
-from bench.nodes.native._native import BN_BRS, BN_ERR, BN_EXT, BN_FD, BN_RTR, Frame, Sig
+from bench.nodes.native._native import BN_BRS, BN_ERR, BN_EXT, BN_FD, BN_RTR, Frame, Held, Sig
 from bench.wire._codec import (
     REJECT_BAD_CRC,
     REJECT_BAD_LENGTH,
@@ -190,6 +190,8 @@ class CtlBlock(ctypes.Structure):
         ("cmd_frame", Frame),
         ("c", Counts),
         ("cmds", CtlCmd * CMDS),
+        ("held", Held),
+        ("slack", ctypes.c_int32),
     ]
 
 
@@ -416,6 +418,12 @@ class NativeController:
         node.samples_accepted += c.c.samples_accepted
         node.next_k = c.next_k
         node.node_engine = "native"
+        if c.realtime:
+            node.commands_held = {
+                "held": int(c.held.total),
+                "held_max": int(c.held.max),
+                "held_full": int(c.held.full),
+            }
         c.c = Counts()
 
 
