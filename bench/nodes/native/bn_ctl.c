@@ -371,8 +371,9 @@ static int unhold(bn_ctl_t *ctl)
 
 /* controller_loop: frames until an event; real time: the sample timeout.  In real time
  * a command frame is held while a sample may be waiting behind it, so that no duty waits
- * on Python's handling of a command: it goes to Python once a step has sent its duty and
- * nothing more is queued (or after a poll interval without a sample).  One that arrives
+ * on Python's handling of a command: it goes to Python once a step has sent its duty (or
+ * before the first step) and nothing more is queued, or after a poll interval without a
+ * sample.  One that arrives
  * for the step being computed is then applied at the next step, counted as late; the
  * bench sends commands ahead of their step. */
 int bn_ctl_serve(bn_ctl_t *ctl, bn_bus_t *bus)
@@ -399,7 +400,8 @@ int bn_ctl_serve(bn_ctl_t *ctl, bn_bus_t *bus)
         int64_t deadline = bn_now_ns() + ctl->poll_ns;
         if (deadline > t_return)
             deadline = t_return;
-        int slack = ctl->held.n > 0 && ctl->slack;
+        /* before the first step no sample waits for a duty (a start goes at once) */
+        int slack = ctl->held.n > 0 && (ctl->slack || ctl->c.steps == 0);
         int r = bn_recv_until(bus, &in, slack ? 0 : deadline); /* slack: what is queued */
         if (r == 0 && ctl->held.n > 0 && (slack || bn_now_ns() >= deadline))
             return unhold(ctl);

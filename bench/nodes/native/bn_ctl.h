@@ -146,8 +146,8 @@ typedef struct {
     bn_ctl_counts_t c;
     bn_ctl_cmd_t cmds[BN_CTL_CMDS]; /* pending, by step */
     /* real time (bn_ctl_serve): command frames met while a sample may wait, held and
-     * handed over one per return once a duty is out (slack), or after a poll interval
-     * without a sample */
+     * handed over one per return once a duty is out (slack) or before the first step,
+     * or after a poll interval without a sample */
     bn_held_t held;
     int32_t slack;
     /* loop state */
