@@ -274,3 +274,70 @@ def test_a_real_time_controller_whose_samples_stopped_still_stops_when_asked(
     stop.set()
     assert ended.wait(10.0), "the node did not see its stop flag"
     assert node.samples_accepted > 0  # it had samples, so it was in the timeouts
+
+
+def test_a_real_time_controller_answers_samples_queued_behind_commands_and_applies_them(
+    native: Any,
+) -> None:
+    """Real time: a command frame (twice, as the bench's pacer sends it) queued just
+    before a sample is held until that sample's duty is out (bn_ctl_serve), then handed
+    to Python; every command frame the loop receives goes through the ring.  Each sample
+    is answered with its duty, and every command is applied at its step, none late, the
+    last one (a stop) ending the loop."""
+    import threading
+    import time
+
+    from bench.wire._bus import BusSpec
+    from bench.wire._protocol import CMD_NONE
+
+    codec = Codec()
+    node = make_controller_node(load_scenario("wen-5.1"), "tt-dq", codec)
+    spec = BusSpec("udp_multicast", GROUP, free_port())
+    ready, ended, errors = threading.Event(), threading.Event(), []
+
+    def serve() -> None:
+        try:
+            native.native_controller_loop(spec, node, realtime=True, on_ready=ready.set)
+        except BaseException as e:  # the test thread reports it
+            errors.append(e)
+        finally:
+            ended.set()
+
+    def command(seq: int, step: int, cmd: int, rpm: float) -> can.Message:
+        sig = {"cmd": cmd, "seq": seq % 16, "step": step, "speed_ref": rpm, "load_torque": 0.0}
+        return codec.encode("BenchCommand", sig)
+
+    n, stop_at = 200, 210
+    frames = [command(0, 0, CMD_START, 0.0)]
+    duties: set[int] = set()
+    threading.Thread(target=serve, daemon=True).start()
+    assert ready.wait(60.0), errors
+    with can.Bus(interface="udp_multicast", channel=GROUP, port=spec.port, fd=True) as bus:
+        bus.send(frames[0])
+        time.sleep(0.02)  # the start ahead of sample 0, as the bench sends it
+        seq = 0
+        for k in range(stop_at + 1):
+            if k % 10 == 5 and k + 20 < stop_at:
+                seq += 1
+                frames += [command(seq, k + 20, CMD_NONE, 10.0 * seq)] * 2
+                bus.send(frames[-1])
+                bus.send(frames[-1])
+            if k == n:
+                frames.append(command(seq + 1, stop_at, CMD_STOP, 0.0))
+                bus.send(frames[-1])
+            sample = {"i_a": 0.0, "i_b": 0.0, "u_dc": 540.0, "status": 1, "step": k}
+            bus.send(codec.encode("PhaseSamples", sample))
+            t_end = time.monotonic() + 1e-3
+            while (m := bus.recv(max(0.0, t_end - time.monotonic()))) is not None:
+                if m.arbitration_id == 0x10:  # PwmDuty
+                    d = codec.decode(m)
+                    assert d is not None and d.reason is None
+                    duties.add(int(d.signals["step"]))
+        assert ended.wait(10.0), "the stop command did not end the loop"
+    assert not errors, errors
+    assert node.counters.late_commands == 0
+    assert node.stopped and not node.commands.pending
+    assert node.commands.applied_seq == (seq + 1) % 16
+    assert node.commands_held is not None
+    assert node.commands_held["held"] == len(frames)
+    assert duties >= set(range(1, stop_at + 1))  # the duty of each sample k is tagged k + 1

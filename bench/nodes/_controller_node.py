@@ -132,6 +132,9 @@ class ControllerNode:
         #: Which loop ran the periods: "python" (:func:`bench.nodes._loops.controller_loop`)
         #: or "native" (:mod:`bench.nodes.native.controller_node`).
         self.node_engine = "python"
+        #: The native real-time loop's command frames held until a duty was out: held,
+        #: the most at once, handed over at once by a full ring (None: not that loop).
+        self.commands_held: dict[str, int] | None = None
         #: The newest output, whose telemetry is sent again when the command
         #: acknowledgement moves (``CtrlTelemetry.cmd_ack``, DBC 2.2).
         self.last_output: ControlOutput | None = None
@@ -274,6 +277,8 @@ class ControllerNode:
         out.update(steps=self.next_k, sample_timeouts=self.sample_timeouts)
         out.update(engine=self.ctrl.engine, engine_note=None)
         out["node_engine"] = self.node_engine
+        if self.commands_held is not None:
+            out["commands_held"] = dict(self.commands_held)
         out["design"] = controller_design(self.ctrl)
         return out
 

@@ -29,9 +29,11 @@ from bench._errors import BenchError
 from bench.wire._bus import UDP_HOP_LIMIT
 
 __all__ = [
+    "HELD",
     "HERE",
     "LIB_SOURCES",
     "Frame",
+    "Held",
     "NativeBuild",
     "Sig",
     "Stats",
@@ -229,6 +231,24 @@ class Frame(ctypes.Structure):
         ("flags", ctypes.c_uint8),
         ("data", ctypes.c_uint8 * 64),
         ("t_ns", ctypes.c_int64),
+    ]
+
+
+#: Frames a real-time node loop holds for Python (bn.h's BN_HELD).
+HELD = 64
+
+
+class Held(ctypes.Structure):
+    """``bn_held_t`` (bn.h): the command frames a real-time loop held for the slack of a
+    period: ``total`` held, the most at once (``max``), handed over at once (``full``)."""
+
+    _fields_ = [
+        ("total", ctypes.c_uint64),
+        ("max", ctypes.c_uint64),
+        ("full", ctypes.c_uint64),
+        ("n", ctypes.c_int32),
+        ("head", ctypes.c_int32),
+        ("f", Frame * HELD),
     ]
 
 

@@ -39,7 +39,7 @@ import numpy as np
 
 from bench._errors import BenchError
 from bench.nodes.native import _native
-from bench.nodes.native._native import BN_BRS, BN_EXT, BN_FD, Frame, Sig, Stats
+from bench.nodes.native._native import BN_BRS, BN_EXT, BN_FD, Frame, Held, Sig, Stats
 from plant_rt._faults import LEG_KINDS, MACHINE_KINDS, SENSOR_KINDS
 
 __all__ = [
@@ -351,6 +351,8 @@ class Loop(ctypes.Structure):
         ("err", _I32),
         ("parts", ctypes.POINTER(ctypes.c_uint32)),
         ("part_ns", _I64 * 3),
+        ("held_margin_ns", _I64),
+        ("held", Held),
     ]
 
 
@@ -610,19 +612,23 @@ class _Sync:
             u.faults.released[t % RING] = round(at * 1e9)
         self.push_commands()
 
-    def push_commands(self) -> None:
+    def push_commands(self, changed: bool = True) -> None:
+        """The queue's state to C; ``changed=False``: its pending list is C's but for what C
+        applied (a command frame the queue took as a repeat): the scalars only, not the
+        list (sorting and copying 500 pending commands took 55 us, half a 10 kHz period)."""
         node, u = self.node, self.u
         q = node.commands
-        pending = sorted(q.pending.items())
-        head = pending[:CMDS]
-        if head:
-            v = self.cmds[: len(head)]
-            v["step"] = [s for s, _ in head]
-            v["cmd"] = [c.cmd for _, c in head]
-            v["seq"] = [c.seq for _, c in head]
-            v["load_nm"] = [c.load_nm for _, c in head]
-        u.n_cmds = min(len(pending), CMDS)
-        u.cmds_more = int(len(pending) > CMDS)
+        if changed:
+            pending = sorted(q.pending.items())
+            head = pending[:CMDS]
+            if head:
+                v = self.cmds[: len(head)]
+                v["step"] = [s for s, _ in head]
+                v["cmd"] = [c.cmd for _, c in head]
+                v["seq"] = [c.seq for _, c in head]
+                v["load_nm"] = [c.load_nm for _, c in head]
+            u.n_cmds = min(len(pending), CMDS)
+            u.cmds_more = int(len(pending) > CMDS)
         u.applied_seq = q.applied_seq
         u.applied_upto = q.applied_upto
         u.cmd_horizon = node.cmd_horizon
@@ -641,15 +647,37 @@ class _Sync:
             if n:
                 node.duty_rejected[reason] = node.duty_rejected.get(reason, 0) + n
 
-    def pull(self) -> None:
-        from bench.nodes._plant_node import fault_name
+    def push_newest(self) -> None:
+        """The queue's state to C after it took one command beyond every other it knew
+        (``node.cmd_horizon``): that command goes to the end of C's list, or stays with
+        the ones Python holds beyond it; the list is not rewritten."""
+        node, u = self.node, self.u
+        s = node.cmd_horizon
+        if u.cmds_more or u.n_cmds >= CMDS:
+            u.cmds_more = 1
+        else:
+            c = node.commands.pending[s]
+            v = self.cmds[u.n_cmds]
+            v["step"], v["cmd"], v["seq"], v["load_nm"] = s, c.cmd, c.seq, c.load_nm
+            u.n_cmds += 1
+        self.push_commands(changed=False)
 
+    def pull_command(self) -> None:
+        """What a command frame's handling in a real-time loop reads: the poll's, the plant's
+        step (the command's unwrap), the commands C applied and the start and stop.
+        :meth:`pull` takes the rest at the next event and at the end."""
         node, u = self.node, self.u
         self.pull_poll()
         node.plant.adopt_core(u.k, u.meas_k)
         if u.applied_upto >= 0:
             node.commands.due(u.applied_upto)  # the ones C applied
         node.started, node.stopped = bool(u.started), bool(u.stopped)
+
+    def pull(self) -> None:
+        from bench.nodes._plant_node import fault_name
+
+        node, u = self.node, self.u
+        self.pull_command()
         node.dut_answered = bool(u.dut_answered)
         node.last_duty_k, node.rounds_waiting = u.last_duty_k, u.rounds_waiting
         node.latest_duty_step = u.latest_duty_step
@@ -1011,6 +1039,11 @@ def _jitter(
         "stall_total": float(stall.sum()),
         "stall_max": float(stall.max()) if len(stall) else 0.0,
         "skipped": float(st.skipped),
+        # command frames held from a period's receive to its slack, the most at once, and
+        # the ones handed over at once by a full ring (bn_held_t)
+        "commands_held": float(loop.held.total),
+        "commands_held_max": float(loop.held.max),
+        "commands_held_full": float(loop.held.full),
     }
 
 
@@ -1105,6 +1138,9 @@ def plant_loop_native(
             loop.late_cap = n
             parts = (ctypes.c_uint32 * (3 * n))()
             loop.parts = ctypes.cast(parts, ctypes.POINTER(ctypes.c_uint32))
+            # a command frame met before a step goes to Python after it while half a
+            # period is left: Python's handling of one took 10-26 us (docs/REALTIME.md)
+            loop.held_margin_ns = loop.period_ns // 2
         diag = PlantDiagnostics(node)
         t_loop = time.perf_counter()
         said_fault = node.fault
@@ -1113,6 +1149,8 @@ def plant_loop_native(
                 ev = dll.bn_plant_loop(ctypes.byref(loop))
                 if ev == EV_POLL and realtime:
                     sync.pull_poll()
+                elif ev == EV_FRAME and realtime:
+                    sync.pull_command()  # in the slack of a period (bn_plant_loop.c)
                 else:
                     sync.pull()
                     faults.pull(u, node.plant)
@@ -1124,8 +1162,14 @@ def plant_loop_native(
                 if ev == EV_DONE:
                     break
                 if ev == EV_FRAME:
+                    n_pending, horizon = len(node.commands.pending), node.cmd_horizon
                     node.on_message(to_message(loop.ev_frame))
-                    sync.push_commands()
+                    if len(node.commands.pending) == n_pending:
+                        sync.push_commands(changed=False)  # a repeat, or no command
+                    elif node.cmd_horizon > horizon and node.cmd_horizon in node.commands.pending:
+                        sync.push_newest()
+                    else:
+                        sync.push_commands()
                 elif ev == EV_CMDS:
                     sync.push_commands()
                 elif ev == EV_POLL:

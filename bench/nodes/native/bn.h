@@ -167,6 +167,27 @@ int bn_recv(bn_bus_t *b, bn_frame_t *f, int64_t timeout_ns);
 
 void bn_close(bn_bus_t *b);
 
+/* ---- frames held for Python ------------------------------------------------
+ * Real time: the frames a node loop hands to Python (BenchCommand), held from where
+ * the loop met them (before a step: the plant; while a sample may wait: the
+ * controller) to the slack of its period (bn_plant_loop.c, bn_ctl.c).  Size: a burst
+ * of the bench's pacer, 32 commands (bench.runs._pacing.COMMAND_BURST) twice each,
+ * met in one period. */
+#define BN_HELD 64
+
+typedef struct {
+    uint64_t total, max, full; /* frames held, the most at once, handed over at once (full) */
+    int32_t n, head;
+    bn_frame_t f[BN_HELD];
+} bn_held_t;
+
+/* Hold *f: 0; when the ring is full the oldest goes to *out first (1: hand *out to
+ * Python now; nothing is lost and the order is kept). */
+int bn_held_put(bn_held_t *h, const bn_frame_t *f, bn_frame_t *out);
+
+/* The oldest held frame into *out (h->n > 0). */
+void bn_held_take(bn_held_t *h, bn_frame_t *out);
+
 /* ---- time ---------------------------------------------------------------- */
 
 int64_t bn_now_ns(void);       /* CLOCK_MONOTONIC */

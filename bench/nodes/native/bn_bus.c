@@ -460,3 +460,24 @@ void bn_close(bn_bus_t *b)
     b->fd = b->tx_fd = -1;
     b->tx_connected = false;
 }
+
+int bn_held_put(bn_held_t *h, const bn_frame_t *f, bn_frame_t *out)
+{
+    int full = h->n == BN_HELD;
+    if (full) {
+        bn_held_take(h, out);
+        h->full++;
+    }
+    h->f[(h->head + h->n) % BN_HELD] = *f;
+    h->n++;
+    h->total++;
+    if ((uint64_t)h->n > h->max) h->max = (uint64_t)h->n;
+    return full;
+}
+
+void bn_held_take(bn_held_t *h, bn_frame_t *out)
+{
+    *out = h->f[h->head];
+    h->head = (h->head + 1) % BN_HELD;
+    h->n--;
+}

@@ -35,6 +35,8 @@ void bn_ctl_reset(bn_ctl_t *ctl)
     ctl->w_m_ref = 0.0;
     ctl->t_last = ctl->t_sample = 0;
     ctl->seen = 0;
+    memset(&ctl->held, 0, sizeof ctl->held);
+    ctl->slack = 0;
 }
 
 /* bench/wire/_protocol.py unwrap: the step nearest expected whose value mod m is raw */
@@ -359,7 +361,21 @@ static int bus_sink(void *ctx, const bn_frame_t *f)
     return 0;
 }
 
-/* controller_loop: frames until an event; real time: the sample timeout */
+/* The oldest held command frame into cmd_frame, for Python */
+static int unhold(bn_ctl_t *ctl)
+{
+    bn_held_take(&ctl->held, &ctl->cmd_frame);
+    if (ctl->held.n == 0) ctl->slack = 0;
+    return BN_CTL_EV_COMMAND;
+}
+
+/* controller_loop: frames until an event; real time: the sample timeout.  In real time
+ * a command frame is held while a sample may be waiting behind it, so that no duty waits
+ * on Python's handling of a command: it goes to Python once a step has sent its duty (or
+ * before the first step) and nothing more is queued, or after a poll interval without a
+ * sample.  One that arrives
+ * for the step being computed is then applied at the next step, counted as late; the
+ * bench sends commands ahead of their step. */
 int bn_ctl_serve(bn_ctl_t *ctl, bn_bus_t *bus)
 {
     int64_t now = bn_now_ns();
@@ -375,8 +391,8 @@ int bn_ctl_serve(bn_ctl_t *ctl, bn_bus_t *bus)
     if (ev != BN_CTL_EV_NONE)
         return ev;
     for (;;) {
-        if (ctl->stopped)
-            return BN_CTL_EV_STOPPED;
+        if (ctl->stopped) /* the frames still held go to Python first */
+            return ctl->held.n > 0 ? unhold(ctl) : BN_CTL_EV_STOPPED;
         now = bn_now_ns();
         if (now >= t_return)
             return BN_CTL_EV_POLL; /* also while frames keep coming: Python looks in time */
@@ -384,7 +400,11 @@ int bn_ctl_serve(bn_ctl_t *ctl, bn_bus_t *bus)
         int64_t deadline = bn_now_ns() + ctl->poll_ns;
         if (deadline > t_return)
             deadline = t_return;
-        int r = bn_recv_until(bus, &in, deadline);
+        /* before the first step no sample waits for a duty (a start goes at once) */
+        int slack = ctl->held.n > 0 && (ctl->slack || ctl->c.steps == 0);
+        int r = bn_recv_until(bus, &in, slack ? 0 : deadline); /* slack: what is queued */
+        if (r == 0 && ctl->held.n > 0 && (slack || bn_now_ns() >= deadline))
+            return unhold(ctl);
         now = bn_now_ns();
         if (r < 0) {
             ctl->error = -r;
@@ -412,8 +432,17 @@ int bn_ctl_serve(bn_ctl_t *ctl, bn_bus_t *bus)
             && !(ctl->needs_truth && id == BENCH_DBC_PLANT_TRUTH_FRAME_ID))
             continue;
         ctl->t_last = now;
+        uint64_t steps = ctl->c.steps;
         ev = bn_ctl_on_frame(ctl, &in, bus_sink, &out);
         flush(&out);
+        if (ctl->c.steps != steps)
+            ctl->slack = 1; /* a duty is out */
+        if (ev == BN_CTL_EV_COMMAND && ctl->realtime) {
+            bn_frame_t got = ctl->cmd_frame;
+            if (!bn_held_put(&ctl->held, &got, &ctl->cmd_frame))
+                continue;
+            return BN_CTL_EV_COMMAND; /* full: the oldest now */
+        }
         if (ev != BN_CTL_EV_NONE)
             return ev;
     }

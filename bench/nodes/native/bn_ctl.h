@@ -145,6 +145,11 @@ typedef struct {
     bn_frame_t cmd_frame;
     bn_ctl_counts_t c;
     bn_ctl_cmd_t cmds[BN_CTL_CMDS]; /* pending, by step */
+    /* real time (bn_ctl_serve): command frames met while a sample may wait, held and
+     * handed over one per return once a duty is out (slack) or before the first step,
+     * or after a poll interval without a sample */
+    bn_held_t held;
+    int32_t slack;
     /* loop state */
     int64_t t_last, t_sample;
     uint64_t seen;

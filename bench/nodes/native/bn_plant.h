@@ -270,7 +270,8 @@ typedef struct {
     bn_clock_t clock;
     int32_t rt_started;
     /* loop state (kept across returns) */
-    int32_t phase;              /* 0: first frames not sent yet */
+    int32_t phase;              /* 0: first frames not sent yet; real time: 1 send, 2 receive
+                                   and step, 3 after the step, 4 done */
     int32_t stall_what;
     int64_t t_progress, t_quiet, t_poll;
     int32_t last_phase;         /* 0, 1: waiting for the last answer, 2: done */
@@ -283,6 +284,11 @@ typedef struct {
      * part_ns: the period's so far (BN_PART_*) */
     uint32_t *parts;
     int64_t part_ns[3];
+    /* real time: the frames for Python (BenchCommand) met while draining before a step,
+     * held and handed over after the step, one per return, while more than
+     * held_margin_ns are left to the next deadline (the rest in later periods) */
+    int64_t held_margin_ns;
+    bn_held_t held;
 } bn_plant_loop_t;
 
 enum { BN_PART_SEND = 0, BN_PART_RECV = 1, BN_PART_STEP = 2 };

@@ -218,13 +218,21 @@ static int loop_realtime(bn_plant_loop_t *L)
             t1 = bn_now_ns();
             L->part_ns[BN_PART_SEND] += t1 - t0;
             t0 = t1;
-            if (done(u)) {
-                u->overruns = L->clock.st.missed;
-                return BN_EV_DONE;
+            L->phase = done(u) ? 4 : 2;
+        }
+        if (L->phase == 4) { /* done: the frames still held go to Python first */
+            if (L->held.n > 0) {
+                bn_held_take(&L->held, &L->ev_frame);
+                return BN_EV_FRAME;
             }
-            L->phase = 2;
+            u->overruns = L->clock.st.missed;
+            return BN_EV_DONE;
         }
         if (L->phase == 2) {
+            /* A command frame is held, not handed to Python here: the step and the next
+             * send would wait on Python's handling.  It goes to Python after the step
+             * (below), so one that arrives for the present step is applied a period
+             * later (counted as a late command); the bench sends them 0.5 s ahead. */
             for (;;) {
                 int r = bn_recv_until(L->bus, &f, 0);
                 if (r < 0) {
@@ -232,8 +240,8 @@ static int loop_realtime(bn_plant_loop_t *L)
                     return BN_EV_ERROR;
                 }
                 if (r == 0) break;
-                if (take(L, &f)) {
-                    L->part_ns[BN_PART_RECV] += bn_now_ns() - t0;
+                if (take(L, &f) && bn_held_put(&L->held, &f, &L->ev_frame)) {
+                    L->part_ns[BN_PART_RECV] += bn_now_ns() - t0; /* full: the oldest now */
                     return BN_EV_FRAME;
                 }
             }
@@ -251,6 +259,12 @@ static int loop_realtime(bn_plant_loop_t *L)
                 L->t_poll = t1 + ns(L->poll_s);
                 return BN_EV_POLL;
             }
+        }
+        /* phase 3: the period's work is done; a held frame goes to Python while its
+         * handling ends before the deadline */
+        if (L->held.n > 0 && bn_clock_deadline(&L->clock) - bn_now_ns() > L->held_margin_ns) {
+            bn_held_take(&L->held, &L->ev_frame);
+            return BN_EV_FRAME;
         }
         uint64_t p = L->clock.st.periods;
         if (L->parts != NULL && p < L->busy_cap) {

@@ -44,7 +44,7 @@ from bench.nodes._counters import (
     REPEATED_COUNTER,
 )
 from bench.nodes.native import _native
-from bench.nodes.native._native import BN_BRS, BN_ERR, BN_EXT, BN_FD, BN_RTR, Frame, Sig
+from bench.nodes.native._native import BN_BRS, BN_ERR, BN_EXT, BN_FD, BN_RTR, Frame, Held, Sig
 from bench.wire._codec import (
     REJECT_BAD_CRC,
     REJECT_BAD_LENGTH,
@@ -190,6 +190,8 @@ class CtlBlock(ctypes.Structure):
         ("cmd_frame", Frame),
         ("c", Counts),
         ("cmds", CtlCmd * CMDS),
+        ("held", Held),
+        ("slack", ctypes.c_int32),
     ]
 
 
@@ -283,13 +285,17 @@ class NativeController:
             setattr(c, attr, (BN_FD if spec.is_fd else 0) | (BN_BRS if spec.brs else 0))
         c.run_id = node.run_id
         c.rpm_per_rad_s = RPM_PER_RAD_S  # the node's speed_ref in rad/s (_apply_commands)
+        self._newest = -1  # the last step of the pending list handed to C
         self._sync_commands()
 
     # -- what stays Python's --------------------------------------------------
-    def _sync_commands(self) -> None:
+    def _sync_commands(self, n_before: int | None = None) -> None:
         """The Python queue's state to C: the acknowledgement, the stop and fault flags,
         and the pending list (its first :data:`CMDS`, in step order; ``cmds_more`` when
-        it holds more)."""
+        it holds more).  ``n_before``: the pending commands before one command frame was
+        queued, when C's list was the queue's but for what C applied: a repeat leaves the
+        list as it is, and a command beyond every other goes to its end (rewriting the
+        list for each of the ramp's frames took longer than a 10 kHz period)."""
         node, c = self.node, self.ctl
         q = node.commands
         c.ack_seq = q.ack_seq
@@ -297,7 +303,21 @@ class NativeController:
         c.faulted = int(node.faulted)
         c.applied_upto = q.applied_upto
         c.applied_seq = q.applied_seq
+        if n_before is not None and len(q.pending) == n_before:
+            return
+        if n_before is not None and len(q.pending) == n_before + 1:
+            top = max(q.pending)
+            if top > self._newest:
+                self._newest = top
+                if c.cmds_more or c.n_cmds >= CMDS:
+                    c.cmds_more = 1
+                else:
+                    cmd, e = q.pending[top], c.cmds[c.n_cmds]
+                    e.step, e.cmd, e.seq, e.speed_ref_rpm = top, cmd.cmd, cmd.seq, cmd.speed_ref_rpm
+                    c.n_cmds += 1
+                return
         pending = sorted(q.pending.items())
+        self._newest = pending[-1][0] if pending else -1
         for j, (s, cmd) in enumerate(pending[:CMDS]):
             e = c.cmds[j]
             e.step, e.cmd, e.seq, e.speed_ref_rpm = s, cmd.cmd, cmd.seq, cmd.speed_ref_rpm
@@ -332,12 +352,12 @@ class NativeController:
             data=bytes(f.data[: f.len]),
             check=False,
         )
-        before = node.commands.ack_seq
+        before, n_before = node.commands.ack_seq, len(node.commands.pending)
         node.last_output = None  # the telemetry is C's (send_ack)
         node.on_message(msg)
         if node.commands.ack_seq != before and c.has_last:
             c.send_ack = 1
-        self._sync_commands()
+        self._sync_commands(n_before)
 
     def _more_commands(self) -> None:
         """The list handed over ran dry with more pending: the next ones."""
@@ -416,6 +436,12 @@ class NativeController:
         node.samples_accepted += c.c.samples_accepted
         node.next_k = c.next_k
         node.node_engine = "native"
+        if c.realtime:
+            node.commands_held = {
+                "held": int(c.held.total),
+                "held_max": int(c.held.max),
+                "held_full": int(c.held.full),
+            }
         c.c = Counts()
 
 
