@@ -317,6 +317,7 @@ int bn_ctl_on_frame(bn_ctl_t *ctl, const bn_frame_t *in, bn_ctl_sink_t sink, voi
         return BN_CTL_EV_NONE;
     }
     if (cmd) {
+        if (bn_cmd_seen_copy(&ctl->cmd_seen, in, ctl->next_k)) return BN_CTL_EV_NONE;
         ctl->cmd_frame = *in;
         return BN_CTL_EV_COMMAND;
     }
@@ -418,3 +419,15 @@ int bn_ctl_serve(bn_ctl_t *ctl, bn_bus_t *bus)
             return ev;
     }
 }
+
+void bn_ctl_cmd_seen_init(bn_ctl_t *ctl, uint32_t id, int64_t span)
+{
+    bn_cmd_seen_init(&ctl->cmd_seen, id, span);
+}
+
+void bn_ctl_cmd_taken(bn_ctl_t *ctl, const bn_frame_t *f)
+{
+    bn_cmd_seen_take(&ctl->cmd_seen, f, ctl->next_k);
+}
+
+uint64_t bn_ctl_cmd_copies(const bn_ctl_t *ctl) { return ctl->cmd_seen.copies; }

@@ -283,6 +283,8 @@ typedef struct {
      * part_ns: the period's so far (BN_PART_*) */
     uint32_t *parts;
     int64_t part_ns[3];
+    /* the bench commands Python took, whose copies take() drops (bn.h; Python sets it up) */
+    bn_cmd_seen_t cmd_seen;
 } bn_plant_loop_t;
 
 enum { BN_PART_SEND = 0, BN_PART_RECV = 1, BN_PART_STEP = 2 };

@@ -73,6 +73,7 @@ static int take(bn_plant_loop_t *L, const bn_frame_t *f)
         bn_plant_on_duty(L->u, f);
         return 0;
     }
+    if (bn_cmd_seen_copy(&L->cmd_seen, f, L->u->k)) return 0; /* a command's copy (bn.h) */
     for (int j = 0; j < 4; j++) {
         if (L->event_ids[j] && f->id == L->event_ids[j]) {
             L->ev_frame = *f;
