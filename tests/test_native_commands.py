@@ -6,12 +6,16 @@ and gets the pending list back; C applies each command at its step, with no retu
 to Python.  Its answers must be the Python node's, bit for bit, and the node's state
 after the run (the queue, the stop, the speed reference) the same: checked with more
 commands pending than the list C holds at a time (the refill, ``EV_CMDS``), a late
-command, a repeat, and a stop.
+command, a repeat, and a stop; and with every command three times, as the bench
+sends it: the copies of the commands Python took are dropped in C, counted as
+Python counts them (``bn_cmd_seen_t``, bn.h).
 """
 
 from __future__ import annotations
 
+import ctypes
 import shutil
+from typing import Any
 
 import can
 import pytest
@@ -116,3 +120,101 @@ def test_the_speed_reference_of_each_command_reaches_the_core() -> None:
     assert got == want
     assert nat_node.ctrl.w_m_ref == py_node.ctrl.w_m_ref != 0.0
     assert nat_node.ctrl.states()["w_m_ref"] == py_node.ctrl.states()["w_m_ref"]
+
+
+def _with_copies(frames: list[can.Message]) -> list[can.Message]:
+    """Each command twice at once and once more four frames later, as the bench sends
+    them (bench/runs/_pacing.py: twice, then again after AGAIN_S)."""
+    out: list[can.Message] = []
+    again: list[tuple[int, can.Message]] = []
+    for m in frames:
+        out.append(m)
+        if m.arbitration_id == CODEC.frame_id("BenchCommand"):
+            out.append(m)
+            again.append((len(out) + 4, m))
+        while again and again[0][0] <= len(out):
+            out.append(again.pop(0)[1])
+    out += [m for _, m in again]
+    return out
+
+
+def test_the_copies_of_a_command_are_dropped_in_c_as_python_counts_them() -> None:
+    """The copies of the commands Python took never reach Python (bn.h, bn_cmd_seen_t):
+    the answers, the queue and every counter (the copies among the duplicates) are the
+    Python node's, and Python sees each command once."""
+    from bench.nodes.native import controller_node as native
+
+    frames = _with_copies(_frames())
+    n_cmd = sum(m.arbitration_id == CODEC.frame_id("BenchCommand") for m in _frames())
+    py_node, nat_node = _node(), _node()
+    want = _python(py_node, frames)
+    events: list[int] = []
+    got = native_answers(nat_node, frames, events.append)
+    assert got == want
+    assert nat_node.counters.as_dict() == py_node.counters.as_dict()
+    # 2 copies of each command, and the _frames' own repeat of seq 7
+    assert py_node.counters.duplicates == 2 * n_cmd + 1
+    # Python saw each command it took once; the repeat of seq 7 (other bytes: another
+    # set-point) it did not take, so its copies reach Python too, and are counted there
+    assert events.count(native.EV_COMMAND) == (n_cmd - 1) + 3
+    assert (nat_node.commands.ack_seq, sorted(nat_node.commands.pending)) == (
+        py_node.commands.ack_seq,
+        sorted(py_node.commands.pending),
+    )
+
+
+def _seen_ring() -> tuple[Any, Any]:
+    from bench.nodes.native import _native
+
+    dll = _native.library()
+    seen = _native.CmdSeen()
+    dll.bn_cmd_seen_init(
+        ctypes.byref(seen), CODEC.frame_id("BenchCommand"), _native.copy_span(M_CMD)
+    )
+    return dll, seen
+
+
+def _frame(msg: can.Message) -> Any:
+    from bench.nodes.native import _native
+
+    f = _native.Frame(id=msg.arbitration_id, len=len(msg.data), flags=0)
+    f.data[: len(msg.data)] = list(msg.data)
+    return f
+
+
+def test_a_copy_is_dropped_only_within_its_span_and_while_kept() -> None:
+    from bench.nodes.native import _native
+
+    dll, seen = _seen_ring()
+    span = _native.copy_span(M_CMD)
+    a = _frame(_cmd(3, 40, CMD_NONE, 10.0))
+    dll.bn_cmd_seen_take(ctypes.byref(seen), ctypes.byref(a), 100)
+    assert dll.bn_cmd_seen_copy(ctypes.byref(seen), ctypes.byref(a), 100) == 1
+    assert dll.bn_cmd_seen_copy(ctypes.byref(seen), ctypes.byref(a), 100 + span) == 1
+    # later than the span: the step might unwrap elsewhere; Python decides
+    assert dll.bn_cmd_seen_copy(ctypes.byref(seen), ctypes.byref(a), 101 + span) == 0
+    assert dll.bn_cmd_seen_copy(ctypes.byref(seen), ctypes.byref(a), 99) == 0  # before it
+    # one bit else is another frame; another identifier is not a command
+    b = _frame(_cmd(3, 40, CMD_NONE, 10.1))
+    assert dll.bn_cmd_seen_copy(ctypes.byref(seen), ctypes.byref(b), 100) == 0
+    s = _frame(_sample(40))
+    dll.bn_cmd_seen_take(ctypes.byref(seen), ctypes.byref(s), 100)
+    assert dll.bn_cmd_seen_copy(ctypes.byref(seen), ctypes.byref(s), 100) == 0
+    assert seen.copies == 2
+    # the ring keeps the last CMD_SEEN taken: the first is then forgotten
+    for j in range(_native.CMD_SEEN):
+        f = _frame(_cmd(j + 4, 41 + j, CMD_NONE, 0.0))
+        dll.bn_cmd_seen_take(ctypes.byref(seen), ctypes.byref(f), 100)
+    assert dll.bn_cmd_seen_copy(ctypes.byref(seen), ctypes.byref(a), 100) == 0
+
+
+def test_the_kept_commands_are_among_the_keys_the_queue_remembers() -> None:
+    """bn.h's argument: a kept frame's key is still in CommandQueue.recent, and a copy
+    within the span unwraps to the same step as a command the queue took (not stale:
+    no more than a quarter of the modulus before the node's step)."""
+    from bench.nodes._counters import CommandQueue
+    from bench.nodes.native import _native
+
+    assert (CommandQueue(M_CMD).recent.maxlen or 0) >= _native.CMD_SEEN
+    span = _native.copy_span(M_CMD)
+    assert M_CMD // 4 + span < M_CMD // 2

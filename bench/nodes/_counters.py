@@ -57,17 +57,19 @@ class NodeCounters:
     send_errors: int = 0
     frames_lost_on_send: int = 0
 
-    def reject(self, reason: str) -> None:
-        """Count a frame that is not used, under ``reason``.
+    def reject(self, reason: str, n: int = 1) -> None:
+        """Count ``n`` frames that are not used, under ``reason``.
 
         ``repeated_counter`` goes to ``duplicates`` (and the per-reason
         counts); every other reason to ``frames_rejected``.
         """
-        self.reject_reasons[reason] = self.reject_reasons.get(reason, 0) + 1
+        if n <= 0:
+            return
+        self.reject_reasons[reason] = self.reject_reasons.get(reason, 0) + n
         if reason == REPEATED_COUNTER:
-            self.duplicates += 1
+            self.duplicates += n
         else:
-            self.frames_rejected += 1
+            self.frames_rejected += n
 
     @property
     def frames_seen(self) -> int:
@@ -124,6 +126,9 @@ class CommandQueue:
         self.ahead: dict[int, int] = {}
         #: seq of the newest command applied (-1: none).
         self.applied_seq = -1
+        #: Frames taken, new or late (each put its key in :attr:`recent`): a native
+        #: node drops the copies of the last ones before they reach Python (bn.h).
+        self.taken = 0
 
     def _follow_seq(self, seq: int, step: int) -> bool:
         """Record a new command's seq; True when it extended the gap-free run."""
@@ -158,6 +163,7 @@ class CommandQueue:
                 return None
             counters.late_commands += 1
             self.recent.append(key)
+            self.taken += 1
             self._follow_seq(seq, s)
             # late: at the next call of due() (the next period the node handles;
             # a plant waiting for its start asks for step 0 again and again, and
@@ -171,6 +177,7 @@ class CommandQueue:
             return s
         else:
             self.recent.append(key)
+            self.taken += 1
             self._follow_seq(seq, s)
         if len(self.pending) >= MAX_PENDING_COMMANDS:
             counters.reject(REJECT_QUEUE_FULL)

@@ -29,15 +29,18 @@ from bench._errors import BenchError
 from bench.wire._bus import UDP_HOP_LIMIT
 
 __all__ = [
+    "CMD_SEEN",
     "HELD",
     "HERE",
     "LIB_SOURCES",
+    "CmdSeen",
     "Frame",
     "Held",
     "NativeBuild",
     "Sig",
     "Stats",
     "build",
+    "copy_span",
     "library",
     "library_path",
     "load",
@@ -50,7 +53,14 @@ LIB_SOURCES = ("bn_bus.c", "bn_msgpack.c", "bn_clock.c")
 #: The plant node's and the controller node's units and loops, the in-process pair and
 #: the recorder's receive thread (beside this file); the library links them with the DBC's C code and the controller
 #: core that ``bench codegen`` writes (``gen/``, ``gen/core/``) and the plant core.
-NODE_SOURCES = ("bn_plant.c", "bn_plant_loop.c", "bn_ctl.c", "bn_pair.c", "bn_rec.c")
+NODE_SOURCES = (
+    "bn_plant.c",
+    "bn_plant_loop.c",
+    "bn_ctl.c",
+    "bn_cmdseen.c",
+    "bn_pair.c",
+    "bn_rec.c",
+)
 #: The plant core's sources (the ones ``plant_rt._cplant`` is built from).
 PLANT_CORE_DIR = HERE.parents[2] / "plant_rt" / "core"
 #: Flags of every compile: C99 (with the POSIX and Linux calls), warnings as errors; no
@@ -252,6 +262,33 @@ class Held(ctypes.Structure):
     ]
 
 
+#: ``BN_CMD_SEEN`` (bn.h): the bench commands a native node keeps to drop their copies;
+#: at most the 64 keys ``CommandQueue.recent`` holds (tests/test_native_commands.py).
+CMD_SEEN = 16
+
+
+class CmdSeen(ctypes.Structure):
+    """``bn_cmd_seen_t`` (bn.h): the bench commands Python took, whose copies the loop drops."""
+
+    _fields_ = [
+        ("id", ctypes.c_uint32),
+        ("n", ctypes.c_int32),
+        ("head", ctypes.c_int32),
+        ("span", ctypes.c_int64),
+        ("len", ctypes.c_uint8 * CMD_SEEN),
+        ("flags", ctypes.c_uint8 * CMD_SEEN),
+        ("data", (ctypes.c_uint8 * 8) * CMD_SEEN),
+        ("k", ctypes.c_int64 * CMD_SEEN),
+        ("copies", ctypes.c_uint64),
+    ]
+
+
+def copy_span(modulus: int) -> int:
+    """Steps a bench command's copy may come after it and still be dropped as one
+    (``bn_cmd_seen_t.span``, bn.h): an eighth of the step counter's ``modulus``."""
+    return modulus // 8
+
+
 class Sig(ctypes.Structure):
     """``bn_sig_t`` (bn.h): :meth:`bench.wire._codec.Codec.signal_table` of one signal."""
 
@@ -337,6 +374,13 @@ def load(lib: Path) -> ctypes.CDLL:
     dll.bn_mp_pack.restype = ctypes.c_size_t
     dll.bn_mp_unpack.argtypes = [ctypes.c_char_p, ctypes.c_size_t, ctypes.c_void_p]
     dll.bn_mp_unpack.restype = ctypes.c_int
+    seen = ctypes.POINTER(CmdSeen)
+    dll.bn_cmd_seen_init.argtypes = [seen, ctypes.c_uint32, ctypes.c_int64]
+    dll.bn_cmd_seen_init.restype = None
+    dll.bn_cmd_seen_take.argtypes = [seen, ctypes.POINTER(Frame), ctypes.c_int64]
+    dll.bn_cmd_seen_take.restype = None
+    dll.bn_cmd_seen_copy.argtypes = [seen, ctypes.POINTER(Frame), ctypes.c_int64]
+    dll.bn_cmd_seen_copy.restype = ctypes.c_int
     return dll
 
 

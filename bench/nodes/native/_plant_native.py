@@ -8,7 +8,8 @@ while it runs), which steps the same plant core instance
 (:meth:`plant_rt.Plant.core_address`) and returns only on an event it does
 not handle: a ``BenchCommand`` or ``CtrlTelemetry`` frame (the node's
 :class:`~bench.nodes._counters.CommandQueue` takes it, and the pending
-commands go back to C), a poll (a signal, or a while without one), a stall,
+commands go back to C; the copies of a command it took are dropped in C and
+counted as its repeats, ``bn_cmd_seen_t`` in bn.h), a poll (a signal, or a while without one), a stall,
 the end.  The node's state and counters are taken back at every event, so
 its report, its stderr lines and its last ``PlantStatus`` are those of the
 Python node.
@@ -38,8 +39,19 @@ import can
 import numpy as np
 
 from bench._errors import BenchError
+from bench.nodes._counters import REPEATED_COUNTER
 from bench.nodes.native import _native
-from bench.nodes.native._native import BN_BRS, BN_EXT, BN_FD, Frame, Held, Sig, Stats
+from bench.nodes.native._native import (
+    BN_BRS,
+    BN_EXT,
+    BN_FD,
+    CmdSeen,
+    Frame,
+    Held,
+    Sig,
+    Stats,
+    copy_span,
+)
 from plant_rt._faults import LEG_KINDS, MACHINE_KINDS, SENSOR_KINDS
 
 __all__ = [
@@ -353,6 +365,7 @@ class Loop(ctypes.Structure):
         ("part_ns", _I64 * 3),
         ("held_margin_ns", _I64),
         ("held", Held),
+        ("cmd_seen", CmdSeen),
     ]
 
 
@@ -1116,6 +1129,9 @@ def plant_loop_native(
         for j, name in enumerate(names[1:]):
             loop.ids[j + 1] = codec.frame_id(name)
             loop.event_ids[j] = codec.frame_id(name)
+        # the copies of the bench commands Python took are dropped in C (bn.h)
+        seen = ctypes.byref(loop.cmd_seen)
+        dll.bn_cmd_seen_init(seen, codec.frame_id("BenchCommand"), copy_span(node.commands.modulus))
         loop.retransmit_s = retransmit_s
         loop.stall_s = watchdog_s
         loop.first_s = dut_timeout_s
@@ -1163,7 +1179,10 @@ def plant_loop_native(
                     break
                 if ev == EV_FRAME:
                     n_pending, horizon = len(node.commands.pending), node.cmd_horizon
+                    taken = node.commands.taken
                     node.on_message(to_message(loop.ev_frame))
+                    if node.commands.taken != taken:
+                        dll.bn_cmd_seen_take(seen, ctypes.byref(loop.ev_frame), u.k)
                     if len(node.commands.pending) == n_pending:
                         sync.push_commands(changed=False)  # a repeat, or no command
                     elif node.cmd_horizon > horizon and node.cmd_horizon in node.commands.pending:
@@ -1202,6 +1221,7 @@ def plant_loop_native(
                     raise BenchError(f"plant: native loop: {os.strerror(-loop.err)}")
         finally:
             node.loop_s = time.perf_counter() - t_loop
+            node.counters.reject(REPEATED_COUNTER, int(loop.cmd_seen.copies))
             if realtime and loop.rt_started and busy and late and parts:
                 u.overruns = loop.clock.st.missed  # also when a stop ended the loop
                 node.jitter = _jitter(dll, loop, busy, late, parts)

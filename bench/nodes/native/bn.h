@@ -264,6 +264,42 @@ typedef struct {
 
 int bn_timing_run(const bn_timing_cfg_t *cfg, uint32_t *busy, bn_stats_t *out);
 
+/* ---- copies of a bench command (bn_cmdseen.c) ------------------------------
+ * Each BenchCommand comes three times (twice at once, once more after
+ * bench.runs._pacing.AGAIN_S), and a frame a node's loop hands to Python costs a
+ * return and a decode there, mid-period in real time, at the nodes' SCHED_FIFO
+ * priority.  The copies are dropped here instead, under one condition that makes
+ * the drop exactly what Python does with them: the loop keeps the last BN_CMD_SEEN
+ * frames Python's CommandQueue took (bench/nodes/_counters.py: a new or late
+ * command, the frames whose (apply step, seq) go into CommandQueue.recent), each
+ * with the node's step when taken; a frame byte for byte one of them, received at
+ * most `span` steps later, has the same unwrapped apply step and seq (the step
+ * unwraps within half its modulus of the node's step, a taken one lies no more
+ * than a quarter before it, CommandQueue's stale bound: span = modulus / 8 keeps
+ * it inside) and that key is still among recent's 64 (BN_CMD_SEEN <= 64): a frame
+ * CommandQueue counts as repeated, no more.  So the loop counts it (copies, added
+ * to the node's duplicates, reason repeated_counter) and drops it.  A frame Python
+ * refused (stale, a bad CRC) is never in the list: its copies still
+ * go to Python (a full queue keeps the key: its copies are repeats there too). */
+#define BN_CMD_SEEN 16
+
+typedef struct {
+    uint32_t id;                     /* BenchCommand's identifier; 0: keep nothing */
+    int32_t n, head;                 /* frames kept, the next slot */
+    int64_t span;                    /* steps a copy may come after its original */
+    uint8_t len[BN_CMD_SEEN], flags[BN_CMD_SEEN];
+    uint8_t data[BN_CMD_SEEN][8];
+    int64_t k[BN_CMD_SEEN];          /* the node's step when Python took it */
+    uint64_t copies;                 /* frames dropped as copies */
+} bn_cmd_seen_t;
+
+/* Keep nothing yet; id and span as above. */
+void bn_cmd_seen_init(bn_cmd_seen_t *s, uint32_t id, int64_t span);
+/* 1 when f is a copy of a frame kept (counted in copies), else 0; now: the node's step. */
+int bn_cmd_seen_copy(bn_cmd_seen_t *s, const bn_frame_t *f, int64_t now);
+/* Python took f (CommandQueue.recent has its key) at the node's step now. */
+void bn_cmd_seen_take(bn_cmd_seen_t *s, const bn_frame_t *f, int64_t now);
+
 #ifdef __cplusplus
 }
 #endif

@@ -319,6 +319,7 @@ int bn_ctl_on_frame(bn_ctl_t *ctl, const bn_frame_t *in, bn_ctl_sink_t sink, voi
         return BN_CTL_EV_NONE;
     }
     if (cmd) {
+        if (bn_cmd_seen_copy(&ctl->cmd_seen, in, ctl->next_k)) return BN_CTL_EV_NONE;
         ctl->cmd_frame = *in;
         return BN_CTL_EV_COMMAND;
     }
@@ -361,12 +362,19 @@ static int bus_sink(void *ctx, const bn_frame_t *f)
     return 0;
 }
 
-/* The oldest held command frame into cmd_frame, for Python */
+/* The oldest held command frame that is no copy of a command Python took since it was
+ * held (bn.h, bn_cmd_seen_t: dropped and counted) into cmd_frame, for Python:
+ * BN_CTL_EV_COMMAND; BN_CTL_EV_NONE when none is left */
 static int unhold(bn_ctl_t *ctl)
 {
-    bn_held_take(&ctl->held, &ctl->cmd_frame);
+    int ev = BN_CTL_EV_NONE;
+    while (ctl->held.n > 0 && ev == BN_CTL_EV_NONE) {
+        bn_held_take(&ctl->held, &ctl->cmd_frame);
+        if (!bn_cmd_seen_copy(&ctl->cmd_seen, &ctl->cmd_frame, ctl->next_k))
+            ev = BN_CTL_EV_COMMAND;
+    }
     if (ctl->held.n == 0) ctl->slack = 0;
-    return BN_CTL_EV_COMMAND;
+    return ev;
 }
 
 /* controller_loop: frames until an event; real time: the sample timeout.  In real time
@@ -391,8 +399,10 @@ int bn_ctl_serve(bn_ctl_t *ctl, bn_bus_t *bus)
     if (ev != BN_CTL_EV_NONE)
         return ev;
     for (;;) {
-        if (ctl->stopped) /* the frames still held go to Python first */
-            return ctl->held.n > 0 ? unhold(ctl) : BN_CTL_EV_STOPPED;
+        if (ctl->stopped) { /* the frames still held go to Python first */
+            int e = unhold(ctl);
+            return e != BN_CTL_EV_NONE ? e : BN_CTL_EV_STOPPED;
+        }
         now = bn_now_ns();
         if (now >= t_return)
             return BN_CTL_EV_POLL; /* also while frames keep coming: Python looks in time */
@@ -403,8 +413,11 @@ int bn_ctl_serve(bn_ctl_t *ctl, bn_bus_t *bus)
         /* before the first step no sample waits for a duty (a start goes at once) */
         int slack = ctl->held.n > 0 && (ctl->slack || ctl->c.steps == 0);
         int r = bn_recv_until(bus, &in, slack ? 0 : deadline); /* slack: what is queued */
-        if (r == 0 && ctl->held.n > 0 && (slack || bn_now_ns() >= deadline))
-            return unhold(ctl);
+        if (r == 0 && ctl->held.n > 0 && (slack || bn_now_ns() >= deadline)) {
+            int e = unhold(ctl);
+            if (e != BN_CTL_EV_NONE) return e;
+            if (slack) continue; /* every frame held was a copy: wait for frames again */
+        }
         now = bn_now_ns();
         if (r < 0) {
             ctl->error = -r;
@@ -439,7 +452,8 @@ int bn_ctl_serve(bn_ctl_t *ctl, bn_bus_t *bus)
             ctl->slack = 1; /* a duty is out */
         if (ev == BN_CTL_EV_COMMAND && ctl->realtime) {
             bn_frame_t got = ctl->cmd_frame;
-            if (!bn_held_put(&ctl->held, &got, &ctl->cmd_frame))
+            if (!bn_held_put(&ctl->held, &got, &ctl->cmd_frame) ||
+                bn_cmd_seen_copy(&ctl->cmd_seen, &ctl->cmd_frame, ctl->next_k))
                 continue;
             return BN_CTL_EV_COMMAND; /* full: the oldest now */
         }
@@ -447,3 +461,15 @@ int bn_ctl_serve(bn_ctl_t *ctl, bn_bus_t *bus)
             return ev;
     }
 }
+
+void bn_ctl_cmd_seen_init(bn_ctl_t *ctl, uint32_t id, int64_t span)
+{
+    bn_cmd_seen_init(&ctl->cmd_seen, id, span);
+}
+
+void bn_ctl_cmd_taken(bn_ctl_t *ctl, const bn_frame_t *f)
+{
+    bn_cmd_seen_take(&ctl->cmd_seen, f, ctl->next_k);
+}
+
+uint64_t bn_ctl_cmd_copies(const bn_ctl_t *ctl) { return ctl->cmd_seen.copies; }

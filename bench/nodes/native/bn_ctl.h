@@ -158,6 +158,8 @@ typedef struct {
     double s_i_a[BN_CTL_RING], s_i_b[BN_CTL_RING], s_u_dc[BN_CTL_RING];
     double t_theta[BN_CTL_RING], t_w_m[BN_CTL_RING];
     bn_frame_t a_duty[BN_CTL_ANSWERS], a_tel[BN_CTL_ANSWERS];
+    /* the bench commands Python took, whose copies bn_ctl_on_frame drops (bn.h) */
+    bn_cmd_seen_t cmd_seen;
 } bn_ctl_t;
 
 /* where the frames to send go; 0 or -errno */
@@ -180,6 +182,13 @@ int bn_ctl_on_frame(bn_ctl_t *ctl, const bn_frame_t *in, bn_ctl_sink_t sink, voi
 /* After Python handled an event: send the telemetry it asked for (send_ack) and
  * run the steps that are ready.  BN_CTL_EV_NONE, or an event. */
 int bn_ctl_resume(bn_ctl_t *ctl, bn_ctl_sink_t sink, void *ctx);
+
+/* The copies of bench commands (bn.h): keep none yet, their id and span; Python took
+ * the command frame f (CommandQueue.recent has its key) at step next_k; the copies
+ * dropped so far. */
+void bn_ctl_cmd_seen_init(bn_ctl_t *ctl, uint32_t id, int64_t span);
+void bn_ctl_cmd_taken(bn_ctl_t *ctl, const bn_frame_t *f);
+uint64_t bn_ctl_cmd_copies(const bn_ctl_t *ctl);
 
 /* The node's loop on a bus until an event for Python (never BN_CTL_EV_NONE).
  * Call again after handling it; the loop resumes where it stopped. */

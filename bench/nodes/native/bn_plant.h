@@ -289,6 +289,8 @@ typedef struct {
      * held_margin_ns are left to the next deadline (the rest in later periods) */
     int64_t held_margin_ns;
     bn_held_t held;
+    /* the bench commands Python took, whose copies take() drops (bn.h; Python sets it up) */
+    bn_cmd_seen_t cmd_seen;
 } bn_plant_loop_t;
 
 enum { BN_PART_SEND = 0, BN_PART_RECV = 1, BN_PART_STEP = 2 };

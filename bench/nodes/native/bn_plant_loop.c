@@ -73,6 +73,7 @@ static int take(bn_plant_loop_t *L, const bn_frame_t *f)
         bn_plant_on_duty(L->u, f);
         return 0;
     }
+    if (bn_cmd_seen_copy(&L->cmd_seen, f, L->u->k)) return 0; /* a command's copy (bn.h) */
     for (int j = 0; j < 4; j++) {
         if (L->event_ids[j] && f->id == L->event_ids[j]) {
             L->ev_frame = *f;
@@ -83,6 +84,17 @@ static int take(bn_plant_loop_t *L, const bn_frame_t *f)
 }
 
 static int64_t ns(double s) { return (int64_t)(s * 1e9); }
+
+/* Real time: the oldest held frame that is no copy of a command Python took since it
+ * was held (bn.h, bn_cmd_seen_t: dropped and counted) into ev_frame: 1; 0: none left. */
+static int unhold(bn_plant_loop_t *L)
+{
+    while (L->held.n > 0) {
+        bn_held_take(&L->held, &L->ev_frame);
+        if (!bn_cmd_seen_copy(&L->cmd_seen, &L->ev_frame, L->u->k)) return 1;
+    }
+    return 0;
+}
 
 static int loop_lockstep(bn_plant_loop_t *L)
 {
@@ -221,10 +233,7 @@ static int loop_realtime(bn_plant_loop_t *L)
             L->phase = done(u) ? 4 : 2;
         }
         if (L->phase == 4) { /* done: the frames still held go to Python first */
-            if (L->held.n > 0) {
-                bn_held_take(&L->held, &L->ev_frame);
-                return BN_EV_FRAME;
-            }
+            if (unhold(L)) return BN_EV_FRAME;
             u->overruns = L->clock.st.missed;
             return BN_EV_DONE;
         }
@@ -240,7 +249,8 @@ static int loop_realtime(bn_plant_loop_t *L)
                     return BN_EV_ERROR;
                 }
                 if (r == 0) break;
-                if (take(L, &f) && bn_held_put(&L->held, &f, &L->ev_frame)) {
+                if (take(L, &f) && bn_held_put(&L->held, &f, &L->ev_frame) &&
+                    !bn_cmd_seen_copy(&L->cmd_seen, &L->ev_frame, u->k)) {
                     L->part_ns[BN_PART_RECV] += bn_now_ns() - t0; /* full: the oldest now */
                     return BN_EV_FRAME;
                 }
@@ -262,10 +272,9 @@ static int loop_realtime(bn_plant_loop_t *L)
         }
         /* phase 3: the period's work is done; a held frame goes to Python while its
          * handling ends before the deadline */
-        if (L->held.n > 0 && bn_clock_deadline(&L->clock) - bn_now_ns() > L->held_margin_ns) {
-            bn_held_take(&L->held, &L->ev_frame);
+        if (L->held.n > 0 && bn_clock_deadline(&L->clock) - bn_now_ns() > L->held_margin_ns &&
+            unhold(L))
             return BN_EV_FRAME;
-        }
         uint64_t p = L->clock.st.periods;
         if (L->parts != NULL && p < L->busy_cap) {
             for (int j = 0; j < 3; j++) {

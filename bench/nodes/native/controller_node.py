@@ -13,7 +13,9 @@ only for what stays Python's:
   in-process pair shares; the Python node keeps :meth:`ControllerNode._apply_commands`
   for the Python loop); Python takes back what C applied at its next event
   (:meth:`NativeController.pull_commands`), and is called again when the list
-  handed over runs dry with more pending (``EV_CMDS``);
+  handed over runs dry with more pending (``EV_CMDS``); the copies of a command
+  Python took (each comes three times) are dropped in C and counted as the repeats
+  they are there (``bn_cmd_seen_t``, bn.h);
 - a real-time sample timeout (:meth:`ControllerNode.sample_timeout`);
 - the end: a stop command ran, ``idle_s`` without a frame, or a stop of the
   process. Python's signal handlers run between two calls: a signal ends the
@@ -44,7 +46,17 @@ from bench.nodes._counters import (
     REPEATED_COUNTER,
 )
 from bench.nodes.native import _native
-from bench.nodes.native._native import BN_BRS, BN_ERR, BN_EXT, BN_FD, BN_RTR, Frame, Held, Sig
+from bench.nodes.native._native import (
+    BN_BRS,
+    BN_ERR,
+    BN_EXT,
+    BN_FD,
+    BN_RTR,
+    Frame,
+    Held,
+    Sig,
+    copy_span,
+)
 from bench.wire._codec import (
     REJECT_BAD_CRC,
     REJECT_BAD_LENGTH,
@@ -231,6 +243,12 @@ def _declare(dll: ctypes.CDLL) -> None:
     dll.bn_can_open.restype = ctypes.c_int
     dll.bn_close.argtypes = [vp]
     dll.bn_close.restype = None
+    dll.bn_ctl_cmd_seen_init.argtypes = [vp, ctypes.c_uint32, ctypes.c_int64]
+    dll.bn_ctl_cmd_seen_init.restype = None
+    dll.bn_ctl_cmd_taken.argtypes = [vp, ctypes.POINTER(Frame)]
+    dll.bn_ctl_cmd_taken.restype = None
+    dll.bn_ctl_cmd_copies.argtypes = [vp]
+    dll.bn_ctl_cmd_copies.restype = ctypes.c_uint64
 
 
 def native_unavailable(node: ControllerNode, interface: str | None) -> str | None:
@@ -286,6 +304,11 @@ class NativeController:
         c.run_id = node.run_id
         c.rpm_per_rad_s = RPM_PER_RAD_S  # the node's speed_ref in rad/s (_apply_commands)
         self._newest = -1  # the last step of the pending list handed to C
+        # the copies of the bench commands Python took are dropped in C (bn.h)
+        dll.bn_ctl_cmd_seen_init(
+            self.addr, codec.frame_id("BenchCommand"), copy_span(node.commands.modulus)
+        )
+        self._copies_merged = 0
         self._sync_commands()
 
     # -- what stays Python's --------------------------------------------------
@@ -353,8 +376,11 @@ class NativeController:
             check=False,
         )
         before, n_before = node.commands.ack_seq, len(node.commands.pending)
+        taken = node.commands.taken
         node.last_output = None  # the telemetry is C's (send_ack)
         node.on_message(msg)
+        if node.commands.taken != taken:
+            self.dll.bn_ctl_cmd_taken(self.addr, ctypes.byref(f))
         if node.commands.ack_seq != before and c.has_last:
             c.send_ack = 1
         self._sync_commands(n_before)
@@ -425,12 +451,11 @@ class NativeController:
         n.frames_accepted += c.c.frames_accepted
         n.frames_unknown += c.c.frames_unknown
         for reason, count in zip(REASONS, c.c.reasons, strict=True):
-            if count:  # as NodeCounters.reject, count times
-                n.reject_reasons[reason] = n.reject_reasons.get(reason, 0) + count
-                if reason == REPEATED_COUNTER:
-                    n.duplicates += count
-                else:
-                    n.frames_rejected += count
+            n.reject(reason, count)
+        # the copies of bench commands C dropped (bn.h): repeats, as CommandQueue counts them
+        copies = int(self.dll.bn_ctl_cmd_copies(self.addr))
+        n.reject(REPEATED_COUNTER, copies - self._copies_merged)
+        self._copies_merged = copies
         n.send_errors += c.c.send_errors
         n.frames_lost_on_send += c.c.frames_lost_on_send
         node.samples_accepted += c.c.samples_accepted
