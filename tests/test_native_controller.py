@@ -281,7 +281,8 @@ def test_a_real_time_controller_answers_samples_queued_behind_commands_and_appli
 ) -> None:
     """Real time: a command frame (twice, as the bench's pacer sends it) queued just
     before a sample is held until that sample's duty is out (bn_ctl_serve), then handed
-    to Python; every command frame the loop receives goes through the ring.  Each sample
+    to Python; every command frame the loop receives goes through the ring but the copies
+    of a command Python already took.  Each sample
     is answered with its duty, and every command is applied at its step, none late, the
     last one (a stop) ending the loop."""
     import threading
@@ -339,5 +340,10 @@ def test_a_real_time_controller_answers_samples_queued_behind_commands_and_appli
     assert node.stopped and not node.commands.pending
     assert node.commands.applied_seq == (seq + 1) % 16
     assert node.commands_held is not None
-    assert node.commands_held["held"] == len(frames)
+    # a copy that comes after Python took its command is dropped in C before the ring
+    # (bn_cmd_seen_t), one that comes before it is held and dropped at hand-over; either
+    # way it is counted among the duplicates, as the queue counts the copies it sees
+    copies = len(frames) - len({bytes(m.data) for m in frames})
+    assert copies == 19 and node.counters.duplicates == copies
+    assert len(frames) - copies <= node.commands_held["held"] <= len(frames)
     assert duties >= set(range(1, stop_at + 1))  # the duty of each sample k is tagged k + 1

@@ -271,8 +271,9 @@ def test_a_controller_under_test_is_served_by_the_native_node(tmp_path: Path) ->
 def test_a_burst_of_commands_in_real_time_is_applied_at_its_steps() -> None:
     """Real time, 2 kHz: a burst of 100 load commands (twice each, as the bench's pacer
     sends them) arrives while the loop runs; every frame the loop receives there is met
-    while draining before a step and held to the slack after it (bn_plant_loop.c), so all
-    200 are counted as held, whatever a full ring handed over at once.  None is lost or
+    while draining before a step and held to the slack after it (bn_plant_loop.c), but the
+    copies of a command Python already took, dropped before the ring (bn_cmd_seen_t): 100
+    to 200 held, whatever a full ring handed over at once.  None is lost or
     late: each load is in the PlantTruth of its step and after, up to the next."""
     import threading
 
@@ -329,7 +330,10 @@ def test_a_burst_of_commands_in_real_time_is_applied_at_its_steps() -> None:
     assert not node.commands.pending and node.commands.applied_seq == n_cmds % 16
     jit = node.jitter
     assert jit is not None
-    assert jit["commands_held"] == 2 * n_cmds
+    # a copy that comes after Python took its command is dropped before the ring
+    # (bn_cmd_seen_t); every copy is counted among the duplicates, in C or by the queue
+    assert n_cmds <= jit["commands_held"] <= 2 * n_cmds
+    assert node.counters.duplicates == n_cmds
     assert 1 <= jit["commands_held_max"] <= _native.HELD
     steps = sorted(loads)
     seen = 0
