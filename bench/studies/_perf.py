@@ -831,7 +831,10 @@ def score_lines(sc: dict[str, Any] | None) -> list[str]:
         ""
         if sc["scores_like_lockstep"]
         else f": {_num(rt['late_duty_pct'], '%')} of its periods ran with a late duty on this "
-        "host, and each changes the loop (the limit is the late periods, not the model)"
+        "host, and each changes the loop: a few late in a row (tenths of a millisecond, "
+        "shorter than a host stall) hold the injection's voltage and move the estimated angle "
+        "by degrees (the largest error above); the limit is the host's late periods, not the "
+        "model"
     )
     if late_cmds > 0:
         why += (
@@ -999,7 +1002,11 @@ def _native_limit(key: str, res: dict[str, Any]) -> str:
         return (
             f"the plant node's own period (receive, step, encode, send){split} on a host with "
             f"load {_num(res['machine'].get('loadavg_1min_start', math.nan))} on "
-            f"{res['machine'].get('cpus')} cores; p99 {_num(r['busy_us_p99'], 'us')}"
+            f"{res['machine'].get('cpus')} cores; p99 {_num(r['busy_us_p99'], 'us')}; the send "
+            "is the kernel's: one udp_multicast datagram per frame (python-can's wire format), "
+            "each delivered to every listening socket within the send call (docs/REALTIME.md, "
+            "the kernel's cost per datagram); fewer datagrams need another wire format, or a "
+            "CAN adapter"
         )
     r = res["realtime_native"]["4kHz" if key.endswith("4khz") else "10kHz"]
     late = r["missed_pct"] - r["late_outside_stalls_pct"]
