@@ -8,6 +8,8 @@ the plant's last period (every real-time run then counted 20 late duties and
 
 from __future__ import annotations
 
+from typing import Any
+
 import can
 import pytest
 
@@ -118,3 +120,34 @@ def test_late_commands_keep_their_order_and_the_newest_set_point() -> None:
     assert node.counters.reject_reasons == {"repeated_counter": 2}
     _answer_steps(node, pn, 3)
     assert node.ctrl.w_m_ref * 60.0 / (2.0 * 3.141592653589793) == pytest.approx(100.0, rel=1e-3)
+
+
+def test_the_commands_are_sent_with_a_short_switch_interval(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """bench run's thread that sends the commands shares the GIL with the recorder's, which
+    hands every frame to Python: while it sends, the interpreter's switch interval is
+    SEND_SWITCH_INTERVAL_S (each send gives the GIL up, and waited up to 5 ms for it back),
+    and the interval before is restored afterwards, also when the loop raises."""
+    import sys
+
+    from bench.runs import _run
+
+    seen: list[float] = []
+
+    def loop(*args: object) -> None:
+        seen.append(sys.getswitchinterval())
+        if len(seen) == 2:
+            raise KeyboardInterrupt
+
+    monkeypatch.setattr(_run, "_drive_loop", loop)
+    before = sys.getswitchinterval()
+    assert before > _run.SEND_SWITCH_INTERVAL_S
+    args: tuple[Any, ...] = (None, None, [], None, 0, False, None, None)
+    _run._drive(*args)
+    # the interpreter keeps it in whole microseconds
+    assert seen == [pytest.approx(_run.SEND_SWITCH_INTERVAL_S, rel=1e-6)]
+    assert sys.getswitchinterval() == before
+    with pytest.raises(KeyboardInterrupt):
+        _run._drive(*args)
+    assert sys.getswitchinterval() == before

@@ -554,6 +554,16 @@ def failed_before_recording(out_dir: Path, why: str) -> BenchError:
     return BenchError(f"{why}; nothing recorded, see {out_dir / 'error.txt'}")
 
 
+#: The interpreter's switch interval while :func:`_drive` sends the commands (s).  This
+#: thread sends them beside the recorder's, which hands every frame of the run to Python
+#: (40,000 a second for a 10 kHz pair): each send gives the GIL up for its socket call and
+#: waited for it back up to the default 5 ms, so that a send took 0.57 ms on average and
+#: wen-5.1's ramp in real time (a command every 10 periods at 10 kHz, three frames each:
+#: one frame every 0.33 ms) went out late.  0.1 ms bounds that wait to under a third of
+#: it; the recorder's thread gives the GIL up only when this one asks for it.
+SEND_SWITCH_INTERVAL_S = 1e-4
+
+
 def _drive(
     rec: Recording,
     pacer: CommandPacer,
@@ -569,10 +579,31 @@ def _drive(
     ended the run early.
 
     The commands go out as :class:`CommandPacer` paces them, after the
-    recorder's view of the plant's step.  With a controller under test
+    recorder's view of the plant's step, with the switch interval at
+    :data:`SEND_SWITCH_INTERVAL_S`.  With a controller under test
     (``dut``) its diagnostics go to stderr as the run goes on, and the run
     ends (``"dut"``) when it has not answered in time.
     """
+    before = sys.getswitchinterval()
+    sys.setswitchinterval(min(before, SEND_SWITCH_INTERVAL_S))
+    try:
+        return _drive_loop(rec, pacer, procs, plant, steps, progress, interrupted, dut, lockstep)
+    finally:
+        sys.setswitchinterval(before)
+
+
+def _drive_loop(
+    rec: Recording,
+    pacer: CommandPacer,
+    procs: list[tuple[str, subprocess.Popen[str]]],
+    plant: subprocess.Popen[str],
+    steps: int,
+    progress: bool,
+    interrupted: _Interrupt,
+    dut: DutWatch | None,
+    lockstep: bool,
+) -> str | None:
+    """:func:`_drive`'s loop."""
     bus = rec.plant_bus
     bar = _Progress(steps) if progress else None
     t_moved, seen_step = time.monotonic(), -1
