@@ -126,7 +126,7 @@ def test_the_commands_are_sent_with_a_short_switch_interval(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
     """bench run's thread that sends the commands shares the GIL with the recorder's, which
-    hands every frame to Python: while it sends, the interpreter's switch interval is
+    hands every frame to Python: while it sends in real time, the interpreter's switch interval is
     SEND_SWITCH_INTERVAL_S (each send gives the GIL up, and waited up to 5 ms for it back),
     and the interval before is restored afterwards, also when the loop raises."""
     import sys
@@ -143,11 +143,18 @@ def test_the_commands_are_sent_with_a_short_switch_interval(
     monkeypatch.setattr(_run, "_drive_loop", loop)
     before = sys.getswitchinterval()
     assert before > _run.SEND_SWITCH_INTERVAL_S
-    args: tuple[Any, ...] = (None, None, [], None, 0, False, None, None)
-    _run._drive(*args)
+
+    def drive(lockstep: bool) -> None:
+        nothing: Any = None
+        _run._drive(nothing, nothing, [], nothing, 0, False, nothing, None, lockstep)
+
+    drive(lockstep=True)  # a paced lockstep plant waits for its commands
+    assert seen == [before]
+    seen.clear()
+    drive(lockstep=False)
     # the interpreter keeps it in whole microseconds
     assert seen == [pytest.approx(_run.SEND_SWITCH_INTERVAL_S, rel=1e-6)]
     assert sys.getswitchinterval() == before
     with pytest.raises(KeyboardInterrupt):
-        _run._drive(*args)
+        drive(lockstep=False)
     assert sys.getswitchinterval() == before

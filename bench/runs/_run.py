@@ -554,7 +554,8 @@ def failed_before_recording(out_dir: Path, why: str) -> BenchError:
     return BenchError(f"{why}; nothing recorded, see {out_dir / 'error.txt'}")
 
 
-#: The interpreter's switch interval while :func:`_drive` sends the commands (s).  This
+#: The interpreter's switch interval while :func:`_drive` sends the commands of a real-time
+#: run (s; a lockstep plant waits for them, and its runs were not faster with it).  This
 #: thread sends them beside the recorder's, which hands every frame of the run to Python
 #: (40,000 a second for a 10 kHz pair): each send gives the GIL up for its socket call and
 #: waited for it back up to the default 5 ms, so that a send took 0.57 ms on average and
@@ -579,13 +580,14 @@ def _drive(
     ended the run early.
 
     The commands go out as :class:`CommandPacer` paces them, after the
-    recorder's view of the plant's step, with the switch interval at
+    recorder's view of the plant's step; in real time with the switch interval at
     :data:`SEND_SWITCH_INTERVAL_S`.  With a controller under test
     (``dut``) its diagnostics go to stderr as the run goes on, and the run
     ends (``"dut"``) when it has not answered in time.
     """
     before = sys.getswitchinterval()
-    sys.setswitchinterval(min(before, SEND_SWITCH_INTERVAL_S))
+    if not lockstep:  # a paced lockstep plant waits for its commands: nothing is late
+        sys.setswitchinterval(min(before, SEND_SWITCH_INTERVAL_S))
     try:
         return _drive_loop(rec, pacer, procs, plant, steps, progress, interrupted, dut, lockstep)
     finally:
