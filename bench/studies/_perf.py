@@ -1067,6 +1067,19 @@ NATIVE_DOC_BEGIN = "<!-- perf-native:begin (written by bench perf --realtime-doc
 NATIVE_DOC_END = "<!-- perf-native:end -->"
 
 
+def native_targets_table(v: dict[str, dict[str, Any]], limits: bool = True) -> list[str]:
+    """Markdown rows: each native target (:func:`native_verdicts` ``v``) against its figure,
+    met or missed, and (``limits``) what limits a missed one."""
+    rows = []
+    for t in NATIVE_TARGET_LIST:
+        r = v[t.key]
+        val = "n/a" if r["value"] < 0 and t.unit == "frames" else _num(r["value"], t.unit)
+        row = [t.figure, val, _target_text(t), "met" if r["met"] else "**missed**"]
+        rows.append([*row, r["limit"] or ""] if limits else row)
+    head = ["figure", "measured", "target", "verdict"]
+    return _table([*head, "limit"] if limits else head, rows)
+
+
 def render_realtime_native(res: dict[str, Any], source: str = "docs/perf/perf.json") -> str:
     """The native nodes' block of docs/REALTIME.md from ``perf.json``'s ``realtime_native``
     and ``lockstep_native``, each target with its verdict and, where missed, its limit."""
@@ -1087,14 +1100,7 @@ def render_realtime_native(res: dict[str, Any], source: str = "docs/perf/perf.js
         f"{res['realtime_native']['10kHz'].get('note', NATIVE_NOTE)}):",
         "",
     ]
-    rows = []
-    for t in NATIVE_TARGET_LIST:
-        r = v[t.key]
-        val = "n/a" if r["value"] < 0 and t.unit == "frames" else _num(r["value"], t.unit)
-        rows.append(
-            [t.figure, val, _target_text(t), "met" if r["met"] else "**missed**", r["limit"] or ""]
-        )
-    lines += _table(["figure", "measured", "target", "verdict", "limit"], rows)
+    lines += native_targets_table(v)
     rows = []
     for name, r in rate_rows(res["realtime_native"]).items():
         rows.append(
@@ -2219,11 +2225,28 @@ README_END = "<!-- perf:end -->"
 
 
 def render_readme_block(res: dict[str, Any]) -> str:
-    """The README's block: the targets table of the last ``make perf``."""
+    """The README's block: the targets of the last ``make perf``, the native pair's (the
+    default engine) first, then the in-process, Python-node and analysis ones."""
+    v = native_verdicts(res)
+    native = (
+        []
+        if v is None
+        else [
+            "The native pair (`--engine native`, the default: each node's whole loop in C; "
+            "what limits a missed target: [docs/REALTIME.md](docs/REALTIME.md)):",
+            "",
+            *native_targets_table(v, limits=False),
+            "",
+            "In process, the Python plant node (`bench plant --engine python`, beside the "
+            "native controller node) and the analysis:",
+            "",
+        ]
+    )
     return "\n".join(
         [
             README_BEGIN,
             "",
+            *native,
             *targets_table(res),
             "",
             README_END,
