@@ -126,35 +126,37 @@ def test_the_commands_are_sent_with_a_short_switch_interval(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
     """bench run's thread that sends the commands shares the GIL with the recorder's, which
-    hands every frame to Python: while it sends in real time, the interpreter's switch interval is
-    SEND_SWITCH_INTERVAL_S (each send gives the GIL up, and waited up to 5 ms for it back),
-    and the interval before is restored afterwards, also when the loop raises."""
+    hands every frame to Python: while it sends in real time, the interpreter's switch
+    interval is SEND_SWITCH_INTERVAL_S (each send gives the GIL up, and waited up to 5 ms
+    for it back), in lockstep as it was; the interval before is restored afterwards, also
+    when the loop raises."""
+    import contextlib
     import sys
 
     from bench.runs import _run
 
-    seen: list[float] = []
-
-    def loop(*args: object) -> None:
-        seen.append(sys.getswitchinterval())
-        if len(seen) == 2:
-            raise KeyboardInterrupt
-
-    monkeypatch.setattr(_run, "_drive_loop", loop)
     before = sys.getswitchinterval()
     assert before > _run.SEND_SWITCH_INTERVAL_S
-
-    def drive(lockstep: bool) -> None:
-        nothing: Any = None
-        _run._drive(nothing, nothing, [], nothing, 0, False, nothing, None, lockstep)
-
-    drive(lockstep=True)  # a paced lockstep plant waits for its commands
-    assert seen == [before]
-    seen.clear()
-    drive(lockstep=False)
-    # the interpreter keeps it in whole microseconds
-    assert seen == [pytest.approx(_run.SEND_SWITCH_INTERVAL_S, rel=1e-6)]
+    with _run._switch_interval(_run.SEND_SWITCH_INTERVAL_S):
+        # the interpreter keeps it in whole microseconds
+        assert sys.getswitchinterval() == pytest.approx(_run.SEND_SWITCH_INTERVAL_S, rel=1e-6)
     assert sys.getswitchinterval() == before
-    with pytest.raises(KeyboardInterrupt):
-        drive(lockstep=False)
+    with pytest.raises(KeyboardInterrupt), _run._switch_interval(1e-4):
+        raise KeyboardInterrupt
     assert sys.getswitchinterval() == before
+    with _run._switch_interval(None):
+        assert sys.getswitchinterval() == before
+
+    asked: list[float | None] = []
+
+    @contextlib.contextmanager
+    def record(seconds: float | None) -> Any:
+        asked.append(seconds)
+        yield
+
+    monkeypatch.setattr(_run, "_switch_interval", record)
+    nothing: Any = None
+    for lockstep in (True, False):  # no recording: the loop fails at once, after the ask
+        with pytest.raises(AttributeError):
+            _run._drive(nothing, nothing, [], nothing, 0, False, nothing, None, lockstep)
+    assert asked == [None, _run.SEND_SWITCH_INTERVAL_S]

@@ -565,6 +565,19 @@ def failed_before_recording(out_dir: Path, why: str) -> BenchError:
 SEND_SWITCH_INTERVAL_S = 1e-4
 
 
+@contextmanager
+def _switch_interval(seconds: float | None) -> Iterator[None]:
+    """The interpreter's switch interval at most ``seconds`` (None: as it is) inside, the one
+    before restored after."""
+    before = sys.getswitchinterval()
+    if seconds is not None:
+        sys.setswitchinterval(min(before, seconds))
+    try:
+        yield
+    finally:
+        sys.setswitchinterval(before)
+
+
 def _drive(
     rec: Recording,
     pacer: CommandPacer,
@@ -585,81 +598,61 @@ def _drive(
     (``dut``) its diagnostics go to stderr as the run goes on, and the run
     ends (``"dut"``) when it has not answered in time.
     """
-    before = sys.getswitchinterval()
-    if not lockstep:  # a paced lockstep plant waits for its commands: nothing is late
-        sys.setswitchinterval(min(before, SEND_SWITCH_INTERVAL_S))
-    try:
-        return _drive_loop(rec, pacer, procs, plant, steps, progress, interrupted, dut, lockstep)
-    finally:
-        sys.setswitchinterval(before)
-
-
-def _drive_loop(
-    rec: Recording,
-    pacer: CommandPacer,
-    procs: list[tuple[str, subprocess.Popen[str]]],
-    plant: subprocess.Popen[str],
-    steps: int,
-    progress: bool,
-    interrupted: _Interrupt,
-    dut: DutWatch | None,
-    lockstep: bool,
-) -> str | None:
-    """:func:`_drive`'s loop."""
-    bus = rec.plant_bus
-    bar = _Progress(steps) if progress else None
-    t_moved, seen_step = time.monotonic(), -1
-    # when the start command went out, and when the recorder last saw the step move
-    # (or the controller under test answered first: the plant waited for it until then)
-    t_start: float | None = None
-    t_seen, last_step, waiting_dut = t_moved, -1, dut is not None and not dut.answered
-    ended: str | None = None
-    tel = rec.recorders[-1]  # the controller's side: its CtrlTelemetry
-    while not interrupted():
-        full_step = max(0, rec.plant_step)
-        now = time.monotonic()
-        pacer.take(tel.acks, now)
-        pacer.send_due(bus, full_step, now)
-        if t_start is None and pacer.sent:
-            t_start = t_seen = now
-        if rec.plant_step != last_step or (waiting_dut and dut is not None and dut.answered):
-            t_seen, last_step = now, rec.plant_step
-            waiting_dut = dut is not None and not dut.answered
-        if last_step < 0 and t_start is not None and now - t_start > START_TIMEOUT_S:
-            ended = NO_START
-            break
-        if last_step >= 0 and not waiting_dut and now - t_seen > NO_PROGRESS_S:
-            ended = NO_PROGRESS
-            break
-        if full_step != seen_step:
-            t_moved, seen_step = now, full_step
-        elif pacer.pace_every and pacer.sent and time.monotonic() - t_moved > 1.0:
-            # a paced plant that stopped moving may have lost the newest
-            # commands (a lossy transport): the last few once more
-            pacer.resend_recent(bus)
-            t_moved = time.monotonic()
-        if rec.plant_done or interrupted() or rec.foreign:  # another run shares the bus
-            break
-        if plant.poll() is not None:
-            # a plant that ends by itself ends well; killed or failed, it is named at once
-            ended = "plant" if plant.returncode != 0 else None
-            break
-        ended = ended_early(procs, lockstep=lockstep)
-        if ended:
-            break
-        if dut is not None:
-            answered = dut.answered
-            if dut.check(full_step):
-                ended = "dut"
+    with _switch_interval(None if lockstep else SEND_SWITCH_INTERVAL_S):
+        bus = rec.plant_bus
+        bar = _Progress(steps) if progress else None
+        t_moved, seen_step = time.monotonic(), -1
+        # when the start command went out, and when the recorder last saw the step move
+        # (or the controller under test answered first: the plant waited for it until then)
+        t_start: float | None = None
+        t_seen, last_step, waiting_dut = t_moved, -1, dut is not None and not dut.answered
+        ended: str | None = None
+        tel = rec.recorders[-1]  # the controller's side: its CtrlTelemetry
+        while not interrupted():
+            full_step = max(0, rec.plant_step)
+            now = time.monotonic()
+            pacer.take(tel.acks, now)
+            pacer.send_due(bus, full_step, now)
+            if t_start is None and pacer.sent:
+                t_start = t_seen = now
+            if rec.plant_step != last_step or (waiting_dut and dut is not None and dut.answered):
+                t_seen, last_step = now, rec.plant_step
+                waiting_dut = dut is not None and not dut.answered
+            if last_step < 0 and t_start is not None and now - t_start > START_TIMEOUT_S:
+                ended = NO_START
                 break
-            if dut.answered and not answered:
-                pacer.resend_all(bus)  # it may have started after the first commands
-        if bar is not None and (dut is None or dut.answered):
-            bar.show(full_step)
-        time.sleep(0.002)
-    if bar is not None:
-        bar.close()
-    return ended
+            if last_step >= 0 and not waiting_dut and now - t_seen > NO_PROGRESS_S:
+                ended = NO_PROGRESS
+                break
+            if full_step != seen_step:
+                t_moved, seen_step = now, full_step
+            elif pacer.pace_every and pacer.sent and time.monotonic() - t_moved > 1.0:
+                # a paced plant that stopped moving may have lost the newest
+                # commands (a lossy transport): the last few once more
+                pacer.resend_recent(bus)
+                t_moved = time.monotonic()
+            if rec.plant_done or interrupted() or rec.foreign:  # another run shares the bus
+                break
+            if plant.poll() is not None:
+                # a plant that ends by itself ends well; killed or failed, it is named at once
+                ended = "plant" if plant.returncode != 0 else None
+                break
+            ended = ended_early(procs, lockstep=lockstep)
+            if ended:
+                break
+            if dut is not None:
+                answered = dut.answered
+                if dut.check(full_step):
+                    ended = "dut"
+                    break
+                if dut.answered and not answered:
+                    pacer.resend_all(bus)  # it may have started after the first commands
+            if bar is not None and (dut is None or dut.answered):
+                bar.show(full_step)
+            time.sleep(0.002)
+        if bar is not None:
+            bar.close()
+        return ended
 
 
 @dataclass(frozen=True)
