@@ -313,5 +313,21 @@ def test_the_demo_section_is_rendered_against_the_issue_target_when_measured() -
     assert "| `make demo`, the whole command (`demo.wall_s`) | 9.50 s | <= 3.00 s" in text
     assert "The largest share is the stepping loop (6.00 s of 9.50 s)" in text
     assert "it needs 13,334 periods/s" in text
+    assert "one run (`demo.wall_s`" in text and "demo.cpu_s" not in text  # an older perf.json
+    # the median of several runs, and the CPU the work needs on the machine's cores
+    res["demo"] = {
+        **demo,
+        "wall_s_runs": [9.4, 9.5, 9.9],
+        "cpu_s": 8.0,
+        "cpu_floor_s": 4.0,
+        "cpus": 2,
+    }
+    text = render_benchmarks(res)
+    assert "the run of median wall time of 3 (9.40 s, 9.50 s, 9.90 s)" in text
+    assert "| CPU time of the command and its node processes (`demo.cpu_s`), over 2 cores" in text
+    assert "use 8.00 s of CPU, 4.00 s on each of the 2 cores" in text
+    assert "more than the target, so no schedule of this work meets it" in text
+    res["demo"] = {**res["demo"], "cpu_s": 5.0, "cpu_floor_s": 2.5}
+    assert "within the target, so the rest is waiting" in render_benchmarks(res)
     res["demo"] = {**demo, "wall_s": 2.9, "loop_s": 1.5, "nodes_s": 0.5, "met": True}
     assert "The target is met in this run." in render_benchmarks(res)
