@@ -16,6 +16,7 @@ from bench.nodes._loops import STATE_DONE
 from bench.nodes.native import _recorder_native
 from bench.runs._recorder import BATCH_DECODE_MIN, Recorder
 from bench.wire._codec import Codec
+from bench.wire._frames import FrameArray
 from tests.frame_helpers import message_fields
 
 CODEC = Codec()
@@ -107,15 +108,18 @@ def test_a_parsed_datagram_is_the_message_unpack_message_makes() -> None:
         (pack_message(m), 1_700_000_000 + i, 123_456_789 * i % 10**9) for i, m in enumerate(frames)
     ]
     batch = _recorder_native.SlotBatch("udp_multicast", "239.0.0.1")
-    msgs, bad = batch.messages(batch.put(dgrams))
+    msgs, bad, rows = batch.messages(batch.put(dgrams))
     assert batch.parsed == len(frames) and bad == 0  # every one parsed in C
     ref, _ = _reference(dgrams)
     _same(msgs, ref)
+    # and as rows, the columns the recorder reads in place of the messages' fields
+    assert rows is not None
+    assert rows.tobytes() == FrameArray.from_messages(ref).rows.tobytes()
     # a float32 time stamp is replaced by the receive stamp all the same
     m = msgpack.unpackb(dgrams[0][0], raw=False)
     f32 = b"\x8b\xa9timestamp\xca" + struct.pack(">f", 1.5) + pack_message(frames[0])[20:]
     assert msgpack.unpackb(f32, raw=False).keys() == m.keys()
-    msgs, bad = batch.messages(batch.put([(f32, 7, 0)]))
+    msgs, bad, _ = batch.messages(batch.put([(f32, 7, 0)]))
     assert batch.parsed == 1 and msgs[0].timestamp == 7.0
     _same(msgs, _reference([(f32, 7, 0)])[0])
 
@@ -127,8 +131,8 @@ def test_other_datagrams_are_python_cans_and_its_refusals_counted_as_malformed()
     # a datagram longer than a slot: truncated by the socket
     dgrams.append((pack_message(_canonical()[3]) + bytes(400), 99, 0))
     batch = _recorder_native.SlotBatch("udp_multicast", "239.0.0.1")
-    msgs, bad = batch.messages(batch.put(dgrams))
-    assert batch.parsed == len(frames)
+    msgs, bad, rows = batch.messages(batch.put(dgrams))
+    assert batch.parsed == len(frames) and rows is None
     ref, ref_bad = _reference(dgrams[:-1])
     assert bad == ref_bad + 1 and ref_bad >= 9
     _same(msgs, ref)
@@ -250,13 +254,14 @@ _FOLLOWED = (
 def test_a_batch_is_followed_as_its_frames_one_by_one(run_id: int | None) -> None:
     frames = _mixed(RUN)
     assert len(frames) >= 4 * BATCH_DECODE_MIN
-    writers = [_Kept() for _ in range(3)]
+    writers = [_Kept() for _ in range(4)]
     recs = [Recorder(CODEC, w, 2, watch_duties=True) for w in writers]
     for r in recs:
         r.run_id = run_id
     for f in frames:  # python-can's Notifier
         recs[0].on_message_received(f)
     recs[1].on_messages(list(frames))  # one batch: decoded column-wise
+    recs[3].on_messages(list(frames), FrameArray.from_messages(frames).rows)  # the reader's
     rng = random.Random(1)
     i = 0
     while i < len(frames):  # batches short and long: both ways of decoding, mixed

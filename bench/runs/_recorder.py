@@ -11,17 +11,19 @@ from __future__ import annotations
 
 import threading
 import time
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
 import can
 import numpy as np
+import numpy.typing as npt
 
 from bench.nodes._loops import STATE_DONE
 from bench.wire._batch_decode import decode_batch
 from bench.wire._bus import UDP_DEFAULT_PORT, BusSpec, quiet_receive
 from bench.wire._codec import Codec
+from bench.wire._frames import FrameArray
 from bench.wire._protocol import SHARED_RUN_FRAMES
 
 #: A batch of at least this many frames has its sample, truth and telemetry frames decoded
@@ -91,14 +93,20 @@ class Recorder(can.Listener):
         self._samples_name = "PhaseSamples"
         self._recorder_names = ("PlantTruth", "CtrlTelemetry")
         self._followed = self._hot_ids | self.run_ids_frames | {self.duty_id, self.status_id}
+        self._hot_array = np.array(sorted(self._hot_ids), dtype=np.uint32)
+        self._followed_array = np.array(sorted(self._followed - {-1}), dtype=np.uint32)
 
     def on_message_received(self, msg: can.Message) -> None:
         """One frame (python-can's :class:`can.Notifier`): :meth:`on_messages` of one."""
         self.on_messages([msg])
 
-    def on_messages(self, msgs: list[can.Message]) -> None:
+    def on_messages(
+        self, msgs: list[can.Message], rows: npt.NDArray[np.void] | None = None
+    ) -> None:
         """Frames in the order received (the native reader's batch): kept and written
-        under one lock, then followed frame by frame (:meth:`_follow`)."""
+        under one lock, then followed frame by frame (:meth:`_follow`).  ``rows``: the
+        same frames as rows of :data:`bench.wire._frames.FRAME_DTYPE`, where the reader
+        has them (read in place of the messages' fields)."""
         channel = self.channel
         for msg in msgs:
             msg.channel = channel
@@ -107,11 +115,11 @@ class Recorder(can.Listener):
             self.frames.extend(msgs)
             for msg in msgs:
                 write(msg)
-        self._follow(msgs)
+        self._follow(msgs, rows)
 
     # -- following the run: each rule once, fed frame by frame or from a batch's columns --
 
-    def _follow(self, msgs: list[can.Message]) -> None:
+    def _follow(self, msgs: list[can.Message], rows: npt.NDArray[np.void] | None = None) -> None:
         """The plant's step, this run's truth step, acknowledgements, other runs' frames,
         duties and status, from the frames in order (the run_id as at the batch's start).
 
@@ -126,16 +134,27 @@ class Recorder(can.Listener):
             for msg in msgs:
                 self._follow_one(msg, run_id)
             return
-        hot = self._hot_ids
-        at: list[int] = []
-        for i, m in enumerate(msgs):
-            if m.arbitration_id in hot and not (
-                m.is_extended_id or m.is_remote_frame or m.is_error_frame
-            ):
-                at.append(i)
-            else:
-                self._follow_one(m, run_id)
-        res = decode_batch([msgs[i] for i in at], self.codec)
+        frames: Sequence[can.Message]
+        if rows is not None:  # the reader's columns: no message's field read
+            ids = rows["id"]
+            plain = ~(rows["extended"] | rows["remote"] | rows["error"])
+            hot = np.isin(ids, self._hot_array) & plain
+            rest = np.flatnonzero(np.isin(ids, self._followed_array) & ~hot).tolist()
+            at = np.flatnonzero(hot).tolist()
+            frames = FrameArray(rows[hot])
+        else:
+            at, rest = [], []
+            for i, m in enumerate(msgs):
+                if m.arbitration_id in self._hot_ids and not (
+                    m.is_extended_id or m.is_remote_frame or m.is_error_frame
+                ):
+                    at.append(i)
+                elif m.arbitration_id in self._followed:
+                    rest.append(i)
+            frames = [msgs[i] for i in at]
+        for i in rest:
+            self._follow_one(msgs[i], run_id)
+        res = decode_batch(frames, self.codec)
         samples = res.messages.get(self._samples_name)
         if samples is not None:
             if run_id is None:
@@ -156,13 +175,13 @@ class Recorder(can.Listener):
             for k in ("run_id", "step", "cmd_ack_valid", "cmd_ack")
         }
         order = np.argsort(idx, kind="stable")
-        rows = zip(
+        recs = zip(
             idx[order].tolist(),
             aid[order].tolist(),
             *(cols[k][order].tolist() for k in ("run_id", "step", "cmd_ack_valid", "cmd_ack")),
             strict=True,
         )
-        for j, a, rid, step, ack_valid, ack in rows:
+        for j, a, rid, step, ack_valid, ack in recs:
             if run_id is None:
                 if a == self.recorder_ids[0]:
                     self._known_frame(msgs[at[j]])

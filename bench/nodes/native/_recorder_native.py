@@ -26,6 +26,7 @@ from typing import Any
 
 import can
 import numpy as np
+import numpy.typing as npt
 from can.interfaces.socketcan.constants import (
     CAN_EFF_FLAG,
     CAN_ERR_FLAG,
@@ -38,6 +39,7 @@ from can.interfaces.socketcan.socketcan import dissect_can_frame
 from can.interfaces.udp_multicast.utils import unpack_message
 
 from bench.nodes.native._native import library
+from bench.wire._frames import FRAME_DTYPE
 
 __all__ = [
     "INTERFACES",
@@ -112,6 +114,7 @@ class _Frame(ctypes.Structure):
         ("ok", ctypes.c_uint8),
         ("has_channel", ctypes.c_uint8),
         ("pad", ctypes.c_uint8 * 2),
+        ("data", ctypes.c_uint8 * 64),
     ]
 
 
@@ -121,6 +124,8 @@ class _Frame(ctypes.Structure):
 _FLAGS = tuple(
     (bool(f & 1), bool(f & 2), bool(f & 4), bool(f & 8), bool(f & 32)) for f in range(64)
 )
+#: The same flags as the columns of FRAME_DTYPE.
+_ROW_FLAGS = (("extended", 1), ("fd", 2), ("brs", 4), ("error", 32))
 
 _DECLARED: list[tuple[ctypes.CDLL, type[ctypes.Structure]]] = []
 
@@ -250,9 +255,11 @@ class SlotBatch:
             ctypes.memmove(ctypes.addressof(s) + self._data_off, d, s.len)
         return n
 
-    def messages(self, n: int) -> tuple[list[can.Message], int]:
-        """The messages python-can's bus would have returned for the first ``n`` slots, and
-        how many slots held none (truncated, or refused as python-can's bus refuses them)."""
+    def messages(self, n: int) -> tuple[list[can.Message], int, npt.NDArray[np.void] | None]:
+        """The messages python-can's bus would have returned for the first ``n`` slots, how
+        many slots held none (truncated, or refused as python-can's bus refuses them), and
+        where bn_rec_parse read every slot, the same frames as rows of
+        :data:`bench.wire._frames.FRAME_DTYPE` (else None)."""
         slots = self._slots[:n]
         secs = slots["sec"]
         # python-can's bus: seconds + nanoseconds * 1.0e-9 of SO_TIMESTAMPNS (the same
@@ -284,6 +291,14 @@ class SlotBatch:
                     c if h else None
                     for c, h in zip(fr["channel"].tolist(), has.tolist(), strict=True)
                 ]
+            rows = np.zeros(n, dtype=FRAME_DTYPE)
+            rows["timestamp"] = stamps
+            rows["id"] = fr["id"]
+            fl = fr["flags"]
+            for name, bit in _ROW_FLAGS:
+                rows[name] = (fl & bit) != 0
+            rows["len"] = fr["len"]
+            rows["data"] = fr["data"]
             start = (base + fr["off"]).tolist()
             end = (base + fr["off"] + fr["len"]).tolist()
             msgs = [
@@ -299,7 +314,7 @@ class SlotBatch:
                     strict=True,
                 )
             ]
-            return msgs, 0
+            return msgs, 0, rows
         # one by one: some slots are python-can's to judge
         lens = slots["len"].tolist()
         truncated = slots["truncated"].tolist()
@@ -349,7 +364,7 @@ class SlotBatch:
                 malformed += 1
                 continue
             append(msg)
-        return msgs, malformed
+        return msgs, malformed, None
 
 
 class NativeReader:
@@ -421,11 +436,11 @@ class NativeReader:
         n = int(self._dll.bn_rec_take(self._h, self._batch_buf.buf, TAKE_BATCH))
         if not n:
             return 0
-        msgs, bad = self._batch_buf.messages(n)
+        msgs, bad, rows = self._batch_buf.messages(n)
         self.malformed += bad
         self.frames += len(msgs)
         if self._batch is not None:
-            self._batch(msgs)
+            self._batch(msgs, rows)
         else:
             on = self.listener.on_message_received
             for msg in msgs:

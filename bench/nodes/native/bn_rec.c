@@ -433,6 +433,7 @@ static int parse_one(const uint8_t *p, size_t n, bn_rec_frame_t *f)
         return 0;
     }
     f->id = id;
+    memcpy(f->data, p + off, len);
     f->off = (uint16_t)off;
     f->len = (uint8_t)len;
     f->flags = (uint8_t)((ext ? BN_EXT : 0) | (fd ? BN_FD : 0) | (brs ? BN_BRS : 0) |

@@ -92,6 +92,7 @@ typedef struct {
                         * refuses): python-can's own unpack_message decides */
     uint8_t has_channel; /* 1: channel is an int; 0: None */
     uint8_t pad[2];
+    uint8_t data[BN_MAX_DATA]; /* the data, zero after len */
 } bn_rec_frame_t;
 
 size_t bn_rec_frame_size(void);
