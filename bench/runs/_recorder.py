@@ -160,7 +160,7 @@ class Recorder(can.Listener):
             if run_id is None:
                 for j in samples.index.tolist():
                     self._known_frame(msgs[at[j]])
-            self._samples(samples.signals["step"].tolist())
+            self._samples(samples.signals["step"].astype(np.int64).tolist())
         # truth and telemetry in the order they came (other runs' count has a cap)
         parts = [res.messages.get(n) for n in self._recorder_names]
         found = [p for p in parts if p is not None]
@@ -178,15 +178,20 @@ class Recorder(can.Listener):
         recs = zip(
             idx[order].tolist(),
             aid[order].tolist(),
-            *(cols[k][order].tolist() for k in ("run_id", "step", "cmd_ack_valid", "cmd_ack")),
+            *(
+                cols[k][order].astype(np.int64).tolist()  # counters: whole numbers
+                for k in ("run_id", "step", "cmd_ack_valid", "cmd_ack")
+            ),
             strict=True,
         )
-        for j, a, rid, step, ack_valid, ack in recs:
-            if run_id is None:
+        if run_id is None:
+            for j, a, *_ in recs:
                 if a == self.recorder_ids[0]:
                     self._known_frame(msgs[at[j]])
-            else:
-                self._recorder_frame(a, int(rid), int(step), int(ack_valid), int(ack), run_id)
+            return
+        frame = self._recorder_frame
+        for _, a, rid, step, ack_valid, ack in recs:
+            frame(a, rid, step, ack_valid, ack, run_id)
 
     def _valid(self, msg: can.Message) -> dict[str, float] | None:
         """The frame's signals where it passes the codec's checks, else None."""
