@@ -5,9 +5,10 @@
  * The thread blocks in ppoll on the socket and drains it with recvmmsg straight
  * into the ring's free slots (no copy, no allocation); Python takes the slots in
  * batches (bn_rec_take) and turns each into a can.Message as python-can's bus does
- * (udp_multicast: its own unpack_message; SocketCAN: its dissect_can_frame and the
- * fields of its capture_message), so the capture holds what python-can's bus would
- * have returned.  A datagram that finds the ring full is counted (ring_lost) and its
+ * (udp_multicast: the fields bn_rec_parse reads from python-can's usual map, checked as
+ * python-can's Message._check checks them, else its own unpack_message; SocketCAN: its
+ * dissect_can_frame and the fields of its capture_message), so the capture holds what
+ * python-can's bus would have returned.  A datagram that finds the ring full is counted (ring_lost) and its
  * slot reused; on SocketCAN the kernel's own drops for the socket are counted too
  * (SO_RXQ_OVFL): the loss is reported, never silent.
  */
