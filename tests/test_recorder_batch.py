@@ -281,3 +281,35 @@ def test_a_batch_is_followed_as_its_frames_one_by_one(run_id: int | None) -> Non
         assert r.done.is_set() == one.done.is_set()
         assert r.frames == one.frames and all(m.channel == 2 for m in r.frames)
         assert w.got == writers[0].got
+
+
+def test_decoding_only_some_signals_keeps_every_verdict_and_value() -> None:
+    from bench.wire._batch_decode import decode_batch
+
+    frames = _mixed(RUN)
+    # an out-of-range value in a signal not asked for still rejects its frame
+    status = CODEC.encode(
+        "PlantStatus",
+        {"state": 1, "fault_code": 0, "overruns": 0, "late_frames": 0, "step": 1},
+    )
+    data = bytearray(status.data)
+    data[1] = 0xFF  # the state's byte: an undefined state
+    frames.append(
+        can.Message(
+            arbitration_id=status.arbitration_id,
+            is_extended_id=False,
+            data=CODEC.with_crc("PlantStatus", data),
+        )
+    )
+    whole = decode_batch(frames, CODEC)
+    only = ("run_id", "step")
+    part = decode_batch(frames, CODEC, only)
+    assert part.rejected == whole.rejected and whole.rejected.get("out_of_range", 0) >= 1
+    assert part.messages.keys() == whole.messages.keys()
+    for name, w in whole.messages.items():
+        p = part.messages[name]
+        assert p.index.tolist() == w.index.tolist()
+        for k in only:
+            if k in w.signals:
+                assert p.signals[k].tolist() == w.signals[k].tolist()
+        assert set(p.signals) < set(w.signals) or name == "PlantStatus"

@@ -32,6 +32,10 @@ from bench.wire._protocol import SHARED_RUN_FRAMES
 BATCH_DECODE_MIN = 256
 
 
+#: The signals the rules read from a batch decoded column-wise (:meth:`Recorder._follow`).
+_FOLLOWED_SIGNALS = ("run_id", "step", "cmd_ack_valid", "cmd_ack")
+
+
 class Recorder(can.Listener):
     """Keeps every frame (with the index of the bus it came from) and writes the capture."""
 
@@ -154,7 +158,7 @@ class Recorder(can.Listener):
             frames = [msgs[i] for i in at]
         for i in rest:
             self._follow_one(msgs[i], run_id)
-        res = decode_batch(frames, self.codec)
+        res = decode_batch(frames, self.codec, _FOLLOWED_SIGNALS)
         samples = res.messages.get(self._samples_name)
         if samples is not None:
             if run_id is None:
@@ -172,7 +176,7 @@ class Recorder(can.Listener):
             k: np.concatenate(
                 [p.signals[k] if k in p.signals else np.zeros(len(p.index)) for p in found]
             )
-            for k in ("run_id", "step", "cmd_ack_valid", "cmd_ack")
+            for k in _FOLLOWED_SIGNALS
         }
         order = np.argsort(idx, kind="stable")
         recs = zip(
@@ -180,7 +184,7 @@ class Recorder(can.Listener):
             aid[order].tolist(),
             *(
                 cols[k][order].astype(np.int64).tolist()  # counters: whole numbers
-                for k in ("run_id", "step", "cmd_ack_valid", "cmd_ack")
+                for k in _FOLLOWED_SIGNALS
             ),
             strict=True,
         )
