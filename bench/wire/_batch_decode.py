@@ -22,7 +22,7 @@ IDs not in the DBC are counted as unknown.
 from __future__ import annotations
 
 import operator
-from collections.abc import Sequence
+from collections.abc import Collection, Sequence
 from dataclasses import dataclass, field
 
 import can
@@ -82,11 +82,17 @@ def _vector_ok(spec: _Spec) -> bool:
     )
 
 
-def _unpack(spec: _Spec, data: npt.NDArray[np.uint8]) -> dict[str, FloatArray]:
-    """Physical values of every signal of ``spec`` from stacked payloads ``data``."""
+def _unpack(
+    spec: _Spec, data: npt.NDArray[np.uint8], only: Collection[str] | None = None
+) -> dict[str, FloatArray]:
+    """Physical values of every signal of ``spec`` (of ``only`` and the range-checked
+    ones, when given) from stacked payloads ``data``."""
     out: dict[str, FloatArray] = {}
     n = data.shape[0]
+    keep = None if only is None else {*only, *(name for name, _, _ in spec.checked)}
     for s in spec.message.signals:
+        if keep is not None and s.name not in keep:
+            continue
         b0, b1 = s.start // 8, (s.start + s.length - 1) // 8
         acc = np.zeros(n, dtype=np.uint64)
         for b in range(b0, b1 + 1):
@@ -129,11 +135,15 @@ def _decode_one_by_one(
     return MessageBatch(spec.name, np.array(keep, dtype=np.int64), sig)
 
 
-def decode_batch(frames: Sequence[can.Message], codec: Codec) -> BatchDecoded:
+def decode_batch(
+    frames: Sequence[can.Message], codec: Codec, only: Collection[str] | None = None
+) -> BatchDecoded:
     """Decode and check every frame of ``frames`` with ``codec``'s DBC.
 
     The result per message holds exactly the frames :meth:`Codec.decode`
     accepts, with the same values; rejected frames are counted by reason.
+    ``only``: the signals wanted (the checks are made all the same; of a message
+    decoded frame by frame, every signal comes).
     A :class:`~bench.wire._frames.FrameArray` is read from its columns, without a
     :class:`can.Message` made (but for a message decoded frame by frame).
     """
@@ -192,7 +202,7 @@ def decode_batch(frames: Sequence[can.Message], codec: Codec) -> BatchDecoded:
             n_bad = int(len(ok) - np.count_nonzero(ok))
             if n_bad:
                 res.rejected[REJECT_BAD_CRC] = res.rejected.get(REJECT_BAD_CRC, 0) + n_bad
-        sig = _unpack(spec, data)
+        sig = _unpack(spec, data, only)
         if spec.checked:
             in_range = np.ones(len(ok), dtype=bool)
             for name, s_lo, s_hi in spec.checked:
@@ -206,7 +216,7 @@ def decode_batch(frames: Sequence[can.Message], codec: Codec) -> BatchDecoded:
         if not np.all(ok):
             idx_arr = idx_arr[ok]
             sig = {k: v[ok] for k, v in sig.items()}
-        if spec.derive_i_c:
+        if spec.derive_i_c and "i_a" in sig and "i_b" in sig:
             sig["i_c"] = -sig["i_a"] - sig["i_b"]
         res.messages[spec.name] = MessageBatch(spec.name, idx_arr.astype(np.int64), sig)
     res.unknown_ids = n - res.skipped - n_known

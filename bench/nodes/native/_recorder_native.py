@@ -6,10 +6,11 @@ where the native library loads: a C thread without the GIL, under ``SCHED_FIFO``
 when asked for, drains the socket into a ring preallocated at open, with each
 frame's kernel receive stamp; a Python thread takes the ring in batches and turns
 each into the :class:`can.Message` python-can's bus would have returned
-(udp_multicast: python-can's own ``unpack_message``; SocketCAN: its
-``dissect_can_frame`` and the fields its ``capture_message`` sets; the time stamp
-computed as python-can computes it), which it hands to its listener as
-:class:`can.Notifier` does.  On SocketCAN the kernel's drops for the socket are
+(udp_multicast: the fields ``bn_rec_parse`` reads in C from python-can's usual map,
+checked as python-can checks them, else python-can's own ``unpack_message``;
+SocketCAN: its ``dissect_can_frame`` and the fields its ``capture_message`` sets; the
+time stamp computed as python-can computes it), which it hands to its listener a
+batch at a time (``on_messages``), or one by one as :class:`can.Notifier` does.  On SocketCAN the kernel's drops for the socket are
 counted too (``SO_RXQ_OVFL``), which python-can's bus does not say.
 The socket is emptied at C speed, so the kernel's buffer no longer overflows
 while the Python side is descheduled or slower than the bus: the ring absorbs
@@ -25,6 +26,8 @@ import time
 from typing import Any
 
 import can
+import numpy as np
+import numpy.typing as npt
 from can.interfaces.socketcan.constants import (
     CAN_EFF_FLAG,
     CAN_ERR_FLAG,
@@ -37,15 +40,23 @@ from can.interfaces.socketcan.socketcan import dissect_can_frame
 from can.interfaces.udp_multicast.utils import unpack_message
 
 from bench.nodes.native._native import library
+from bench.wire._frames import FRAME_DTYPE
 
-__all__ = ["INTERFACES", "RING_CAPACITY", "NativeReader", "can_message", "unavailable"]
+__all__ = [
+    "INTERFACES",
+    "RING_CAPACITY",
+    "NativeReader",
+    "SlotBatch",
+    "can_message",
+    "unavailable",
+]
 
 #: The ring's datagrams.  A 10 kHz native pair puts 4 datagrams a period on the
 #: recorder's bus (wen-5.1 with tt-dq, measured: 160,050 in 40,000 periods: the plant's
 #: samples and truth, the controller's duty and telemetry, the status), 40,000 a second
 #: while the clock keeps time; the Python side turns one into a recorded frame in about
-#: 15 us of CPU (python-can's unpack, the Recorder's checks, the BLF writer), 60 % of a
-#: core, which it does not get beside two SCHED_FIFO nodes on 2 cores.  2**18 datagrams
+#: 4-5 us of CPU (of which python-can's BLF writer 2.3 us), 20 % of a core, which it may
+#: not get beside two SCHED_FIFO nodes on 2 cores.  2**18 datagrams
 #: hold 6.6 s of that bus with the Python side not running at all, longer than the
 #: real-time runs of ``bench perf`` (4 s); about 90 MB (bn_rec_slot_t: 344 bytes).
 RING_CAPACITY = 1 << 18
@@ -92,6 +103,31 @@ def _slot_type(dgram: int) -> type[ctypes.Structure]:
     return Slot
 
 
+class _Frame(ctypes.Structure):
+    """``bn_rec_frame_t`` (bn_rec.h)."""
+
+    _fields_ = [
+        ("id", ctypes.c_uint32),
+        ("channel", ctypes.c_uint32),
+        ("off", ctypes.c_uint16),
+        ("len", ctypes.c_uint8),
+        ("flags", ctypes.c_uint8),
+        ("ok", ctypes.c_uint8),
+        ("has_channel", ctypes.c_uint8),
+        ("pad", ctypes.c_uint8 * 2),
+        ("data", ctypes.c_uint8 * 64),
+    ]
+
+
+#: ``bn_frame_t``'s flags (bn.h: BN_EXT 1, BN_FD 2, BN_BRS 4, BN_ESI 8, BN_ERR 32) that
+#: bn_rec_parse sets, as (is_extended_id, is_fd, bitrate_switch, error_state_indicator,
+#: is_error_frame).
+_FLAGS = tuple(
+    (bool(f & 1), bool(f & 2), bool(f & 4), bool(f & 8), bool(f & 32)) for f in range(64)
+)
+#: The same flags as the columns of FRAME_DTYPE.
+_ROW_FLAGS = (("extended", 1), ("fd", 2), ("brs", 4), ("error", 32))
+
 _DECLARED: list[tuple[ctypes.CDLL, type[ctypes.Structure]]] = []
 
 
@@ -133,6 +169,11 @@ def _lib() -> tuple[ctypes.CDLL, type[ctypes.Structure]]:
     dll.bn_rec_stop.restype = None
     dll.bn_rec_stats.argtypes = [ctypes.c_void_p, ctypes.POINTER(_Stats)]
     dll.bn_rec_stats.restype = None
+    dll.bn_rec_frame_size.restype = ctypes.c_size_t
+    if int(dll.bn_rec_frame_size()) != ctypes.sizeof(_Frame):
+        raise OSError(0, "bn_rec_frame_t and its Python mirror differ in size")
+    dll.bn_rec_parse.argtypes = [ctypes.c_void_p, ctypes.c_uint64, ctypes.c_void_p]
+    dll.bn_rec_parse.restype = ctypes.c_uint64
     dll.bn_rec_close.argtypes = [ctypes.c_void_p]
     dll.bn_rec_close.restype = None
     _DECLARED.append((dll, slot))
@@ -175,6 +216,158 @@ def can_message(frame: bytes, ts: float, local: bool, channel: str) -> can.Messa
     )
 
 
+class SlotBatch:
+    """The slots of one batch taken from the ring (``bn_rec_take``), and the
+    :class:`can.Message` each holds as python-can's bus on ``interface`` (``channel``) would
+    have returned it.
+
+    udp_multicast: ``bn_rec_parse`` reads python-can's msgpack map where it has the shape
+    python-can's ``pack_message`` writes and its values pass ``can.Message``'s check, and
+    the message is built from those fields (``check=False``: checked in C); any other
+    datagram goes through python-can's own ``unpack_message``, which decides.
+    """
+
+    def __init__(self, interface: str, channel: str, capacity: int = TAKE_BATCH) -> None:
+        self._dll, slot = _lib()
+        self.interface = interface
+        self.channel = channel
+        self.capacity = capacity
+        self.buf = (slot * capacity)()
+        self._slot_size = ctypes.sizeof(slot)
+        self._data_off = int(slot.data.offset)
+        self._dgram = ctypes.sizeof(slot) - self._data_off
+        self._slots = np.ctypeslib.as_array(self.buf)  # a view: the columns of a batch
+        self._raw = memoryview(self.buf).cast("B")
+        self._parsed = (_Frame * capacity)()
+        self._frames = np.ctypeslib.as_array(self._parsed)
+        #: The slots of the last batch that bn_rec_parse read (the rest: python-can's).
+        self.parsed = 0
+
+    def put(self, datagrams: list[tuple[bytes, int, int]]) -> int:
+        """Fill the first slots with ``(datagram, sec, nsec)`` as the receive thread does
+        (a datagram longer than a slot: truncated); how many (replays and tests)."""
+        n = min(len(datagrams), self.capacity)
+        for i, (d, sec, nsec) in enumerate(datagrams[:n]):
+            s = self.buf[i]
+            s.sec, s.nsec = sec, nsec
+            s.truncated = len(d) > self._dgram
+            s.len = min(len(d), self._dgram)
+            s.local = 0
+            ctypes.memmove(ctypes.addressof(s) + self._data_off, d, s.len)
+        return n
+
+    def messages(self, n: int) -> tuple[list[can.Message], int, npt.NDArray[np.void] | None]:
+        """The messages python-can's bus would have returned for the first ``n`` slots, how
+        many slots held none (truncated, or refused as python-can's bus refuses them), and
+        where bn_rec_parse read every slot, the same frames as rows of
+        :data:`bench.wire._frames.FRAME_DTYPE` (else None)."""
+        slots = self._slots[:n]
+        secs = slots["sec"]
+        # python-can's bus: seconds + nanoseconds * 1.0e-9 of SO_TIMESTAMPNS (the same
+        # float64 operations, column-wise); time.time() where the kernel gave no stamp
+        stamps = (secs.astype(np.float64) + slots["nsec"] * 1.0e-9).tolist()
+        if (secs < 0).any():
+            for i in np.flatnonzero(secs < 0).tolist():
+                stamps[i] = time.time()
+        raw = self._raw
+        base = np.arange(n) * self._slot_size + self._data_off
+        if self.interface == "udp_multicast":
+            parsed = int(self._dll.bn_rec_parse(self.buf, n, self._parsed))
+            fr = self._frames[:n]
+        else:
+            parsed = 0
+        self.parsed = parsed
+        message = can.Message
+        if parsed == n:
+            # bn_rec_parse: unpack_message's fields, its check passed (every slot)
+            flags = map(_FLAGS.__getitem__, fr["flags"].tolist())
+            has = fr["has_channel"]
+            chans: list[int | None]
+            if not has.any():
+                chans = [None] * n
+            elif has.all():
+                chans = list(fr["channel"].tolist())
+            else:
+                chans = [
+                    c if h else None
+                    for c, h in zip(fr["channel"].tolist(), has.tolist(), strict=True)
+                ]
+            rows = np.zeros(n, dtype=FRAME_DTYPE)
+            rows["timestamp"] = stamps
+            rows["id"] = fr["id"]
+            fl = fr["flags"]
+            for name, bit in _ROW_FLAGS:
+                rows[name] = (fl & bit) != 0
+            rows["len"] = fr["len"]
+            rows["data"] = fr["data"]
+            start = (base + fr["off"]).tolist()
+            end = (base + fr["off"] + fr["len"]).tolist()
+            msgs = [
+                message(ts, aid, ext, False, err, ch, dlc, bytearray(raw[a:b]), fd, True, brs, esi)
+                for ts, aid, (ext, fd, brs, esi, err), ch, dlc, a, b in zip(
+                    stamps,
+                    fr["id"].tolist(),
+                    flags,
+                    chans,
+                    fr["len"].tolist(),
+                    start,
+                    end,
+                    strict=True,
+                )
+            ]
+            return msgs, 0, rows
+        # one by one: some slots are python-can's to judge
+        lens = slots["len"].tolist()
+        truncated = slots["truncated"].tolist()
+        bases = base.tolist()
+        if parsed:
+            ok, ids, offs, dlcs, flag, chan, has_chan = (
+                fr[k].tolist()
+                for k in ("ok", "id", "off", "len", "flags", "channel", "has_channel")
+            )
+        else:
+            ok = [0] * n
+        malformed = 0
+        msgs = []
+        append = msgs.append
+        for i in range(n):
+            if truncated[i]:
+                malformed += 1
+                continue
+            ts = stamps[i]
+            if ok[i]:
+                ext, fd, brs, esi, err = _FLAGS[flag[i]]
+                a = bases[i] + offs[i]
+                append(
+                    message(
+                        ts,
+                        ids[i],
+                        ext,
+                        False,
+                        err,
+                        chan[i] if has_chan[i] else None,
+                        dlcs[i],
+                        bytearray(raw[a : a + dlcs[i]]),
+                        fd,
+                        True,
+                        brs,
+                        esi,
+                    )
+                )
+                continue
+            data = bytes(raw[bases[i] : bases[i] + lens[i]])
+            try:
+                if self.interface == "socketcan":
+                    msg = can_message(data, ts, bool(slots["local"][i]), self.channel)
+                else:
+                    msg = unpack_message(data, replace={"timestamp": ts}, check=True)
+            except Exception:  # python-can's bus raises CanOperationError on it
+                malformed += 1
+                continue
+            append(msg)
+        return msgs, malformed, None
+
+
 class NativeReader:
     """Reads python-can's udp_multicast bus ``group``/``port`` (``interface``
     ``udp_multicast``) or the SocketCAN interface ``group`` (``socketcan``; ``port`` unused)
@@ -200,7 +393,7 @@ class NativeReader:
         capacity: int | None = None,
         poll_s: float = 0.05,
     ) -> None:
-        self._dll, slot = _lib()
+        self._dll = _lib()[0]
         self.listener = listener
         self.interface = interface
         self._channel = group
@@ -219,7 +412,9 @@ class NativeReader:
         if not handle:
             raise OSError(-err.value, f"native recorder: {os.strerror(-err.value)}")
         self._h: int | None = handle
-        self._buf = (slot * TAKE_BATCH)()
+        self._batch_buf = SlotBatch(interface, group)
+        #: The listener's batch entry (``on_messages``: one call per batch), if it has one.
+        self._batch = getattr(listener, "on_messages", None)
         self._poll_s = poll_s
         #: Datagrams that were not python-can messages (truncated, or refused by
         #: ``unpack_message``: python-can's bus raises on them).
@@ -239,30 +434,18 @@ class NativeReader:
     def _take(self) -> int:
         """Hand one batch of the ring to the listener; how many datagrams it held."""
         assert self._h is not None
-        n = int(self._dll.bn_rec_take(self._h, self._buf, TAKE_BATCH))
-        buf = self._buf
-        on = self.listener.on_message_received
-        can_bus = self.interface == "socketcan"
-        for i in range(n):
-            s = buf[i]
-            length = int(s.len)
-            if s.truncated:
-                self.malformed += 1
-                continue
-            data = bytes(memoryview(s.data)[:length])
-            sec = int(s.sec)
-            # python-can's bus: seconds + nanoseconds * 1.0e-9 of SO_TIMESTAMPNS
-            ts = sec + int(s.nsec) * 1.0e-9 if sec >= 0 else time.time()
-            try:
-                if can_bus:
-                    msg = can_message(data, ts, bool(s.local), self._channel)
-                else:
-                    msg = unpack_message(data, replace={"timestamp": ts}, check=True)
-            except Exception:  # python-can's bus raises CanOperationError on it
-                self.malformed += 1
-                continue
-            self.frames += 1
-            on(msg)
+        n = int(self._dll.bn_rec_take(self._h, self._batch_buf.buf, TAKE_BATCH))
+        if not n:
+            return 0
+        msgs, bad, rows = self._batch_buf.messages(n)
+        self.malformed += bad
+        self.frames += len(msgs)
+        if self._batch is not None:
+            self._batch(msgs, rows)
+        else:
+            on = self.listener.on_message_received
+            for msg in msgs:
+                on(msg)
         return n
 
     def _run(self) -> None:

@@ -5,9 +5,10 @@
  * The thread blocks in ppoll on the socket and drains it with recvmmsg straight
  * into the ring's free slots (no copy, no allocation); Python takes the slots in
  * batches (bn_rec_take) and turns each into a can.Message as python-can's bus does
- * (udp_multicast: its own unpack_message; SocketCAN: its dissect_can_frame and the
- * fields of its capture_message), so the capture holds what python-can's bus would
- * have returned.  A datagram that finds the ring full is counted (ring_lost) and its
+ * (udp_multicast: the fields bn_rec_parse reads from python-can's usual map, checked as
+ * python-can's Message._check checks them, else its own unpack_message; SocketCAN: its
+ * dissect_can_frame and the fields of its capture_message), so the capture holds what
+ * python-can's bus would have returned.  A datagram that finds the ring full is counted (ring_lost) and its
  * slot reused; on SocketCAN the kernel's own drops for the socket are counted too
  * (SO_RXQ_OVFL): the loss is reported, never silent.
  */
@@ -313,4 +314,145 @@ void bn_rec_close(bn_rec_t *r)
     bn_close(&r->bus);
     free(r->ring);
     free(r);
+}
+
+/* ---- python-can's datagram, parsed where it has its usual shape ---- */
+
+size_t bn_rec_frame_size(void) { return sizeof(bn_rec_frame_t); }
+
+typedef struct {
+    const uint8_t *p;
+    size_t n, i;
+} mp_t;
+
+/* The fixstr key s next (exactly). */
+static bool mp_key(mp_t *m, const char *s)
+{
+    size_t len = strlen(s);
+    if (m->i + 1 + len > m->n || m->p[m->i] != (uint8_t)(0xa0u | len) ||
+        memcmp(m->p + m->i + 1, s, len) != 0) {
+        return false;
+    }
+    m->i += 1 + len;
+    return true;
+}
+
+/* A msgpack bool (Python bool, not an int standing for one). */
+static bool mp_bool(mp_t *m, bool *v)
+{
+    if (m->i >= m->n || (m->p[m->i] != 0xc2u && m->p[m->i] != 0xc3u)) {
+        return false;
+    }
+    *v = m->p[m->i++] == 0xc3u;
+    return true;
+}
+
+/* A msgpack unsigned integer up to 32 bits (positive fixint, uint 8/16/32). */
+static bool mp_uint(mp_t *m, uint32_t *v)
+{
+    if (m->i >= m->n) {
+        return false;
+    }
+    uint8_t c = m->p[m->i++];
+    int bytes;
+    if (c <= 0x7fu) {
+        *v = c;
+        return true;
+    }
+    if (c == 0xccu) {
+        bytes = 1;
+    } else if (c == 0xcdu) {
+        bytes = 2;
+    } else if (c == 0xceu) {
+        bytes = 4;
+    } else {
+        return false;
+    }
+    if (m->i + (size_t)bytes > m->n) {
+        return false;
+    }
+    uint32_t x = 0;
+    for (int k = 0; k < bytes; k++) {
+        x = (x << 8) | m->p[m->i++];
+    }
+    *v = x;
+    return true;
+}
+
+/* One datagram: 1 and the fields of python-can's message, or 0 (python-can decides). */
+static int parse_one(const uint8_t *p, size_t n, bn_rec_frame_t *f)
+{
+    mp_t m = {p, n, 0};
+    bool ext, rtr, err, fd, brs, esi;
+    uint32_t id, dlc;
+    memset(f, 0, sizeof *f);
+    if (n < 1 || p[0] != (0x80u | 11u)) { /* fixmap of 11 */
+        return 0;
+    }
+    m.i = 1;
+    /* the timestamp is replaced by the receive stamp: any float will do */
+    if (!mp_key(&m, "timestamp") || m.i >= n) {
+        return 0;
+    }
+    if (p[m.i] == 0xcbu) {
+        m.i += 9;
+    } else if (p[m.i] == 0xcau) {
+        m.i += 5;
+    } else {
+        return 0;
+    }
+    if (m.i > n || !mp_key(&m, "arbitration_id") || !mp_uint(&m, &id) ||
+        !mp_key(&m, "is_extended_id") || !mp_bool(&m, &ext) ||
+        !mp_key(&m, "is_remote_frame") || !mp_bool(&m, &rtr) ||
+        !mp_key(&m, "is_error_frame") || !mp_bool(&m, &err) || !mp_key(&m, "channel") ||
+        m.i >= n) {
+        return 0;
+    }
+    if (p[m.i] == 0xc0u) { /* None */
+        m.i++;
+    } else if (mp_uint(&m, &f->channel)) {
+        f->has_channel = 1;
+    } else {
+        return 0; /* a str (python-can decodes it) */
+    }
+    if (!mp_key(&m, "dlc") || !mp_uint(&m, &dlc) ||
+        !mp_key(&m, "data") || m.i + 2 > n || p[m.i] != 0xc4u) {
+        return 0;
+    }
+    size_t len = p[m.i + 1];
+    size_t off = m.i + 2;
+    m.i = off + len;
+    if (m.i > n || !mp_key(&m, "is_fd") || !mp_bool(&m, &fd) || !mp_key(&m, "bitrate_switch") ||
+        !mp_bool(&m, &brs) || !mp_key(&m, "error_state_indicator") || !mp_bool(&m, &esi) ||
+        m.i != n) {
+        return 0;
+    }
+    /* python-can's Message._check, for the message it would build (a remote frame is left
+     * to python-can: its data is dropped) */
+    if (rtr || id >= (ext ? 0x20000000u : 0x800u) || dlc > (fd ? 64u : 8u) || dlc != len ||
+        (!fd && (brs || esi))) {
+        return 0;
+    }
+    f->id = id;
+    memcpy(f->data, p + off, len);
+    f->off = (uint16_t)off;
+    f->len = (uint8_t)len;
+    f->flags = (uint8_t)((ext ? BN_EXT : 0) | (fd ? BN_FD : 0) | (brs ? BN_BRS : 0) |
+                         (esi ? BN_ESI : 0) | (err ? BN_ERR : 0));
+    f->ok = 1;
+    return 1;
+}
+
+uint64_t bn_rec_parse(const bn_rec_slot_t *slots, uint64_t n, bn_rec_frame_t *out)
+{
+    uint64_t ok = 0;
+    for (uint64_t k = 0; k < n; k++) {
+        const bn_rec_slot_t *s = &slots[k];
+        if (s->truncated) {
+            memset(&out[k], 0, sizeof out[k]);
+            continue;
+        }
+        ok += (uint64_t)parse_one(s->data, s->len, &out[k]);
+    }
+    return ok;
 }

@@ -79,6 +79,29 @@ void bn_rec_stop(bn_rec_t *r);
 
 void bn_rec_stats(const bn_rec_t *r, bn_rec_stats_t *out);
 
+/* One datagram of python-can's udp_multicast bus as python-can's unpack_message would
+ * turn it into a can.Message (check=True), where bn_rec_parse can say so exactly. */
+typedef struct {
+    uint32_t id;       /* arbitration_id */
+    uint32_t channel;  /* channel, when has_channel (else None) */
+    uint16_t off;      /* where data starts in the datagram */
+    uint8_t len;       /* bytes of data (= dlc) */
+    uint8_t flags;     /* BN_EXT, BN_FD, BN_BRS, BN_ESI, BN_ERR */
+    uint8_t ok;        /* 1: the fields here are the message's; 0: not parsed here (another
+                        * msgpack shape, a remote frame, or a message python-can's check
+                        * refuses): python-can's own unpack_message decides */
+    uint8_t has_channel; /* 1: channel is an int; 0: None */
+    uint8_t pad[2];
+    uint8_t data[BN_MAX_DATA]; /* the data, zero after len */
+} bn_rec_frame_t;
+
+size_t bn_rec_frame_size(void);
+
+/* Parse n taken slots (bn_rec_take) into out[0..n): the map of the eleven keys in the
+ * order python-can's pack_message writes them (channel nil or an unsigned int, data bin 8) whose values
+ * pass python-can's Message._check.  How many were parsed (ok). */
+uint64_t bn_rec_parse(const bn_rec_slot_t *slots, uint64_t n, bn_rec_frame_t *out);
+
 /* Stop, close the socket and free the ring. */
 void bn_rec_close(bn_rec_t *r);
 
