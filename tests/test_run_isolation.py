@@ -205,35 +205,19 @@ def test_a_run_refuses_a_bus_that_carries_another_runs_frames(tmp_path: Path) ->
             k += 1
             time.sleep(0.01)
 
-    heard: list[can.Message] = []
-
-    def listen() -> None:  # everything on the bus while the second run starts and refuses
-        while not stop.is_set():
-            m = bus.recv(timeout=0.05)
-            if m is not None:
-                heard.append(m)
-
-    threads = [threading.Thread(target=f, daemon=True) for f in (chatter, listen)]
-    for th in threads:
-        th.start()
+    th = threading.Thread(target=chatter, daemon=True)
+    th.start()
     try:
         p = subprocess.run(_cmd(port, tmp_path / "r"), cwd=ROOT, capture_output=True, timeout=120)
     finally:
         stop.set()
-        for th in threads:
-            th.join()
+        th.join()
         bus.shutdown()
     err = p.stderr.decode().strip().splitlines()
     assert p.returncode == 2, err
     assert err[-1].startswith("bench: error: another run is on this bus (udp_multicast"), err
     assert "refusing to share it" in err[-1]
-    # its nodes started while it listened, and were stopped having sent nothing: the bus
-    # carried the other run's frames only
-    assert (tmp_path / "r" / "plant.log").exists()
-    truth = CODEC.frame_id("PlantTruth")
-    assert heard and all(m.arbitration_id == truth for m in heard), {
-        m.arbitration_id for m in heard
-    }
+    assert not (tmp_path / "r" / "plant.log").exists()  # no node was started
 
 
 def test_random_fd_frames_with_the_dbc_ids_leave_the_scored_rows_unchanged(

@@ -30,7 +30,6 @@ import signal
 import subprocess
 import sys
 import time
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -168,8 +167,7 @@ def start_nodes(
     procs: list[tuple[str, subprocess.Popen[str]]],
     *,
     stop: Any,
-    meanwhile: Callable[[], str | None] | None = None,
-) -> str | None:
+) -> None:
     """Start each role's process on the run's plan, all at once, and wait for every
     ``READY``; appended to ``procs`` as started.
 
@@ -181,18 +179,11 @@ def start_nodes(
     failure is named first (the link, the controller, the plant).
     ``procs`` is filled in place so that the caller can kill what was started
     when a node fails to start.  ``stop()`` (a signal came) ends the start-up early.
-
-    ``meanwhile()``: what the caller does while the nodes start, before their
-    ``READY`` is awaited (``bench run`` listens to the bus for another run there:
-    the nodes' start-up, about half a second of imports, overlaps it, and none of
-    them sends before the start command); a line it returns (the bus is another
-    run's) is returned at once, without waiting for the nodes (the caller kills
-    them), else None once every node is ready.
     """
     started: list[tuple[str, subprocess.Popen[str]]] = []
     for role, extra in roles:
         if stop():
-            return None
+            return
         log = out_dir / f"{role}.log"
         cmd = [sys.executable, "-m", "bench", role, "--plan", str(plan_file), *extra]
         if role != "link":
@@ -210,13 +201,8 @@ def start_nodes(
         )
         procs.append((role, p))
         started.append((role, p))
-    if meanwhile is not None:
-        why = meanwhile()
-        if why is not None:
-            return why
     for role, p in started:
         _wait_ready(p, role, out_dir / f"{role}.log", stop=stop)
-    return None
 
 
 def stop_nodes(

@@ -22,7 +22,6 @@ other run.
 
 from __future__ import annotations
 
-import gc
 import json
 import math
 import os
@@ -43,6 +42,7 @@ from bench._errors import BenchError, CommandsLost
 from bench.nodes._counters import RejectionSummary, rejection_text
 from bench.nodes._loops import STALL_S, trip_text
 from bench.nodes._plan import PLAN_FILE, make_plan
+from controller import DesignRecord
 from bench.runs._analysis import NoRowsError
 from bench.runs._busfit import check_bus_rate
 from bench.runs._pacing import PACE_EVERY, CommandPacer
@@ -69,7 +69,6 @@ from bench.scenarios._setup import sample_period, with_position_sensor
 from bench.wire._bus import BusSpec
 from bench.wire._codec import Codec
 from bench.wire._protocol import SHARED_RUN_FRAMES, new_run_id, unwrap
-from controller import DesignRecord
 
 LOG_SUFFIX = {"blf": ".blf", "asc": ".asc", "log": ".log"}
 
@@ -159,28 +158,6 @@ def recorder_priority(node_args: dict[str, list[str]] | None) -> int | None:
     return max(1, min(prios) - 1) if prios else None
 
 
-@contextmanager
-def collector_paused() -> Iterator[None]:
-    """Python's cyclic garbage collector off inside (as it was, after).
-
-    A run keeps every frame it records, a Python object each (160,000 in the 4 s of
-    wen-5.1 at 10 kHz), and the collector walked them all again at each of its full
-    passes: 0.5 s of the bench process's 5 s, GIL held, in the demo, while its
-    recorder thread, whose pace a lockstep plant waits for, needs that GIL.  The run
-    itself makes no cyclic garbage (measured: 3,022 objects found once the collector
-    ran again, the same after 1 s and after 4 s of a run: its start-up's), so nothing
-    accumulates; what it does make is freed when the collector is back on.
-    """
-    was = gc.isenabled()
-    gc.disable()
-    try:
-        yield
-    finally:
-        if was:
-            gc.enable()
-
-
-@collector_paused()
 def run_scenario(
     scn: Scenario,
     estimator: str,
@@ -282,22 +259,14 @@ def run_scenario(
     pacer: CommandPacer | None = None
     with _catch_signals() as interrupted:
         try:
+            start_error = _bus_in_use(rec, spec, interrupted)
+            rec.expect_run(run_id)
             try:
-                build_native_libraries()
-                # the nodes start while the bus is listened to (none sends before the start
-                # command); one that fails to start is named after the bus's refusal
-                start_error = start_nodes(
-                    roles,
-                    plan_file,
-                    out_dir,
-                    env,
-                    procs,
-                    stop=interrupted,
-                    meanwhile=lambda: _bus_in_use(rec, spec, interrupted),
-                )
+                if start_error is None:
+                    build_native_libraries()
+                    start_nodes(roles, plan_file, out_dir, env, procs, stop=interrupted)
             except BenchError as e:  # a node that never became ready: nothing to record
                 start_error = str(e)
-            rec.expect_run(run_id)
             if start_error is not None and check is not None:
                 # a node that failed on the run's settings says less than their own check
                 try:
@@ -516,11 +485,10 @@ def clear_run_files(out_dir: Path, keep: tuple[str, ...] = ()) -> None:
             (out_dir / name).unlink(missing_ok=True)
 
 
-#: Listening while a run's nodes start (none sends before the start command): a bus
-#: that carries a plant's or a bench's frames then is another run's (a controller under
-#: test waiting for its first sample may already send, and is no other run) (an active
-#: plant sends every period, a stalled lockstep plant every 50 ms, PlantStatus every
-#: 100 ms of plant time).
+#: Listening before a run starts its nodes: a bus that carries a plant's or a
+#: bench's frames then is another run's (a controller under test waiting
+#: for its first sample may already send, and is no other run) (an active plant sends every period, a stalled
+#: lockstep plant every 50 ms, PlantStatus every 100 ms of plant time).
 LISTEN_S = 0.3
 
 

@@ -1470,7 +1470,7 @@ def demo_lines(res: dict[str, Any]) -> list[str]:
                 else "this run made it (scipy's import and the loops' margin searches). "
             )
             + "The rest of the command's own work is Python's start and the imports, "
-            "listening to the bus while the nodes start, then decoding the capture, "
+            "listening to the bus before the nodes start, then decoding the capture, "
             "writing signals.csv and drawing run.png (matplotlib's text and axes, mostly; "
             "matplotlib and scipy.signal are imported while the nodes start). "
             "The nodes' start-up is two Python processes' imports at once on the shared "
