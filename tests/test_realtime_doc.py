@@ -121,6 +121,33 @@ def test_the_sensorless_real_time_score_says_its_verdict_and_the_late_periods() 
     assert "frames the recorder lost: 29,881." in page
 
 
+def test_the_score_is_the_run_of_median_rms_of_several_real_time_runs() -> None:
+    """The real-time run moves from run to run by its late periods: the score names every
+    run's rms and how many scored like lockstep, and its figures are the median run's,
+    a failed run or a lost angle counting as the worst."""
+    from bench.studies._perf import _failed_score_run, median_score_run
+
+    def run(rms: float, lost: bool = False) -> dict[str, Any]:
+        return {"theta_err_rms_deg": rms, "lock_lost": lost}
+
+    pick, n = median_score_run([run(2.45), run(0.48), run(0.83)], 0.40, 0.24)
+    assert pick["theta_err_rms_deg"] == 0.83 and n == 1
+    pick, n = median_score_run([run(0.3, lost=True), run(0.5), _failed_score_run("x")], 0.4, 0.24)
+    assert pick["lock_lost"] and n == 1  # the kept-angle run ranks first, the median is worse
+    pick, n = median_score_run([run(0.45)], 0.40, 0.24)
+    assert pick["theta_err_rms_deg"] == 0.45 and n == 1
+    res = _measured(missed_10k=1.0, frames_lost=0.0)
+    res["realtime_native_score"] = {
+        **_score(0.83),
+        "realtime_rms_runs": [2.45, 0.48, 0.83],
+        "realtime_runs_within": 1,
+    }
+    page = render_realtime_native(res)
+    assert "Real time 3 times, the run of median rms below (rms 2.45 deg, 0.480 deg, " in page
+    assert "0.830 deg; 1 of 3 scored like lockstep)." in page
+    assert "0.830 deg in real time against 0.400 deg in lockstep" in page
+
+
 def test_the_score_says_the_commands_its_nodes_held_after_their_step() -> None:
     """A command held after its step applies a set-point later than in lockstep: the run
     differs with no late duty, and the score says so beside the late periods."""

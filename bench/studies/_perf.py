@@ -715,15 +715,29 @@ def score_tolerance_deg(scn: Any) -> float:
     return math.degrees(w_e * sample_period(scn))
 
 
+#: Real-time runs of :func:`sensorless_realtime_score` (one with ``--quick``): the figures are
+#: those of the run of median rms (on this shared machine one run's rms moved from 0.48 to
+#: 2.45 deg between runs of the same code, by its late periods; the lockstep run is
+#: deterministic and runs once).
+SCORE_RUNS = 3
+
+
 def sensorless_realtime_score(
-    out: Path, priority: int | None = RT_PRIORITY, duration: float | None = None
+    out: Path,
+    priority: int | None = RT_PRIORITY,
+    duration: float | None = None,
+    realtime_runs: int = SCORE_RUNS,
 ) -> dict[str, Any]:
     """wen-5.1 with tt-dq at 10 kHz (the paper's rate), whole (or its first ``duration``
     seconds, ``--quick``: 1.2 s, scored from 1 s at 100 rpm), on the native pair: in real
     time with ``--rt-priority`` and in lockstep over the default transport; each run's
     position-error figures, the real-time run's late duties, and whether it scores like
     the lockstep run within :func:`score_tolerance_deg` with the angle kept
-    (``realtime_native_score``; issue 29)."""
+    (``realtime_native_score``; issue 29).
+
+    The real-time run is made ``realtime_runs`` times; ``realtime`` holds the one of
+    median rms (a failed run counts as the worst), ``realtime_rms_runs`` every run's rms
+    (NaN: failed) and ``realtime_runs_within`` how many scored like the lockstep run."""
     from bench.runs._run import run_scenario
     from bench.scenarios._schema import load_scenario
     from bench.scenarios._setup import sample_period
@@ -734,15 +748,19 @@ def sensorless_realtime_score(
     if duration is not None:
         scn = replace(scn, duration=duration)
     runs: dict[str, dict[str, Any]] = {}
-    for i, mode in enumerate(("lockstep", "realtime")):
-        port = 48000 + 4 * (os.getpid() % 1000) + 2 * i if iface == "udp_multicast" else None
+    rt_runs: list[dict[str, Any]] = []
+    modes = ["lockstep"] + ["realtime"] * max(1, realtime_runs)
+    for i, mode in enumerate(modes):
+        port = (
+            48000 + 4 * (os.getpid() % 1000) + 2 * min(i, 1) if iface == "udp_multicast" else None
+        )
         rt = [] if priority is None or mode == "lockstep" else ["--rt-priority", str(priority)]
         try:
             res = run_scenario(
                 scn,
                 "tt-dq",
                 spec=BusSpec(iface, chan, port),
-                out_dir=out / mode,
+                out_dir=out / (mode if i == 0 else f"{mode}{i}"),
                 mode=mode,
                 progress=False,
                 node_args={
@@ -755,11 +773,11 @@ def sensorless_realtime_score(
                 raise
             # a real-time run that failed on this host (a node that missed its stop and was
             # killed, a trip before anything was scored) is this host's result: kept, said
-            runs[mode] = _failed_score_run(str(e))
+            rt_runs.append(_failed_score_run(str(e)))
             continue
         m = res.metrics
         n = max(1, int(m.get("steps") or 0))
-        runs[mode] = {
+        row = {
             **{k: math.nan if m.get(k) is None else float(m[k]) for k in SCORE_KEYS},
             "lock_lost": bool(m.get("lock_lost")),
             "late_duty_pct": 100.0 * m.get("late_duty_periods", 0) / n,
@@ -786,8 +804,14 @@ def sensorless_realtime_score(
             # which recorder read the bus (native: bench/nodes/native/bn_rec.c, or python)
             "recorder_engine": str((res.meta.get("recorder") or {}).get("engine", "python")),
         }
+        if mode == "lockstep":
+            runs[mode] = row
+        else:
+            rt_runs.append(row)
     tol = score_tolerance_deg(scn)
-    diff = abs(runs["realtime"]["theta_err_rms_deg"] - runs["lockstep"]["theta_err_rms_deg"])
+    ref = runs["lockstep"]["theta_err_rms_deg"]
+    runs["realtime"], n_within = median_score_run(rt_runs, ref, tol)
+    diff = abs(runs["realtime"]["theta_err_rms_deg"] - ref)
     return {
         "scenario": "wen-5.1",
         "estimator": "tt-dq",
@@ -795,9 +819,31 @@ def sensorless_realtime_score(
         "f_sw": 1.0 / sample_period(scn),
         "tolerance_deg": tol,
         "rms_diff_deg": diff,
-        "scores_like_lockstep": bool(diff <= tol and not runs["realtime"]["lock_lost"]),
+        "scores_like_lockstep": scores_like(runs["realtime"], ref, tol),
+        "realtime_rms_runs": [float(r["theta_err_rms_deg"]) for r in rt_runs],
+        "realtime_runs_within": n_within,
         **runs,
     }
+
+
+def scores_like(run: dict[str, Any], ref_rms: float, tol: float) -> bool:
+    """Whether a real-time score run scores like the lockstep run of rms ``ref_rms``:
+    within ``tol`` of it with the angle kept (a failed run, NaN, does not)."""
+    return bool(abs(run["theta_err_rms_deg"] - ref_rms) <= tol and not run["lock_lost"])
+
+
+def median_score_run(
+    runs: list[dict[str, Any]], ref_rms: float, tol: float
+) -> tuple[dict[str, Any], int]:
+    """The real-time score run of median rms (a failed run or a lost angle counts as the
+    worst), and how many of ``runs`` score like the lockstep run (:func:`scores_like`)."""
+
+    def rank(r: dict[str, Any]) -> float:
+        v = float(r["theta_err_rms_deg"])
+        return math.inf if math.isnan(v) or r["lock_lost"] else v
+
+    ranked = sorted(runs, key=rank)
+    return ranked[len(ranked) // 2], sum(scores_like(r, ref_rms, tol) for r in runs)
 
 
 def _failed_score_run(error: str) -> dict[str, Any]:
@@ -859,7 +905,15 @@ def score_lines(sc: dict[str, Any] | None) -> list[str]:
         f"(`realtime_native_score`): {sc['scenario']} with {sc['estimator']} at "
         f"{sc['f_sw'] / 1e3:g} kHz, {_num(sc['duration_s'], 's')}, both nodes native, "
         "`--rt-priority`. "
-        f"Position error rms {_num(rt['theta_err_rms_deg'], 'deg')} in real time against "
+        + (
+            f"Real time {len(sc['realtime_rms_runs'])} times, the run of median rms below "
+            f"(rms {', '.join(_num(v, 'deg') for v in sc['realtime_rms_runs'])}; "
+            f"{sc['realtime_runs_within']} of {len(sc['realtime_rms_runs'])} scored like "
+            "lockstep). "
+            if len(sc.get("realtime_rms_runs") or []) > 1
+            else ""
+        )
+        + f"Position error rms {_num(rt['theta_err_rms_deg'], 'deg')} in real time against "
         f"{_num(ls['theta_err_rms_deg'], 'deg')} in lockstep (max |error| "
         f"{_num(rt['theta_err_abs_max_deg'], 'deg')} against "
         f"{_num(ls['theta_err_abs_max_deg'], 'deg')}, angle "
@@ -1470,11 +1524,12 @@ def demo_lines(res: dict[str, Any]) -> list[str]:
                 else "this run made it (scipy's import and the loops' margin searches). "
             )
             + "The rest of the command's own work is Python's start and the imports, "
-            "listening to the bus before the nodes start, then decoding the capture, "
+            "then decoding the capture, "
             "writing signals.csv and drawing run.png (matplotlib's text and axes, mostly; "
             "matplotlib and scipy.signal are imported while the nodes start). "
-            "The nodes' start-up is two Python processes' imports at once on the shared "
-            "cores. The machine's load average "
+            "The nodes' start-up holds the 0.3 s the bench listens to the bus for another "
+            "run before it starts them (a run never shares its bus), then two Python "
+            "processes' imports at once on the shared cores. The machine's load average "
             f"was "
             f"{_num(res['machine'].get('loadavg_1min_start', math.nan))} on "
             f"{res['machine'].get('cpus')} cores at the start of `bench perf`."
@@ -1566,7 +1621,9 @@ def run_perf(
         res["realtime_native"] = {**nat, "recorder_frames_lost": recorder_frames_lost(nat)}
         say("3c. a sensorless run on the native pair: real time against lockstep")
         res["realtime_native_score"] = sensorless_realtime_score(
-            tmpd / "score", duration=1.2 if quick else None
+            tmpd / "score",
+            duration=1.2 if quick else None,
+            realtime_runs=1 if quick else SCORE_RUNS,
         )
         say("4. codec, and bench analyze on a large capture")
         res["codec"] = {
