@@ -314,6 +314,7 @@ def test_the_kernels_drops_on_vcan_are_counted(tmp_path: Path) -> None:
     # the kernel's smallest receive buffer holds a few frames; a burst from a raw socket
     # (no python-can per frame) outruns a reader that naps 1 ms after each drain
     n = 20000
+    backlog_drops_before = _backlog_drops()
     with socket.socket(socket.AF_CAN, socket.SOCK_RAW, socket.CAN_RAW) as tx:
         tx.bind(("vcan0",))
         frame = (0x321).to_bytes(4, "little") + bytes([8, 0, 0, 0]) + bytes(8)
@@ -325,14 +326,37 @@ def test_the_kernels_drops_on_vcan_are_counted(tmp_path: Path) -> None:
             except OSError:  # ENOBUFS: the interface's own queue is full; try again
                 time.sleep(0.0005)
         # the kernel says a socket's drops with the next frame it queues for it: one
-        # more, once the reader has caught up, carries the count of the whole burst
-        _wait_for(lambda: reader.pending() == 0, 30.0)
-        tx.send(frame)
-        sent += 1
+        # more that is queued after the burst carries the count of the whole burst.  A
+        # marker sent while the socket's queue is still full (a raw CAN socket answers
+        # no FIONREAD, so ``pending`` cannot see it) is dropped too: send markers, each
+        # after a quiet spell, until one is received
+        marker = (0x322).to_bytes(4, "little") + bytes([8, 0, 0, 0]) + bytes(8)
+        t_end = time.monotonic() + 60.0
+        while time.monotonic() < t_end:
+            _wait_for(lambda: reader.pending() == 0, 30.0)
+            time.sleep(0.2)
+            tx.send(marker)
+            sent += 1
+            _wait_for(lambda: any(m.arbitration_id == 0x322 for m in got), 2.0)
+            if any(m.arbitration_id == 0x322 for m in got):
+                break
     _wait_for(lambda: reader.pending() == 0 and len(got) + reader.stats()["kernel_drops"] >= sent)
     reader.stop()
     st = reader.stats()
     reader.close()
     assert len(got) == st["frames"] == st["received"]
     assert st["kernel_drops"] > 0, st  # the burst did overflow the socket's queue
-    assert st["received"] + st["kernel_drops"] + st["ring_lost"] + st["unread"] == sent, st
+    counted = st["received"] + st["kernel_drops"] + st["ring_lost"] + st["unread"]
+    # a frame the host's input backlog dropped (netdev_max_backlog, when softirqs lag
+    # behind the burst on a busy host) never reached the socket: no socket can count
+    # it, the host does (/proc/net/softnet_stat); other traffic may add to the host's
+    # count, never to the socket's
+    backlog = _backlog_drops() - backlog_drops_before
+    assert counted <= sent <= counted + backlog, (st, sent, backlog)
+
+
+def _backlog_drops() -> int:
+    """Frames the host dropped at its per-CPU input backlog: /proc/net/softnet_stat's
+    second column, summed over the CPUs."""
+    with open("/proc/net/softnet_stat") as f:
+        return sum(int(line.split()[1], 16) for line in f if line.strip())
