@@ -425,7 +425,9 @@ static void apply_commands(node_t *n, law_t *law, int64_t k)
  * in that period) are in. */
 static void try_compute(int sock, node_t *n, law_t *law, const sensor_t *sen)
 {
-    if (!n->have_sample) {
+    if (!n->have_sample || n->ack_seq < 0) {
+        /* no sample is answered before the start is held (docs/PROTOCOL.md): the plant
+         * sends it again and the bench its commands, so the first answer has the start */
         return;
     }
     int64_t k = n->sample_k;
@@ -593,7 +595,7 @@ static void on_frame(int sock, node_t *n, law_t *law, const struct canfd_frame *
              * period after the plant's last one ends the program here) */
             apply_commands(n, law, n->next_k);
         }
-        return;
+        break; /* a sample held until the start came is computed now */
     }
     default:
         return;

@@ -49,6 +49,14 @@ newest telemetry again when that moves.  ``--protocol 2.1`` sends 0 there, as a
 controller written to 2.1 does.  ``--drop P`` throws away a share ``P`` of the
 ``BenchCommand``, ``PhaseSamples`` and ``PositionSensor`` frames it receives, at random
 (``--seed``), as an overflowing receive buffer does.
+
+It answers no sample before it holds the start (docs/PROTOCOL.md, "Bench
+commands and pacing"): the plant sends sample 0 again every 50 ms and the bench
+its commands, so its first answer is computed with the start however late it
+joined the bus.  ``--deaf-samples N`` throws away every frame until it has
+seen ``N`` ``PhaseSamples``: a controller that opened its bus after the start,
+its first copies and the first sample.  ``--protocol 2.1`` answers from the
+first sample, as a controller written to 2.1 may.
 """
 
 from __future__ import annotations
@@ -228,6 +236,9 @@ def main() -> int:
     ap.add_argument("--protocol", choices=("2.1", "2.2"), default="2.2")
     ap.add_argument("--drop", type=float, default=0.0, help="share of frames thrown away")
     ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument(
+        "--deaf-samples", type=int, default=0, help="frames thrown away until N samples seen"
+    )
     a = ap.parse_args()
     rng = random.Random(a.seed)
     dropped = 0
@@ -254,6 +265,7 @@ def main() -> int:
 
     next_k = 0
     stop = False
+    deaf = a.deaf_samples
     print("READY", flush=True)
     try:
         while not stop:
@@ -265,6 +277,9 @@ def main() -> int:
             if d is None:
                 continue
             name, sig = d
+            if deaf > 0:  # not on the bus yet
+                deaf -= 1 if name == "PhaseSamples" else 0
+                continue
             if (
                 name in ("BenchCommand", "PhaseSamples", "PositionSensor")
                 and a.drop
@@ -288,8 +303,7 @@ def main() -> int:
                         moved = True
                     if moved and last_tel is not None:
                         bus.send(telemetry(last_tel))  # the acknowledgement moved: say so now
-                continue
-            if name == "PhaseSamples":
+            elif name == "PhaseSamples":
                 k = unwrap(int(sig["step"]), next_k, 10)
                 if k < next_k:  # a resend (lockstep): the same duty again
                     cached = answers.get(k, [])
@@ -305,8 +319,13 @@ def main() -> int:
                     readings[k] = float(sig["theta_m"])
             else:
                 continue
-            # sample k, and its reading when the sensor reads in period k
-            while next_k in samples and (next_k % foc.sensor_every or next_k in readings):
+            # sample k, and its reading when the sensor reads in period k; none before
+            # the start is held (2.2), else the first answer would be computed without it
+            while (
+                (ack >= 0 or a.protocol == "2.1")
+                and next_k in samples
+                and (next_k % foc.sensor_every or next_k in readings)
+            ):
                 k = next_k
                 s = samples.pop(k)
                 if k in readings:

@@ -204,6 +204,24 @@ def test_a_dropping_controller_gives_the_clean_trace(tmp_path: Path) -> None:
         assert _signals(d) == ref, f"seed {seed}: the trace changed"
 
 
+def test_a_controller_that_joins_after_the_start_gives_the_clean_trace(tmp_path: Path) -> None:
+    """A controller that opened its bus after the start, its first copies and the first
+    sample (``--deaf-samples``: it sees nothing until two resends of sample 0 have
+    passed) answers no sample before it holds the start (docs/PROTOCOL.md): its first
+    answer is computed with it, the plant is gated from that answer on, and the run is
+    the clean one, verified, none late.  Whichever of the plant's resent sample and the
+    bench's resent commands reaches it first, the rule gives the same run."""
+    res, clean = _run(tmp_path / "clean")
+    assert res.returncode == 0, res.stderr[-2000:]
+    for deaf in (1, 3):
+        res, d = _run(tmp_path / f"deaf{deaf}", extra_ctrl=("--deaf-samples", str(deaf)))
+        assert res.returncode == 0, res.stderr[-2000:]
+        c = json.loads((d / "meta.json").read_text())["commands"]
+        assert c["commands_verified"] and c["commands_late"] == 0, c
+        assert c["commands_unacknowledged"] == 0, c
+        assert _signals(d) == _signals(clean), f"deaf for {deaf} sample(s): the trace changed"
+
+
 def test_a_21_controller_runs_and_is_told_unverified(tmp_path: Path) -> None:
     res, d = _run(tmp_path, extra_ctrl=("--protocol", "2.1"))
     assert res.returncode == 0, res.stderr[-2000:]

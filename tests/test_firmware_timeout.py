@@ -198,3 +198,16 @@ def test_in_lockstep_the_timeout_is_not_armed(harness: Path) -> None:
     assert rows[0] == ["limit", "0"]
     assert [r[1:] for r in rows if r[0] == "watch"] == [["0", "0", "0"]]
     assert _enables(rows, range(6)) == [1] * 6
+
+
+def test_no_sample_is_answered_before_the_start_is_held(harness: Path) -> None:
+    """docs/PROTOCOL.md: a controller that joined the bus after the start answers no sample
+    before it holds it.  Sample 0 before the start gets no duty (the plant sends it again);
+    the start then answers it at once, enabled, and a copy of sample 0 gets that answer
+    again (the protocol's rule for a repeated sample)."""
+    rows, _ = _run(harness, "l", ["s 0", "c 1 0 0 100", "s 0", "s 1"])
+    duties = [r[1:] for r in rows if r[0] == "duty"]
+    assert duties == [["1", "1"], ["1", "1"], ["2", "1"]]
+    # a command beyond a gap (seq 1 without seq 0, the start) is not the start
+    rows, _ = _run(harness, "l", ["c 0 1 5 100", "s 0", "c 1 0 0 100"])
+    assert [r[1:] for r in rows if r[0] == "duty"] == [["1", "1"]]

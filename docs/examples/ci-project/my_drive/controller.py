@@ -155,8 +155,8 @@ def main() -> int:
     ap.add_argument("-p", "--port", default="", help="udp_multicast's port (empty: none)")
     a = ap.parse_args()
     # the bus first: the bench sends its start command as soon as its plant is up, and
-    # the socket keeps the frames that come while the rest loads (a controller that
-    # misses the start is reported: PROTOCOL.md, "Bench commands and pacing")
+    # the socket keeps the frames that come while the rest loads (one that joins later
+    # still runs the clean run: the samples wait for the start, below)
     bus = can.Bus(
         interface=a.interface,
         channel=a.channel,
@@ -217,7 +217,10 @@ def main() -> int:
                             bus.send(telemetry())
                     continue
                 samples[k] = sig
-            while next_k in samples and (next_k % foc.every or next_k in readings):
+            # no sample is answered before the start is held: the plant sends sample 0
+            # again every 50 ms and the bench its commands, so the first answer is
+            # computed with the start however late this joined (PROTOCOL.md)
+            while ack >= 0 and next_k in samples and (next_k % foc.every or next_k in readings):
                 k = next_k
                 s = samples.pop(k)
                 if k in readings:
