@@ -154,6 +154,14 @@ def test_a_realtime_run_that_did_not_keep_time_gets_a_warning() -> None:
     stalled = {**bad, "host_stalls": 2, "host_stall_ms_max": 114.0, "periods_skipped": 150}
     line = realtime_warning(stalled)
     assert line is not None and "2 host stalls (longest 114.0 ms, 150 periods skipped)" in line
+    # the plant's counters are of the periods it ran, not of the rows recorded: a run
+    # whose watchdog tripped early has fewer rows (3,932 of 4,000 periods) and every
+    # period with a late duty (it once printed 101.7 %)
+    tripped = {"steps": 3932, "plant_periods": 4000, "late_duty_periods": 4000,
+               "deadline_misses": 40, "jitter_us": {"max": 4000.0}}  # fmt: skip
+    line = realtime_warning(tripped)
+    assert line is not None and "100.0 % of periods ran with a late duty" in line
+    assert "1.0 % started late" in line
 
 
 def test_the_paper_column_names_the_method_its_numbers_belong_to() -> None:

@@ -74,6 +74,9 @@ def test_the_paper_column_only_where_the_paper_has_numbers() -> None:
     assert paper[0].split() == ["metric", "bench", "paper", "(tt-dq)"]
     assert paper[1].split()[:4] == ["theta_err_max_deg", "1.000", "4.0", "deg"]
     assert paper[2].split()[:3] == ["theta_err_mean_deg", "0.500", "deg"]  # no number: blank
+    # a controller under test's results are headed with its name (--dut-name)
+    dut = format_metrics(m, {"theta_err_max_deg": 4.0}, "tt-dq", "tt-dq", "my-drive")
+    assert dut.splitlines()[0].split() == ["metric", "my-drive", "paper", "(tt-dq)"]
 
 
 def test_analyze_of_a_capture_made_elsewhere_records_the_plant_it_analysed_with(

@@ -48,6 +48,12 @@ def test_the_segments_give_the_profiles_and_count_every_frame(name: str) -> None
     sc = schedule(scn)
     cmds = command_schedule(scn)
     assert sc["frames"] == len(cmds)
+    # lockstep: what `bench run` sends, keep-alives included (each a seq of its own)
+    from bench.nodes._loops import command_frames
+    from bench.runs._pacing import PACE_EVERY
+    from bench.wire._codec import Codec
+
+    assert sc["frames_lockstep"] == len(command_frames(scn, Codec(), PACE_EVERY)) >= len(cmds)
     assert (sc["start_step"], sc["stop_step"]) == (cmds[0].apply_step, cmds[-1].apply_step)
     for key, prof in (("speed_rpm", scn.speed_rpm), ("load_nm", scn.load_nm)):
         segs = sc[key]

@@ -84,7 +84,8 @@ def cmd_show(args: argparse.Namespace) -> int:
     print(
         f"schedule ({sc['frames']} BenchCommand frames: start at step {sc['start_step']}, "
         f"stop at step {sc['stop_step']}; a ramp is sent as steps at "
-        f"{sc['reference_rate_hz']:g} Hz; --commands lists every frame):"
+        f"{sc['reference_rate_hz']:g} Hz; --commands lists every frame; in lockstep "
+        f"{sc['frames_lockstep']} with the keep-alives, docs/PROTOCOL.md):"
     )
     for line in schedule_lines(sc):
         print(f"  {line}")

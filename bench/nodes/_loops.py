@@ -47,9 +47,9 @@ from bench.scenarios._setup import (
     n_steps,
     needs_truth,
     sample_period,
+    with_keepalives,
 )
 from bench.wire._codec import Codec
-from bench.wire._protocol import CMD_NONE
 from controller import Controller
 from plant_rt import FAULT_WATCHDOG, Plant, ProtectionPars
 
@@ -196,18 +196,9 @@ def command_frames(
     (:attr:`bench.nodes._plant_node.PlantNode.pace_every`).
     """
     m = 1 << codec.step_bits("BenchCommand")
-    plan = list(schedule) if schedule is not None else command_schedule(scn)
-    if pace_every > 0:
-        have = {c.apply_step for c in plan}
-        extra = []
-        j = 0
-        for k in range(pace_every, plan[-1].apply_step, pace_every):
-            while j + 1 < len(plan) and plan[j + 1].apply_step < k:
-                j += 1
-            if k not in have:
-                c = plan[j]
-                extra.append(PlannedCommand(k, CMD_NONE, c.speed_ref_rpm, c.load_nm))
-        plan = sorted([*plan, *extra], key=lambda c: c.apply_step)
+    plan = with_keepalives(
+        list(schedule) if schedule is not None else command_schedule(scn), pace_every
+    )
     out = []
     for i, c in enumerate(plan):
         msg = codec.encode(
@@ -407,6 +398,7 @@ def plant_loop(
                 if not _wait_first_answer(bus, node, ids, frames, stop, dut_timeout_s, diag):
                     return
                 frames = []  # sample 0 is out; the clock starts with period 0
+                t_loop = time.perf_counter()  # waiting for the first answer is start-up
             _serve_realtime(bus, node, ids, frames, stop=stop, diag=diag)
         else:
             _serve_lockstep(

@@ -694,6 +694,15 @@ def fault_metrics(
     return out
 
 
+def plant_periods(m: Mapping[str, Any]) -> int:
+    """The periods the plant ran (its report's count, which its own counters such as
+    ``late_duty_periods`` and ``deadline_misses`` are of); the rows of the table when the
+    run has no plant report (``bench analyze`` of a capture).  Rows can be fewer (a
+    recording that lost frames) or one more (the stop's sample): a share of the plant's
+    counters is of its periods, never above 100 %."""
+    return max(1, int(m.get("plant_periods") or m.get("steps") or 0))
+
+
 def late_duty_fraction(m: Mapping[str, Any]) -> float:
     """The fraction of a run's periods that ran with a late or missing duty (real time)."""
-    return float(m.get("late_duty_periods", 0)) / max(1, int(m.get("steps", 0)))
+    return float(m.get("late_duty_periods", 0)) / plant_periods(m)

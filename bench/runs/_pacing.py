@@ -52,7 +52,7 @@ import can
 from bench.nodes._counters import MAX_PENDING_COMMANDS
 from bench.nodes._loops import command_frames
 from bench.scenarios._schema import Scenario
-from bench.scenarios._setup import PlannedCommand, sample_period
+from bench.scenarios._setup import PACE_EVERY, PlannedCommand, sample_period
 from bench.wire._codec import Codec
 from bench.wire._protocol import ACK_WINDOW, SEQ_MODULUS
 
@@ -66,9 +66,6 @@ __all__ = [
     "command_lead",
 ]
 
-#: Lockstep pacing: a bench command (a keep-alive when nothing changes) at
-#: least every this many periods; see :attr:`bench.nodes._plant_node.PlantNode.pace_every`.
-PACE_EVERY = 100
 
 #: Datagrams a receive buffer of Linux's default size (``net.core.rmem_default``,
 #: 212,992 bytes) holds of python-can's udp_multicast frames: 256, measured with a

@@ -38,6 +38,7 @@ from bench.runs._metrics import (
     compute_metrics,
     fault_metrics,
     late_duty_fraction,
+    plant_periods,
     split_corner_hz,
 )
 from bench.scenarios._schema import Scenario
@@ -274,6 +275,7 @@ def finish_run(
     # start-up excluded); the whole run's wall time when no plant report
     loop_s = plant_r.get("loop_s") or wall_s
     m["realtime_factor"] = m["sim_s"] / loop_s if loop_s > 0 else float("nan")
+    m["plant_periods"] = int(plant_r.get("steps", 0))
     m["deadline_misses"] = int(plant_r.get("overruns", 0))
     m["late_duty_periods"] = int(plant_r.get("late_duties", 0))
     m["frames_rejected"] = int(
@@ -733,7 +735,7 @@ def host_stall_times(frames: Sequence[can.Message], codec: Codec, T_s: float) ->
 
 def realtime_warning(m: dict[str, Any]) -> str | None:
     """One line when a real-time run did not keep time well enough to read as a drive's."""
-    steps = max(1, int(m.get("steps", 0)))
+    steps = plant_periods(m)
     late = late_duty_fraction(m)
     over = m.get("deadline_misses", 0) / steps
     if max(late, over) <= REALTIME_LATE_WARN:
@@ -804,8 +806,12 @@ def format_metrics(
     paper: dict[str, Any] | None = None,
     paper_method: str | None = None,
     estimator: str | None = None,
+    column: str = "bench",
 ) -> str:
     """The metrics as an aligned text table, with the paper's number where it has one.
+
+    ``column``: the heading of the run's column (a controller under test: its
+    ``--dut-name``, at most 12 characters).
 
     ``paper_method``: the method the paper's numbers belong to (the
     scenario's own estimator), named in the column's heading.  ``estimator``:
@@ -832,7 +838,7 @@ def format_metrics(
     head = f"paper ({paper_method})" if paper_method else "paper"
     rows = [(k, u) for k, u in (*METRIC_ROWS, *BAND_ROWS) if k in m]
     wk = max([26, *(len(k) + 1 for k, _ in rows)])
-    lines = [f"{'metric':<{wk}}{'bench':>12}" + (f"  {head}" if paper else "")]
+    lines = [f"{'metric':<{wk}}{column[:12]:>12}" + (f"  {head}" if paper else "")]
     for key, unit in rows:
         v = m[key]
         vs = f"{v:12.3f}" if isinstance(v, float) else f"{'-' if v is None else v:>12}"

@@ -17,7 +17,14 @@ from dataclasses import asdict
 from typing import Any
 
 from bench.scenarios._schema import SHIPPED, Profile, Scenario, load_scenario
-from bench.scenarios._setup import command_schedule, n_steps, plant_setup, sample_period
+from bench.scenarios._setup import (
+    PACE_EVERY,
+    command_schedule,
+    n_steps,
+    plant_setup,
+    sample_period,
+    with_keepalives,
+)
 
 #: Kinds of a schedule segment (:func:`profile_segments`).
 SEGMENT_KINDS = ("constant", "ramp", "step")
@@ -81,8 +88,10 @@ def schedule(scn: Scenario) -> dict[str, Any]:
     profiles, each with ``frames``, the number of ``BenchCommand`` frames
     (other than start and stop) that apply within it (``t0_s < t <= t1_s``;
     a step's own frame included); ``frames``: every frame, start and stop
-    included; ``reference_rate_hz``: the staircase rate of a ramp;
-    ``start_step``/``stop_step``: the periods the start and the stop apply in.
+    included; ``frames_lockstep``: the same with the keep-alives ``bench run`` adds in
+    lockstep (one wherever :data:`PACE_EVERY` periods pass without a command, each a
+    command of its own: its own ``seq``); ``reference_rate_hz``: the staircase rate of a
+    ramp; ``start_step``/``stop_step``: the periods the start and the stop apply in.
     """
     T_s = sample_period(scn)
     cmds = command_schedule(scn)
@@ -98,6 +107,7 @@ def schedule(scn: Scenario) -> dict[str, Any]:
         out[key] = segs
     out.update(
         frames=len(cmds),
+        frames_lockstep=len(with_keepalives(cmds, PACE_EVERY)),
         reference_rate_hz=scn.reference_rate_hz,
         start_step=cmds[0].apply_step,
         stop_step=cmds[-1].apply_step,

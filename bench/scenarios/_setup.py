@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 import os
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -19,7 +20,7 @@ from bench.scenarios._schema import (
     saliency_error,
     split_options,
 )
-from bench.wire._protocol import CMD_START, CMD_STOP, RPM_PER_RAD_S
+from bench.wire._protocol import CMD_NONE, CMD_START, CMD_STOP, RPM_PER_RAD_S
 from controller import (
     CompensationPars,
     Controller,
@@ -51,6 +52,32 @@ class PlannedCommand:
     cmd: int
     speed_ref_rpm: float
     load_nm: float
+
+
+#: Lockstep pacing: a bench command (a keep-alive when nothing changes) at
+#: least every this many periods; see :attr:`bench.nodes._plant_node.PlantNode.pace_every`.
+PACE_EVERY = 100
+
+
+def with_keepalives(plan: Sequence[PlannedCommand], pace_every: int) -> list[PlannedCommand]:
+    """``plan`` with a keep-alive (``cmd`` 0, the references already in force, so nothing
+    changes) at every multiple of ``pace_every`` before the last command that has no
+    command of its own, in step order: the pace tokens of a paced lockstep plant
+    (:attr:`bench.nodes._plant_node.PlantNode.pace_every`); each is a command of its
+    own (a ``seq`` of its own).  ``pace_every <= 0``: ``plan`` as it is."""
+    out = list(plan)
+    if pace_every <= 0 or not out:
+        return out
+    have = {c.apply_step for c in out}
+    extra = []
+    j = 0
+    for k in range(pace_every, out[-1].apply_step, pace_every):
+        while j + 1 < len(out) and out[j + 1].apply_step < k:
+            j += 1
+        if k not in have:
+            c = out[j]
+            extra.append(PlannedCommand(k, CMD_NONE, c.speed_ref_rpm, c.load_nm))
+    return sorted([*out, *extra], key=lambda c: c.apply_step)
 
 
 def get_preset(scn: Scenario) -> Preset:

@@ -628,6 +628,7 @@ def realtime_run(
     ``late_outside_stalls_pct``: the late periods other than the wake-ups
     that ended a stall, of the periods computed.
     """
+    from bench.runs._metrics import late_duty_fraction, plant_periods
     from bench.runs._run import run_scenario
     from bench.scenarios._schema import Profile, load_scenario
     from bench.wire._bus import BusSpec, default_transport
@@ -657,10 +658,9 @@ def realtime_run(
         },
     )
     m = res.metrics
-    # periods the plant ran (the table may miss a few steps whose telemetry never came)
     plant_r = res.meta.get("node_reports", {}).get("plant", {}) or {}
-    plant_steps = plant_r.get("steps")
-    n = max(1, int(plant_steps or m["steps"]))
+    # periods the plant ran (the table may miss a few steps whose telemetry never came)
+    n = plant_periods(m)
     jit = m.get("jitter_us") or {}
     return {
         "f_sw": f_sw,
@@ -673,7 +673,7 @@ def realtime_run(
             int(m.get("host_stalls", 0)),
             int(m.get("periods_skipped", 0)),
         ),
-        "late_duty_pct": 100.0 * m.get("late_duty_periods", 0) / n,
+        "late_duty_pct": 100.0 * late_duty_fraction(m),
         "host_stall_ms_total": float(m.get("host_stall_ms_total", 0.0)),
         "host_stall_ms_max": float(m.get("host_stall_ms_max", 0.0)),
         "jitter_us_median": float(jit.get("median", math.nan)),
@@ -738,6 +738,7 @@ def sensorless_realtime_score(
     The real-time run is made ``realtime_runs`` times; ``realtime`` holds the one of
     median rms (a failed run counts as the worst), ``realtime_rms_runs`` every run's rms
     (NaN: failed) and ``realtime_runs_within`` how many scored like the lockstep run."""
+    from bench.runs._metrics import late_duty_fraction
     from bench.runs._run import run_scenario
     from bench.scenarios._schema import load_scenario
     from bench.scenarios._setup import sample_period
@@ -776,11 +777,10 @@ def sensorless_realtime_score(
             rt_runs.append(_failed_score_run(str(e)))
             continue
         m = res.metrics
-        n = max(1, int(m.get("steps") or 0))
         row = {
             **{k: math.nan if m.get(k) is None else float(m[k]) for k in SCORE_KEYS},
             "lock_lost": bool(m.get("lock_lost")),
-            "late_duty_pct": 100.0 * m.get("late_duty_periods", 0) / n,
+            "late_duty_pct": 100.0 * late_duty_fraction(m),
             # bench commands the controller held only after their step: set-points applied
             # later than in lockstep, a run that differs with no late duty; and the rows
             # scored (the same window in both modes)
