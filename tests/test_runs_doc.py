@@ -100,3 +100,17 @@ def test_the_plant_record_of_meta_json_is_documented() -> None:
     rec = plant_record(load_scenario("wen-5.1"))
     missing = sorted(k for k in [*rec, *rec["preset"], *rec["plant"]] if k not in named)
     assert not missing, f"meta.json keys not in docs/RUNS.md's meta.json section: {missing}"
+
+
+def test_every_key_of_the_committed_runs_meta_json_is_documented() -> None:
+    """Every top-level key of the reference runs' ``meta.json`` (docs/results) is named
+    in the files table's ``meta.json`` row."""
+    import json
+
+    row = next(ln for ln in DOC.splitlines() if ln.startswith("| `meta.json` |"))
+    keys: set[str] = set()
+    for f in (ROOT / "docs" / "results" / "runs").rglob("meta.json"):
+        keys |= set(json.loads(f.read_text()))
+    assert len(keys) > 20
+    missing = sorted(k for k in keys if f"`{k}`" not in row)
+    assert not missing, f"meta.json keys not in docs/RUNS.md's files table: {missing}"
