@@ -98,7 +98,9 @@ class Run:
         Where the run ran: ``in-process``, or the bus (``socketcan:vcan0``,
         ``udp_multicast:ff15:7079:7468:6f6e:6465:6d6f:6d63:6173 port 44012``).
     warnings : list of str
-        The warning lines of the exit status (a trip, a lost angle).
+        The warning lines ``bench run`` prints: real time not kept, recorded frames not
+        scored, those of the exit status (a trip, a lost angle, a fault's expectation
+        missed) and periods without a row.
     meta : dict
         ``meta.json``: the configuration, presets, gains, seeds, versions.
     """
@@ -168,11 +170,14 @@ def _read_signals(folder: Path | None) -> dict[str, np.ndarray]:
 def _run_from(res: RunResult, folder: Path | None, *, analysis: bool = False) -> Run:
     """The :class:`Run` of a finished run or analysis whose files are in ``res.out_dir``."""
     from bench.runs._local import exit_status
+    from bench.runs._results import run_warnings
 
     out = Path(res.out_dir)
     status, lines = exit_status(res, analysis=analysis)
     metrics = json.loads((out / "metrics.json").read_text())
     meta = json.loads((out / "meta.json").read_text())
+    if not analysis:  # the lines bench run prints (bench analyze prints its own)
+        lines = run_warnings(metrics, meta, lines)
     run = Run(
         metrics=metrics,
         exit_status=status,

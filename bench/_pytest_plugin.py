@@ -26,6 +26,7 @@ is installed in: it imports nothing of the bench until a test asks for
 
 from __future__ import annotations
 
+import json
 import re
 from pathlib import Path
 from typing import Any
@@ -115,6 +116,8 @@ class Hil:
         for key, value in run.metrics.items():
             if value is None or isinstance(value, bool | int | float | str):
                 record(f"{prefix}{key}", value)
+            else:  # a list or a table (faults, rejections by reason): as compact JSON
+                record(f"{prefix}{key}", json.dumps(value, separators=(",", ":"), sort_keys=True))
         png = run.folder / "run.png" if run.folder is not None else None
         if png is not None and png.is_file():
             self._request.node.stash.setdefault(_PNG_KEY, []).append(png)

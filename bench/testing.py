@@ -40,14 +40,18 @@ def _fail(text: str, run: Run) -> AssertionError:
 def _span(run: Run) -> str:
     t0 = run.meta.get("scored_from_s")
     t1 = run.metrics.get("sim_s")
+    T_s = run.meta.get("T_s")
     if isinstance(t0, int | float) and isinstance(t1, int | float):
-        return f"scored t = {t0:g} .. {t1:g} s"
+        if isinstance(T_s, int | float) and t1 >= T_s:
+            t1 -= T_s  # sim_s is rows x T_s: the last row is one period before it
+        return f"scored t = {t0:g} .. {t1:.6g} s"
     return "scored span unknown"
 
 
 def assert_lock_kept(run: Run) -> None:
     """The estimator kept the rotor angle (``lock_lost`` false: never ``|dtheta|`` > 90 deg
     electrical for more than 50 ms after the scoring start; the plant did not trip)."""
+    __tracebackhide__ = True  # pytest: the failure line, not this helper's body
     m = run.metrics
     if m.get("lock_lost"):
         at = m.get("lock_lost_at_s")
@@ -74,6 +78,7 @@ def assert_within(run: Run, **bounds: float) -> None:
     A metric the run does not have, or without a value, fails: a bound that
     cannot be checked is not met.
     """
+    __tracebackhide__ = True  # pytest: the failure line, not this helper's body
     if not bounds:
         raise TypeError("assert_within: name at least one metric, e.g. theta_err_abs_mean_deg=4.0")
     for name, bound in bounds.items():
@@ -87,6 +92,7 @@ def assert_within(run: Run, **bounds: float) -> None:
 
 
 def _signal(run: Run, name: str) -> np.ndarray:
+    __tracebackhide__ = True  # pytest: the failure line, not this helper's body
     sig = run.signals
     if name not in sig:
         raise _fail(f"{name}: not a signal of this run (signals.csv: {', '.join(sig)})", run)
@@ -94,6 +100,7 @@ def _signal(run: Run, name: str) -> np.ndarray:
 
 
 def _reference(run: Run, reference: Any, n: int) -> tuple[np.ndarray, str]:
+    __tracebackhide__ = True  # pytest: the failure line, not this helper's body
     import numpy as np
 
     if isinstance(reference, str):
@@ -111,6 +118,7 @@ def _reference(run: Run, reference: Any, n: int) -> tuple[np.ndarray, str]:
 def _first_outside(
     run: Run, signal: str, ref: np.ndarray, ref_name: str, within: float, from_s: float, what: str
 ) -> None:
+    __tracebackhide__ = True  # pytest: the failure line, not this helper's body
     import numpy as np
 
     x = _signal(run, signal)
@@ -144,12 +152,14 @@ def assert_tracks(
     value per row of ``signals.csv``.  Units are the signals'
     (``signals.md``: angles electrical, speeds mechanical rpm).
     """
+    __tracebackhide__ = True  # pytest: the failure line, not this helper's body
     ref, name = _reference(run, reference, len(_signal(run, signal)))
     _first_outside(run, signal, ref, name, within, after_s, f"tracking from t = {after_s:g} s")
 
 
 def assert_settles(run: Run, signal: str, to: float, within: float, by_s: float) -> None:
     """``signal`` is within ``within`` of ``to`` by ``by_s`` (s) and stays there to the run's end."""
+    __tracebackhide__ = True  # pytest: the failure line, not this helper's body
     import numpy as np
 
     n = len(_signal(run, signal))

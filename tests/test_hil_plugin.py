@@ -66,10 +66,15 @@ def test_the_fixture_runs_records_and_fails_on_one_line(pytester: pytest.Pyteste
     )
     assert ok["hil.transport"] == "in-process" and ok["hil.exit_status"] == "0"
     assert ok["hil.steps"] == "3001"
+    # a table is its JSON: the metric as metrics.json has it
+    assert json.loads(ok["hil.faults"]) == metrics["faults"]
+    assert json.loads(ok["hil.frames_rejected_by_reason"]) == metrics["frames_rejected_by_reason"]
     # the failure: metric, bound, value, time and folder on one line
     bad = props["test_a_bound_too_tight"]
     line = next(x for x in out.splitlines() if x.startswith("E ") and "speed_err_max_rpm" in x)
-    assert "> 1e-06" in line and "scored t = 0.2 .. 0.2501 s" in line
+    assert "> 1e-06" in line and "scored t = 0.2 .. 0.25 s" in line
+    # the failure is the user's line and that one, not the helper's body (__tracebackhide__)
+    assert "raise _fail(" not in out and "def assert_within" not in out
     assert f"run {bad['hil.folder']}" in line
     measured = float(bad["hil.speed_err_max_rpm"])
     assert f"|{measured:.6g}|" in line
@@ -133,7 +138,8 @@ def test_bus(hil):
 def _run(**signals: Any) -> Run:
     t = np.arange(11) * 0.1
     sig = {"t": t, **{k: np.asarray(v, dtype=float) for k, v in signals.items()}}
-    metrics = {"theta_err_abs_mean_deg": -2.5, "sim_s": 1.0, "lock_lost": False, "thd": None}
+    # sim_s is rows x T_s (10,001 rows at 0.1 ms: the last at t = 1 s)
+    metrics = {"theta_err_abs_mean_deg": -2.5, "sim_s": 1.0001, "lock_lost": False, "thd": None}
     run = Run(metrics, 0, Path("/runs/x"), "in-process", meta={"scored_from_s": 0.5, "T_s": 1e-4})
     run._signals = sig
     return run

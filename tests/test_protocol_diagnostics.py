@@ -114,7 +114,8 @@ def test_a_tripped_plant_names_the_time_it_waited_on_one_clock() -> None:
 
     node = _node()
     assert "in 5 s" in tripped_text(node, 100.0, 105.2)
-    assert "in 0 s" in tripped_text(node, time.monotonic())  # now: the same clock
+    assert "in 0 ms" in tripped_text(node, time.monotonic())  # now: the same clock
+    assert "in 52 ms" in tripped_text(node, 100.0, 100.052)  # under a second: in ms
     # the native loop passes its t_progress (CLOCK_MONOTONIC ns) as seconds
     t_ns = time.monotonic_ns() - 3_000_000_000
     assert "in 3 s" in tripped_text(node, t_ns * 1e-9)

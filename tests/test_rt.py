@@ -172,3 +172,20 @@ def test_the_paper_column_names_the_method_its_numbers_belong_to() -> None:
     assert "paper (tt-dq)" in head and row.split()[1:3] == ["1.000", "4.0"]
     # without the paper's numbers (a user's own scenario) there is no paper column
     assert format_metrics({"theta_err_max_deg": 1.0}).splitlines()[0].split() == ["metric", "bench"]
+
+
+def test_the_api_and_the_command_line_give_the_same_warning_lines() -> None:
+    """``bench.Run.warnings`` holds every line ``bench run`` prints (run_warnings, one home):
+    a real-time run that did not keep time, the exit status's lines, and the periods
+    without a row, which the API once left out (a run that a trip ended early)."""
+    from bench.runs._results import run_warnings
+
+    m = {"steps": 3001, "plant_periods": 3000, "late_duty_periods": 500, "deadline_misses": 0,
+         "jitter_us": {}, "steps_missing": 999}  # fmt: skip
+    lines = run_warnings(m, {"mode": "realtime"}, ["warning: the status's line"])
+    assert [ln.split(":")[1].strip()[:9] for ln in lines] == ["real time", "the statu", "999 perio"]
+    lockstep = run_warnings(m, {"mode": "lockstep"}, [])
+    assert len(lockstep) == 1 and "999 periods of the run have no row" in lockstep[0]
+    assert (
+        run_warnings({**m, "steps_missing": 0}, {"mode": "lockstep", "interrupted": True}, []) == []
+    )

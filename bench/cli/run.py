@@ -101,7 +101,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     from bench.runs._dut import started_dut
     from bench.runs._export import EXPORT_FILES, check_formats, export_signals, parse_formats
     from bench.runs._local import exit_status
-    from bench.runs._results import format_metrics, frames_warning, realtime_warning
+    from bench.runs._results import format_metrics, run_warnings
     from bench.runs._run import run_scenario
     from bench.scenarios._setup import countermeasures_text, sample_period
 
@@ -186,20 +186,9 @@ def cmd_run(args: argparse.Namespace) -> int:
     print(f"countermeasures: {countermeasures_text(res.meta.get('countermeasures'))}")
     if engines := res.meta.get("node_engines"):  # which loop served each node
         print("node engines: " + ", ".join(f"{r} {e}" for r, e in sorted(engines.items())))
-    if args.mode == "realtime" and (warn := realtime_warning(res.metrics)):
-        print(warn, file=sys.stderr)
-    if warn := frames_warning(res.metrics):
-        print(warn, file=sys.stderr)
     status, warnings = exit_status(res)
-    for line in warnings:
+    for line in run_warnings(res.metrics, res.meta, warnings):
         print(line, file=sys.stderr)
-    missing = int(res.metrics.get("steps_missing", 0))
-    if missing and not res.meta.get("interrupted"):
-        print(
-            f"warning: {missing} periods of the run have no row in signals.csv (the run ended "
-            "early, or frames the recording lost); the metrics cover the rows present",
-            file=sys.stderr,
-        )
     try:
         export_signals(out, formats, title=f"{scn.name} {est}")
     except BenchError as e:  # every file of the run is written: keep them, say what is not

@@ -92,7 +92,9 @@ def tripped_text(node: PlantNode, last_progress_s: float, now_s: float | None = 
 def stall_text(node: PlantNode, waited_s: float) -> str:
     """Why a lockstep plant waits: the duty it needs, what came instead, what was rejected."""
     need = node.needed_duty()
-    s = f"no valid PwmDuty for step {need} (the answer to sample {need - 1}) in {waited_s:.0f} s"
+    # a trip's line gives the time waited, often under a second: in ms there
+    waited = f"{waited_s:.0f} s" if waited_s >= 1.0 else f"{waited_s * 1e3:.0f} ms"
+    s = f"no valid PwmDuty for step {need} (the answer to sample {need - 1}) in {waited}"
     later = sorted(t for t in node.duties if t > need)
     if later:
         # the plant sent sample need - 1 (and resent it): whether the controller's

@@ -626,6 +626,34 @@ def telemetry_warning(m: dict[str, Any]) -> str | None:
     return f"warning: {'; '.join(parts)}"
 
 
+def missing_rows_warning(m: dict[str, Any], meta: dict[str, Any]) -> str | None:
+    """One line for periods of the run without a row in ``signals.csv`` (``steps_missing``);
+    none for a run that Ctrl-C interrupted (its end is said already)."""
+    missing = int(m.get("steps_missing", 0) or 0)
+    if not missing or meta.get("interrupted"):
+        return None
+    return (
+        f"warning: {missing} periods of the run have no row in signals.csv (the run ended "
+        "early, or frames the recording lost); the metrics cover the rows present"
+    )
+
+
+def run_warnings(m: dict[str, Any], meta: dict[str, Any], status_lines: list[str]) -> list[str]:
+    """Every warning line ``bench run`` prints, in its order: real time not kept (a
+    real-time run), recorded frames not scored, ``status_lines`` (those of its exit
+    status), rows missing.  The command line and :attr:`bench.Run.warnings` both take
+    them from here."""
+    lines = []
+    if meta.get("mode") == "realtime" and (w := realtime_warning(m)):
+        lines.append(w)
+    if w := frames_warning(m):
+        lines.append(w)
+    lines += status_lines
+    if w := missing_rows_warning(m, meta):
+        lines.append(w)
+    return lines
+
+
 def frames_warning(m: dict[str, Any]) -> str | None:
     """One line for recorded frames that were not scored: bad ones and another run's."""
     parts = []
