@@ -305,3 +305,31 @@ def test_the_dut_timeout_counts_from_the_nodes_readiness() -> None:
     ready.t0 -= 10.0
     ready.start()
     assert ready.check(0) is False
+
+
+@pytest.mark.parametrize("engine", ["native", "python"])
+def test_a_duty_drop_paces_the_plant_on_a_controller_under_test(
+    tmp_path: Path, engine: str
+) -> None:
+    """Lockstep, the duties dropped for 50 ms (a [[faults]] drop of PwmDuty, expect trip):
+    the plant does not apply them, but it still waits for each to arrive before the next
+    period, as for any duty.  Without that wait it ran the 500 periods at its own pace, a
+    controller under test (a Python one, a default receive buffer) lost samples in the
+    burst, stopped answering, and the run ended at the fault's end with 999 rows missing.
+    Now the run is whole: the trip expected and met, every period a row."""
+    scn = tmp_path / "duty-drop.toml"
+    scn.write_text(
+        (ROOT / "tests" / "data" / "firmware-100rpm.toml")
+        .read_text()
+        .replace("duration = 0.3", "duration = 0.4")
+        + '\n[[faults]]\nkind = "drop"\nmessage = "PwmDuty"\nprob = 1.0\nat_s = 0.25\n'
+        'duration_s = 0.05\nexpect = "trip"\n'
+    )
+    res, d = _run(tmp_path / "drop", "--engine", engine, scenario=scn)
+    assert res.returncode == 0, res.stderr[-2000:]
+    assert json.loads((d / "meta.json").read_text())["node_engines"] == {"plant": engine}
+    m = json.loads((d / "metrics.json").read_text())
+    (f,) = m["faults"]
+    assert f["met"] and f["detected_by"] == "watchdog", f
+    assert m["steps_missing"] == 0 and m["steps"] == 4001, (m["steps"], m["steps_missing"])
+    assert "no row in signals.csv" not in res.stderr

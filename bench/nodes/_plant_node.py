@@ -170,6 +170,11 @@ class PlantNode:
         self.duties: dict[int, tuple[float, float, float, bool]] = {}
         self.latest_duty: tuple[float, float, float, bool] = _SAFE_DUTY
         self.latest_duty_step = -1
+        #: Lockstep, a controller under test: the newest duty step that arrived and a
+        #: [[faults]] window dropped (-1: none).  The plant waits for a dropped duty's
+        #: arrival as for any other (:meth:`ready`): without that, it ran a drop
+        #: window at its own pace and a controller slower than the plant lost samples.
+        self.dropped_upto = -1
         #: Lockstep: the newest duty taken in its own period, and its tag.
         self.applied: tuple[tuple[float, float, float, bool], int] = (_SAFE_DUTY, -1)
         self.commands = CommandQueue(self.m_cmd)
@@ -318,6 +323,7 @@ class PlantNode:
             # plant's resend: too late for its period, as in real time (_fault_bus)
             fate = "lost"
         if fate is not None:  # a bus fault: lost, or arrives with a bad E2E CRC
+            self.dropped_upto = max(self.dropped_upto, t)  # arrived all the same
             if fate == "corrupt":
                 self._reject_duty(REJECT_BAD_CRC)
             else:
@@ -442,7 +448,18 @@ class PlantNode:
         return (
             t <= 0
             or t in self.duties
-            or (nf is not None and (nf.duty_fate(self.plant.k) is not None or nf.answer_lost(t)))
+            or (
+                nf is not None
+                and (
+                    # a dropped duty: not waited for, but a controller under test's
+                    # arrival is (its pace is the run's in lockstep)
+                    (
+                        nf.duty_fate(self.plant.k) is not None
+                        and (not self.external or self.dropped_upto >= t)
+                    )
+                    or nf.answer_lost(t)
+                )
+            )
         )
 
     def paced(self) -> bool:

@@ -277,6 +277,7 @@ class Unit(ctypes.Structure):
         ("last_duty_k", _I64),
         ("rounds_waiting", _I64),
         ("latest_duty_step", _I64),
+        ("dropped_upto", _I64),
         ("latest", _D * 3),
         ("latest_en", _I32),
         ("duty_age", _I32),
@@ -600,6 +601,7 @@ class _Sync:
         u.dut_answered = int(node.dut_answered)
         u.last_duty_k, u.rounds_waiting = node.last_duty_k, node.rounds_waiting
         u.latest_duty_step = node.latest_duty_step
+        u.dropped_upto = node.dropped_upto
         d_a, d_b, d_c, en = node.latest_duty
         u.latest[0], u.latest[1], u.latest[2], u.latest_en = d_a, d_b, d_c, int(en)
         u.duty_age = node.duty_age
@@ -694,6 +696,7 @@ class _Sync:
         node.dut_answered = bool(u.dut_answered)
         node.last_duty_k, node.rounds_waiting = u.last_duty_k, u.rounds_waiting
         node.latest_duty_step = u.latest_duty_step
+        node.dropped_upto = u.dropped_upto
         node.latest_duty = (u.latest[0], u.latest[1], u.latest[2], bool(u.latest_en))
         node.duty_age = u.duty_age
         live = self.duties[self.duties["tag"] >= 0]  # in slot order, as the ring

@@ -233,6 +233,8 @@ void bn_plant_on_duty(bn_plant_t *u, const bn_frame_t *f)
     if (fate == BN_FATE_NONE && !u->realtime && t >= k - u->delay && answer_lost(u, t))
         fate = BN_FATE_LOST; /* the answer to a sample lost on its first sending: too late */
     if (fate != BN_FATE_NONE) { /* a bus fault: lost, or arrives with a bad E2E CRC */
+        if (t > u->dropped_upto)
+            u->dropped_upto = t; /* arrived all the same (bn_plant_ready) */
         if (fate == BN_FATE_CORRUPT)
             reject_duty(u, BN_RJ_BAD_CRC);
         else
@@ -512,7 +514,11 @@ void bn_plant_frames_now(bn_plant_t *u) { frames_now(u, NULL); }
 int bn_plant_ready(const bn_plant_t *u)
 {
     int64_t t = u->k - u->delay;
-    return t <= 0 || has_duty(u, t) || duty_fate(u, u->k) != BN_FATE_NONE || answer_lost(u, t);
+    /* a dropped duty is not waited for, but a controller under test's arrival is
+     * (PlantNode.ready) */
+    return t <= 0 || has_duty(u, t) ||
+           (duty_fate(u, u->k) != BN_FATE_NONE && (!u->external || u->dropped_upto >= t)) ||
+           answer_lost(u, t);
 }
 
 int bn_plant_paced(const bn_plant_t *u) { return u->pace_every <= 0 || u->k < u->cmd_horizon; }

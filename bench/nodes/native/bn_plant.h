@@ -177,6 +177,7 @@ typedef struct {
     int64_t meas_k;               /* the step of pl->meas (sensor delay), -1: none */
     int32_t started, stopped, fault, dut_answered;
     int64_t fault_step, last_duty_k, rounds_waiting, latest_duty_step;
+    int64_t dropped_upto;         /* PlantNode.dropped_upto: a dropped duty's arrival, -1 */
     double latest[3];
     int32_t latest_en, duty_age;
     int32_t load_changed;         /* a command set the load (pl->tau_const) */
