@@ -179,9 +179,8 @@ def cmd_run(args: argparse.Namespace) -> int:
     for role, rep in res.meta.get("node_reports", {}).items():
         for why in ((rep or {}).get("rt") or {}).get("refused", []):
             print(f"{role}: real-time setting refused: {why}", file=sys.stderr)
-    column = "bench"
-    if args.controller == "external":  # the controller under test's results, by its name
-        column = str(res.meta.get("controller_name") or "external")
+    # a controller under test's results are headed with its name (meta.json controller_name)
+    column = str(res.meta.get("controller_name") or "bench")
     print(format_metrics(res.metrics, scn.paper_result, scn.estimator, est, column))
     print(f"countermeasures: {countermeasures_text(res.meta.get('countermeasures'))}")
     if engines := res.meta.get("node_engines"):  # which loop served each node

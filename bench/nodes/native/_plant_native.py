@@ -1223,11 +1223,13 @@ def plant_loop_native(
                 else:
                     raise BenchError(f"plant: native loop: {os.strerror(-loop.err)}")
         finally:
-            node.loop_s = time.perf_counter() - t_loop
-            if realtime and loop.rt_started:
-                # from the clock's start: a controller under test's first answer, which
-                # the plant waits for before it (up to --dut-timeout), is start-up
-                node.loop_s = (time.monotonic_ns() - loop.clock.t0_ns) * 1e-9
+            # in real time from the clock's start: a controller under test's first answer,
+            # which the plant waits for before it (up to --dut-timeout), is start-up
+            node.loop_s = (
+                (time.monotonic_ns() - loop.clock.t0_ns) * 1e-9
+                if realtime and loop.rt_started
+                else time.perf_counter() - t_loop
+            )
             node.counters.reject(REPEATED_COUNTER, int(loop.cmd_seen.copies))
             if realtime and loop.rt_started and busy and late and parts:
                 u.overruns = loop.clock.st.missed  # also when a stop ended the loop
